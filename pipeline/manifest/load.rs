@@ -1,0 +1,464 @@
+//! Reading a manifest: syntax (TOML or JSON), form (types and unknown keys)
+//! and meaning (`validate`), with every problem collected before any is
+//! reported, each with its key path, run and, for TOML, line and column.
+
+use std::ops::Range;
+use std::path::{Path, PathBuf};
+
+use serde::de::DeserializeOwned;
+use serde_json::Value;
+
+use super::keypath::{KeyPath, Seg};
+use super::validate::{self, Campaign, Partial};
+use super::{CampaignInfo, Channels, Identification, Reference, Rig, Run};
+
+/// One problem in a manifest.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Problem {
+    /// Where: the key path inside the manifest.
+    pub path: KeyPath,
+    /// The run's id when the problem is inside a run.
+    pub run: Option<String>,
+    /// Line and column (1-based) in a TOML manifest.
+    pub line_col: Option<(usize, usize)>,
+    pub message: String,
+}
+
+impl Problem {
+    pub fn new(path: KeyPath, message: impl Into<String>) -> Self {
+        Self {
+            path,
+            run: None,
+            line_col: None,
+            message: message.into(),
+        }
+    }
+}
+
+/// Why a manifest cannot be used.
+#[derive(Debug, thiserror::Error)]
+pub enum ManifestError {
+    #[error("{}: cannot read the manifest: {source}", file.display())]
+    Read {
+        file: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    #[error("{}:{line}:{column}: {format} syntax error: {message}", file.display())]
+    Syntax {
+        file: PathBuf,
+        format: &'static str,
+        line: usize,
+        column: usize,
+        message: String,
+    },
+    #[error("{}", render(file, problems))]
+    Invalid {
+        file: PathBuf,
+        problems: Vec<Problem>,
+    },
+}
+
+fn render(file: &Path, problems: &[Problem]) -> String {
+    let n = problems.len();
+    let mut out = format!(
+        "{}: {n} problem{} in the manifest:",
+        file.display(),
+        if n == 1 { "" } else { "s" }
+    );
+    for p in problems {
+        out.push_str("\n  ");
+        out.push_str(&file.display().to_string());
+        if let Some((l, c)) = p.line_col {
+            out.push_str(&format!(":{l}:{c}"));
+        }
+        out.push_str(&format!(": {}", p.path));
+        if let Some(run) = &p.run {
+            out.push_str(&format!(" (run \"{run}\")"));
+        }
+        out.push_str(&format!(": {}", p.message));
+    }
+    out
+}
+
+/// Read and check a manifest file (`.json` is read as JSON, anything else as TOML).
+pub fn load(path: &Path) -> Result<Campaign, ManifestError> {
+    let text = std::fs::read_to_string(path).map_err(|source| ManifestError::Read {
+        file: path.to_path_buf(),
+        source,
+    })?;
+    load_str(&text, path)
+}
+
+/// Check manifest text as if read from `path` (relative log paths resolve
+/// against `path`'s folder).
+pub fn load_str(text: &str, path: &Path) -> Result<Campaign, ManifestError> {
+    let is_json = path
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("json"));
+    let (value, doc) = if is_json {
+        let v: Value = serde_json::from_str(text).map_err(|e| ManifestError::Syntax {
+            file: path.to_path_buf(),
+            format: "JSON",
+            line: e.line(),
+            column: e.column(),
+            message: e.to_string(),
+        })?;
+        (v, None)
+    } else {
+        let doc = toml_edit::Document::parse(text).map_err(|e| {
+            let (line, column) = e.span().map(|s| line_col(text, s.start)).unwrap_or((1, 1));
+            ManifestError::Syntax {
+                file: path.to_path_buf(),
+                format: "TOML",
+                line,
+                column,
+                message: e.message().to_string(),
+            }
+        })?;
+        let v: Value = toml::from_str(text).map_err(|e| {
+            let (line, column) = e.span().map(|s| line_col(text, s.start)).unwrap_or((1, 1));
+            ManifestError::Syntax {
+                file: path.to_path_buf(),
+                format: "TOML",
+                line,
+                column,
+                message: e.message().to_string(),
+            }
+        })?;
+        (v, Some(doc))
+    };
+
+    let mut problems = Vec::new();
+    let partial = deserialize_sections(&value, &mut problems);
+    let base_dir = path.parent().unwrap_or(Path::new("")).to_path_buf();
+    let campaign = validate::validate(partial, path, text.as_bytes(), &base_dir, &mut problems);
+
+    if let (true, Some(c)) = (problems.is_empty(), campaign) {
+        return Ok(c);
+    }
+    // Attach run ids and locations, then order by position in the file.
+    for p in problems.iter_mut() {
+        if p.run.is_none()
+            && let Some(i) = p.path.run_index()
+        {
+            p.run = value
+                .get("runs")
+                .and_then(|r| r.get(i))
+                .and_then(|r| r.get("id"))
+                .and_then(|id| id.as_str())
+                .map(str::to_string);
+        }
+        if let Some(doc) = &doc {
+            p.line_col = span_of(doc, &p.path).map(|s| line_col(text, s.start));
+        }
+    }
+    problems.sort_by(|a, b| {
+        a.line_col
+            .unwrap_or((usize::MAX, 0))
+            .cmp(&b.line_col.unwrap_or((usize::MAX, 0)))
+            .then(a.path.cmp(&b.path))
+    });
+    problems.dedup();
+    Err(ManifestError::Invalid {
+        file: path.to_path_buf(),
+        problems,
+    })
+}
+
+/// Deserialize each top-level section, and each run and reference on its own,
+/// so that a type error in one does not hide the problems in the others.
+fn deserialize_sections(value: &Value, problems: &mut Vec<Problem>) -> Partial {
+    let mut partial = Partial::default();
+    let Some(obj) = value.as_object() else {
+        problems.push(Problem::new(
+            KeyPath::root(),
+            "the manifest must be a table of sections",
+        ));
+        return partial;
+    };
+    let root = KeyPath::root();
+    let schema = crate::schema::manifest_schema();
+    let required = required_keys(&schema);
+    for key in &required {
+        if !obj.contains_key(key) {
+            problems.push(Problem::new(
+                root.key(key),
+                "required key is missing".to_string(),
+            ));
+        }
+    }
+    for (key, v) in obj {
+        let path = root.key(key);
+        match key.as_str() {
+            "schema_version" => partial.schema_version = section(v, &path, &schema, problems),
+            "campaign" => partial.campaign = section::<CampaignInfo>(v, &path, &schema, problems),
+            "rig" => partial.rig = section::<Rig>(v, &path, &schema, problems),
+            "channels" => partial.channels = section::<Channels>(v, &path, &schema, problems),
+            "identification" => {
+                partial.identification = section::<Identification>(v, &path, &schema, problems)
+            }
+            "runs" => match v.as_array() {
+                Some(items) => {
+                    partial.runs = items
+                        .iter()
+                        .enumerate()
+                        .map(|(i, item)| section::<Run>(item, &path.index(i), &schema, problems))
+                        .collect();
+                    partial.raw_run_ids = items
+                        .iter()
+                        .map(|r| r.get("id").and_then(|x| x.as_str()).map(str::to_string))
+                        .collect();
+                    partial.raw_run_roles = items
+                        .iter()
+                        .map(|r| {
+                            r.get("role")
+                                .and_then(|x| serde_json::from_value(x.clone()).ok())
+                        })
+                        .collect();
+                }
+                None => problems.push(Problem::new(path, "must be an array of runs ([[runs]])")),
+            },
+            "references" => match v.as_array() {
+                Some(items) => {
+                    partial.references = items
+                        .iter()
+                        .enumerate()
+                        .map(|(i, item)| {
+                            section::<Reference>(item, &path.index(i), &schema, problems)
+                        })
+                        .collect();
+                }
+                None => problems.push(Problem::new(
+                    path,
+                    "must be an array of references ([[references]])",
+                )),
+            },
+            other => problems.push(unknown_key(&schema, &root, other)),
+        }
+    }
+    partial
+}
+
+/// Deserialize one section, collecting its unknown keys and its first type error.
+fn section<T: DeserializeOwned>(
+    value: &Value,
+    base: &KeyPath,
+    schema: &Value,
+    problems: &mut Vec<Problem>,
+) -> Option<T> {
+    let mut unknown: Vec<KeyPath> = Vec::new();
+    let result: Result<T, _> = {
+        let mut record = |p: serde_ignored::Path<'_>| unknown.push(from_ignored(&p));
+        let de = serde_ignored::Deserializer::new(value.clone(), &mut record);
+        serde_path_to_error::deserialize(de)
+    };
+    for u in unknown {
+        let full = base.join(&u);
+        let parent = full.parent();
+        let name = match full.0.last() {
+            Some(Seg::Key(k)) => k.clone(),
+            _ => String::new(),
+        };
+        problems.push(unknown_key(schema, &parent, &name));
+    }
+    match result {
+        Ok(v) => Some(v),
+        Err(e) => {
+            let mut path = base.join(&from_error_path(e.path()));
+            let raw = e.inner().to_string();
+            let message = if let Some(field) = raw
+                .strip_prefix("missing field `")
+                .and_then(|r| r.strip_suffix('`'))
+            {
+                path = path.key(field);
+                "required key is missing".to_string()
+            } else if raw.contains("untagged enum Column") {
+                "expected a column name (string) or a 0-based column index (integer)".to_string()
+            } else {
+                raw
+            };
+            problems.push(Problem::new(path, message));
+            None
+        }
+    }
+}
+
+fn unknown_key(schema: &Value, parent: &KeyPath, name: &str) -> Problem {
+    let known = known_keys(schema, parent);
+    let best = known
+        .iter()
+        .map(|k| (strsim::jaro_winkler(k, name), k))
+        .filter(|(score, _)| *score > 0.85)
+        .max_by(|a, b| a.0.total_cmp(&b.0));
+    let hint = match best {
+        Some((_, k)) => format!("; did you mean `{k}`?"),
+        None if !known.is_empty() => format!("; expected one of: {}", known.join(", ")),
+        None => String::new(),
+    };
+    Problem::new(parent.key(name), format!("unknown key `{name}`{hint}"))
+}
+
+fn from_ignored(p: &serde_ignored::Path<'_>) -> KeyPath {
+    use serde_ignored::Path as P;
+    match p {
+        P::Root => KeyPath::root(),
+        P::Seq { parent, index } => from_ignored(parent).index(*index),
+        P::Map { parent, key } => from_ignored(parent).key(key),
+        P::Some { parent } | P::NewtypeStruct { parent } | P::NewtypeVariant { parent } => {
+            from_ignored(parent)
+        }
+    }
+}
+
+fn from_error_path(p: &serde_path_to_error::Path) -> KeyPath {
+    use serde_path_to_error::Segment;
+    let mut out = KeyPath::root();
+    for seg in p.iter() {
+        out = match seg {
+            Segment::Seq { index } => out.index(*index),
+            Segment::Map { key } => out.key(key),
+            Segment::Enum { variant } => out.key(variant),
+            Segment::Unknown => out,
+        };
+    }
+    out
+}
+
+/// The object schemas a schema node stands for, following `$ref` and
+/// `anyOf`/`oneOf`/`allOf` (Option<T> is `anyOf [T, null]`).
+fn resolve<'a>(root: &'a Value, node: &'a Value, out: &mut Vec<&'a Value>) {
+    if let Some(r) = node.get("$ref").and_then(Value::as_str) {
+        let name = r.trim_start_matches("#/$defs/");
+        if let Some(target) = root.get("$defs").and_then(|d| d.get(name)) {
+            resolve(root, target, out);
+        }
+        return;
+    }
+    let mut branched = false;
+    for key in ["anyOf", "oneOf", "allOf"] {
+        if let Some(list) = node.get(key).and_then(Value::as_array) {
+            branched = true;
+            for n in list {
+                resolve(root, n, out);
+            }
+        }
+    }
+    if !branched || node.get("properties").is_some() || node.get("items").is_some() {
+        out.push(node);
+    }
+}
+
+/// The keys the schema allows at `path`.
+fn known_keys(schema: &Value, path: &KeyPath) -> Vec<String> {
+    let mut nodes = Vec::new();
+    resolve(schema, schema, &mut nodes);
+    for seg in &path.0 {
+        let mut next = Vec::new();
+        for n in &nodes {
+            let child = match seg {
+                Seg::Key(k) => n.get("properties").and_then(|p| p.get(k)),
+                Seg::Index(_) => n.get("items"),
+            };
+            if let Some(c) = child {
+                resolve(schema, c, &mut next);
+            }
+        }
+        nodes = next;
+    }
+    let mut keys: Vec<String> = nodes
+        .iter()
+        .filter_map(|n| n.get("properties").and_then(Value::as_object))
+        .flat_map(|p| p.keys().cloned())
+        .collect();
+    keys.sort();
+    keys.dedup();
+    keys
+}
+
+fn required_keys(schema: &Value) -> Vec<String> {
+    schema
+        .get("required")
+        .and_then(Value::as_array)
+        .map(|a| {
+            a.iter()
+                .filter_map(|v| v.as_str().map(str::to_string))
+                .collect()
+        })
+        .unwrap_or_default()
+}
+
+/// Byte span of the key (or, failing that, the nearest enclosing item) a path
+/// points at.
+fn span_of(doc: &toml_edit::Document<&str>, path: &KeyPath) -> Option<Range<usize>> {
+    use toml_edit::{Item, Value as TV};
+    let mut item: &Item = doc.as_item();
+    let mut best: Option<Range<usize>> = None;
+    for (i, seg) in path.0.iter().enumerate() {
+        let last = i + 1 == path.0.len();
+        let next = match seg {
+            Seg::Key(k) => {
+                let kv = match item {
+                    Item::Table(t) => t.get_key_value(k),
+                    Item::Value(TV::InlineTable(t)) => t.get_key_value(k),
+                    _ => None,
+                };
+                match kv {
+                    Some((key, it)) => {
+                        let key_span = key.span();
+                        best = if last {
+                            key_span.or_else(|| it.span()).or(best)
+                        } else {
+                            it.span().or(key_span).or(best)
+                        };
+                        it
+                    }
+                    None => return best,
+                }
+            }
+            Seg::Index(n) => match item.get(*n) {
+                Some(it) => {
+                    best = it.span().or(best);
+                    it
+                }
+                None => return best,
+            },
+        };
+        item = next;
+    }
+    best
+}
+
+/// 1-based line and column of a byte offset.
+fn line_col(text: &str, offset: usize) -> (usize, usize) {
+    let offset = offset.min(text.len());
+    let before = &text[..offset];
+    let line = before.matches('\n').count() + 1;
+    let col = before.rfind('\n').map_or(before.chars().count(), |nl| {
+        before[nl + 1..].chars().count()
+    }) + 1;
+    (line, col)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn line_col_counts_from_one() {
+        let t = "a = 1\nbb = 2\n";
+        assert_eq!(line_col(t, 0), (1, 1));
+        assert_eq!(line_col(t, 6), (2, 1));
+        assert_eq!(line_col(t, 9), (2, 4));
+    }
+
+    #[test]
+    fn schema_knows_the_keys_of_a_run_specimen() {
+        let schema = crate::schema::manifest_schema();
+        let keys = known_keys(&schema, &KeyPath::parse("runs[0].specimen"));
+        assert!(keys.contains(&"stiffness_n_per_m".to_string()), "{keys:?}");
+        assert!(keys.contains(&"mass_kg".to_string()));
+        let top = known_keys(&schema, &KeyPath::root());
+        assert!(top.contains(&"runs".to_string()));
+    }
+}

@@ -1,0 +1,59 @@
+//! Writing outputs. Every file is written to a temporary sibling and renamed
+//! into place, so a reader never sees a half-written file and a failure never
+//! destroys the previous output.
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+use crate::results::Results;
+
+/// Why an output could not be written.
+#[derive(Debug, thiserror::Error)]
+pub enum WriteError {
+    #[error("{}: {source}", path.display())]
+    Io {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+}
+
+/// Write `bytes` to `path` atomically (temporary file, fsync, rename).
+pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), WriteError> {
+    let io = |source| WriteError::Io {
+        path: path.to_path_buf(),
+        source,
+    };
+    let dir = path.parent().unwrap_or(Path::new("."));
+    std::fs::create_dir_all(dir).map_err(io)?;
+    let name = path
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    let tmp = dir.join(format!(".{name}.tmp-{}", std::process::id()));
+    let result = (|| {
+        let mut f = std::fs::File::create(&tmp)?;
+        f.write_all(bytes)?;
+        f.sync_all()?;
+        std::fs::rename(&tmp, path)
+    })();
+    if result.is_err() {
+        let _ = std::fs::remove_file(&tmp);
+    }
+    result.map_err(io)
+}
+
+/// results.json as bytes: pretty JSON with a trailing newline. Floats are
+/// printed shortest-round-trip, so equal results give equal bytes.
+pub fn results_json(results: &Results) -> Vec<u8> {
+    let mut s = serde_json::to_string_pretty(results).expect("results serialise");
+    s.push('\n');
+    s.into_bytes()
+}
+
+/// Write `results.json` into `out_dir`; returns its path.
+pub fn write_results(results: &Results, out_dir: &Path) -> Result<PathBuf, WriteError> {
+    let path = out_dir.join("results.json");
+    write_atomic(&path, &results_json(results))?;
+    Ok(path)
+}

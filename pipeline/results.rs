@@ -1,0 +1,225 @@
+//! results.json: the machine-readable contract that reports, the nightly
+//! batch and reviewers read. Its schema (`schemas/results.schema.json`) is
+//! generated from these types. Keys are stable; new keys may be added.
+//!
+//! Units: beta1, a3 [1/s]; a1b0 [N/(m s^2)]; a2 [N/m]; R1 [1/s^2];
+//! R2 [N/(m s)]; R3 [m s^2/N]; C1 [1/s^4], C2 [1/s^3], C3 [1/s^2], C4 [1/s],
+//! C5 [1/(kg s^2)]; poles [rad/s]; transfer functions in SI (m/m, N/m).
+
+use schemars::JsonSchema;
+use serde::{Deserialize, Serialize};
+
+use crate::identify::{Estimate, PerSpring};
+use crate::lti::TransferFunction;
+use crate::manifest::{CompareMode, Role};
+use crate::model::LinearSpecimen;
+
+/// Version of the results.json format.
+pub const RESULTS_SCHEMA_VERSION: u32 = 1;
+
+/// Everything a campaign run produced.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+pub struct Results {
+    pub schema_version: u32,
+    /// The servoid version that wrote this file.
+    pub servoid_version: String,
+    pub campaign: CampaignSummary,
+    /// The rig's parameters, identified or given; null when the campaign could
+    /// not establish them (see `rig_error`).
+    pub rig: Option<RigResult>,
+    /// Why `rig` is null, when it is and the campaign needed it.
+    pub rig_error: Option<String>,
+    /// One entry per run, in manifest order.
+    pub runs: Vec<RunResult>,
+    /// Controllable canonical form (Eqs. 34-35) for every run with a specimen mass.
+    pub ccf: Vec<CcfResult>,
+    /// Published numbers beside the recomputed ones.
+    pub comparisons: Vec<Comparison>,
+    /// Campaign-level warnings.
+    pub warnings: Vec<String>,
+}
+
+/// What was analysed.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+pub struct CampaignSummary {
+    pub name: String,
+    pub description: String,
+    pub rig_name: String,
+    pub rig_notes: String,
+    /// The manifest's file name.
+    pub manifest: String,
+    /// SHA-256 of the manifest's bytes.
+    pub manifest_sha256: String,
+}
+
+/// Where the rig parameters come from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
+#[serde(rename_all = "snake_case")]
+pub enum RigSource {
+    /// Identified by this campaign (Eqs. 18-20).
+    Identified,
+    /// Given in the manifest's [rig.parameters].
+    Given,
+}
+
+/// The rig (Eq. 10), with a1b0 and R1 at `p_gain`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[allow(non_snake_case)]
+pub struct RigResult {
+    pub source: RigSource,
+    /// P gain at which a1b0 and R1 are stated.
+    pub p_gain: f64,
+    pub beta1: Estimate,
+    pub a1b0: Estimate,
+    pub a2: Estimate,
+    pub a3: Estimate,
+    pub R1: Estimate,
+    /// Servo-valve time constant 1/beta1 (ms).
+    pub valve_time_constant_ms: Estimate,
+    /// Per-spring values (Eqs. 19-20); empty when the rig was given.
+    pub per_spring: Vec<PerSpring>,
+    /// Scatter of the per-spring values (sample standard deviation), when
+    /// there are at least two springs.
+    pub spread: Option<Spread>,
+}
+
+/// Sample standard deviation of the per-spring values.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+pub struct Spread {
+    pub a1b0: f64,
+    pub a2: f64,
+    pub a3: f64,
+}
+
+/// Outcome of a run.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
+#[serde(rename_all = "snake_case")]
+pub enum Status {
+    Ok,
+    Failed,
+}
+
+/// Where a run's transfer function comes from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
+#[serde(rename_all = "snake_case")]
+pub enum TfSource {
+    /// Given in the manifest (a publication's fitted model).
+    Published,
+    /// Fitted to this run's log.
+    Fitted,
+    /// Predicted from the rig parameters and the specimen (Eqs. 12, 14, 17).
+    Model,
+}
+
+/// A transfer function x1/u with `den[0] == 1`, highest power first.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+pub struct TfResult {
+    pub num: Vec<f64>,
+    pub den: Vec<f64>,
+    pub delay_s: f64,
+    pub source: TfSource,
+    /// Poles [rad/s].
+    pub poles: Vec<ComplexValue>,
+}
+
+impl TfResult {
+    pub fn new(tf: &TransferFunction, source: TfSource) -> Self {
+        Self {
+            num: tf.num.clone(),
+            den: tf.den.clone(),
+            delay_s: tf.delay_s,
+            source,
+            poles: tf.poles().into_iter().map(ComplexValue::from).collect(),
+        }
+    }
+}
+
+/// A complex number.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, JsonSchema)]
+pub struct ComplexValue {
+    pub re: f64,
+    pub im: f64,
+}
+
+impl From<nalgebra::Complex<f64>> for ComplexValue {
+    fn from(c: nalgebra::Complex<f64>) -> Self {
+        Self { re: c.re, im: c.im }
+    }
+}
+
+/// One run's results.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+pub struct RunResult {
+    pub id: String,
+    pub role: Role,
+    pub description: String,
+    pub p_gain: f64,
+    pub status: Status,
+    /// Why the run failed (null when ok).
+    pub error: Option<String>,
+    /// Warnings that did not stop the run.
+    pub warnings: Vec<String>,
+    pub specimen: LinearSpecimen,
+    /// Undamped natural frequency of an SDOF specimen (Hz).
+    pub natural_frequency_hz: Option<f64>,
+    /// a1b0 at this run's P gain [N/(m s^2)], when the rig is known.
+    pub a1b0: Option<f64>,
+    /// x1/u: published, fitted, or (validation runs) the model's prediction.
+    pub tf: Option<TfResult>,
+    /// f/u predicted by the model (Eq. 45), for runs with a specimen.
+    pub force_tf: Option<TfResult>,
+    /// Measured vs simulated displacement (Eqs. 47-48), when the run has a log.
+    pub validation: Option<ValidationMetrics>,
+}
+
+/// Normalised errors of the simulated displacement (Eqs. 47-48) [%].
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+pub struct ValidationMetrics {
+    pub nrmse_pct: f64,
+    pub nae_pct: f64,
+}
+
+/// The controllable canonical form of one run (Eqs. 34-35, signs of MODEL.md).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[allow(non_snake_case)]
+pub struct CcfResult {
+    pub run: String,
+    pub p_gain: f64,
+    pub C1: f64,
+    pub C2: f64,
+    pub C3: f64,
+    pub C4: f64,
+    pub C5: f64,
+    /// Poles of the CCF with Cn kept: the plant's own poles [rad/s].
+    pub poles_with_cn: Vec<ComplexValue>,
+    /// Poles of the paper's simplified CCF (Cn dropped) [rad/s].
+    pub poles_without_cn: Vec<ComplexValue>,
+}
+
+/// A published number beside the recomputed one.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+pub struct Comparison {
+    pub quantity: String,
+    pub published: f64,
+    /// The recomputed value (signed); null when the campaign could not compute it.
+    pub computed: Option<f64>,
+    /// (computed - published) / |published|, with |computed| when `compare` is
+    /// `magnitude`.
+    pub rel_diff: Option<f64>,
+    /// True when |rel_diff| exceeds the tolerance.
+    pub flag: bool,
+    pub compare: CompareMode,
+    pub tolerance_pct: f64,
+    /// Where the published number comes from.
+    pub source: String,
+    pub status: ComparisonStatus,
+}
+
+/// Outcome of a comparison.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
+#[serde(rename_all = "snake_case")]
+pub enum ComparisonStatus {
+    Agrees,
+    Differs,
+    NotComputed,
+}

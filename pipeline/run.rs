@@ -1,0 +1,410 @@
+//! The campaign runner: the one module that knows every stage. It takes a
+//! checked [`Campaign`], runs each run's stages in parallel (results keep the
+//! manifest's order, so the output does not depend on the thread count),
+//! identifies the rig, predicts and validates, and compares with the
+//! published numbers. A failed run is recorded in its result and the batch
+//! goes on.
+
+use rayon::prelude::*;
+
+use crate::identify::{self, Estimate, SecondOrder, SpringRun, TfEstimate};
+use crate::lti::TransferFunction;
+use crate::manifest::{Campaign, CompareMode, Quantity, Role, RunPlan, RunSource};
+use crate::model::{self, CnTerm, LinearSdof, LinearSpecimen, RigParams};
+use crate::results::{
+    CampaignSummary, CcfResult, Comparison, ComparisonStatus, ComplexValue, RESULTS_SCHEMA_VERSION,
+    Results, RigResult, RigSource, RunResult, Spread, Status, TfResult, TfSource,
+};
+
+/// Why one run failed; recorded in that run's result.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum RunError {
+    #[error("{}: reading logs is not supported yet", path.display())]
+    LogUnsupported { path: std::path::PathBuf },
+    #[error("{0}")]
+    Model(String),
+    #[error("the rig parameters are unavailable: {0}")]
+    NoRig(String),
+}
+
+/// What the first stage gives for each run: its own transfer function.
+#[derive(Debug, Clone)]
+struct Acquired {
+    tf: Option<TransferFunction>,
+    /// Covariance of (n0, d1, d0) for a second-order fit.
+    cov: Option<[[f64; 3]; 3]>,
+    source: TfSource,
+    warnings: Vec<String>,
+}
+
+/// The first stage of one run: its measured or published transfer function.
+fn acquire(run: &RunPlan) -> Result<Acquired, RunError> {
+    match &run.source {
+        RunSource::None => Ok(Acquired {
+            tf: None,
+            cov: None,
+            source: TfSource::Model,
+            warnings: Vec::new(),
+        }),
+        RunSource::Published { tf, .. } => Ok(Acquired {
+            tf: Some(tf.clone()),
+            cov: None,
+            source: TfSource::Published,
+            warnings: Vec::new(),
+        }),
+        RunSource::Log(plan) => Err(RunError::LogUnsupported {
+            path: plan.path.clone(),
+        }),
+    }
+}
+
+/// Analyse a campaign. Pure apart from the ingest stage reading the logs.
+pub fn analyse(campaign: &Campaign) -> Results {
+    let acquired: Vec<Result<Acquired, RunError>> = campaign.runs.par_iter().map(acquire).collect();
+
+    let mut warnings = Vec::new();
+    let rig = establish_rig(campaign, &acquired, &mut warnings);
+    let rig_params = rig.as_ref().ok().map(|(p, _)| *p);
+
+    let runs: Vec<RunResult> = campaign
+        .runs
+        .iter()
+        .zip(acquired)
+        .map(|(plan, acq)| run_result(plan, acq, rig_params.as_ref(), rig.as_ref().err()))
+        .collect();
+
+    let ccf = match &rig_params {
+        Some(rig) => campaign
+            .runs
+            .iter()
+            .filter_map(|r| ccf_result(rig, r))
+            .collect(),
+        None => Vec::new(),
+    };
+
+    let needs_rig = campaign.runs.iter().any(|r| r.role == Role::Validation)
+        || campaign.identifies_rig()
+        || campaign.given_rig.is_some();
+    let (rig_result, rig_error) = match rig {
+        Ok((_, r)) => (Some(r), None),
+        Err(e) => (None, needs_rig.then_some(e)),
+    };
+    let mut results = Results {
+        schema_version: RESULTS_SCHEMA_VERSION,
+        servoid_version: env!("CARGO_PKG_VERSION").to_string(),
+        campaign: CampaignSummary {
+            name: campaign.name.clone(),
+            description: campaign.description.clone(),
+            rig_name: campaign.rig_name.clone(),
+            rig_notes: campaign.rig_notes.clone(),
+            manifest: campaign
+                .file
+                .file_name()
+                .map(|f| f.to_string_lossy().into_owned())
+                .unwrap_or_default(),
+            manifest_sha256: campaign.manifest_sha256.clone(),
+        },
+        rig: rig_result,
+        rig_error,
+        runs,
+        ccf,
+        comparisons: Vec::new(),
+        warnings,
+    };
+    results.comparisons = compare(campaign, &results);
+    results
+}
+
+/// The rig: identified when the campaign can (Fig. 6), else given.
+fn establish_rig(
+    campaign: &Campaign,
+    acquired: &[Result<Acquired, RunError>],
+    warnings: &mut Vec<String>,
+) -> Result<(RigParams, RigResult), String> {
+    if !campaign.identifies_rig() {
+        return match campaign.given_rig {
+            Some(p) => Ok((p, given_result(&p))),
+            None => Err("the campaign neither gives [rig.parameters] nor has a no_specimen run and a spring run".into()),
+        };
+    }
+    let mut no_spec = Vec::new();
+    let mut springs = Vec::new();
+    let mut failed = Vec::new();
+    for (plan, acq) in campaign.runs.iter().zip(acquired) {
+        if !matches!(plan.role, Role::NoSpecimen | Role::Spring) {
+            continue;
+        }
+        let estimate = match acq {
+            Ok(Acquired {
+                tf: Some(tf), cov, ..
+            }) => match SecondOrder::from_tf(tf) {
+                Ok(so) => TfEstimate {
+                    run: plan.id.clone(),
+                    p_gain: plan.p_gain,
+                    tf: so,
+                    cov: *cov,
+                },
+                Err(e) => {
+                    failed.push(format!("run {}: {e}", plan.id));
+                    continue;
+                }
+            },
+            Ok(_) => continue,
+            Err(e) => {
+                failed.push(format!("run {} failed ({e})", plan.id));
+                continue;
+            }
+        };
+        match plan.specimen.linear() {
+            LinearSpecimen::Spring { stiffness_n_per_m } => springs.push(SpringRun {
+                stiffness_n_per_m,
+                estimate,
+            }),
+            _ => no_spec.push(estimate),
+        }
+    }
+    if !failed.is_empty() {
+        return Err(format!("identification runs failed: {}", failed.join("; ")));
+    }
+    let ident = identify::identify_rig(&no_spec, &springs).map_err(|e| e.to_string())?;
+    if let Some(given) = &campaign.given_rig {
+        warnings.push(format!(
+            "the manifest gives [rig.parameters] and the campaign identifies the rig; the identified parameters are used (given: beta1 = {:.6e}, a1b0 = {:.6e} at P = {}, a2 = {:.6e}, a3 = {:.6e})",
+            given.beta1_per_s, given.a1b0_n_per_m_s2, given.p_gain, given.a2_n_per_m, given.a3_per_s
+        ));
+    }
+    let spread = (ident.per_spring.len() >= 2).then(|| {
+        let sd = |f: &dyn Fn(&identify::PerSpring) -> f64| {
+            let v: Vec<f64> = ident.per_spring.iter().map(f).collect();
+            let mean = v.iter().sum::<f64>() / v.len() as f64;
+            (v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (v.len() - 1) as f64).sqrt()
+        };
+        Spread {
+            a1b0: sd(&|s| s.a1b0.value),
+            a2: sd(&|s| s.a2.value),
+            a3: sd(&|s| s.a3.value),
+        }
+    });
+    let params = ident.params();
+    let result = RigResult {
+        source: RigSource::Identified,
+        p_gain: ident.p_gain,
+        beta1: ident.beta1,
+        a1b0: ident.a1b0,
+        a2: ident.a2,
+        a3: ident.a3,
+        R1: ident.r1,
+        valve_time_constant_ms: time_constant(&ident.beta1),
+        per_spring: ident.per_spring,
+        spread,
+    };
+    Ok((params, result))
+}
+
+/// 1/beta1 in ms, with its propagated std.
+fn time_constant(beta1: &Estimate) -> Estimate {
+    Estimate {
+        value: 1e3 / beta1.value,
+        std: beta1.std.map(|s| 1e3 * s / (beta1.value * beta1.value)),
+    }
+}
+
+fn given_result(p: &RigParams) -> RigResult {
+    let beta1 = Estimate::exact(p.beta1_per_s);
+    RigResult {
+        source: RigSource::Given,
+        p_gain: p.p_gain,
+        beta1,
+        a1b0: Estimate::exact(p.a1b0_n_per_m_s2),
+        a2: Estimate::exact(p.a2_n_per_m),
+        a3: Estimate::exact(p.a3_per_s),
+        R1: Estimate::exact(p.r1()),
+        valve_time_constant_ms: time_constant(&beta1),
+        per_spring: Vec::new(),
+        spread: None,
+    }
+}
+
+fn run_result(
+    plan: &RunPlan,
+    acq: Result<Acquired, RunError>,
+    rig: Option<&RigParams>,
+    rig_error: Option<&String>,
+) -> RunResult {
+    let specimen = plan.specimen.linear();
+    let mut out = RunResult {
+        id: plan.id.clone(),
+        role: plan.role,
+        description: plan.description.clone(),
+        p_gain: plan.p_gain,
+        status: Status::Ok,
+        error: None,
+        warnings: Vec::new(),
+        specimen,
+        natural_frequency_hz: specimen.natural_frequency_hz(),
+        a1b0: rig.map(|r| r.at_p_gain(plan.p_gain).a1b0_n_per_m_s2),
+        tf: None,
+        force_tf: None,
+        validation: None,
+    };
+    let acq = match acq {
+        Ok(a) => a,
+        Err(e) => {
+            out.status = Status::Failed;
+            out.error = Some(e.to_string());
+            return out;
+        }
+    };
+    out.warnings = acq.warnings.clone();
+    let rig_at_p = rig.map(|r| r.at_p_gain(plan.p_gain));
+    if let Some(r) = &rig_at_p
+        && !matches!(specimen, LinearSpecimen::None)
+    {
+        out.force_tf = Some(TfResult::new(&model::tf_f_u(r, &specimen), TfSource::Model));
+    }
+    match plan.role {
+        Role::Validation => match &rig_at_p {
+            Some(r) => {
+                out.tf = Some(TfResult::new(
+                    &model::tf_x1_u(r, &specimen),
+                    TfSource::Model,
+                ));
+            }
+            None => {
+                out.status = Status::Failed;
+                out.error =
+                    Some(RunError::NoRig(rig_error.cloned().unwrap_or_default()).to_string());
+            }
+        },
+        _ => {
+            out.tf = acq.tf.as_ref().map(|tf| TfResult::new(tf, acq.source));
+        }
+    }
+    out
+}
+
+fn ccf_result(rig: &RigParams, plan: &RunPlan) -> Option<CcfResult> {
+    let LinearSpecimen::Sdof {
+        mass_kg,
+        damping_ns_per_m,
+        stiffness_n_per_m,
+    } = plan.specimen.linear()
+    else {
+        return None;
+    };
+    let rig = rig.at_p_gain(plan.p_gain);
+    let sdof = LinearSdof {
+        mass_kg,
+        damping_ns_per_m,
+        stiffness_n_per_m,
+    };
+    let c = model::ccf_coefficients(&rig, &sdof, 0.0, 0.0);
+    let poles = |cn| {
+        model::ccf_linear_state_space(&rig, &sdof, cn)
+            .eigenvalues()
+            .into_iter()
+            .map(ComplexValue::from)
+            .collect()
+    };
+    Some(CcfResult {
+        run: plan.id.clone(),
+        p_gain: plan.p_gain,
+        C1: c.C1,
+        C2: c.C2,
+        C3: c.C3,
+        C4: c.C4,
+        C5: c.C5,
+        poles_with_cn: poles(CnTerm::Kept),
+        poles_without_cn: poles(CnTerm::Dropped),
+    })
+}
+
+/// The value of a quantity, read back from the results being written (so the
+/// comparison is of what a reader sees).
+fn lookup(q: &Quantity, r: &Results) -> Option<f64> {
+    match q {
+        Quantity::Rig(name) => {
+            let rig = r.rig.as_ref()?;
+            Some(match name.as_str() {
+                "beta1" => rig.beta1.value,
+                "R1" => rig.R1.value,
+                "a1b0" => rig.a1b0.value,
+                "a2" => rig.a2.value,
+                "a3" => rig.a3.value,
+                "valve_time_constant_ms" => rig.valve_time_constant_ms.value,
+                _ => return None,
+            })
+        }
+        Quantity::PerSpring { run, name } => {
+            let s = r.rig.as_ref()?.per_spring.iter().find(|s| &s.run == run)?;
+            Some(match name.as_str() {
+                "R2" => s.R2.value,
+                "R3" => s.R3.value,
+                "a1b0" => s.a1b0.value,
+                "a2" => s.a2.value,
+                "a3" => s.a3.value,
+                _ => return None,
+            })
+        }
+        Quantity::Run { run, name } => {
+            let rr = r.runs.iter().find(|x| &x.id == run)?;
+            match name.as_str() {
+                "a1b0" => rr.a1b0,
+                "natural_frequency_hz" => rr.natural_frequency_hz,
+                "nrmse_pct" => rr.validation.as_ref().map(|v| v.nrmse_pct),
+                "nae_pct" => rr.validation.as_ref().map(|v| v.nae_pct),
+                _ => None,
+            }
+        }
+        Quantity::Ccf { run, name } => {
+            let c = r.ccf.iter().find(|c| &c.run == run)?;
+            Some(match name.as_str() {
+                "C1" => c.C1,
+                "C2" => c.C2,
+                "C3" => c.C3,
+                "C4" => c.C4,
+                "C5" => c.C5,
+                _ => return None,
+            })
+        }
+    }
+}
+
+fn compare(campaign: &Campaign, results: &Results) -> Vec<Comparison> {
+    campaign
+        .references
+        .iter()
+        .map(|refp| {
+            let computed = lookup(&refp.quantity, results);
+            let rel_diff = computed.map(|c| {
+                let c = match refp.compare {
+                    CompareMode::Signed => c,
+                    CompareMode::Magnitude => c.abs(),
+                };
+                (c - refp.published) / refp.published.abs()
+            });
+            let flag = rel_diff.is_some_and(|d| d.abs() * 100.0 > refp.tolerance_pct);
+            let status = match rel_diff {
+                None => ComparisonStatus::NotComputed,
+                Some(_) if flag => ComparisonStatus::Differs,
+                Some(_) => ComparisonStatus::Agrees,
+            };
+            Comparison {
+                quantity: refp.quantity.to_string(),
+                published: refp.published,
+                computed,
+                rel_diff,
+                flag,
+                compare: refp.compare,
+                tolerance_pct: refp.tolerance_pct,
+                source: refp.source.clone(),
+                status,
+            }
+        })
+        .collect()
+}
+
+/// Whether any run failed.
+pub fn any_failed(results: &Results) -> bool {
+    results.runs.iter().any(|r| r.status == Status::Failed)
+}

@@ -1,0 +1,372 @@
+//! Bad manifests: each gives one clear message naming the file and the key
+//! or run, exit code 2, and no output written.
+
+use crate::util::{scratch, servoid, write};
+
+/// A small valid campaign: no specimen, one spring, one validation run.
+const BASE: &str = r#"schema_version = 1
+
+[campaign]
+name = "tiny"
+
+[rig]
+name = "test rig"
+
+[[runs]]
+id = "ns"
+role = "no_specimen"
+p_gain = 1.0
+[runs.data.transfer_function]
+num = [3060.0]
+den = [1.0, 267.0, 3060.0]
+
+[[runs]]
+id = "k1"
+role = "spring"
+p_gain = 1.0
+specimen = { stiffness_n_per_m = 116640.0 }
+[runs.data.transfer_function]
+num = [2703.0]
+den = [1.0, 263.4, 3337.0]
+
+[[runs]]
+id = "exp1"
+role = "validation"
+p_gain = 1.0
+specimen = { mass_kg = 3.8, damping_ns_per_m = 5.0, stiffness_n_per_m = 129400.0 }
+"#;
+
+struct Checked {
+    code: i32,
+    stderr: String,
+    wrote_output: bool,
+}
+
+fn check(text: &str) -> Checked {
+    check_named(text, "campaign.toml")
+}
+
+fn check_named(text: &str, name: &str) -> Checked {
+    let dir = scratch();
+    let path = write(dir.path(), name, text);
+    let out = dir.path().join("out");
+    let o = servoid(
+        dir.path(),
+        &[
+            "run",
+            path.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ],
+    );
+    Checked {
+        code: o.code,
+        stderr: o.stderr,
+        wrote_output: out.exists(),
+    }
+}
+
+/// Assert a manifest error: exit 2, nothing written, and every fragment in the message.
+fn assert_manifest_error(text: &str, fragments: &[&str]) {
+    let c = check(text);
+    assert_eq!(c.code, 2, "exit code; stderr:\n{}", c.stderr);
+    assert!(!c.wrote_output, "a bad manifest must write nothing");
+    assert!(
+        c.stderr.contains("campaign.toml"),
+        "names the file:\n{}",
+        c.stderr
+    );
+    for f in fragments {
+        assert!(c.stderr.contains(f), "missing {f:?} in:\n{}", c.stderr);
+    }
+}
+
+#[test]
+fn the_base_manifest_is_valid() {
+    let c = check(BASE);
+    assert_eq!(c.code, 0, "{}", c.stderr);
+    assert!(c.wrote_output);
+}
+
+#[test]
+fn syntax_error_names_line_and_column() {
+    let text = BASE.replace(
+        "p_gain = 1.0\nspecimen = { stiff",
+        "p_gain = = 1.0\nspecimen = { stiff",
+    );
+    // The broken line is line 20 (k1's p_gain); the column points into it.
+    assert_manifest_error(&text, &["campaign.toml:20:", "TOML syntax error"]);
+}
+
+#[test]
+fn json_syntax_error_names_line_and_column() {
+    let c = check_named(
+        "{\n  \"schema_version\": 1,\n  \"campaign\": {,}\n}\n",
+        "m.json",
+    );
+    assert_eq!(c.code, 2);
+    assert!(c.stderr.contains("m.json:3:"), "{}", c.stderr);
+}
+
+#[test]
+fn missing_key_is_named() {
+    let text = BASE.replace(
+        "id = \"k1\"\nrole = \"spring\"\np_gain = 1.0\n",
+        "id = \"k1\"\nrole = \"spring\"\n",
+    );
+    assert_manifest_error(
+        &text,
+        &["runs[1].p_gain", "run \"k1\"", "required key is missing"],
+    );
+}
+
+#[test]
+fn missing_section_is_named() {
+    let text = BASE.replace("[campaign]\nname = \"tiny\"\n", "");
+    assert_manifest_error(&text, &["campaign: required key is missing"]);
+}
+
+#[test]
+fn mistyped_key_is_named_with_line() {
+    let text = BASE.replace(
+        "id = \"exp1\"\nrole = \"validation\"\np_gain = 1.0",
+        "id = \"exp1\"\nrole = \"validation\"\np_gain = \"one\"",
+    );
+    assert_manifest_error(
+        &text,
+        &[
+            "runs[2].p_gain",
+            "run \"exp1\"",
+            "invalid type",
+            "campaign.toml:29:1:",
+        ],
+    );
+}
+
+#[test]
+fn unknown_key_is_rejected_with_its_path_and_a_suggestion() {
+    let text = BASE.replace(
+        "{ stiffness_n_per_m = 116640.0 }",
+        "{ stifness_n_per_m = 116640.0 }",
+    );
+    assert_manifest_error(
+        &text,
+        &[
+            "runs[1].specimen.stifness_n_per_m",
+            "unknown key",
+            "did you mean `stiffness_n_per_m`",
+        ],
+    );
+}
+
+#[test]
+fn unknown_top_level_key_is_rejected() {
+    let text = format!("{BASE}\n[extras]\nfoo = 1\n");
+    assert_manifest_error(&text, &["extras: unknown key `extras`"]);
+}
+
+#[test]
+fn zero_or_negative_mass_stiffness_and_p_gain_are_rejected() {
+    let text = BASE
+        .replace("mass_kg = 3.8", "mass_kg = -3.8")
+        .replace(
+            "{ stiffness_n_per_m = 116640.0 }",
+            "{ stiffness_n_per_m = 0.0 }",
+        )
+        .replace(
+            "id = \"ns\"\nrole = \"no_specimen\"\np_gain = 1.0",
+            "id = \"ns\"\nrole = \"no_specimen\"\np_gain = 0.0",
+        );
+    let c = check(&text);
+    assert_eq!(c.code, 2);
+    // Every problem at once, each with its run.
+    for f in [
+        "runs[2].specimen.mass_kg (run \"exp1\"): must be positive (got -3.8)",
+        "runs[1].specimen.stiffness_n_per_m (run \"k1\"): must be positive (got 0)",
+        "runs[0].p_gain (run \"ns\"): must be positive (got 0)",
+        "3 problems",
+    ] {
+        assert!(c.stderr.contains(f), "missing {f:?} in:\n{}", c.stderr);
+    }
+}
+
+#[test]
+fn spring_run_without_stiffness() {
+    let text = BASE.replace("specimen = { stiffness_n_per_m = 116640.0 }\n", "");
+    assert_manifest_error(
+        &text,
+        &[
+            "runs[1].specimen.stiffness_n_per_m",
+            "run \"k1\"",
+            "needs the spring's stiffness",
+        ],
+    );
+}
+
+#[test]
+fn validation_campaign_without_rig_parameters_or_identification_runs() {
+    // Drop the spring run: nothing gives R2 and R3, and no [rig.parameters].
+    let start = BASE.find("[[runs]]\nid = \"k1\"").unwrap();
+    let end = BASE.find("[[runs]]\nid = \"exp1\"").unwrap();
+    let text = format!("{}{}", &BASE[..start], &BASE[end..]);
+    assert_manifest_error(&text, &["rig.parameters", "has no spring run"]);
+}
+
+#[test]
+fn given_rig_parameters_suffice_for_validation() {
+    let exp = &BASE[BASE.find("[[runs]]\nid = \"exp1\"").unwrap()..];
+    let text = format!(
+        "schema_version = 1\n[campaign]\nname = \"given\"\n[rig]\nname = \"r\"\n[rig.parameters]\nbeta1_per_s = 267.0\na1b0_n_per_m_s2 = 2.412e9\na2_n_per_m = 7.881e5\na3_per_s = 16.118\n\n{exp}"
+    );
+    let c = check(&text);
+    assert_eq!(c.code, 0, "{}", c.stderr);
+}
+
+#[test]
+fn duplicate_run_ids() {
+    let text = BASE.replace("id = \"k1\"", "id = \"ns\"");
+    assert_manifest_error(
+        &text,
+        &[
+            "runs[1].id",
+            "duplicate run id `ns` (first used by runs[0])",
+        ],
+    );
+}
+
+#[test]
+fn zero_leading_denominator() {
+    let text = BASE.replace("den = [1.0, 263.4, 3337.0]", "den = [0.0, 263.4, 3337.0]");
+    assert_manifest_error(
+        &text,
+        &[
+            "runs[1].data.transfer_function.den",
+            "run \"k1\"",
+            "leading denominator coefficient is zero",
+        ],
+    );
+}
+
+#[test]
+fn identification_runs_need_second_order_models() {
+    let text = BASE.replace(
+        "den = [1.0, 267.0, 3060.0]",
+        "den = [1.0, 267.0, 3060.0, 5.0]",
+    );
+    assert_manifest_error(&text, &["runs[0].data.transfer_function", "second-order"]);
+}
+
+#[test]
+fn every_problem_is_reported_at_once() {
+    // A type error in one run does not hide problems elsewhere.
+    let text = BASE
+        .replace(
+            "p_gain = 1.0\n[runs.data.transfer_function]\nnum = [3060.0]",
+            "p_gain = \"x\"\n[runs.data.transfer_function]\nnum = [3060.0]",
+        )
+        .replace(
+            "{ stiffness_n_per_m = 116640.0 }",
+            "{ stiffness_n_per_m = -1.0 }",
+        )
+        .replace("mass_kg = 3.8", "mass_kg = 0.0")
+        .replace(
+            "name = \"test rig\"",
+            "name = \"test rig\"\ncolour = \"red\"",
+        );
+    let c = check(&text);
+    assert_eq!(c.code, 2);
+    for f in [
+        "4 problems",
+        "runs[0].p_gain",
+        "runs[1].specimen.stiffness_n_per_m",
+        "runs[2].specimen.mass_kg",
+        "rig.colour",
+    ] {
+        assert!(c.stderr.contains(f), "missing {f:?} in:\n{}", c.stderr);
+    }
+}
+
+#[test]
+fn unreadable_manifest_names_the_file() {
+    let dir = scratch();
+    let o = servoid(dir.path(), &["run", "nowhere.toml"]);
+    assert_eq!(o.code, 2);
+    assert!(o.stderr.contains("nowhere.toml"), "{}", o.stderr);
+}
+
+#[test]
+fn missing_log_file_is_named() {
+    let text = BASE.replace(
+        "[runs.data.transfer_function]\nnum = [2703.0]\nden = [1.0, 263.4, 3337.0]",
+        "[runs.data]\nlog = \"logs/k1.csv\"",
+    );
+    let text = format!(
+        "{}\n[channels]\ntime = {{ column = \"t\" }}\ncommand = {{ column = \"u\", unit = \"mm\" }}\ndisplacement = {{ column = \"x\", unit = \"mm\" }}\n",
+        text
+    );
+    assert_manifest_error(&text, &["runs[1].data.log", "log file not found", "k1.csv"]);
+}
+
+#[test]
+fn unknown_reference_quantity_and_run() {
+    let text = format!(
+        "{BASE}\n[[references]]\nquantity = \"rig.a9\"\npublished = 1.0\n\n[[references]]\nquantity = \"ccf.nope.C1\"\npublished = 1.0\n"
+    );
+    assert_manifest_error(
+        &text,
+        &[
+            "references[0].quantity",
+            "unknown quantity `rig.a9`",
+            "references[1].quantity",
+            "run `nope`",
+        ],
+    );
+}
+
+#[test]
+fn usage_errors_exit_2() {
+    let dir = scratch();
+    assert_eq!(servoid(dir.path(), &["frobnicate"]).code, 2);
+    assert_eq!(servoid(dir.path(), &["run"]).code, 2);
+    assert_eq!(servoid(dir.path(), &["--help"]).code, 0);
+}
+
+#[test]
+fn a_failed_run_exits_1_and_the_others_complete() {
+    // A spring whose fitted model raises the static gain (d0/n0 < 1) gives a
+    // non-physical R2: identification fails, the validation run cannot be
+    // predicted, and both are recorded in results.json.
+    let text = BASE.replace("den = [1.0, 263.4, 3337.0]", "den = [1.0, 263.4, 2600.0]");
+    let dir = scratch();
+    let path = write(dir.path(), "campaign.toml", &text);
+    let out = dir.path().join("out");
+    let o = servoid(
+        dir.path(),
+        &[
+            "run",
+            path.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ],
+    );
+    assert_eq!(o.code, 1, "{}", o.stderr);
+    let r: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("results.json")).unwrap()).unwrap();
+    assert!(r["rig"].is_null());
+    assert!(
+        r["rig_error"].as_str().unwrap().contains("k1"),
+        "{}",
+        r["rig_error"]
+    );
+    let exp1 = &r["runs"][2];
+    assert_eq!(exp1["status"], "failed");
+    assert!(
+        exp1["error"]
+            .as_str()
+            .unwrap()
+            .contains("rig parameters are unavailable")
+    );
+    // The identification runs themselves completed.
+    assert_eq!(r["runs"][0]["status"], "ok");
+    assert!(o.stderr.contains("run exp1"), "{}", o.stderr);
+}
