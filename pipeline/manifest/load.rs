@@ -83,161 +83,203 @@ fn render(file: &Path, problems: &[Problem]) -> String {
 
 /// Read and check a manifest file (`.json` is read as JSON, anything else as TOML).
 pub fn load(path: &Path) -> Result<Campaign, ManifestError> {
-    let text = std::fs::read_to_string(path).map_err(|source| ManifestError::Read {
+    let text = read(path)?;
+    load_str(&text, path)
+}
+
+/// Read a manifest's text, naming the file when it cannot be read.
+pub(crate) fn read(path: &Path) -> Result<String, ManifestError> {
+    std::fs::read_to_string(path).map_err(|source| ManifestError::Read {
         file: path.to_path_buf(),
         source,
-    })?;
-    load_str(&text, path)
+    })
 }
 
 /// Check manifest text as if read from `path` (relative log paths resolve
 /// against `path`'s folder).
 pub fn load_str(text: &str, path: &Path) -> Result<Campaign, ManifestError> {
-    let is_json = path
-        .extension()
-        .is_some_and(|e| e.eq_ignore_ascii_case("json"));
-    let (value, doc) = if is_json {
-        let v: Value = serde_json::from_str(text).map_err(|e| ManifestError::Syntax {
-            file: path.to_path_buf(),
-            format: "JSON",
-            line: e.line(),
-            column: e.column(),
-            message: e.to_string(),
-        })?;
-        (v, None)
-    } else {
-        let doc = toml_edit::Document::parse(text).map_err(|e| {
-            let (line, column) = e.span().map(|s| line_col(text, s.start)).unwrap_or((1, 1));
-            ManifestError::Syntax {
-                file: path.to_path_buf(),
-                format: "TOML",
-                line,
-                column,
-                message: e.message().to_string(),
-            }
-        })?;
-        let v: Value = toml::from_str(text).map_err(|e| {
-            let (line, column) = e.span().map(|s| line_col(text, s.start)).unwrap_or((1, 1));
-            ManifestError::Syntax {
-                file: path.to_path_buf(),
-                format: "TOML",
-                line,
-                column,
-                message: e.message().to_string(),
-            }
-        })?;
-        (v, Some(doc))
+    let mut doc = Document::parse(text, path, crate::schema::manifest_schema())?;
+    doc.check_top_level();
+    // Each section, and each run and reference on its own, so that a type
+    // error in one does not hide the problems in the others.
+    let partial = Partial {
+        schema_version: doc.section("schema_version"),
+        campaign: doc.section::<CampaignInfo>("campaign"),
+        rig: doc.section::<Rig>("rig"),
+        channels: doc.section::<Channels>("channels"),
+        identification: doc.section::<Identification>("identification"),
+        runs: doc.array::<Run>("runs"),
+        raw_run_ids: doc.raw("runs", "id"),
+        raw_run_roles: doc.raw("runs", "role"),
+        references: doc.array::<Reference>("references"),
     };
-
-    let mut problems = Vec::new();
-    let partial = deserialize_sections(&value, &mut problems);
     let base_dir = path.parent().unwrap_or(Path::new("")).to_path_buf();
-    let campaign = validate::validate(partial, path, text.as_bytes(), &base_dir, &mut problems);
-
-    if let (true, Some(c)) = (problems.is_empty(), campaign) {
-        return Ok(c);
-    }
-    // Attach run ids and locations, then order by position in the file.
-    for p in problems.iter_mut() {
-        if p.run.is_none()
-            && let Some(i) = p.path.run_index()
-        {
-            p.run = value
-                .get("runs")
-                .and_then(|r| r.get(i))
-                .and_then(|r| r.get("id"))
-                .and_then(|id| id.as_str())
-                .map(str::to_string);
-        }
-        if let Some(doc) = &doc {
-            p.line_col = span_of(doc, &p.path).map(|s| line_col(text, s.start));
-        }
-    }
-    problems.sort_by(|a, b| {
-        a.line_col
-            .unwrap_or((usize::MAX, 0))
-            .cmp(&b.line_col.unwrap_or((usize::MAX, 0)))
-            .then(a.path.cmp(&b.path))
-    });
-    problems.dedup();
-    Err(ManifestError::Invalid {
-        file: path.to_path_buf(),
-        problems,
-    })
+    let campaign = validate::validate(partial, path, text.as_bytes(), &base_dir, &mut doc.problems);
+    doc.finish(campaign)
 }
 
-/// Deserialize each top-level section, and each run and reference on its own,
-/// so that a type error in one does not hide the problems in the others.
-fn deserialize_sections(value: &Value, problems: &mut Vec<Problem>) -> Partial {
-    let mut partial = Partial::default();
-    let Some(obj) = value.as_object() else {
-        problems.push(Problem::new(
-            KeyPath::root(),
-            "the manifest must be a table of sections",
-        ));
-        return partial;
-    };
-    let root = KeyPath::root();
-    let schema = crate::schema::manifest_schema();
-    let required = required_keys(&schema);
-    for key in &required {
-        if !obj.contains_key(key) {
-            problems.push(Problem::new(
-                root.key(key),
-                "required key is missing".to_string(),
+/// A parsed manifest document (TOML or JSON) and the problems found in it so
+/// far; shared by every manifest kind servoid reads.
+pub(crate) struct Document<'a> {
+    path: &'a Path,
+    text: &'a str,
+    value: Value,
+    /// The TOML document with spans, for line and column.
+    spans: Option<toml_edit::Document<&'a str>>,
+    schema: Value,
+    pub problems: Vec<Problem>,
+}
+
+impl<'a> Document<'a> {
+    /// Parse the text; a syntax error names line and column.
+    pub fn parse(text: &'a str, path: &'a Path, schema: Value) -> Result<Self, ManifestError> {
+        let is_json = path
+            .extension()
+            .is_some_and(|e| e.eq_ignore_ascii_case("json"));
+        let syntax = |format, (line, column), message: String| ManifestError::Syntax {
+            file: path.to_path_buf(),
+            format,
+            line,
+            column,
+            message,
+        };
+        let (value, spans) = if is_json {
+            let v: Value = serde_json::from_str(text)
+                .map_err(|e| syntax("JSON", (e.line(), e.column()), e.to_string()))?;
+            (v, None)
+        } else {
+            let doc = toml_edit::Document::parse(text).map_err(|e| {
+                let at = e.span().map(|s| line_col(text, s.start)).unwrap_or((1, 1));
+                syntax("TOML", at, e.message().to_string())
+            })?;
+            let v: Value = toml::from_str(text).map_err(|e| {
+                let at = e.span().map(|s| line_col(text, s.start)).unwrap_or((1, 1));
+                syntax("TOML", at, e.message().to_string())
+            })?;
+            (v, Some(doc))
+        };
+        Ok(Self {
+            path,
+            text,
+            value,
+            spans,
+            schema,
+            problems: Vec::new(),
+        })
+    }
+
+    /// Required top-level keys are present and no unknown ones are.
+    pub fn check_top_level(&mut self) {
+        let root = KeyPath::root();
+        let Some(obj) = self.value.as_object() else {
+            self.problems.push(Problem::new(
+                root,
+                "the manifest must be a table of sections",
             ));
-        }
-    }
-    for (key, v) in obj {
-        let path = root.key(key);
-        match key.as_str() {
-            "schema_version" => partial.schema_version = section(v, &path, &schema, problems),
-            "campaign" => partial.campaign = section::<CampaignInfo>(v, &path, &schema, problems),
-            "rig" => partial.rig = section::<Rig>(v, &path, &schema, problems),
-            "channels" => partial.channels = section::<Channels>(v, &path, &schema, problems),
-            "identification" => {
-                partial.identification = section::<Identification>(v, &path, &schema, problems)
+            return;
+        };
+        for key in required_keys(&self.schema) {
+            if !obj.contains_key(&key) {
+                self.problems
+                    .push(Problem::new(root.key(&key), "required key is missing"));
             }
-            "runs" => match v.as_array() {
-                Some(items) => {
-                    partial.runs = items
-                        .iter()
-                        .enumerate()
-                        .map(|(i, item)| section::<Run>(item, &path.index(i), &schema, problems))
-                        .collect();
-                    partial.raw_run_ids = items
-                        .iter()
-                        .map(|r| r.get("id").and_then(|x| x.as_str()).map(str::to_string))
-                        .collect();
-                    partial.raw_run_roles = items
-                        .iter()
-                        .map(|r| {
-                            r.get("role")
-                                .and_then(|x| serde_json::from_value(x.clone()).ok())
-                        })
-                        .collect();
-                }
-                None => problems.push(Problem::new(path, "must be an array of runs ([[runs]])")),
-            },
-            "references" => match v.as_array() {
-                Some(items) => {
-                    partial.references = items
-                        .iter()
-                        .enumerate()
-                        .map(|(i, item)| {
-                            section::<Reference>(item, &path.index(i), &schema, problems)
-                        })
-                        .collect();
-                }
-                None => problems.push(Problem::new(
-                    path,
-                    "must be an array of references ([[references]])",
-                )),
-            },
-            other => problems.push(unknown_key(&schema, &root, other)),
+        }
+        let known = known_keys(&self.schema, &root);
+        for key in obj.keys() {
+            if !known.contains(key) {
+                self.problems.push(unknown_key(&self.schema, &root, key));
+            }
         }
     }
-    partial
+
+    /// A top-level section; None when absent or when it failed (the problem is recorded).
+    pub fn section<T: DeserializeOwned>(&mut self, key: &str) -> Option<T> {
+        let v = self.value.get(key)?.clone();
+        section(
+            &v,
+            &KeyPath::root().key(key),
+            &self.schema,
+            &mut self.problems,
+        )
+    }
+
+    /// A top-level array of tables, each element deserialized on its own.
+    pub fn array<T: DeserializeOwned>(&mut self, key: &str) -> Vec<Option<T>> {
+        let path = KeyPath::root().key(key);
+        let Some(v) = self.value.get(key).cloned() else {
+            return Vec::new();
+        };
+        let Some(items) = v.as_array() else {
+            self.problems.push(Problem::new(
+                path,
+                format!("must be an array of tables ([[{key}]])"),
+            ));
+            return Vec::new();
+        };
+        items
+            .iter()
+            .enumerate()
+            .map(|(i, item)| section(item, &path.index(i), &self.schema, &mut self.problems))
+            .collect()
+    }
+
+    /// One field of every element of a top-level array, read leniently (None
+    /// where absent or of another type), for cross-element checks.
+    pub fn raw<T: DeserializeOwned>(&self, array: &str, field: &str) -> Vec<Option<T>> {
+        self.value
+            .get(array)
+            .and_then(Value::as_array)
+            .map(|items| {
+                items
+                    .iter()
+                    .map(|r| {
+                        r.get(field)
+                            .and_then(|x| serde_json::from_value(x.clone()).ok())
+                    })
+                    .collect()
+            })
+            .unwrap_or_default()
+    }
+
+    /// The result when there is no problem; else every problem, with run ids,
+    /// lines and columns, in file order.
+    pub fn finish<R>(mut self, result: Option<R>) -> Result<R, ManifestError> {
+        if let (true, Some(r)) = (self.problems.is_empty(), result) {
+            return Ok(r);
+        }
+        for p in self.problems.iter_mut() {
+            if p.run.is_none()
+                && let Some(i) = p.path.run_index()
+            {
+                p.run = self
+                    .value
+                    .get("runs")
+                    .and_then(|r| r.get(i))
+                    .and_then(|r| r.get("id"))
+                    .and_then(|id| id.as_str())
+                    .map(str::to_string);
+            }
+            if let Some(doc) = &self.spans {
+                p.line_col = span_of(doc, &p.path).map(|s| line_col(self.text, s.start));
+            }
+        }
+        let mut problems = self.problems;
+        problems.sort_by(|a, b| {
+            a.line_col
+                .unwrap_or((usize::MAX, 0))
+                .cmp(&b.line_col.unwrap_or((usize::MAX, 0)))
+                .then(a.path.cmp(&b.path))
+        });
+        problems.dedup();
+        if problems.is_empty() {
+            // Validation produced nothing yet no result: never expected, but say so.
+            problems.push(Problem::new(KeyPath::root(), "the manifest is incomplete"));
+        }
+        Err(ManifestError::Invalid {
+            file: self.path.to_path_buf(),
+            problems,
+        })
+    }
 }
 
 /// Deserialize one section, collecting its unknown keys and its first type error.
