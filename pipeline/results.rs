@@ -35,6 +35,9 @@ pub struct Results {
     pub ccf: Vec<CcfResult>,
     /// Published numbers beside the recomputed ones.
     pub comparisons: Vec<Comparison>,
+    /// How the rig parameters' precision depends on the spring stiffness
+    /// (paper Sec. 2.3), when the rig is known.
+    pub sensitivity: Option<SensitivityResult>,
     /// Campaign-level warnings.
     pub warnings: Vec<String>,
 }
@@ -83,6 +86,16 @@ pub struct RigResult {
     pub spread: Option<Spread>,
 }
 
+/// The stiffness sensitivity analysis, with where the campaign's springs sit.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+pub struct SensitivityResult {
+    /// Where the assumed coefficient precision comes from.
+    pub basis: String,
+    pub sweep: crate::sensitivity::StiffnessSensitivity,
+    /// The campaign's spring stiffnesses (N/m).
+    pub springs_n_per_m: Vec<f64>,
+}
+
 /// Sample standard deviation of the per-spring values.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 pub struct Spread {
@@ -118,8 +131,13 @@ pub struct TfResult {
     pub den: Vec<f64>,
     pub delay_s: f64,
     pub source: TfSource,
-    /// Poles [rad/s].
+    /// Poles (rad/s).
     pub poles: Vec<ComplexValue>,
+    /// Standard deviation of each fitted coefficient (num then den after the
+    /// leading 1, then the delay when fitted); null unless fitted.
+    pub std: Option<Vec<f64>>,
+    /// The same, relative to each coefficient's magnitude.
+    pub rel_std: Option<Vec<f64>>,
 }
 
 impl TfResult {
@@ -130,6 +148,8 @@ impl TfResult {
             delay_s: tf.delay_s,
             source,
             poles: tf.poles().into_iter().map(ComplexValue::from).collect(),
+            std: None,
+            rel_std: None,
         }
     }
 }

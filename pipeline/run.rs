@@ -109,8 +109,10 @@ pub fn analyse(campaign: &Campaign) -> Results {
         runs,
         ccf,
         comparisons: Vec::new(),
+        sensitivity: None,
         warnings,
     };
+    results.sensitivity = rig_params.and_then(|rig| sensitivity(campaign, &rig, &results));
     results.comparisons = compare(campaign, &results);
     results
 }
@@ -316,6 +318,51 @@ fn ccf_result(rig: &RigParams, plan: &RunPlan) -> Option<CcfResult> {
         C5: c.C5,
         poles_with_cn: poles(CnTerm::Kept),
         poles_without_cn: poles(CnTerm::Dropped),
+    })
+}
+
+/// The stiffness sweep over 0.01 a2 .. 10 a2 (the paper's springs sit near
+/// 0.1 a2), assuming each coefficient is as precise as the campaign's
+/// median fitted one, or 0.1 % when the campaign's models carry no
+/// uncertainty (published transfer functions).
+fn sensitivity(
+    campaign: &Campaign,
+    rig: &RigParams,
+    results: &Results,
+) -> Option<crate::results::SensitivityResult> {
+    let springs: Vec<f64> = campaign
+        .runs
+        .iter()
+        .filter_map(|r| match (r.role, r.specimen.linear()) {
+            (Role::Spring, LinearSpecimen::Spring { stiffness_n_per_m }) => Some(stiffness_n_per_m),
+            _ => None,
+        })
+        .collect();
+    let mut rel: Vec<f64> = results
+        .runs
+        .iter()
+        .filter(|r| matches!(r.role, Role::NoSpecimen | Role::Spring))
+        .filter_map(|r| r.tf.as_ref())
+        .flat_map(|tf| tf.rel_std.clone().unwrap_or_default())
+        .filter(|v| v.is_finite() && *v > 0.0)
+        .collect();
+    rel.sort_by(f64::total_cmp);
+    let (eps, basis) = match rel.get(rel.len() / 2) {
+        Some(&m) if !rel.is_empty() => (
+            m,
+            format!("median relative std of the campaign's fitted coefficients ({m:.2e})"),
+        ),
+        _ => (
+            1e-3,
+            "assumed 0.1 % relative std per coefficient (the campaign's models carry no uncertainty)".to_string(),
+        ),
+    };
+    let a2 = rig.a2_n_per_m;
+    let sweep = crate::sensitivity::stiffness_sweep(rig, (0.01 * a2, 10.0 * a2), 61, eps).ok()?;
+    Some(crate::results::SensitivityResult {
+        basis,
+        sweep,
+        springs_n_per_m: springs,
     })
 }
 
