@@ -7,6 +7,7 @@ use std::sync::OnceLock;
 use serde_json::Value;
 
 use crate::manifest::Manifest;
+use crate::manifest::simulation::SimulationManifest;
 use crate::results::Results;
 
 /// File names under `schemas/`, with their generators.
@@ -14,6 +15,7 @@ pub fn all() -> Vec<(&'static str, Value)> {
     vec![
         ("manifest.schema.json", manifest_schema()),
         ("results.schema.json", results_schema()),
+        ("simulation.schema.json", simulation_schema()),
     ]
 }
 
@@ -23,6 +25,17 @@ pub fn manifest_schema() -> Value {
     CACHE
         .get_or_init(|| {
             serde_json::to_value(schemars::schema_for!(Manifest)).expect("schema serialises")
+        })
+        .clone()
+}
+
+/// The simulation manifest schema (cached, as the manifest's).
+pub fn simulation_schema() -> Value {
+    static CACHE: OnceLock<Value> = OnceLock::new();
+    CACHE
+        .get_or_init(|| {
+            serde_json::to_value(schemars::schema_for!(SimulationManifest))
+                .expect("schema serialises")
         })
         .clone()
 }

@@ -8,7 +8,11 @@ fn committed_schemas_are_current() {
     let dir = scratch();
     let o = servoid(dir.path(), &["schema", "--out-dir", "fresh"]);
     assert_eq!(o.code, 0, "{}", o.stderr);
-    for name in ["manifest.schema.json", "results.schema.json"] {
+    for name in [
+        "manifest.schema.json",
+        "results.schema.json",
+        "simulation.schema.json",
+    ] {
         let fresh = std::fs::read_to_string(dir.path().join("fresh").join(name)).unwrap();
         let committed = std::fs::read_to_string(root().join("schemas").join(name))
             .unwrap_or_else(|_| panic!("schemas/{name} is missing; run `servoid schema`"));

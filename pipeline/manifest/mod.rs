@@ -9,13 +9,14 @@
 
 mod keypath;
 mod load;
+pub mod simulation;
 mod validate;
 
 pub use keypath::{KeyPath, Seg};
 pub use load::{ManifestError, Problem, load, load_str};
 pub use validate::{
-    Campaign, ChannelPlan, Channels as ResolvedChannels, FrfPlan, IdentificationPlan, LogPlan,
-    Quantity, ReferencePlan, RunPlan, RunSource, SpecimenPlan,
+    Campaign, ChannelPlan, Channels as ResolvedChannels, DelayPlan, FrfPlan, IdentificationPlan,
+    LogPlan, Quantity, ReferencePlan, RunPlan, RunSource, SpecimenPlan, TimePlan,
 };
 
 use schemars::JsonSchema;

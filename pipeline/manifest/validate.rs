@@ -370,7 +370,7 @@ pub(crate) fn hex(bytes: &[u8]) -> String {
     bytes.iter().map(|b| format!("{b:02x}")).collect()
 }
 
-fn check_slug(s: &str, path: &KeyPath, bad: &mut impl FnMut(KeyPath, String)) {
+pub(super) fn check_slug(s: &str, path: &KeyPath, bad: &mut impl FnMut(KeyPath, String)) {
     if s.is_empty() {
         bad(path.clone(), "must not be empty".into());
     } else if !s
@@ -470,7 +470,7 @@ fn check_band(band: [f64; 2], path: &KeyPath, bad: &mut impl FnMut(KeyPath, Stri
     }
 }
 
-fn check_identification(
+pub(super) fn check_identification(
     id: &Identification,
     path: &KeyPath,
     bad: &mut impl FnMut(KeyPath, String),
@@ -542,7 +542,7 @@ fn check_identification(
     }
 }
 
-fn check_specimen(
+pub(super) fn check_specimen(
     role: Role,
     spec: Option<&Specimen>,
     path: &KeyPath,
