@@ -121,16 +121,19 @@ fn cmd_run(manifest_path: &Path, out: Option<PathBuf>, jobs: Option<usize>, quie
         }
     };
     let results = pool.install(|| run::analyse(&campaign));
-    let path = match report::write_results(&results, &out_dir) {
+    let written = report::write_results(&results, &out_dir)
+        .and_then(|r| Ok((r, report::write_page(&results, &[], None, &out_dir)?)));
+    let (path, page) = match written {
         Ok(p) => p,
         Err(e) => {
-            eprintln!("error: cannot write results: {e}");
+            eprintln!("error: cannot write the outputs: {e}");
             return EXIT_FAILED;
         }
     };
     if !quiet {
         print_summary(&results);
         println!("wrote {}", path.display());
+        println!("wrote {}", page.display());
     }
     for r in results.runs.iter().filter(|r| r.status == Status::Failed) {
         eprintln!(

@@ -40,6 +40,8 @@ pub struct Results {
     pub sensitivity: Option<SensitivityResult>,
     /// Campaign-level warnings.
     pub warnings: Vec<String>,
+    /// The manifest as read (after defaults), for provenance.
+    pub manifest: crate::manifest::Manifest,
 }
 
 /// What was analysed.
@@ -190,6 +192,19 @@ pub struct RunResult {
     pub force_tf: Option<TfResult>,
     /// Measured vs simulated displacement (Eqs. 47-48), when the run has a log.
     pub validation: Option<ValidationMetrics>,
+    /// The log this run read, when it has one.
+    pub log: Option<LogInfo>,
+}
+
+/// Provenance of a run's log.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+pub struct LogInfo {
+    /// The file as the manifest names it.
+    pub file: String,
+    pub sha256: String,
+    pub sample_rate_hz: f64,
+    pub n_samples: usize,
+    pub duration_s: f64,
 }
 
 /// Normalised errors of the simulated displacement (Eqs. 47-48) [%].

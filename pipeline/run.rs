@@ -111,6 +111,7 @@ pub fn analyse(campaign: &Campaign) -> Results {
         comparisons: Vec::new(),
         sensitivity: None,
         warnings,
+        manifest: campaign.manifest.clone(),
     };
     results.sensitivity = rig_params.and_then(|rig| sensitivity(campaign, &rig, &results));
     results.comparisons = compare(campaign, &results);
@@ -248,6 +249,7 @@ fn run_result(
         tf: None,
         force_tf: None,
         validation: None,
+        log: None,
     };
     let acq = match acq {
         Ok(a) => a,

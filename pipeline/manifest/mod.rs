@@ -28,7 +28,7 @@ use crate::model::RigParams;
 pub const SCHEMA_VERSION: u32 = 1;
 
 /// An experiment manifest: one test campaign on one rig.
-#[derive(Debug, Clone, Serialize, Deserialize, JsonSchema)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[schemars(deny_unknown_fields)]
 pub struct Manifest {
     /// Version of the manifest format (this servoid reads 1).
@@ -49,7 +49,7 @@ pub struct Manifest {
 }
 
 /// What the campaign is.
-#[derive(Debug, Clone, Serialize, Deserialize, JsonSchema)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[schemars(deny_unknown_fields)]
 pub struct CampaignInfo {
     /// Short name; also the default output folder under `reports/`
@@ -60,7 +60,7 @@ pub struct CampaignInfo {
 }
 
 /// The rig (hydraulic transfer system).
-#[derive(Debug, Clone, Serialize, Deserialize, JsonSchema)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[schemars(deny_unknown_fields)]
 pub struct Rig {
     pub name: String,
@@ -387,7 +387,7 @@ impl Default for ModelOrders {
 }
 
 /// One run of the campaign.
-#[derive(Debug, Clone, Serialize, Deserialize, JsonSchema)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[schemars(deny_unknown_fields)]
 pub struct Run {
     /// Unique id (letters, digits, `.`, `_` and `-`).

@@ -1,6 +1,8 @@
 //! Writing outputs. Every file is written to a temporary sibling and renamed
 //! into place, so a reader never sees a half-written file and a failure never
-//! destroys the previous output.
+//! destroys the previous output. `html` renders the campaign's page.
+
+pub mod html;
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -10,6 +12,8 @@ use crate::results::Results;
 /// Why an output could not be written.
 #[derive(Debug, thiserror::Error)]
 pub enum WriteError {
+    #[error(transparent)]
+    Html(#[from] html::HtmlError),
     #[error("{}: {source}", path.display())]
     Io {
         path: PathBuf,
@@ -49,6 +53,19 @@ pub fn results_json(results: &Results) -> Vec<u8> {
     let mut s = serde_json::to_string_pretty(results).expect("results serialise");
     s.push('\n');
     s.into_bytes()
+}
+
+/// Write the HTML report `report.html` into `out_dir`; returns its path.
+pub fn write_page(
+    results: &Results,
+    figures: &[html::PageFigure],
+    notice: Option<&str>,
+    out_dir: &Path,
+) -> Result<PathBuf, WriteError> {
+    let page = html::render(results, figures, notice)?;
+    let path = out_dir.join("report.html");
+    write_atomic(&path, page.as_bytes())?;
+    Ok(path)
 }
 
 /// Write `results.json` into `out_dir`; returns its path.
