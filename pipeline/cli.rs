@@ -121,8 +121,17 @@ fn cmd_run(manifest_path: &Path, out: Option<PathBuf>, jobs: Option<usize>, quie
         }
     };
     let results = pool.install(|| run::analyse(&campaign));
-    let written = report::write_results(&results, &out_dir)
-        .and_then(|r| Ok((r, report::write_page(&results, &[], None, &out_dir)?)));
+    let written = report::write_results(&results, &out_dir).and_then(|r| {
+        Ok((
+            r,
+            report::write_page(
+                &results,
+                &[],
+                results.manifest.campaign.synthetic.as_deref(),
+                &out_dir,
+            )?,
+        ))
+    });
     let (path, page) = match written {
         Ok(p) => p,
         Err(e) => {

@@ -14,6 +14,7 @@ mod validate;
 
 pub use keypath::{KeyPath, Seg};
 pub use load::{ManifestError, Problem, load, load_str};
+pub use validate::hex;
 pub use validate::{
     Campaign, ChannelPlan, Channels as ResolvedChannels, DelayPlan, FrfPlan, IdentificationPlan,
     LogPlan, Quantity, ReferencePlan, RunPlan, RunSource, SpecimenPlan, TimePlan,
@@ -57,6 +58,10 @@ pub struct CampaignInfo {
     pub name: String,
     #[serde(default)]
     pub description: String,
+    /// Set when the logs are synthetic: how they were made (shown as a banner
+    /// in the report). `servoid simulate` writes it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub synthetic: Option<String>,
 }
 
 /// The rig (hydraulic transfer system).
