@@ -65,6 +65,7 @@ pub struct FitOptions {
     pub intersample: Intersample,
     /// Sample rate of the command (Hz); used by the hold.
     pub sample_rate_hz: f64,
+    /// Pure delay: none, known, or fitted within a bound.
     pub delay: DelayPlan,
     /// Levenberg-Marquardt iterations allowed (at least 1).
     pub max_iterations: u64,
@@ -537,8 +538,9 @@ fn refine(prep: &Prepared, opts: &FitOptions, start: Vec<f64>) -> Result<TfFit, 
             poles.join(", ")
         ));
     }
+    // Compared in scaled units, where the solver clamps exactly.
     if let Some(max_s) = prep.max_delay_s
-        && (tau_s <= 0.0 || tau_s >= max_s)
+        && (theta[p - 1] <= 0.0 || theta[p - 1] >= max_s * w0)
     {
         warnings.push(format!(
             "the fitted delay {tau_s} s is at a bound of [0, {max_s}] s; its standard deviation assumes an interior optimum"

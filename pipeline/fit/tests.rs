@@ -596,3 +596,74 @@ fn bad_inputs_give_errors_that_say_what_and_where() {
         "invalid fit option start: needs 3 values (n0, d1, d0), got 2"
     );
 }
+
+#[test]
+fn covariance_is_the_scaled_inverse_normal_matrix() {
+    // Independent route: explicit inverse of J^T J, on a Jacobian whose
+    // columns differ in scale by 1e6 (as unscaled coefficients would).
+    let mut rng = SplitMix64(99);
+    let jac = DMatrix::from_fn(40, 3, |_, j| rng.normal() * 1e3_f64.powi(j as i32));
+    let cov = covariance(&jac, 2.5).unwrap();
+    let want = (jac.transpose() * &jac).try_inverse().unwrap() * 2.5;
+    for i in 0..3 {
+        for j in 0..3 {
+            let scale = (want[(i, i)] * want[(j, j)]).sqrt();
+            assert!((cov[(i, j)] - want[(i, j)]).abs() < 1e-10 * scale);
+        }
+    }
+    // A column the residuals do not depend on is named.
+    let mut singular = jac.clone();
+    singular.column_mut(1).fill(0.0);
+    assert_eq!(covariance(&singular, 1.0).unwrap_err().column, 1);
+}
+
+#[test]
+fn unidentifiable_parameter_at_the_optimum_is_named() {
+    // fit_from skips Levy, so three bins at one frequency reach the
+    // Jacobian check: damped steps still run, but J^T W J is singular there.
+    let opts = FitOptions::new(0, 2, 1000.0);
+    let same = [5.0; 3];
+    let h = [Complex::new(0.2, -0.7); 3];
+    let v = [1.0; 3];
+    let input = FitInput {
+        freq_hz: &same,
+        h: &h,
+        variance: &v,
+    };
+    let msg = fit_from(&input, &opts, &[3000.0, 250.0, 3000.0])
+        .unwrap_err()
+        .to_string();
+    assert!(
+        msg.starts_with("parameter ")
+            && msg.contains("is not identifiable from these 3 bins: the Jacobian at the optimum (J^T W J) is singular"),
+        "{msg}"
+    );
+}
+
+#[test]
+fn a_delay_fitted_at_its_bound_is_reported() {
+    // No delay in the data: the best delay in [0, 5] ms is 0, on the bound.
+    let plant = TransferFunction::new(&[3060.0], &[1.0, 267.0, 3060.0]).unwrap();
+    let freq = band_bins();
+    let h = analytic(&plant, &freq, Some(1000.0));
+    let variance: Vec<f64> = h.iter().map(|h| 1e-6 * h.norm_sqr()).collect();
+    let input = FitInput {
+        freq_hz: &freq,
+        h: &h,
+        variance: &variance,
+    };
+    let mut opts = FitOptions::new(0, 2, 1000.0);
+    opts.delay = DelayPlan::Fit { max_s: 0.005 };
+    let f = fit(&input, &opts).unwrap();
+    assert!(f.params[3].abs() < 1e-12, "tau = {}", f.params[3]);
+    for (got, want) in f.params.iter().zip([3060.0, 267.0, 3060.0]) {
+        assert_relative_eq!(*got, want, max_relative = 1e-8);
+    }
+    assert!(
+        f.warnings
+            .iter()
+            .any(|w| w.contains("at a bound of [0, 0.005] s")),
+        "{:?}",
+        f.warnings
+    );
+}
