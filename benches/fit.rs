@@ -1,0 +1,92 @@
+//! Fit time for the paper's second-order model on the bins a real log gives:
+//! 170 s at 2048 Hz, Welch segments of 8192 samples (0.25 Hz apart), band
+//! 0.5-30 Hz, with the command's sample-and-hold modelled; without and with
+//! a fitted delay. Budget: FRF + fit within 20 ms in release.
+//!
+//! `cargo bench --bench fit`
+
+use std::hint::black_box;
+
+use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
+use nalgebra::Complex;
+use servoid::fit::{DelayPlan, FitInput, FitOptions, fit};
+use servoid::lti::TransferFunction;
+use servoid::manifest::Intersample;
+
+const SAMPLE_RATE_HZ: f64 = 2048.0;
+const SEGMENT: usize = 8192;
+const BAND_HZ: (f64, f64) = (0.5, 30.0);
+
+/// SplitMix64 + Box-Muller, for reproducible noise without a dependency.
+struct SplitMix64(u64);
+
+impl SplitMix64 {
+    fn next_f64(&mut self) -> f64 {
+        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        (((z ^ (z >> 31)) >> 11) as f64 + 0.5) / (1_u64 << 53) as f64
+    }
+
+    fn normal(&mut self) -> f64 {
+        let (u1, u2) = (self.next_f64(), self.next_f64());
+        (-2.0 * u1.ln()).sqrt() * (2.0 * std::f64::consts::PI * u2).cos()
+    }
+}
+
+/// The Welch bins inside the band, and a noisy measured response there:
+/// the paper's no-specimen model (Eq. 36) with a 1 ms delay, through the
+/// hold, plus 2 % complex noise.
+fn data() -> (Vec<f64>, Vec<Complex<f64>>, Vec<f64>) {
+    let df = SAMPLE_RATE_HZ / SEGMENT as f64;
+    let freq: Vec<f64> = (0..=SEGMENT / 2)
+        .map(|k| k as f64 * df)
+        .filter(|f| (BAND_HZ.0..=BAND_HZ.1).contains(f))
+        .collect();
+    let plant = TransferFunction::with_delay(&[3060.0], &[1.0, 267.0, 3060.0], 0.001).unwrap();
+    let mut rng = SplitMix64(2018);
+    let mut h = Vec::with_capacity(freq.len());
+    let mut variance = Vec::with_capacity(freq.len());
+    for &f in &freq {
+        let z = servoid::fit::hold_response(Intersample::SampleAndHold, SAMPLE_RATE_HZ, f);
+        let clean = plant.freq_response(f) * z;
+        let v = (0.02 * clean.norm()).powi(2);
+        let s = (0.5 * v).sqrt();
+        h.push(clean + Complex::new(s * rng.normal(), s * rng.normal()));
+        variance.push(v);
+    }
+    (freq, h, variance)
+}
+
+fn bench_fit(c: &mut Criterion) {
+    let (freq, h, variance) = data();
+    let n = freq.len();
+    let input = FitInput {
+        freq_hz: &freq,
+        h: &h,
+        variance: &variance,
+    };
+    let mut group = c.benchmark_group("fit_second_order_hold");
+    group.throughput(Throughput::Elements(n as u64));
+    let cases = [
+        ("no_delay", DelayPlan::None),
+        ("fitted_delay_max_10ms", DelayPlan::Fit { max_s: 0.01 }),
+    ];
+    for (name, delay) in cases {
+        let mut opts = FitOptions::new(0, 2, SAMPLE_RATE_HZ);
+        opts.delay = delay;
+        // Fail loudly rather than time a fit that does not work.
+        let check = fit(&input, &opts).expect("the benchmark data fit");
+        assert!(check.converged, "{name}: {}", check.termination);
+        group.bench_with_input(
+            BenchmarkId::new(name, format!("{n}_bins")),
+            &opts,
+            |b, o| b.iter(|| fit(black_box(&input), black_box(o)).unwrap()),
+        );
+    }
+    group.finish();
+}
+
+criterion_group!(benches, bench_fit);
+criterion_main!(benches);

@@ -1,0 +1,553 @@
+//! Continuous-time transfer-function fitting to measured frequency-response
+//! bins: H(jw) = N(jw)/D(jw) exp(-jw tau) Z(jw), with D monic, Z the command's
+//! sample-and-hold and tau none, fixed or fitted. For the paper's procedure
+//! the model is x1/u = n0/(s^2 + d1 s + d0) (Eqs. 11-14), whose coefficients
+//! and covariance feed Eqs. 18-20 (`identify`).
+//!
+//! Procedure: scale frequency by w0 ([`Scaling`]); Levy's linear least
+//! squares and Sanathanan-Koerner re-weighting on h / (Z exp(-jw tau))
+//! ([`linear`]); for a fitted delay, the best of those over a grid of delays;
+//! then Levenberg-Marquardt ([`LevenbergMarquardt`], an argmin solver) on the
+//! weighted complex error with an analytic Jacobian ([`FrfProblem`]); then the
+//! covariance from the Jacobian at the optimum ([`covariance`]).
+
+pub mod linear;
+pub mod lm;
+pub mod problem;
+
+#[cfg(test)]
+mod tests;
+
+use argmin::core::{Executor, State, TerminationReason};
+use nalgebra::{Complex, DMatrix, DVector};
+
+use crate::lti::{LtiError, TransferFunction};
+use crate::manifest::Intersample;
+
+pub use linear::{RankDeficient, levy, sanathanan_koerner};
+pub use lm::LevenbergMarquardt;
+pub use problem::{FrfProblem, ModelShape, Scaling, hold_response};
+
+/// How a pure delay enters the fit: the manifest's checked plan.
+pub use crate::manifest::DelayPlan;
+
+/// The bins to fit: already restricted to the band and to coherent bins.
+#[derive(Debug, Clone, Copy)]
+pub struct FitInput<'a> {
+    /// Bin frequencies (Hz), positive.
+    pub freq_hz: &'a [f64],
+    /// Measured response at those bins.
+    pub h: &'a [Complex<f64>],
+    /// Variance of each complex h, E|h - E h|^2; the weights are 1/variance.
+    pub variance: &'a [f64],
+}
+
+/// What to fit and how.
+#[derive(Debug, Clone, PartialEq)]
+pub struct FitOptions {
+    /// Degree of N (numerator_order + 1 free coefficients).
+    pub numerator_order: usize,
+    /// Degree of the monic D (at least 1, at least `numerator_order`).
+    pub denominator_order: usize,
+    /// Intersample behaviour of the command.
+    pub intersample: Intersample,
+    /// Sample rate of the command (Hz); used by the hold.
+    pub sample_rate_hz: f64,
+    /// Pure delay: none, known, or fitted within a bound.
+    pub delay: DelayPlan,
+    /// Levenberg-Marquardt iterations allowed (at least 1).
+    pub max_iterations: u64,
+    /// Sanathanan-Koerner re-weightings after Levy's solve.
+    pub sk_iterations: usize,
+}
+
+impl FitOptions {
+    /// Options with a sample-and-hold command, no delay, 100 iterations and
+    /// 10 SK re-weightings.
+    pub fn new(numerator_order: usize, denominator_order: usize, sample_rate_hz: f64) -> Self {
+        Self {
+            numerator_order,
+            denominator_order,
+            intersample: Intersample::SampleAndHold,
+            sample_rate_hz,
+            delay: DelayPlan::None,
+            max_iterations: 100,
+            sk_iterations: 10,
+        }
+    }
+}
+
+/// A fitted transfer function with its uncertainty and diagnostics.
+#[derive(Debug, Clone)]
+pub struct TfFit {
+    /// The plant n(s)/d(s) with `den[0] == 1` and `delay_s` = tau (fixed or
+    /// fitted); the hold is not part of it.
+    pub tf: TransferFunction,
+    /// Orders and whether the delay was fitted.
+    pub shape: ModelShape,
+    /// Numerator coefficients (highest power first), the denominator's after
+    /// its leading 1, then tau (s) if fitted.
+    pub params: Vec<f64>,
+    /// Names of `params`: n_m .. n0, d_{n-1} .. d0, tau_s.
+    pub param_names: Vec<String>,
+    /// Covariance of `params`, (J^T W J)^-1 scaled by `reduced_chi2`.
+    pub covariance: DMatrix<f64>,
+    /// sqrt(diag(covariance)).
+    pub std: Vec<f64>,
+    /// 100 (1 - ||h - h_model|| / ||h - mean(h)||) over the complex bins,
+    /// unweighted, h_model including hold and delay (MATLAB tfest's
+    /// FitPercent). 100 is a perfect fit; it can be negative.
+    pub fit_percent: f64,
+    /// chi2 / (2N - p): sum of |h - h_model|^2 / (variance / 2) over the
+    /// 2N real and imaginary parts, per degree of freedom; about 1 when the
+    /// model is right and the variances are honest.
+    pub reduced_chi2: f64,
+    /// Levenberg-Marquardt iterations.
+    pub iterations: u64,
+    /// argmin's termination reason, verbatim.
+    pub termination: String,
+    /// Whether the solver reported convergence.
+    pub converged: bool,
+    /// Whether every pole is in the open left half-plane.
+    pub stable: bool,
+    /// Number of bins fitted.
+    pub n_bins: usize,
+    /// What the caller should know (not converged, unstable, delay at bound).
+    pub warnings: Vec<String>,
+}
+
+impl TfFit {
+    /// Covariance of (n0, d1, d0) for a 0/2 model, in that order (the input
+    /// of `identify`). With a fitted delay this is the marginal covariance,
+    /// which accounts for the delay's correlation with the coefficients.
+    /// `None` for other orders.
+    pub fn second_order_cov(&self) -> Option<[[f64; 3]; 3]> {
+        if self.shape.numerator_order != 0 || self.shape.denominator_order != 2 {
+            return None;
+        }
+        let mut out = [[0.0; 3]; 3];
+        for (i, row) in out.iter_mut().enumerate() {
+            for (j, v) in row.iter_mut().enumerate() {
+                *v = self.covariance[(i, j)];
+            }
+        }
+        Some(out)
+    }
+}
+
+/// Why a fit could not be made.
+#[derive(Debug, thiserror::Error)]
+pub enum FitError {
+    #[error("invalid fit option {option}: {reason}")]
+    InvalidOption {
+        option: &'static str,
+        reason: String,
+    },
+    #[error("input lengths differ: {freq} frequencies, {h} responses, {variance} variances")]
+    LengthMismatch {
+        freq: usize,
+        h: usize,
+        variance: usize,
+    },
+    #[error("{field}[{index}] is not finite ({value})")]
+    NonFinite {
+        field: &'static str,
+        index: usize,
+        value: String,
+    },
+    #[error("freq_hz[{index}] must be positive (got {value} Hz)")]
+    NonPositiveFrequency { index: usize, value: f64 },
+    #[error("variance[{index}] must be positive (got {value})")]
+    NonPositiveVariance { index: usize, value: f64 },
+    #[error(
+        "freq_hz[{index}] = {value} Hz is above the Nyquist frequency {nyquist_hz} Hz of the command's sample-and-hold"
+    )]
+    AboveNyquist {
+        index: usize,
+        value: f64,
+        nyquist_hz: f64,
+    },
+    #[error(
+        "{bins} bins give {equations} real equations, which does not exceed the {params} parameters ({names}); at least {needed} bins are needed"
+    )]
+    TooFewBins {
+        bins: usize,
+        equations: usize,
+        params: usize,
+        names: String,
+        needed: usize,
+    },
+    #[error(
+        "parameter {parameter} is not identifiable from these {bins} bins: the {matrix} is singular (smallest/largest singular value {ratio:.1e} after column scaling)"
+    )]
+    NotIdentifiable {
+        parameter: String,
+        bins: usize,
+        matrix: &'static str,
+        ratio: f64,
+    },
+    #[error("the optimiser failed: {0}")]
+    Solver(String),
+    #[error("the fitted model is not a valid transfer function: {0}")]
+    Model(#[from] LtiError),
+}
+
+/// Everything the fit needs, checked.
+struct Prepared {
+    problem: FrfProblem,
+    scaling: Scaling,
+    names: Vec<String>,
+    fixed_delay_s: f64,
+    max_delay_s: Option<f64>,
+}
+
+fn check_options(opts: &FitOptions) -> Result<(), FitError> {
+    let bad = |option, reason: String| Err(FitError::InvalidOption { option, reason });
+    if opts.denominator_order == 0 {
+        return bad("denominator_order", "must be at least 1 (got 0)".into());
+    }
+    if opts.numerator_order > opts.denominator_order {
+        return bad(
+            "numerator_order",
+            format!(
+                "must not exceed denominator_order (got {} > {})",
+                opts.numerator_order, opts.denominator_order
+            ),
+        );
+    }
+    if opts.intersample == Intersample::SampleAndHold
+        && !(opts.sample_rate_hz.is_finite() && opts.sample_rate_hz > 0.0)
+    {
+        return bad(
+            "sample_rate_hz",
+            format!(
+                "must be positive for a sample-and-hold command (got {} Hz)",
+                opts.sample_rate_hz
+            ),
+        );
+    }
+    if opts.max_iterations == 0 {
+        return bad("max_iterations", "must be at least 1 (got 0)".into());
+    }
+    match opts.delay {
+        DelayPlan::None => {}
+        DelayPlan::Fixed { delay_s } => {
+            if !(delay_s.is_finite() && delay_s >= 0.0) {
+                return bad(
+                    "delay",
+                    format!("a fixed delay must be finite and non-negative (got {delay_s} s)"),
+                );
+            }
+        }
+        DelayPlan::Fit { max_s } => {
+            if !(max_s.is_finite() && max_s > 0.0) {
+                return bad(
+                    "delay",
+                    format!("the bound on a fitted delay must be positive (got {max_s} s)"),
+                );
+            }
+        }
+    }
+    Ok(())
+}
+
+fn check_input(input: &FitInput, opts: &FitOptions, shape: &ModelShape) -> Result<(), FitError> {
+    let (nf, nh, nv) = (input.freq_hz.len(), input.h.len(), input.variance.len());
+    if nf != nh || nf != nv {
+        return Err(FitError::LengthMismatch {
+            freq: nf,
+            h: nh,
+            variance: nv,
+        });
+    }
+    for (index, &f) in input.freq_hz.iter().enumerate() {
+        if !f.is_finite() {
+            return Err(FitError::NonFinite {
+                field: "freq_hz",
+                index,
+                value: f.to_string(),
+            });
+        }
+        if f <= 0.0 {
+            return Err(FitError::NonPositiveFrequency { index, value: f });
+        }
+        if opts.intersample == Intersample::SampleAndHold && f > 0.5 * opts.sample_rate_hz {
+            return Err(FitError::AboveNyquist {
+                index,
+                value: f,
+                nyquist_hz: 0.5 * opts.sample_rate_hz,
+            });
+        }
+    }
+    if let Some((index, h)) = input
+        .h
+        .iter()
+        .enumerate()
+        .find(|(_, h)| !(h.re.is_finite() && h.im.is_finite()))
+    {
+        return Err(FitError::NonFinite {
+            field: "h",
+            index,
+            value: h.to_string(),
+        });
+    }
+    for (index, &v) in input.variance.iter().enumerate() {
+        if !v.is_finite() {
+            return Err(FitError::NonFinite {
+                field: "variance",
+                index,
+                value: v.to_string(),
+            });
+        }
+        if v <= 0.0 {
+            return Err(FitError::NonPositiveVariance { index, value: v });
+        }
+    }
+    let p = shape.n_params();
+    if 2 * nf <= p {
+        return Err(FitError::TooFewBins {
+            bins: nf,
+            equations: 2 * nf,
+            params: p,
+            names: shape.names().join(", "),
+            needed: p / 2 + 1,
+        });
+    }
+    Ok(())
+}
+
+fn prepare(input: &FitInput, opts: &FitOptions) -> Result<Prepared, FitError> {
+    check_options(opts)?;
+    let shape = ModelShape {
+        numerator_order: opts.numerator_order,
+        denominator_order: opts.denominator_order,
+        fit_delay: matches!(opts.delay, DelayPlan::Fit { .. }),
+    };
+    check_input(input, opts, &shape)?;
+    let (fixed_delay_s, max_delay_s) = match opts.delay {
+        DelayPlan::None => (0.0, None),
+        DelayPlan::Fixed { delay_s } => (delay_s, None),
+        DelayPlan::Fit { max_s } => (0.0, Some(max_s)),
+    };
+    let scaling = Scaling::for_band(input.freq_hz);
+    let known = input
+        .freq_hz
+        .iter()
+        .map(|&f| {
+            let z = hold_response(opts.intersample, opts.sample_rate_hz, f);
+            let phase = -2.0 * std::f64::consts::PI * f * fixed_delay_s;
+            z * Complex::from_polar(1.0, phase)
+        })
+        .collect();
+    let problem = FrfProblem {
+        shape,
+        s: input.freq_hz.iter().map(|&f| scaling.s(f)).collect(),
+        h: input.h.to_vec(),
+        known,
+        weight: input.variance.iter().map(|v| (2.0 / v).sqrt()).collect(),
+    };
+    Ok(Prepared {
+        names: shape.names(),
+        problem,
+        scaling,
+        fixed_delay_s,
+        max_delay_s,
+    })
+}
+
+fn not_identifiable(p: &Prepared, e: RankDeficient, matrix: &'static str) -> FitError {
+    FitError::NotIdentifiable {
+        parameter: p.names[e.column].clone(),
+        bins: p.problem.n_bins(),
+        matrix,
+        ratio: e.ratio,
+    }
+}
+
+/// Fits `input` with the procedure of the module documentation.
+pub fn fit(input: &FitInput, opts: &FitOptions) -> Result<TfFit, FitError> {
+    let prep = prepare(input, opts)?;
+    let start = match prep.max_delay_s {
+        Some(max_s) => linear::delay_grid_start(
+            &prep.problem,
+            max_s * prep.scaling.w0_rad_per_s,
+            opts.sk_iterations,
+        ),
+        None => linear::linear_start(&prep.problem, 0.0, opts.sk_iterations).map(|r| r.theta),
+    }
+    .map_err(|e| not_identifiable(&prep, e, "Levy least-squares matrix"))?;
+    refine(&prep, opts, start)
+}
+
+/// As [`fit`] but skips the linear steps and starts the nonlinear refinement
+/// from `start`, physical parameters laid out as [`TfFit::params`].
+pub fn fit_from(input: &FitInput, opts: &FitOptions, start: &[f64]) -> Result<TfFit, FitError> {
+    let prep = prepare(input, opts)?;
+    let p = prep.problem.shape.n_params();
+    if start.len() != p {
+        return Err(FitError::InvalidOption {
+            option: "start",
+            reason: format!(
+                "needs {p} values ({}), got {}",
+                prep.names.join(", "),
+                start.len()
+            ),
+        });
+    }
+    if let Some((i, v)) = start.iter().enumerate().find(|(_, v)| !v.is_finite()) {
+        return Err(FitError::InvalidOption {
+            option: "start",
+            reason: format!("{} is not finite ({v})", prep.names[i]),
+        });
+    }
+    let scaled = prep.scaling.to_scaled(&prep.problem.shape, start);
+    refine(&prep, opts, scaled)
+}
+
+/// Covariance of least-squares parameters, (J^T J)^-1 * `scale`, for the
+/// Jacobian J of weighted residuals (so J^T J = J_u^T W J_u).
+///
+/// Computed from the SVD of J with unit-norm columns (the normal equations
+/// would square its condition number). `fit` passes the reduced chi-square
+/// as `scale`: the weights 1/variance then need to be right only up to a
+/// common factor, and when the model cannot reproduce the data (chi2 per
+/// degree of freedom above 1) the uncertainty grows with the misfit instead
+/// of claiming a precision the residuals contradict.
+pub fn covariance(jac: &DMatrix<f64>, scale: f64) -> Result<DMatrix<f64>, RankDeficient> {
+    let norms = linear::check_rank(jac)?;
+    let mut scaled = jac.clone();
+    for (j, mut col) in scaled.column_iter_mut().enumerate() {
+        col /= norms[j];
+    }
+    let svd = scaled.svd(false, true);
+    let v_t = svd.v_t.expect("V^T was requested");
+    let p = jac.ncols();
+    let mut cov = DMatrix::zeros(p, p);
+    for k in 0..p {
+        let inv_s2 = 1.0 / (svd.singular_values[k] * svd.singular_values[k]);
+        for i in 0..p {
+            for j in 0..p {
+                cov[(i, j)] += v_t[(k, i)] * v_t[(k, j)] * inv_s2;
+            }
+        }
+    }
+    for i in 0..p {
+        for j in 0..p {
+            cov[(i, j)] *= scale / (norms[i] * norms[j]);
+        }
+    }
+    Ok(cov)
+}
+
+/// Levenberg-Marquardt from `start` (scaled), then the covariance and report.
+fn refine(prep: &Prepared, opts: &FitOptions, start: Vec<f64>) -> Result<TfFit, FitError> {
+    let problem = &prep.problem;
+    let shape = problem.shape;
+    let p = shape.n_params();
+    let w0 = prep.scaling.w0_rad_per_s;
+    let mut solver = LevenbergMarquardt::new();
+    if let Some(max_s) = prep.max_delay_s {
+        let mut lower = DVector::from_element(p, f64::NEG_INFINITY);
+        let mut upper = DVector::from_element(p, f64::INFINITY);
+        lower[p - 1] = 0.0;
+        upper[p - 1] = max_s * w0;
+        solver = solver
+            .with_bounds(lower, upper)
+            .map_err(|e| FitError::Solver(e.to_string()))?;
+    }
+    let result = Executor::new(problem.clone(), solver)
+        .configure(|s| {
+            s.param(DVector::from_vec(start))
+                .max_iters(opts.max_iterations)
+        })
+        .run()
+        .map_err(|e| FitError::Solver(e.to_string()))?;
+    let state = result.state();
+    let theta: Vec<f64> = state
+        .get_best_param()
+        .ok_or_else(|| FitError::Solver("argmin returned no parameters".into()))?
+        .iter()
+        .copied()
+        .collect();
+    let reason = state.get_termination_reason().cloned().unwrap_or_default();
+    let iterations = state.get_iter();
+    let converged = reason == TerminationReason::SolverConverged;
+
+    let n = problem.n_bins();
+    let jac = problem.jacobian_matrix(&theta);
+    let chi2 = problem.residuals(&theta).norm_squared();
+    let reduced_chi2 = chi2 / (2 * n - p) as f64;
+    let cov_scaled = covariance(&jac, reduced_chi2)
+        .map_err(|e| not_identifiable(prep, e, "Jacobian at the optimum (J^T W J)"))?;
+    let factors = prep.scaling.factors(&shape);
+    let covariance = DMatrix::from_fn(p, p, |i, j| cov_scaled[(i, j)] * factors[i] * factors[j]);
+    let std: Vec<f64> = (0..p).map(|i| covariance[(i, i)].sqrt()).collect();
+    let params = prep.scaling.to_physical(&shape, &theta);
+
+    let m = shape.numerator_order;
+    let tau_s = if shape.fit_delay {
+        params[p - 1]
+    } else {
+        prep.fixed_delay_s
+    };
+    let mut den = vec![1.0];
+    den.extend_from_slice(&params[m + 1..shape.n_rational()]);
+    let tf = TransferFunction::with_delay(&params[..=m], &den, tau_s)?;
+
+    let model = problem.model(&theta);
+    let mean = problem.h.iter().sum::<Complex<f64>>() / n as f64;
+    let err = problem
+        .h
+        .iter()
+        .zip(model.iter())
+        .map(|(h, hm)| (h - hm).norm_sqr())
+        .sum::<f64>()
+        .sqrt();
+    let spread = problem
+        .h
+        .iter()
+        .map(|h| (h - mean).norm_sqr())
+        .sum::<f64>()
+        .sqrt();
+    let fit_percent = 100.0 * (1.0 - err / spread);
+
+    let termination = reason.text().to_string();
+    let mut warnings = Vec::new();
+    if !converged {
+        warnings.push(format!(
+            "the fit did not converge ({termination} after {iterations} iterations); the coefficients and their covariance are from the last accepted step"
+        ));
+    }
+    let stable = tf.is_stable();
+    if !stable {
+        let poles: Vec<String> = tf.poles().iter().map(|p| format!("{p:.4}")).collect();
+        warnings.push(format!(
+            "the fitted model is unstable: poles outside the open left half-plane among [{}] (rad/s)",
+            poles.join(", ")
+        ));
+    }
+    // Compared in scaled units, where the solver clamps exactly.
+    if let Some(max_s) = prep.max_delay_s
+        && (theta[p - 1] <= 0.0 || theta[p - 1] >= max_s * w0)
+    {
+        warnings.push(format!(
+            "the fitted delay {tau_s} s is at a bound of [0, {max_s}] s; its standard deviation assumes an interior optimum"
+        ));
+    }
+    Ok(TfFit {
+        tf,
+        shape,
+        params,
+        param_names: prep.names.clone(),
+        covariance,
+        std,
+        fit_percent,
+        reduced_chi2,
+        iterations,
+        termination,
+        converged,
+        stable,
+        n_bins: n,
+        warnings,
+    })
+}
