@@ -19,3 +19,4 @@ pub mod report;
 pub mod results;
 pub mod run;
 pub mod schema;
+pub mod simulate;
