@@ -21,4 +21,5 @@ pub mod results;
 pub mod run;
 pub mod schema;
 pub mod sensitivity;
+pub mod simulate;
 pub mod validate;

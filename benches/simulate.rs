@@ -1,0 +1,100 @@
+//! Simulator throughput: the paper's 170 s chirp at 2048 Hz (348,160 samples)
+//! through the linear Exp1 plant (exact ZOH), and a Duffing specimen on the
+//! same rig with RK4 for comparison. `cargo bench --bench simulate`.
+
+use std::hint::black_box;
+
+use criterion::{Criterion, Throughput, criterion_group, criterion_main};
+use servoid::model::RigParams;
+use servoid::simulate::{
+    ChirpLaw, Duffing, Excitation, Integrator, Padding, PlantSpec, SpecimenModel, Unmodelled,
+    generate, simulate,
+};
+
+const FS_HZ: f64 = 2048.0;
+
+/// The paper's mean identified rig (Table 3, P = 1).
+fn paper_rig() -> RigParams {
+    RigParams {
+        beta1_per_s: 267.0,
+        a1b0_n_per_m_s2: 2.412e9,
+        a2_n_per_m: 7.881e5,
+        a3_per_s: 16.118,
+        p_gain: 1.0,
+    }
+}
+
+/// Quadratic chirp 0.1 -> 35 Hz, 2 mm (the paper's command).
+fn paper_command(duration_s: f64) -> Vec<f64> {
+    generate(
+        &Excitation::Chirp {
+            law: ChirpLaw::Quadratic,
+            f0_hz: 0.1,
+            f1_hz: 35.0,
+            duration_s,
+            amplitude_m: 2e-3,
+        },
+        FS_HZ,
+        Padding::default(),
+    )
+    .expect("valid chirp")
+}
+
+fn bench_simulate(c: &mut Criterion) {
+    let mut group = c.benchmark_group("simulate");
+
+    let u = paper_command(170.0);
+    assert_eq!(u.len(), 348_160);
+    let exp1 = PlantSpec {
+        rig: paper_rig(),
+        specimen: SpecimenModel::LinearSdof {
+            mass_kg: 3.8,
+            damping_ns_per_m: 5.0,
+            stiffness_n_per_m: 129_400.0,
+        },
+        unmodelled: Unmodelled::default(),
+    };
+    group.throughput(Throughput::Elements(u.len() as u64));
+    group.bench_function("linear_exp1_zoh/170s_2048hz", |b| {
+        b.iter(|| {
+            simulate(
+                black_box(&exp1),
+                black_box(&u),
+                FS_HZ,
+                [0.0, 0.0],
+                Integrator::default(),
+            )
+            .expect("simulates")
+        })
+    });
+
+    // The nonlinear path for information: 10 s of the same command.
+    let u = paper_command(10.0);
+    let duffing = PlantSpec {
+        specimen: SpecimenModel::Duffing(Duffing {
+            mass_kg: 3.8,
+            damping_ns_per_m: 5.0,
+            stiffness_n_per_m: 129_400.0,
+            cubic_stiffness_n_per_m3: 1e10,
+        }),
+        ..exp1
+    };
+    group.throughput(Throughput::Elements(u.len() as u64));
+    group.sample_size(20);
+    group.bench_function("duffing_rk4_4substeps/10s_2048hz", |b| {
+        b.iter(|| {
+            simulate(
+                black_box(&duffing),
+                black_box(&u),
+                FS_HZ,
+                [0.0, 0.0],
+                Integrator::Rk4 { substeps: 4 },
+            )
+            .expect("simulates")
+        })
+    });
+    group.finish();
+}
+
+criterion_group!(benches, bench_simulate);
+criterion_main!(benches);
