@@ -10,6 +10,7 @@
 //! only module that knows all of them; `cli` decides the exit code.
 
 pub mod cli;
+pub mod frf;
 pub mod identify;
 pub mod lti;
 pub mod manifest;
