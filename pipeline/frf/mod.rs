@@ -27,7 +27,7 @@ pub struct Frf {
     pub freq_hz: Vec<f64>,
     /// The estimate at each bin (0 where its denominator is exactly zero).
     pub h: Vec<Complex<f64>>,
-    /// Ordinary coherence in (0, 1) at each bin (0 where undefined). For the
+    /// Ordinary coherence in [0, 1] at each bin (0 where undefined). For the
     /// ETFE it comes from a Welch estimate over the plan's segments,
     /// interpolated onto the ETFE's finer grid (see [`etfe`]).
     pub coherence: Vec<f64>,
@@ -72,7 +72,13 @@ pub enum FrfError {
     SegmentTooShort(usize),
 }
 
-/// Estimates the FRF u -> y with the plan's estimator and segment settings.
+/// Estimates the FRF u -> y with the plan's estimator and segment settings
+/// (for `Estimator::Etfe` the segments serve its coherence; see [`etfe`]).
+///
+/// The result is the same bits for the same input on the same machine: one
+/// thread, segments accumulated in order. rustfft picks its AVX, SSE or
+/// scalar kernels at run time, so a machine with another instruction set may
+/// differ in the last bits.
 pub fn estimate(
     u: &[f64],
     y: &[f64],
@@ -91,7 +97,8 @@ pub fn estimate(
     )
 }
 
-/// Welch-averaged FRF (Welch 1967): segments of `segment_length` samples
+/// Welch-averaged FRF (P. D. Welch, IEEE Trans. Audio Electroacoust. 15(2),
+/// 1967, 70-73): segments of `segment_length` samples
 /// starting every `segment_length - floor(overlap * segment_length)` samples
 /// (samples after the last whole segment are not used), each detrended, then
 /// windowed, then transformed; spectra are averaged in segment order.
@@ -244,7 +251,7 @@ pub fn window(kind: Window, n: usize) -> Vec<f64> {
     }
     // Generalised cosine windows sum_k (-1)^k a_k cos(2 pi k i / n).
     let coefficients: &[f64] = match kind {
-        Window::Rectangular => &[1.0],
+        Window::Rectangular => return vec![1.0; n],
         Window::Hann => &[0.5, 0.5],
         Window::Hamming => &[0.54, 0.46],
         // Four-term, -92 dB side lobes (Harris 1978, Table I).
@@ -303,24 +310,32 @@ pub fn band_mask(frf: &Frf, band_hz: (f64, f64), coherence_min: f64) -> Vec<bool
 /// each Cartesian component has variance (1 - g^2) |H|^2 / (2 n_d g^2).
 ///
 /// Two corrections make this honest when computed from the estimates
-/// themselves: n_d is the equivalent number of independent averages of
-/// overlapping windowed segments (Welch 1967, IEEE Trans. Audio
-/// Electroacoust. 15(2), Eq. for var of the averaged periodogram):
+/// themselves. First, K overlapping windowed segments are worth fewer than K
+/// independent averages; Welch (1967, the variance of the averaged
+/// periodogram) gives the equivalent number, stored as
+/// [`Frf::effective_averages`]:
 ///
-///   n_eff = K / (1 + 2 sum_{j=1}^{K-1} (1 - j/K) rho(j)^2),
-///   rho(j) = sum_i w(i) w(i + j S) / sum_i w(i)^2  (S the hop),
+/// ```text
+/// n_eff  = K / (1 + 2 sum_{j=1}^{K-1} (1 - j/K) rho(j)^2)
+/// rho(j) = sum_i w(i) w(i + j S) / sum_i w(i)^2      (S the hop)
+/// ```
 ///
-/// (rho(1) = 1/6 for Hann at 50 % overlap, so n_eff ~ 0.95 K), and n_d =
-/// n_eff - 1: with estimated coherence, (1 - g^2)|H|^2/g^2 = S_res/Suu is
-/// the residual spectrum over Suu, whose expectation is (1 - 1/n) of the
-/// noise spectrum (one complex parameter fitted per bin), so dividing by
-/// n - 1 instead of n makes the variance unbiased (the same reason a sample
-/// variance divides by n - 1). For H2 the same first-order expression holds
-/// (it is H1 of the inverse path; delta method). For the ETFE n_d = 1 with
-/// the Welch coherence: an approximation that takes the record's periodogram
-/// of u as equal to its smooth spectrum.
+/// (rho(1) = 1/6 for Hann at 50 % overlap, so n_eff ~ 0.95 K; the same
+/// factor applies to the cross-spectrum of u with the noise, hence to H1).
+/// Second, n_d = n_eff - 1: with the estimated coherence,
+/// (1 - g^2) |H|^2 / g^2 = S_res / Suu, the residual spectrum over Suu, and
+/// the residual's expectation is (1 - 1/n) times the noise spectrum (one
+/// complex parameter fitted per bin), so dividing by n - 1 makes the
+/// variance unbiased, as for a sample variance. The Monte Carlo test checks
+/// the result to a few per cent.
 ///
-/// Infinite where the coherence is zero (no information); zero where it is 1.
+/// For H2 the same first-order expression holds (H2 is H1 of the inverse
+/// path; delta method). For the ETFE n_d = 1 with the Welch coherence, an
+/// approximation that takes the record's periodogram of u to equal its
+/// smooth spectrum (roughly true for a sweep, not for random input).
+///
+/// Infinite where the coherence is zero or there is a single segment (no
+/// information about the noise); zero where the coherence is 1.
 pub fn h_variance(frf: &Frf) -> Vec<f64> {
     let dof = match frf.estimator {
         Estimator::Etfe => 1.0,
