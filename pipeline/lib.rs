@@ -11,6 +11,7 @@
 
 pub mod cli;
 pub mod fit;
+pub mod frf;
 pub mod identify;
 pub mod lti;
 pub mod manifest;

@@ -1,0 +1,65 @@
+//! Throughput of the FRF stage on a log of the paper's shape: 170 s at
+//! 2048 Hz (348,160 samples), a quadratic chirp 0.1-35 Hz through the
+//! no-specimen plant of Eq. 36, Welch H1 with 8192-sample Hann segments at
+//! 50 % overlap (the manifest's defaults).
+//!
+//! `cargo bench --bench frf`
+
+use std::f64::consts::PI;
+use std::hint::black_box;
+
+use criterion::{Criterion, Throughput, criterion_group, criterion_main};
+use servoid::frf;
+use servoid::manifest::{Detrend, Estimator, FrfPlan, Window};
+
+const FS_HZ: f64 = 2048.0;
+const DURATION_S: f64 = 170.0;
+
+/// Quadratic chirp f(t) = f0 + (f1 - f0) (t/T)^2 of 3 mm amplitude, and its
+/// response through 3060/(s^2 + 267 s + 3060) (paper Eq. 36), written as two
+/// first-order lags with poles at 12.1 and 254.9 rad/s, each discretised by
+/// zero-order hold (a plausible signal; the timing does not depend on it).
+fn synthetic_log() -> (Vec<f64>, Vec<f64>) {
+    let n = (DURATION_S * FS_HZ) as usize;
+    let (f0, f1) = (0.1, 35.0);
+    let u: Vec<f64> = (0..n)
+        .map(|i| {
+            let t = i as f64 / FS_HZ;
+            let phase = 2.0 * PI * (f0 * t + (f1 - f0) * t.powi(3) / (3.0 * DURATION_S.powi(2)));
+            0.003 * phase.sin()
+        })
+        .collect();
+    let disc = 267.0f64 * 267.0 - 4.0 * 3060.0;
+    let poles = [(267.0 - disc.sqrt()) / 2.0, (267.0 + disc.sqrt()) / 2.0];
+    let mut y = u.clone();
+    for p in poles {
+        let a = (-p / FS_HZ).exp();
+        let mut state = 0.0;
+        for v in y.iter_mut() {
+            let input = *v;
+            *v = state;
+            state = a * state + (1.0 - a) * input;
+        }
+    }
+    (u, y)
+}
+
+fn bench_frf(c: &mut Criterion) {
+    let (u, y) = synthetic_log();
+    let plan = FrfPlan {
+        estimator: Estimator::H1,
+        segment_length: 8192,
+        overlap: 0.5,
+        window: Window::Hann,
+        detrend: Detrend::Mean,
+    };
+    let mut group = c.benchmark_group("frf");
+    group.throughput(Throughput::Elements(u.len() as u64));
+    group.bench_function("welch_h1/348160_samples/seg8192", |b| {
+        b.iter(|| frf::estimate(black_box(&u), black_box(&y), FS_HZ, &plan).unwrap())
+    });
+    group.finish();
+}
+
+criterion_group!(benches, bench_frf);
+criterion_main!(benches);

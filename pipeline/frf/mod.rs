@@ -1,0 +1,685 @@
+//! Frequency-response estimation from uniformly sampled logs: Welch-averaged
+//! H1 and H2 estimates, the empirical transfer-function estimate (ETFE), their
+//! auto- and cross-spectral densities, ordinary coherence, the random-error
+//! variance the fit stage weights by, and the bin mask it fits on.
+//!
+//! Conventions (Bendat & Piersol, *Random Data*, 4th ed., 2010, Ch. 5 and 9):
+//! the cross-spectrum is `Suy = conj(U) Y`, H1 = Suy/Suu (noise on the output),
+//! H2 = Syy/Syu with Syu = conj(Suy) (noise on the input), coherence
+//! |Suy|^2/(Suu Syy). Densities are one-sided (unit^2/Hz) and scaled by the
+//! window's power, so that the sum of `suu * resolution_hz` over all bins is
+//! the variance of the (detrended) signal (Parseval).
+
+use nalgebra::Complex;
+use std::sync::Arc;
+
+use realfft::{RealFftPlanner, RealToComplex};
+
+use crate::manifest::{Detrend, Estimator, FrfPlan, Window};
+
+/// Shortest Welch segment accepted (the manifest enforces the same bound).
+pub const MIN_SEGMENT_LENGTH: usize = 16;
+
+/// A frequency-response estimate on the bins 0 ..= fs/2.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Frf {
+    /// Bin frequencies (Hz), 0 .. fs/2 in steps of `resolution_hz`.
+    pub freq_hz: Vec<f64>,
+    /// The estimate at each bin (0 where its denominator is exactly zero).
+    pub h: Vec<Complex<f64>>,
+    /// Ordinary coherence in [0, 1] at each bin (0 where undefined). For the
+    /// ETFE it comes from a Welch estimate over the plan's segments,
+    /// interpolated onto the ETFE's finer grid (see [`etfe`]).
+    pub coherence: Vec<f64>,
+    /// One-sided auto-spectral density of u (unit^2/Hz).
+    pub suu: Vec<f64>,
+    /// One-sided auto-spectral density of y (unit^2/Hz).
+    pub syy: Vec<f64>,
+    /// One-sided cross-spectral density conj(U) Y (unit^2/Hz).
+    pub suy: Vec<Complex<f64>>,
+    /// Welch segments averaged (1 for the ETFE).
+    pub n_averages: usize,
+    /// Equivalent number of independent averages after Welch's overlap
+    /// correction (equal to `n_averages` without overlap; 1 for the ETFE).
+    /// [`h_variance`] uses it.
+    pub effective_averages: f64,
+    pub estimator: Estimator,
+    /// Bin spacing (Hz): fs / segment_length, or fs / record length for the ETFE.
+    pub resolution_hz: f64,
+}
+
+/// Why an FRF cannot be estimated from the given signals and settings.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum FrfError {
+    #[error("u and y differ in length: u has {u_len} samples, y has {y_len}")]
+    LengthMismatch { u_len: usize, y_len: usize },
+    #[error("log too short: {samples} samples, segment_length {segment_length}")]
+    TooShort {
+        samples: usize,
+        segment_length: usize,
+    },
+    #[error("{signal} sample {index} is not finite ({value})")]
+    NonFinite {
+        signal: &'static str,
+        index: usize,
+        value: f64,
+    },
+    #[error("sample rate must be finite and positive (got {0} Hz)")]
+    BadSampleRate(f64),
+    #[error("overlap must be in [0, 1) (got {0})")]
+    BadOverlap(f64),
+    #[error("segment_length must be at least {MIN_SEGMENT_LENGTH} (got {0})")]
+    SegmentTooShort(usize),
+}
+
+/// Estimates the FRF u -> y with the plan's estimator and segment settings
+/// (for `Estimator::Etfe` the segments serve its coherence; see [`etfe`]).
+///
+/// The result is the same bits for the same input on the same machine: one
+/// thread, segments accumulated in order. rustfft picks its AVX, SSE or
+/// scalar kernels at run time, so a machine with another instruction set may
+/// differ in the last bits.
+pub fn estimate(
+    u: &[f64],
+    y: &[f64],
+    sample_rate_hz: f64,
+    plan: &FrfPlan,
+) -> Result<Frf, FrfError> {
+    welch(
+        u,
+        y,
+        sample_rate_hz,
+        plan.segment_length,
+        plan.overlap,
+        plan.window,
+        plan.detrend,
+        plan.estimator,
+    )
+}
+
+/// Welch-averaged FRF (P. D. Welch, IEEE Trans. Audio Electroacoust. 15(2),
+/// 1967, 70-73): segments of `segment_length` samples
+/// starting every `segment_length - floor(overlap * segment_length)` samples
+/// (samples after the last whole segment are not used), each detrended, then
+/// windowed, then transformed; spectra are averaged in segment order.
+///
+/// `Estimator::Etfe` is passed on to [`etfe`] with these segment settings for
+/// its coherence.
+#[allow(clippy::too_many_arguments)]
+pub fn welch(
+    u: &[f64],
+    y: &[f64],
+    sample_rate_hz: f64,
+    segment_length: usize,
+    overlap: f64,
+    window_kind: Window,
+    detrend_kind: Detrend,
+    estimator: Estimator,
+) -> Result<Frf, FrfError> {
+    if estimator == Estimator::Etfe {
+        return etfe(
+            u,
+            y,
+            sample_rate_hz,
+            window_kind,
+            detrend_kind,
+            segment_length,
+            overlap,
+        );
+    }
+    check_inputs(u, y, sample_rate_hz, segment_length, overlap)?;
+    let segments = Segmenting {
+        length: segment_length,
+        overlap,
+        window_kind,
+        detrend_kind,
+    };
+    let spectra = welch_spectra(&mut RealFftPlanner::new(), u, y, sample_rate_hz, &segments);
+    let h = spectra
+        .suu
+        .iter()
+        .zip(&spectra.syy)
+        .zip(&spectra.suy)
+        .map(|((&suu, &syy), &suy)| match estimator {
+            Estimator::H2 => ratio(Complex::new(syy, 0.0), suy.conj()),
+            _ => ratio(suy, Complex::new(suu, 0.0)),
+        })
+        .collect();
+    let coherence = coherence_of(&spectra.suu, &spectra.syy, &spectra.suy);
+    let resolution_hz = sample_rate_hz / segment_length as f64;
+    Ok(Frf {
+        freq_hz: bin_frequencies(spectra.suu.len(), resolution_hz),
+        h,
+        coherence,
+        suu: spectra.suu,
+        syy: spectra.syy,
+        suy: spectra.suy,
+        n_averages: spectra.n_segments,
+        effective_averages: spectra.effective_averages,
+        estimator,
+        resolution_hz,
+    })
+}
+
+/// Empirical transfer-function estimate Y/U (Ljung, *System Identification*,
+/// 2nd ed., Sec. 6.3): one window over the whole record, one transform, no
+/// averaging, so the resolution is fs / record length and `n_averages` is 1.
+///
+/// A single average has coherence identically 1, which says nothing about
+/// noise; so `coherence` is taken from a Welch estimate with
+/// `coherence_segment_length` and `coherence_overlap` (the plan's segment
+/// settings), linearly interpolated onto the ETFE's bins, and masking works
+/// as for H1. `suu`, `syy` and `suy` are the whole-record periodograms (same
+/// scaling as Welch), so `h = suy / suu`.
+///
+/// For a sweep, prefer `Window::Rectangular`: a tapered window over the whole
+/// record suppresses the frequencies swept at its start and end.
+pub fn etfe(
+    u: &[f64],
+    y: &[f64],
+    sample_rate_hz: f64,
+    window_kind: Window,
+    detrend_kind: Detrend,
+    coherence_segment_length: usize,
+    coherence_overlap: f64,
+) -> Result<Frf, FrfError> {
+    check_inputs(
+        u,
+        y,
+        sample_rate_hz,
+        coherence_segment_length,
+        coherence_overlap,
+    )?;
+    let n = u.len();
+    let w = window(window_kind, n);
+    let scale = 1.0 / (sample_rate_hz * w.iter().map(|v| v * v).sum::<f64>());
+
+    let mut planner = RealFftPlanner::<f64>::new();
+    let mut transform = SegmentTransform::new(&mut planner, n);
+    let mut uf = transform.make_output();
+    let mut yf = transform.make_output();
+    transform.run(u, &w, detrend_kind, &mut uf);
+    transform.run(y, &w, detrend_kind, &mut yf);
+    let nb = uf.len();
+    let mut suu = Vec::with_capacity(nb);
+    let mut syy = Vec::with_capacity(nb);
+    let mut suy = Vec::with_capacity(nb);
+    let mut h = Vec::with_capacity(nb);
+    for k in 0..nb {
+        let s = scale * one_sided_factor(k, n);
+        suu.push(s * uf[k].norm_sqr());
+        syy.push(s * yf[k].norm_sqr());
+        suy.push(uf[k].conj() * yf[k] * s);
+        h.push(ratio(yf[k], uf[k]));
+    }
+
+    let resolution_hz = sample_rate_hz / n as f64;
+    let freq_hz = bin_frequencies(nb, resolution_hz);
+    let segments = Segmenting {
+        length: coherence_segment_length,
+        overlap: coherence_overlap,
+        window_kind,
+        detrend_kind,
+    };
+    let coarse = welch_spectra(&mut planner, u, y, sample_rate_hz, &segments);
+    let coarse_coherence = coherence_of(&coarse.suu, &coarse.syy, &coarse.suy);
+    let coarse_resolution_hz = sample_rate_hz / coherence_segment_length as f64;
+    let coherence = freq_hz
+        .iter()
+        .map(|&f| interpolate(&coarse_coherence, f / coarse_resolution_hz))
+        .collect();
+    Ok(Frf {
+        freq_hz,
+        h,
+        coherence,
+        suu,
+        syy,
+        suy,
+        n_averages: 1,
+        effective_averages: 1.0,
+        estimator: Estimator::Etfe,
+        resolution_hz,
+    })
+}
+
+/// Periodic (DFT-even) window of length `n`: the symmetric window of length
+/// n + 1 without its last sample, so that w(0) = 0 and w(n/2) = 1 for Hann
+/// (Harris, Proc. IEEE 66(1), 1978, Sec. II). Length 1 gives `[1.0]`.
+pub fn window(kind: Window, n: usize) -> Vec<f64> {
+    if n == 1 {
+        return vec![1.0];
+    }
+    // Generalised cosine windows sum_k (-1)^k a_k cos(2 pi k i / n).
+    let coefficients: &[f64] = match kind {
+        Window::Rectangular => return vec![1.0; n],
+        Window::Hann => &[0.5, 0.5],
+        Window::Hamming => &[0.54, 0.46],
+        // Four-term, -92 dB side lobes (Harris 1978, Table I).
+        Window::BlackmanHarris => &[0.35875, 0.48829, 0.14128, 0.01168],
+    };
+    (0..n)
+        .map(|i| {
+            let x = 2.0 * std::f64::consts::PI * i as f64 / n as f64;
+            coefficients
+                .iter()
+                .enumerate()
+                .map(|(k, a)| {
+                    let sign = if k % 2 == 0 { 1.0 } else { -1.0 };
+                    sign * a * (k as f64 * x).cos()
+                })
+                .sum()
+        })
+        .collect()
+}
+
+/// `x` with its mean (`Mean`) or least-squares straight line (`Linear`)
+/// removed.
+pub fn detrend(x: &[f64], kind: Detrend) -> Vec<f64> {
+    let mut out = x.to_vec();
+    detrend_in_place(&mut out, kind);
+    out
+}
+
+/// Bins to fit: inside `band_hz` (inclusive), coherence at least
+/// `coherence_min`, and a finite, non-zero estimate.
+pub fn band_mask(frf: &Frf, band_hz: (f64, f64), coherence_min: f64) -> Vec<bool> {
+    frf.freq_hz
+        .iter()
+        .zip(&frf.coherence)
+        .zip(&frf.h)
+        .map(|((&f, &c), h)| {
+            f >= band_hz.0
+                && f <= band_hz.1
+                && c >= coherence_min
+                && c > 0.0
+                && h.re.is_finite()
+                && h.im.is_finite()
+                && h.norm_sqr() > 0.0
+        })
+        .collect()
+}
+
+/// Random-error variance of each of Re(H) and Im(H) at each bin (the weight
+/// of a residual stacked as [Re; Im] is its inverse); the variance of the
+/// complex estimate, E|H_est - H|^2, is twice this.
+///
+/// Bendat & Piersol (*Random Data*, 4th ed., Ch. 9, gain and phase errors of
+/// H estimates) give for n_d averages the normalised errors
+/// eps(|H|) = sd(phase) = sqrt((1 - g^2) / (2 n_d g^2)), g^2 the coherence;
+/// magnitude and phase errors are the radial and tangential components, so
+/// each Cartesian component has variance (1 - g^2) |H|^2 / (2 n_d g^2).
+///
+/// Two corrections make this honest when computed from the estimates
+/// themselves. First, K overlapping windowed segments are worth fewer than K
+/// independent averages; Welch (1967, the variance of the averaged
+/// periodogram) gives the equivalent number, stored as
+/// [`Frf::effective_averages`]:
+///
+/// ```text
+/// n_eff  = K / (1 + 2 sum_{j=1}^{K-1} (1 - j/K) rho(j)^2)
+/// rho(j) = sum_i w(i) w(i + j S) / sum_i w(i)^2      (S the hop)
+/// ```
+///
+/// (rho(1) = 1/6 for Hann at 50 % overlap, so n_eff ~ 0.95 K; the same
+/// factor applies to the cross-spectrum of u with the noise, hence to H1).
+/// Second, n_d = n_eff - 1: with the estimated coherence,
+/// (1 - g^2) |H|^2 / g^2 = S_res / Suu, the residual spectrum over Suu, and
+/// the residual's expectation is (1 - 1/n) times the noise spectrum (one
+/// complex parameter fitted per bin), so dividing by n - 1 makes the
+/// variance unbiased, as for a sample variance. The Monte Carlo test checks
+/// the result to a few per cent.
+///
+/// For H2 the same first-order expression holds (H2 is H1 of the inverse
+/// path; delta method). For the ETFE n_d = 1 with the Welch coherence, an
+/// approximation that takes the record's periodogram of u to equal its
+/// smooth spectrum (roughly true for a sweep, not for random input).
+///
+/// Infinite where the coherence is zero or there is a single segment (no
+/// information about the noise); zero where the coherence is 1.
+pub fn h_variance(frf: &Frf) -> Vec<f64> {
+    let dof = match frf.estimator {
+        Estimator::Etfe => 1.0,
+        _ => frf.effective_averages - 1.0,
+    };
+    frf.h
+        .iter()
+        .zip(&frf.coherence)
+        .map(|(h, &g2)| {
+            if g2 <= 0.0 || dof <= 0.0 {
+                f64::INFINITY
+            } else {
+                (1.0 - g2) * h.norm_sqr() / (2.0 * dof * g2)
+            }
+        })
+        .collect()
+}
+
+/// Discrete Fourier transform X(k) = sum_n x(n) exp(-2 pi i k n / N) for all
+/// N bins, by the definition: O(N^2), the reference the FFT is tested against.
+pub fn naive_dft(x: &[f64]) -> Vec<Complex<f64>> {
+    let n = x.len();
+    (0..n)
+        .map(|k| {
+            x.iter()
+                .enumerate()
+                .map(|(i, &v)| {
+                    // Reduce k*i modulo N first so the angle stays exact.
+                    let m = (k as u128 * i as u128 % n as u128) as f64;
+                    let angle = -2.0 * std::f64::consts::PI * m / n as f64;
+                    Complex::new(v * angle.cos(), v * angle.sin())
+                })
+                .sum()
+        })
+        .collect()
+}
+
+fn check_inputs(
+    u: &[f64],
+    y: &[f64],
+    sample_rate_hz: f64,
+    segment_length: usize,
+    overlap: f64,
+) -> Result<(), FrfError> {
+    if !(sample_rate_hz.is_finite() && sample_rate_hz > 0.0) {
+        return Err(FrfError::BadSampleRate(sample_rate_hz));
+    }
+    if !(0.0..1.0).contains(&overlap) {
+        return Err(FrfError::BadOverlap(overlap));
+    }
+    if segment_length < MIN_SEGMENT_LENGTH {
+        return Err(FrfError::SegmentTooShort(segment_length));
+    }
+    if u.len() != y.len() {
+        return Err(FrfError::LengthMismatch {
+            u_len: u.len(),
+            y_len: y.len(),
+        });
+    }
+    if u.len() < segment_length {
+        return Err(FrfError::TooShort {
+            samples: u.len(),
+            segment_length,
+        });
+    }
+    for (signal, x) in [("u", u), ("y", y)] {
+        // A branch-free pass over blocks (it vectorises); the search for the
+        // first bad index runs only when something is wrong.
+        let all_finite = x
+            .chunks(1024)
+            .all(|block| block.iter().fold(true, |ok, v| ok & v.is_finite()));
+        if all_finite {
+            continue;
+        }
+        if let Some((index, &value)) = x.iter().enumerate().find(|(_, v)| !v.is_finite()) {
+            return Err(FrfError::NonFinite {
+                signal,
+                index,
+                value,
+            });
+        }
+    }
+    Ok(())
+}
+
+/// A planned real FFT of one length with its working buffers: built once per
+/// call and reused for every segment, so the segment loop does not allocate.
+struct SegmentTransform {
+    r2c: Arc<dyn RealToComplex<f64>>,
+    buf: Vec<f64>,
+    scratch: Vec<Complex<f64>>,
+}
+
+impl SegmentTransform {
+    fn new(planner: &mut RealFftPlanner<f64>, n: usize) -> Self {
+        let r2c = planner.plan_fft_forward(n);
+        let buf = r2c.make_input_vec();
+        let scratch = r2c.make_scratch_vec();
+        Self { r2c, buf, scratch }
+    }
+
+    /// A buffer for the n/2 + 1 bins of one transform.
+    fn make_output(&self) -> Vec<Complex<f64>> {
+        self.r2c.make_output_vec()
+    }
+
+    /// Detrends `x`, multiplies it by `w` and writes its DFT (bins 0 ..= n/2)
+    /// into `out`; `x`, `w` and `out` have the planned lengths.
+    fn run(&mut self, x: &[f64], w: &[f64], detrend_kind: Detrend, out: &mut [Complex<f64>]) {
+        // One pass: detrend and window straight from `x` into the buffer.
+        let trend = Trend::of(x, detrend_kind);
+        let samples = self.buf.iter_mut().zip(x).zip(w);
+        if trend.slope == 0.0 {
+            // Mean or none: the same values as `detrend`, without the ramp.
+            samples.for_each(|((b, &v), &w)| *b = (v - trend.offset) * w);
+        } else {
+            samples
+                .enumerate()
+                .for_each(|(i, ((b, &v), &w))| *b = (v - trend.at(i)) * w);
+        }
+        // realfft checks only the lengths, which come from the plan.
+        self.r2c
+            .process_with_scratch(&mut self.buf, out, &mut self.scratch)
+            .expect("buffer lengths come from the plan");
+    }
+}
+
+/// Averaged one-sided densities of checked inputs.
+struct Spectra {
+    suu: Vec<f64>,
+    syy: Vec<f64>,
+    suy: Vec<Complex<f64>>,
+    n_segments: usize,
+    effective_averages: f64,
+}
+
+/// How a record is cut into Welch segments and each segment prepared.
+struct Segmenting {
+    length: usize,
+    overlap: f64,
+    window_kind: Window,
+    detrend_kind: Detrend,
+}
+
+fn welch_spectra(
+    planner: &mut RealFftPlanner<f64>,
+    u: &[f64],
+    y: &[f64],
+    sample_rate_hz: f64,
+    segments: &Segmenting,
+) -> Spectra {
+    let Segmenting {
+        length: l,
+        overlap,
+        window_kind,
+        detrend_kind,
+    } = *segments;
+    // overlap < 1, so the hop is at least one sample.
+    let hop = l - (overlap * l as f64).floor() as usize;
+    let n_segments = (u.len() - l) / hop + 1;
+    let w = window(window_kind, l);
+
+    // One plan and one set of buffers for every segment.
+    let mut transform = SegmentTransform::new(planner, l);
+    let mut uf = transform.make_output();
+    let mut yf = transform.make_output();
+    let nb = uf.len();
+    let mut suu = vec![0.0; nb];
+    let mut syy = vec![0.0; nb];
+    let mut suy = vec![Complex::new(0.0, 0.0); nb];
+
+    for s in 0..n_segments {
+        let segment = s * hop..s * hop + l;
+        transform.run(&u[segment.clone()], &w, detrend_kind, &mut uf);
+        transform.run(&y[segment], &w, detrend_kind, &mut yf);
+        for k in 0..nb {
+            suu[k] += uf[k].norm_sqr();
+            syy[k] += yf[k].norm_sqr();
+            suy[k] += uf[k].conj() * yf[k];
+        }
+    }
+
+    // One-sided density: |X|^2 / (fs sum w^2), averaged, doubled off DC and
+    // Nyquist, so that sum(S df) is the mean square (Parseval).
+    let scale = 1.0 / (sample_rate_hz * w.iter().map(|v| v * v).sum::<f64>() * n_segments as f64);
+    for k in 0..nb {
+        let s = scale * one_sided_factor(k, l);
+        suu[k] *= s;
+        syy[k] *= s;
+        suy[k] *= s;
+    }
+    Spectra {
+        suu,
+        syy,
+        suy,
+        n_segments,
+        effective_averages: effective_averages(&w, hop, n_segments),
+    }
+}
+
+/// Welch's (1967) equivalent number of independent averages of `k`
+/// overlapping segments windowed by `w` and `hop` samples apart.
+fn effective_averages(w: &[f64], hop: usize, k: usize) -> f64 {
+    let mut sum = 0.0;
+    for j in 1..k {
+        let shift = j * hop;
+        if shift >= w.len() {
+            break;
+        }
+        let rho = overlap_correlation(w, shift);
+        sum += (1.0 - j as f64 / k as f64) * rho * rho;
+    }
+    k as f64 / (1.0 + 2.0 * sum)
+}
+
+/// Correlation of a window with itself shifted by `shift` samples, normalised
+/// by its energy (Harris 1978, "overlap correlation").
+fn overlap_correlation(w: &[f64], shift: usize) -> f64 {
+    let energy: f64 = w.iter().map(|v| v * v).sum();
+    let cross: f64 = w.iter().zip(&w[shift..]).map(|(a, b)| a * b).sum();
+    cross / energy
+}
+
+/// 2 for the bins that stand for a positive and a negative frequency, 1 for
+/// DC and (even lengths) Nyquist.
+fn one_sided_factor(k: usize, n: usize) -> f64 {
+    if k == 0 || (n.is_multiple_of(2) && k == n / 2) {
+        1.0
+    } else {
+        2.0
+    }
+}
+
+fn coherence_of(suu: &[f64], syy: &[f64], suy: &[Complex<f64>]) -> Vec<f64> {
+    suu.iter()
+        .zip(syy)
+        .zip(suy)
+        .map(|((&a, &b), c)| {
+            let denominator = a * b;
+            if denominator > 0.0 {
+                // Rounding can put a perfectly coherent bin a hair above 1.
+                (c.norm_sqr() / denominator).clamp(0.0, 1.0)
+            } else {
+                0.0
+            }
+        })
+        .collect()
+}
+
+/// num / den, or 0 when den is exactly 0 (such a bin has zero coherence).
+fn ratio(num: Complex<f64>, den: Complex<f64>) -> Complex<f64> {
+    if den.norm_sqr() > 0.0 {
+        num / den
+    } else {
+        Complex::new(0.0, 0.0)
+    }
+}
+
+fn bin_frequencies(n_bins: usize, resolution_hz: f64) -> Vec<f64> {
+    (0..n_bins).map(|k| k as f64 * resolution_hz).collect()
+}
+
+/// Linear interpolation of `values` (on bins 0, 1, 2, ...) at fractional bin
+/// `position`, clamped to the ends.
+fn interpolate(values: &[f64], position: f64) -> f64 {
+    let last = values.len() - 1;
+    if position <= 0.0 {
+        return values[0];
+    }
+    let i = position.floor() as usize;
+    if i >= last {
+        return values[last];
+    }
+    let t = position - i as f64;
+    values[i] * (1.0 - t) + values[i + 1] * t
+}
+
+/// The trend `detrend` removes, as value(i) = offset + slope (i - centre)
+/// with centre = (n - 1)/2: least squares on a centred abscissa, where the
+/// mean and the slope decouple (slope = sum t x / sum t^2, with
+/// sum t^2 = n (n^2 - 1)/12).
+#[derive(Debug, Clone, Copy)]
+struct Trend {
+    offset: f64,
+    slope: f64,
+    centre: f64,
+}
+
+impl Trend {
+    fn of(x: &[f64], kind: Detrend) -> Self {
+        let n = x.len();
+        let centre = (n as f64 - 1.0) / 2.0;
+        let none = Self {
+            offset: 0.0,
+            slope: 0.0,
+            centre,
+        };
+        if n == 0 || kind == Detrend::None {
+            return none;
+        }
+        let offset = lane_sum(x, |_, v| v) / n as f64;
+        let slope = if kind == Detrend::Linear && n > 1 {
+            let stt = n as f64 * (n as f64 * n as f64 - 1.0) / 12.0;
+            lane_sum(x, |i, v| (i as f64 - centre) * v) / stt
+        } else {
+            0.0
+        };
+        Self {
+            offset,
+            slope,
+            centre,
+        }
+    }
+
+    fn at(&self, i: usize) -> f64 {
+        self.offset + self.slope * (i as f64 - self.centre)
+    }
+}
+
+fn detrend_in_place(x: &mut [f64], kind: Detrend) {
+    let trend = Trend::of(x, kind);
+    for (i, v) in x.iter_mut().enumerate() {
+        *v -= trend.at(i);
+    }
+}
+
+/// sum_i f(i, x(i)) in eight interleaved partial sums added in a fixed order:
+/// the compiler can vectorise it (a single running sum is a serial chain),
+/// the rounding is no worse, and the result depends only on the input.
+fn lane_sum(x: &[f64], f: impl Fn(usize, f64) -> f64) -> f64 {
+    const LANES: usize = 8;
+    let mut acc = [0.0; LANES];
+    let chunks = x.chunks_exact(LANES);
+    let tail = chunks.remainder();
+    for (c, chunk) in chunks.enumerate() {
+        for (lane, (a, &v)) in acc.iter_mut().zip(chunk).enumerate() {
+            *a += f(c * LANES + lane, v);
+        }
+    }
+    let start = x.len() - tail.len();
+    let tail_sum: f64 = tail.iter().enumerate().map(|(j, &v)| f(start + j, v)).sum();
+    let [a0, a1, a2, a3, a4, a5, a6, a7] = acc;
+    ((a0 + a4) + (a2 + a6)) + ((a1 + a5) + (a3 + a7)) + tail_sum
+}
+
+#[cfg(test)]
+mod tests;

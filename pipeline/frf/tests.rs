@@ -1,0 +1,857 @@
+//! Tests of the FRF stage in the RustFFT style: the naive DFT against analytic
+//! pairs, the FFT path against the naive DFT, then the estimators against
+//! systems whose response is known in closed form.
+
+use super::*;
+use approx::{assert_abs_diff_eq, assert_relative_eq};
+use std::f64::consts::PI;
+
+/// SplitMix64 (Steele, Lea & Flood 2014): a tiny seeded generator, so the
+/// tests need no new dependency and give the same numbers everywhere.
+struct SplitMix64(u64);
+
+impl SplitMix64 {
+    fn next_u64(&mut self) -> u64 {
+        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^ (z >> 31)
+    }
+
+    /// Uniform in [0, 1).
+    fn uniform(&mut self) -> f64 {
+        (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64
+    }
+
+    /// Standard normal (Box-Muller).
+    fn gaussian(&mut self) -> f64 {
+        let u1 = 1.0 - self.uniform();
+        let u2 = self.uniform();
+        (-2.0 * u1.ln()).sqrt() * (2.0 * PI * u2).cos()
+    }
+}
+
+fn white(seed: u64, n: usize, sigma: f64) -> Vec<f64> {
+    let mut rng = SplitMix64(seed);
+    (0..n).map(|_| sigma * rng.gaussian()).collect()
+}
+
+/// Direct-form difference equation
+/// y(n) = sum b_k x(n-k) - sum_{k>=1} a_k y(n-k), with a_0 = 1.
+fn lfilter(b: &[f64], a: &[f64], x: &[f64]) -> Vec<f64> {
+    let mut y = vec![0.0; x.len()];
+    for n in 0..x.len() {
+        let mut acc = 0.0;
+        for (k, bk) in b.iter().enumerate() {
+            if n >= k {
+                acc += bk * x[n - k];
+            }
+        }
+        for (k, ak) in a.iter().enumerate().skip(1) {
+            if n >= k {
+                acc -= ak * y[n - k];
+            }
+        }
+        y[n] = acc;
+    }
+    y
+}
+
+/// H(e^{j w}) = B(e^{-j w}) / A(e^{-j w}) from the difference equation's
+/// coefficients, w in rad/sample.
+fn response(b: &[f64], a: &[f64], w: f64) -> Complex<f64> {
+    let poly = |c: &[f64]| -> Complex<f64> {
+        c.iter()
+            .enumerate()
+            .map(|(k, ck)| Complex::from_polar(*ck, -(k as f64) * w))
+            .sum()
+    };
+    poly(b) / poly(a)
+}
+
+const FS_HZ: f64 = 1000.0;
+
+/// Second-order IIR with poles at radius 0.95 and angle 2 pi 100/1000 (a
+/// resonance near 100 Hz at fs = 1 kHz) and zeros at radius 0.5, so |H| stays
+/// between about 0.5 and 20.
+fn test_system() -> (Vec<f64>, Vec<f64>) {
+    let r: f64 = 0.95;
+    let theta = 2.0 * PI * 100.0 / FS_HZ;
+    (
+        vec![1.0, -0.5, 0.25],
+        vec![1.0, -2.0 * r * theta.cos(), r * r],
+    )
+}
+
+/// Seeded white noise of `n` samples through the test system, after a
+/// warm-up of 2000 samples (0.95^2000 ~ 1e-45) so the output is stationary.
+fn filtered_white(seed: u64, n: usize) -> (Vec<f64>, Vec<f64>) {
+    let (b, a) = test_system();
+    let warm = 2000;
+    let u = white(seed, n + warm, 1.0);
+    let y = lfilter(&b, &a, &u);
+    (u[warm..].to_vec(), y[warm..].to_vec())
+}
+
+fn analytic_h(freq_hz: f64) -> Complex<f64> {
+    let (b, a) = test_system();
+    response(&b, &a, 2.0 * PI * freq_hz / FS_HZ)
+}
+
+/// Welch's equivalent number of averages for Hann at 50 % overlap, from the
+/// closed form rho(1) = 1/6 (only adjacent segments overlap).
+fn hann_half_overlap_n_eff(k: usize) -> f64 {
+    let k = k as f64;
+    k / (1.0 + 2.0 * (1.0 - 1.0 / k) / 36.0)
+}
+
+fn welch_h1(u: &[f64], y: &[f64], l: usize) -> Frf {
+    welch(
+        u,
+        y,
+        FS_HZ,
+        l,
+        0.5,
+        Window::Hann,
+        Detrend::Mean,
+        Estimator::H1,
+    )
+    .unwrap()
+}
+
+// 1. The naive DFT against analytic pairs.
+
+#[test]
+fn naive_dft_of_an_impulse_is_flat_with_a_linear_phase() {
+    let n = 16;
+    let mut x = vec![0.0; n];
+    x[0] = 1.0;
+    for v in naive_dft(&x) {
+        assert_abs_diff_eq!(v.re, 1.0, epsilon = 1e-14);
+        assert_abs_diff_eq!(v.im, 0.0, epsilon = 1e-14);
+    }
+    // A delay of 3 samples: X(k) = exp(-2 pi i 3 k / N).
+    let mut x = vec![0.0; n];
+    x[3] = 1.0;
+    for (k, v) in naive_dft(&x).into_iter().enumerate() {
+        let expected = Complex::from_polar(1.0, -2.0 * PI * 3.0 * k as f64 / n as f64);
+        assert_abs_diff_eq!(v.re, expected.re, epsilon = 1e-13);
+        assert_abs_diff_eq!(v.im, expected.im, epsilon = 1e-13);
+    }
+}
+
+#[test]
+fn naive_dft_of_a_bin_centred_cosine_is_two_lines_of_height_n_over_2() {
+    let (n, k0) = (32, 5);
+    let x: Vec<f64> = (0..n)
+        .map(|i| (2.0 * PI * (k0 * i) as f64 / n as f64).cos())
+        .collect();
+    for (k, v) in naive_dft(&x).into_iter().enumerate() {
+        let expected = if k == k0 || k == n - k0 {
+            n as f64 / 2.0
+        } else {
+            0.0
+        };
+        assert_abs_diff_eq!(v.re, expected, epsilon = 1e-12);
+        assert_abs_diff_eq!(v.im, 0.0, epsilon = 1e-12);
+    }
+}
+
+#[test]
+fn naive_dft_of_a_constant_is_n_times_it_at_dc() {
+    let n = 24;
+    let x = vec![2.5; n];
+    for (k, v) in naive_dft(&x).into_iter().enumerate() {
+        let expected = if k == 0 { 2.5 * n as f64 } else { 0.0 };
+        assert_abs_diff_eq!(v.re, expected, epsilon = 1e-12);
+        assert_abs_diff_eq!(v.im, 0.0, epsilon = 1e-12);
+    }
+}
+
+// 2. The realfft path against the naive DFT.
+
+#[test]
+fn segment_transform_matches_the_naive_dft_on_random_signals() {
+    // Even, odd, prime and power-of-two lengths take different realfft paths.
+    for (seed, n) in [
+        (1, 16),
+        (2, 17),
+        (3, 100),
+        (4, 127),
+        (5, 256),
+        (6, 1000),
+        (7, 1021),
+    ] {
+        let mut rng = SplitMix64(seed);
+        let x: Vec<f64> = (0..n).map(|_| 2.0 * rng.uniform() - 1.0).collect();
+        let w = vec![1.0; n];
+        let mut planner = RealFftPlanner::new();
+        let mut transform = SegmentTransform::new(&mut planner, n);
+        let mut fast = transform.make_output();
+        transform.run(&x, &w, Detrend::None, &mut fast);
+        let slow = naive_dft(&x);
+        assert_eq!(fast.len(), n / 2 + 1);
+        let scale = slow.iter().map(|v| v.norm()).fold(0.0, f64::max);
+        for (k, (f, s)) in fast.iter().zip(&slow).enumerate() {
+            let err = (f - s).norm() / scale;
+            assert!(err < 1e-12, "n = {n}, bin {k}: relative error {err:e}");
+        }
+    }
+}
+
+// 3. Parseval for the density scaling.
+
+/// Sum of bin-centred cosines for a segment of `l` samples, plus an offset;
+/// its variance is sum A^2 / 2 exactly. The lines are at least 3 bins apart
+/// and from DC, so even Hann's 3-bin spread keeps them from interfering.
+fn periodic_signal(l: usize, n: usize) -> (Vec<f64>, f64) {
+    let lines = [
+        (5, 1.0, 0.3),
+        (12, 0.5, 1.1),
+        (31, 2.0, -0.7),
+        (77, 0.3, 2.0),
+    ];
+    let x = (0..n)
+        .map(|i| {
+            3.0 + lines
+                .iter()
+                .map(|&(k, amp, phase): &(usize, f64, f64)| {
+                    amp * (2.0 * PI * (k * i % l) as f64 / l as f64 + phase).cos()
+                })
+                .sum::<f64>()
+        })
+        .collect();
+    let variance = lines.iter().map(|(_, amp, _)| amp * amp / 2.0).sum();
+    (x, variance)
+}
+
+fn integral(frf: &Frf) -> f64 {
+    frf.suu.iter().sum::<f64>() * frf.resolution_hz
+}
+
+#[test]
+fn welch_density_integrates_to_the_variance_of_a_periodic_signal() {
+    // Hann, even length, 50 % overlap; Rectangular, odd length (no Nyquist
+    // bin), 30 % overlap. Mean detrending removes the offset of 3.
+    for (l, overlap, kind) in [
+        (256, 0.5, Window::Hann),
+        (255, 0.3, Window::Rectangular),
+        (256, 0.0, Window::BlackmanHarris),
+    ] {
+        let (x, variance) = periodic_signal(l, 20 * l);
+        let frf = welch(
+            &x,
+            &x,
+            FS_HZ,
+            l,
+            overlap,
+            kind,
+            Detrend::Mean,
+            Estimator::H1,
+        )
+        .unwrap();
+        assert_relative_eq!(integral(&frf), variance, max_relative = 1e-10);
+        assert_relative_eq!(frf.resolution_hz, FS_HZ / l as f64);
+    }
+}
+
+#[test]
+fn etfe_density_integrates_to_the_variance_of_a_periodic_signal() {
+    let l = 256;
+    let (x, variance) = periodic_signal(l, 20 * l);
+    let frf = etfe(&x, &x, FS_HZ, Window::Rectangular, Detrend::Mean, l, 0.5).unwrap();
+    assert_relative_eq!(integral(&frf), variance, max_relative = 1e-10);
+}
+
+#[test]
+fn welch_density_integrates_to_the_variance_of_white_noise() {
+    // Each Hann segment's windowed power scatters by sqrt(2 sum w^4/(sum w^2)^2)
+    // = sqrt(2 (35/128)/(9/64)/256) ~ 0.12 relative; 511 half-overlapping
+    // segments bring that to about 0.6 %, so 3 % is a 5-sigma bound.
+    let x = white(11, 65536, 2.0);
+    let mean = x.iter().sum::<f64>() / x.len() as f64;
+    let variance = x.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / x.len() as f64;
+    let frf = welch_h1(&x, &x, 256);
+    assert_eq!(frf.n_averages, 511);
+    assert_relative_eq!(integral(&frf), variance, max_relative = 0.03);
+    // White noise of variance 4 has one-sided density 2 * 4 / fs everywhere.
+    let mid: f64 = frf.suu[10..118].iter().sum::<f64>() / 108.0;
+    assert_relative_eq!(mid, 2.0 * 4.0 / FS_HZ, max_relative = 0.03);
+}
+
+// 4. Welch H1 of a known discrete-time system.
+
+#[test]
+fn welch_h1_matches_the_difference_equations_response_at_every_bin() {
+    let l = 1024;
+    let (u, y) = filtered_white(21, 64 * l);
+    let frf = welch_h1(&u, &y, l);
+    assert_eq!(frf.n_averages, 127);
+    let n_eff = hann_half_overlap_n_eff(127);
+    assert_relative_eq!(frf.effective_averages, n_eff, max_relative = 1e-12);
+    // Noise-free, the only error is leakage: the filter's memory crosses the
+    // segment edges, which acts as noise incoherent with u and shows in the
+    // coherence. Bendat & Piersol's random error of H1 bounds it:
+    // |dH|/|H| <= 4 sqrt((1 - g^2) / (n_eff g^2)), plus 5e-3 for the
+    // resolution bias at the resonance (Bendat & Piersol Sec. 8.5: about
+    // (B_e / B_r)^2 / 3 with Hann's B_e = 1.5 df = 1.5 Hz and half-power
+    // bandwidth B_r = (1 - r) fs / pi = 16 Hz, i.e. 3e-3).
+    for k in 1..=l / 2 {
+        let h = analytic_h(frf.freq_hz[k]);
+        let g2 = frf.coherence[k];
+        let bound = 4.0 * ((1.0 - g2) / (n_eff * g2)).sqrt() + 5e-3;
+        let err = (frf.h[k] - h).norm() / h.norm();
+        assert!(err <= bound, "bin {k}: relative error {err:e} > {bound:e}");
+        assert!(err < 0.02, "bin {k}: relative error {err:e}");
+        assert!(g2 > 0.99, "bin {k}: coherence {g2}");
+        assert_relative_eq!(frf.freq_hz[k], k as f64 * FS_HZ / l as f64);
+    }
+}
+
+// 5. Noise on the output, then on the input.
+
+#[test]
+fn output_noise_lowers_coherence_as_predicted_and_leaves_h1_unbiased() {
+    let l = 4096;
+    let (u, y_clean) = filtered_white(31, 64 * l);
+    let sigma_n = 1.0;
+    let noise = white(32, y_clean.len(), sigma_n);
+    let y: Vec<f64> = y_clean.iter().zip(&noise).map(|(a, b)| a + b).collect();
+    let frf = welch_h1(&u, &y, l);
+    let n_eff = hann_half_overlap_n_eff(frf.n_averages);
+    let mut bias_sum = Complex::new(0.0, 0.0);
+    let bins = 2..l / 2;
+    for k in bins.clone() {
+        let h = analytic_h(frf.freq_hz[k]);
+        // White u (variance 1) and n (variance sigma_n^2): the one-sided
+        // densities 2 sigma^2 / fs cancel in the ratio.
+        let g2 = h.norm_sqr() / (h.norm_sqr() + sigma_n * sigma_n);
+        // Bendat & Piersol: coherence scatters by sqrt(2) (1 - g^2) / (|g| sqrt(n))
+        // and is biased up by about (1 - g^2)^2 / n; 5 sigma per bin, plus
+        // 2e-3 for leakage, ten times its size at this resolution (0.24 Hz).
+        let sd = 2f64.sqrt() * (1.0 - g2) / (g2.sqrt() * n_eff.sqrt());
+        let bias = (1.0 - g2).powi(2) / n_eff;
+        assert!(
+            (frf.coherence[k] - g2 - bias).abs() < 5.0 * sd + 2e-3,
+            "bin {k}: coherence {} vs analytic {g2}",
+            frf.coherence[k]
+        );
+        let sd_h = ((1.0 - g2) / (n_eff * g2)).sqrt();
+        let rel = frf.h[k] / h - 1.0;
+        assert!(rel.norm() < 5.0 * sd_h + 2e-3, "bin {k}: H1 off by {rel}");
+        bias_sum += rel;
+    }
+    // Unbiased: the mean relative error over 2046 bins is small. The relative
+    // errors have sd up to 0.13 (g^2 ~ 0.2 near fs/2, n_eff ~ 120) and Hann
+    // correlates neighbours in pairs, so the mean's sd is below 0.005; 0.015
+    // is 3 of those at worst, far below any bias that matters.
+    let mean = bias_sum / bins.len() as f64;
+    assert!(mean.norm() < 0.015, "mean relative error of H1 {mean}");
+}
+
+#[test]
+fn input_noise_biases_h1_low_by_suu_over_suu_plus_snn_and_not_h2() {
+    let l = 512;
+    let (u_true, y) = filtered_white(41, 128 * l);
+    let sigma_m = 0.5;
+    let m = white(42, u_true.len(), sigma_m);
+    let u: Vec<f64> = u_true.iter().zip(&m).map(|(a, b)| a + b).collect();
+    // Both white: Suu/(Suu + Smm) = 1/(1 + 0.25) = 0.8 at every bin.
+    let expected_h1_factor = 1.0 / (1.0 + sigma_m * sigma_m);
+    let run = |estimator| {
+        welch(
+            &u,
+            &y,
+            FS_HZ,
+            l,
+            0.5,
+            Window::Hann,
+            Detrend::Mean,
+            estimator,
+        )
+        .unwrap()
+    };
+    let h1 = run(Estimator::H1);
+    let h2 = run(Estimator::H2);
+    assert_eq!(h2.estimator, Estimator::H2);
+    // g^2 = 0.8 everywhere, so each ratio scatters by sqrt(0.2/(0.8 n_eff))
+    // ~ 0.022 with n_eff ~ 240; the mean over 254 bins (correlated in pairs by
+    // Hann) has sd ~ 0.002, so the bias is resolved to +-0.01 (5 sigma).
+    let bins = 2..l / 2;
+    let mut r1 = Complex::new(0.0, 0.0);
+    let mut r2 = Complex::new(0.0, 0.0);
+    for k in bins.clone() {
+        let h = analytic_h(h1.freq_hz[k]);
+        r1 += h1.h[k] / h;
+        r2 += h2.h[k] / h;
+        assert_relative_eq!(h1.coherence[k], 0.8, epsilon = 0.1);
+        assert!((h1.h[k] / h - expected_h1_factor).norm() < 0.12);
+        assert!((h2.h[k] / h - 1.0).norm() < 0.15);
+    }
+    let r1 = r1 / bins.len() as f64;
+    let r2 = r2 / bins.len() as f64;
+    assert_abs_diff_eq!(r1.re, expected_h1_factor, epsilon = 0.01);
+    assert_abs_diff_eq!(r1.im, 0.0, epsilon = 0.01);
+    assert_abs_diff_eq!(r2.re, 1.0, epsilon = 0.01);
+    assert_abs_diff_eq!(r2.im, 0.0, epsilon = 0.01);
+    // The same spectra give both: H2 / H1 = 1 / coherence at every bin.
+    for k in bins {
+        let ratio = h2.h[k] / h1.h[k];
+        assert_relative_eq!(ratio.re, 1.0 / h1.coherence[k], max_relative = 1e-9);
+        assert_abs_diff_eq!(ratio.im, 0.0, epsilon = 1e-9);
+    }
+}
+
+// 6. Monte Carlo of h_variance.
+
+#[test]
+fn h_variance_matches_the_scatter_of_h1_over_200_repetitions() {
+    let (l, reps) = (512, 200);
+    let n = 16 * l; // 31 half-overlapping segments
+    let sigma_n = 1.0;
+    // Bins away from the resonance: within two half-power bandwidths of it
+    // (68-132 Hz) the filter's memory crossing the segment edges adds an
+    // error that is not noise (test 4 bounds it).
+    let bins: Vec<usize> = (4..l / 2)
+        .step_by(4)
+        .filter(|&k| {
+            let f = k as f64 * FS_HZ / l as f64;
+            !(68.0..=132.0).contains(&f)
+        })
+        .collect();
+    let mut h_sum = vec![Complex::new(0.0, 0.0); bins.len()];
+    let mut h_sq = vec![(0.0, 0.0); bins.len()];
+    let mut var_sum = vec![0.0; bins.len()];
+    let mut n_eff = 0.0;
+    for rep in 0..reps {
+        let (u, y_clean) = filtered_white(1000 + rep, n);
+        let noise = white(5000 + rep, n, sigma_n);
+        let y: Vec<f64> = y_clean.iter().zip(&noise).map(|(a, b)| a + b).collect();
+        let frf = welch_h1(&u, &y, l);
+        n_eff = frf.effective_averages;
+        let var = h_variance(&frf);
+        for (j, &k) in bins.iter().enumerate() {
+            h_sum[j] += frf.h[k];
+            h_sq[j].0 += frf.h[k].re.powi(2);
+            h_sq[j].1 += frf.h[k].im.powi(2);
+            var_sum[j] += var[k];
+        }
+    }
+    assert_relative_eq!(n_eff, hann_half_overlap_n_eff(31), max_relative = 1e-12);
+    let r = reps as f64;
+    let (mut pooled_re, mut pooled_im, mut pooled_analytic) = (0.0, 0.0, 0.0);
+    for j in 0..bins.len() {
+        let mean = h_sum[j] / r;
+        // Sample variances of Re H1 and Im H1 over the repetitions.
+        let var_re = (h_sq[j].0 - r * mean.re * mean.re) / (r - 1.0);
+        let var_im = (h_sq[j].1 - r * mean.im * mean.im) / (r - 1.0);
+        let predicted = var_sum[j] / r;
+        // The complex variance of 200 repetitions scatters by 1/sqrt(200)
+        // ~ 7 %, so 20 % is about 3 sigma at each bin.
+        assert_relative_eq!(var_re + var_im, 2.0 * predicted, max_relative = 0.2);
+        pooled_re += var_re / predicted;
+        pooled_im += var_im / predicted;
+        // Independent of the estimated coherence: per component
+        // Snn / (2 (n_eff - 1) Suu) with the true spectra (white u and n,
+        // so Snn / Suu = sigma_n^2) and n_eff from the closed form.
+        let analytic = sigma_n * sigma_n / (2.0 * (hann_half_overlap_n_eff(31) - 1.0));
+        pooled_analytic += (var_re + var_im) / (2.0 * analytic);
+    }
+    let nb = bins.len() as f64;
+    // Pooled over 55 bins (4 apart, so nearly independent) a per-component
+    // ratio has sd ~ 10 % / sqrt(55) ~ 1.4 %, the complex one ~ 1 %. 5 % and
+    // 4 % are about 4 sigma: tight enough to reject the raw segment count
+    // (31 instead of n_eff - 1 = 28.4 puts the ratio 8 % off), not to resolve
+    // n_eff against n_eff - 1 (3.5 %).
+    assert_relative_eq!(pooled_re / nb, 1.0, max_relative = 0.05);
+    assert_relative_eq!(pooled_im / nb, 1.0, max_relative = 0.05);
+    assert_relative_eq!(pooled_analytic / nb, 1.0, max_relative = 0.04);
+}
+
+// 7. Windows and their overlap correlation.
+
+#[test]
+fn hann_and_hamming_match_their_closed_forms_and_are_periodic() {
+    let n = 8;
+    let hann = window(Window::Hann, n);
+    let hamming = window(Window::Hamming, n);
+    // Hann = sin^2(pi i / n); sin^2(pi/8) = (1 - cos(pi/4))/2 = (2 - sqrt 2)/4.
+    let s2 = 2f64.sqrt();
+    let expected_hann = [
+        0.0,
+        (2.0 - s2) / 4.0,
+        0.5,
+        (2.0 + s2) / 4.0,
+        1.0,
+        (2.0 + s2) / 4.0,
+        0.5,
+        (2.0 - s2) / 4.0,
+    ];
+    for (w, e) in hann.iter().zip(expected_hann) {
+        assert_abs_diff_eq!(*w, e, epsilon = 1e-15);
+    }
+    // Hamming = 0.54 - 0.46 cos(2 pi i / n): 0.08 at 0, 0.54 at n/4, 1 at n/2.
+    assert_abs_diff_eq!(hamming[0], 0.08, epsilon = 1e-15);
+    assert_abs_diff_eq!(hamming[2], 0.54, epsilon = 1e-15);
+    assert_abs_diff_eq!(hamming[4], 1.0, epsilon = 1e-15);
+    assert_abs_diff_eq!(hamming[1], 0.54 - 0.46 / s2, epsilon = 1e-15);
+    // Periodic: w(0) = 0 and w(n/2) = 1 for Hann at any even length, and
+    // w(i) = w(n - i) (the symmetric window of length n + 1, last sample cut).
+    for n in [16, 1024] {
+        let w = window(Window::Hann, n);
+        assert_eq!(w.len(), n);
+        assert_abs_diff_eq!(w[0], 0.0, epsilon = 1e-15);
+        assert_abs_diff_eq!(w[n / 2], 1.0, epsilon = 1e-15);
+        for i in 1..n {
+            assert_abs_diff_eq!(w[i], w[n - i], epsilon = 1e-15);
+        }
+        // Mean square of a periodic Hann is exactly 3/8.
+        let ms = w.iter().map(|v| v * v).sum::<f64>() / n as f64;
+        assert_abs_diff_eq!(ms, 3.0 / 8.0, epsilon = 1e-14);
+    }
+    // Blackman-Harris: a0 - a1 + a2 - a3 at 0, the sum of the a's at n/2.
+    let bh = window(Window::BlackmanHarris, 64);
+    assert_abs_diff_eq!(
+        bh[0],
+        0.35875 - 0.48829 + 0.14128 - 0.01168,
+        epsilon = 1e-15
+    );
+    assert_abs_diff_eq!(bh[32], 1.0, epsilon = 1e-15);
+    assert!(window(Window::Rectangular, 5).iter().all(|&v| v == 1.0));
+    assert_eq!(window(Window::Hann, 1), vec![1.0]);
+    assert!(window(Window::Hann, 0).is_empty());
+}
+
+#[test]
+fn overlap_correlation_matches_harris_table_and_welch_correction() {
+    // Hann at 50 %: sum_{i<n/2} sin^2 cos^2 = n/16 over sum w^2 = 3n/8: 1/6.
+    let w = window(Window::Hann, 256);
+    assert_relative_eq!(
+        overlap_correlation(&w, 128),
+        1.0 / 6.0,
+        max_relative = 1e-12
+    );
+    // Two-term cosine windows w = a - b cos(2 pi x) on [0, 1), continuous
+    // limit: at 50 % overlap int_0^{1/2} w(x) w(x + 1/2) = a^2/2 - b^2/4, at
+    // 75 % int_0^{3/4} w(x) w(x + 1/4) = 3a^2/4 + ab/pi - b^2/(4 pi), both
+    // over int_0^1 w^2 = a^2 + b^2/2. A 4096-sample window differs by O(1/n).
+    let n = 4096;
+    for (kind, a, b) in [(Window::Hann, 0.5, 0.5), (Window::Hamming, 0.54, 0.46)] {
+        let w = window(kind, n);
+        let energy = a * a + b * b / 2.0;
+        let at_50 = (a * a / 2.0 - b * b / 4.0) / energy;
+        let at_75 = (3.0 * a * a / 4.0 + a * b / PI - b * b / (4.0 * PI)) / energy;
+        assert_abs_diff_eq!(overlap_correlation(&w, n / 2), at_50, epsilon = 1e-3);
+        assert_abs_diff_eq!(overlap_correlation(&w, n / 4), at_75, epsilon = 1e-3);
+    }
+    // Harris (1978), Table I, "overlap correlation" at 75 % and 50 % overlap,
+    // given to 0.1 %: Hann 65.9 and 16.7, four-term Blackman-Harris 46.0 and
+    // 3.8. (The table's Hamming 50 % entry, 23.5, is 0.1 above the integral
+    // above, 23.38 %, so it is checked there instead.)
+    for (kind, at_75, at_50) in [
+        (Window::Hann, 0.659, 0.167),
+        (Window::BlackmanHarris, 0.460, 0.038),
+    ] {
+        let w = window(kind, n);
+        assert_abs_diff_eq!(overlap_correlation(&w, n / 4), at_75, epsilon = 6e-4);
+        assert_abs_diff_eq!(overlap_correlation(&w, n / 2), at_50, epsilon = 6e-4);
+    }
+    // Without overlap the segments are independent: n_eff = K.
+    let w = window(Window::Hann, 256);
+    assert_relative_eq!(effective_averages(&w, 256, 10), 10.0);
+    // Hann at 50 %: only neighbours overlap.
+    assert_relative_eq!(
+        effective_averages(&w, 128, 20),
+        hann_half_overlap_n_eff(20),
+        max_relative = 1e-12
+    );
+}
+
+// 8. Detrending.
+
+#[test]
+fn linear_detrend_removes_an_exact_line() {
+    let line: Vec<f64> = (0..1001).map(|i| 3.2 - 0.0071 * i as f64).collect();
+    for v in detrend(&line, Detrend::Linear) {
+        assert_abs_diff_eq!(v, 0.0, epsilon = 1e-12);
+    }
+    // A line plus an alternating +-1 (even length, orthogonal to both the
+    // constant and the centred ramp) leaves the alternating part.
+    let x: Vec<f64> = (0..1000)
+        .map(|i| -1.5 + 0.02 * i as f64 + if i % 2 == 0 { 1.0 } else { -1.0 })
+        .collect();
+    let d = detrend(&x, Detrend::Linear);
+    // The alternating sequence has a tiny projection on the ramp: sum t (-1)^i
+    // = -n/2 over sum t^2 = n(n^2 - 1)/12, so a residual slope of -6/(n^2-1).
+    let slope = -6.0 / (1000.0f64.powi(2) - 1.0);
+    for (i, v) in d.iter().enumerate() {
+        let alt = if i % 2 == 0 { 1.0 } else { -1.0 };
+        let expected = alt - slope * (i as f64 - 499.5);
+        assert_abs_diff_eq!(*v, expected, epsilon = 1e-12);
+    }
+}
+
+#[test]
+fn mean_detrend_removes_the_mean_only() {
+    let x: Vec<f64> = (0..100)
+        .map(|i| 7.25 + if i % 2 == 0 { 1.0 } else { -1.0 })
+        .collect();
+    for (i, v) in detrend(&x, Detrend::Mean).iter().enumerate() {
+        assert_abs_diff_eq!(*v, if i % 2 == 0 { 1.0 } else { -1.0 }, epsilon = 1e-12);
+    }
+    // A ramp keeps its slope under Mean: 0..=9 has mean 4.5.
+    let ramp: Vec<f64> = (0..10).map(f64::from).collect();
+    for (i, v) in detrend(&ramp, Detrend::Mean).iter().enumerate() {
+        assert_abs_diff_eq!(*v, i as f64 - 4.5, epsilon = 1e-14);
+    }
+    assert_eq!(detrend(&ramp, Detrend::None), ramp);
+}
+
+// 9. Errors.
+
+#[test]
+fn each_error_names_its_numbers() {
+    let ok = vec![0.5; 64];
+    let plan = |segment_length, overlap| FrfPlan {
+        estimator: Estimator::H1,
+        segment_length,
+        overlap,
+        window: Window::Hann,
+        detrend: Detrend::Mean,
+    };
+    let message =
+        |u: &[f64], y: &[f64], fs: f64, p: FrfPlan| estimate(u, y, fs, &p).unwrap_err().to_string();
+    assert_eq!(
+        message(&ok, &ok[..60], 100.0, plan(32, 0.5)),
+        "u and y differ in length: u has 64 samples, y has 60"
+    );
+    assert_eq!(
+        message(&ok, &ok, 100.0, plan(128, 0.5)),
+        "log too short: 64 samples, segment_length 128"
+    );
+    let mut bad = ok.clone();
+    bad[17] = f64::NAN;
+    assert_eq!(
+        message(&ok, &bad, 100.0, plan(32, 0.5)),
+        "y sample 17 is not finite (NaN)"
+    );
+    bad[17] = 0.0;
+    bad[3] = f64::INFINITY;
+    assert_eq!(
+        message(&bad, &ok, 100.0, plan(32, 0.5)),
+        "u sample 3 is not finite (inf)"
+    );
+    assert_eq!(
+        message(&ok, &ok, 0.0, plan(32, 0.5)),
+        "sample rate must be finite and positive (got 0 Hz)"
+    );
+    assert_eq!(
+        message(&ok, &ok, -5.0, plan(32, 0.5)),
+        "sample rate must be finite and positive (got -5 Hz)"
+    );
+    assert_eq!(
+        message(&ok, &ok, 100.0, plan(32, 1.0)),
+        "overlap must be in [0, 1) (got 1)"
+    );
+    assert_eq!(
+        message(&ok, &ok, 100.0, plan(32, -0.25)),
+        "overlap must be in [0, 1) (got -0.25)"
+    );
+    assert_eq!(
+        message(&ok, &ok, 100.0, plan(8, 0.5)),
+        "segment_length must be at least 16 (got 8)"
+    );
+    // The ETFE checks the same things (its coherence needs a segment).
+    let etfe_plan = FrfPlan {
+        estimator: Estimator::Etfe,
+        ..plan(128, 0.5)
+    };
+    assert!(matches!(
+        estimate(&ok, &ok, 100.0, &etfe_plan),
+        Err(FrfError::TooShort {
+            samples: 64,
+            segment_length: 128
+        })
+    ));
+}
+
+// 10. Determinism.
+
+fn bits(frf: &Frf) -> Vec<u64> {
+    let mut out: Vec<u64> = Vec::new();
+    out.extend(frf.freq_hz.iter().map(|v| v.to_bits()));
+    out.extend(frf.h.iter().flat_map(|v| [v.re.to_bits(), v.im.to_bits()]));
+    out.extend(frf.coherence.iter().map(|v| v.to_bits()));
+    out.extend(frf.suu.iter().map(|v| v.to_bits()));
+    out.extend(frf.syy.iter().map(|v| v.to_bits()));
+    out.extend(
+        frf.suy
+            .iter()
+            .flat_map(|v| [v.re.to_bits(), v.im.to_bits()]),
+    );
+    out.push(frf.effective_averages.to_bits());
+    out.push(frf.resolution_hz.to_bits());
+    out.push(frf.n_averages as u64);
+    out
+}
+
+#[test]
+fn the_same_input_gives_the_same_bits() {
+    let (u, y) = filtered_white(77, 10_000);
+    for estimator in [Estimator::H1, Estimator::H2, Estimator::Etfe] {
+        let plan = FrfPlan {
+            estimator,
+            segment_length: 1000,
+            overlap: 0.6,
+            window: Window::Hamming,
+            detrend: Detrend::Linear,
+        };
+        let a = estimate(&u, &y, FS_HZ, &plan).unwrap();
+        let b = estimate(&u, &y, FS_HZ, &plan).unwrap();
+        assert_eq!(bits(&a), bits(&b), "{estimator:?}");
+        assert_eq!(a.estimator, estimator);
+    }
+}
+
+// The ETFE, the mask and the variance's edge cases.
+
+#[test]
+fn etfe_of_a_periodic_steady_state_is_the_exact_response() {
+    // One period of white noise repeated: after the filter's transient, each
+    // period of y is the circular convolution of u's period with the impulse
+    // response, so Y(k) = H(e^{j 2 pi k / N}) U(k) exactly (rectangular window).
+    let n = 4096;
+    let (b, a) = test_system();
+    let period = white(91, n, 1.0);
+    let repeated: Vec<f64> = period.iter().cycle().take(3 * n).copied().collect();
+    let y = lfilter(&b, &a, &repeated)[2 * n..].to_vec();
+    let frf = etfe(
+        &period,
+        &y,
+        FS_HZ,
+        Window::Rectangular,
+        Detrend::None,
+        512,
+        0.5,
+    )
+    .unwrap();
+    assert_eq!(frf.h.len(), n / 2 + 1);
+    assert_eq!(frf.n_averages, 1);
+    assert_relative_eq!(frf.resolution_hz, FS_HZ / n as f64);
+    for k in 0..=n / 2 {
+        let h = analytic_h(frf.freq_hz[k]);
+        assert_relative_eq!(frf.h[k].re, h.re, max_relative = 1e-9, epsilon = 1e-9);
+        assert_relative_eq!(frf.h[k].im, h.im, max_relative = 1e-9, epsilon = 1e-9);
+        // h is suy / suu, the cross-spectrum over the auto-spectrum.
+        let ratio = frf.suy[k] / frf.suu[k];
+        assert_relative_eq!(ratio.re, frf.h[k].re, max_relative = 1e-9, epsilon = 1e-12);
+    }
+}
+
+#[test]
+fn etfe_coherence_is_the_welch_coherence_interpolated() {
+    let (u, y_clean) = filtered_white(61, 8192);
+    let noise = white(62, u.len(), 1.0);
+    let y: Vec<f64> = y_clean.iter().zip(&noise).map(|(a, b)| a + b).collect();
+    let fine = etfe(&u, &y, FS_HZ, Window::Hann, Detrend::Mean, 256, 0.5).unwrap();
+    let coarse = welch_h1(&u, &y, 256);
+    // 8192 / 256 = 32 fine bins per coarse bin: every 32nd bin coincides, and
+    // halfway between two coarse bins the value is their mean.
+    for j in 0..coarse.coherence.len() - 1 {
+        assert_relative_eq!(
+            fine.coherence[32 * j],
+            coarse.coherence[j],
+            max_relative = 1e-12
+        );
+        let mid = 0.5 * (coarse.coherence[j] + coarse.coherence[j + 1]);
+        assert_relative_eq!(fine.coherence[32 * j + 16], mid, max_relative = 1e-12);
+    }
+    // h_variance of the ETFE: one average, (1 - g^2) |H|^2 / (2 g^2).
+    let var = h_variance(&fine);
+    let k = 1000;
+    let g2 = fine.coherence[k];
+    assert_relative_eq!(
+        var[k],
+        (1.0 - g2) * fine.h[k].norm_sqr() / (2.0 * g2),
+        max_relative = 1e-12
+    );
+}
+
+#[test]
+fn band_mask_keeps_coherent_bins_inside_the_band() {
+    let frf = Frf {
+        freq_hz: vec![0.0, 1.0, 2.0, 3.0, 4.0, 5.0],
+        h: vec![Complex::new(1.0, 0.0); 6],
+        coherence: vec![0.0, 0.95, 0.5, 0.9, 0.99, 0.99],
+        suu: vec![1.0; 6],
+        syy: vec![1.0; 6],
+        suy: vec![Complex::new(1.0, 0.0); 6],
+        n_averages: 10,
+        effective_averages: 10.0,
+        estimator: Estimator::H1,
+        resolution_hz: 1.0,
+    };
+    assert_eq!(
+        band_mask(&frf, (1.0, 4.0), 0.9),
+        vec![false, true, false, true, true, false]
+    );
+    // h_variance: (1 - g^2)|H|^2 / (2 (n_eff - 1) g^2); infinite where g^2 = 0.
+    let var = h_variance(&frf);
+    assert!(var[0].is_infinite());
+    assert_relative_eq!(var[1], 0.05 / (2.0 * 9.0 * 0.95), max_relative = 1e-12);
+    assert_relative_eq!(var[2], 0.5 / (2.0 * 9.0 * 0.5), max_relative = 1e-12);
+}
+
+#[test]
+fn coherence_masks_the_bins_a_sweep_does_not_excite() {
+    // The lab's command: a quadratic chirp 0.1 -> 35 Hz (here 60 s at 1 kHz),
+    // through the test system, with output noise 1 % of the command's
+    // amplitude. Inside the sweep the output's density is orders of magnitude
+    // above the noise's (g^2 ~ 1); above it u carries only Hann side-lobe
+    // leakage (< -100 dB 10 Hz past the end), so the true g^2 is ~0 and the
+    // bins drop.
+    let (duration_s, f0, f1) = (60.0, 0.1, 35.0);
+    let n = (duration_s * FS_HZ) as usize;
+    let u: Vec<f64> = (0..n)
+        .map(|i| {
+            let t = i as f64 / FS_HZ;
+            (2.0 * PI * (f0 * t + (f1 - f0) * t.powi(3) / (3.0 * duration_s * duration_s))).sin()
+        })
+        .collect();
+    let (b, a) = test_system();
+    let noise = white(71, n, 0.01);
+    let y: Vec<f64> = lfilter(&b, &a, &u)
+        .iter()
+        .zip(&noise)
+        .map(|(y, e)| y + e)
+        .collect();
+    let frf = welch_h1(&u, &y, 4096);
+    let mask = band_mask(&frf, (0.0, FS_HZ / 2.0), 0.8);
+    for (k, &f) in frf.freq_hz.iter().enumerate() {
+        if (1.0..=30.0).contains(&f) {
+            assert!(mask[k], "{f} Hz: coherence {}", frf.coherence[k]);
+        }
+        if f >= 45.0 {
+            assert!(!mask[k], "{f} Hz: coherence {}", frf.coherence[k]);
+            // With zero true coherence the estimate over n independent averages
+            // is Beta(1, n - 1): P(> 0.5) = 0.5^(n-1) ~ 1e-8 per bin for n ~ 28.
+            assert!(
+                frf.coherence[k] < 0.5,
+                "{f} Hz: coherence {}",
+                frf.coherence[k]
+            );
+        }
+    }
+    // Where it is kept, H1 is right to the random error of g^2 ~ 1.
+    for (k, &f) in frf.freq_hz.iter().enumerate() {
+        if (1.0..=30.0).contains(&f) {
+            let h = analytic_h(f);
+            let g2 = frf.coherence[k];
+            // 2e-3: leakage and resolution bias, as in the test with white noise.
+            let bound = 4.0 * ((1.0 - g2) / (frf.effective_averages * g2)).sqrt() + 2e-3;
+            let err = (frf.h[k] - h).norm() / h.norm();
+            assert!(err < bound, "{f} Hz: relative error {err:e} > {bound:e}");
+        }
+    }
+}
