@@ -1,119 +1,34 @@
-//! A small complex FFT for synthesising periodic excitations of any length:
-//! iterative radix-2 for powers of two, Bluestein's chirp-z algorithm
-//! (Bluestein 1970; Rabiner, Schafer & Rader 1969) for every other length.
-//! The crate has no FFT dependency, and excitations need exact DFTs of
-//! lengths such as 170 s x 2048 Hz = 348,160 = 2^12 * 5 * 17.
+//! The complex DFT the excitations are synthesised with, for any length
+//! (170 s at 2048 Hz is 348,160 = 2^12 * 5 * 17 samples), by rustfft (mixed
+//! radix, Rader or Bluestein as the length needs).
 
 use nalgebra::Complex;
-use std::f64::consts::PI;
+use rustfft::FftPlanner;
 
 /// The unnormalised inverse DFT, x_j = sum_k X_k exp(+2 pi i j k / N).
 pub(crate) fn inverse_dft(spectrum: &[Complex<f64>]) -> Vec<Complex<f64>> {
-    let n = spectrum.len();
-    if n <= 1 {
-        return spectrum.to_vec();
+    let mut x = spectrum.to_vec();
+    if x.len() > 1 {
+        FftPlanner::new().plan_fft_inverse(x.len()).process(&mut x);
     }
-    if n.is_power_of_two() {
-        let mut x = spectrum.to_vec();
-        radix2(&mut x, 1.0);
-        x
-    } else {
-        bluestein(spectrum, 1.0)
-    }
+    x
 }
 
 /// The forward DFT, X_k = sum_j x_j exp(-2 pi i j k / N) (tests and
 /// analysis of generated signals).
 #[cfg(test)]
 pub(crate) fn forward_dft(signal: &[Complex<f64>]) -> Vec<Complex<f64>> {
-    let n = signal.len();
-    if n <= 1 {
-        return signal.to_vec();
+    let mut x = signal.to_vec();
+    if x.len() > 1 {
+        FftPlanner::new().plan_fft_forward(x.len()).process(&mut x);
     }
-    if n.is_power_of_two() {
-        let mut x = signal.to_vec();
-        radix2(&mut x, -1.0);
-        x
-    } else {
-        bluestein(signal, -1.0)
-    }
-}
-
-/// In-place radix-2 decimation-in-time FFT with exponent sign `sign`
-/// (-1 forward, +1 inverse), unnormalised. Twiddles are computed directly
-/// from their angle (no recurrence), so the error stays O(eps log N).
-fn radix2(x: &mut [Complex<f64>], sign: f64) {
-    let n = x.len();
-    debug_assert!(n.is_power_of_two());
-    let bits = n.trailing_zeros();
-    for i in 0..n {
-        let j = i.reverse_bits() >> (usize::BITS - bits);
-        if j > i {
-            x.swap(i, j);
-        }
-    }
-    let twiddles: Vec<Complex<f64>> = (0..n / 2)
-        .map(|m| {
-            let a = sign * 2.0 * PI * m as f64 / n as f64;
-            Complex::new(a.cos(), a.sin())
-        })
-        .collect();
-    let mut len = 2;
-    while len <= n {
-        let half = len / 2;
-        let stride = n / len;
-        for start in (0..n).step_by(len) {
-            for m in 0..half {
-                let w = twiddles[m * stride];
-                let a = x[start + m];
-                let b = x[start + m + half] * w;
-                x[start + m] = a + b;
-                x[start + m + half] = a - b;
-            }
-        }
-        len *= 2;
-    }
-}
-
-/// Bluestein: j k = (j^2 + k^2 - (j - k)^2) / 2 turns the DFT into a
-/// convolution with the chirp c_m = exp(sign i pi m^2 / N), done with
-/// radix-2 FFTs of a power-of-two length >= 2N - 1. m^2 is reduced modulo
-/// 2N in integers so the chirp's angle is exact for any N.
-fn bluestein(x: &[Complex<f64>], sign: f64) -> Vec<Complex<f64>> {
-    let n = x.len();
-    let two_n = 2 * n as u128;
-    let chirp: Vec<Complex<f64>> = (0..n)
-        .map(|m| {
-            let m = m as u128;
-            let r = (m * m) % two_n;
-            let a = sign * PI * r as f64 / n as f64;
-            Complex::new(a.cos(), a.sin())
-        })
-        .collect();
-    let len = (2 * n - 1).next_power_of_two();
-    let mut a = vec![Complex::new(0.0, 0.0); len];
-    for k in 0..n {
-        a[k] = x[k] * chirp[k];
-    }
-    let mut b = vec![Complex::new(0.0, 0.0); len];
-    b[0] = chirp[0].conj();
-    for m in 1..n {
-        b[m] = chirp[m].conj();
-        b[len - m] = chirp[m].conj();
-    }
-    radix2(&mut a, -1.0);
-    radix2(&mut b, -1.0);
-    for (p, q) in a.iter_mut().zip(b.iter()) {
-        *p *= q;
-    }
-    radix2(&mut a, 1.0);
-    let scale = 1.0 / len as f64;
-    (0..n).map(|j| chirp[j] * a[j] * scale).collect()
+    x
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use std::f64::consts::PI;
 
     /// The DFT by its definition, angles reduced exactly: the independent truth.
     fn naive(x: &[Complex<f64>], sign: f64) -> Vec<Complex<f64>> {
