@@ -1,7 +1,9 @@
 //! servoid's integration tests: the `servoid` binary run end to end.
 
+mod cdp;
 mod util;
 
+mod browser;
 mod manifest_errors;
 mod paper;
 mod schemas;
