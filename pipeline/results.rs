@@ -12,7 +12,6 @@ use serde::{Deserialize, Serialize};
 use crate::identify::{Estimate, PerSpring};
 use crate::lti::TransferFunction;
 use crate::manifest::{CompareMode, Role};
-use crate::model::LinearSpecimen;
 
 /// Version of the results.json format.
 pub const RESULTS_SCHEMA_VERSION: u32 = 1;
@@ -181,7 +180,7 @@ pub struct RunResult {
     pub error: Option<String>,
     /// Warnings that did not stop the run.
     pub warnings: Vec<String>,
-    pub specimen: LinearSpecimen,
+    pub specimen: crate::simulate::specimen::SpecimenModel,
     /// Undamped natural frequency of an SDOF specimen (Hz).
     pub natural_frequency_hz: Option<f64>,
     /// a1b0 at this run's P gain [N/(m s^2)], when the rig is known.

@@ -443,27 +443,63 @@ impl Role {
 }
 
 /// The physical specimen. Springs give `stiffness_n_per_m`; a linear SDOF
-/// specimen gives `mass_kg`, `damping_ns_per_m` and `stiffness_n_per_m`.
+/// specimen gives `mass_kg`, `damping_ns_per_m` and `stiffness_n_per_m`;
+/// a nonlinear one names its `model` and adds that model's parameters.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[schemars(deny_unknown_fields)]
 pub struct Specimen {
     /// Specimen model; `linear` unless a nonlinear model is named.
     #[serde(default)]
-    pub model: SpecimenModel,
-    #[serde(default)]
+    pub model: SpecimenKind,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub mass_kg: Option<f64>,
-    #[serde(default)]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub damping_ns_per_m: Option<f64>,
-    #[serde(default)]
+    /// Linear (or, for Bouc-Wen, initial elastic) stiffness.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub stiffness_n_per_m: Option<f64>,
+    /// Duffing: k3 in g = c x2 + k x1 + k3 x1^3 (hardening when positive).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub cubic_stiffness_n_per_m3: Option<f64>,
+    /// Friction: the sliding force f_c in g = c x2 + k x1 + f_c tanh(x2 / v_s).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub coulomb_force_n: Option<f64>,
+    /// Friction: the smoothing velocity v_s.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub smoothing_velocity_m_per_s: Option<f64>,
+    /// Bouc-Wen hysteresis parameters (Wen 1976).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub bouc_wen: Option<BoucWenParams>,
 }
 
 /// Specimen models servoid knows.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
 #[serde(rename_all = "snake_case")]
-pub enum SpecimenModel {
+pub enum SpecimenKind {
+    /// None, a spring, or a linear SDOF specimen (Eq. 15), by the keys given.
     #[default]
     Linear,
+    /// Cubic stiffness.
+    Duffing,
+    /// Bouc-Wen hysteresis.
+    BoucWen,
+    /// Viscous spring-mass with smoothed Coulomb friction.
+    Friction,
+}
+
+/// Bouc-Wen in Wen's form: g = c x2 + alpha k x1 + (1 - alpha) k z,
+/// z' = A x2 - beta |x2| |z|^(n-1) z - gamma x2 |z|^n.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[schemars(deny_unknown_fields)]
+pub struct BoucWenParams {
+    /// Post- to pre-yield stiffness ratio, in [0, 1].
+    pub alpha: f64,
+    /// A, the initial slope dz/dx1.
+    pub a: f64,
+    pub beta_per_m_pow_n: f64,
+    pub gamma_per_m_pow_n: f64,
+    /// n >= 1, sharpness of the transition.
+    pub n: f64,
 }
 
 /// A run's data.

@@ -13,10 +13,10 @@ use super::load::Problem;
 use super::{
     CampaignInfo, Channel, Channels as RawChannels, Column, CompareMode, CsvOptions, DelayMode,
     Detrend, Estimator, Identification, Intersample, LogFormat, Manifest, Reference, Rig, Role,
-    Run, SCHEMA_VERSION, Specimen, TimeUnit, Unit, UnitKind, Window,
+    Run, SCHEMA_VERSION, Specimen, SpecimenKind, TimeUnit, Unit, UnitKind, Window,
 };
 use crate::lti::TransferFunction;
-use crate::model::{LinearSpecimen, RigParams};
+use crate::model::RigParams;
 
 /// The sections that deserialized (a failed section is `None`; its problem is
 /// already recorded).
@@ -108,19 +108,8 @@ pub struct RunPlan {
     pub band_hz: (f64, f64),
 }
 
-/// A checked specimen.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub enum SpecimenPlan {
-    Linear(LinearSpecimen),
-}
-
-impl SpecimenPlan {
-    pub fn linear(&self) -> LinearSpecimen {
-        match self {
-            SpecimenPlan::Linear(l) => *l,
-        }
-    }
-}
+/// A checked specimen: the simulator's model of it, linear or not.
+pub type SpecimenPlan = crate::simulate::specimen::SpecimenModel;
 
 /// Where a run's transfer function comes from.
 #[derive(Debug, Clone)]
@@ -548,6 +537,7 @@ pub(super) fn check_specimen(
     path: &KeyPath,
     bad: &mut impl FnMut(KeyPath, String),
 ) -> Option<SpecimenPlan> {
+    use crate::simulate::specimen::{BoucWen, Duffing, Friction, SpecimenModel as M};
     let s = spec.cloned().unwrap_or_default();
     let mut ok = true;
     for (k, v) in [
@@ -567,6 +557,35 @@ pub(super) fn check_specimen(
         );
         ok = false;
     }
+    // Keys that belong to one nonlinear model only.
+    let model_keys: [(&str, bool, SpecimenKind); 4] = [
+        (
+            "cubic_stiffness_n_per_m3",
+            s.cubic_stiffness_n_per_m3.is_some(),
+            SpecimenKind::Duffing,
+        ),
+        (
+            "coulomb_force_n",
+            s.coulomb_force_n.is_some(),
+            SpecimenKind::Friction,
+        ),
+        (
+            "smoothing_velocity_m_per_s",
+            s.smoothing_velocity_m_per_s.is_some(),
+            SpecimenKind::Friction,
+        ),
+        ("bouc_wen", s.bouc_wen.is_some(), SpecimenKind::BoucWen),
+    ];
+    for (key, given, owner) in model_keys {
+        if given && s.model != owner {
+            let name = serde_json::to_value(owner)
+                .ok()
+                .and_then(|v| v.as_str().map(str::to_string))
+                .unwrap_or_default();
+            bad(path.key(key), format!("applies only to model = \"{name}\""));
+            ok = false;
+        }
+    }
     let given: Vec<&str> = [
         ("mass_kg", s.mass_kg.is_some()),
         ("damping_ns_per_m", s.damping_ns_per_m.is_some()),
@@ -576,6 +595,16 @@ pub(super) fn check_specimen(
     .filter(|(_, g)| *g)
     .map(|(k, _)| *k)
     .collect();
+    if s.model != SpecimenKind::Linear && matches!(role, Role::NoSpecimen | Role::Spring) {
+        bad(
+            path.key("model"),
+            format!(
+                "a {} run identifies the rig with a linear specimen (Eqs. 18-19); nonlinear specimens are for validation and fit runs",
+                role.as_str()
+            ),
+        );
+        return None;
+    }
     match role {
         Role::NoSpecimen => {
             if !given.is_empty() {
@@ -588,7 +617,7 @@ pub(super) fn check_specimen(
                 );
                 return None;
             }
-            Some(SpecimenPlan::Linear(LinearSpecimen::None))
+            Some(M::None)
         }
         Role::Spring => {
             let Some(k) = s.stiffness_n_per_m else {
@@ -605,17 +634,17 @@ pub(super) fn check_specimen(
                 );
                 return None;
             }
-            ok.then_some(SpecimenPlan::Linear(LinearSpecimen::Spring {
+            ok.then_some(M::Spring {
                 stiffness_n_per_m: k,
-            }))
+            })
         }
-        Role::Validation | Role::Fit => {
+        Role::Validation | Role::Fit if s.model == SpecimenKind::Linear => {
             let lin = match (s.mass_kg, s.damping_ns_per_m, s.stiffness_n_per_m) {
-                (None, None, None) => LinearSpecimen::None,
-                (None, None, Some(k)) => LinearSpecimen::Spring {
+                (None, None, None) => M::None,
+                (None, None, Some(k)) => M::Spring {
                     stiffness_n_per_m: k,
                 },
-                (Some(m), c, Some(k)) => LinearSpecimen::Sdof {
+                (Some(m), c, Some(k)) => M::LinearSdof {
                     mass_kg: m,
                     damping_ns_per_m: c.unwrap_or(0.0),
                     stiffness_n_per_m: k,
@@ -635,8 +664,85 @@ pub(super) fn check_specimen(
                     return None;
                 }
             };
-            ok.then_some(SpecimenPlan::Linear(lin))
+            ok.then_some(lin)
         }
+        Role::Validation | Role::Fit => {
+            // A nonlinear specimen: every parameter of its model is required.
+            let mut need = |key: &str, v: Option<f64>| -> f64 {
+                v.unwrap_or_else(|| {
+                    bad(
+                        path.key(key),
+                        format!("a {} specimen needs `{key}`", model_name(s.model)),
+                    );
+                    ok = false;
+                    f64::NAN
+                })
+            };
+            let m = need("mass_kg", s.mass_kg);
+            let k = need("stiffness_n_per_m", s.stiffness_n_per_m);
+            let c = s.damping_ns_per_m.unwrap_or(0.0);
+            let model = match s.model {
+                SpecimenKind::Duffing => M::Duffing(Duffing {
+                    mass_kg: m,
+                    damping_ns_per_m: c,
+                    stiffness_n_per_m: k,
+                    cubic_stiffness_n_per_m3: need(
+                        "cubic_stiffness_n_per_m3",
+                        s.cubic_stiffness_n_per_m3,
+                    ),
+                }),
+                SpecimenKind::Friction => M::Friction(Friction {
+                    mass_kg: m,
+                    damping_ns_per_m: c,
+                    stiffness_n_per_m: k,
+                    coulomb_force_n: need("coulomb_force_n", s.coulomb_force_n),
+                    smoothing_velocity_m_per_s: need(
+                        "smoothing_velocity_m_per_s",
+                        s.smoothing_velocity_m_per_s,
+                    ),
+                }),
+                SpecimenKind::BoucWen => match &s.bouc_wen {
+                    Some(bw) => M::BoucWen(BoucWen {
+                        mass_kg: m,
+                        damping_ns_per_m: c,
+                        stiffness_n_per_m: k,
+                        alpha: bw.alpha,
+                        a: bw.a,
+                        beta_per_m_pow_n: bw.beta_per_m_pow_n,
+                        gamma_per_m_pow_n: bw.gamma_per_m_pow_n,
+                        n: bw.n,
+                    }),
+                    None => {
+                        bad(
+                            path.key("bouc_wen"),
+                            "a bouc_wen specimen needs its `bouc_wen` table (alpha, a, beta_per_m_pow_n, gamma_per_m_pow_n, n)".into(),
+                        );
+                        return None;
+                    }
+                },
+                SpecimenKind::Linear => unreachable!("handled above"),
+            };
+            if !ok {
+                return None;
+            }
+            // Signs and ranges, by the simulator's own checks (they name the parameter).
+            match model.validate() {
+                Ok(()) => Some(model),
+                Err(e) => {
+                    bad(path.clone(), e.to_string());
+                    None
+                }
+            }
+        }
+    }
+}
+
+fn model_name(k: SpecimenKind) -> &'static str {
+    match k {
+        SpecimenKind::Linear => "linear",
+        SpecimenKind::Duffing => "duffing",
+        SpecimenKind::BoucWen => "bouc_wen",
+        SpecimenKind::Friction => "friction",
     }
 }
 

@@ -136,14 +136,37 @@ fn specimen(v: Value) -> String {
             "spring, k = {} N/m",
             get("stiffness_n_per_m").map_or("?".into(), |x| format_number(x, 6))
         ),
-        "sdof" => format!(
-            "m = {} kg, c = {} N s/m, k = {} N/m",
-            get("mass_kg").map_or("?".into(), |x| format_number(x, 4)),
-            get("damping_ns_per_m").map_or("?".into(), |x| format_number(x, 4)),
-            get("stiffness_n_per_m").map_or("?".into(), |x| format_number(x, 6))
-        ),
         "none" => "none".into(),
-        other => other.to_string(),
+        other => {
+            let f = |k: &str, sig: usize| get(k).map_or("?".into(), |x| format_number(x, sig));
+            let mck = format!(
+                "m = {} kg, c = {} N s/m, k = {} N/m",
+                f("mass_kg", 4),
+                f("damping_ns_per_m", 4),
+                f("stiffness_n_per_m", 6)
+            );
+            match other {
+                "linear_sdof" => mck,
+                "duffing" => format!(
+                    "Duffing: {mck}, k3 = {} N/m\u{b3}",
+                    f("cubic_stiffness_n_per_m3", 4)
+                ),
+                "friction" => format!(
+                    "friction: {mck}, f_c = {} N, v_s = {} m/s",
+                    f("coulomb_force_n", 4),
+                    f("smoothing_velocity_m_per_s", 3)
+                ),
+                "bouc_wen" => format!(
+                    "Bouc-Wen: {mck}, \u{3b1} = {}, A = {}, \u{3b2} = {}, \u{3b3} = {}, n = {}",
+                    f("alpha", 3),
+                    f("a", 3),
+                    f("beta_per_m_pow_n", 3),
+                    f("gamma_per_m_pow_n", 3),
+                    f("n", 3)
+                ),
+                _ => other.to_string(),
+            }
+        }
     }
 }
 

@@ -15,6 +15,7 @@ use crate::results::{
     CampaignSummary, CcfResult, Comparison, ComparisonStatus, ComplexValue, RESULTS_SCHEMA_VERSION,
     Results, RigResult, RigSource, RunResult, Spread, Status, TfResult, TfSource,
 };
+use crate::simulate::specimen::SpecimenModel;
 
 /// Why one run failed; recorded in that run's result.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -158,8 +159,8 @@ fn establish_rig(
                 continue;
             }
         };
-        match plan.specimen.linear() {
-            LinearSpecimen::Spring { stiffness_n_per_m } => springs.push(SpringRun {
+        match plan.specimen {
+            SpecimenModel::Spring { stiffness_n_per_m } => springs.push(SpringRun {
                 stiffness_n_per_m,
                 estimate,
             }),
@@ -234,7 +235,7 @@ fn run_result(
     rig: Option<&RigParams>,
     rig_error: Option<&String>,
 ) -> RunResult {
-    let specimen = plan.specimen.linear();
+    let specimen = plan.specimen;
     let mut out = RunResult {
         id: plan.id.clone(),
         role: plan.role,
@@ -261,18 +262,17 @@ fn run_result(
     };
     out.warnings = acq.warnings.clone();
     let rig_at_p = rig.map(|r| r.at_p_gain(plan.p_gain));
-    if let Some(r) = &rig_at_p
-        && !matches!(specimen, LinearSpecimen::None)
+    // The model's transfer functions exist for linear specimens only.
+    let linear = specimen.linear();
+    if let (Some(r), Some(lin)) = (&rig_at_p, &linear)
+        && !matches!(lin, LinearSpecimen::None)
     {
-        out.force_tf = Some(TfResult::new(&model::tf_f_u(r, &specimen), TfSource::Model));
+        out.force_tf = Some(TfResult::new(&model::tf_f_u(r, lin), TfSource::Model));
     }
     match plan.role {
         Role::Validation => match &rig_at_p {
             Some(r) => {
-                out.tf = Some(TfResult::new(
-                    &model::tf_x1_u(r, &specimen),
-                    TfSource::Model,
-                ));
+                out.tf = linear.map(|lin| TfResult::new(&model::tf_x1_u(r, &lin), TfSource::Model));
             }
             None => {
                 out.status = Status::Failed;
@@ -288,11 +288,11 @@ fn run_result(
 }
 
 fn ccf_result(rig: &RigParams, plan: &RunPlan) -> Option<CcfResult> {
-    let LinearSpecimen::Sdof {
+    let SpecimenModel::LinearSdof {
         mass_kg,
         damping_ns_per_m,
         stiffness_n_per_m,
-    } = plan.specimen.linear()
+    } = plan.specimen
     else {
         return None;
     };
@@ -335,8 +335,8 @@ fn sensitivity(
     let springs: Vec<f64> = campaign
         .runs
         .iter()
-        .filter_map(|r| match (r.role, r.specimen.linear()) {
-            (Role::Spring, LinearSpecimen::Spring { stiffness_n_per_m }) => Some(stiffness_n_per_m),
+        .filter_map(|r| match (r.role, r.specimen) {
+            (Role::Spring, SpecimenModel::Spring { stiffness_n_per_m }) => Some(stiffness_n_per_m),
             _ => None,
         })
         .collect();

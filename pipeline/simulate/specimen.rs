@@ -204,6 +204,32 @@ impl SpecimenModel {
         }
     }
 
+    /// The paper's linear specimen (Eq. 10 with h linear), when this is one.
+    pub fn linear(&self) -> Option<crate::model::LinearSpecimen> {
+        use crate::model::LinearSpecimen as L;
+        match *self {
+            SpecimenModel::None => Some(L::None),
+            SpecimenModel::Spring { stiffness_n_per_m } => Some(L::Spring { stiffness_n_per_m }),
+            SpecimenModel::LinearSdof {
+                mass_kg,
+                damping_ns_per_m,
+                stiffness_n_per_m,
+            } => Some(L::Sdof {
+                mass_kg,
+                damping_ns_per_m,
+                stiffness_n_per_m,
+            }),
+            _ => None,
+        }
+    }
+
+    /// Undamped natural frequency sqrt(k/m)/(2 pi) (Hz) of the linearisation
+    /// at rest, for a specimen with mass and positive stiffness.
+    pub fn natural_frequency_hz(&self) -> Option<f64> {
+        let (m, _, k) = self.linearised_at_rest();
+        (m > 0.0 && k > 0.0).then(|| (k / m).sqrt() / (2.0 * std::f64::consts::PI))
+    }
+
     /// (m, c, k) of the linearisation at rest (x1 = x2 = z = 0). Friction's
     /// tanh adds f_c / v_s of damping. Bouc-Wen's z' = A x2 makes z = A x1
     /// along motions from rest (its other mode, z - A x1 = constant, is a
