@@ -155,9 +155,32 @@ struct Curve {
 /// A curve before its panel's ranges are known: raw data and a style.
 #[derive(Clone, Debug)]
 pub(crate) struct RawCurve<'a> {
-    pub x: &'a [f64],
-    pub y: &'a [f64],
-    pub style: Style,
+    x: &'a [f64],
+    y: &'a [f64],
+    style: Style,
+    /// x is non-decreasing (checked once; enables binary search).
+    sorted: bool,
+}
+
+impl<'a> RawCurve<'a> {
+    /// Uses the common length of `x` and `y`.
+    pub(crate) fn new(x: &'a [f64], y: &'a [f64], style: Style) -> Self {
+        let n = x.len().min(y.len());
+        let (x, y) = (&x[..n], &y[..n]);
+        let sorted = x.windows(2).all(|w| w[0] <= w[1]);
+        RawCurve {
+            x,
+            y,
+            style,
+            sorted,
+        }
+    }
+
+    /// Whether some finite point lies inside the x range (positive values
+    /// on log axes).
+    pub(crate) fn has_points_in(&self, x_range: (f64, f64), x_log: bool, y_log: bool) -> bool {
+        y_extent(self, x_range, x_log, y_log).is_some()
+    }
 }
 
 /// One chart of a sheet. The y range is fixed, or (`y_auto`) chosen from
@@ -201,7 +224,7 @@ impl<'a> Panel<'a> {
     fn extent(&self) -> Option<(f64, f64)> {
         self.raw
             .iter()
-            .filter_map(|r| y_extent(r.x, r.y, self.x.lo, self.x.hi, self.x.log, self.y.log))
+            .filter_map(|r| y_extent(r, (self.x.lo, self.x.hi), self.x.log, self.y.log))
             .reduce(|a, b| (a.0.min(b.0), a.1.max(b.1)))
     }
 
@@ -228,7 +251,7 @@ impl<'a> Panel<'a> {
             .raw
             .iter()
             .map(|r| Curve {
-                runs: prepare(r.x, r.y, &self.x, &self.y, columns),
+                runs: prepare(r, &self.x, &self.y, columns),
                 style: r.style,
             })
             .collect();
@@ -266,7 +289,7 @@ pub(crate) fn nice_step(span: f64, max_ticks: usize) -> f64 {
     let mag = 10f64.powf(raw.log10().floor());
     for m in [1.0, 2.0, 5.0, 10.0] {
         let step = m * mag;
-        if (span / step).floor() as usize + 1 <= max_ticks {
+        if ((span / step).floor() as usize) < max_ticks {
             return step;
         }
     }
@@ -314,13 +337,8 @@ pub(crate) fn log_ticks(lo: f64, hi: f64, max_ticks: usize) -> Vec<f64> {
 
 /// Axis limits around data [min, max]: padded, snapped to the tick step,
 /// never degenerate. `None` (no data) gives 0..1 (1..10 on a log axis).
-pub(crate) fn nice_range(extent: Option<(f64, f64)>, log: bool, max_ticks: usize) -> (f64, f64) {
-    let (lo, hi, _) = nice_range_step(extent, log, max_ticks);
-    (lo, hi)
-}
-
-/// [`nice_range`] and the linear tick step it snapped to (NaN on a log
-/// axis), so that the ticks use the same step as the limits.
+/// Also returns the linear tick step snapped to (NaN on a log axis), so
+/// that the ticks use the same step as the limits.
 pub(crate) fn nice_range_step(
     extent: Option<(f64, f64)>,
     log: bool,
@@ -351,7 +369,9 @@ pub(crate) fn nice_range_step(
         };
         (min - d, max + d)
     };
-    let pad = 0.03 * (max - min);
+    // A hair of padding so a maximum exactly on a tick does not touch the box
+    // (more would push the limits out a whole step for little gain).
+    let pad = 0.005 * (max - min);
     let (min, max) = (min - pad, max + pad);
     // Snapping outwards can add a step at each end; choose the step for
     // the snapped span so the tick count stays within the budget.
@@ -371,17 +391,14 @@ pub(crate) fn nice_range_step(
 
 /// Smallest and largest finite y whose x lies in [x_lo, x_hi] (positive
 /// values only on a log axis).
-pub(crate) fn y_extent(
-    x: &[f64],
-    y: &[f64],
-    x_lo: f64,
-    x_hi: f64,
+fn y_extent(
+    c: &RawCurve<'_>,
+    (x_lo, x_hi): (f64, f64),
     x_log: bool,
     y_log: bool,
 ) -> Option<(f64, f64)> {
-    let n = x.len().min(y.len());
-    let (x, y) = (&x[..n], &y[..n]);
-    let (i0, i1) = window(x, x_lo, x_hi);
+    let (x, y) = (c.x, c.y);
+    let (i0, i1) = window(x, x_lo, x_hi, c.sorted);
     let mut e: Option<(f64, f64)> = None;
     for i in i0..i1 {
         let (xv, yv) = (x[i], y[i]);
@@ -399,8 +416,7 @@ pub(crate) fn y_extent(
 /// Index range worth looking at for x in [lo, hi]: for non-decreasing x a
 /// binary search (plus one point either side, for lines entering the
 /// panel); otherwise everything.
-fn window(x: &[f64], lo: f64, hi: f64) -> (usize, usize) {
-    let sorted = x.windows(2).all(|w| w[0] <= w[1]);
+fn window(x: &[f64], lo: f64, hi: f64, sorted: bool) -> (usize, usize) {
     if !sorted {
         return (0, x.len());
     }
@@ -411,50 +427,57 @@ fn window(x: &[f64], lo: f64, hi: f64) -> (usize, usize) {
 
 // --------------------------------------------------------------- curves
 
-/// Clip `(x, y)` to the panel, split at non-finite points, and decimate each
-/// run to `columns` pixel columns over the full x axis.
-pub(crate) fn prepare(
-    x: &[f64],
-    y: &[f64],
-    xa: &Axis,
-    ya: &Axis,
-    columns: usize,
-) -> Vec<Vec<(f64, f64)>> {
-    let n = x.len().min(y.len());
-    let (x, y) = (&x[..n], &y[..n]);
-    let (i0, i1) = window(x, xa.lo, xa.hi);
+/// Decimate `c` to `columns` pixel columns over the x axis, split it at
+/// non-finite points and clip it to the panel. Decimating first keeps the
+/// work on a long record to one pass over the window; clipping the
+/// per-column extremes afterwards draws the same envelope.
+fn prepare(c: &RawCurve<'_>, xa: &Axis, ya: &Axis, columns: usize) -> Vec<Vec<(f64, f64)>> {
+    use std::borrow::Cow;
+    let (x, y) = (c.x, c.y);
+    let (i0, i1) = window(x, xa.lo, xa.hi, c.sorted);
     let tx = |v: f64| fwd(v, xa.log);
     let ty = |v: f64| fwd(v, ya.log);
-    let (bx0, bx1, by0, by1) = (tx(xa.lo), tx(xa.hi), ty(ya.lo), ty(ya.hi));
-    let span = bx1 - bx0;
+    let bounds = (tx(xa.lo), ty(ya.lo), tx(xa.hi), ty(ya.hi));
+    let span = bounds.2 - bounds.0;
 
-    // Runs of consecutive finite points, in transformed coordinates.
-    let mut finite_runs: Vec<Vec<(f64, f64)>> = Vec::new();
-    let mut cur: Vec<(f64, f64)> = Vec::new();
+    // Runs of consecutive drawable samples, as index ranges.
+    let mut runs: Vec<std::ops::Range<usize>> = Vec::new();
+    let mut start: Option<usize> = None;
     for i in i0..i1 {
-        let p = (tx(x[i]), ty(y[i]));
-        if p.0.is_finite() && p.1.is_finite() {
-            cur.push(p);
-        } else if !cur.is_empty() {
-            finite_runs.push(std::mem::take(&mut cur));
+        let ok = tx(x[i]).is_finite() && ty(y[i]).is_finite();
+        match (ok, start) {
+            (true, None) => start = Some(i),
+            (false, Some(s0)) => {
+                runs.push(s0..i);
+                start = None;
+            }
+            _ => {}
         }
     }
-    if !cur.is_empty() {
-        finite_runs.push(cur);
+    if let Some(s0) = start {
+        runs.push(s0..i1);
     }
 
     let mut out = Vec::new();
-    for run in finite_runs {
-        for clipped in clip_run(&run, (bx0, by0, bx1, by1)) {
-            let rx: Vec<f64> = clipped.iter().map(|p| p.0).collect();
-            let ry: Vec<f64> = clipped.iter().map(|p| p.1).collect();
-            let run_span = rx.iter().cloned().fold(f64::MIN, f64::max)
-                - rx.iter().cloned().fold(f64::MAX, f64::min);
-            let buckets = ((columns as f64 * run_span / span).ceil() as usize).max(1);
-            let (dx, dy) = decimate_minmax(&rx, &ry, buckets);
+    for r in runs {
+        let (rx, ry): (Cow<'_, [f64]>, Cow<'_, [f64]>) = if xa.log || ya.log {
+            (
+                x[r.clone()].iter().map(|&v| tx(v)).collect(),
+                y[r.clone()].iter().map(|&v| ty(v)).collect(),
+            )
+        } else {
+            (Cow::Borrowed(&x[r.clone()]), Cow::Borrowed(&y[r.clone()]))
+        };
+        let (lo, hi) = rx
+            .iter()
+            .fold((f64::MAX, f64::MIN), |(a, b), &v| (a.min(v), b.max(v)));
+        let buckets = ((columns as f64 * (hi - lo) / span).ceil() as usize).clamp(1, rx.len());
+        let (dx, dy) = decimate_minmax(&rx, &ry, buckets);
+        let pts: Vec<(f64, f64)> = dx.into_iter().zip(dy).collect();
+        for clipped in clip_run(&pts, bounds) {
             out.push(
-                dx.into_iter()
-                    .zip(dy)
+                clipped
+                    .into_iter()
                     .map(|(a, b)| (inv(a, xa.log), inv(b, ya.log)))
                     .collect(),
             );
@@ -644,12 +667,12 @@ fn margin_top(m: &Metrics) -> i32 {
 
 /// Maximum number of y ticks for a plot `plot_h` pixels tall.
 fn y_tick_budget(m: &Metrics, plot_h: i32) -> usize {
-    ((f64::from(plot_h) / (2.0 * m.tick_px)) as usize + 1).clamp(2, 11)
+    ((f64::from(plot_h) / (1.7 * m.tick_px)) as usize + 1).clamp(2, 11)
 }
 
 /// Maximum number of x ticks for a plot `plot_w` pixels wide.
 fn x_tick_budget(m: &Metrics, plot_w: i32, widest_label: i32) -> usize {
-    let per = f64::from(widest_label) + 2.0 * m.tick_px;
+    let per = f64::from(widest_label) + 1.5 * m.tick_px;
     ((f64::from(plot_w) / per) as usize + 1).clamp(2, 13)
 }
 
@@ -1003,7 +1026,7 @@ mod tests {
     use approx::assert_relative_eq;
 
     #[test]
-    fn nice_steps_follow_1_2_2p5_5() {
+    fn nice_steps_follow_1_2_5() {
         // 0..30 Hz with room for 7 ticks: step 5 (0, 5, ..., 30), as in the
         // paper's Figs. 8, 11, 13.
         assert_relative_eq!(nice_step(30.0, 7), 5.0);
@@ -1022,16 +1045,16 @@ mod tests {
 
     #[test]
     fn ranges_are_never_degenerate() {
-        let (lo, hi) = nice_range(Some((2.0, 2.0)), false, 5);
+        let (lo, hi, _) = nice_range_step(Some((2.0, 2.0)), false, 5);
         assert!(lo < 2.0 && hi > 2.0);
-        let (lo, hi) = nice_range(Some((0.0, 0.0)), false, 5);
+        let (lo, hi, _) = nice_range_step(Some((0.0, 0.0)), false, 5);
         assert!(lo < 0.0 && hi > 0.0);
-        let (lo, hi) = nice_range(None, false, 5);
+        let (lo, hi, _) = nice_range_step(None, false, 5);
         assert!(lo < hi);
-        let (lo, hi) = nice_range(Some((3.0, 3.0)), true, 5);
+        let (lo, hi, _) = nice_range_step(Some((3.0, 3.0)), true, 5);
         assert_relative_eq!(lo, 1.0);
         assert_relative_eq!(hi, 10.0);
-        // -27.3..3.1 dB, 5 ticks: padded to -28.2..4.0, step 10 gives
+        // -27.3..3.1 dB, 5 ticks: padded to -27.45..3.25, step 10 gives
         // -30..10, five ticks.
         let (lo, hi, step) = nice_range_step(Some((-27.3, 3.1)), false, 5);
         assert_relative_eq!(lo, -30.0);
@@ -1073,13 +1096,19 @@ mod tests {
         // Goes out of the top between x = 2 and 4 and comes back.
         let x = [0.0, 2.0, 4.0, 6.0];
         let y = [0.0, 0.0, 3.0, 0.0];
-        let runs = prepare(&x, &y, &xa, &ya, 100);
+        let style = Style {
+            rgb: (0, 0, 0),
+            dash: Dash::Solid,
+            width: 1,
+        };
+        let runs = prepare(&RawCurve::new(&x, &y, style), &xa, &ya, 100);
         assert_eq!(runs.len(), 2);
         // Leaves at y = 1: x = 2 + 2 * (1/3).
         assert_relative_eq!(runs[0].last().unwrap().0, 2.0 + 2.0 / 3.0, epsilon = 1e-12);
         assert_relative_eq!(runs[1][0].0, 6.0 - 2.0 / 3.0, epsilon = 1e-12);
         // NaN splits a run; a lone finite point is kept as a single point.
-        let runs = prepare(&[1.0, 2.0, 3.0], &[0.5, f64::NAN, 0.5], &xa, &ya, 100);
+        let (x, y) = ([1.0, 2.0, 3.0], [0.5, f64::NAN, 0.5]);
+        let runs = prepare(&RawCurve::new(&x, &y, style), &xa, &ya, 100);
         assert_eq!(runs.len(), 2);
         assert_eq!(runs[0].len(), 1);
     }

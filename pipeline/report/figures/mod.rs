@@ -332,14 +332,13 @@ pub fn render_bode(fig: &BodeFigure, size: (u32, u32)) -> Result<Rendered, Figur
             .iter()
             .zip(&styles)
             .filter_map(|(s, st)| {
-                s.coherence.as_ref().map(|c| RawCurve {
-                    x: &s.freq_hz,
-                    y: c,
-                    style: Style {
+                s.coherence.as_ref().map(|c| {
+                    let style = Style {
                         dash: Dash::Solid,
                         width: m.thin_w,
                         ..*st
-                    },
+                    };
+                    RawCurve::new(&s.freq_hz, c, style)
                 })
             })
             .collect();
@@ -356,10 +355,14 @@ pub fn render_bode(fig: &BodeFigure, size: (u32, u32)) -> Result<Rendered, Figur
     // Legend: series with something inside the frequency range.
     let mut legend = Vec::new();
     for (i, s) in fig.series.iter().enumerate() {
-        let drawn = chart::y_extent(&s.freq_hz, &mag[i], f0, f1, fig.log_frequency, false)
-            .is_some()
-            || chart::y_extent(&s.freq_hz, &phase[i], f0, f1, fig.log_frequency, false).is_some();
-        if drawn {
+        let in_range = |y: &[f64]| {
+            RawCurve::new(&s.freq_hz, y, styles[i]).has_points_in(
+                (f0, f1),
+                fig.log_frequency,
+                false,
+            )
+        };
+        if in_range(&mag[i]) || in_range(&phase[i]) {
             push_legend(&mut legend, &s.label, styles[i]);
         }
     }
@@ -401,14 +404,11 @@ pub fn render_panels(fig: &PanelsFigure, size: (u32, u32)) -> Result<Rendered, F
         let mut raw = Vec::new();
         for (i, s) in p.series.iter().enumerate() {
             let style = style_for(s.trace, i, s.palette_index, &m);
-            if chart::y_extent(&p.t_s, &s.y, t0, t1, false, false).is_some() {
+            let curve = RawCurve::new(&p.t_s, &s.y, style);
+            if curve.has_points_in((t0, t1), false, false) {
                 push_legend(&mut legend, &s.label, style);
             }
-            raw.push(RawCurve {
-                x: &p.t_s,
-                y: &s.y,
-                style,
-            });
+            raw.push(curve);
         }
         let (y0, y1) = p.y_range.unwrap_or((0.0, 1.0));
         panels.push(Panel::new(
@@ -473,14 +473,11 @@ pub fn render_lines(fig: &LinesFigure, size: (u32, u32)) -> Result<Rendered, Fig
     let mut raw = Vec::new();
     for (i, s) in fig.series.iter().enumerate() {
         let style = style_for(s.trace, i, s.palette_index, &m);
-        if chart::y_extent(&s.x, &s.y, x0, x1, fig.log_x, fig.log_y).is_some() {
+        let curve = RawCurve::new(&s.x, &s.y, style);
+        if curve.has_points_in((x0, x1), fig.log_x, fig.log_y) {
             push_legend(&mut legend, &s.label, style);
         }
-        raw.push(RawCurve {
-            x: &s.x,
-            y: &s.y,
-            style,
-        });
+        raw.push(curve);
     }
     let (y0, y1) = fig.y_range.unwrap_or((0.0, 1.0));
     let mut panel = Panel::new(
@@ -538,11 +535,7 @@ fn raw_curves<'a>(
         .iter()
         .zip(ys)
         .zip(styles)
-        .map(|((s, y), st)| RawCurve {
-            x: &s.freq_hz,
-            y,
-            style: *st,
-        })
+        .map(|((s, y), st)| RawCurve::new(&s.freq_hz, y, *st))
         .collect()
 }
 

@@ -37,9 +37,15 @@ impl Image {
         }
         let i = (y * self.width + x) * 3;
         let src = [colour.rgb.0, colour.rgb.1, colour.rgb.2];
+        if a >= 1.0 {
+            self.rgb[i..i + 3].copy_from_slice(&src);
+            return;
+        }
         for (k, s) in src.iter().enumerate() {
             let d = f32::from(self.rgb[i + k]);
-            self.rgb[i + k] = (d + (f32::from(*s) - d) * a).round() as u8;
+            // Values stay within 0..=255, so adding 0.5 and truncating
+            // rounds half up (cheaper than `round`, same on every machine).
+            self.rgb[i + k] = (d + (f32::from(*s) - d) * a + 0.5) as u8;
         }
     }
 }
@@ -93,9 +99,17 @@ fn draw(img: &mut Image, op: &Op) {
             let (w, h) = (img.width as i32, img.height as i32);
             let cx = |v: i32| v.clamp(0, w) as usize;
             let cy = |v: i32| v.clamp(0, h) as usize;
+            let (xa, xb) = (cx(*x0), cx(*x1));
             for y in cy(*y0)..cy(*y1) {
-                for x in cx(*x0)..cx(*x1) {
-                    img.blend(x, y, *colour, 1.0);
+                if colour.alpha >= 1.0 {
+                    let row = &mut img.rgb[(y * img.width + xa) * 3..(y * img.width + xb) * 3];
+                    for px in row.chunks_exact_mut(3) {
+                        px.copy_from_slice(&[colour.rgb.0, colour.rgb.1, colour.rgb.2]);
+                    }
+                } else {
+                    for x in xa..xb {
+                        img.blend(x, y, *colour, 1.0);
+                    }
                 }
             }
         }
@@ -117,10 +131,8 @@ fn draw(img: &mut Image, op: &Op) {
                     }
                 }
             }
-            if let Some(&first) = pts.first() {
-                if inside(first, lim) {
-                    polys.push(disc(first, r));
-                }
+            if let Some(&first) = pts.first().filter(|&&p| inside(p, lim)) {
+                polys.push(disc(first, r));
             }
             fill_polygons(img, &polys, *colour);
         }

@@ -233,7 +233,7 @@ mod tests {
         assert_eq!(num(0.0), "0");
         assert_eq!(num(-0.001), "0");
         assert_eq!(num(12.5), "12.5");
-        assert_eq!(num(-3.14159), "-3.14");
+        assert_eq!(num(-4.236), "-4.24");
         assert_eq!(num(7.05), "7.05");
         assert_eq!(num(1199.999), "1200");
     }
