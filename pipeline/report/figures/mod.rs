@@ -32,8 +32,8 @@ use chart::{Arrangement, Axis, Dash, Metrics, PALETTE, Panel, RawCurve, Sheet, S
 
 pub use decimate::decimate_minmax;
 
-/// A full-width figure: 1200 x 700 px. At 90 mm wide the tick labels are
-/// about 5.5 pt.
+/// A full-width figure: 1200 x 700 px. Shown 90 mm wide, the smallest text
+/// (tick labels) is 6 pt to the em.
 pub const FULL_WIDTH: (u32, u32) = (1200, 700);
 
 /// Smallest and largest accepted sizes (px).

@@ -233,10 +233,33 @@ fn disc(c: P, r: f32) -> Vec<P> {
     let n = ((std::f32::consts::PI / (1.0 - 0.1 / r.max(0.1)).clamp(-1.0, 1.0).acos()).ceil()
         as usize)
         .clamp(8, 64);
+    unit_circle(n)
+        .into_iter()
+        .map(|(x, y)| (c.0 + r * x as f32, c.1 + r * y as f32))
+        .collect()
+}
+
+/// n points on the unit circle using only IEEE-exact arithmetic (+, *, /):
+/// the step's cosine and sine from their Taylor series, then rotation by
+/// that step. Platform `sin`/`cos` may differ in the last bit, which would
+/// change PNG bytes between machines.
+fn unit_circle(n: usize) -> Vec<(f64, f64)> {
+    let d = std::f64::consts::TAU / n as f64; // at most pi/4
+    let (mut cd, mut sd) = (0.0, 0.0);
+    let (mut term_c, mut term_s) = (1.0, d);
+    for k in 0..12 {
+        cd += term_c;
+        sd += term_s;
+        let (a, b) = ((2 * k + 1) as f64, (2 * k + 2) as f64);
+        term_c *= -d * d / (a * b);
+        term_s *= -d * d / (b * (b + 1.0));
+    }
+    let (mut x, mut y) = (1.0f64, 0.0f64);
     (0..n)
-        .map(|k| {
-            let t = k as f32 * std::f32::consts::TAU / n as f32;
-            (c.0 + r * t.cos(), c.1 + r * t.sin())
+        .map(|_| {
+            let p = (x, y);
+            (x, y) = (x * cd - y * sd, x * sd + y * cd);
+            p
         })
         .collect()
 }
@@ -442,6 +465,18 @@ mod tests {
             .map(|p| (255.0 - f64::from(p[0])) / 255.0)
             .sum();
         assert_relative_eq!(ink, std::f64::consts::PI * 10.5 * 10.5, max_relative = 0.02);
+    }
+
+    #[test]
+    fn unit_circle_matches_sin_cos() {
+        // Against the platform's sin/cos (an independent implementation).
+        for n in [8, 23, 64] {
+            for (k, (x, y)) in unit_circle(n).into_iter().enumerate() {
+                let t = k as f64 * std::f64::consts::TAU / n as f64;
+                assert_relative_eq!(x, t.cos(), epsilon = 1e-12);
+                assert_relative_eq!(y, t.sin(), epsilon = 1e-12);
+            }
+        }
     }
 
     #[test]
