@@ -4,6 +4,8 @@
 
 pub mod html;
 
+pub mod figures;
+
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
