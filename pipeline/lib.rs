@@ -11,6 +11,7 @@
 
 pub mod cli;
 pub mod identify;
+pub mod ingest;
 pub mod lti;
 pub mod manifest;
 pub mod model;

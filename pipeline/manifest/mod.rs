@@ -15,7 +15,7 @@ pub use keypath::{KeyPath, Seg};
 pub use load::{ManifestError, Problem, load, load_str};
 pub use validate::{
     Campaign, ChannelPlan, Channels as ResolvedChannels, FrfPlan, IdentificationPlan, LogPlan,
-    Quantity, ReferencePlan, RunPlan, RunSource, SpecimenPlan,
+    Quantity, ReferencePlan, RunPlan, RunSource, SpecimenPlan, TimePlan,
 };
 
 use schemars::JsonSchema;

@@ -2,6 +2,8 @@
 //! into place, so a reader never sees a half-written file and a failure never
 //! destroys the previous output.
 
+pub mod logs;
+
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
