@@ -22,6 +22,8 @@ pub(super) fn read<'a>(
     bytes: &'a [u8],
     plan: &'a LogPlan,
 ) -> Result<Raw<'a>, IngestError> {
+    // A UTF-8 byte-order mark is not part of the first column's name.
+    let bytes = bytes.strip_prefix(b"\xEF\xBB\xBF").unwrap_or(bytes);
     let opts = Layout::new(path, plan)?;
     let mut lines = opts.data_lines(bytes);
     let Some((first_no, first)) = lines.next() else {
@@ -30,10 +32,8 @@ pub(super) fn read<'a>(
             what: "only skipped, comment or blank lines".into(),
         });
     };
-    let first_fields: Vec<String> = split(first, opts.sep)
-        .map(|f| unquote(f).to_string())
-        .collect();
-    let names = plan.csv.header.then_some(&first_fields);
+    let first_fields: Vec<&str> = split(first, opts.sep).map(unquote).collect();
+    let names = plan.csv.header.then_some(first_fields.as_slice());
     if names.is_some() && lines.next().is_none() {
         return Err(IngestError::HeaderOnly {
             path: path.to_path_buf(),
@@ -46,18 +46,50 @@ pub(super) fn read<'a>(
     for w in &want {
         index.push(resolve(path, w, names, first_fields.len())?);
     }
+    let header = plan.csv.header;
+    let columns = match by_polars(path, bytes, plan, &opts, names, &want, &index) {
+        Some(result) => result?,
+        None => by_hand(path, bytes, &opts, header, &want, &index)?,
+    };
+    if columns[0].is_empty() {
+        return Err(IngestError::HeaderOnly {
+            path: path.to_path_buf(),
+            what: "no line parses as a data row".into(),
+        });
+    }
+    let locate = Box::new(move |row: usize| {
+        let (line_no, _) = opts
+            .data_lines(bytes)
+            .nth(row + usize::from(header))
+            .expect("every row is a data line");
+        At::Line(line_no)
+    });
+    raw_from_table(path, plan, columns, locate)
+}
+
+/// The wanted columns, parsed by polars; `None` when polars cannot parse
+/// them (the caller then parses by hand, which either copes, e.g. with
+/// spaces around values, or names the line at fault).
+fn by_polars(
+    path: &Path,
+    bytes: &[u8],
+    plan: &LogPlan,
+    opts: &Layout<'_>,
+    names: Option<&[&str]>,
+    want: &[Wanted<'_>],
+    index: &[usize],
+) -> Option<Result<Vec<Vec<f64>>, IngestError>> {
     let polars_name = |i: usize| match names {
-        Some(n) => n[i].clone(),
+        Some(n) => n[i].to_string(),
         None => format!("column_{}", i + 1),
     };
-    let mut projection = index.clone();
+    let mut projection = index.to_vec();
     projection.sort_unstable();
     projection.dedup();
     let schema: Schema = projection
         .iter()
         .map(|&i| Field::new(polars_name(i).into(), DataType::Float64))
         .collect();
-
     let mut parse = CsvParseOptions::default().with_separator(opts.sep);
     if let Some(p) = &plan.csv.comment_prefix {
         parse = parse.with_comment_prefix(Some(p.as_str()));
@@ -69,69 +101,35 @@ pub(super) fn read<'a>(
     let df = CsvReadOptions::default()
         .with_has_header(plan.csv.header)
         .with_skip_lines(plan.csv.skip_lines)
-        .with_projection(Some(projection.clone().into()))
+        .with_projection(Some(projection.into()))
         .with_schema_overwrite(Some(SchemaRef::new(schema)))
         .with_raise_if_empty(false)
         .with_parse_options(parse)
         .into_reader_with_file_handle(Cursor::new(cleaned.as_deref().unwrap_or(bytes)))
         .finish()
-        .map_err(|e| {
-            diagnose(path, bytes, &opts, plan.csv.header, &want, &index).unwrap_or_else(|| {
-                IngestError::Format {
-                    path: path.to_path_buf(),
-                    message: format!("polars cannot read it as CSV: {e}"),
-                }
-            })
-        })?;
-    if df.height() == 0 {
-        return Err(IngestError::HeaderOnly {
-            path: path.to_path_buf(),
-            what: "no line parses as a data row".into(),
-        });
-    }
+        .ok()?;
 
     let mut columns = Vec::with_capacity(want.len());
-    for (w, &i) in want.iter().zip(&index) {
-        let name = polars_name(i);
-        let internal = |message: String| IngestError::Format {
-            path: path.to_path_buf(),
-            message,
-        };
-        let col = df
-            .column(&name)
-            .map_err(|e| internal(format!("column `{name}` lost in parsing: {e}")))?;
-        let col = col
-            .cast(&DataType::Float64)
-            .map_err(|e| internal(format!("column `{name}` is not numeric: {e}")))?;
-        let ca = col
-            .f64()
-            .map_err(|e| internal(format!("column `{name}` is not numeric: {e}")))?;
+    for (w, &i) in want.iter().zip(index) {
+        let col = df.column(&polars_name(i)).ok()?;
+        let col = col.cast(&DataType::Float64).ok()?;
+        let ca = col.f64().ok()?;
         if ca.null_count() > 0 {
             let row = ca.iter().position(|v| v.is_none()).expect("a null exists");
             let (line_no, line) = opts
                 .data_lines(bytes)
-                .nth(row + usize::from(plan.csv.header))
-                .expect("polars' rows are data lines");
-            return Err(IngestError::MissingValue {
+                .nth(row + usize::from(plan.csv.header))?;
+            return Some(Err(IngestError::MissingValue {
                 path: path.to_path_buf(),
                 at: At::Line(line_no),
                 channel: w.channel,
                 column: w.column.to_string(),
                 detail: field_detail(line, opts.sep, i),
-            });
+            }));
         }
         columns.push(ca.into_no_null_iter().collect::<Vec<f64>>());
     }
-
-    let skip_header = usize::from(plan.csv.header);
-    let locate = Box::new(move |row: usize| {
-        let (line_no, _) = opts
-            .data_lines(bytes)
-            .nth(row + skip_header)
-            .expect("polars' rows are data lines");
-        At::Line(line_no)
-    });
-    raw_from_table(path, plan, columns, locate)
+    Some(Ok(columns))
 }
 
 /// `bytes` without the blank lines that follow the first `skip_lines`
@@ -233,7 +231,7 @@ fn unquote(f: &str) -> &str {
 fn resolve(
     path: &Path,
     w: &Wanted<'_>,
-    names: Option<&Vec<String>>,
+    names: Option<&[&str]>,
     n_fields: usize,
 ) -> Result<usize, IngestError> {
     let missing = |available: String| IngestError::MissingColumn {
@@ -244,7 +242,9 @@ fn resolve(
     };
     match (w.column, names) {
         (Column::Name(n), Some(names)) => {
-            let hits: Vec<usize> = (0..names.len()).filter(|&i| &names[i] == n).collect();
+            let hits: Vec<usize> = (0..names.len())
+                .filter(|&i| names[i].trim() == n.trim())
+                .collect();
             match hits.as_slice() {
                 [i] => Ok(*i),
                 [] => Err(missing(format!(
@@ -286,52 +286,45 @@ fn resolve(
     }
 }
 
-/// After polars refused the file: the first line whose wanted field is
-/// missing or not a number, as an error naming it; `None` if every wanted
-/// field parses (the trouble is elsewhere, and polars' message stands).
-fn diagnose(
+/// The wanted columns, parsed line by line: slower than polars, but it
+/// trims spaces around values and names the first line whose wanted field is
+/// missing or not a number.
+fn by_hand(
     path: &Path,
     bytes: &[u8],
     opts: &Layout<'_>,
     header: bool,
     want: &[Wanted<'_>],
     index: &[usize],
-) -> Option<IngestError> {
+) -> Result<Vec<Vec<f64>>, IngestError> {
+    let mut columns = vec![Vec::new(); want.len()];
     for (line_no, line) in opts.data_lines(bytes).skip(usize::from(header)) {
         let fields: Vec<&str> = split(line, opts.sep).collect();
-        for (w, &i) in want.iter().zip(index) {
-            let at = At::Line(line_no);
-            let Some(field) = fields.get(i) else {
-                return Some(IngestError::MissingValue {
-                    path: path.to_path_buf(),
-                    at,
-                    channel: w.channel,
-                    column: w.column.to_string(),
-                    detail: fields_detail(fields.len()),
-                });
+        for ((w, &i), col) in want.iter().zip(index).zip(&mut columns) {
+            let missing = |detail: String| IngestError::MissingValue {
+                path: path.to_path_buf(),
+                at: At::Line(line_no),
+                channel: w.channel,
+                column: w.column.to_string(),
+                detail,
             };
-            let value = unquote(field);
+            let Some(field) = fields.get(i) else {
+                return Err(missing(fields_detail(fields.len())));
+            };
+            let value = unquote(field.trim()).trim();
             if value.is_empty() {
-                return Some(IngestError::MissingValue {
-                    path: path.to_path_buf(),
-                    at,
-                    channel: w.channel,
-                    column: w.column.to_string(),
-                    detail: format!("field {i} is empty"),
-                });
+                return Err(missing(format!("field {i} is empty")));
             }
-            if value.parse::<f64>().is_err() {
-                return Some(IngestError::BadValue {
-                    path: path.to_path_buf(),
-                    at,
-                    channel: w.channel,
-                    column: w.column.to_string(),
-                    value: value.to_string(),
-                });
-            }
+            col.push(value.parse::<f64>().map_err(|_| IngestError::BadValue {
+                path: path.to_path_buf(),
+                at: At::Line(line_no),
+                channel: w.channel,
+                column: w.column.to_string(),
+                value: value.to_string(),
+            })?);
         }
     }
-    None
+    Ok(columns)
 }
 
 /// Why field `i` of `line` gave no value.

@@ -55,6 +55,7 @@ pub(super) fn read<'a>(
             what: "a MAT header and no variables".into(),
         });
     }
+    check_elements(path, bytes)?;
     let mat = MatFile::parse(bytes)
         .map_err(|e| format(format!("not a readable level-5 MAT-file (matfile: {e})")))?;
     if mat.arrays().is_empty() {
@@ -167,6 +168,52 @@ pub(super) fn read<'a>(
         locate: Box::new(|i| At::Element(i + 1)),
         warnings: Vec::new(),
     })
+}
+
+/// Walk the top-level elements' tags (type, byte count) and refuse a file
+/// cut short: `matfile` stops quietly at an element it cannot parse, which
+/// would lose the last variables without a word.
+fn check_elements(path: &Path, bytes: &[u8]) -> Result<(), IngestError> {
+    let big_endian = &bytes[126..HEADER_LEN] == b"MI";
+    let word = |at: usize| {
+        let b: [u8; 4] = bytes[at..at + 4].try_into().expect("4 bytes");
+        if big_endian {
+            u32::from_be_bytes(b)
+        } else {
+            u32::from_le_bytes(b)
+        }
+    };
+    let mut pos = HEADER_LEN;
+    while pos < bytes.len() {
+        let remain = bytes.len() - pos;
+        let declared = if remain >= 8 {
+            Some(word(pos + 4) as usize)
+        } else {
+            None
+        };
+        if declared.is_none_or(|size| size > remain - 8) {
+            return Err(IngestError::Format {
+                path: path.to_path_buf(),
+                message: format!(
+                    "the MAT-file is cut short: the data element at byte {pos} needs {} bytes but {remain} remain",
+                    declared.map_or_else(
+                        || "an 8-byte tag and data".to_string(),
+                        |s| (s + 8).to_string()
+                    )
+                ),
+            });
+        }
+        let size = declared.unwrap_or(0);
+        // miCOMPRESSED (15) elements are not padded; others are padded to
+        // 8 bytes (the last one may lack its padding).
+        let padded = if word(pos) == 15 {
+            size
+        } else {
+            size.div_ceil(8) * 8
+        };
+        pos = (pos + 8 + padded).min(bytes.len());
+    }
+    Ok(())
 }
 
 fn dims(a: &Array) -> String {

@@ -426,6 +426,19 @@ fn csv_without_header_is_addressed_by_index() {
     assert_contains(&msg, &["log.csv", "`u`", "no header", "index 0 to 2"]);
 }
 
+#[test]
+fn csv_comment_before_header_byte_order_mark_and_spaces() {
+    let dir = tempfile::tempdir().unwrap();
+    let text = "\u{feff}# exported by the rig\nt,u,x,f\n0,1,2,3\n0.5, 1.5 ,2,3\n1,1,2,3\n";
+    let path = write_file(dir.path(), "spaces.csv", text.as_bytes());
+    let mut p = plan_by_name(&path, LogFormat::Csv);
+    p.csv.comment_prefix = Some("#".into());
+    let log = read_log(&p).unwrap();
+    assert_eq!(log.n_rows, 3);
+    assert_relative_eq!(log.command_m[1], 1.5);
+    assert_relative_eq!(log.sample_rate_hz, 2.0);
+}
+
 // ------------------------------------------------------------ Parquet
 
 #[test]
@@ -697,6 +710,11 @@ fn mat_errors_name_the_file() {
     v73.resize(512, 0);
     let path = write_file(dir.path(), "v73.mat", &v73);
     assert_contains(&err(&mat_plan(&path)), &["v73.mat", "v7.3", "-v7"]);
+
+    let mut cut = mat_file(false, 50);
+    cut.truncate(cut.len() - 100);
+    let path = write_file(dir.path(), "cut.mat", &cut);
+    assert_contains(&err(&mat_plan(&path)), &["cut.mat", "cut short", "remain"]);
 
     let path = write_file(dir.path(), "bare.mat", &matw::header());
     assert_contains(
