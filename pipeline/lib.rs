@@ -13,6 +13,7 @@ pub mod cli;
 pub mod fit;
 pub mod frf;
 pub mod identify;
+pub mod ingest;
 pub mod lti;
 pub mod manifest;
 pub mod model;

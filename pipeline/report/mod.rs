@@ -6,6 +6,8 @@ pub mod html;
 
 pub mod figures;
 
+pub mod logs;
+
 use std::io::Write;
 use std::path::{Path, PathBuf};
 

@@ -1,0 +1,144 @@
+//! Log reading throughput (`cargo bench --bench ingest`): a 170 s log at
+//! 2048 Hz (348,160 rows of time_s, command_mm, displacement_mm, force_kn)
+//! from Parquet and from CSV, and the real 1 kHz DAQ text export 0A.txt.
+//! Throughput is file bytes per second; each read includes hashing the file
+//! (SHA-256) and converting to SI, as `read_log` always does.
+
+use std::hint::black_box;
+use std::path::{Path, PathBuf};
+
+use criterion::{Criterion, Throughput, criterion_group, criterion_main};
+use servoid::ingest::read_log;
+use servoid::manifest::{
+    ChannelPlan, Column, CsvOptions, LogFormat, LogPlan, ResolvedChannels, TimePlan, Unit,
+};
+use servoid::report::logs::{write_csv, write_parquet};
+
+const FS_HZ: f64 = 2048.0;
+const ROWS: usize = 348_160; // 170 s at 2048 Hz
+
+fn channel(column: Column, unit: Unit, scale: f64) -> ChannelPlan {
+    ChannelPlan {
+        column,
+        unit,
+        gain: scale * unit.to_si(),
+        offset: 0.0,
+    }
+}
+
+fn plan(path: &Path, format: LogFormat, time: TimePlan, chans: [ChannelPlan; 3]) -> LogPlan {
+    let [command, displacement, force] = chans;
+    LogPlan {
+        path: path.to_path_buf(),
+        format,
+        csv: CsvOptions {
+            delimiter: ",".into(),
+            skip_lines: 0,
+            comment_prefix: None,
+            header: true,
+        },
+        sha256: None,
+        channels: ResolvedChannels {
+            time,
+            command,
+            displacement,
+            force: Some(force),
+        },
+    }
+}
+
+/// A 0.1-20 Hz linear chirp command (mm), a lagging, smaller displacement
+/// (mm) and a force (kN), with full-precision values like a simulator's.
+fn columns() -> Vec<(&'static str, Vec<f64>)> {
+    let t: Vec<f64> = (0..ROWS).map(|k| k as f64 / FS_HZ).collect();
+    let duration_s = ROWS as f64 / FS_HZ;
+    let rate = (20.0 - 0.1) / duration_s;
+    let phase = |t: f64| 2.0 * std::f64::consts::PI * (0.1 * t + 0.5 * rate * t * t);
+    let u: Vec<f64> = t.iter().map(|&t| 5.0 * phase(t).sin()).collect();
+    let x: Vec<f64> = t.iter().map(|&t| 4.7 * (phase(t) - 0.3).sin()).collect();
+    let f: Vec<f64> = t.iter().map(|&t| 12.5 * (phase(t) + 1.1).sin()).collect();
+    vec![
+        ("time_s", t),
+        ("command_mm", u),
+        ("displacement_mm", x),
+        ("force_kn", f),
+    ]
+}
+
+fn real_daq_log() -> PathBuf {
+    [
+        concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/../shared/data/utfsm-mts-mrdamper/0A.txt"
+        ),
+        concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/../../shared/data/utfsm-mts-mrdamper/0A.txt"
+        ),
+    ]
+    .iter()
+    .map(PathBuf::from)
+    .find(|p| p.exists())
+    .expect("the shared UTFSM logs")
+}
+
+fn bench(c: &mut Criterion) {
+    let dir = tempfile::tempdir().unwrap();
+    let cols = columns();
+    let borrowed: Vec<(&str, &[f64])> = cols.iter().map(|(n, v)| (*n, v.as_slice())).collect();
+    let parquet = dir.path().join("chirp.parquet");
+    let csv = dir.path().join("chirp.csv");
+    write_parquet(&parquet, &borrowed).unwrap();
+    write_csv(&csv, &borrowed).unwrap();
+
+    let name = |n: &str| Column::Name(n.into());
+    let table_channels = || {
+        [
+            channel(name("command_mm"), Unit::Millimeter, 1.0),
+            channel(name("displacement_mm"), Unit::Millimeter, 1.0),
+            channel(name("force_kn"), Unit::Kilonewton, 1.0),
+        ]
+    };
+    let time = TimePlan::Column {
+        column: name("time_s"),
+        to_s: 1.0,
+    };
+    let daq = real_daq_log();
+    let cases = [
+        (
+            format!("parquet/{ROWS}x4"),
+            plan(&parquet, LogFormat::Parquet, time.clone(), table_channels()),
+        ),
+        (
+            format!("csv/{ROWS}x4"),
+            plan(&csv, LogFormat::Csv, time, table_channels()),
+        ),
+        (
+            "daq_text/0A.txt".to_string(),
+            plan(
+                &daq,
+                LogFormat::DaqText,
+                TimePlan::FromLog,
+                [
+                    channel(name("CHANNEL2"), Unit::Millimeter, 10.0),
+                    channel(name("CHANNEL0"), Unit::Millimeter, 10.0),
+                    channel(name("CHANNEL1"), Unit::Newton, 9806.65),
+                ],
+            ),
+        ),
+    ];
+
+    let mut group = c.benchmark_group("read_log");
+    group.sample_size(20);
+    for (id, p) in &cases {
+        let bytes = std::fs::metadata(&p.path).unwrap().len();
+        group.throughput(Throughput::Bytes(bytes));
+        group.bench_function(id.as_str(), |b| {
+            b.iter(|| black_box(read_log(black_box(p)).unwrap()))
+        });
+    }
+    group.finish();
+}
+
+criterion_group!(benches, bench);
+criterion_main!(benches);

@@ -1,0 +1,342 @@
+//! Delimited text logs, parsed by polars.
+//!
+//! polars does the fast parse; this file finds the header itself (to resolve
+//! columns and list the available ones), forces the wanted columns to f64 and,
+//! when polars refuses a value, rescans the lines to name the line and column
+//! at fault. Line numbers count every line of the file, 1-based, with the
+//! lines polars skips: the first `skip_lines`, comment lines and blank lines.
+
+use std::io::Cursor;
+use std::path::Path;
+
+use polars::prelude::{
+    CsvParseOptions, CsvReadOptions, DataType, Field, Schema, SchemaRef, SerReader,
+};
+
+use super::{At, IngestError, Raw, Wanted, list, raw_from_table, wanted};
+use crate::manifest::{Column, LogPlan};
+
+/// Read a CSV log's wanted columns.
+pub(super) fn read<'a>(
+    path: &Path,
+    bytes: &'a [u8],
+    plan: &'a LogPlan,
+) -> Result<Raw<'a>, IngestError> {
+    // A UTF-8 byte-order mark is not part of the first column's name.
+    let bytes = bytes.strip_prefix(b"\xEF\xBB\xBF").unwrap_or(bytes);
+    let opts = Layout::new(path, plan)?;
+    let mut lines = opts.data_lines(bytes);
+    let Some((first_no, first)) = lines.next() else {
+        return Err(IngestError::HeaderOnly {
+            path: path.to_path_buf(),
+            what: "only skipped, comment or blank lines".into(),
+        });
+    };
+    let first_fields: Vec<&str> = split(first, opts.sep).map(unquote).collect();
+    let names = plan.csv.header.then_some(first_fields.as_slice());
+    if names.is_some() && lines.next().is_none() {
+        return Err(IngestError::HeaderOnly {
+            path: path.to_path_buf(),
+            what: format!("a header at line {first_no} and nothing after it"),
+        });
+    }
+
+    let want = wanted(plan);
+    let mut index = Vec::with_capacity(want.len());
+    for w in &want {
+        index.push(resolve(path, w, names, first_fields.len())?);
+    }
+    let header = plan.csv.header;
+    let columns = match by_polars(path, bytes, plan, &opts, names, &want, &index) {
+        Some(result) => result?,
+        None => by_hand(path, bytes, &opts, header, &want, &index)?,
+    };
+    if columns[0].is_empty() {
+        return Err(IngestError::HeaderOnly {
+            path: path.to_path_buf(),
+            what: "no line parses as a data row".into(),
+        });
+    }
+    let locate = Box::new(move |row: usize| {
+        let (line_no, _) = opts
+            .data_lines(bytes)
+            .nth(row + usize::from(header))
+            .expect("every row is a data line");
+        At::Line(line_no)
+    });
+    raw_from_table(path, plan, columns, locate)
+}
+
+/// The wanted columns, parsed by polars; `None` when polars cannot parse
+/// them (the caller then parses by hand, which either copes, e.g. with
+/// spaces around values, or names the line at fault).
+fn by_polars(
+    path: &Path,
+    bytes: &[u8],
+    plan: &LogPlan,
+    opts: &Layout<'_>,
+    names: Option<&[&str]>,
+    want: &[Wanted<'_>],
+    index: &[usize],
+) -> Option<Result<Vec<Vec<f64>>, IngestError>> {
+    let polars_name = |i: usize| match names {
+        Some(n) => n[i].to_string(),
+        None => format!("column_{}", i + 1),
+    };
+    let mut projection = index.to_vec();
+    projection.sort_unstable();
+    projection.dedup();
+    let schema: Schema = projection
+        .iter()
+        .map(|&i| Field::new(polars_name(i).into(), DataType::Float64))
+        .collect();
+    let mut parse = CsvParseOptions::default().with_separator(opts.sep);
+    if let Some(p) = &plan.csv.comment_prefix {
+        parse = parse.with_comment_prefix(Some(p.as_str()));
+    }
+    // polars reads a blank line as a row of nulls; blank lines are skipped
+    // here, as in the other text format, by handing polars a copy without
+    // them (only when there are any).
+    let cleaned = without_blank_lines(bytes, plan.csv.skip_lines);
+    let df = CsvReadOptions::default()
+        .with_has_header(plan.csv.header)
+        .with_skip_lines(plan.csv.skip_lines)
+        .with_projection(Some(projection.into()))
+        .with_schema_overwrite(Some(SchemaRef::new(schema)))
+        .with_raise_if_empty(false)
+        .with_parse_options(parse)
+        .into_reader_with_file_handle(Cursor::new(cleaned.as_deref().unwrap_or(bytes)))
+        .finish()
+        .ok()?;
+
+    let mut columns = Vec::with_capacity(want.len());
+    for (w, &i) in want.iter().zip(index) {
+        let col = df.column(&polars_name(i)).ok()?;
+        let col = col.cast(&DataType::Float64).ok()?;
+        let ca = col.f64().ok()?;
+        if ca.null_count() > 0 {
+            let row = ca.iter().position(|v| v.is_none()).expect("a null exists");
+            let (line_no, line) = opts
+                .data_lines(bytes)
+                .nth(row + usize::from(plan.csv.header))?;
+            return Some(Err(IngestError::MissingValue {
+                path: path.to_path_buf(),
+                at: At::Line(line_no),
+                channel: w.channel,
+                column: w.column.to_string(),
+                detail: field_detail(line, opts.sep, i),
+            }));
+        }
+        columns.push(ca.into_no_null_iter().collect::<Vec<f64>>());
+    }
+    Some(Ok(columns))
+}
+
+/// `bytes` without the blank lines that follow the first `skip_lines`
+/// lines, or `None` when there are none.
+fn without_blank_lines(bytes: &[u8], skip_lines: usize) -> Option<Vec<u8>> {
+    let mut start = 0;
+    for _ in 0..skip_lines {
+        match bytes[start..].iter().position(|&b| b == b'\n') {
+            Some(k) => start += k + 1,
+            None => return None,
+        }
+    }
+    let body = &bytes[start..];
+    let blank = |l: &[u8]| l.is_empty() || l == b"\r";
+    // A blank line is one ended by '\n' with nothing (or only '\r') before
+    // it; what follows the final '\n' is not a line.
+    let mut line_start = 0;
+    let mut any = false;
+    for (i, &b) in body.iter().enumerate() {
+        if b == b'\n' {
+            if blank(&body[line_start..i]) {
+                any = true;
+                break;
+            }
+            line_start = i + 1;
+        }
+    }
+    if !any {
+        return None;
+    }
+    let mut out = Vec::with_capacity(bytes.len());
+    out.extend_from_slice(&bytes[..start]);
+    for l in body.split(|&b| b == b'\n').filter(|l| !blank(l)) {
+        out.extend_from_slice(l);
+        out.push(b'\n');
+    }
+    Some(out)
+}
+
+/// How lines are told apart: the options polars gets, for the rescans.
+struct Layout<'p> {
+    sep: u8,
+    skip_lines: usize,
+    comment: Option<&'p [u8]>,
+}
+
+impl<'p> Layout<'p> {
+    fn new(path: &Path, plan: &'p LogPlan) -> Result<Self, IngestError> {
+        let d = plan.csv.delimiter.as_bytes();
+        if d.len() != 1 {
+            return Err(IngestError::Format {
+                path: path.to_path_buf(),
+                message: format!(
+                    "the CSV delimiter must be one ASCII character (got {:?})",
+                    plan.csv.delimiter
+                ),
+            });
+        }
+        Ok(Layout {
+            sep: d[0],
+            skip_lines: plan.csv.skip_lines,
+            comment: plan
+                .csv
+                .comment_prefix
+                .as_deref()
+                .filter(|p| !p.is_empty())
+                .map(str::as_bytes),
+        })
+    }
+
+    /// Header (if any) and data lines with their 1-based line numbers.
+    fn data_lines<'b>(
+        &self,
+        bytes: &'b [u8],
+    ) -> impl Iterator<Item = (usize, &'b [u8])> + use<'b, 'p> {
+        let comment = self.comment;
+        bytes
+            .split(|&b| b == b'\n')
+            .enumerate()
+            .skip(self.skip_lines)
+            .map(|(i, l)| (i + 1, l.strip_suffix(b"\r").unwrap_or(l)))
+            .filter(move |(_, l)| !l.is_empty() && !comment.is_some_and(|c| l.starts_with(c)))
+    }
+}
+
+fn split(line: &[u8], sep: u8) -> impl Iterator<Item = &str> {
+    line.split(move |&b| b == sep)
+        .map(|f| std::str::from_utf8(f).unwrap_or("\u{fffd}"))
+}
+
+/// A field without one pair of surrounding double quotes.
+fn unquote(f: &str) -> &str {
+    f.strip_prefix('"')
+        .and_then(|s| s.strip_suffix('"'))
+        .unwrap_or(f)
+}
+
+/// The 0-based field index of a wanted column.
+fn resolve(
+    path: &Path,
+    w: &Wanted<'_>,
+    names: Option<&[&str]>,
+    n_fields: usize,
+) -> Result<usize, IngestError> {
+    let missing = |available: String| IngestError::MissingColumn {
+        path: path.to_path_buf(),
+        channel: w.channel,
+        column: w.column.to_string(),
+        available,
+    };
+    match (w.column, names) {
+        (Column::Name(n), Some(names)) => {
+            let hits: Vec<usize> = (0..names.len())
+                .filter(|&i| names[i].trim() == n.trim())
+                .collect();
+            match hits.as_slice() {
+                [i] => Ok(*i),
+                [] => Err(missing(format!(
+                    "columns: {}",
+                    list(names.iter().map(|n| format!("`{n}`")))
+                ))),
+                _ => Err(IngestError::Format {
+                    path: path.to_path_buf(),
+                    message: format!(
+                        "column `{n}` ({} channel) appears {} times in the header (fields {}); rename one or address it by index",
+                        w.channel,
+                        hits.len(),
+                        list(&hits)
+                    ),
+                }),
+            }
+        }
+        (Column::Name(_), None) => Err(missing(format!(
+            "the file has no header line (csv.header = false), so address columns by index 0 to {}",
+            n_fields.saturating_sub(1)
+        ))),
+        (Column::Index(i), names) => {
+            if *i < n_fields {
+                Ok(*i)
+            } else {
+                Err(missing(match names {
+                    Some(names) => format!(
+                        "{n_fields} columns, indices 0 to {}: {}",
+                        n_fields - 1,
+                        list(names.iter().map(|n| format!("`{n}`")))
+                    ),
+                    None => format!(
+                        "the first data line has {n_fields} fields, indices 0 to {}",
+                        n_fields.saturating_sub(1)
+                    ),
+                }))
+            }
+        }
+    }
+}
+
+/// The wanted columns, parsed line by line: slower than polars, but it
+/// trims spaces around values and names the first line whose wanted field is
+/// missing or not a number.
+fn by_hand(
+    path: &Path,
+    bytes: &[u8],
+    opts: &Layout<'_>,
+    header: bool,
+    want: &[Wanted<'_>],
+    index: &[usize],
+) -> Result<Vec<Vec<f64>>, IngestError> {
+    let mut columns = vec![Vec::new(); want.len()];
+    for (line_no, line) in opts.data_lines(bytes).skip(usize::from(header)) {
+        let fields: Vec<&str> = split(line, opts.sep).collect();
+        for ((w, &i), col) in want.iter().zip(index).zip(&mut columns) {
+            let missing = |detail: String| IngestError::MissingValue {
+                path: path.to_path_buf(),
+                at: At::Line(line_no),
+                channel: w.channel,
+                column: w.column.to_string(),
+                detail,
+            };
+            let Some(field) = fields.get(i) else {
+                return Err(missing(fields_detail(fields.len())));
+            };
+            let value = unquote(field.trim()).trim();
+            if value.is_empty() {
+                return Err(missing(format!("field {i} is empty")));
+            }
+            col.push(value.parse::<f64>().map_err(|_| IngestError::BadValue {
+                path: path.to_path_buf(),
+                at: At::Line(line_no),
+                channel: w.channel,
+                column: w.column.to_string(),
+                value: value.to_string(),
+            })?);
+        }
+    }
+    Ok(columns)
+}
+
+/// Why field `i` of `line` gave no value.
+fn field_detail(line: &[u8], sep: u8, i: usize) -> String {
+    let n = split(line, sep).count();
+    if i < n {
+        format!("field {i} is empty")
+    } else {
+        fields_detail(n)
+    }
+}
+
+fn fields_detail(n: usize) -> String {
+    format!("the line has {n} field{}", if n == 1 { "" } else { "s" })
+}

@@ -1,0 +1,352 @@
+//! DAQ text exports, parsed by hand (the data lines are ragged, which polars
+//! refuses).
+//!
+//! The layout, as in `/work/shared/data/utfsm-mts-mrdamper/`:
+//!
+//! ```text
+//! Header Size:  7
+//! Version:  2
+//! Sampling Interval:  0.001
+//! Sampling Rate:  1000
+//! Sample Count:  61500
+//! Device Serial Number:  0
+//! Sample Number, Date/Time, CHANNEL0, CHANNEL1, CHANNEL2, Events
+//!          1,   06/29/2022 04:05:36.674 PM, -0.0209, -0.0166, -0.0169, DAQ Start
+//!          2,   06/29/2022 04:05:36.675 PM, -0.0221, -0.0166, -0.0167
+//! ...
+//!      61500,   06/29/2022 04:06:38.173 PM, -0.0282, -0.0218, -0.0204, DAQ Pause, DAQ Stop
+//! ```
+//!
+//! Header lines are `key: value`; the first line without a colon names the
+//! columns. Fields after the last wanted one are never looked at, so the
+//! Events field may be absent or hold commas. Columns are addressed by name
+//! (`CHANNEL0`) or by 0-based index into the column-name line. The time base
+//! is the header's `Sampling Rate` (or 1 / `Sampling Interval`) for
+//! `FromLog`, the manifest's rate, or a named column; in every case the
+//! `Sample Number` column must count up by one, since a skipped number is a
+//! dropped sample. The date/time stamps (millisecond resolution) are not used.
+//! Lines end in `\n` or `\r\n`; blank lines are skipped; places are 1-based
+//! line numbers.
+
+use std::path::Path;
+
+use super::{At, IngestError, Raw, RawTime, list, wanted};
+use crate::manifest::{Column, LogPlan, TimePlan};
+
+/// Header values used (others are ignored).
+#[derive(Default)]
+struct Header {
+    header_size: Option<usize>,
+    rate_hz: Option<f64>,
+    interval_s: Option<f64>,
+    sample_count: Option<usize>,
+}
+
+/// Columns that hold text.
+const TEXT_COLUMNS: [&str; 2] = ["Date/Time", "Events"];
+
+/// Read a DAQ text log's wanted columns.
+pub(super) fn read<'a>(
+    path: &Path,
+    bytes: &'a [u8],
+    plan: &'a LogPlan,
+) -> Result<Raw<'a>, IngestError> {
+    let format = |message: String| IngestError::Format {
+        path: path.to_path_buf(),
+        message,
+    };
+    let mut lines = Lines {
+        bytes,
+        pos: 0,
+        no: 0,
+    };
+
+    // Header block, up to the column-name line.
+    let mut header = Header::default();
+    let names: Vec<&str> = loop {
+        let Some(line) = lines.next() else {
+            return Err(IngestError::HeaderOnly {
+                path: path.to_path_buf(),
+                what: "a header block but no column-name line (`Sample Number, Date/Time, CHANNEL0, ...`)".into(),
+            });
+        };
+        let text = utf8(line).trim();
+        if text.is_empty() {
+            continue;
+        }
+        let Some((key, value)) = text.split_once(':') else {
+            break text.split(',').map(str::trim).collect();
+        };
+        let (key, value) = (key.trim(), value.trim());
+        let bad = || {
+            format(format!(
+                "line {}: header `{key}` is {value:?}, not a positive number",
+                lines.no
+            ))
+        };
+        let positive = |v: f64| v.is_finite() && v > 0.0;
+        match key {
+            "Header Size" => header.header_size = Some(value.parse().map_err(|_| bad())?),
+            "Sample Count" => header.sample_count = Some(value.parse().map_err(|_| bad())?),
+            "Sampling Rate" => {
+                let v = value
+                    .parse()
+                    .ok()
+                    .filter(|&v| positive(v))
+                    .ok_or_else(bad)?;
+                header.rate_hz = Some(v);
+            }
+            "Sampling Interval" => {
+                let v = value
+                    .parse()
+                    .ok()
+                    .filter(|&v| positive(v))
+                    .ok_or_else(bad)?;
+                header.interval_s = Some(v);
+            }
+            _ => {}
+        }
+    };
+    let names_line = lines.no;
+    let display = || path.display();
+    let mut warnings = Vec::new();
+    if let Some(size) = header.header_size
+        && size != names_line
+    {
+        warnings.push(format!(
+            "{}: the header says `Header Size: {size}` but the column names are on line {names_line}",
+            display()
+        ));
+    }
+
+    // Resolve the wanted columns to field indices.
+    let want = wanted(plan);
+    let mut index = Vec::with_capacity(want.len());
+    for w in &want {
+        let found = match w.column {
+            Column::Name(n) => names.iter().position(|c| c == n),
+            Column::Index(i) => (*i < names.len()).then_some(*i),
+        };
+        let Some(i) = found else {
+            return Err(IngestError::MissingColumn {
+                path: path.to_path_buf(),
+                channel: w.channel,
+                column: w.column.to_string(),
+                available: format!(
+                    "line {names_line} names {} columns, indices 0 to {}: {}",
+                    names.len(),
+                    names.len().saturating_sub(1),
+                    list(names.iter().map(|n| format!("`{n}`")))
+                ),
+            });
+        };
+        if TEXT_COLUMNS.contains(&names[i]) {
+            return Err(format(format!(
+                "column `{}` (index {i}, {} channel) holds text, not numbers",
+                names[i], w.channel
+            )));
+        }
+        index.push(i);
+    }
+    let check_samples = names
+        .first()
+        .is_some_and(|n| n.eq_ignore_ascii_case("Sample Number"));
+    let last_field = index.iter().copied().max().unwrap_or(0);
+
+    // Data lines.
+    let expect_rows = bytes.len() / 64;
+    let mut columns: Vec<Vec<f64>> = want
+        .iter()
+        .map(|_| Vec::with_capacity(expect_rows))
+        .collect();
+    let mut fields: Vec<&[u8]> = Vec::with_capacity(last_field + 2);
+    let mut first_line = 0;
+    // (rows read before it, blank lines skipped) for blank lines among data.
+    let mut blanks: Vec<(usize, usize)> = Vec::new();
+    let mut prev_sample: Option<u64> = None;
+    let mut rows = 0usize;
+    while let Some(line) = lines.next() {
+        if line.iter().all(u8::is_ascii_whitespace) {
+            if rows > 0 {
+                match blanks.last_mut() {
+                    Some((r, k)) if *r == rows => *k += 1,
+                    _ => blanks.push((rows, 1)),
+                }
+            }
+            continue;
+        }
+        if rows == 0 {
+            first_line = lines.no;
+        }
+        let at = At::Line(lines.no);
+        fields.clear();
+        fields.extend(line.splitn(last_field + 2, |&b| b == b','));
+        if check_samples {
+            let field = fields[0].trim_ascii();
+            let n: u64 = utf8(field).parse().map_err(|_| IngestError::BadValue {
+                path: path.to_path_buf(),
+                at,
+                channel: "sample number",
+                column: format!("`{}`", names[0]),
+                value: String::from_utf8_lossy(field).into_owned(),
+            })?;
+            if let Some(p) = prev_sample
+                && p.checked_add(1) != Some(n)
+            {
+                return Err(IngestError::SampleGap {
+                    path: path.to_path_buf(),
+                    at,
+                    prev: p,
+                    next: n,
+                });
+            }
+            prev_sample = Some(n);
+        }
+        for ((w, &i), col) in want.iter().zip(&index).zip(&mut columns) {
+            let Some(field) = fields.get(i) else {
+                return Err(IngestError::MissingValue {
+                    path: path.to_path_buf(),
+                    at,
+                    channel: w.channel,
+                    column: w.column.to_string(),
+                    detail: format!("the line has {} fields", fields.len()),
+                });
+            };
+            let field = field.trim_ascii();
+            match utf8(field).parse::<f64>() {
+                Ok(v) => col.push(v),
+                Err(_) if field.is_empty() => {
+                    return Err(IngestError::MissingValue {
+                        path: path.to_path_buf(),
+                        at,
+                        channel: w.channel,
+                        column: w.column.to_string(),
+                        detail: format!("field {i} is empty"),
+                    });
+                }
+                Err(_) => {
+                    return Err(IngestError::BadValue {
+                        path: path.to_path_buf(),
+                        at,
+                        channel: w.channel,
+                        column: w.column.to_string(),
+                        value: String::from_utf8_lossy(field).into_owned(),
+                    });
+                }
+            }
+        }
+        rows += 1;
+    }
+    if rows == 0 {
+        return Err(IngestError::HeaderOnly {
+            path: path.to_path_buf(),
+            what: format!("nothing after the column names on line {names_line}"),
+        });
+    }
+    if let Some(count) = header.sample_count
+        && count != rows
+    {
+        warnings.push(format!(
+            "{}: the header says `Sample Count: {count}` but the file has {rows} data lines{}",
+            display(),
+            if rows < count { " (truncated?)" } else { "" }
+        ));
+    }
+
+    // Time base.
+    let header_hz = match (header.rate_hz, header.interval_s) {
+        (Some(hz), Some(dt)) => {
+            if ((hz * dt) - 1.0).abs() > 1e-9 {
+                warnings.push(format!(
+                    "{}: the header's `Sampling Rate: {hz}` and `Sampling Interval: {dt}` disagree; the rate is used",
+                    display()
+                ));
+            }
+            Some(hz)
+        }
+        (Some(hz), None) => Some(hz),
+        (None, Some(dt)) => Some(1.0 / dt),
+        (None, None) => None,
+    };
+    let mut it = columns.into_iter();
+    let time = match &plan.channels.time {
+        TimePlan::Column { column, to_s } => RawTime::Column {
+            raw: it.next().expect("time wanted"),
+            to_s: *to_s,
+            column: column.to_string(),
+        },
+        TimePlan::SampleRate { hz } => {
+            if let Some(h) = header_hz
+                && ((h - hz) / hz).abs() > 1e-9
+            {
+                warnings.push(format!(
+                    "{}: the manifest's sampling rate {hz} Hz overrides the header's {h} Hz",
+                    display()
+                ));
+            }
+            RawTime::Rate {
+                hz: *hz,
+                from: "manifest",
+            }
+        }
+        TimePlan::FromLog => RawTime::Rate {
+            hz: header_hz.ok_or_else(|| {
+                format(
+                    "no `Sampling Rate` or `Sampling Interval` in the header; give channels.time.sample_rate_hz"
+                        .into(),
+                )
+            })?,
+            from: "DAQ header",
+        },
+    };
+    let command = it.next().expect("command wanted");
+    let displacement = it.next().expect("displacement wanted");
+    let force = it.next();
+    let locate = Box::new(move |i: usize| {
+        let skipped: usize = blanks
+            .iter()
+            .take_while(|(r, _)| *r <= i)
+            .map(|(_, k)| k)
+            .sum();
+        At::Line(first_line + i + skipped)
+    });
+    Ok(Raw {
+        time,
+        command,
+        displacement,
+        force,
+        locate,
+        warnings,
+    })
+}
+
+/// Lines without their `\n` or `\r\n`, counted from 1.
+struct Lines<'a> {
+    bytes: &'a [u8],
+    pos: usize,
+    /// Number of the line last returned.
+    no: usize,
+}
+
+impl<'a> Iterator for Lines<'a> {
+    type Item = &'a [u8];
+
+    fn next(&mut self) -> Option<&'a [u8]> {
+        let rest = &self.bytes[self.pos..];
+        if rest.is_empty() {
+            return None;
+        }
+        let (line, advance) = match rest.iter().position(|&b| b == b'\n') {
+            Some(k) => (&rest[..k], k + 1),
+            None => (rest, rest.len()),
+        };
+        self.pos += advance;
+        self.no += 1;
+        Some(line.strip_suffix(b"\r").unwrap_or(line))
+    }
+}
+
+/// Text of a field; invalid UTF-8 becomes a string that parses as nothing.
+fn utf8(b: &[u8]) -> &str {
+    std::str::from_utf8(b).unwrap_or("\u{fffd}")
+}

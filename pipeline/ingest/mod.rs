@@ -1,0 +1,701 @@
+//! Reading lab logs: the only module that reads data files.
+//!
+//! A log holds the command displacement u, the measured displacement x1 and,
+//! optionally, the actuator force f, uniformly sampled. [`read_log`] reads one
+//! file as a [`LogPlan`] describes it (CSV, Parquet, MATLAB level-5 MAT or DAQ
+//! text), verifies its SHA-256, and converts every channel to SI once, here:
+//! SI value = raw * gain + offset. [`check_log`] then judges whether the log
+//! suits the FRF settings (length, uniform sampling, clipping), and
+//! [`trim_to_excitation`], [`remove_mean`] and [`remove_trend`] prepare the
+//! signals. Every error and warning names the file and, where it helps, the
+//! 1-based line (text formats), row (Parquet) or element (MAT) at fault.
+//!
+//! The file is read into memory once; the hash is taken over exactly the bytes
+//! that are parsed.
+
+mod csv;
+mod daq;
+mod mat;
+mod parquet;
+#[cfg(test)]
+mod tests;
+
+use std::fmt;
+use std::path::{Path, PathBuf};
+
+use sha2::{Digest, Sha256};
+
+use crate::manifest::{ChannelPlan, Column, LogFormat, LogPlan, TimePlan};
+
+/// A log read and converted to SI.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Log {
+    pub path: PathBuf,
+    /// SHA-256 of the file's bytes, lowercase hexadecimal.
+    pub sha256: String,
+    pub format: LogFormat,
+    /// 1 / (mean sample interval) (Hz).
+    pub sample_rate_hz: f64,
+    /// Time of the first sample (s): the first time stamp of a time column,
+    /// else 0.
+    pub t0_s: f64,
+    /// Command displacement u (m).
+    pub command_m: Vec<f64>,
+    /// Measured actuator displacement x1 (m).
+    pub displacement_m: Vec<f64>,
+    /// Measured actuator force f (N), when the plan names a force channel.
+    pub force_n: Option<Vec<f64>>,
+    /// Number of samples in each channel (after [`trim_to_excitation`], the
+    /// number kept).
+    pub n_rows: usize,
+    pub timing: Timing,
+    /// Oddities found while reading; each names the file.
+    pub warnings: Vec<String>,
+}
+
+/// How the time base was obtained.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Timing {
+    /// From a sampling rate (the manifest's or the log's header): uniform by
+    /// construction.
+    Exact { dt_s: f64 },
+    /// Measured from a time column. The jitter is the deviation of each
+    /// interval t(k+1) - t(k) from the mean interval.
+    Measured {
+        mean_dt_s: f64,
+        jitter_rms_s: f64,
+        jitter_max_s: f64,
+        /// Where the interval with the largest deviation ends.
+        worst_at: At,
+    },
+}
+
+impl Timing {
+    /// The (mean) sample interval (s).
+    pub fn dt_s(&self) -> f64 {
+        match *self {
+            Timing::Exact { dt_s } => dt_s,
+            Timing::Measured { mean_dt_s, .. } => mean_dt_s,
+        }
+    }
+}
+
+/// A place in a log file, 1-based.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum At {
+    /// A line of a text file (CSV, DAQ text), counting every line.
+    Line(usize),
+    /// A row of a Parquet table.
+    Row(usize),
+    /// An element of a MAT variable.
+    Element(usize),
+}
+
+impl fmt::Display for At {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            At::Line(n) => write!(f, "line {n}"),
+            At::Row(n) => write!(f, "row {n}"),
+            At::Element(n) => write!(f, "element {n}"),
+        }
+    }
+}
+
+/// What the later stages need from a log.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Needs {
+    /// Fewest samples the FRF settings can use (e.g. one segment).
+    pub min_samples: usize,
+    /// Largest tolerated deviation of a sample interval from the mean, as a
+    /// fraction of the mean interval; above it the log is refused.
+    pub max_jitter_fraction: f64,
+    /// Largest tolerated fraction of samples sitting exactly at a channel's
+    /// maximum (or minimum); above it the channel is taken as clipped.
+    pub clip_fraction: f64,
+}
+
+/// Why a log cannot be used. Every message names the file.
+#[derive(Debug, thiserror::Error)]
+pub enum IngestError {
+    #[error("{}: cannot read: {source}", path.display())]
+    Io {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    #[error(
+        "{}: SHA-256 is {actual} but the manifest expects {expected}: the file changed or is not the one recorded",
+        path.display()
+    )]
+    Sha256Mismatch {
+        path: PathBuf,
+        expected: String,
+        actual: String,
+    },
+    #[error("{}: the file is empty", path.display())]
+    Empty { path: PathBuf },
+    #[error("{}: no data rows ({what})", path.display())]
+    HeaderOnly { path: PathBuf, what: String },
+    #[error("{}: the {channel} channel needs column {column}, which is not there ({available})", path.display())]
+    MissingColumn {
+        path: PathBuf,
+        channel: &'static str,
+        column: String,
+        available: String,
+    },
+    #[error("{}: {at}: cannot read {value:?} as a number ({channel}, column {column})", path.display())]
+    BadValue {
+        path: PathBuf,
+        at: At,
+        channel: &'static str,
+        column: String,
+        value: String,
+    },
+    #[error("{}: {at}: missing value ({channel}, column {column}: {detail})", path.display())]
+    MissingValue {
+        path: PathBuf,
+        at: At,
+        channel: &'static str,
+        column: String,
+        detail: String,
+    },
+    #[error(
+        "{}: {at}: {channel} (column {column}) is {si} after scaling raw {raw}; values must be finite",
+        path.display()
+    )]
+    NonFinite {
+        path: PathBuf,
+        at: At,
+        channel: &'static str,
+        column: String,
+        raw: f64,
+        si: f64,
+    },
+    #[error(
+        "{}: {at}: time does not increase ({t_s} s after {prev_s} s); time stamps must be strictly increasing",
+        path.display()
+    )]
+    NotMonotonic {
+        path: PathBuf,
+        at: At,
+        prev_s: f64,
+        t_s: f64,
+    },
+    #[error(
+        "{}: {at}: sample number {next} follows {prev}; consecutive numbers were expected, so samples are missing or repeated and the time base is not uniform",
+        path.display()
+    )]
+    SampleGap {
+        path: PathBuf,
+        at: At,
+        prev: u64,
+        next: u64,
+    },
+    #[error(
+        "{}: sampling is not uniform: interval jitter max {jitter_max_s:.3e} s (interval ending at {worst_at}), rms {jitter_rms_s:.3e} s, against a mean interval of {dt_s:.6e} s; the max is {fraction:.3e} of the interval, above the tolerance {tolerance:e}",
+        path.display()
+    )]
+    Jitter {
+        path: PathBuf,
+        dt_s: f64,
+        jitter_rms_s: f64,
+        jitter_max_s: f64,
+        worst_at: At,
+        fraction: f64,
+        tolerance: f64,
+    },
+    #[error(
+        "{}: the {channel} channel looks clipped: {:.2} % of its samples sit exactly at its {which} {level:e} {unit} (tolerance {:.2} %)",
+        path.display(), 100.0 * fraction, 100.0 * tolerance
+    )]
+    Clipped {
+        path: PathBuf,
+        channel: &'static str,
+        which: &'static str,
+        level: f64,
+        unit: &'static str,
+        fraction: f64,
+        tolerance: f64,
+    },
+    #[error("{}: {n} samples, but the FRF settings need at least {min}", path.display())]
+    TooShort { path: PathBuf, n: usize, min: usize },
+    #[error("{}: sampling rate {hz} Hz ({from}) must be finite and positive", path.display())]
+    BadRate {
+        path: PathBuf,
+        hz: f64,
+        from: &'static str,
+    },
+    #[error("{}: {message}", path.display())]
+    Format { path: PathBuf, message: String },
+}
+
+/// Read a log as `plan` describes it and convert its channels to SI.
+///
+/// Refuses the file when its SHA-256 differs from `plan.sha256`, when it is
+/// empty or has no data rows, when a column is missing or a value is not a
+/// number, when a value is NaN or infinite, and when time stamps do not
+/// strictly increase (or DAQ sample numbers skip). Quality judgements that
+/// depend on the analysis (length, jitter, clipping) are left to
+/// [`check_log`].
+pub fn read_log(plan: &LogPlan) -> Result<Log, IngestError> {
+    let path = plan.path.as_path();
+    let bytes = std::fs::read(path).map_err(|source| IngestError::Io {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    let sha256 = sha256_hex(&bytes);
+    if let Some(expected) = &plan.sha256
+        && !expected.eq_ignore_ascii_case(&sha256)
+    {
+        return Err(IngestError::Sha256Mismatch {
+            path: path.to_path_buf(),
+            expected: expected.to_ascii_lowercase(),
+            actual: sha256,
+        });
+    }
+    if bytes.iter().all(u8::is_ascii_whitespace) {
+        return Err(IngestError::Empty {
+            path: path.to_path_buf(),
+        });
+    }
+    let raw = match plan.format {
+        LogFormat::Csv => csv::read(path, &bytes, plan)?,
+        LogFormat::Parquet => parquet::read(path, &bytes, plan)?,
+        LogFormat::Mat => mat::read(path, &bytes, plan)?,
+        LogFormat::DaqText => daq::read(path, &bytes, plan)?,
+    };
+    assemble(plan, sha256, raw)
+}
+
+/// SHA-256 of `bytes` as lowercase hexadecimal.
+pub fn sha256_hex(bytes: &[u8]) -> String {
+    use std::fmt::Write;
+    Sha256::digest(bytes)
+        .iter()
+        .fold(String::with_capacity(64), |mut s, b| {
+            let _ = write!(s, "{b:02x}");
+            s
+        })
+}
+
+/// Raw channels as a format reader found them, before scaling.
+struct Raw<'a> {
+    time: RawTime,
+    command: Vec<f64>,
+    displacement: Vec<f64>,
+    force: Option<Vec<f64>>,
+    /// Where sample `i` (0-based) sits in the file.
+    locate: Box<dyn Fn(usize) -> At + 'a>,
+    warnings: Vec<String>,
+}
+
+enum RawTime {
+    /// Raw time stamps, times `to_s` gives seconds; `column` names where they
+    /// came from.
+    Column {
+        raw: Vec<f64>,
+        to_s: f64,
+        column: String,
+    },
+    /// A rate, and what gave it (for messages).
+    Rate { hz: f64, from: &'static str },
+}
+
+/// One column a plan asks for: which channel it feeds and how it is addressed.
+struct Wanted<'p> {
+    channel: &'static str,
+    column: &'p Column,
+}
+
+/// The columns `plan` needs, in a fixed order: time (when it is a column),
+/// command, displacement, force (when given).
+fn wanted(plan: &LogPlan) -> Vec<Wanted<'_>> {
+    let ch = &plan.channels;
+    let mut out = Vec::with_capacity(4);
+    if let TimePlan::Column { column, .. } = &ch.time {
+        out.push(Wanted {
+            channel: "time",
+            column,
+        });
+    }
+    out.push(Wanted {
+        channel: "command",
+        column: &ch.command.column,
+    });
+    out.push(Wanted {
+        channel: "displacement",
+        column: &ch.displacement.column,
+    });
+    if let Some(f) = &ch.force {
+        out.push(Wanted {
+            channel: "force",
+            column: &f.column,
+        });
+    }
+    out
+}
+
+/// Split the columns a table reader extracted (in [`wanted`] order) into a
+/// [`Raw`], with the time base a table format supports (a column or a rate).
+fn raw_from_table<'a>(
+    path: &Path,
+    plan: &LogPlan,
+    mut columns: Vec<Vec<f64>>,
+    locate: Box<dyn Fn(usize) -> At + 'a>,
+) -> Result<Raw<'a>, IngestError> {
+    let mut it = columns.drain(..);
+    let time = match &plan.channels.time {
+        TimePlan::Column { column, to_s } => RawTime::Column {
+            raw: it.next().expect("time column wanted"),
+            to_s: *to_s,
+            column: column.to_string(),
+        },
+        TimePlan::SampleRate { hz } => RawTime::Rate {
+            hz: *hz,
+            from: "manifest",
+        },
+        TimePlan::FromLog => {
+            return Err(IngestError::Format {
+                path: path.to_path_buf(),
+                message: format!(
+                    "a {} log has no sampling rate of its own; give channels.time.column or channels.time.sample_rate_hz",
+                    format_name(plan.format)
+                ),
+            });
+        }
+    };
+    let command = it.next().expect("command wanted");
+    let displacement = it.next().expect("displacement wanted");
+    let force = it.next();
+    drop(it);
+    Ok(Raw {
+        time,
+        command,
+        displacement,
+        force,
+        locate,
+        warnings: Vec::new(),
+    })
+}
+
+fn format_name(f: LogFormat) -> &'static str {
+    match f {
+        LogFormat::Csv => "CSV",
+        LogFormat::Parquet => "Parquet",
+        LogFormat::Mat => "MAT",
+        LogFormat::DaqText => "DAQ text",
+    }
+}
+
+/// Scale, check finiteness and monotonic time, and measure the timing.
+fn assemble(plan: &LogPlan, sha256: String, raw: Raw<'_>) -> Result<Log, IngestError> {
+    let path = &plan.path;
+    let n = raw.command.len();
+    if n == 0 {
+        return Err(IngestError::HeaderOnly {
+            path: path.clone(),
+            what: "the channels are empty".into(),
+        });
+    }
+    let locate = &raw.locate;
+    let scale = |channel: &'static str, plan: &ChannelPlan, v: Vec<f64>| {
+        // A zero offset is not added, so that -0 stays -0 and a log written
+        // in SI reads back bit for bit.
+        let si: Vec<f64> = if plan.offset == 0.0 {
+            v.iter().map(|&r| r * plan.gain).collect()
+        } else {
+            v.iter().map(|&r| r * plan.gain + plan.offset).collect()
+        };
+        match si.iter().position(|x| !x.is_finite()) {
+            Some(i) => Err(IngestError::NonFinite {
+                path: path.clone(),
+                at: locate(i),
+                channel,
+                column: plan.column.to_string(),
+                raw: v[i],
+                si: si[i],
+            }),
+            None => Ok(si),
+        }
+    };
+    let (timing, sample_rate_hz, t0_s) = match raw.time {
+        RawTime::Column { raw, to_s, column } => {
+            let t: Vec<f64> = raw.iter().map(|&r| r * to_s).collect();
+            if let Some(i) = t.iter().position(|x| !x.is_finite()) {
+                return Err(IngestError::NonFinite {
+                    path: path.clone(),
+                    at: locate(i),
+                    channel: "time",
+                    column,
+                    raw: raw[i],
+                    si: t[i],
+                });
+            }
+            let timing = measure_timing(path, &t, locate)?;
+            (timing, 1.0 / timing.dt_s(), t[0])
+        }
+        RawTime::Rate { hz, from } => {
+            if !(hz.is_finite() && hz > 0.0) {
+                return Err(IngestError::BadRate {
+                    path: path.clone(),
+                    hz,
+                    from,
+                });
+            }
+            (Timing::Exact { dt_s: 1.0 / hz }, hz, 0.0)
+        }
+    };
+    let ch = &plan.channels;
+    let command_m = scale("command", &ch.command, raw.command)?;
+    let displacement_m = scale("displacement", &ch.displacement, raw.displacement)?;
+    let force_n = match (&ch.force, raw.force) {
+        (Some(p), Some(v)) => Some(scale("force", p, v)?),
+        _ => None,
+    };
+    Ok(Log {
+        path: path.clone(),
+        sha256,
+        format: plan.format,
+        sample_rate_hz,
+        t0_s,
+        command_m,
+        displacement_m,
+        force_n,
+        n_rows: n,
+        timing,
+        warnings: raw.warnings,
+    })
+}
+
+/// Mean interval and jitter of time stamps `t` (s); refuses time that does not
+/// strictly increase.
+fn measure_timing(
+    path: &Path,
+    t: &[f64],
+    locate: &dyn Fn(usize) -> At,
+) -> Result<Timing, IngestError> {
+    if t.len() < 2 {
+        return Err(IngestError::TooShort {
+            path: path.to_path_buf(),
+            n: t.len(),
+            min: 2,
+        });
+    }
+    if let Some(k) = t.windows(2).position(|w| w[1] <= w[0]) {
+        return Err(IngestError::NotMonotonic {
+            path: path.to_path_buf(),
+            at: locate(k + 1),
+            prev_s: t[k],
+            t_s: t[k + 1],
+        });
+    }
+    let intervals = (t.len() - 1) as f64;
+    let mean_dt_s = (t[t.len() - 1] - t[0]) / intervals;
+    let mut sum_sq = 0.0;
+    let (mut jitter_max_s, mut worst) = (0.0_f64, 1);
+    for (k, w) in t.windows(2).enumerate() {
+        let dev = (w[1] - w[0]) - mean_dt_s;
+        sum_sq += dev * dev;
+        if dev.abs() > jitter_max_s {
+            jitter_max_s = dev.abs();
+            worst = k + 1;
+        }
+    }
+    Ok(Timing::Measured {
+        mean_dt_s,
+        jitter_rms_s: (sum_sq / intervals).sqrt(),
+        jitter_max_s,
+        worst_at: locate(worst),
+    })
+}
+
+/// Jitter below this fraction of the interval is what printing time stamps
+/// in decimal costs (a few ulps of t); above it a warning is worth giving.
+const JITTER_WARN_FRACTION: f64 = 1e-6;
+
+/// Judge whether `log` suits the analysis.
+///
+/// Errors: fewer than `needs.min_samples` samples; sample-interval jitter
+/// above `needs.max_jitter_fraction` of the mean interval; a channel with more
+/// than `needs.clip_fraction` of its samples exactly at its maximum or
+/// minimum (clipped or saturated; a constant channel is 100 % at both).
+/// Warnings: jitter above 1e-6 of the interval but within tolerance.
+///
+/// Returns every warning about the log: those found while reading
+/// (`log.warnings`) followed by those of these checks.
+pub fn check_log(log: &Log, needs: &Needs) -> Result<Vec<String>, IngestError> {
+    let path = &log.path;
+    let mut warnings = log.warnings.clone();
+    if log.n_rows < needs.min_samples {
+        return Err(IngestError::TooShort {
+            path: path.clone(),
+            n: log.n_rows,
+            min: needs.min_samples,
+        });
+    }
+    if let Timing::Measured {
+        mean_dt_s,
+        jitter_rms_s,
+        jitter_max_s,
+        worst_at,
+    } = log.timing
+    {
+        let fraction = jitter_max_s / mean_dt_s;
+        if fraction > needs.max_jitter_fraction {
+            return Err(IngestError::Jitter {
+                path: path.clone(),
+                dt_s: mean_dt_s,
+                jitter_rms_s,
+                jitter_max_s,
+                worst_at,
+                fraction,
+                tolerance: needs.max_jitter_fraction,
+            });
+        }
+        if fraction > JITTER_WARN_FRACTION {
+            warnings.push(format!(
+                "{}: sampling is slightly uneven: interval jitter max {jitter_max_s:.3e} s (interval ending at {worst_at}), rms {jitter_rms_s:.3e} s, against a mean interval of {mean_dt_s:.6e} s ({fraction:.3e} of it, within the tolerance {:e}); the analysis assumes uniform sampling",
+                path.display(),
+                needs.max_jitter_fraction
+            ));
+        }
+    }
+    let mut channels: Vec<(&'static str, &'static str, &[f64])> = vec![
+        ("command", "m", &log.command_m),
+        ("displacement", "m", &log.displacement_m),
+    ];
+    if let Some(f) = &log.force_n {
+        channels.push(("force", "N", f));
+    }
+    for (channel, unit, x) in channels {
+        if let Some((which, level, fraction)) = clipping(x)
+            && fraction > needs.clip_fraction
+        {
+            return Err(IngestError::Clipped {
+                path: path.clone(),
+                channel,
+                which,
+                level,
+                unit,
+                fraction,
+                tolerance: needs.clip_fraction,
+            });
+        }
+    }
+    Ok(warnings)
+}
+
+/// The extreme (maximum or minimum) at which most samples of `x` sit, with
+/// that fraction of samples; `None` when `x` is empty.
+fn clipping(x: &[f64]) -> Option<(&'static str, f64, f64)> {
+    if x.is_empty() {
+        return None;
+    }
+    let max = x.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    let min = x.iter().copied().fold(f64::INFINITY, f64::min);
+    // Exact equality on purpose: a clipped channel repeats its rail value.
+    let at_max = x.iter().filter(|&&v| v == max).count();
+    let at_min = x.iter().filter(|&&v| v == min).count();
+    let n = x.len() as f64;
+    Some(if at_max >= at_min {
+        ("maximum", max, at_max as f64 / n)
+    } else {
+        ("minimum", min, at_min as f64 / n)
+    })
+}
+
+/// Margin kept before the first and after the last excited sample (s): many
+/// times the actuator's time constants (1/beta1 is tens of milliseconds), so
+/// the response's onset and decay stay in the record.
+pub const TRIM_MARGIN_S: f64 = 0.5;
+
+/// Rest period at the start of the log whose mean is taken as the command's
+/// rest level u0 (s).
+pub const REST_WINDOW_S: f64 = 0.1;
+
+/// Keep the excited part of a log.
+///
+/// The command's rest level u0 is the mean of its first [`REST_WINDOW_S`]
+/// (at least one sample); a sample is excited where |u - u0| exceeds
+/// `threshold_fraction` times the largest |u - u0| in the log. The result runs
+/// from [`TRIM_MARGIN_S`] before the first excited sample to
+/// [`TRIM_MARGIN_S`] after the last (clamped to the log), with every channel
+/// cut alike, `t0_s` moved to the new first sample and `n_rows` updated. A
+/// command that never leaves its rest level leaves the log whole, with a
+/// warning added.
+pub fn trim_to_excitation(log: &Log, threshold_fraction: f64) -> Log {
+    let u = &log.command_m;
+    let n = u.len();
+    let mut out = log.clone();
+    if n == 0 {
+        return out;
+    }
+    let dt_s = 1.0 / log.sample_rate_hz;
+    let rest = ((REST_WINDOW_S / dt_s).round() as usize).clamp(1, n);
+    let u0 = u[..rest].iter().sum::<f64>() / rest as f64;
+    let peak = u.iter().map(|x| (x - u0).abs()).fold(0.0, f64::max);
+    let threshold = threshold_fraction * peak;
+    let first = u.iter().position(|x| (x - u0).abs() > threshold);
+    let last = u.iter().rposition(|x| (x - u0).abs() > threshold);
+    let (Some(first), Some(last)) = (first, last) else {
+        out.warnings.push(format!(
+            "{}: the command never departs from its rest level {u0:e} m by more than {threshold_fraction} of its largest excursion ({peak:e} m); nothing trimmed",
+            log.path.display()
+        ));
+        return out;
+    };
+    let margin = (TRIM_MARGIN_S / dt_s).round() as usize;
+    let start = first.saturating_sub(margin);
+    let end = (last + margin + 1).min(n);
+    let cut = |v: &[f64]| v[start..end].to_vec();
+    out.command_m = cut(&log.command_m);
+    out.displacement_m = cut(&log.displacement_m);
+    out.force_n = log.force_n.as_deref().map(cut);
+    out.n_rows = end - start;
+    out.t0_s = log.t0_s + start as f64 * dt_s;
+    out
+}
+
+/// Subtract the mean from `x` in place.
+pub fn remove_mean(x: &mut [f64]) {
+    if x.is_empty() {
+        return;
+    }
+    let mean = x.iter().sum::<f64>() / x.len() as f64;
+    x.iter_mut().for_each(|v| *v -= mean);
+}
+
+/// Subtract the least-squares straight line a + b k (k the sample index) from
+/// `x` in place.
+pub fn remove_trend(x: &mut [f64]) {
+    let n = x.len();
+    if n < 2 {
+        remove_mean(x);
+        return;
+    }
+    // Centred index kc = k - (n-1)/2 makes the normal equations diagonal:
+    // a = mean(x), b = sum(kc x) / sum(kc^2).
+    let nf = n as f64;
+    let centre = (nf - 1.0) / 2.0;
+    let mean = x.iter().sum::<f64>() / nf;
+    let sxy: f64 = x
+        .iter()
+        .enumerate()
+        .map(|(k, v)| (k as f64 - centre) * v)
+        .sum();
+    let sxx = nf * (nf * nf - 1.0) / 12.0;
+    let slope = sxy / sxx;
+    x.iter_mut()
+        .enumerate()
+        .for_each(|(k, v)| *v -= mean + slope * (k as f64 - centre));
+}
+
+/// Comma-separated list of names for "available" messages.
+fn list(names: impl IntoIterator<Item = impl fmt::Display>) -> String {
+    let v: Vec<String> = names.into_iter().map(|n| n.to_string()).collect();
+    if v.is_empty() {
+        "none".into()
+    } else {
+        v.join(", ")
+    }
+}

@@ -1,0 +1,1158 @@
+//! Tests of log reading: the real DAQ logs against an independent parse,
+//! round trips through the writers, a hand-built MAT-file, and every check
+//! from a crafted bad file.
+
+use std::path::{Path, PathBuf};
+
+use approx::assert_relative_eq;
+
+use super::*;
+use crate::manifest::{CsvOptions, ResolvedChannels, Unit};
+use crate::report::logs::{csv_bytes, parquet_bytes, write_csv, write_parquet};
+
+// ---------------------------------------------------------------- helpers
+
+/// A channel as the manifest resolves it: gain = scale * unit-to-SI.
+fn ch(column: Column, unit: Unit, scale: f64) -> ChannelPlan {
+    ChannelPlan {
+        column,
+        unit,
+        gain: scale * unit.to_si(),
+        offset: 0.0,
+    }
+}
+
+fn name(n: &str) -> Column {
+    Column::Name(n.into())
+}
+
+fn csv_options() -> CsvOptions {
+    CsvOptions {
+        delimiter: ",".into(),
+        skip_lines: 0,
+        comment_prefix: None,
+        header: true,
+    }
+}
+
+fn plan(
+    path: &Path,
+    format: LogFormat,
+    time: TimePlan,
+    command: ChannelPlan,
+    displacement: ChannelPlan,
+    force: Option<ChannelPlan>,
+) -> LogPlan {
+    LogPlan {
+        path: path.to_path_buf(),
+        format,
+        csv: csv_options(),
+        sha256: None,
+        channels: ResolvedChannels {
+            time,
+            command,
+            displacement,
+            force,
+        },
+    }
+}
+
+/// A plan reading columns `t` (s), `u`, `x` (m) and `f` (N) by name.
+fn plan_by_name(path: &Path, format: LogFormat) -> LogPlan {
+    plan(
+        path,
+        format,
+        TimePlan::Column {
+            column: name("t"),
+            to_s: 1.0,
+        },
+        ch(name("u"), Unit::Meter, 1.0),
+        ch(name("x"), Unit::Meter, 1.0),
+        Some(ch(name("f"), Unit::Newton, 1.0)),
+    )
+}
+
+fn write_file(dir: &Path, file: &str, bytes: &[u8]) -> PathBuf {
+    let p = dir.join(file);
+    std::fs::write(&p, bytes).unwrap();
+    p
+}
+
+fn err(plan: &LogPlan) -> String {
+    read_log(plan)
+        .expect_err("the log must be refused")
+        .to_string()
+}
+
+fn assert_contains(msg: &str, parts: &[&str]) {
+    for p in parts {
+        assert!(msg.contains(p), "message {msg:?} lacks {p:?}");
+    }
+}
+
+/// Deterministic pseudo-random numbers in (-1, 1) (64-bit LCG, Knuth's
+/// MMIX constants), so the tests need no RNG crate.
+fn lcg(seed: u64, n: usize) -> Vec<f64> {
+    let mut s = seed;
+    (0..n)
+        .map(|_| {
+            s = s
+                .wrapping_mul(6_364_136_223_846_793_005)
+                .wrapping_add(1_442_695_040_888_963_407);
+            (s >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
+        })
+        .collect()
+}
+
+/// Bit-for-bit equality of two series, reporting the first difference.
+#[track_caller]
+fn assert_same_bits(got: &[f64], want: &[f64]) {
+    assert_eq!(got.len(), want.len(), "lengths differ");
+    if let Some(k) = (0..got.len()).find(|&k| got[k].to_bits() != want[k].to_bits()) {
+        panic!("sample {k}: got {:e}, want {:e}", got[k], want[k]);
+    }
+}
+
+const NEEDS: Needs = Needs {
+    min_samples: 1024,
+    max_jitter_fraction: 0.01,
+    clip_fraction: 0.01,
+};
+
+// ------------------------------------------------------- real DAQ logs
+
+/// The shared data folder: beside the main checkout (as the brief has it),
+/// or one level further up from a worktree under /work/wt.
+fn shared_log(file: &str) -> PathBuf {
+    let candidates = [
+        concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/../shared/data/utfsm-mts-mrdamper/"
+        ),
+        concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/../../shared/data/utfsm-mts-mrdamper/"
+        ),
+    ];
+    candidates
+        .iter()
+        .map(|d| Path::new(d).join(file))
+        .find(|p| p.exists())
+        .unwrap_or_else(|| panic!("{file} not found in {candidates:?}"))
+}
+
+/// The UTFSM convention: CHANNEL2 = command (x 10 -> mm), CHANNEL0 =
+/// displacement (x 10 -> mm), CHANNEL1 = force (x 9806.65 -> N).
+fn daq_plan(path: &Path) -> LogPlan {
+    plan(
+        path,
+        LogFormat::DaqText,
+        TimePlan::FromLog,
+        ch(name("CHANNEL2"), Unit::Millimeter, 10.0),
+        ch(name("CHANNEL0"), Unit::Millimeter, 10.0),
+        Some(ch(name("CHANNEL1"), Unit::Newton, 9806.65)),
+    )
+}
+
+/// Independent parse of a DAQ export: skip the 7 header lines, split each
+/// line with `str::split(',')`, and return per channel (CHANNEL0..2) the sum
+/// and the max of the raw values, plus the line count.
+fn independent_daq(path: &Path) -> ([f64; 3], [f64; 3], usize) {
+    let text = std::fs::read_to_string(path).unwrap();
+    let mut sum = [0.0; 3];
+    let mut max = [f64::NEG_INFINITY; 3];
+    let mut n = 0;
+    for line in text.lines().skip(7) {
+        let fields: Vec<&str> = line.split(',').collect();
+        for k in 0..3 {
+            let v: f64 = fields[2 + k].trim().parse().unwrap();
+            sum[k] += v;
+            max[k] = max[k].max(v);
+        }
+        n += 1;
+    }
+    (sum, max, n)
+}
+
+fn check_real_daq(file: &str, expected_rows: usize) {
+    let path = shared_log(file);
+    let log = read_log(&daq_plan(&path)).unwrap();
+    let (sum, max, n) = independent_daq(&path);
+    assert_eq!(n, expected_rows);
+    assert_eq!(log.n_rows, expected_rows);
+    assert_eq!(log.command_m.len(), expected_rows);
+    assert_relative_eq!(log.sample_rate_hz, 1000.0);
+    assert!(matches!(log.timing, Timing::Exact { dt_s } if (dt_s - 1e-3).abs() < 1e-15));
+    assert!(log.warnings.is_empty(), "{:?}", log.warnings);
+    assert_eq!(log.sha256.len(), 64);
+
+    // SI = raw * 10 mm * 1e-3 (m) or raw * 9806.65 (N).
+    let to_m = 10.0 * 1e-3;
+    let force = log.force_n.as_ref().unwrap();
+    let sums = [
+        log.displacement_m.iter().sum::<f64>(),
+        force.iter().sum::<f64>(),
+        log.command_m.iter().sum::<f64>(),
+    ];
+    let maxes = [
+        log.displacement_m.iter().copied().fold(f64::MIN, f64::max),
+        force.iter().copied().fold(f64::MIN, f64::max),
+        log.command_m.iter().copied().fold(f64::MIN, f64::max),
+    ];
+    let gains = [to_m, 9806.65, to_m];
+    for k in 0..3 {
+        assert_relative_eq!(sums[k], sum[k] * gains[k], max_relative = 1e-12);
+        assert_relative_eq!(maxes[k], max[k] * gains[k], max_relative = 1e-15);
+    }
+    // The real logs pass the checks with settings like the paper's
+    // (2^14-point segments).
+    let needs = Needs {
+        min_samples: 1 << 14,
+        ..NEEDS
+    };
+    assert!(check_log(&log, &needs).unwrap().is_empty());
+}
+
+#[test]
+fn real_daq_log_0a_matches_an_independent_parse() {
+    check_real_daq("0A.txt", 61_500);
+}
+
+#[test]
+fn real_daq_log_1a_matches_an_independent_parse() {
+    check_real_daq("1A.txt", 59_100);
+}
+
+#[test]
+fn real_daq_log_first_and_last_values() {
+    // Read off the file by eye: line 8 is the first sample, line 61507 the
+    // last ("-0.0282, -0.0218, -0.0204, DAQ Pause, DAQ Stop").
+    let log = read_log(&daq_plan(&shared_log("0A.txt"))).unwrap();
+    assert_relative_eq!(log.displacement_m[0], -0.0209 * 1e-2, max_relative = 1e-15);
+    assert_relative_eq!(
+        log.force_n.as_ref().unwrap()[0],
+        -0.0166 * 9806.65,
+        max_relative = 1e-15
+    );
+    assert_relative_eq!(log.command_m[0], -0.0169 * 1e-2, max_relative = 1e-15);
+    assert_relative_eq!(log.command_m[61_499], -0.0204 * 1e-2, max_relative = 1e-15);
+}
+
+#[test]
+fn real_daq_log_by_index_and_with_a_given_rate() {
+    let path = shared_log("1A.txt");
+    let mut p = daq_plan(&path);
+    p.channels.command.column = Column::Index(4); // CHANNEL2
+    p.channels.time = TimePlan::SampleRate { hz: 1024.0 };
+    let log = read_log(&p).unwrap();
+    let by_name = read_log(&daq_plan(&path)).unwrap();
+    assert_same_bits(&log.command_m, &by_name.command_m);
+    assert_relative_eq!(log.sample_rate_hz, 1024.0);
+    assert_eq!(log.warnings.len(), 1);
+    assert_contains(&log.warnings[0], &["1A.txt", "1024 Hz", "1000 Hz"]);
+}
+
+// ------------------------------------------------------------ CSV
+
+/// Values that test shortest round-trip printing: tiny, huge, negative zero,
+/// sums that are not short decimals, subnormals.
+fn awkward(n: usize, seed: u64) -> Vec<f64> {
+    let mut v = lcg(seed, n);
+    let special = [
+        0.1 + 0.2,
+        -0.0,
+        1e-300,
+        -2.5e-9,
+        123_456_789.012_345_68,
+        1e22,
+        f64::MIN_POSITIVE / 8.0,
+        1e300,
+        1.0 / 3.0,
+    ];
+    for (k, s) in special.iter().enumerate() {
+        v[k * 7 % n] = *s;
+    }
+    v
+}
+
+fn table(n: usize) -> Vec<(&'static str, Vec<f64>)> {
+    let fs = 2048.0;
+    vec![
+        ("t", (0..n).map(|k| k as f64 / fs).collect()),
+        ("u", awkward(n, 1)),
+        ("x", awkward(n, 2)),
+        ("f", awkward(n, 3)),
+    ]
+}
+
+fn borrowed<'a>(t: &'a [(&'static str, Vec<f64>)]) -> Vec<(&'a str, &'a [f64])> {
+    t.iter().map(|(n, v)| (*n, v.as_slice())).collect()
+}
+
+#[test]
+fn csv_round_trip_is_bit_exact_by_name_and_by_index() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("log.csv");
+    let t = table(3000);
+    write_csv(&path, &borrowed(&t)).unwrap();
+
+    let log = read_log(&plan_by_name(&path, LogFormat::Csv)).unwrap();
+    assert_eq!(log.n_rows, 3000);
+    assert_same_bits(&log.command_m, &t[1].1);
+    assert_same_bits(&log.displacement_m, &t[2].1);
+    assert_same_bits(log.force_n.as_ref().unwrap(), &t[3].1);
+    assert_relative_eq!(log.sample_rate_hz, 2048.0, max_relative = 1e-12);
+    assert_relative_eq!(log.t0_s, 0.0);
+
+    let mut p = plan_by_name(&path, LogFormat::Csv);
+    p.channels.time = TimePlan::Column {
+        column: Column::Index(0),
+        to_s: 1.0,
+    };
+    p.channels.command.column = Column::Index(3);
+    p.channels.displacement.column = Column::Index(1);
+    p.channels.force = None;
+    let by_index = read_log(&p).unwrap();
+    assert_same_bits(&by_index.command_m, &t[3].1);
+    assert_same_bits(&by_index.displacement_m, &t[1].1);
+    assert!(by_index.force_n.is_none());
+}
+
+#[test]
+fn csv_writer_prints_shortest_round_trip_text() {
+    let cols = [("a", &[0.1 + 0.2, 1e-300, -0.0, 0.5, 1e22][..])];
+    let text = String::from_utf8(csv_bytes(Path::new("x.csv"), &cols).unwrap()).unwrap();
+    // 0.1 + 0.2 is 0.3000000000000000444...; 17 digits are the fewest that
+    // tell it from 0.3.
+    assert_eq!(text, "a\n0.30000000000000004\n1e-300\n-0\n0.5\n1e22\n");
+}
+
+#[test]
+fn csv_with_delimiter_skipped_lines_comments_and_units() {
+    let dir = tempfile::tempdir().unwrap();
+    let text = "\
+rig: MTS 244 (skipped)
+operator: nobody (skipped)
+time_ms;u_in;x_cm;f_lbf;f_kn
+% a comment line
+0;1;10;100;1
+1;2;20;200;2
+% another comment
+
+2;-4;-40;-400;-4
+3;0.5;5;50;0.5
+";
+    let path = write_file(dir.path(), "log.csv", text.as_bytes());
+    let mut p = plan(
+        &path,
+        LogFormat::Csv,
+        TimePlan::Column {
+            column: name("time_ms"),
+            to_s: 1e-3,
+        },
+        ch(name("u_in"), Unit::Inch, 1.0),
+        ch(name("x_cm"), Unit::Centimeter, 1.0),
+        Some(ch(name("f_lbf"), Unit::PoundForce, 1.0)),
+    );
+    p.csv = CsvOptions {
+        delimiter: ";".into(),
+        skip_lines: 2,
+        comment_prefix: Some("%".into()),
+        header: true,
+    };
+    let log = read_log(&p).unwrap();
+    assert_eq!(log.n_rows, 4);
+    assert_relative_eq!(log.sample_rate_hz, 1000.0, max_relative = 1e-12);
+    // 1 in = 0.0254 m exactly; 1 cm = 0.01 m; 1 lbf = 4.4482216152605 N.
+    let u = [0.0254, 0.0508, -0.1016, 0.0127];
+    let x = [0.1, 0.2, -0.4, 0.05];
+    let f = [
+        444.82216152605,
+        889.6443230521,
+        -1779.2886461042,
+        222.411080763025,
+    ];
+    for k in 0..4 {
+        assert_relative_eq!(log.command_m[k], u[k], max_relative = 1e-15);
+        assert_relative_eq!(log.displacement_m[k], x[k], max_relative = 1e-15);
+        assert_relative_eq!(log.force_n.as_ref().unwrap()[k], f[k], max_relative = 1e-15);
+    }
+
+    // The same file, force in kN and millimetres for x (scale 10: cm -> mm).
+    p.channels.force = Some(ch(name("f_kn"), Unit::Kilonewton, 1.0));
+    p.channels.displacement = ch(name("x_cm"), Unit::Millimeter, 10.0);
+    let log = read_log(&p).unwrap();
+    let f = [1000.0, 2000.0, -4000.0, 500.0];
+    for k in 0..4 {
+        assert_relative_eq!(log.displacement_m[k], x[k], max_relative = 1e-15);
+        assert_relative_eq!(log.force_n.as_ref().unwrap()[k], f[k], max_relative = 1e-15);
+    }
+}
+
+#[test]
+fn csv_without_header_is_addressed_by_index() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = write_file(
+        dir.path(),
+        "log.csv",
+        b"# comment\n0\t1\t2\n0.5\t3\t4\n1\t5\t6\n",
+    );
+    let mut p = plan(
+        &path,
+        LogFormat::Csv,
+        TimePlan::Column {
+            column: Column::Index(0),
+            to_s: 1.0,
+        },
+        ch(Column::Index(2), Unit::Meter, 1.0),
+        ch(Column::Index(1), Unit::Meter, 1.0),
+        None,
+    );
+    p.csv = CsvOptions {
+        delimiter: "\t".into(),
+        skip_lines: 0,
+        comment_prefix: Some("#".into()),
+        header: false,
+    };
+    let log = read_log(&p).unwrap();
+    assert_eq!(log.n_rows, 3);
+    assert_relative_eq!(log.sample_rate_hz, 2.0, max_relative = 1e-15);
+    assert_relative_eq!(log.command_m[2], 6.0);
+    assert_relative_eq!(log.displacement_m[1], 3.0);
+
+    // A name cannot address a headerless file; the error says how to.
+    p.channels.command.column = name("u");
+    let msg = err(&p);
+    assert_contains(&msg, &["log.csv", "`u`", "no header", "index 0 to 2"]);
+}
+
+#[test]
+fn csv_comment_before_header_byte_order_mark_and_spaces() {
+    let dir = tempfile::tempdir().unwrap();
+    let text = "\u{feff}# exported by the rig\nt,u,x,f\n0,1,2,3\n0.5, 1.5 ,2,3\n1,1,2,3\n";
+    let path = write_file(dir.path(), "spaces.csv", text.as_bytes());
+    let mut p = plan_by_name(&path, LogFormat::Csv);
+    p.csv.comment_prefix = Some("#".into());
+    let log = read_log(&p).unwrap();
+    assert_eq!(log.n_rows, 3);
+    assert_relative_eq!(log.command_m[1], 1.5);
+    assert_relative_eq!(log.sample_rate_hz, 2.0);
+}
+
+// ------------------------------------------------------------ Parquet
+
+#[test]
+fn parquet_round_trip_is_bit_exact_by_name_and_by_index() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("log.parquet");
+    let t = table(5000);
+    write_parquet(&path, &borrowed(&t)).unwrap();
+
+    let log = read_log(&plan_by_name(&path, LogFormat::Parquet)).unwrap();
+    assert_eq!(log.n_rows, 5000);
+    assert_same_bits(&log.command_m, &t[1].1);
+    assert_same_bits(&log.displacement_m, &t[2].1);
+    assert_same_bits(log.force_n.as_ref().unwrap(), &t[3].1);
+    assert_relative_eq!(log.sample_rate_hz, 2048.0, max_relative = 1e-12);
+
+    let p = plan(
+        &path,
+        LogFormat::Parquet,
+        TimePlan::SampleRate { hz: 2048.0 },
+        ch(Column::Index(2), Unit::Millimeter, 1.0),
+        ch(Column::Index(3), Unit::Meter, 1.0),
+        Some(ch(Column::Index(1), Unit::Kilonewton, 1.0)),
+    );
+    let log = read_log(&p).unwrap();
+    assert!(matches!(log.timing, Timing::Exact { .. }));
+    assert_same_bits(&log.displacement_m, &t[3].1);
+    for k in (0..5000).step_by(97) {
+        assert_relative_eq!(log.command_m[k], t[2].1[k] / 1000.0, max_relative = 1e-15);
+        assert_relative_eq!(
+            log.force_n.as_ref().unwrap()[k],
+            t[1].1[k] * 1000.0,
+            max_relative = 1e-15
+        );
+    }
+}
+
+#[test]
+fn writers_give_identical_bytes_for_identical_columns() {
+    let dir = tempfile::tempdir().unwrap();
+    let t = table(20_000);
+    let cols = borrowed(&t);
+    let (a, b) = (dir.path().join("a.parquet"), dir.path().join("b.parquet"));
+    write_parquet(&a, &cols).unwrap();
+    write_parquet(&b, &cols).unwrap();
+    assert_eq!(std::fs::read(&a).unwrap(), std::fs::read(&b).unwrap());
+    let (a, b) = (dir.path().join("a.csv"), dir.path().join("b.csv"));
+    write_csv(&a, &cols).unwrap();
+    write_csv(&b, &cols).unwrap();
+    assert_eq!(std::fs::read(&a).unwrap(), std::fs::read(&b).unwrap());
+    assert_eq!(
+        parquet_bytes(Path::new("p"), &cols).unwrap(),
+        std::fs::read(dir.path().join("a.parquet")).unwrap()
+    );
+    assert_eq!(
+        csv_bytes(Path::new("c"), &cols).unwrap(),
+        std::fs::read(dir.path().join("a.csv")).unwrap()
+    );
+}
+
+#[test]
+fn writers_refuse_ragged_columns_and_bad_names() {
+    let p = Path::new("out/log.csv");
+    let e = csv_bytes(p, &[("a", &[1.0, 2.0][..]), ("b", &[1.0][..])]).unwrap_err();
+    assert_contains(&e.to_string(), &["out/log.csv", "`b` has 1", "`a` has 2"]);
+    let e = parquet_bytes(p, &[("a,b", &[1.0][..])]).unwrap_err();
+    assert_contains(&e.to_string(), &["\"a,b\""]);
+    let e = csv_bytes(p, &[("a", &[1.0][..]), ("a", &[1.0][..])]).unwrap_err();
+    assert_contains(&e.to_string(), &["unique"]);
+}
+
+// ------------------------------------------------------------ MAT
+
+/// A minimal MAT level-5 writer, after MathWorks, "MAT-File Format"
+/// (R2013b and later), chapter 1: a 128-byte header (116 bytes of text, 8
+/// bytes of subsystem-data offset, version 0x0100, endian indicator "IM" as
+/// written by a little-endian machine), then data elements. Each element is
+/// an 8-byte tag (u32 data type, u32 byte count) and its data padded to 8
+/// bytes; elements of 4 bytes or less may use the small format (byte count
+/// in the upper half of the first u32, data in the second). A variable is a
+/// miMATRIX (type 14) holding: array flags (miUINT32, class in the low byte,
+/// mxDOUBLE_CLASS = 6), dimensions (miINT32), name (miINT8) and the real part
+/// (miDOUBLE, type 9), column-major. A compressed variable is a miCOMPRESSED
+/// element (type 15) holding the zlib stream of the whole miMATRIX element,
+/// unpadded.
+mod matw {
+    pub const MI_INT8: u32 = 1;
+    pub const MI_INT32: u32 = 5;
+    pub const MI_UINT32: u32 = 6;
+    pub const MI_DOUBLE: u32 = 9;
+    pub const MI_MATRIX: u32 = 14;
+    pub const MI_COMPRESSED: u32 = 15;
+    pub const MX_DOUBLE_CLASS: u32 = 6;
+
+    pub fn header() -> Vec<u8> {
+        let mut h = format!(
+            "{:<116}",
+            "MATLAB 5.0 MAT-file, written by the servoid tests"
+        )
+        .into_bytes();
+        h.extend_from_slice(&[0u8; 8]);
+        h.extend_from_slice(&0x0100u16.to_le_bytes());
+        h.extend_from_slice(b"IM");
+        assert_eq!(h.len(), 128);
+        h
+    }
+
+    pub fn element(ty: u32, data: &[u8]) -> Vec<u8> {
+        let mut e = Vec::new();
+        if data.len() <= 4 && ty != MI_MATRIX {
+            e.extend_from_slice(&(((data.len() as u32) << 16) | ty).to_le_bytes());
+            e.extend_from_slice(data);
+            e.resize(8, 0);
+            return e;
+        }
+        e.extend_from_slice(&ty.to_le_bytes());
+        e.extend_from_slice(&(data.len() as u32).to_le_bytes());
+        e.extend_from_slice(data);
+        e.resize(8 + data.len().div_ceil(8) * 8, 0);
+        e
+    }
+
+    /// A rows x cols double variable, `values` column-major.
+    pub fn matrix(name: &str, rows: usize, cols: usize, values: &[f64]) -> Vec<u8> {
+        assert_eq!(values.len(), rows * cols);
+        let mut body = element(
+            MI_UINT32,
+            &[MX_DOUBLE_CLASS.to_le_bytes(), 0u32.to_le_bytes()].concat(),
+        );
+        body.extend(element(
+            MI_INT32,
+            &[(rows as i32).to_le_bytes(), (cols as i32).to_le_bytes()].concat(),
+        ));
+        body.extend(element(MI_INT8, name.as_bytes()));
+        let data: Vec<u8> = values.iter().flat_map(|v| v.to_le_bytes()).collect();
+        body.extend(element(MI_DOUBLE, &data));
+        element(MI_MATRIX, &body)
+    }
+
+    pub fn compressed(matrix: &[u8]) -> Vec<u8> {
+        use std::io::Write;
+        let mut z = flate2::write::ZlibEncoder::new(Vec::new(), flate2::Compression::default());
+        z.write_all(matrix).unwrap();
+        let z = z.finish().unwrap();
+        let mut e = MI_COMPRESSED.to_le_bytes().to_vec();
+        e.extend_from_slice(&(z.len() as u32).to_le_bytes());
+        e.extend(z);
+        e
+    }
+}
+
+/// Samples of a MAT test log: t at 1 kHz, u, x1 and f.
+fn mat_signals(n: usize) -> [Vec<f64>; 4] {
+    [
+        (0..n).map(|k| k as f64 * 1e-3).collect(),
+        lcg(11, n),
+        lcg(12, n),
+        lcg(13, n),
+    ]
+}
+
+fn mat_file(compress: bool, n: usize) -> Vec<u8> {
+    let [t, u, x, f] = mat_signals(n);
+    // One table `data` = [u x f] (n x 3), plus vectors t (1 x n), u (n x 1)
+    // and a wide table `sim` = [t; x] (2 x n) as Simulink's To File writes.
+    let data: Vec<f64> = [u.clone(), x.clone(), f.clone()].concat();
+    let wide: Vec<f64> = t.iter().zip(&x).flat_map(|(a, b)| [*a, *b]).collect();
+    let vars = [
+        matw::matrix("t", 1, n, &t),
+        matw::matrix("u", n, 1, &u),
+        matw::matrix("data", n, 3, &data),
+        matw::matrix("sim", 2, n, &wide),
+    ];
+    let mut file = matw::header();
+    for v in vars {
+        file.extend(if compress { matw::compressed(&v) } else { v });
+    }
+    file
+}
+
+fn mat_plan(path: &Path) -> LogPlan {
+    plan(
+        path,
+        LogFormat::Mat,
+        TimePlan::FromLog,
+        ch(name("u"), Unit::Meter, 1.0),
+        ch(name("data:1"), Unit::Meter, 1.0),
+        Some(ch(Column::Index(2), Unit::Newton, 1.0)),
+    )
+}
+
+#[test]
+fn mat_level5_vectors_tables_and_wide_tables() {
+    let dir = tempfile::tempdir().unwrap();
+    let n = 700;
+    let [_, u, x, f] = mat_signals(n);
+    for compress in [false, true] {
+        let path = write_file(dir.path(), "log.mat", &mat_file(compress, n));
+        // `data` is the only n x 3 table... but `sim` is 2-D too, so an index
+        // is ambiguous and the message says how to resolve it.
+        let msg = err(&mat_plan(&path));
+        assert_contains(
+            &msg,
+            &["log.mat", "force", "`data`", "`sim`", "\"variable:2\""],
+        );
+
+        let mut p = mat_plan(&path);
+        p.channels.force = Some(ch(name("data:2"), Unit::Kilonewton, 1.0));
+        let log = read_log(&p).unwrap();
+        assert_eq!(log.n_rows, n);
+        assert_relative_eq!(log.sample_rate_hz, 1000.0, max_relative = 1e-12);
+        assert_same_bits(&log.command_m, &u);
+        assert_same_bits(&log.displacement_m, &x);
+        for (got, raw) in log.force_n.as_ref().unwrap().iter().zip(&f) {
+            assert_relative_eq!(*got, raw * 1e3, max_relative = 1e-15);
+        }
+        // A wide table has its channels in rows.
+        p.channels.displacement = ch(name("sim:1"), Unit::Meter, 1.0);
+        p.channels.time = TimePlan::Column {
+            column: name("sim:0"),
+            to_s: 1.0,
+        };
+        let log = read_log(&p).unwrap();
+        assert_same_bits(&log.displacement_m, &x);
+        assert!(matches!(log.timing, Timing::Measured { .. }));
+    }
+}
+
+#[test]
+fn mat_index_addresses_the_only_table() {
+    let dir = tempfile::tempdir().unwrap();
+    let n = 300;
+    let [t, u, x, _] = mat_signals(n);
+    let mut file = matw::header();
+    file.extend(matw::matrix("time", n, 1, &t));
+    file.extend(matw::compressed(&matw::matrix(
+        "log",
+        n,
+        2,
+        &[u.clone(), x.clone()].concat(),
+    )));
+    let path = write_file(dir.path(), "idx.mat", &file);
+    let p = plan(
+        &path,
+        LogFormat::Mat,
+        TimePlan::FromLog,
+        ch(Column::Index(0), Unit::Meter, 1.0),
+        ch(Column::Index(1), Unit::Meter, 1.0),
+        None,
+    );
+    let log = read_log(&p).unwrap();
+    assert_same_bits(&log.command_m, &u);
+    assert_same_bits(&log.displacement_m, &x);
+
+    let mut p = p;
+    p.channels.displacement.column = Column::Index(2);
+    assert_contains(&err(&p), &["idx.mat", "`log:2`", "channels 0 to 1"]);
+    p.channels.displacement.column = name("x1");
+    assert_contains(
+        &err(&p),
+        &["idx.mat", "`x1`", "`time` (300x1)", "`log` (300x2)"],
+    );
+}
+
+#[test]
+fn mat_errors_name_the_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut v73 = b"MATLAB 7.3 MAT-file, Platform: GLNXA64".to_vec();
+    v73.resize(512, 0);
+    let path = write_file(dir.path(), "v73.mat", &v73);
+    assert_contains(&err(&mat_plan(&path)), &["v73.mat", "v7.3", "-v7"]);
+
+    let mut cut = mat_file(false, 50);
+    cut.truncate(cut.len() - 100);
+    let path = write_file(dir.path(), "cut.mat", &cut);
+    assert_contains(&err(&mat_plan(&path)), &["cut.mat", "cut short", "remain"]);
+
+    let path = write_file(dir.path(), "bare.mat", &matw::header());
+    assert_contains(
+        &err(&mat_plan(&path)),
+        &["bare.mat", "no data rows", "no variables"],
+    );
+
+    let mut file = matw::header();
+    file.extend(matw::matrix("u", 3, 1, &[1.0, 2.0, 3.0]));
+    file.extend(matw::matrix("data", 2, 2, &[1.0, 2.0, 3.0, 4.0]));
+    let path = write_file(dir.path(), "short.mat", &file);
+    let mut p = mat_plan(&path);
+    p.channels.force = None;
+    // No `t` or `time` for FromLog.
+    assert_contains(&err(&p), &["short.mat", "no vector variable `t` or `time`"]);
+    p.channels.time = TimePlan::SampleRate { hz: 10.0 };
+    // u has 3 samples, data:1 has 2.
+    assert_contains(&err(&p), &["short.mat", "command 3", "displacement 2"]);
+}
+
+// ------------------------------------------------------------ bad files
+
+#[test]
+fn empty_and_header_only_files_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = write_file(dir.path(), "empty.csv", b"");
+    assert_contains(
+        &err(&plan_by_name(&path, LogFormat::Csv)),
+        &["empty.csv", "empty"],
+    );
+    let path = write_file(dir.path(), "blank.txt", b"\r\n\n");
+    let msg = err(&daq_plan(&path));
+    assert_contains(&msg, &["blank.txt", "empty"]);
+
+    let path = write_file(dir.path(), "head.csv", b"t,u,x,f\n");
+    assert_contains(
+        &err(&plan_by_name(&path, LogFormat::Csv)),
+        &["head.csv", "no data rows", "header at line 1"],
+    );
+    let path = write_file(dir.path(), "comments.csv", b"# only\n# comments\n");
+    let mut p = plan_by_name(&path, LogFormat::Csv);
+    p.csv.comment_prefix = Some("#".into());
+    assert_contains(&err(&p), &["comments.csv", "no data rows"]);
+
+    let daq_head = "Header Size:  7\r\nVersion:  2\r\nSampling Interval:  0.001\r\nSampling Rate:  1000\r\nSample Count:  0\r\nDevice Serial Number:  0\r\nSample Number, Date/Time, CHANNEL0, CHANNEL1, CHANNEL2, Events\r\n";
+    let path = write_file(dir.path(), "head.txt", daq_head.as_bytes());
+    assert_contains(
+        &err(&daq_plan(&path)),
+        &["head.txt", "no data rows", "line 7"],
+    );
+
+    let path = dir.path().join("empty.parquet");
+    write_parquet(&path, &[("t", &[][..]), ("u", &[]), ("x", &[]), ("f", &[])]).unwrap();
+    assert_contains(
+        &err(&plan_by_name(&path, LogFormat::Parquet)),
+        &["empty.parquet", "no data rows"],
+    );
+}
+
+#[test]
+fn sha256_mismatch_names_both_hashes() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = write_file(dir.path(), "log.csv", b"t,u,x,f\n0,1,2,3\n1,1,2,3\n");
+    let mut p = plan_by_name(&path, LogFormat::Csv);
+    let actual = read_log(&p).unwrap().sha256;
+    let wrong = "0".repeat(64);
+    p.sha256 = Some(wrong.clone());
+    let msg = err(&p);
+    assert_contains(&msg, &["log.csv", &wrong, &actual]);
+    p.sha256 = Some(actual.to_ascii_uppercase());
+    assert!(read_log(&p).is_ok());
+    // The digest itself: SHA-256 of "abc" (FIPS 180-2, appendix B.1).
+    assert_eq!(
+        sha256_hex(b"abc"),
+        "ba7816bf8f01cfea414140de5dae2223b00361a396177a9cb410ff61f20015ad"
+    );
+}
+
+#[test]
+fn csv_bad_values_name_line_and_column() {
+    let dir = tempfile::tempdir().unwrap();
+    // 1500 rows: the bad value lies beyond polars' schema-inference window.
+    let mut text = String::from("t,u,x,f\n");
+    for k in 0..1500 {
+        let x = if k == 1200 {
+            "abc".to_string()
+        } else {
+            format!("{}", k as f64 * 0.5)
+        };
+        text.push_str(&format!("{},{},{x},1\n", k as f64 * 1e-3, (k % 7) as f64));
+    }
+    let path = write_file(dir.path(), "bad.csv", text.as_bytes());
+    // Row k sits on line k + 2.
+    assert_contains(
+        &err(&plan_by_name(&path, LogFormat::Csv)),
+        &["bad.csv", "line 1202", "\"abc\"", "displacement", "`x`"],
+    );
+
+    let path = write_file(
+        dir.path(),
+        "hole.csv",
+        b"t,u,x,f\n0,1,2,3\n1,,2,3\n2,1,2,3\n",
+    );
+    assert_contains(
+        &err(&plan_by_name(&path, LogFormat::Csv)),
+        &[
+            "hole.csv",
+            "line 3",
+            "missing value",
+            "command",
+            "field 1 is empty",
+        ],
+    );
+
+    let path = write_file(dir.path(), "cols.csv", b"t,u,x\n0,1,2\n");
+    assert_contains(
+        &err(&plan_by_name(&path, LogFormat::Csv)),
+        &["cols.csv", "force", "`f`", "`t`, `u`, `x`"],
+    );
+}
+
+#[test]
+fn nan_and_infinite_values_name_channel_and_place() {
+    let dir = tempfile::tempdir().unwrap();
+    // Comment and blank lines before the bad row must be counted.
+    let text = "t,u,x,f\n# c\n0,1,2,3\n\n1,1,2,3\n# c\n2,1,NaN,3\n3,1,2,3\n";
+    let path = write_file(dir.path(), "nan.csv", text.as_bytes());
+    let mut p = plan_by_name(&path, LogFormat::Csv);
+    p.csv.comment_prefix = Some("#".into());
+    assert_contains(
+        &err(&p),
+        &["nan.csv", "line 7", "displacement", "`x`", "NaN"],
+    );
+
+    let path = dir.path().join("inf.parquet");
+    let f = [3.0, 3.0, f64::INFINITY, 3.0];
+    write_parquet(
+        &path,
+        &[
+            ("t", &[0.0, 1.0, 2.0, 3.0][..]),
+            ("u", &[1.0; 4]),
+            ("x", &[2.0; 4]),
+            ("f", &f),
+        ],
+    )
+    .unwrap();
+    assert_contains(
+        &err(&plan_by_name(&path, LogFormat::Parquet)),
+        &["inf.parquet", "row 3", "force", "`f`", "inf"],
+    );
+}
+
+#[test]
+fn time_that_does_not_increase_names_the_row() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = write_file(
+        dir.path(),
+        "back.csv",
+        b"t,u,x,f\n0,1,2,3\n1,1,2,3\n3,1,2,3\n2,1,2,3\n",
+    );
+    assert_contains(
+        &err(&plan_by_name(&path, LogFormat::Csv)),
+        &["back.csv", "line 5", "2 s after 3 s"],
+    );
+    let path = write_file(
+        dir.path(),
+        "same.csv",
+        b"t,u,x,f\n0,1,2,3\n1,1,2,3\n1,1,2,3\n",
+    );
+    assert_contains(
+        &err(&plan_by_name(&path, LogFormat::Csv)),
+        &["same.csv", "line 4"],
+    );
+}
+
+/// A CSV log of `n` samples at 1 kHz with time stamps perturbed by `jitter`.
+fn jittered(dir: &Path, n: usize, jitter: impl Fn(usize) -> f64) -> LogPlan {
+    let t: Vec<f64> = (0..n).map(|k| k as f64 * 1e-3 + jitter(k)).collect();
+    let u = lcg(5, n);
+    let path = dir.join("jitter.csv");
+    write_csv(&path, &[("t", &t[..]), ("u", &u), ("x", &u), ("f", &u)]).unwrap();
+    plan_by_name(&path, LogFormat::Csv)
+}
+
+#[test]
+fn jitter_above_tolerance_is_an_error_and_below_a_warning() {
+    let dir = tempfile::tempdir().unwrap();
+    let n = 2000;
+    // From sample 1000 (line 1002) on, every stamp is 5e-5 s late: one
+    // interval is 5e-5 s (5 % of dt) too long. With d = 5e-5 and m = 1999
+    // intervals the mean interval is 1e-3 + d/m, that interval deviates by
+    // d (m-1)/m and the others by -d/m, so rms = d sqrt(m-1)/m.
+    let p = jittered(dir.path(), n, |k| if k >= 1000 { 5e-5 } else { 0.0 });
+    let log = read_log(&p).unwrap();
+    let Timing::Measured {
+        jitter_max_s,
+        worst_at,
+        mean_dt_s,
+        jitter_rms_s,
+    } = log.timing
+    else {
+        panic!("a time column gives measured timing")
+    };
+    let (d, m) = (5e-5, 1999.0_f64);
+    assert_relative_eq!(mean_dt_s, 1e-3 + d / m, max_relative = 1e-9);
+    assert_relative_eq!(jitter_max_s, d * (m - 1.0) / m, max_relative = 1e-6);
+    assert_relative_eq!(jitter_rms_s, d * (m - 1.0).sqrt() / m, max_relative = 1e-6);
+    assert_eq!(worst_at, At::Line(1002));
+    let msg = check_log(&log, &NEEDS).unwrap_err().to_string();
+    assert_contains(
+        &msg,
+        &["jitter.csv", "line 1002", "4.997e-5", "tolerance 1e-2"],
+    );
+
+    let loose = Needs {
+        max_jitter_fraction: 0.1,
+        ..NEEDS
+    };
+    let warnings = check_log(&log, &loose).unwrap();
+    assert_eq!(warnings.len(), 1);
+    assert_contains(&warnings[0], &["jitter.csv", "uneven", "line 1002"]);
+
+    // Time stamps k * 1e-3 printed shortest-round-trip carry only rounding.
+    let p = jittered(dir.path(), n, |_| 0.0);
+    assert!(
+        check_log(&read_log(&p).unwrap(), &NEEDS)
+            .unwrap()
+            .is_empty()
+    );
+}
+
+#[test]
+fn clipped_channel_names_channel_level_and_fraction() {
+    let dir = tempfile::tempdir().unwrap();
+    let n = 2000;
+    let t: Vec<f64> = (0..n).map(|k| k as f64 * 1e-3).collect();
+    let u: Vec<f64> = (0..n).map(|k| (k as f64 * 0.05).sin()).collect();
+    // x saturates at 0.5 wherever the sine exceeds it: a third of the time
+    // (sin > 0.5 on (pi/6, 5 pi/6) of each period).
+    let x: Vec<f64> = u.iter().map(|v| v.min(0.5)).collect();
+    let path = dir.path().join("clip.csv");
+    write_csv(&path, &[("t", &t[..]), ("u", &u), ("x", &x), ("f", &u)]).unwrap();
+    let log = read_log(&plan_by_name(&path, LogFormat::Csv)).unwrap();
+    let msg = check_log(&log, &NEEDS).unwrap_err().to_string();
+    let at_rail = x.iter().filter(|v| **v >= 0.5).count() as f64 / n as f64;
+    assert_relative_eq!(at_rail, 1.0 / 3.0, epsilon = 0.01);
+    assert_contains(
+        &msg,
+        &[
+            "clip.csv",
+            "displacement",
+            "maximum 5e-1 m",
+            &format!("{:.2} %", 100.0 * at_rail),
+        ],
+    );
+}
+
+#[test]
+fn too_short_for_the_frf_settings() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = jittered(dir.path(), 500, |_| 0.0);
+    let msg = check_log(&read_log(&p).unwrap(), &NEEDS)
+        .unwrap_err()
+        .to_string();
+    assert_contains(&msg, &["jitter.csv", "500 samples", "at least 1024"]);
+}
+
+const DAQ_HEAD: &str = "Header Size:  7\r\nVersion:  2\r\nSampling Interval:  0.001\r\nSampling Rate:  1000\r\nSample Count:  4\r\nDevice Serial Number:  0\r\nSample Number, Date/Time, CHANNEL0, CHANNEL1, CHANNEL2, Events\r\n";
+
+fn daq_line(k: usize, c2: &str) -> String {
+    format!("{k:>10},   06/29/2022 04:05:36.674 PM, -0.0209, -0.0166, {c2}\r\n")
+}
+
+#[test]
+fn daq_malformed_lines_are_named() {
+    let dir = tempfile::tempdir().unwrap();
+    let body = |lines: &[String]| format!("{DAQ_HEAD}{}", lines.concat());
+    let ok = [
+        daq_line(1, "0.1, DAQ Start"),
+        daq_line(2, "0.2"),
+        daq_line(3, "0.3"),
+        daq_line(4, "0.4, DAQ Pause, DAQ Stop"),
+    ];
+    let path = write_file(dir.path(), "ok.txt", body(&ok).as_bytes());
+    let log = read_log(&daq_plan(&path)).unwrap();
+    assert_eq!(log.n_rows, 4);
+    assert_relative_eq!(log.command_m[3], 0.4 * 1e-2, max_relative = 1e-15);
+
+    let mut bad = ok.clone();
+    bad[2] = daq_line(3, "0.3x");
+    let path = write_file(dir.path(), "bad.txt", body(&bad).as_bytes());
+    assert_contains(
+        &err(&daq_plan(&path)),
+        &["bad.txt", "line 10", "\"0.3x\"", "command", "`CHANNEL2`"],
+    );
+
+    let mut gap = ok.clone();
+    gap[2] = daq_line(5, "0.3");
+    let path = write_file(dir.path(), "gap.txt", body(&gap).as_bytes());
+    assert_contains(
+        &err(&daq_plan(&path)),
+        &["gap.txt", "line 10", "5 follows 2"],
+    );
+
+    let mut short = ok.clone();
+    short[1] = "         2,   06/29/2022 04:05:36.675 PM, -0.0221\r\n".into();
+    let path = write_file(dir.path(), "short.txt", body(&short).as_bytes());
+    assert_contains(
+        &err(&daq_plan(&path)),
+        &[
+            "short.txt",
+            "line 9",
+            "missing value",
+            "command",
+            "3 fields",
+        ],
+    );
+
+    let mut nan = ok.clone();
+    nan[3] = daq_line(4, "nan");
+    let path = write_file(dir.path(), "nan.txt", body(&nan).as_bytes());
+    assert_contains(
+        &err(&daq_plan(&path)),
+        &["nan.txt", "line 11", "command", "NaN"],
+    );
+
+    let mut p = daq_plan(&path);
+    p.channels.command.column = name("CHANNEL9");
+    assert_contains(
+        &err(&p),
+        &["nan.txt", "`CHANNEL9`", "`CHANNEL2`", "`Events`"],
+    );
+    p.channels.command.column = name("Date/Time");
+    assert_contains(&err(&p), &["nan.txt", "`Date/Time`", "text"]);
+
+    // A header without a rate: FromLog cannot work.
+    let norate = body(&ok).replace("Sampling Interval:  0.001\r\nSampling Rate:  1000\r\n", "");
+    let path = write_file(dir.path(), "norate.txt", norate.as_bytes());
+    assert_contains(
+        &err(&daq_plan(&path)),
+        &["norate.txt", "Sampling Rate", "sample_rate_hz"],
+    );
+}
+
+#[test]
+fn daq_header_disagreements_are_warnings() {
+    let dir = tempfile::tempdir().unwrap();
+    let text = DAQ_HEAD
+        .replace("Sample Count:  4", "Sample Count:  6")
+        .to_string()
+        + &daq_line(1, "0.1")
+        + &daq_line(2, "0.2")
+        + "\r\n"
+        + &daq_line(3, "0.3")
+        + &daq_line(4, "nan");
+    let path = write_file(dir.path(), "warn.txt", text.as_bytes());
+    // The blank line 10 is skipped and counted: the NaN is on line 12.
+    assert_contains(&err(&daq_plan(&path)), &["warn.txt", "line 12", "NaN"]);
+    let text = text.replace("nan", "0.4");
+    let path = write_file(dir.path(), "warn.txt", text.as_bytes());
+    let log = read_log(&daq_plan(&path)).unwrap();
+    assert_eq!(log.warnings.len(), 1);
+    assert_contains(
+        &log.warnings[0],
+        &["warn.txt", "Sample Count: 6", "4 data lines", "truncated"],
+    );
+}
+
+// ------------------------------------------------------- preparation
+
+fn log_with_command(u: Vec<f64>, fs: f64) -> Log {
+    let n = u.len();
+    Log {
+        path: "mem.csv".into(),
+        sha256: String::new(),
+        format: LogFormat::Csv,
+        sample_rate_hz: fs,
+        t0_s: 10.0,
+        displacement_m: (0..n).map(|k| k as f64).collect(),
+        force_n: Some((0..n).map(|k| -(k as f64)).collect()),
+        command_m: u,
+        n_rows: n,
+        timing: Timing::Exact { dt_s: 1.0 / fs },
+        warnings: Vec::new(),
+    }
+}
+
+#[test]
+fn trim_keeps_the_excitation_and_half_a_second_around_it() {
+    // 1 kHz; rest (0) for 2 s, a +-1 square wave from sample 2000 to 4999,
+    // rest again to 7 s: excited samples 2000..=4999, margin 500 samples.
+    let u: Vec<f64> = (0..7000)
+        .map(|k| {
+            if (2000..5000).contains(&k) {
+                if k % 2 == 0 { 1.0 } else { -1.0 }
+            } else {
+                0.0
+            }
+        })
+        .collect();
+    let log = log_with_command(u, 1000.0);
+    let cut = trim_to_excitation(&log, 0.05);
+    assert_eq!(cut.n_rows, 4000);
+    assert_eq!(cut.command_m.len(), 4000);
+    assert_relative_eq!(cut.t0_s, 10.0 + 1.5, max_relative = 1e-12);
+    assert_relative_eq!(cut.displacement_m[0], 1500.0);
+    assert_relative_eq!(cut.force_n.as_ref().unwrap()[3999], -5499.0);
+    assert!(cut.warnings.is_empty());
+
+    // Excitation near the ends: the margin is clamped to the log.
+    let u: Vec<f64> = (0..1000).map(|k| if k < 900 { 1.0 } else { 0.0 }).collect();
+    // Rest level = mean of the first 0.1 s = 1; excited where |u - 1| > 0.05.
+    let cut = trim_to_excitation(&log_with_command(u, 1000.0), 0.05);
+    assert_eq!(cut.n_rows, 1000 - 400);
+    assert_relative_eq!(cut.t0_s, 10.4, max_relative = 1e-12);
+
+    let flat = trim_to_excitation(&log_with_command(vec![0.25; 100], 1000.0), 0.05);
+    assert_eq!(flat.n_rows, 100);
+    assert_contains(&flat.warnings[0], &["mem.csv", "never departs"]);
+}
+
+#[test]
+fn mean_and_trend_removal() {
+    let mut x = [1.0, 2.0, 3.0, 6.0];
+    remove_mean(&mut x);
+    for (a, b) in x.iter().zip([-2.0, -1.0, 0.0, 3.0]) {
+        assert_relative_eq!(*a, b);
+    }
+    // A line plus a part orthogonal to both 1 and k (a quadratic minus its
+    // own least-squares line, computed by hand for k = 0..4: k^2 - 4k + 2
+    // has sum 0 and sum k (.) = 0), which must survive.
+    let q = [2.0, -1.0, -2.0, -1.0, 2.0];
+    let mut y: Vec<f64> = (0..5).map(|k| 3.0 - 0.7 * k as f64 + q[k]).collect();
+    remove_trend(&mut y);
+    for (a, b) in y.iter().zip(q) {
+        assert_relative_eq!(*a, b, epsilon = 1e-12);
+    }
+    let mut one = [5.0];
+    remove_trend(&mut one);
+    assert_relative_eq!(one[0], 0.0);
+}

@@ -1,0 +1,133 @@
+//! Writing logs: named f64 columns as CSV or Parquet, as the simulator writes
+//! synthetic lab logs for `ingest` to read back. Both writers give the same
+//! bytes for the same columns, and write atomically (temporary sibling, then
+//! rename).
+
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+use polars::prelude::{Column, DataFrame, ParquetCompression, ParquetWriter};
+
+use super::{WriteError, write_atomic};
+
+/// Why a log could not be written.
+#[derive(Debug, thiserror::Error)]
+pub enum LogWriteError {
+    #[error(transparent)]
+    Write(#[from] WriteError),
+    #[error("{}: no columns to write", path.display())]
+    NoColumns { path: PathBuf },
+    #[error("{}: column `{name}` has {len} values but `{first}` has {first_len}; columns must be equally long", path.display())]
+    Ragged {
+        path: PathBuf,
+        name: String,
+        len: usize,
+        first: String,
+        first_len: usize,
+    },
+    #[error("{}: column name {name:?} must be non-empty, unique and free of commas, quotes and line breaks", path.display())]
+    BadName { path: PathBuf, name: String },
+    #[error("{}: Parquet encoding failed: {message}", path.display())]
+    Parquet { path: PathBuf, message: String },
+}
+
+/// Write `columns` as CSV: a header line of the names, then one line per
+/// row, fields separated by `,`, lines ended by `\n`. Each value is printed
+/// in the shortest form that reads back to the same f64 (plain decimals for
+/// magnitudes in \[1e-5, 1e16), else exponent form; `NaN`, `inf`, `-inf` for
+/// non-finite values).
+pub fn write_csv(path: &Path, columns: &[(&str, &[f64])]) -> Result<(), LogWriteError> {
+    let bytes = csv_bytes(path, columns)?;
+    write_atomic(path, &bytes)?;
+    Ok(())
+}
+
+/// The bytes [`write_csv`] writes (`path` only names the file in errors).
+pub fn csv_bytes(path: &Path, columns: &[(&str, &[f64])]) -> Result<Vec<u8>, LogWriteError> {
+    let n = check(path, columns)?;
+    // About 20 bytes per value is typical of shortest round-trip output.
+    let mut s = String::with_capacity(20 * n * columns.len() + 64);
+    let names: Vec<&str> = columns.iter().map(|(name, _)| *name).collect();
+    s.push_str(&names.join(","));
+    s.push('\n');
+    for row in 0..n {
+        for (j, (_, values)) in columns.iter().enumerate() {
+            if j > 0 {
+                s.push(',');
+            }
+            push_shortest(&mut s, values[row]);
+        }
+        s.push('\n');
+    }
+    Ok(s.into_bytes())
+}
+
+/// Append `x` in the shortest decimal form that parses back to `x`. Rust's
+/// `Display` and `LowerExp` for f64 both print the shortest round-trip digits;
+/// `Display` never uses an exponent, so tiny and huge values take `LowerExp`.
+fn push_shortest(s: &mut String, x: f64) {
+    let a = x.abs();
+    if a == 0.0 || !a.is_finite() || (1e-5..1e16).contains(&a) {
+        let _ = write!(s, "{x}");
+    } else {
+        let _ = write!(s, "{x:e}");
+    }
+}
+
+/// Write `columns` as a Parquet file of f64 columns (Snappy-compressed pages,
+/// one row group per 512^2 rows as polars chooses). The same columns give the
+/// same bytes: the writer stamps no time or host into the file.
+pub fn write_parquet(path: &Path, columns: &[(&str, &[f64])]) -> Result<(), LogWriteError> {
+    let bytes = parquet_bytes(path, columns)?;
+    write_atomic(path, &bytes)?;
+    Ok(())
+}
+
+/// The bytes [`write_parquet`] writes (`path` only names the file in errors).
+pub fn parquet_bytes(path: &Path, columns: &[(&str, &[f64])]) -> Result<Vec<u8>, LogWriteError> {
+    let n = check(path, columns)?;
+    let parquet = |e: polars::prelude::PolarsError| LogWriteError::Parquet {
+        path: path.to_path_buf(),
+        message: e.to_string(),
+    };
+    let cols: Vec<Column> = columns
+        .iter()
+        .map(|(name, values)| Column::new((*name).into(), *values))
+        .collect();
+    let mut df = DataFrame::new(n, cols).map_err(parquet)?;
+    let mut buf = Vec::new();
+    ParquetWriter::new(&mut buf)
+        .with_compression(ParquetCompression::Snappy)
+        .finish(&mut df)
+        .map_err(parquet)?;
+    Ok(buf)
+}
+
+/// Common checks; returns the row count.
+fn check(path: &Path, columns: &[(&str, &[f64])]) -> Result<usize, LogWriteError> {
+    let Some((first, first_values)) = columns.first() else {
+        return Err(LogWriteError::NoColumns {
+            path: path.to_path_buf(),
+        });
+    };
+    for (j, (name, values)) in columns.iter().enumerate() {
+        let bad_char = name.contains([',', '"', '\n', '\r']);
+        let duplicate = columns[..j].iter().any(|(other, _)| other == name);
+        if name.is_empty() || bad_char || duplicate {
+            return Err(LogWriteError::BadName {
+                path: path.to_path_buf(),
+                name: name.to_string(),
+            });
+        }
+        if values.len() != first_values.len() {
+            return Err(LogWriteError::Ragged {
+                path: path.to_path_buf(),
+                name: name.to_string(),
+                len: values.len(),
+                first: first.to_string(),
+                first_len: first_values.len(),
+            });
+        }
+    }
+    Ok(first_values.len())
+}
