@@ -1,10 +1,12 @@
-//! Delimited text logs, parsed by polars.
+//! Delimited text logs, parsed by polars, with a line parser behind it.
 //!
-//! polars does the fast parse; this file finds the header itself (to resolve
-//! columns and list the available ones), forces the wanted columns to f64 and,
-//! when polars refuses a value, rescans the lines to name the line and column
-//! at fault. Line numbers count every line of the file, 1-based, with the
-//! lines polars skips: the first `skip_lines`, comment lines and blank lines.
+//! This file finds the header itself (to resolve columns by name or index and
+//! list the available ones), then has polars parse the wanted columns as f64.
+//! When polars refuses the file (spaces around values, a value that is not a
+//! number), a line-by-line parser reads the wanted fields trimmed, and either
+//! copes or names the line and column at fault. Both skip the first
+//! `skip_lines` lines, comment lines and blank lines. Line numbers count every
+//! line of the file, 1-based.
 
 use std::io::Cursor;
 use std::path::Path;
@@ -91,8 +93,8 @@ fn by_polars(
         .map(|&i| Field::new(polars_name(i).into(), DataType::Float64))
         .collect();
     let mut parse = CsvParseOptions::default().with_separator(opts.sep);
-    if let Some(p) = &plan.csv.comment_prefix {
-        parse = parse.with_comment_prefix(Some(p.as_str()));
+    if let Some(p) = opts.comment {
+        parse = parse.with_comment_prefix(Some(p));
     }
     // polars reads a blank line as a row of nulls; blank lines are skipped
     // here, as in the other text format, by handing polars a copy without
@@ -173,7 +175,7 @@ fn without_blank_lines(bytes: &[u8], skip_lines: usize) -> Option<Vec<u8>> {
 struct Layout<'p> {
     sep: u8,
     skip_lines: usize,
-    comment: Option<&'p [u8]>,
+    comment: Option<&'p str>,
 }
 
 impl<'p> Layout<'p> {
@@ -191,12 +193,7 @@ impl<'p> Layout<'p> {
         Ok(Layout {
             sep: d[0],
             skip_lines: plan.csv.skip_lines,
-            comment: plan
-                .csv
-                .comment_prefix
-                .as_deref()
-                .filter(|p| !p.is_empty())
-                .map(str::as_bytes),
+            comment: plan.csv.comment_prefix.as_deref().filter(|p| !p.is_empty()),
         })
     }
 
@@ -205,7 +202,7 @@ impl<'p> Layout<'p> {
         &self,
         bytes: &'b [u8],
     ) -> impl Iterator<Item = (usize, &'b [u8])> + use<'b, 'p> {
-        let comment = self.comment;
+        let comment = self.comment.map(str::as_bytes);
         bytes
             .split(|&b| b == b'\n')
             .enumerate()
@@ -243,7 +240,7 @@ fn resolve(
     match (w.column, names) {
         (Column::Name(n), Some(names)) => {
             let hits: Vec<usize> = (0..names.len())
-                .filter(|&i| names[i].trim() == n.trim())
+                .filter(|&i| unquote(names[i].trim()) == n.trim())
                 .collect();
             match hits.as_slice() {
                 [i] => Ok(*i),
