@@ -34,9 +34,26 @@ pub enum Command {
         #[arg(long, short)]
         quiet: bool,
     },
-    /// Check a manifest and report every problem, without running it.
+    /// Simulate a campaign: lab logs, truth.json and an analysis manifest.
+    Simulate {
+        /// The simulation manifest (TOML, or JSON with a .json extension).
+        manifest: PathBuf,
+        /// Output folder (default: `reports/<simulation name>`).
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// Then run the generated campaign into the same folder.
+        #[arg(long)]
+        run: bool,
+        /// Worker threads (default: all cores); the output does not depend on it.
+        #[arg(long, short)]
+        jobs: Option<usize>,
+        /// Print nothing but errors.
+        #[arg(long, short)]
+        quiet: bool,
+    },
+    /// Check a manifest (campaign or simulation) and report every problem, without running it.
     Check {
-        /// The campaign manifest.
+        /// The manifest.
         manifest: PathBuf,
     },
     /// Write the JSON Schemas of the manifest and of results.json.
@@ -72,21 +89,37 @@ fn dispatch(command: Command) -> u8 {
             jobs,
             quiet,
         } => cmd_run(&manifest, out, jobs, quiet),
-        Command::Check { manifest } => match manifest::load(&manifest) {
-            Ok(c) => {
-                println!(
-                    "{}: ok (campaign `{}`, {} runs)",
-                    manifest.display(),
-                    c.name,
-                    c.runs.len()
-                );
-                EXIT_OK
+        Command::Simulate {
+            manifest,
+            out,
+            run,
+            jobs,
+            quiet,
+        } => cmd_simulate(&manifest, out, run, jobs, quiet),
+        Command::Check { manifest } => {
+            let checked = if is_simulation(&manifest) {
+                manifest::simulation::load_simulation(&manifest).map(|p| {
+                    format!(
+                        "simulation `{}`, {} runs",
+                        p.manifest.simulation.name,
+                        p.runs.len()
+                    )
+                })
+            } else {
+                manifest::load(&manifest)
+                    .map(|c| format!("campaign `{}`, {} runs", c.name, c.runs.len()))
+            };
+            match checked {
+                Ok(what) => {
+                    println!("{}: ok ({what})", manifest.display());
+                    EXIT_OK
+                }
+                Err(e) => {
+                    eprintln!("error: {e}");
+                    EXIT_USAGE
+                }
             }
-            Err(e) => {
-                eprintln!("error: {e}");
-                EXIT_USAGE
-            }
-        },
+        }
         Command::Schema { out_dir } => {
             for (name, value) in schema::all() {
                 let path = out_dir.join(name);
@@ -101,6 +134,79 @@ fn dispatch(command: Command) -> u8 {
     }
 }
 
+/// Whether a manifest is a simulation manifest (it has a `simulation` table).
+fn is_simulation(path: &Path) -> bool {
+    let Ok(text) = std::fs::read_to_string(path) else {
+        return false;
+    };
+    let is_json = path
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("json"));
+    if is_json {
+        serde_json::from_str::<serde_json::Value>(&text)
+            .ok()
+            .is_some_and(|v| v.get("simulation").is_some())
+    } else {
+        toml::from_str::<toml::Table>(&text)
+            .ok()
+            .is_some_and(|t| t.contains_key("simulation"))
+    }
+}
+
+fn pool(jobs: Option<usize>) -> Result<rayon::ThreadPool, u8> {
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(jobs.unwrap_or(0))
+        .build()
+        .map_err(|e| {
+            eprintln!("error: cannot start worker threads: {e}");
+            EXIT_FAILED
+        })
+}
+
+fn cmd_simulate(
+    manifest_path: &Path,
+    out: Option<PathBuf>,
+    then_run: bool,
+    jobs: Option<usize>,
+    quiet: bool,
+) -> u8 {
+    let plan = match manifest::simulation::load_simulation(manifest_path) {
+        Ok(p) => p,
+        Err(e) => {
+            eprintln!("error: {e}");
+            return EXIT_USAGE;
+        }
+    };
+    let out_dir =
+        out.unwrap_or_else(|| PathBuf::from("reports").join(&plan.manifest.simulation.name));
+    let workers = match pool(jobs) {
+        Ok(p) => p,
+        Err(code) => return code,
+    };
+    let simulated = match workers.install(|| run::simulate::simulate_campaign(&plan, &out_dir)) {
+        Ok(s) => s,
+        Err(e) => {
+            eprintln!("error: {e}");
+            return EXIT_FAILED;
+        }
+    };
+    if !quiet {
+        println!(
+            "simulated {} runs of `{}` (SYNTHETIC logs, seed {})",
+            simulated.logs.len(),
+            plan.manifest.simulation.name,
+            plan.manifest.simulation.seed
+        );
+        println!("wrote {}", simulated.truth.display());
+        println!("wrote {}", simulated.manifest.display());
+    }
+    if then_run {
+        cmd_run(&simulated.manifest, Some(out_dir), jobs, quiet)
+    } else {
+        EXIT_OK
+    }
+}
+
 fn cmd_run(manifest_path: &Path, out: Option<PathBuf>, jobs: Option<usize>, quiet: bool) -> u8 {
     let campaign = match manifest::load(manifest_path) {
         Ok(c) => c,
@@ -110,27 +216,26 @@ fn cmd_run(manifest_path: &Path, out: Option<PathBuf>, jobs: Option<usize>, quie
         }
     };
     let out_dir = out.unwrap_or_else(|| PathBuf::from("reports").join(&campaign.name));
-    let pool = match rayon::ThreadPoolBuilder::new()
-        .num_threads(jobs.unwrap_or(0))
-        .build()
-    {
+    let workers = match pool(jobs) {
         Ok(p) => p,
-        Err(e) => {
-            eprintln!("error: cannot start worker threads: {e}");
-            return EXIT_FAILED;
-        }
+        Err(code) => return code,
     };
-    let results = pool.install(|| run::analyse(&campaign));
-    let written = report::write_results(&results, &out_dir).and_then(|r| {
-        Ok((
-            r,
-            report::write_page(
-                &results,
-                &[],
+    let (written, results) = workers.install(|| {
+        let mut analysis = run::analyse_full(&campaign);
+        let specs = run::figures::build(&analysis, &campaign);
+        let written = report::write_figures(&specs, &out_dir).and_then(|(figures, warnings)| {
+            analysis.results.warnings.extend(warnings);
+            let results = &analysis.results;
+            let json = report::write_results(results, &out_dir)?;
+            let page = report::write_page(
+                results,
+                &figures,
                 results.manifest.campaign.synthetic.as_deref(),
                 &out_dir,
-            )?,
-        ))
+            )?;
+            Ok((json, page))
+        });
+        (written, analysis.results)
     });
     let (path, page) = match written {
         Ok(p) => p,

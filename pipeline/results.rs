@@ -189,6 +189,8 @@ pub struct RunResult {
     pub tf: Option<TfResult>,
     /// f/u predicted by the model (Eq. 45), for runs with a specimen.
     pub force_tf: Option<TfResult>,
+    /// How the transfer function was fitted to the log, when it was.
+    pub fit: Option<FitSummary>,
     /// Measured vs simulated displacement (Eqs. 47-48), when the run has a log.
     pub validation: Option<ValidationMetrics>,
     /// The log this run read, when it has one.
@@ -206,11 +208,32 @@ pub struct LogInfo {
     pub duration_s: f64,
 }
 
-/// Normalised errors of the simulated displacement (Eqs. 47-48) [%].
+pub use crate::run::timedomain::{ValidationMetrics, WindowErrors};
+
+/// A transfer-function fit to a run's FRF.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
-pub struct ValidationMetrics {
-    pub nrmse_pct: f64,
-    pub nae_pct: f64,
+pub struct FitSummary {
+    /// 100 (1 - ||h - h_model|| / ||h - mean(h)||) over the fitted bins.
+    pub fit_percent: f64,
+    pub n_bins: usize,
+    pub band_hz: [f64; 2],
+    /// Coherence over the fitted bins: mean and lowest.
+    pub coherence_mean: f64,
+    pub coherence_min: f64,
+    /// Weighted residual per degree of freedom; about 1 for a right model
+    /// with honest FRF variances.
+    pub reduced_chi2: f64,
+    pub iterations: u64,
+    /// The solver's termination reason (argmin), verbatim.
+    pub termination: String,
+    pub converged: bool,
+    pub stable: bool,
+    pub param_names: Vec<String>,
+    pub params: Vec<f64>,
+    pub std: Vec<f64>,
+    /// Welch segments averaged, and the bin spacing (Hz).
+    pub frf_averages: usize,
+    pub frf_resolution_hz: f64,
 }
 
 /// The controllable canonical form of one run (Eqs. 34-35, signs of MODEL.md).

@@ -440,6 +440,24 @@ pub fn load_simulation_str(text: &str, path: &Path) -> Result<SimulationPlan, Ma
             check_excitation(e, &p.key("excitation"), fs, &mut bad);
         }
         let exc = run.excitation.clone().or_else(|| excitation.clone());
+        // The true plant must be stable: Eq. 10 at this P gain with the
+        // specimen and any unmodelled dynamics (eigenvalues, or those of the
+        // linearisation at rest).
+        if let (Some(spec), Some(r)) = (&spec, &rig)
+            && r.parameters.is_physical()
+        {
+            let plant = crate::simulate::plant::PlantSpec {
+                rig: r.parameters.at_p_gain(run.p_gain),
+                specimen: *spec,
+                unmodelled: unmodelled(r.unmodelled.as_ref()),
+            };
+            if let Err(e) = crate::simulate::plant::validate(&plant) {
+                bad(
+                    p.clone(),
+                    format!("the true plant of this run cannot be simulated: {e}"),
+                );
+            }
+        }
         if let (Some(spec), Some(exc)) = (spec, exc) {
             run_plans.push(SimRunPlan {
                 id: run.id.clone(),
@@ -480,6 +498,23 @@ pub fn load_simulation_str(text: &str, path: &Path) -> Result<SimulationPlan, Ma
         })
     })();
     doc.finish(result)
+}
+
+/// The simulator's form of the unmodelled dynamics.
+pub fn unmodelled(u: Option<&UnmodelledSpec>) -> crate::simulate::plant::Unmodelled {
+    let Some(u) = u else {
+        return crate::simulate::plant::Unmodelled::default();
+    };
+    crate::simulate::plant::Unmodelled {
+        valve_mode: u
+            .valve_mode
+            .as_ref()
+            .map(|v| crate::simulate::plant::ValveMode {
+                natural_frequency_hz: v.natural_frequency_hz,
+                damping_ratio: v.damping_ratio,
+            }),
+        piston_mass_kg: u.piston_mass_kg,
+    }
 }
 
 fn check_excitation(

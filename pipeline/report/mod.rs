@@ -26,6 +26,51 @@ pub enum WriteError {
     },
 }
 
+/// One figure to draw, with what the page says of it.
+#[derive(Debug, Clone)]
+pub struct FigureSpec {
+    /// File stem under `figures/` and the anchor on the page.
+    pub id: String,
+    pub title: String,
+    pub caption: String,
+    pub figure: figures::Figure,
+    pub size: (u32, u32),
+}
+
+/// Render every figure (in parallel; bytes do not depend on the thread
+/// count) and write `figures/<id>.png` and `.svg` into `out_dir`. A figure
+/// that cannot be drawn is reported in the returned warnings and left out;
+/// it never stops the report.
+pub fn write_figures(
+    specs: &[FigureSpec],
+    out_dir: &Path,
+) -> Result<(Vec<html::PageFigure>, Vec<String>), WriteError> {
+    let jobs: Vec<(figures::Figure, (u32, u32))> =
+        specs.iter().map(|s| (s.figure.clone(), s.size)).collect();
+    let rendered = figures::render_many(&jobs);
+    let mut page = Vec::new();
+    let mut warnings = Vec::new();
+    for (spec, r) in specs.iter().zip(rendered) {
+        match r {
+            Ok(r) => {
+                let png = out_dir.join("figures").join(format!("{}.png", spec.id));
+                let svg_name = format!("figures/{}.svg", spec.id);
+                write_atomic(&png, &r.png)?;
+                write_atomic(&out_dir.join(&svg_name), r.svg.as_bytes())?;
+                page.push(html::PageFigure::new(
+                    &spec.id,
+                    &spec.title,
+                    &spec.caption,
+                    &r.png,
+                    Some(svg_name),
+                ));
+            }
+            Err(e) => warnings.push(format!("figure {}: {e}", spec.id)),
+        }
+    }
+    Ok((page, warnings))
+}
+
 /// Write `bytes` to `path` atomically (temporary file, fsync, rename).
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), WriteError> {
     let io = |source| WriteError::Io {

@@ -5,6 +5,11 @@
 //! published numbers. A failed run is recorded in its result and the batch
 //! goes on.
 
+pub mod acquire;
+pub mod figures;
+pub mod simulate;
+pub mod timedomain;
+
 use rayon::prelude::*;
 
 use crate::identify::{self, Estimate, SecondOrder, SpringRun, TfEstimate};
@@ -12,23 +17,27 @@ use crate::lti::TransferFunction;
 use crate::manifest::{Campaign, CompareMode, Quantity, Role, RunPlan, RunSource};
 use crate::model::{self, CnTerm, LinearSdof, LinearSpecimen, RigParams};
 use crate::results::{
-    CampaignSummary, CcfResult, Comparison, ComparisonStatus, ComplexValue, RESULTS_SCHEMA_VERSION,
-    Results, RigResult, RigSource, RunResult, Spread, Status, TfResult, TfSource,
+    CampaignSummary, CcfResult, Comparison, ComparisonStatus, ComplexValue, FitSummary, LogInfo,
+    RESULTS_SCHEMA_VERSION, Results, RigResult, RigSource, RunResult, Spread, Status, TfResult,
+    TfSource,
 };
 use crate::simulate::specimen::SpecimenModel;
+use acquire::LogStage;
+use timedomain::TimeStage;
 
 /// Why one run failed; recorded in that run's result.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum RunError {
-    #[error("{}: reading logs is not supported yet", path.display())]
-    LogUnsupported { path: std::path::PathBuf },
-    #[error("{0}")]
-    Model(String),
+    #[error(transparent)]
+    Acquire(#[from] acquire::AcquireError),
     #[error("the rig parameters are unavailable: {0}")]
     NoRig(String),
+    #[error("time-domain validation: {0}")]
+    Validation(String),
 }
 
-/// What the first stage gives for each run: its own transfer function.
+/// What the first stage gives for each run: its own transfer function, and
+/// the log's signals and spectra when it has a log.
 #[derive(Debug, Clone)]
 struct Acquired {
     tf: Option<TransferFunction>,
@@ -36,43 +45,88 @@ struct Acquired {
     cov: Option<[[f64; 3]; 3]>,
     source: TfSource,
     warnings: Vec<String>,
+    stage: Option<Box<LogStage>>,
 }
 
 /// The first stage of one run: its measured or published transfer function.
-fn acquire(run: &RunPlan) -> Result<Acquired, RunError> {
+fn acquire(campaign: &Campaign, run: &RunPlan) -> Result<Acquired, RunError> {
     match &run.source {
         RunSource::None => Ok(Acquired {
             tf: None,
             cov: None,
             source: TfSource::Model,
             warnings: Vec::new(),
+            stage: None,
         }),
         RunSource::Published { tf, .. } => Ok(Acquired {
             tf: Some(tf.clone()),
             cov: None,
             source: TfSource::Published,
             warnings: Vec::new(),
+            stage: None,
         }),
-        RunSource::Log(plan) => Err(RunError::LogUnsupported {
-            path: plan.path.clone(),
-        }),
+        RunSource::Log(plan) => {
+            let stage = acquire::log_stage(run, plan, &campaign.identification)?;
+            let fit = stage.fit.as_ref();
+            Ok(Acquired {
+                tf: fit.map(|f| f.tf.clone()),
+                cov: fit.and_then(|f| f.second_order_cov()),
+                source: TfSource::Fitted,
+                warnings: stage.warnings.clone(),
+                stage: Some(Box::new(stage)),
+            })
+        }
     }
+}
+
+/// What a run leaves for the figures besides its result.
+#[derive(Debug, Clone, Default)]
+pub struct RunArtifacts {
+    pub stage: Option<Box<LogStage>>,
+    pub time: Option<TimeStage>,
+}
+
+/// A campaign's results and the signals behind them.
+#[derive(Debug, Clone)]
+pub struct Analysis {
+    pub results: Results,
+    /// One per run, in manifest order.
+    pub artifacts: Vec<RunArtifacts>,
 }
 
 /// Analyse a campaign. Pure apart from the ingest stage reading the logs.
 pub fn analyse(campaign: &Campaign) -> Results {
-    let acquired: Vec<Result<Acquired, RunError>> = campaign.runs.par_iter().map(acquire).collect();
+    analyse_full(campaign).results
+}
+
+/// Analyse a campaign and keep the signals for the figures.
+pub fn analyse_full(campaign: &Campaign) -> Analysis {
+    let acquired: Vec<Result<Acquired, RunError>> = campaign
+        .runs
+        .par_iter()
+        .map(|r| acquire(campaign, r))
+        .collect();
 
     let mut warnings = Vec::new();
     let rig = establish_rig(campaign, &acquired, &mut warnings);
     let rig_params = rig.as_ref().ok().map(|(p, _)| *p);
 
-    let runs: Vec<RunResult> = campaign
+    let (mut runs, artifacts): (Vec<RunResult>, Vec<RunArtifacts>) = campaign
         .runs
-        .iter()
+        .par_iter()
         .zip(acquired)
         .map(|(plan, acq)| run_result(plan, acq, rig_params.as_ref(), rig.as_ref().err()))
+        .collect::<Vec<_>>()
+        .into_iter()
+        .unzip();
+    // Validation runs far worse than the others are flagged (the specimen
+    // may differ from its log's behaviour).
+    let mut validation: Vec<&mut timedomain::ValidationMetrics> = runs
+        .iter_mut()
+        .filter(|r| r.role == Role::Validation)
+        .filter_map(|r| r.validation.as_mut())
         .collect();
+    timedomain::flag_outliers(&mut validation);
 
     let ccf = match &rig_params {
         Some(rig) => campaign
@@ -116,7 +170,7 @@ pub fn analyse(campaign: &Campaign) -> Results {
     };
     results.sensitivity = rig_params.and_then(|rig| sensitivity(campaign, &rig, &results));
     results.comparisons = compare(campaign, &results);
-    results
+    Analysis { results, artifacts }
 }
 
 /// The rig: identified when the campaign can (Fig. 6), else given.
@@ -234,7 +288,7 @@ fn run_result(
     acq: Result<Acquired, RunError>,
     rig: Option<&RigParams>,
     rig_error: Option<&String>,
-) -> RunResult {
+) -> (RunResult, RunArtifacts) {
     let specimen = plan.specimen;
     let mut out = RunResult {
         id: plan.id.clone(),
@@ -249,6 +303,7 @@ fn run_result(
         a1b0: rig.map(|r| r.at_p_gain(plan.p_gain).a1b0_n_per_m_s2),
         tf: None,
         force_tf: None,
+        fit: None,
         validation: None,
         log: None,
     };
@@ -257,10 +312,24 @@ fn run_result(
         Err(e) => {
             out.status = Status::Failed;
             out.error = Some(e.to_string());
-            return out;
+            return (out, RunArtifacts::default());
         }
     };
     out.warnings = acq.warnings.clone();
+    let stage = acq.stage;
+    if let (Some(st), RunSource::Log(lp)) = (&stage, &plan.source) {
+        out.log = Some(LogInfo {
+            file: lp
+                .path
+                .file_name()
+                .map(|f| f.to_string_lossy().into_owned())
+                .unwrap_or_default(),
+            sha256: st.log.sha256.clone(),
+            sample_rate_hz: st.log.sample_rate_hz,
+            n_samples: st.log.n_rows,
+            duration_s: st.log.n_rows as f64 / st.log.sample_rate_hz,
+        });
+    }
     let rig_at_p = rig.map(|r| r.at_p_gain(plan.p_gain));
     // The model's transfer functions exist for linear specimens only.
     let linear = specimen.linear();
@@ -269,10 +338,23 @@ fn run_result(
     {
         out.force_tf = Some(TfResult::new(&model::tf_f_u(r, lin), TfSource::Model));
     }
+    let mut time = None;
     match plan.role {
         Role::Validation => match &rig_at_p {
             Some(r) => {
                 out.tf = linear.map(|lin| TfResult::new(&model::tf_x1_u(r, &lin), TfSource::Model));
+                if let Some(st) = &stage {
+                    match timedomain::validation_run(r, &specimen, &st.log) {
+                        Ok(t) => {
+                            out.validation = Some(t.metrics.clone());
+                            time = Some(t);
+                        }
+                        Err(e) => {
+                            out.status = Status::Failed;
+                            out.error = Some(RunError::Validation(e).to_string());
+                        }
+                    }
+                }
             }
             None => {
                 out.status = Status::Failed;
@@ -281,10 +363,67 @@ fn run_result(
             }
         },
         _ => {
-            out.tf = acq.tf.as_ref().map(|tf| TfResult::new(tf, acq.source));
+            out.tf = acq.tf.as_ref().map(|tf| {
+                let mut t = TfResult::new(tf, acq.source);
+                if let Some(fit) = stage.as_ref().and_then(|s| s.fit.as_ref()) {
+                    t.std = Some(fit.std.clone());
+                    t.rel_std = Some(
+                        fit.std
+                            .iter()
+                            .zip(&fit.params)
+                            .map(|(s, p)| s / p.abs())
+                            .collect(),
+                    );
+                }
+                t
+            });
+            if let Some(st) = &stage
+                && let Some(fit) = &st.fit
+            {
+                out.fit = Some(fit_summary(plan, st, fit));
+                // The fitted model in the time domain (Figs. 9, 12, 14); a
+                // failure here is a warning, the fit stands on its own.
+                match timedomain::fitted_run(&fit.tf, &st.log) {
+                    Ok(t) => {
+                        out.validation = Some(t.metrics.clone());
+                        time = Some(t);
+                    }
+                    Err(e) => out
+                        .warnings
+                        .push(format!("time-domain check of the fitted model: {e}")),
+                }
+            }
         }
     }
-    out
+    (out, RunArtifacts { stage, time })
+}
+
+fn fit_summary(plan: &RunPlan, st: &LogStage, fit: &crate::fit::TfFit) -> FitSummary {
+    let used: Vec<f64> = st
+        .frf
+        .coherence
+        .iter()
+        .zip(&st.mask)
+        .filter(|(_, m)| **m)
+        .map(|(c, _)| *c)
+        .collect();
+    FitSummary {
+        fit_percent: fit.fit_percent,
+        n_bins: fit.n_bins,
+        band_hz: [plan.band_hz.0, plan.band_hz.1],
+        coherence_mean: used.iter().sum::<f64>() / used.len().max(1) as f64,
+        coherence_min: used.iter().copied().fold(f64::INFINITY, f64::min),
+        reduced_chi2: fit.reduced_chi2,
+        iterations: fit.iterations,
+        termination: fit.termination.clone(),
+        converged: fit.converged,
+        stable: fit.stable,
+        param_names: fit.param_names.clone(),
+        params: fit.params.clone(),
+        std: fit.std.clone(),
+        frf_averages: st.frf.n_averages,
+        frf_resolution_hz: st.frf.resolution_hz,
+    }
 }
 
 fn ccf_result(rig: &RigParams, plan: &RunPlan) -> Option<CcfResult> {

@@ -1,0 +1,208 @@
+//! The first stage of a run with a log: read it (ingest), check it against
+//! the FRF settings, estimate the command-to-displacement and
+//! command-to-force FRFs, and, for the runs that identify or characterise the
+//! rig, fit the transfer function. Pure apart from `ingest` reading the file.
+
+use crate::fit::{self, FitInput, FitOptions, TfFit};
+use crate::frf::{self, Frf};
+use crate::ingest::{self, Log, Needs};
+use crate::manifest::{IdentificationPlan, LogPlan, Role, RunPlan};
+
+/// What a log gave: the signals and their spectra, and the fit when one was made.
+#[derive(Debug, Clone)]
+pub struct LogStage {
+    pub log: Log,
+    /// Command to displacement.
+    pub frf: Frf,
+    /// Command to force, when the log has a force channel.
+    pub force_frf: Option<Frf>,
+    /// The bins the fit used (band and coherence).
+    pub mask: Vec<bool>,
+    pub fit: Option<TfFit>,
+    pub warnings: Vec<String>,
+}
+
+/// Why a log stage failed; the message names the run's file.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum AcquireError {
+    #[error("{0}")]
+    Ingest(String),
+    #[error("{}: FRF: {message}", path.display())]
+    Frf {
+        path: std::path::PathBuf,
+        message: String,
+    },
+    #[error("{}: the command has no energy in the fit band {lo}-{hi} Hz ({fraction:.2e} of its power)", path.display())]
+    NoExcitation {
+        path: std::path::PathBuf,
+        lo: f64,
+        hi: f64,
+        fraction: f64,
+    },
+    #[error("{}: only {n} bins in {lo}-{hi} Hz have coherence >= {coherence_min}; the fit needs at least {need} (lower identification.coherence_min or widen the band)", path.display())]
+    TooFewBins {
+        path: std::path::PathBuf,
+        n: usize,
+        need: usize,
+        lo: f64,
+        hi: f64,
+        coherence_min: f64,
+    },
+    #[error("{}: transfer-function fit: {message}", path.display())]
+    Fit {
+        path: std::path::PathBuf,
+        message: String,
+    },
+    #[error("{}: the fit did not converge ({termination}); refusing a model that is not an optimum", path.display())]
+    NotConverged {
+        path: std::path::PathBuf,
+        termination: String,
+    },
+    #[error("{}: the fitted model is unstable (poles {poles}); refusing it", path.display())]
+    Unstable {
+        path: std::path::PathBuf,
+        poles: String,
+    },
+}
+
+/// Largest tolerated sample-interval deviation (fraction of the interval)
+/// and clipped fraction of a channel.
+const MAX_JITTER_FRACTION: f64 = 0.05;
+const CLIP_FRACTION: f64 = 0.01;
+/// Below this fraction of the command's power inside the band, the log has
+/// no excitation there.
+const MIN_BAND_POWER_FRACTION: f64 = 1e-6;
+
+/// Run the log stage of one run.
+pub fn log_stage(
+    run: &RunPlan,
+    plan: &LogPlan,
+    ident: &IdentificationPlan,
+) -> Result<LogStage, AcquireError> {
+    let path = plan.path.clone();
+    let mut log = ingest::read_log(plan).map_err(|e| AcquireError::Ingest(e.to_string()))?;
+    let mut warnings = log.warnings.clone();
+    let needs = Needs {
+        min_samples: ident.frf.segment_length,
+        max_jitter_fraction: MAX_JITTER_FRACTION,
+        clip_fraction: CLIP_FRACTION,
+    };
+    warnings
+        .extend(ingest::check_log(&log, &needs).map_err(|e| AcquireError::Ingest(e.to_string()))?);
+    if ident.trim_to_excitation {
+        log = ingest::trim_to_excitation(&log, 0.01);
+        // Trimming can leave too little for one segment.
+        warnings.extend(
+            ingest::check_log(&log, &needs).map_err(|e| AcquireError::Ingest(e.to_string()))?,
+        );
+    }
+    let fs = log.sample_rate_hz;
+    let frf_err = |e: frf::FrfError| AcquireError::Frf {
+        path: path.clone(),
+        message: e.to_string(),
+    };
+    let h = frf::estimate(&log.command_m, &log.displacement_m, fs, &ident.frf).map_err(frf_err)?;
+    let force_frf = match &log.force_n {
+        Some(f) => Some(frf::estimate(&log.command_m, f, fs, &ident.frf).map_err(frf_err)?),
+        None => None,
+    };
+
+    // Excitation in the band: the command's power there against its total.
+    let (lo, hi) = run.band_hz;
+    let total: f64 = h.suu.iter().skip(1).sum();
+    let in_band: f64 = h
+        .freq_hz
+        .iter()
+        .zip(&h.suu)
+        .filter(|(f, _)| **f >= lo && **f <= hi)
+        .map(|(_, s)| s)
+        .sum();
+    let fraction = if total > 0.0 { in_band / total } else { 0.0 };
+    if fraction < MIN_BAND_POWER_FRACTION {
+        return Err(AcquireError::NoExcitation {
+            path,
+            lo,
+            hi,
+            fraction,
+        });
+    }
+    let mask = frf::band_mask(&h, run.band_hz, ident.coherence_min);
+
+    let fit = if matches!(run.role, Role::NoSpecimen | Role::Spring | Role::Fit) {
+        let n_params = ident.numerator_order
+            + 1
+            + ident.denominator_order
+            + usize::from(matches!(
+                ident.delay,
+                crate::manifest::DelayPlan::Fit { .. }
+            ));
+        let used = mask.iter().filter(|m| **m).count();
+        // Each bin gives two real equations; ask for a margin over the bare minimum.
+        let need = n_params.max(3);
+        if used < need {
+            return Err(AcquireError::TooFewBins {
+                path,
+                n: used,
+                need,
+                lo,
+                hi,
+                coherence_min: ident.coherence_min,
+            });
+        }
+        let var_re_im = frf::h_variance(&h);
+        let (mut fq, mut hh, mut var) = (Vec::new(), Vec::new(), Vec::new());
+        for i in 0..h.freq_hz.len() {
+            if mask[i] {
+                fq.push(h.freq_hz[i]);
+                hh.push(h.h[i]);
+                // frf gives the variance of Re(H) and of Im(H) each; fit wants
+                // E|dH|^2, their sum.
+                var.push(2.0 * var_re_im[i]);
+            }
+        }
+        let mut opts = FitOptions::new(ident.numerator_order, ident.denominator_order, fs);
+        opts.intersample = ident.intersample;
+        opts.delay = ident.delay;
+        opts.max_iterations = 200;
+        let fit = fit::fit(
+            &FitInput {
+                freq_hz: &fq,
+                h: &hh,
+                variance: &var,
+            },
+            &opts,
+        )
+        .map_err(|e| AcquireError::Fit {
+            path: path.clone(),
+            message: e.to_string(),
+        })?;
+        if !fit.stable {
+            let poles = fit
+                .tf
+                .poles()
+                .iter()
+                .map(|p| format!("{:.4}{:+.4}j", p.re, p.im))
+                .collect::<Vec<_>>()
+                .join(", ");
+            return Err(AcquireError::Unstable { path, poles });
+        }
+        if !fit.converged {
+            return Err(AcquireError::NotConverged {
+                path,
+                termination: fit.termination.clone(),
+            });
+        }
+        warnings.extend(fit.warnings.iter().cloned());
+        Some(fit)
+    } else {
+        None
+    };
+    Ok(LogStage {
+        log,
+        frf: h,
+        force_frf,
+        mask,
+        fit,
+        warnings,
+    })
+}
