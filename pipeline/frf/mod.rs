@@ -301,13 +301,28 @@ pub fn band_mask(frf: &Frf, band_hz: (f64, f64), coherence_min: f64) -> Vec<bool
 
 /// Random-error variance of each of Re(H) and Im(H) at each bin (the weight
 /// of a residual stacked as [Re; Im] is its inverse); the variance of the
-/// complex estimate, E|H_est - H|^2, is twice this.
+/// complex estimate, E|H_est - H|^2, is twice this. Same as
+/// [`h_variance_at`] over every bin.
+pub fn h_variance(frf: &Frf) -> Vec<f64> {
+    let all: Vec<usize> = (0..frf.h.len()).collect();
+    h_variance_at(frf, &all)
+}
+
+/// Half-width (bins) of the ETFE's local polynomial window: 2 R + 1 = 15
+/// bins, 12 complex degrees of freedom after the quadratic.
+pub const ETFE_LOCAL_HALF_WIDTH: usize = 7;
+
+/// Degree of the ETFE's local polynomial in the bin offset.
+const ETFE_LOCAL_DEGREE: usize = 2;
+
+/// [`h_variance`] at the given bins only (the fit asks for its band's).
 ///
-/// Bendat & Piersol (*Random Data*, 4th ed., Ch. 9, gain and phase errors of
-/// H estimates) give for n_d averages the normalised errors
-/// eps(|H|) = sd(phase) = sqrt((1 - g^2) / (2 n_d g^2)), g^2 the coherence;
-/// magnitude and phase errors are the radial and tangential components, so
-/// each Cartesian component has variance (1 - g^2) |H|^2 / (2 n_d g^2).
+/// **Welch H1 and H2.** Bendat & Piersol (*Random Data*, 4th ed., Ch. 9,
+/// gain and phase errors of H estimates) give for n_d averages the
+/// normalised errors eps(|H|) = sd(phase) = sqrt((1 - g^2) / (2 n_d g^2)),
+/// g^2 the coherence; magnitude and phase errors are the radial and
+/// tangential components, so each Cartesian component has variance
+/// (1 - g^2) |H|^2 / (2 n_d g^2).
 ///
 /// Two corrections make this honest when computed from the estimates
 /// themselves. First, K overlapping windowed segments are worth fewer than K
@@ -327,24 +342,42 @@ pub fn band_mask(frf: &Frf, band_hz: (f64, f64), coherence_min: f64) -> Vec<bool
 /// the residual's expectation is (1 - 1/n) times the noise spectrum (one
 /// complex parameter fitted per bin), so dividing by n - 1 makes the
 /// variance unbiased, as for a sample variance. The Monte Carlo test checks
-/// the result to a few per cent.
+/// the result to a few per cent. For H2 the same first-order expression
+/// holds (H2 is H1 of the inverse path; delta method).
 ///
-/// For H2 the same first-order expression holds (H2 is H1 of the inverse
-/// path; delta method). For the ETFE n_d = 1 with the Welch coherence, an
-/// approximation that takes the record's periodogram of u to equal its
-/// smooth spectrum (roughly true for a sweep, not for random input).
+/// These assume stationary signals. For a sweep each frequency lives in one
+/// or two segments, the coherence is biased towards 1 and the variance is
+/// too small; the fit's reduced chi-square then exceeds 1 (and scales the
+/// covariance), but the relative weights of the bins are not to be trusted.
 ///
-/// Infinite where the coherence is zero or there is a single segment (no
-/// information about the noise); zero where the coherence is 1.
-pub fn h_variance(frf: &Frf) -> Vec<f64> {
-    let dof = match frf.estimator {
-        Estimator::Etfe => 1.0,
-        _ => frf.effective_averages - 1.0,
-    };
-    frf.h
-        .iter()
-        .zip(&frf.coherence)
-        .map(|(h, &g2)| {
+/// **ETFE.** With a rectangular window over a record that starts and ends
+/// at rest (a sweep with quiet lead-in and lead-out), Y(k) = G(k) U(k) +
+/// V(k) holds exactly, the noise DFT bins V(k) are uncorrelated, and the
+/// ETFE's error at bin k is V(k)/U(k), of variance sigma_V^2(k) / |U(k)|^2.
+/// The noise level sigma_V^2(k) is estimated by the local polynomial method
+/// (Pintelon, Schoukens et al., MSSP 24(3), 2010, 573-595; Pintelon &
+/// Schoukens, *System Identification: A Frequency Domain Approach*, 2nd ed.,
+/// 2012, Ch. 7) without its transient term: over the 2R + 1 bins around k
+/// (R = [`ETFE_LOCAL_HALF_WIDTH`]), G is a quadratic in the bin offset r,
+/// fitted to H by least squares weighted by Suu (the whitening weight,
+/// since Suu(k) H(k) residuals = U(k)* V(k) scaled); the weighted residual
+/// sum over its 2R + 1 - 3 complex degrees of freedom estimates the noise
+/// density, and dividing it by Suu(k) gives the bin's variance. G is smooth
+/// over 2R + 1 bins of a long record, so what the polynomial leaves is
+/// noise; leakage from a record that does not end at rest is counted as
+/// noise too, which errs on the side of larger variances.
+///
+/// Infinite where there is no information (zero coherence or a single
+/// Welch segment; an unexcited ETFE bin or a window without enough excited
+/// bins); zero where the coherence is 1.
+pub fn h_variance_at(frf: &Frf, bins: &[usize]) -> Vec<f64> {
+    if frf.estimator == Estimator::Etfe {
+        return bins.iter().map(|&k| etfe_local_variance(frf, k)).collect();
+    }
+    let dof = frf.effective_averages - 1.0;
+    bins.iter()
+        .map(|&k| {
+            let (h, g2) = (frf.h[k], frf.coherence[k]);
             if g2 <= 0.0 || dof <= 0.0 {
                 f64::INFINITY
             } else {
@@ -352,6 +385,63 @@ pub fn h_variance(frf: &Frf) -> Vec<f64> {
             }
         })
         .collect()
+}
+
+/// The ETFE's per-component variance at bin `k` by the local polynomial
+/// method (see [`h_variance_at`]). The window is shifted, not shortened, at
+/// the ends of the spectrum, and DC (which detrending empties) is left out.
+fn etfe_local_variance(frf: &Frf, k: usize) -> f64 {
+    const P: usize = ETFE_LOCAL_DEGREE + 1;
+    let r_half = ETFE_LOCAL_HALF_WIDTH;
+    let nb = frf.h.len();
+    let width = 2 * r_half + 1;
+    if nb < width + 1 || frf.suu[k] <= 0.0 || k == 0 {
+        return f64::INFINITY;
+    }
+    let first = k.saturating_sub(r_half).clamp(1, nb - width);
+    let window = first..first + width;
+    // Weighted least squares in the scaled offset x = (j - k) / R, which
+    // keeps the normal matrix well conditioned.
+    let usable = |j: usize| frf.suu[j] > 0.0 && frf.h[j].re.is_finite() && frf.h[j].im.is_finite();
+    let mut a = nalgebra::SMatrix::<f64, P, P>::zeros();
+    let mut b = nalgebra::SVector::<Complex<f64>, P>::zeros();
+    let mut used = 0usize;
+    for j in window.clone().filter(|&j| usable(j)) {
+        let x = (j as f64 - k as f64) / r_half as f64;
+        let w = frf.suu[j];
+        let mut powers = [1.0; P];
+        for p in 1..P {
+            powers[p] = powers[p - 1] * x;
+        }
+        for p in 0..P {
+            for q in 0..P {
+                a[(p, q)] += w * powers[p] * powers[q];
+            }
+            b[p] += frf.h[j] * (w * powers[p]);
+        }
+        used += 1;
+    }
+    if used <= P {
+        return f64::INFINITY;
+    }
+    let Some(inv) = a.try_inverse() else {
+        return f64::INFINITY;
+    };
+    let c: Vec<Complex<f64>> = (0..P)
+        .map(|p| (0..P).map(|q| b[q] * inv[(p, q)]).sum())
+        .collect();
+    let mut rss = 0.0;
+    for j in window.filter(|&j| usable(j)) {
+        let x = (j as f64 - k as f64) / r_half as f64;
+        let fitted = c
+            .iter()
+            .rev()
+            .fold(Complex::new(0.0, 0.0), |acc, cp| acc * x + cp);
+        rss += frf.suu[j] * (frf.h[j] - fitted).norm_sqr();
+    }
+    let noise_density = rss / (used - P) as f64;
+    // Complex variance noise / Suu(k); half of it per component.
+    0.5 * noise_density / frf.suu[k]
 }
 
 /// Discrete Fourier transform X(k) = sum_n x(n) exp(-2 pi i k n / N) for all

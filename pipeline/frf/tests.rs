@@ -767,15 +767,77 @@ fn etfe_coherence_is_the_welch_coherence_interpolated() {
         let mid = 0.5 * (coarse.coherence[j] + coarse.coherence[j + 1]);
         assert_relative_eq!(fine.coherence[32 * j + 16], mid, max_relative = 1e-12);
     }
-    // h_variance of the ETFE: one average, (1 - g^2) |H|^2 / (2 g^2).
-    let var = h_variance(&fine);
-    let k = 1000;
-    let g2 = fine.coherence[k];
-    assert_relative_eq!(
-        var[k],
-        (1.0 - g2) * fine.h[k].norm_sqr() / (2.0 * g2),
-        max_relative = 1e-12
-    );
+}
+
+#[test]
+fn etfe_variance_is_the_noise_over_the_input_and_matches_the_scatter() {
+    // A fixed input (one period of white noise) and its periodic steady
+    // state, so that the ETFE is G + V/U exactly; 200 draws of white output
+    // noise. The complex variance of bin k is then N sigma^2 / |U(k)|^2 (the
+    // unnormalised DFT of white noise has E|V(k)|^2 = N sigma^2), with U(k)
+    // summed here by the definition, independently of the FFT path.
+    let n = 16_384;
+    let sigma = 0.1;
+    let reps = 200;
+    let (b, a) = test_system();
+    let period = white(93, n, 1.0);
+    let repeated: Vec<f64> = period.iter().cycle().take(3 * n).copied().collect();
+    let y_clean = lfilter(&b, &a, &repeated)[2 * n..].to_vec();
+    let bins: Vec<usize> = (16..n / 2 - 16).step_by(64).collect();
+    let analytic: Vec<f64> = bins
+        .iter()
+        .map(|&k| {
+            let u_k: Complex<f64> = period
+                .iter()
+                .enumerate()
+                .map(|(i, x)| Complex::from_polar(*x, -2.0 * PI * (k * i % n) as f64 / n as f64))
+                .sum();
+            n as f64 * sigma * sigma / u_k.norm_sqr()
+        })
+        .collect();
+    let mut predicted = vec![0.0; bins.len()];
+    let mut h_sum = vec![Complex::new(0.0, 0.0); bins.len()];
+    let mut h_sq = vec![0.0; bins.len()];
+    for rep in 0..reps {
+        let noise = white(7000 + rep, n, sigma);
+        let y: Vec<f64> = y_clean.iter().zip(&noise).map(|(c, v)| c + v).collect();
+        let frf = etfe(
+            &period,
+            &y,
+            FS_HZ,
+            Window::Rectangular,
+            Detrend::None,
+            512,
+            0.5,
+        )
+        .unwrap();
+        let var = h_variance_at(&frf, &bins);
+        for (j, &k) in bins.iter().enumerate() {
+            // Per component in, complex out.
+            predicted[j] += 2.0 * var[j] / reps as f64;
+            h_sum[j] += frf.h[k];
+            h_sq[j] += frf.h[k].norm_sqr();
+        }
+    }
+    let r = reps as f64;
+    let (mut pooled_pred, mut pooled_scatter) = (0.0, 0.0);
+    for j in 0..bins.len() {
+        let mean = h_sum[j] / r;
+        let scatter = (h_sq[j] - r * mean.norm_sqr()) / (r - 1.0);
+        // One draw's estimate has 2 (15 - 3) = 24 real degrees of freedom
+        // (sd sqrt(2/24) ~ 29 %); 200 draws bring that to ~2 %, so 10 % is
+        // about 5 sigma at each bin. The scatter of 200 draws is ~7 %: 30 %
+        // is 4 sigma.
+        assert_relative_eq!(predicted[j], analytic[j], max_relative = 0.10);
+        assert_relative_eq!(scatter, analytic[j], max_relative = 0.30);
+        pooled_pred += predicted[j] / analytic[j];
+        pooled_scatter += scatter / analytic[j];
+    }
+    // Pooled over the bins (64 apart, independent): the estimate is unbiased
+    // to about 1 %, and so is the scatter it predicts.
+    let nb = bins.len() as f64;
+    assert_relative_eq!(pooled_pred / nb, 1.0, max_relative = 0.02);
+    assert_relative_eq!(pooled_scatter / nb, 1.0, max_relative = 0.02);
 }
 
 #[test]

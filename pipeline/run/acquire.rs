@@ -149,17 +149,18 @@ pub fn log_stage(
                 coherence_min: ident.coherence_min,
             });
         }
-        let var_re_im = frf::h_variance(&h);
-        let (mut fq, mut hh, mut var) = (Vec::new(), Vec::new(), Vec::new());
-        for i in 0..h.freq_hz.len() {
-            if mask[i] {
-                fq.push(h.freq_hz[i]);
-                hh.push(h.h[i]);
-                // frf gives the variance of Re(H) and of Im(H) each; fit wants
-                // E|dH|^2, their sum.
-                var.push(2.0 * var_re_im[i]);
-            }
-        }
+        let masked: Vec<usize> = (0..h.freq_hz.len()).filter(|&i| mask[i]).collect();
+        // frf gives the variance of Re(H) and of Im(H) each; fit wants
+        // E|dH|^2, their sum. A bin whose variance is undefined (no noise
+        // information around it) carries no weight and is left out.
+        let (bins, var): (Vec<usize>, Vec<f64>) = masked
+            .iter()
+            .zip(frf::h_variance_at(&h, &masked))
+            .filter(|(_, v)| v.is_finite())
+            .map(|(&i, v)| (i, 2.0 * v))
+            .unzip();
+        let fq: Vec<f64> = bins.iter().map(|&i| h.freq_hz[i]).collect();
+        let hh: Vec<_> = bins.iter().map(|&i| h.h[i]).collect();
         let mut opts = FitOptions::new(ident.numerator_order, ident.denominator_order, fs);
         opts.intersample = ident.intersample;
         opts.delay = ident.delay;
