@@ -251,6 +251,9 @@ pub struct CcfResult {
     pub poles_with_cn: Vec<ComplexValue>,
     /// Poles of the paper's simplified CCF (Cn dropped) [rad/s].
     pub poles_without_cn: Vec<ComplexValue>,
+    /// Every pole of the simplified CCF has a negative real part: dropping
+    /// Cn can move the specimen's pair into the right half-plane.
+    pub stable_without_cn: bool,
 }
 
 /// A published number beside the recomputed one.

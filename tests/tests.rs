@@ -7,3 +7,4 @@ mod browser;
 mod manifest_errors;
 mod paper;
 mod schemas;
+mod simulate;

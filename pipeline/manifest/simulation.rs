@@ -402,6 +402,21 @@ pub fn load_simulation_str(text: &str, path: &Path) -> Result<SimulationPlan, Ma
     }
     let ident = identification.clone().unwrap_or_default();
     let ident_plan = check_identification(&ident, &root.key("identification"), &mut bad);
+    // The logs will be sampled at simulation.sample_rate_hz: a band reaching
+    // Nyquist would fit bins that hold no information (and the hold's
+    // half-sample delay, exact only below Nyquist).
+    if let Some(ny) = fs.filter(|f| f.is_finite() && *f > 0.0).map(|f| 0.5 * f)
+        && ident_plan.band_hz.1 >= ny
+    {
+        bad(
+            root.key("identification").key("band_hz"),
+            format!(
+                "the band's upper edge {} Hz is at or above the Nyquist frequency ({ny} Hz at simulation.sample_rate_hz = {})",
+                ident_plan.band_hz.1,
+                2.0 * ny
+            ),
+        );
+    }
 
     let mut first_seen = std::collections::BTreeMap::new();
     for (i, id) in raw_ids.iter().enumerate() {
@@ -677,6 +692,13 @@ mod tests {
             e.contains("at or above the Nyquist frequency (1024 Hz"),
             "{e}"
         );
+    }
+
+    #[test]
+    fn an_identification_band_above_nyquist_names_the_key() {
+        let e = problems(&BUNDLED.replace("band_hz = [0.5, 30.0]", "band_hz = [0.5, 1100.0]"));
+        assert!(e.contains("identification.band_hz"), "{e}");
+        assert!(e.contains("1100 Hz is at or above the Nyquist frequency (1024 Hz"), "{e}");
     }
 
     #[test]

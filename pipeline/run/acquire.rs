@@ -32,6 +32,12 @@ pub enum AcquireError {
         path: std::path::PathBuf,
         message: String,
     },
+    #[error("{}: the fit band's upper edge {hi} Hz (identification.band_hz) is at or above the log's Nyquist frequency {nyquist} Hz (sampled at {} Hz)", path.display(), 2.0 * nyquist)]
+    BandAboveNyquist {
+        path: std::path::PathBuf,
+        hi: f64,
+        nyquist: f64,
+    },
     #[error("{}: the command has no energy in the fit band {lo}-{hi} Hz ({fraction:.2e} of its power)", path.display())]
     NoExcitation {
         path: std::path::PathBuf,
@@ -97,6 +103,15 @@ pub fn log_stage(
         );
     }
     let fs = log.sample_rate_hz;
+    // The manifest cannot know the rate of a log that carries its own (a
+    // time column, a DAQ header), so the band is checked against it here.
+    if run.band_hz.1 >= 0.5 * fs {
+        return Err(AcquireError::BandAboveNyquist {
+            path,
+            hi: run.band_hz.1,
+            nyquist: 0.5 * fs,
+        });
+    }
     let frf_err = |e: frf::FrfError| AcquireError::Frf {
         path: path.clone(),
         message: e.to_string(),

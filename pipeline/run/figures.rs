@@ -206,6 +206,13 @@ pub fn build(analysis: &Analysis, campaign: &Campaign) -> Vec<FigureSpec> {
             };
             let measured = cm(&time.x1_measured);
             let simulated = cm(&time.x1_simulated);
+            // The paper's simplified CCF beside the full model, when it is
+            // stable enough to have been simulated.
+            let simplified = time
+                .x1_simplified
+                .as_ref()
+                .filter(|x| x.len() >= n)
+                .map(|x| cm(x));
             let letters = ["(a)", "(b)", "(c)", "(d)"];
             let panels: Vec<TimePanel> = time
                 .windows
@@ -237,7 +244,15 @@ pub fn build(analysis: &Analysis, campaign: &Campaign) -> Vec<FigureSpec> {
                             trace: Trace::Model,
                             palette_index: Some(1),
                         },
-                    ],
+                    ]
+                    .into_iter()
+                    .chain(simplified.as_ref().map(|y| TimeSeries {
+                        label: "Simplified CCF (Cn dropped)".into(),
+                        y: y.clone(),
+                        trace: Trace::Model,
+                        palette_index: Some(3),
+                    }))
+                    .collect(),
                     t_range_s: (w.start_s, w.end_s),
                     y_label: "Disp (cm)".into(),
                     y_range: None,

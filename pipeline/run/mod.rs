@@ -449,7 +449,9 @@ fn ccf_result(rig: &RigParams, plan: &RunPlan) -> Option<CcfResult> {
             .map(ComplexValue::from)
             .collect()
     };
+    let poles_without_cn: Vec<ComplexValue> = poles(CnTerm::Dropped);
     Some(CcfResult {
+        stable_without_cn: poles_without_cn.iter().all(|p| p.re < 0.0),
         run: plan.id.clone(),
         p_gain: plan.p_gain,
         C1: c.C1,
@@ -458,7 +460,7 @@ fn ccf_result(rig: &RigParams, plan: &RunPlan) -> Option<CcfResult> {
         C4: c.C4,
         C5: c.C5,
         poles_with_cn: poles(CnTerm::Kept),
-        poles_without_cn: poles(CnTerm::Dropped),
+        poles_without_cn,
     })
 }
 

@@ -48,14 +48,32 @@ pub struct ValidationMetrics {
     pub windows: Vec<WindowErrors>,
     /// Measured against simulated force, when the log has force.
     pub force: Option<Errors>,
-    /// The paper's simplified canonical form (Cn dropped) against the measured displacement.
-    pub simplified_ccf: Option<Errors>,
+    /// The paper's simplified canonical form (Cn dropped), side by side;
+    /// null for a specimen that is not a linear SDOF.
+    pub simplified_ccf: Option<SimplifiedCcf>,
     /// max |x1(CCF with Cn) - x1(physical)| / max |x1(physical)|: the two
     /// forms are one model, so this is round-off.
     pub ccf_consistency: Option<f64>,
     /// Set when this run's errors are far above the campaign's other runs.
     pub outlier: bool,
     pub note: Option<String>,
+}
+
+/// The paper's simplified canonical form (Cn dropped "for a linear
+/// specimen", Sec. 3) checked on a validation run. Dropping Cn moves the
+/// poles (MODEL.md); at some rig parameters it moves the specimen's pair into
+/// the right half-plane, and a simulation of it then grows without bound, so
+/// it is only simulated when stable and otherwise says so.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+pub struct SimplifiedCcf {
+    /// Every pole of the simplified form has a negative real part.
+    pub stable: bool,
+    /// The largest real part among its poles (1/s); positive when unstable.
+    pub max_pole_real_per_s: f64,
+    /// Measured against simulated displacement (Eqs. 47-48); null when the
+    /// form is unstable and was not simulated.
+    pub errors: Option<Errors>,
+    pub note: String,
 }
 
 /// The simulated signals kept for the figures.
@@ -147,7 +165,7 @@ pub fn validation_run(
         let centred: Vec<f64> = f[..n].iter().map(|v| v - offset).collect();
         validate::errors(&centred, &force[..n])
     });
-    let (mut simplified, mut simplified_errors, mut consistency) = (None, None, None);
+    let (mut simplified, mut simplified_check, mut consistency) = (None, None, None);
     if let SpecimenModel::LinearSdof {
         mass_kg,
         damping_ns_per_m,
@@ -170,14 +188,36 @@ pub fn validation_run(
             .zip(&x1)
             .fold(0.0_f64, |m, (a, b)| m.max((a - b).abs()));
         consistency = (peak > 0.0).then(|| diff / peak);
-        let dropped = simulate(
-            &model::ccf_linear_state_space(rig_at_p, &sdof, CnTerm::Dropped),
-            log,
-            0.0,
-        )?;
-        let x_dropped = dropped.into_iter().next().expect("x1 output");
-        simplified_errors = compare(&log.displacement_m, &x_dropped, fs, &[]).map(|c| c.0);
-        simplified = Some(x_dropped);
+        let dropped_ss = model::ccf_linear_state_space(rig_at_p, &sdof, CnTerm::Dropped);
+        let poles = dropped_ss.eigenvalues();
+        let max_re = poles.iter().map(|p| p.re).fold(f64::NEG_INFINITY, f64::max);
+        if max_re < 0.0 {
+            let dropped = simulate(&dropped_ss, log, 0.0)?;
+            let x_dropped = dropped.into_iter().next().expect("x1 output");
+            let errors = compare(&log.displacement_m, &x_dropped, fs, &[]).map(|c| c.0);
+            simplified_check = Some(SimplifiedCcf {
+                stable: true,
+                max_pole_real_per_s: max_re,
+                errors,
+                note: "stable; simulated beside the full form".into(),
+            });
+            simplified = Some(x_dropped);
+        } else {
+            let worst = poles
+                .iter()
+                .filter(|p| p.re >= 0.0)
+                .map(|p| format!("{:.1} {} {:.1}j", p.re, if p.im < 0.0 { '-' } else { '+' }, p.im.abs()))
+                .collect::<Vec<_>>()
+                .join(", ");
+            simplified_check = Some(SimplifiedCcf {
+                stable: false,
+                max_pole_real_per_s: max_re,
+                errors: None,
+                note: format!(
+                    "unstable with Cn dropped (poles {worst} rad/s), so not simulated: at these rig parameters the paper's simplification does not describe the plant; the form with Cn kept does"
+                ),
+            });
+        }
     }
     Ok(TimeStage {
         metrics: ValidationMetrics {
@@ -188,7 +228,7 @@ pub fn validation_run(
             offset_removed_m: offset,
             windows: per_window,
             force: force_errors,
-            simplified_ccf: simplified_errors,
+            simplified_ccf: simplified_check,
             ccf_consistency: consistency,
             outlier: false,
             note: None,
@@ -277,6 +317,96 @@ mod tests {
             outlier: false,
             note: None,
         }
+    }
+
+    /// The paper's rig (Table 3) and a noise-free log of a linear SDOF
+    /// specimen on it: a 0.5-30 Hz linear chirp, 1 kHz, 20 s, displacement
+    /// from the exact ZOH simulation of Eq. 10.
+    fn paper_rig() -> RigParams {
+        RigParams {
+            beta1_per_s: 267.0,
+            a1b0_n_per_m_s2: 2.412e9,
+            a2_n_per_m: 7.881e5,
+            a3_per_s: 16.118,
+            p_gain: 1.0,
+        }
+    }
+
+    fn log_of(rig: &RigParams, specimen: &SpecimenModel) -> Log {
+        let fs = 1000.0;
+        let n = 20_000;
+        let u: Vec<f64> = (0..n)
+            .map(|k| {
+                let t = k as f64 / fs;
+                let phase = 2.0 * std::f64::consts::PI * (0.5 * t + 0.5 * (29.5 / 20.0) * t * t);
+                2e-3 * phase.sin()
+            })
+            .collect();
+        let lin = specimen.linear().expect("linear");
+        let y = simulate_linear(&model::state_space(rig, &lin), &u, 1.0 / fs, &[0.0, 0.0])
+            .expect("simulates");
+        Log {
+            path: "mem.csv".into(),
+            sha256: String::new(),
+            format: crate::manifest::LogFormat::Csv,
+            sample_rate_hz: fs,
+            t0_s: 0.0,
+            displacement_m: y[0].clone(),
+            force_n: Some(y[1].clone()),
+            command_m: u,
+            n_rows: n,
+            timing: crate::ingest::Timing::Exact { dt_s: 1.0 / fs },
+            warnings: Vec::new(),
+        }
+    }
+
+    /// Exp1 of Table 2 at the paper's rig: with Cn dropped the canonical
+    /// form's characteristic polynomial is s^4 - C4 s^3 - (C3 + C5 m) s^2 -
+    /// (C2 + C5 c) s + (C1 - C5 k). Its roots, computed separately with
+    /// numpy.roots from Table 3's parameters (C1..C5 by MODEL.md's Eq. 35),
+    /// are -290.85, -12.52 and 10.125 +/- 463.11j rad/s: unstable. The run
+    /// must say so and not report errors of a diverging simulation, while
+    /// the full model reproduces its own noise-free log.
+    #[test]
+    fn the_simplified_ccf_is_reported_unstable_at_the_papers_exp1() {
+        let rig = paper_rig();
+        let specimen = SpecimenModel::LinearSdof {
+            mass_kg: 3.8,
+            damping_ns_per_m: 5.0,
+            stiffness_n_per_m: 129_400.0,
+        };
+        let stage = validation_run(&rig, &specimen, &log_of(&rig, &specimen)).unwrap();
+        let m = &stage.metrics;
+        assert!(m.nrmse_pct < 1e-6, "full model NRMSE {}", m.nrmse_pct);
+        assert!(m.ccf_consistency.unwrap() < 1e-9);
+        let s = m.simplified_ccf.as_ref().expect("linear SDOF is checked");
+        assert!(!s.stable);
+        assert!((s.max_pole_real_per_s - 10.125).abs() < 0.01, "{}", s.max_pole_real_per_s);
+        assert!(s.errors.is_none());
+        assert!(s.note.contains("unstable") && s.note.contains("463.1j"), "{}", s.note);
+        assert!(stage.x1_simplified.is_none());
+    }
+
+    /// With c = 500 N s/m the same rig's simplified form is stable (numpy
+    /// roots of the quartic above: largest real part -6.32 rad/s), so it is
+    /// simulated beside the full model. Dropping Cn is a model error, so its
+    /// NRMSE on the full model's own log is clearly above zero.
+    #[test]
+    fn a_stable_simplified_ccf_is_validated_side_by_side() {
+        let rig = paper_rig();
+        let specimen = SpecimenModel::LinearSdof {
+            mass_kg: 3.8,
+            damping_ns_per_m: 500.0,
+            stiffness_n_per_m: 129_400.0,
+        };
+        let stage = validation_run(&rig, &specimen, &log_of(&rig, &specimen)).unwrap();
+        let s = stage.metrics.simplified_ccf.as_ref().unwrap();
+        assert!(s.stable);
+        assert!((s.max_pole_real_per_s + 6.317).abs() < 0.01, "{}", s.max_pole_real_per_s);
+        let e = s.errors.as_ref().expect("simulated");
+        assert!(e.nrmse_pct > 0.1 && e.nrmse_pct.is_finite(), "{}", e.nrmse_pct);
+        assert!(stage.metrics.nrmse_pct < 1e-6);
+        assert_eq!(stage.x1_simplified.as_ref().unwrap().len(), 20_000);
     }
 
     #[test]

@@ -1,0 +1,431 @@
+//! `servoid simulate` end to end: a closed loop through `servoid run`, the
+//! same bytes for the same seed whatever the thread count, fresh noise for a
+//! new seed, and the bad inputs of issue 3, each refused with exit code 2, a
+//! message naming the file and the key, and nothing written.
+
+use std::path::Path;
+
+use crate::util::{root, scratch, servoid, write};
+
+/// A short campaign (20 s linear chirp at 1 kHz) on a rig that is not the
+/// paper's, so nothing here can lean on the bundled numbers.
+const BASE: &str = r#"
+schema_version = 1
+
+[simulation]
+name = "cli-test"
+description = "a short synthetic campaign for the CLI tests"
+sample_rate_hz = 1000.0
+seed = 7
+log_format = "csv"
+
+[rig]
+name = "test rig"
+
+[rig.parameters]
+beta1_per_s = 250.0
+a1b0_n_per_m_s2 = 2.0e9
+a2_n_per_m = 7.0e5
+a3_per_s = 15.0
+
+[excitation]
+kind = "chirp"
+law = "linear"
+f0_hz = 0.5
+f1_hz = 40.0
+duration_s = 20.0
+amplitude_m = 0.003
+lead_in_s = 0.5
+lead_out_s = 0.5
+
+[instrument.command]
+unit = "mm"
+
+[instrument.displacement]
+unit = "mm"
+noise_rms = 0.002
+quantization = { bits = 18, full_scale = 50.0 }
+
+[instrument.force]
+unit = "N"
+noise_rms = 1.0
+
+[identification]
+band_hz = [0.5, 30.0]
+coherence_min = 0.8
+command_intersample = "sample_and_hold"
+frf = { estimator = "etfe", segment_length = 4096, overlap = 0.5, window = "rectangular", detrend = "mean" }
+
+[[runs]]
+id = "bare"
+role = "no_specimen"
+p_gain = 1.0
+
+[[runs]]
+id = "k1"
+role = "spring"
+p_gain = 1.0
+specimen = { stiffness_n_per_m = 100000.0 }
+
+[[runs]]
+id = "v1"
+role = "validation"
+p_gain = 1.5
+specimen = { mass_kg = 4.0, damping_ns_per_m = 10.0, stiffness_n_per_m = 120000.0 }
+"#;
+
+// The rig of BASE.
+const BETA1: f64 = 250.0;
+const A1B0: f64 = 2.0e9;
+const A2: f64 = 7.0e5;
+const A3: f64 = 15.0;
+
+fn json(path: &Path) -> serde_json::Value {
+    let text = std::fs::read_to_string(path)
+        .unwrap_or_else(|e| panic!("{} is readable: {e}", path.display()));
+    serde_json::from_str(&text).expect("valid JSON")
+}
+
+fn floats(v: &serde_json::Value) -> Vec<f64> {
+    v.as_array()
+        .expect("an array")
+        .iter()
+        .map(|x| x.as_f64().expect("a number"))
+        .collect()
+}
+
+fn rel(a: f64, b: f64) -> f64 {
+    (a - b).abs() / b.abs()
+}
+
+/// One column of a CSV log written by the simulator (header line, then
+/// comma-separated numbers), parsed here without servoid's reader.
+fn csv_column(path: &Path, name: &str) -> Vec<f64> {
+    let text = std::fs::read_to_string(path).expect("log readable");
+    let mut lines = text.lines().filter(|l| !l.starts_with('#'));
+    let header: Vec<&str> = lines.next().expect("a header").split(',').collect();
+    let j = header
+        .iter()
+        .position(|h| *h == name)
+        .unwrap_or_else(|| panic!("column {name} in {header:?}"));
+    lines
+        .map(|l| l.split(',').nth(j).unwrap().parse::<f64>().unwrap())
+        .collect()
+}
+
+/// Every file under `dir`, relative path and bytes, sorted.
+fn tree(dir: &Path) -> Vec<(String, Vec<u8>)> {
+    fn walk(base: &Path, dir: &Path, out: &mut Vec<(String, Vec<u8>)>) {
+        for e in std::fs::read_dir(dir).unwrap() {
+            let p = e.unwrap().path();
+            if p.is_dir() {
+                walk(base, &p, out);
+            } else {
+                let rel = p.strip_prefix(base).unwrap().to_string_lossy().into_owned();
+                out.push((rel, std::fs::read(&p).unwrap()));
+            }
+        }
+    }
+    let mut out = Vec::new();
+    walk(dir, dir, &mut out);
+    out.sort_by(|a, b| a.0.cmp(&b.0));
+    out
+}
+
+/// simulate then run: truth.json holds the transfer functions of MODEL.md's
+/// table (Eqs. 11-17, computed here from the four parameters), the generated
+/// manifest runs, and the identified rig comes back close to the truth.
+#[test]
+fn simulate_then_run_is_a_closed_loop() {
+    let dir = scratch();
+    let manifest = write(dir.path(), "sim.toml", BASE);
+    let out = dir.path().join("out");
+    let r = servoid(
+        dir.path(),
+        &[
+            "simulate",
+            manifest.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+            "--run",
+        ],
+    );
+    assert_eq!(r.code, 0, "stdout:\n{}\nstderr:\n{}", r.stdout, r.stderr);
+    assert!(r.stdout.contains("SYNTHETIC"), "{}", r.stdout);
+    for f in [
+        "truth.json",
+        "campaign.toml",
+        "results.json",
+        "report.html",
+        "logs/bare.csv",
+        "logs/k1.csv",
+        "logs/v1.csv",
+    ] {
+        assert!(out.join(f).is_file(), "{f} written");
+    }
+
+    // Truth: x1/u by Eqs. 11-17, normalised to a monic denominator.
+    let truth = json(&out.join("truth.json"));
+    assert_eq!(truth["seed"].as_u64(), Some(7));
+    let run = |id: &str| {
+        truth["runs"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|r| r["id"] == id)
+            .unwrap_or_else(|| panic!("truth of {id}"))
+            .clone()
+    };
+    let check_tf = |id: &str, num: &[f64], den: &[f64]| {
+        let t = &run(id)["plant_tf_x1_u"];
+        let (n, d) = (floats(&t["num"]), floats(&t["den"]));
+        let lead = den[0];
+        assert_eq!(d.len(), den.len(), "{id}: order");
+        for (a, b) in d.iter().zip(den) {
+            assert!(rel(*a, b / lead) < 1e-12, "{id}: den {d:?} vs {den:?}");
+        }
+        assert!(rel(n[n.len() - 1], num[0] / lead) < 1e-12, "{id}: num {n:?}");
+    };
+    check_tf("bare", &[A1B0], &[A2, BETA1 * A2, A1B0]);
+    let k = 1.0e5;
+    check_tf(
+        "k1",
+        &[A1B0],
+        &[k + A2, A3 * k + BETA1 * (k + A2), BETA1 * A3 * k + A1B0],
+    );
+    // The validation run at P = 1.5 scales a1b0 (Eq. 7).
+    let (m, c, k, a1b0) = (4.0, 10.0, 1.2e5, 1.5 * A1B0);
+    check_tf(
+        "v1",
+        &[a1b0],
+        &[
+            m,
+            A3 * m + c + BETA1 * m,
+            k + A3 * c + A2 + BETA1 * A3 * m + BETA1 * c,
+            A3 * k + BETA1 * k + BETA1 * A3 * c + BETA1 * A2,
+            BETA1 * A3 * k + a1b0,
+        ],
+    );
+
+    // The identified rig: 20 s of sweep is enough for 1 %.
+    let results = json(&out.join("results.json"));
+    for (key, truth) in [
+        ("beta1", BETA1),
+        ("a1b0", A1B0),
+        ("a2", A2),
+        ("a3", A3),
+    ] {
+        let v = results["rig"][key]["value"].as_f64().unwrap();
+        assert!(rel(v, truth) < 0.01, "{key} = {v}, truth {truth}");
+    }
+    let runs = results["runs"].as_array().unwrap();
+    assert_eq!(runs.len(), 3);
+    assert!(runs.iter().all(|r| r["status"] == "ok"), "{runs:?}");
+    // The validation run is predicted from the identified rig: close to the
+    // log, whose only departures from the model are noise and quantisation.
+    let v = runs.iter().find(|r| r["id"] == "v1").unwrap();
+    let nrmse = v["validation"]["nrmse_pct"].as_f64().unwrap();
+    assert!(nrmse < 1.0, "v1 NRMSE {nrmse} %");
+}
+
+/// The same manifest gives the same bytes with one worker thread or two,
+/// logs, truth, results, figures and page alike.
+#[test]
+fn the_same_seed_gives_the_same_bytes_whatever_the_thread_count() {
+    let dir = scratch();
+    let manifest = write(dir.path(), "sim.toml", BASE);
+    let mut trees = Vec::new();
+    for jobs in ["1", "2"] {
+        let out = dir.path().join(format!("out-{jobs}"));
+        let r = servoid(
+            dir.path(),
+            &[
+                "simulate",
+                manifest.to_str().unwrap(),
+                "--out",
+                out.to_str().unwrap(),
+                "--run",
+                "--quiet",
+                "--jobs",
+                jobs,
+            ],
+        );
+        assert_eq!(r.code, 0, "{}", r.stderr);
+        trees.push(tree(&out));
+    }
+    let names = |t: &[(String, Vec<u8>)]| t.iter().map(|(n, _)| n.clone()).collect::<Vec<_>>();
+    assert_eq!(names(&trees[0]), names(&trees[1]));
+    assert!(trees[0].len() > 10, "logs, truth, results, figures");
+    for ((name, a), (_, b)) in trees[0].iter().zip(&trees[1]) {
+        assert!(a == b, "{name} differs between --jobs 1 and --jobs 2");
+    }
+}
+
+/// A new seed draws new noise and nothing else: the command (no noise
+/// configured) is identical, and the displacement differs by two
+/// independent noise draws, whose difference has RMS sqrt(2) x 2 um.
+#[test]
+fn a_different_seed_gives_different_noise() {
+    let dir = scratch();
+    let mut logs = Vec::new();
+    for seed in ["7", "8"] {
+        let text = BASE.replace("seed = 7", &format!("seed = {seed}"));
+        let manifest = write(dir.path(), &format!("sim-{seed}.toml"), &text);
+        let out = dir.path().join(format!("out-{seed}"));
+        let r = servoid(
+            dir.path(),
+            &[
+                "simulate",
+                manifest.to_str().unwrap(),
+                "--out",
+                out.to_str().unwrap(),
+                "--quiet",
+            ],
+        );
+        assert_eq!(r.code, 0, "{}", r.stderr);
+        logs.push(out.join("logs").join("k1.csv"));
+    }
+    assert_ne!(
+        std::fs::read(&logs[0]).unwrap(),
+        std::fs::read(&logs[1]).unwrap()
+    );
+    assert_eq!(
+        csv_column(&logs[0], "command_mm"),
+        csv_column(&logs[1], "command_mm")
+    );
+    let (a, b) = (
+        csv_column(&logs[0], "displacement_mm"),
+        csv_column(&logs[1], "displacement_mm"),
+    );
+    assert_eq!(a.len(), 21_000);
+    let rms = (a.iter().zip(&b).map(|(x, y)| (x - y).powi(2)).sum::<f64>() / a.len() as f64).sqrt();
+    let expected = 2f64.sqrt() * 0.002;
+    assert!(
+        (rms / expected - 1.0).abs() < 0.05,
+        "difference RMS {rms} mm, expected {expected} mm"
+    );
+}
+
+/// Each bad input: exit code 2, the file and the key named, no output.
+fn refused(text: &str, key: &str, what: &str) {
+    let dir = scratch();
+    let manifest = write(dir.path(), "bad-sim.toml", text);
+    let out = dir.path().join("out");
+    let r = servoid(
+        dir.path(),
+        &[
+            "simulate",
+            manifest.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ],
+    );
+    assert_eq!(r.code, 2, "{key}: stdout {} stderr {}", r.stdout, r.stderr);
+    assert!(r.stderr.contains("bad-sim.toml"), "{key}: {}", r.stderr);
+    assert!(r.stderr.contains(key), "expected {key} in: {}", r.stderr);
+    assert!(r.stderr.contains(what), "expected `{what}` in: {}", r.stderr);
+    assert!(!out.exists(), "{key}: nothing is written");
+    // `servoid check` refuses it the same way.
+    let c = servoid(dir.path(), &["check", manifest.to_str().unwrap()]);
+    assert_eq!(c.code, 2, "check {key}: {}", c.stderr);
+    assert!(c.stderr.contains(key), "check {key}: {}", c.stderr);
+}
+
+#[test]
+fn a_band_above_nyquist_is_refused() {
+    refused(
+        &BASE.replace("band_hz = [0.5, 30.0]", "band_hz = [0.5, 600.0]"),
+        "identification.band_hz",
+        "Nyquist frequency (500 Hz",
+    );
+    refused(
+        &BASE.replace("f1_hz = 40.0", "f1_hz = 700.0"),
+        "excitation.f1_hz",
+        "Nyquist frequency (500 Hz",
+    );
+}
+
+#[test]
+fn a_non_positive_duration_or_sample_rate_is_refused() {
+    refused(
+        &BASE.replace("duration_s = 20.0", "duration_s = 0.0"),
+        "excitation.duration_s",
+        "must be positive",
+    );
+    refused(
+        &BASE.replace("duration_s = 20.0", "duration_s = -3.0"),
+        "excitation.duration_s",
+        "must be positive",
+    );
+    refused(
+        &BASE.replace("sample_rate_hz = 1000.0", "sample_rate_hz = 0.0"),
+        "simulation.sample_rate_hz",
+        "must be positive",
+    );
+    refused(
+        &BASE.replace("sample_rate_hz = 1000.0", "sample_rate_hz = -1000.0"),
+        "simulation.sample_rate_hz",
+        "must be positive",
+    );
+}
+
+#[test]
+fn a_nonlinear_specimen_with_missing_parameters_is_refused() {
+    refused(
+        &BASE.replace(
+            "specimen = { mass_kg = 4.0, damping_ns_per_m = 10.0, stiffness_n_per_m = 120000.0 }",
+            r#"specimen = { model = "duffing", mass_kg = 4.0, damping_ns_per_m = 10.0, stiffness_n_per_m = 120000.0 }"#,
+        ),
+        "cubic_stiffness_n_per_m3",
+        "runs[2]",
+    );
+    refused(
+        &BASE.replace(
+            "specimen = { mass_kg = 4.0, damping_ns_per_m = 10.0, stiffness_n_per_m = 120000.0 }",
+            r#"specimen = { model = "bouc_wen", mass_kg = 4.0, damping_ns_per_m = 10.0, stiffness_n_per_m = 120000.0 }"#,
+        ),
+        "bouc_wen",
+        "runs[2]",
+    );
+}
+
+/// A valve mode at 5 Hz with 5 % damping inside the position loop: the
+/// closed loop's valve pair crosses into the right half-plane (the loop gain
+/// a1b0/a2 = 2857 1/s^2 is far too high for that much phase lag).
+#[test]
+fn an_unstable_true_plant_is_refused() {
+    let text = BASE.replace(
+        "[rig.parameters]",
+        "[rig.unmodelled]\nvalve_mode = { natural_frequency_hz = 5.0, damping_ratio = 0.05 }\n\n[rig.parameters]",
+    );
+    refused(&text, "runs[0]", "unstable");
+    refused(
+        &BASE.replace("beta1_per_s = 250.0", "beta1_per_s = -250.0"),
+        "rig.parameters.beta1_per_s",
+        "must be positive",
+    );
+}
+
+#[test]
+fn a_seed_that_is_not_an_integer_is_refused() {
+    for seed in ["1.5", "\"seven\"", "-3"] {
+        refused(
+            &BASE.replace("seed = 7", &format!("seed = {seed}")),
+            "simulation.seed",
+            "expected u64",
+        );
+    }
+}
+
+/// The bundled default and the rich campaign pass `servoid check`.
+#[test]
+fn the_bundled_simulation_manifests_check() {
+    for m in [
+        "experiments/maghareh2018/simulation.toml",
+        "experiments/maghareh2018/simulation-rich.toml",
+    ] {
+        let r = servoid(&root(), &["check", m]);
+        assert_eq!(r.code, 0, "{m}: {}", r.stderr);
+        assert!(r.stdout.contains("7 runs"), "{m}: {}", r.stdout);
+    }
+}
