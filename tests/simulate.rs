@@ -184,7 +184,10 @@ fn simulate_then_run_is_a_closed_loop() {
         for (a, b) in d.iter().zip(den) {
             assert!(rel(*a, b / lead) < 1e-12, "{id}: den {d:?} vs {den:?}");
         }
-        assert!(rel(n[n.len() - 1], num[0] / lead) < 1e-12, "{id}: num {n:?}");
+        assert!(
+            rel(n[n.len() - 1], num[0] / lead) < 1e-12,
+            "{id}: num {n:?}"
+        );
     };
     check_tf("bare", &[A1B0], &[A2, BETA1 * A2, A1B0]);
     let k = 1.0e5;
@@ -209,12 +212,7 @@ fn simulate_then_run_is_a_closed_loop() {
 
     // The identified rig: 20 s of sweep is enough for 1 %.
     let results = json(&out.join("results.json"));
-    for (key, truth) in [
-        ("beta1", BETA1),
-        ("a1b0", A1B0),
-        ("a2", A2),
-        ("a3", A3),
-    ] {
+    for (key, truth) in [("beta1", BETA1), ("a1b0", A1B0), ("a2", A2), ("a3", A3)] {
         let v = results["rig"][key]["value"].as_f64().unwrap();
         assert!(rel(v, truth) < 0.01, "{key} = {v}, truth {truth}");
     }
@@ -323,7 +321,11 @@ fn refused(text: &str, key: &str, what: &str) {
     assert_eq!(r.code, 2, "{key}: stdout {} stderr {}", r.stdout, r.stderr);
     assert!(r.stderr.contains("bad-sim.toml"), "{key}: {}", r.stderr);
     assert!(r.stderr.contains(key), "expected {key} in: {}", r.stderr);
-    assert!(r.stderr.contains(what), "expected `{what}` in: {}", r.stderr);
+    assert!(
+        r.stderr.contains(what),
+        "expected `{what}` in: {}",
+        r.stderr
+    );
     assert!(!out.exists(), "{key}: nothing is written");
     // `servoid check` refuses it the same way.
     let c = servoid(dir.path(), &["check", manifest.to_str().unwrap()]);

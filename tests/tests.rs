@@ -3,6 +3,7 @@
 mod cdp;
 mod util;
 
+mod accuracy;
 mod browser;
 mod manifest_errors;
 mod paper;

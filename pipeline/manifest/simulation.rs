@@ -698,7 +698,10 @@ mod tests {
     fn an_identification_band_above_nyquist_names_the_key() {
         let e = problems(&BUNDLED.replace("band_hz = [0.5, 30.0]", "band_hz = [0.5, 1100.0]"));
         assert!(e.contains("identification.band_hz"), "{e}");
-        assert!(e.contains("1100 Hz is at or above the Nyquist frequency (1024 Hz"), "{e}");
+        assert!(
+            e.contains("1100 Hz is at or above the Nyquist frequency (1024 Hz"),
+            "{e}"
+        );
     }
 
     #[test]

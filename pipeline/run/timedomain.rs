@@ -206,7 +206,14 @@ pub fn validation_run(
             let worst = poles
                 .iter()
                 .filter(|p| p.re >= 0.0)
-                .map(|p| format!("{:.1} {} {:.1}j", p.re, if p.im < 0.0 { '-' } else { '+' }, p.im.abs()))
+                .map(|p| {
+                    format!(
+                        "{:.1} {} {:.1}j",
+                        p.re,
+                        if p.im < 0.0 { '-' } else { '+' },
+                        p.im.abs()
+                    )
+                })
                 .collect::<Vec<_>>()
                 .join(", ");
             simplified_check = Some(SimplifiedCcf {
@@ -381,9 +388,17 @@ mod tests {
         assert!(m.ccf_consistency.unwrap() < 1e-9);
         let s = m.simplified_ccf.as_ref().expect("linear SDOF is checked");
         assert!(!s.stable);
-        assert!((s.max_pole_real_per_s - 10.125).abs() < 0.01, "{}", s.max_pole_real_per_s);
+        assert!(
+            (s.max_pole_real_per_s - 10.125).abs() < 0.01,
+            "{}",
+            s.max_pole_real_per_s
+        );
         assert!(s.errors.is_none());
-        assert!(s.note.contains("unstable") && s.note.contains("463.1j"), "{}", s.note);
+        assert!(
+            s.note.contains("unstable") && s.note.contains("463.1j"),
+            "{}",
+            s.note
+        );
         assert!(stage.x1_simplified.is_none());
     }
 
@@ -402,9 +417,17 @@ mod tests {
         let stage = validation_run(&rig, &specimen, &log_of(&rig, &specimen)).unwrap();
         let s = stage.metrics.simplified_ccf.as_ref().unwrap();
         assert!(s.stable);
-        assert!((s.max_pole_real_per_s + 6.317).abs() < 0.01, "{}", s.max_pole_real_per_s);
+        assert!(
+            (s.max_pole_real_per_s + 6.317).abs() < 0.01,
+            "{}",
+            s.max_pole_real_per_s
+        );
         let e = s.errors.as_ref().expect("simulated");
-        assert!(e.nrmse_pct > 0.1 && e.nrmse_pct.is_finite(), "{}", e.nrmse_pct);
+        assert!(
+            e.nrmse_pct > 0.1 && e.nrmse_pct.is_finite(),
+            "{}",
+            e.nrmse_pct
+        );
         assert!(stage.metrics.nrmse_pct < 1e-6);
         assert_eq!(stage.x1_simplified.as_ref().unwrap().len(), 20_000);
     }
