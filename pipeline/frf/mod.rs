@@ -134,7 +134,7 @@ pub fn welch(
         window_kind,
         detrend_kind,
     };
-    let spectra = welch_spectra(&mut RealFftPlanner::new(), u, y, sample_rate_hz, &segments);
+    let spectra = welch_spectra(u, y, sample_rate_hz, &segments);
     let h = spectra
         .suu
         .iter()
@@ -193,13 +193,26 @@ pub fn etfe(
     let n = u.len();
     let w = window(window_kind, n);
     let scale = 1.0 / (sample_rate_hz * w.iter().map(|v| v * v).sum::<f64>());
+    let segments = Segmenting {
+        length: coherence_segment_length,
+        overlap: coherence_overlap,
+        window_kind,
+        detrend_kind,
+    };
 
-    let mut planner = RealFftPlanner::<f64>::new();
-    let mut transform = SegmentTransform::new(&mut planner, n);
-    let mut uf = transform.make_output();
-    let mut yf = transform.make_output();
-    transform.run(u, &w, detrend_kind, &mut uf);
-    transform.run(y, &w, detrend_kind, &mut yf);
+    // The two whole-record transforms and the Welch pass for the coherence
+    // are independent: run them side by side (each with its own plan; the
+    // arithmetic, and so every bit of the result, is the same as in series).
+    let transform_of = |x: &[f64]| {
+        let mut transform = SegmentTransform::new(n);
+        let mut out = transform.make_output();
+        transform.run(x, &w, detrend_kind, &mut out);
+        out
+    };
+    let ((uf, yf), coarse) = rayon::join(
+        || rayon::join(|| transform_of(u), || transform_of(y)),
+        || welch_spectra(u, y, sample_rate_hz, &segments),
+    );
     let nb = uf.len();
     let mut suu = Vec::with_capacity(nb);
     let mut syy = Vec::with_capacity(nb);
@@ -215,13 +228,6 @@ pub fn etfe(
 
     let resolution_hz = sample_rate_hz / n as f64;
     let freq_hz = bin_frequencies(nb, resolution_hz);
-    let segments = Segmenting {
-        length: coherence_segment_length,
-        overlap: coherence_overlap,
-        window_kind,
-        detrend_kind,
-    };
-    let coarse = welch_spectra(&mut planner, u, y, sample_rate_hz, &segments);
     let coarse_coherence = coherence_of(&coarse.suu, &coarse.syy, &coarse.suy);
     let coarse_resolution_hz = sample_rate_hz / coherence_segment_length as f64;
     let coherence = freq_hz
@@ -558,6 +564,16 @@ fn check_inputs(
     Ok(())
 }
 
+thread_local! {
+    // realfft keeps its plans by length; one planner per thread keeps them
+    // across calls. A campaign's runs share their lengths, and planning a
+    // long record's transform (2^12 x 3 x 29 samples for the bundled
+    // default) costs about as much as running it. Plans are deterministic,
+    // so which thread made one does not change a bit of the result.
+    static PLANNER: std::cell::RefCell<RealFftPlanner<f64>> =
+        std::cell::RefCell::new(RealFftPlanner::new());
+}
+
 /// A planned real FFT of one length with its working buffers: built once per
 /// call and reused for every segment, so the segment loop does not allocate.
 struct SegmentTransform {
@@ -567,8 +583,8 @@ struct SegmentTransform {
 }
 
 impl SegmentTransform {
-    fn new(planner: &mut RealFftPlanner<f64>, n: usize) -> Self {
-        let r2c = planner.plan_fft_forward(n);
+    fn new(n: usize) -> Self {
+        let r2c = PLANNER.with(|p| p.borrow_mut().plan_fft_forward(n));
         let buf = r2c.make_input_vec();
         let scratch = r2c.make_scratch_vec();
         Self { r2c, buf, scratch }
@@ -617,13 +633,7 @@ struct Segmenting {
     detrend_kind: Detrend,
 }
 
-fn welch_spectra(
-    planner: &mut RealFftPlanner<f64>,
-    u: &[f64],
-    y: &[f64],
-    sample_rate_hz: f64,
-    segments: &Segmenting,
-) -> Spectra {
+fn welch_spectra(u: &[f64], y: &[f64], sample_rate_hz: f64, segments: &Segmenting) -> Spectra {
     let Segmenting {
         length: l,
         overlap,
@@ -636,7 +646,7 @@ fn welch_spectra(
     let w = window(window_kind, l);
 
     // One plan and one set of buffers for every segment.
-    let mut transform = SegmentTransform::new(planner, l);
+    let mut transform = SegmentTransform::new(l);
     let mut uf = transform.make_output();
     let mut yf = transform.make_output();
     let nb = uf.len();

@@ -186,8 +186,7 @@ fn segment_transform_matches_the_naive_dft_on_random_signals() {
         let mut rng = SplitMix64(seed);
         let x: Vec<f64> = (0..n).map(|_| 2.0 * rng.uniform() - 1.0).collect();
         let w = vec![1.0; n];
-        let mut planner = RealFftPlanner::new();
-        let mut transform = SegmentTransform::new(&mut planner, n);
+        let mut transform = SegmentTransform::new(n);
         let mut fast = transform.make_output();
         transform.run(&x, &w, Detrend::None, &mut fast);
         let slow = naive_dft(&x);

@@ -1,0 +1,103 @@
+//! One log of the bundled default, end to end through the identification:
+//! 170 s at 2048 Hz (348,160 samples + 2 s of rest), the no-specimen run of
+//! `experiments/maghareh2018/simulation.toml` (quadratic chirp 0.1-35 Hz,
+//! 2 um LVDT noise, 18-bit I/O), written as Parquet by the simulator.
+//!
+//! - `log_stage/parquet`: what `servoid run` does per log: read and hash the
+//!   file, convert to SI, the log checks, ETFE over the whole record with the
+//!   Welch coherence, the local-polynomial noise variance, and the
+//!   second-order fit with the hold modelled (throughput in file bytes/s);
+//! - `frf_and_fit`: the same FRF and fit on signals already in memory
+//!   (throughput in samples/s). Budget: under 20 ms.
+//!
+//! `cargo bench --bench identify`
+
+use std::hint::black_box;
+
+use criterion::{Criterion, Throughput, criterion_group, criterion_main};
+use servoid::fit::{FitInput, FitOptions, fit};
+use servoid::frf;
+use servoid::manifest::simulation::load_simulation_str;
+use servoid::manifest::{LogFormat, RunSource, load};
+use servoid::run::acquire::log_stage;
+use servoid::run::simulate::simulate_campaign;
+
+fn bench_identify(c: &mut Criterion) {
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+    let text = std::fs::read_to_string(root.join("experiments/maghareh2018/simulation.toml"))
+        .expect("the bundled default")
+        .replace("log_format = \"csv\"", "log_format = \"parquet\"");
+    let dir = tempfile::tempdir().expect("a temporary folder");
+    let plan = load_simulation_str(&text, &dir.path().join("simulation.toml")).unwrap();
+    let sim = simulate_campaign(&plan, dir.path()).expect("simulates");
+    let campaign = load(&sim.manifest).expect("the generated manifest loads");
+    let run = campaign
+        .runs
+        .iter()
+        .find(|r| r.id == "no-specimen")
+        .expect("the no-specimen run");
+    let RunSource::Log(log_plan) = &run.source else {
+        panic!("a log run")
+    };
+    assert_eq!(log_plan.format, LogFormat::Parquet);
+    let ident = &campaign.identification;
+    let bytes = std::fs::metadata(&log_plan.path).unwrap().len();
+
+    // Fail loudly rather than time a stage that does not work.
+    let stage = log_stage(run, log_plan, ident).expect("the log stage runs");
+    let fitted = stage.fit.as_ref().expect("a fit");
+    assert!(fitted.converged && fitted.stable);
+    let (u, y, fs) = (
+        stage.log.command_m.clone(),
+        stage.log.displacement_m.clone(),
+        stage.log.sample_rate_hz,
+    );
+
+    let mut group = c.benchmark_group("identify_170s_2048hz");
+    group.sample_size(20);
+    group.throughput(Throughput::Bytes(bytes));
+    group.bench_function("log_stage/parquet", |b| {
+        b.iter(|| log_stage(black_box(run), black_box(log_plan), ident).unwrap())
+    });
+
+    // The FRF and the fit alone, as acquire.rs calls them.
+    group.throughput(Throughput::Elements(u.len() as u64));
+    group.bench_function("frf_only", |b| {
+        b.iter(|| frf::estimate(black_box(&u), black_box(&y), fs, &ident.frf).unwrap())
+    });
+    let h = frf::estimate(&u, &y, fs, &ident.frf).unwrap();
+    let mask = frf::band_mask(&h, run.band_hz, ident.coherence_min);
+    let bins: Vec<usize> = (0..h.freq_hz.len()).filter(|&i| mask[i]).collect();
+    group.bench_function("variance_only", |b| {
+        b.iter(|| frf::h_variance_at(black_box(&h), black_box(&bins)))
+    });
+    group.bench_function("frf_and_fit", |b| {
+        b.iter(|| {
+            let h = frf::estimate(black_box(&u), black_box(&y), fs, &ident.frf).unwrap();
+            let mask = frf::band_mask(&h, run.band_hz, ident.coherence_min);
+            let bins: Vec<usize> = (0..h.freq_hz.len()).filter(|&i| mask[i]).collect();
+            let var: Vec<f64> = frf::h_variance_at(&h, &bins)
+                .into_iter()
+                .map(|v| 2.0 * v)
+                .collect();
+            let fq: Vec<f64> = bins.iter().map(|&i| h.freq_hz[i]).collect();
+            let hh: Vec<_> = bins.iter().map(|&i| h.h[i]).collect();
+            let mut opts = FitOptions::new(ident.numerator_order, ident.denominator_order, fs);
+            opts.intersample = ident.intersample;
+            opts.delay = ident.delay;
+            fit(
+                &FitInput {
+                    freq_hz: &fq,
+                    h: &hh,
+                    variance: &var,
+                },
+                &opts,
+            )
+            .unwrap()
+        })
+    });
+    group.finish();
+}
+
+criterion_group!(benches, bench_identify);
+criterion_main!(benches);
