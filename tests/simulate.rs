@@ -431,3 +431,102 @@ fn the_bundled_simulation_manifests_check() {
         assert!(r.stdout.contains("7 runs"), "{m}: {}", r.stdout);
     }
 }
+
+/// A validation run whose manifest names the wrong specimen: simulated with
+/// m = 4 kg, k = 80 kN/m, analysed as m = 12 kg, k = 200 kN/m. Its NRMSE is
+/// far above the three honest runs', so results.json and the page flag it;
+/// the honest runs stay unflagged, and Table 4 shows the paper's simplified
+/// form beside the full one for every validation run.
+#[test]
+fn a_validation_run_with_the_wrong_specimen_is_flagged() {
+    let runs = (1..=4)
+        .map(|i| {
+            format!(
+                "[[runs]]\nid = \"v{i}\"\nrole = \"validation\"\np_gain = {}\nspecimen = {{ mass_kg = 4.0, damping_ns_per_m = 10.0, stiffness_n_per_m = {} }}\n",
+                if i % 2 == 0 { 1.5 } else { 1.0 },
+                if i <= 2 { 120000.0 } else { 80000.0 }
+            )
+        })
+        .collect::<Vec<_>>()
+        .join("\n");
+    let cut = BASE.find("[[runs]]\nid = \"v1\"").expect("the v1 run");
+    let text = format!("{}{runs}", &BASE[..cut]);
+    let dir = scratch();
+    let manifest = write(dir.path(), "sim.toml", &text);
+    let out = dir.path().join("out");
+    let r = servoid(
+        dir.path(),
+        &[
+            "simulate",
+            manifest.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+            "--quiet",
+        ],
+    );
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    // The lab's mistake: v3's specimen written down wrong.
+    let campaign = out.join("campaign.toml");
+    let generated = std::fs::read_to_string(&campaign).unwrap();
+    let (i, j) = (
+        generated.find("id = \"v3\"").unwrap(),
+        generated.find("id = \"v4\"").unwrap(),
+    );
+    let wrong = generated[i..j]
+        .replace("mass_kg = 4.0", "mass_kg = 12.0")
+        .replace(
+            "stiffness_n_per_m = 80000.0",
+            "stiffness_n_per_m = 200000.0",
+        );
+    assert_ne!(wrong, generated[i..j], "the specimen was edited");
+    std::fs::write(
+        &campaign,
+        format!("{}{wrong}{}", &generated[..i], &generated[j..]),
+    )
+    .unwrap();
+    let r = servoid(
+        dir.path(),
+        &[
+            "run",
+            campaign.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+            "--quiet",
+        ],
+    );
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    let results = json(&out.join("results.json"));
+    let validation = |id: &str| {
+        results["runs"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|r| r["id"] == id)
+            .unwrap()["validation"]
+            .clone()
+    };
+    for id in ["v1", "v2", "v4"] {
+        let v = validation(id);
+        assert_eq!(v["outlier"], false, "{id}: {v}");
+        assert!(v["nrmse_pct"].as_f64().unwrap() < 0.5, "{id}: {v}");
+    }
+    let v3 = validation("v3");
+    assert_eq!(v3["outlier"], true, "{v3}");
+    let note = v3["note"].as_str().unwrap();
+    assert!(note.contains("specimen"), "{note}");
+    // The simplified form is checked for each run: stable or not, stated.
+    for id in ["v1", "v2", "v3", "v4"] {
+        let s = &validation(id)["simplified_ccf"];
+        assert!(s["stable"].is_boolean(), "{id}: {s}");
+        assert_eq!(s["errors"].is_null(), s["stable"] == false, "{id}: {s}");
+    }
+    let page = std::fs::read_to_string(out.join("report.html")).unwrap();
+    let table4 = &page[page.find("id=\"table4\"").expect("Table 4 on the page")..];
+    let row = &table4[table4.find("<td class=\"l\">v3</td>").expect("v3's row")
+        ..table4.find("<td class=\"l\">v4</td>").expect("v4's row")];
+    assert!(row.contains("flagcell"), "v3's row is flagged: {row}");
+    assert!(
+        table4.contains("CCF, Cn dropped"),
+        "the side-by-side columns"
+    );
+}
