@@ -6,6 +6,7 @@ mod util;
 mod accuracy;
 mod browser;
 mod manifest_errors;
+mod mts;
 mod paper;
 mod schemas;
 mod simulate;

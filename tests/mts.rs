@@ -1,0 +1,274 @@
+//! The real MTS logs (`../shared/data/utfsm-mts-mrdamper/`, 1 kHz DAQ text)
+//! through the example manifest `experiments/utfsm-mts-mrdamper/campaign.toml`,
+//! cross-checked against an independent computation written here, which
+//! shares no code with servoid:
+//!
+//! 1. its own parser: skip the 7 header lines and the column-name line,
+//!    split each line on commas, take CHANNEL2 (command) and CHANNEL0
+//!    (displacement), times 10 -> mm;
+//! 2. its own H1 estimate with the manifest's settings (16384-sample
+//!    periodic Hann segments, 50 % overlap, mean removed per segment), each
+//!    bin's DFT summed directly (a rotating phasor, no FFT) at the bins
+//!    inside 0.5-20 Hz, with the coherence;
+//! 3. its own fit of n0 / (s^2 + d1 s + d0) on the bins with coherence >=
+//!    0.8, weighted by the H1 variance (1 - g^2) |H|^2 / g^2:
+//!    Sanathanan-Koerner iterations (Levy's linearised error divided by the
+//!    previous denominator) for a start, then Gauss-Newton on the output
+//!    error, solved with nalgebra's SVD.
+//!
+//! servoid fits the same weighted output error by Levy, SK and then
+//! Levenberg-Marquardt (argmin), with its own FFT-based FRF. SK alone stops
+//! about 2 % away on these logs (the second-order model does not explain
+//! them to the noise level, so estimators that weigh the bins differently
+//! disagree); the output-error optimum is one point, which both must find.
+//! Measured: the two agree to 3e-6 relative in every coefficient (FFT
+//! against direct sums, and the solvers' stopping rules); the test allows
+//! 1e-4, thirty times that and far below the 0.6 % standard deviations.
+
+use std::f64::consts::PI;
+use std::path::{Path, PathBuf};
+
+use nalgebra::{Complex, DMatrix, DVector};
+
+use crate::util::{root, scratch, servoid};
+
+/// The shared data beside the clone (or beside a worktree's parent).
+fn data_dir() -> PathBuf {
+    let candidates = [
+        root().join("../shared/data/utfsm-mts-mrdamper"),
+        root().join("../../shared/data/utfsm-mts-mrdamper"),
+    ];
+    candidates
+        .iter()
+        .find(|d| d.join("0A.txt").exists())
+        .unwrap_or_else(|| panic!("the MTS logs are not in {candidates:?}"))
+        .clone()
+}
+
+/// (command, displacement) in mm.
+fn parse(path: &Path) -> (Vec<f64>, Vec<f64>) {
+    let text = std::fs::read_to_string(path).expect("the log is readable");
+    let (mut u, mut y) = (Vec::new(), Vec::new());
+    for line in text.lines().skip(8) {
+        let f: Vec<&str> = line.split(',').collect();
+        y.push(10.0 * f[2].trim().parse::<f64>().unwrap());
+        u.push(10.0 * f[4].trim().parse::<f64>().unwrap());
+    }
+    (u, y)
+}
+
+/// H1 and coherence at bins k of `seg`-sample Hann segments, 50 % overlap.
+fn h1(
+    u: &[f64],
+    y: &[f64],
+    fs: f64,
+    seg: usize,
+    band: (f64, f64),
+) -> Vec<(f64, Complex<f64>, f64)> {
+    let hop = seg / 2;
+    let n_seg = (u.len() - seg) / hop + 1;
+    let w: Vec<f64> = (0..seg)
+        .map(|i| 0.5 - 0.5 * (2.0 * PI * i as f64 / seg as f64).cos())
+        .collect();
+    let bins: Vec<usize> = (1..seg / 2)
+        .filter(|&k| {
+            let f = k as f64 * fs / seg as f64;
+            f >= band.0 && f <= band.1
+        })
+        .collect();
+    let mut suu = vec![0.0; bins.len()];
+    let mut syy = vec![0.0; bins.len()];
+    let mut suy = vec![Complex::new(0.0, 0.0); bins.len()];
+    for s in 0..n_seg {
+        let (us, ys) = (&u[s * hop..s * hop + seg], &y[s * hop..s * hop + seg]);
+        let (mu, my) = (
+            us.iter().sum::<f64>() / seg as f64,
+            ys.iter().sum::<f64>() / seg as f64,
+        );
+        for (b, &k) in bins.iter().enumerate() {
+            let step = Complex::from_polar(1.0, -2.0 * PI * k as f64 / seg as f64);
+            let mut phasor = Complex::new(1.0, 0.0);
+            let (mut uk, mut yk) = (Complex::new(0.0, 0.0), Complex::new(0.0, 0.0));
+            for i in 0..seg {
+                uk += phasor * ((us[i] - mu) * w[i]);
+                yk += phasor * ((ys[i] - my) * w[i]);
+                phasor *= step;
+                if i % 1024 == 1023 {
+                    // Keep the phasor on the unit circle.
+                    phasor = Complex::from_polar(
+                        1.0,
+                        -2.0 * PI * (k * (i + 1) % seg) as f64 / seg as f64,
+                    );
+                }
+            }
+            suu[b] += uk.norm_sqr();
+            syy[b] += yk.norm_sqr();
+            suy[b] += uk.conj() * yk;
+        }
+    }
+    bins.iter()
+        .enumerate()
+        .map(|(b, &k)| {
+            let h = suy[b] / suu[b];
+            let g2 = suy[b].norm_sqr() / (suu[b] * syy[b]);
+            (k as f64 * fs / seg as f64, h, g2)
+        })
+        .collect()
+}
+
+/// [n0, d1, d0] by Sanathanan-Koerner iterations on the weighted bins.
+fn sk_fit(bins: &[(f64, Complex<f64>, f64)]) -> [f64; 3] {
+    let used: Vec<_> = bins.iter().filter(|b| b.2 >= 0.8 && b.2 < 1.0).collect();
+    let mut theta = [0.0, 0.0, 0.0];
+    let mut prev: Vec<Complex<f64>> = vec![Complex::new(1.0, 0.0); used.len()];
+    for _ in 0..50 {
+        // e = (jw)^2 H + d1 (jw) H + d0 H - n0, over |D_prev| and sigma.
+        let mut a = DMatrix::<f64>::zeros(2 * used.len(), 3);
+        let mut rhs = DVector::<f64>::zeros(2 * used.len());
+        for (i, (f, h, g2)) in used.iter().enumerate() {
+            let jw = Complex::new(0.0, 2.0 * PI * f);
+            let sigma = ((1.0 - g2) / g2).sqrt() * h.norm();
+            let scale = 1.0 / (sigma * prev[i].norm());
+            let cols = [Complex::new(-1.0, 0.0), jw * h, *h];
+            for (c, v) in cols.iter().enumerate() {
+                a[(2 * i, c)] = v.re * scale;
+                a[(2 * i + 1, c)] = v.im * scale;
+            }
+            let r = -(jw * jw * h);
+            rhs[2 * i] = r.re * scale;
+            rhs[2 * i + 1] = r.im * scale;
+        }
+        // Columns scaled to unit norm for conditioning.
+        let norms: Vec<f64> = (0..3).map(|c| a.column(c).norm()).collect();
+        for (c, n) in norms.iter().enumerate() {
+            a.column_mut(c).scale_mut(1.0 / n);
+        }
+        let x = a.svd(true, true).solve(&rhs, 1e-14).expect("solvable");
+        theta = [x[0] / norms[0], x[1] / norms[1], x[2] / norms[2]];
+        for (i, (f, _, _)) in used.iter().enumerate() {
+            let jw = Complex::new(0.0, 2.0 * PI * f);
+            prev[i] = jw * jw + jw * theta[1] + theta[2];
+        }
+    }
+    theta
+}
+
+/// Gauss-Newton on the output error sum |(H - n0 / D) / sigma|^2 from `start`
+/// (the SK estimate): the weighted least-squares optimum servoid's
+/// Levenberg-Marquardt also seeks, reached by other code. The Jacobian is
+/// analytic: d/dn0 = 1/D, d/dd1 = -n0 jw / D^2, d/dd0 = -n0 / D^2 (of the
+/// model, so of minus the residual).
+fn output_error_fit(bins: &[(f64, Complex<f64>, f64)], start: [f64; 3]) -> [f64; 3] {
+    let used: Vec<_> = bins.iter().filter(|b| b.2 >= 0.8 && b.2 < 1.0).collect();
+    let mut theta = start;
+    for _ in 0..100 {
+        let mut jac = DMatrix::<f64>::zeros(2 * used.len(), 3);
+        let mut r = DVector::<f64>::zeros(2 * used.len());
+        for (i, (f, h, g2)) in used.iter().enumerate() {
+            let jw = Complex::new(0.0, 2.0 * PI * f);
+            let d = jw * jw + jw * theta[1] + theta[2];
+            let model = Complex::new(theta[0], 0.0) / d;
+            let sigma = ((1.0 - g2) / g2).sqrt() * h.norm();
+            let e = (h - model) / sigma;
+            r[2 * i] = e.re;
+            r[2 * i + 1] = e.im;
+            let cols = [
+                Complex::new(1.0, 0.0) / d,
+                -(jw * theta[0]) / (d * d),
+                Complex::new(-theta[0], 0.0) / (d * d),
+            ];
+            for (c, v) in cols.iter().enumerate() {
+                jac[(2 * i, c)] = v.re / sigma;
+                jac[(2 * i + 1, c)] = v.im / sigma;
+            }
+        }
+        let norms: Vec<f64> = (0..3).map(|c| jac.column(c).norm()).collect();
+        for (c, n) in norms.iter().enumerate() {
+            jac.column_mut(c).scale_mut(1.0 / n);
+        }
+        // Model step: J delta = r (r = data - model).
+        let x = jac.svd(true, true).solve(&r, 1e-14).expect("solvable");
+        let step: Vec<f64> = (0..3).map(|c| x[c] / norms[c]).collect();
+        for c in 0..3 {
+            theta[c] += step[c];
+        }
+        if (0..3).all(|c| step[c].abs() < 1e-12 * theta[c].abs()) {
+            break;
+        }
+    }
+    theta
+}
+
+fn response(theta: [f64; 3], f: f64) -> Complex<f64> {
+    let jw = Complex::new(0.0, 2.0 * PI * f);
+    Complex::new(theta[0], 0.0) / (jw * jw + jw * theta[1] + theta[2])
+}
+
+#[test]
+fn the_mts_logs_fit_as_an_independent_computation_does() {
+    let data = data_dir();
+    let dir = scratch();
+    let out = dir.path().join("out");
+    let r = servoid(
+        &root(),
+        &[
+            "run",
+            "experiments/utfsm-mts-mrdamper/campaign.toml",
+            "--out",
+            out.to_str().unwrap(),
+            "--quiet",
+        ],
+    );
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    let results: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("results.json")).unwrap()).unwrap();
+    for id in ["0A", "1A"] {
+        let run = results["runs"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|r| r["id"] == id)
+            .unwrap();
+        assert_eq!(run["status"], "ok", "{id}: {run}");
+        let tf = &run["tf"];
+        let num: Vec<f64> = serde_json::from_value(tf["num"].clone()).unwrap();
+        let den: Vec<f64> = serde_json::from_value(tf["den"].clone()).unwrap();
+        assert_eq!((num.len(), den.len()), (1, 3), "{id}: second order");
+        let servoid_theta = [num[0], den[1], den[2]];
+
+        let (u, y) = parse(&data.join(format!("{id}.txt")));
+        let bins = h1(&u, &y, 1000.0, 16384, (0.5, 20.0));
+        let theta = output_error_fit(&bins, sk_fit(&bins));
+        eprintln!("{id}: servoid {servoid_theta:?}, independent {theta:?}");
+        for (k, name) in ["n0", "d1", "d0"].iter().enumerate() {
+            let rel = (servoid_theta[k] - theta[k]).abs() / theta[k].abs();
+            assert!(
+                rel < 1e-4,
+                "{id} {name}: servoid {} vs independent {} ({:.3} %)",
+                servoid_theta[k],
+                theta[k],
+                100.0 * rel
+            );
+        }
+        for (f, _, _) in &bins {
+            let (a, b) = (response(servoid_theta, *f), response(theta, *f));
+            assert!((a - b).norm() / b.norm() < 1e-4, "{id} at {f} Hz");
+        }
+        // Physical sanity: a displacement-controlled actuator tracks at DC.
+        let dc = num[0] / den[2];
+        assert!((dc - 1.0).abs() < 0.05, "{id}: DC gain {dc}");
+
+        // Fit percent and coherence are reported (measured: fit 94.6 % and
+        // 95.3 %, mean coherence 0.998 and 0.9996).
+        let fit = &run["fit"];
+        let fit_pct = fit["fit_percent"].as_f64().unwrap();
+        assert!(fit_pct > 90.0, "{id}: fit {fit_pct} %");
+        let coh = fit["coherence_mean"].as_f64().unwrap();
+        let independent_coh = bins.iter().map(|b| b.2).sum::<f64>() / bins.len() as f64;
+        assert!(
+            (coh - independent_coh).abs() < 0.01,
+            "{id}: mean coherence {coh} vs {independent_coh}"
+        );
+        assert_eq!(fit["converged"], true);
+    }
+}
