@@ -40,3 +40,28 @@ pub fn write(dir: &Path, name: &str, text: &str) -> PathBuf {
     std::fs::write(&p, text).expect("write a test file");
     p
 }
+
+/// The shared folder of real MTS logs: `$SERVOID_SHARED_DATA` (the folder
+/// holding `utfsm-mts-mrdamper/`), else `../shared/data` beside the
+/// checkout, one level further up (a worktree), or `/work/shared/data`.
+/// None, after a SKIPPED line on stderr, where none holds them: the logs
+/// are not part of the repository.
+pub fn mts_data() -> Option<PathBuf> {
+    let candidates: Vec<PathBuf> = std::env::var_os("SERVOID_SHARED_DATA")
+        .map(PathBuf::from)
+        .into_iter()
+        .chain([
+            root().join("../shared/data"),
+            root().join("../../shared/data"),
+            PathBuf::from("/work/shared/data"),
+        ])
+        .collect();
+    let found = candidates
+        .iter()
+        .map(|d| d.join("utfsm-mts-mrdamper"))
+        .find(|d| d.join("0A.txt").exists() && d.join("1A.txt").exists());
+    if found.is_none() {
+        eprintln!("SKIPPED: the MTS logs are not in any of {candidates:?}");
+    }
+    found
+}

@@ -121,24 +121,31 @@ const NEEDS: Needs = Needs {
 
 // ------------------------------------------------------- real DAQ logs
 
-/// The shared data folder: beside the main checkout (as the brief has it),
-/// or one level further up from a worktree under /work/wt.
-fn shared_log(file: &str) -> PathBuf {
-    let candidates = [
-        concat!(
-            env!("CARGO_MANIFEST_DIR"),
-            "/../shared/data/utfsm-mts-mrdamper/"
-        ),
-        concat!(
-            env!("CARGO_MANIFEST_DIR"),
-            "/../../shared/data/utfsm-mts-mrdamper/"
-        ),
-    ];
-    candidates
+/// A real MTS log from the shared data folder: `$SERVOID_SHARED_DATA` (the
+/// folder holding `utfsm-mts-mrdamper/`), else `../shared/data` beside the
+/// checkout (as the brief has it), one level further up (a worktree), or
+/// `/work/shared/data`. The logs are not part of the repository; where none
+/// of these holds them the tests that need them say SKIPPED on stderr and
+/// pass, so that a clone without the data still builds and tests.
+fn shared_log(file: &str) -> Option<PathBuf> {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let candidates: Vec<PathBuf> = std::env::var_os("SERVOID_SHARED_DATA")
+        .map(PathBuf::from)
+        .into_iter()
+        .chain([
+            root.join("../shared/data"),
+            root.join("../../shared/data"),
+            PathBuf::from("/work/shared/data"),
+        ])
+        .collect();
+    let found = candidates
         .iter()
-        .map(|d| Path::new(d).join(file))
-        .find(|p| p.exists())
-        .unwrap_or_else(|| panic!("{file} not found in {candidates:?}"))
+        .map(|d| d.join("utfsm-mts-mrdamper").join(file))
+        .find(|p| p.exists());
+    if found.is_none() {
+        eprintln!("SKIPPED: {file} not found in {candidates:?}");
+    }
+    found
 }
 
 /// The UTFSM convention: CHANNEL2 = command (x 10 -> mm), CHANNEL0 =
@@ -175,7 +182,9 @@ fn independent_daq(path: &Path) -> ([f64; 3], [f64; 3], usize) {
 }
 
 fn check_real_daq(file: &str, expected_rows: usize) {
-    let path = shared_log(file);
+    let Some(path) = shared_log(file) else {
+        return;
+    };
     let log = read_log(&daq_plan(&path)).unwrap();
     let (sum, max, n) = independent_daq(&path);
     assert_eq!(n, expected_rows);
@@ -227,7 +236,10 @@ fn real_daq_log_1a_matches_an_independent_parse() {
 fn real_daq_log_first_and_last_values() {
     // Read off the file by eye: line 8 is the first sample, line 61507 the
     // last ("-0.0282, -0.0218, -0.0204, DAQ Pause, DAQ Stop").
-    let log = read_log(&daq_plan(&shared_log("0A.txt"))).unwrap();
+    let Some(path) = shared_log("0A.txt") else {
+        return;
+    };
+    let log = read_log(&daq_plan(&path)).unwrap();
     assert_relative_eq!(log.displacement_m[0], -0.0209 * 1e-2, max_relative = 1e-15);
     assert_relative_eq!(
         log.force_n.as_ref().unwrap()[0],
@@ -240,7 +252,9 @@ fn real_daq_log_first_and_last_values() {
 
 #[test]
 fn real_daq_log_by_index_and_with_a_given_rate() {
-    let path = shared_log("1A.txt");
+    let Some(path) = shared_log("1A.txt") else {
+        return;
+    };
     let mut p = daq_plan(&path);
     p.channels.command.column = Column::Index(4); // CHANNEL2
     p.channels.time = TimePlan::SampleRate { hz: 1024.0 };
