@@ -73,42 +73,73 @@ pub const PAPER_WINDOWS: [(&str, f64, f64); 4] = [
     ("about 35 Hz", 35.0, 1.0),
 ];
 
+/// Hysteresis of the zero-crossing detector, as a fraction of the sweep's
+/// amplitude: far above DAQ noise (on the UTFSM command its peaks reach
+/// about 2 % of the amplitude) and crossed twice every period by a sweep of
+/// roughly constant amplitude.
+const CROSSING_HYSTERESIS: f64 = 0.1;
+
 /// Instantaneous frequency of a sweep from its upward zero crossings: the
 /// crossing times (linear interpolation between samples), and the frequency
 /// 1/dt between consecutive upward crossings placed at their midpoint.
 ///
 /// Whole periods, not half periods: with any offset left in the signal the
 /// rising and falling half-cycles differ in length, but a full period does
-/// not. The median of the excited part is removed first (robust to the slow
-/// start of a chirp, where a mean is not). Returns (time_s, frequency_hz) pairs.
+/// not. The sweep is the part of the record that strays from the record's
+/// median (its rest level, which a real command need not hold at zero) by
+/// more than `CROSSING_HYSTERESIS` (a tenth) of the largest excursion; the median of
+/// that part is removed (robust to the slow start of a chirp, where a mean
+/// is not). An upward crossing counts only once the signal has been below
+/// -h and reaches +h (a Schmitt trigger, h the hysteresis), so noise on a
+/// slow crossing or at rest adds none; it is placed where the signal last
+/// crossed zero on the way up. Returns (time_s, frequency_hz) pairs.
 pub fn instantaneous_frequency(u: &[f64], sample_rate_hz: f64) -> Vec<(f64, f64)> {
     if u.len() < 3 {
         return Vec::new();
     }
-    let peak = u.iter().fold(0.0_f64, |m, v| m.max(v.abs()));
-    // Ignore the flat lead-in and lead-out: crossings of a near-zero signal
-    // are noise.
-    let floor = 1e-3 * peak;
-    let excited: Vec<usize> = (0..u.len()).filter(|&i| u[i].abs() > floor).collect();
-    let (Some(&first), Some(&last)) = (excited.first(), excited.last()) else {
+    let level = median(u);
+    let peak = u.iter().fold(0.0_f64, |m, v| m.max((v - level).abs()));
+    if !(peak > 0.0 && peak.is_finite()) {
+        return Vec::new();
+    }
+    let h = CROSSING_HYSTERESIS * peak;
+    let excited = |i: &usize| (u[*i] - level).abs() > h;
+    let (Some(first), Some(last)) = ((0..u.len()).find(excited), (0..u.len()).rfind(excited))
+    else {
         return Vec::new();
     };
-    let mut sorted = u[first..=last].to_vec();
-    sorted.sort_by(f64::total_cmp);
-    let centre = sorted[sorted.len() / 2];
+    let centre = median(&u[first..=last]);
     let dt = 1.0 / sample_rate_hz;
     let mut crossings = Vec::new();
-    for k in first..last {
-        let (a, b) = (u[k] - centre, u[k + 1] - centre);
-        if a < 0.0 && b >= 0.0 {
-            let frac = a / (a - b);
-            crossings.push((k as f64 + frac) * dt);
+    let (mut armed, mut last_negative) = (false, None);
+    for k in first..=last {
+        let d = u[k] - centre;
+        if d < 0.0 {
+            last_negative = Some(k);
+        }
+        if d < -h {
+            armed = true;
+        } else if armed
+            && d >= h
+            && let Some(j) = last_negative
+        {
+            // u[j] < centre <= u[j + 1], and j < k.
+            let (a, b) = (u[j] - centre, u[j + 1] - centre);
+            crossings.push((j as f64 + a / (a - b)) * dt);
+            armed = false;
         }
     }
     crossings
         .windows(2)
         .map(|w| (0.5 * (w[0] + w[1]), 1.0 / (w[1] - w[0])))
         .collect()
+}
+
+/// The median (upper middle element for an even count).
+fn median(x: &[f64]) -> f64 {
+    let mut sorted = x.to_vec();
+    sorted.sort_by(f64::total_cmp);
+    sorted[sorted.len() / 2]
 }
 
 /// Locate the paper's windows in a record from its command: each window is
@@ -266,5 +297,64 @@ mod tests {
         let w = locate_windows(&u, fs);
         let labels: Vec<&str> = w.iter().map(|x| x.label.as_str()).collect();
         assert_eq!(labels, ["below 0.5 Hz", "about 2.5 Hz", "about 18 Hz"]);
+    }
+
+    /// Regression (the UTFSM MTS logs): a recorded command rests at a
+    /// non-zero level (-0.21 mm against a 2 mm sweep) with DAQ noise (0.015
+    /// mm rms) for seconds before and after the sweep. Every sample then
+    /// cleared the old 1e-3 x peak floor, the noise at rest crossed the
+    /// median hundreds of times a second, and every window landed at 0 s.
+    #[test]
+    fn windows_of_a_noisy_offset_command_with_rest_land_on_the_sweep() {
+        let fs = 1000.0;
+        let (f0, f1, t1, lead, tail) = (0.1, 20.0, 50.0, 7.0, 4.0);
+        let (offset, amplitude, noise_rms) = (-0.21, 2.0, 0.015);
+        let n = ((lead + t1 + tail) * fs) as usize;
+        // Uniform noise in (-1, 1) has rms 1/sqrt(3).
+        let mut state = 2022_u64;
+        let mut noise = || {
+            state = state
+                .wrapping_mul(6_364_136_223_846_793_005)
+                .wrapping_add(1_442_695_040_888_963_407);
+            ((state >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0) * noise_rms * 3f64.sqrt()
+        };
+        let u: Vec<f64> = (0..n)
+            .map(|k| {
+                let t = k as f64 / fs - lead;
+                let sweep = if (0.0..=t1).contains(&t) {
+                    let phase =
+                        2.0 * std::f64::consts::PI * (f0 * t + (f1 - f0) * t * t / (2.0 * t1));
+                    amplitude * phase.sin()
+                } else {
+                    0.0
+                };
+                offset + sweep + noise()
+            })
+            .collect();
+        let inst = instantaneous_frequency(&u, fs);
+        assert!(
+            inst.iter().all(|p| p.0 > lead - 1.0 && p.1 < 1.05 * f1),
+            "crossings outside the sweep or above its top: {:?}",
+            inst.iter().find(|p| p.0 <= lead - 1.0 || p.1 >= 1.05 * f1)
+        );
+        let w = locate_windows(&u, fs);
+        let labels: Vec<&str> = w.iter().map(|x| x.label.as_str()).collect();
+        assert_eq!(labels, ["below 0.5 Hz", "about 2.5 Hz", "about 18 Hz"]);
+        // This sweep passes 0.35 Hz inside its first period, so the first
+        // window sits on the first whole-period estimate: its centre is
+        // within the sweep's first 3 s (phase 4 pi at 3.0 s).
+        let centre0 = 0.5 * (w[0].start_s + w[0].end_s) - lead;
+        assert!((0.0..3.0).contains(&centre0), "{:?}", w[0]);
+        // Linear law: f = f0 + (f1 - f0) t / t1.
+        let law_t = |f: f64| lead + (f - f0) / (f1 - f0) * t1;
+        for (win, target, tol) in [(&w[1], 2.5, 0.3), (&w[2], 18.0, 0.1)] {
+            let centre = 0.5 * (win.start_s + win.end_s);
+            assert!(
+                (centre - law_t(target)).abs() < tol,
+                "{}: centre {centre} s, law {} s",
+                win.label,
+                law_t(target)
+            );
+        }
     }
 }

@@ -275,5 +275,23 @@ fn the_mts_logs_fit_as_an_independent_computation_does() {
             "{id}: mean coherence {coh} vs {independent_coh}"
         );
         assert_eq!(fit["converged"], true);
+
+        // The paper's windows are found on the sweep (which starts after
+        // about 1-7 s of noisy rest at an offset and tops out at 20 Hz): no
+        // window at 0 s and none at 35 Hz.
+        let windows = run["validation"]["windows"].as_array().unwrap();
+        let labels: Vec<&str> = windows
+            .iter()
+            .map(|w| w["label"].as_str().unwrap())
+            .collect();
+        assert_eq!(
+            labels,
+            ["below 0.5 Hz", "about 2.5 Hz", "about 18 Hz"],
+            "{id}"
+        );
+        assert!(
+            windows.iter().all(|w| w["start_s"].as_f64().unwrap() > 1.0),
+            "{id}: {windows:?}"
+        );
     }
 }
