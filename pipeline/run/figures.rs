@@ -266,11 +266,19 @@ pub fn build(analysis: &Analysis, campaign: &Campaign) -> Vec<FigureSpec> {
                 };
                 let size = fig.recommended_size();
                 let m = &time.metrics;
+                // The windows the sweep reaches (a sweep that stops short of
+                // 35 Hz has fewer than the paper's four).
+                let windows = time
+                    .windows
+                    .iter()
+                    .map(|w| format!("{} ({:.1}-{:.1} s)", w.label, w.start_s, w.end_s))
+                    .collect::<Vec<_>>()
+                    .join(", ");
                 out.push(FigureSpec {
                     id: format!("time-{}", run.id),
                     title: format!("{}: time-domain comparison", run.id),
                     caption: format!(
-                        "Counterpart of the paper's Figs. 9, 12, 14 and 19-22: {} driven by the measured command, in the windows where the sweep is below 0.5 Hz, at about 2.5, 18 and 35 Hz. Whole record: NRMSE {:.2} %, NAE {:.2} % (Eqs. 47-48).",
+                        "Counterpart of the paper's Figs. 9, 12, 14 and 19-22: {} driven by the measured command, in the windows of the sweep {windows}. Whole record: NRMSE {:.2} %, NAE {:.2} % (Eqs. 47-48).",
                         m.model, m.nrmse_pct, m.nae_pct
                     ),
                     figure: Figure::Panels(fig),
