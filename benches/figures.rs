@@ -13,7 +13,7 @@ use std::sync::Arc;
 
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use nalgebra::Complex;
-use servoid::model::{LinearSpecimen, RigParams, tf_f_u, tf_x1_u};
+use servoid::model::{LinearSpecimen, PAPER_RIG, tf_f_u, tf_x1_u};
 use servoid::report::figures::{
     BodeFigure, BodeSeries, FULL_WIDTH, Figure, LinesFigure, PanelsFigure, TimePanel, TimeSeries,
     Trace, XySeries, render_many,
@@ -23,17 +23,6 @@ const FS_HZ: f64 = 2000.0;
 const N: usize = 348_160; // 174 s at 2 kHz
 const DF_HZ: f64 = 0.25;
 const BINS: usize = 4097;
-
-/// The paper's identified rig (Table 3).
-fn rig() -> RigParams {
-    RigParams {
-        beta1_per_s: 267.0,
-        a1b0_n_per_m_s2: 2.412e9,
-        a2_n_per_m: 7.881e5,
-        a3_per_s: 16.118,
-        p_gain: 1.0,
-    }
-}
 
 /// Deterministic noise in [-0.5, 0.5).
 struct Noise(u64);
@@ -100,7 +89,7 @@ fn respond(u: &[f64], d1: f64, wn2: f64) -> Vec<f64> {
 }
 
 fn campaign() -> Vec<(Figure, (u32, u32))> {
-    let rig = rig();
+    let rig = PAPER_RIG;
     let f = freqs();
     let mut figs = Vec::new();
 

@@ -5,24 +5,12 @@
 use std::hint::black_box;
 
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
-use servoid::model::RigParams;
 use servoid::simulate::{
     ChirpLaw, Duffing, Excitation, Integrator, Padding, PlantSpec, SpecimenModel, Unmodelled,
     generate, simulate,
 };
 
 const FS_HZ: f64 = 2048.0;
-
-/// The paper's mean identified rig (Table 3, P = 1).
-fn paper_rig() -> RigParams {
-    RigParams {
-        beta1_per_s: 267.0,
-        a1b0_n_per_m_s2: 2.412e9,
-        a2_n_per_m: 7.881e5,
-        a3_per_s: 16.118,
-        p_gain: 1.0,
-    }
-}
 
 /// Quadratic chirp 0.1 -> 35 Hz, 2 mm (the paper's command).
 fn paper_command(duration_s: f64) -> Vec<f64> {
@@ -46,7 +34,7 @@ fn bench_simulate(c: &mut Criterion) {
     let u = paper_command(170.0);
     assert_eq!(u.len(), 348_160);
     let exp1 = PlantSpec {
-        rig: paper_rig(),
+        rig: servoid::model::PAPER_RIG,
         specimen: SpecimenModel::LinearSdof {
             mass_kg: 3.8,
             damping_ns_per_m: 5.0,

@@ -30,6 +30,16 @@ pub struct RigParams {
     pub p_gain: f64,
 }
 
+/// The paper's mean identified rig (Sec. 3.1, Table 3), a1b0 at P = 1: the
+/// rig the bundled campaigns, tests and benchmarks are built on.
+pub const PAPER_RIG: RigParams = RigParams {
+    beta1_per_s: 267.0,
+    a1b0_n_per_m_s2: 2.412e9,
+    a2_n_per_m: 7.881e5,
+    a3_per_s: 16.118,
+    p_gain: 1.0,
+};
+
 fn unit_gain() -> f64 {
     1.0
 }
@@ -373,17 +383,6 @@ mod tests {
     use crate::poly;
     use approx::assert_relative_eq;
 
-    /// The paper's mean identified rig (Table 3, P = 1).
-    fn paper_rig() -> RigParams {
-        RigParams {
-            beta1_per_s: 267.0,
-            a1b0_n_per_m_s2: 2.412e9,
-            a2_n_per_m: 7.881e5,
-            a3_per_s: 16.118,
-            p_gain: 1.0,
-        }
-    }
-
     fn exp1() -> LinearSdof {
         LinearSdof {
             mass_kg: 3.8,
@@ -425,7 +424,7 @@ mod tests {
     #[test]
     fn state_space_eigenvalues_are_the_transfer_function_poles() {
         // Eigenvalues of Eq. 10's A matrix against the roots of Eqs. 12/14/17.
-        let rig = paper_rig();
+        let rig = PAPER_RIG;
         for spec in specimens() {
             let eig = state_space(&rig, &spec).eigenvalues();
             let tf_poles = tf_x1_u(&rig, &spec).poles();
@@ -436,7 +435,7 @@ mod tests {
     #[test]
     fn closed_form_transfer_functions_match_the_state_space_response() {
         // Eqs. 12, 14, 17 and 45 against (sI - A)^-1 B solved numerically.
-        let rig = paper_rig();
+        let rig = PAPER_RIG;
         for spec in specimens() {
             let ss = state_space(&rig, &spec);
             let x = tf_x1_u(&rig, &spec);
@@ -456,7 +455,7 @@ mod tests {
 
     #[test]
     fn static_gain_is_one_without_specimen_and_below_one_with_a_spring() {
-        let rig = paper_rig();
+        let rig = PAPER_RIG;
         assert_relative_eq!(
             tf_x1_u(&rig, &LinearSpecimen::None).dc_gain(),
             1.0,
@@ -479,7 +478,7 @@ mod tests {
     #[test]
     fn specimen_poles_are_zeros_of_the_force_path() {
         // Eq. 45: the zeros of f/u are the roots of m s^2 + c s + k.
-        let rig = paper_rig();
+        let rig = PAPER_RIG;
         let e = exp1();
         let spec = LinearSpecimen::Sdof {
             mass_kg: e.mass_kg,
@@ -499,7 +498,7 @@ mod tests {
     #[test]
     fn ccf_with_cn_reproduces_the_fourth_order_transfer_function() {
         // The CCF (Eq. 34) with Cn kept and f substituted must be Eq. 17 exactly.
-        let rig = paper_rig();
+        let rig = PAPER_RIG;
         for k in [129_400.0, 84_340.0] {
             let sdof = LinearSdof {
                 stiffness_n_per_m: k,
@@ -533,7 +532,7 @@ mod tests {
     fn dropping_cn_moves_the_poles() {
         // The paper's simplification is a different model: its characteristic
         // polynomial lacks the k/m s^2 and c/m s^3 terms of Cn.
-        let rig = paper_rig();
+        let rig = PAPER_RIG;
         let sdof = exp1();
         let kept = ccf_linear_state_space(&rig, &sdof, CnTerm::Kept).eigenvalues();
         let dropped = ccf_linear_state_space(&rig, &sdof, CnTerm::Dropped);
@@ -557,7 +556,7 @@ mod tests {
         // Map a physical state [x1, x2, f, r] to CCF coordinates, x3 = h + f/m
         // and x4 = h' + f'/m (Eqs. 27-28), and compare x4' from Eq. 34 with the
         // derivative of x4 computed from Eq. 10.
-        let rig = paper_rig();
+        let rig = PAPER_RIG;
         let sdof = exp1();
         let ss = state_space(
             &rig,
@@ -581,7 +580,7 @@ mod tests {
 
     #[test]
     fn p_gain_scales_a1b0_only() {
-        let rig = paper_rig().at_p_gain(2.0);
+        let rig = PAPER_RIG.at_p_gain(2.0);
         assert_relative_eq!(rig.a1b0_n_per_m_s2, 4.824e9, max_relative = 1e-12);
         assert_eq!(rig.a2_n_per_m, 7.881e5);
         assert_relative_eq!(rig.r1(), 2.0 * 2.412e9 / 7.881e5, max_relative = 1e-12);

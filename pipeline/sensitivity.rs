@@ -115,16 +115,6 @@ mod tests {
     use super::*;
     use approx::assert_relative_eq;
 
-    fn rig() -> RigParams {
-        RigParams {
-            beta1_per_s: 267.0,
-            a1b0_n_per_m_s2: 2.412e9,
-            a2_n_per_m: 7.881e5,
-            a3_per_s: 16.118,
-            p_gain: 1.0,
-        }
-    }
-
     #[test]
     fn a1b0_error_follows_the_closed_form_conditioning() {
         // a1b0 = 1/R3 with R3 = (1/n0_s - 1/R1)/k, R1 = d0_ns (d2 = 1). With
@@ -133,7 +123,7 @@ mod tests {
         //   rel(a1b0)^2 = eps^2 [ (1/n0_s)^2 + (1/R1)^2 ] / (1/n0_s - 1/R1)^2
         // and 1/n0_s - 1/R1 = k/a1b0, 1/n0_s = (k + a2)/a1b0, 1/R1 = a2/a1b0:
         //   rel(a1b0) = eps sqrt((k + a2)^2 + a2^2) / k.
-        let r = rig();
+        let r = crate::model::PAPER_RIG;
         let eps = 1e-3;
         let s = stiffness_sweep(&r, (1e4, 1e7), 25, eps).unwrap();
         for (k, got) in s.stiffness_n_per_m.iter().zip(&s.rel_std_a1b0) {
@@ -145,7 +135,7 @@ mod tests {
 
     #[test]
     fn soft_springs_amplify_noise() {
-        let s = stiffness_sweep(&rig(), (1e3, 1e7), 40, 1e-3).unwrap();
+        let s = stiffness_sweep(&crate::model::PAPER_RIG, (1e3, 1e7), 40, 1e-3).unwrap();
         // Monotone improvement with stiffness over this range for a1b0 and a2.
         for w in s.rel_std_a1b0.windows(2) {
             assert!(w[1] < w[0]);
@@ -157,11 +147,11 @@ mod tests {
     #[test]
     fn bad_ranges_are_rejected() {
         assert!(matches!(
-            stiffness_sweep(&rig(), (0.0, 1e5), 10, 1e-3),
+            stiffness_sweep(&crate::model::PAPER_RIG, (0.0, 1e5), 10, 1e-3),
             Err(SensitivityError::Range(..))
         ));
         assert!(matches!(
-            stiffness_sweep(&rig(), (1e3, 1e5), 10, 0.0),
+            stiffness_sweep(&crate::model::PAPER_RIG, (1e3, 1e5), 10, 0.0),
             Err(SensitivityError::Noise(_))
         ));
     }

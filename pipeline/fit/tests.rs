@@ -6,7 +6,7 @@ use approx::assert_relative_eq;
 use nalgebra::{Complex, DMatrix, DVector};
 
 use super::*;
-use crate::model::{LinearSpecimen, RigParams, tf_x1_u};
+use crate::model::{LinearSpecimen, tf_x1_u};
 
 /// SplitMix64 (Steele, Lea & Flood 2014) with Box-Muller normals: a seeded,
 /// dependency-free generator for the Monte Carlo tests.
@@ -67,13 +67,7 @@ fn truth_params(tf: &TransferFunction) -> Vec<f64> {
 fn paper_exp1_fourth_order() -> TransferFunction {
     // Eq. 17 with the paper's identified rig (Table 3) and the Exp1 specimen
     // (Table 2): m = 3.8 kg, c = 5 N s/m, k = 129,400 N/m.
-    let rig = RigParams {
-        beta1_per_s: 267.0,
-        a1b0_n_per_m_s2: 2.412e9,
-        a2_n_per_m: 7.881e5,
-        a3_per_s: 16.118,
-        p_gain: 1.0,
-    };
+    let rig = crate::model::PAPER_RIG;
     let specimen = LinearSpecimen::Sdof {
         mass_kg: 3.8,
         damping_ns_per_m: 5.0,

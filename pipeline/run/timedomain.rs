@@ -341,19 +341,6 @@ mod tests {
         }
     }
 
-    /// The paper's rig (Table 3) and a noise-free log of a linear SDOF
-    /// specimen on it: a 0.5-30 Hz linear chirp, 1 kHz, 20 s, displacement
-    /// from the exact ZOH simulation of Eq. 10.
-    fn paper_rig() -> RigParams {
-        RigParams {
-            beta1_per_s: 267.0,
-            a1b0_n_per_m_s2: 2.412e9,
-            a2_n_per_m: 7.881e5,
-            a3_per_s: 16.118,
-            p_gain: 1.0,
-        }
-    }
-
     fn log_of(rig: &RigParams, specimen: &SpecimenModel) -> Log {
         let fs = 1000.0;
         let n = 20_000;
@@ -391,7 +378,7 @@ mod tests {
     /// the full model reproduces its own noise-free log.
     #[test]
     fn the_simplified_ccf_is_reported_unstable_at_the_papers_exp1() {
-        let rig = paper_rig();
+        let rig = model::PAPER_RIG;
         let specimen = SpecimenModel::LinearSdof {
             mass_kg: 3.8,
             damping_ns_per_m: 5.0,
@@ -423,7 +410,7 @@ mod tests {
     /// NRMSE on the full model's own log is clearly above zero.
     #[test]
     fn a_stable_simplified_ccf_is_validated_side_by_side() {
-        let rig = paper_rig();
+        let rig = model::PAPER_RIG;
         let specimen = SpecimenModel::LinearSdof {
             mass_kg: 3.8,
             damping_ns_per_m: 500.0,

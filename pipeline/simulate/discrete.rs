@@ -265,20 +265,10 @@ fn run_dynamic(disc: &Discretized, taps: &[Tap], u: &[f64], out: &mut [Vec<f64>]
 mod tests {
     use super::*;
     use crate::lti::TransferFunction;
-    use crate::model::{self, LinearSpecimen, RigParams};
+    use crate::model::{self, LinearSpecimen};
     use approx::assert_relative_eq;
     use nalgebra::Complex;
     use std::f64::consts::PI;
-
-    fn paper_rig() -> RigParams {
-        RigParams {
-            beta1_per_s: 267.0,
-            a1b0_n_per_m_s2: 2.412e9,
-            a2_n_per_m: 7.881e5,
-            a3_per_s: 16.118,
-            p_gain: 1.0,
-        }
-    }
 
     fn exp1() -> LinearSpecimen {
         LinearSpecimen::Sdof {
@@ -411,7 +401,7 @@ mod tests {
     fn paper_plant_step_matches_partial_fractions() {
         // Exp1 (Eq. 17's x1/u and Eq. 45's f/u) against the closed-form step
         // response from the transfer functions' poles: independent of exp().
-        let rig = paper_rig();
+        let rig = model::PAPER_RIG;
         let ss = model::state_space(&rig, &exp1());
         let tfs = [model::tf_x1_u(&rig, &exp1()), model::tf_f_u(&rig, &exp1())];
         let dt = 1.0 / 2048.0;
@@ -442,7 +432,7 @@ mod tests {
         // matrix, whose norm here is 0.72: about eps per entry. Pade with
         // scaling and squaring on the unbalanced M (norm 1.7e6, ~21 squarings)
         // was measured 3e-10 off in the x1 row; balanced, it is within 1e-15.
-        let rig = paper_rig();
+        let rig = model::PAPER_RIG;
         let ss = model::state_space(&rig, &exp1());
         let dt = 1.0 / 2048.0;
         let n = 4;
@@ -473,7 +463,7 @@ mod tests {
         // exp(B T) for the balanced Exp1 matrix B by Sylvester's formula over
         // its distinct eigenvalues: sum_i e^{l_i T} prod_{j != i} (B - l_j) /
         // (l_i - l_j). The eigen-decomposition route, independent of Pade.
-        let rig = paper_rig();
+        let rig = model::PAPER_RIG;
         let a = crate::lti::balance(&model::state_space(&rig, &exp1()).a);
         let t = 1.0 / 2048.0;
         let ss = StateSpace {
@@ -521,7 +511,7 @@ mod tests {
         // degree 4) the m = 0 term alone is within 1e-11; the force path
         // (relative degree 2) aliases about 1e-8, so the sum is taken to
         // |m| = 4000 (tail ~ 1/m^2, below 1e-13).
-        let rig = paper_rig();
+        let rig = model::PAPER_RIG;
         let spec = exp1();
         let ss = model::state_space(&rig, &spec);
         let fs = 2048.0;

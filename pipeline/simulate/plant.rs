@@ -379,16 +379,6 @@ mod tests {
     use crate::simulate::specimen::{BoucWen, Duffing, Friction};
     use approx::assert_relative_eq;
 
-    fn paper_rig() -> RigParams {
-        RigParams {
-            beta1_per_s: 267.0,
-            a1b0_n_per_m_s2: 2.412e9,
-            a2_n_per_m: 7.881e5,
-            a3_per_s: 16.118,
-            p_gain: 1.0,
-        }
-    }
-
     fn exp1() -> SpecimenModel {
         SpecimenModel::LinearSdof {
             mass_kg: 3.8,
@@ -399,7 +389,7 @@ mod tests {
 
     fn spec(specimen: SpecimenModel, unmodelled: Unmodelled) -> PlantSpec {
         PlantSpec {
-            rig: paper_rig(),
+            rig: crate::model::PAPER_RIG,
             specimen,
             unmodelled,
         }
@@ -460,7 +450,7 @@ mod tests {
 
     #[test]
     fn unmodelled_dynamics_have_their_transfer_functions() {
-        let rig = paper_rig();
+        let rig = crate::model::PAPER_RIG;
         let specimens = [
             (SpecimenModel::None, LinearSpecimen::None),
             (
@@ -540,7 +530,7 @@ mod tests {
 
     #[test]
     fn clean_linear_cases_are_the_models_state_space() {
-        let rig = paper_rig();
+        let rig = crate::model::PAPER_RIG;
         let ss = linear_state_space(&spec(exp1(), Unmodelled::default())).unwrap();
         let want = model::state_space(
             &rig,
