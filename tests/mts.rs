@@ -30,7 +30,7 @@ use std::path::Path;
 
 use nalgebra::{Complex, DMatrix, DVector};
 
-use crate::util::{mts_data, root, scratch, servoid, write};
+use crate::util::{mts_data, root, scratch, servoid_into, write};
 
 /// (command, displacement) in mm.
 fn parse(path: &Path) -> (Vec<f64>, Vec<f64>) {
@@ -218,16 +218,7 @@ fn the_mts_logs_fit_as_an_independent_computation_does() {
         &bundled.replace(relative, &format!("{}/", data.display())),
     );
     let out = dir.path().join("out");
-    let r = servoid(
-        dir.path(),
-        &[
-            "run",
-            manifest.to_str().unwrap(),
-            "--out",
-            out.to_str().unwrap(),
-            "--quiet",
-        ],
-    );
+    let r = servoid_into(dir.path(), "run", &manifest, &out, &["--quiet"]);
     assert_eq!(r.code, 0, "{}", r.stderr);
     let results: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("results.json")).unwrap()).unwrap();

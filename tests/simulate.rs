@@ -5,7 +5,7 @@
 
 use std::path::Path;
 
-use crate::util::{root, scratch, servoid, write};
+use crate::util::{root, scratch, servoid, servoid_into, write};
 
 /// A short campaign (20 s linear chirp at 1 kHz) on a rig that is not the
 /// paper's, so nothing here can lean on the bundled numbers.
@@ -140,16 +140,7 @@ fn simulate_then_run_is_a_closed_loop() {
     let dir = scratch();
     let manifest = write(dir.path(), "sim.toml", BASE);
     let out = dir.path().join("out");
-    let r = servoid(
-        dir.path(),
-        &[
-            "simulate",
-            manifest.to_str().unwrap(),
-            "--out",
-            out.to_str().unwrap(),
-            "--run",
-        ],
-    );
+    let r = servoid_into(dir.path(), "simulate", &manifest, &out, &["--run"]);
     assert_eq!(r.code, 0, "stdout:\n{}\nstderr:\n{}", r.stdout, r.stderr);
     assert!(r.stdout.contains("SYNTHETIC"), "{}", r.stdout);
     for f in [
@@ -235,18 +226,12 @@ fn the_same_seed_gives_the_same_bytes_whatever_the_thread_count() {
     let mut trees = Vec::new();
     for jobs in ["1", "2"] {
         let out = dir.path().join(format!("out-{jobs}"));
-        let r = servoid(
+        let r = servoid_into(
             dir.path(),
-            &[
-                "simulate",
-                manifest.to_str().unwrap(),
-                "--out",
-                out.to_str().unwrap(),
-                "--run",
-                "--quiet",
-                "--jobs",
-                jobs,
-            ],
+            "simulate",
+            &manifest,
+            &out,
+            &["--run", "--quiet", "--jobs", jobs],
         );
         assert_eq!(r.code, 0, "{}", r.stderr);
         trees.push(tree(&out));
@@ -270,16 +255,7 @@ fn a_different_seed_gives_different_noise() {
         let text = BASE.replace("seed = 7", &format!("seed = {seed}"));
         let manifest = write(dir.path(), &format!("sim-{seed}.toml"), &text);
         let out = dir.path().join(format!("out-{seed}"));
-        let r = servoid(
-            dir.path(),
-            &[
-                "simulate",
-                manifest.to_str().unwrap(),
-                "--out",
-                out.to_str().unwrap(),
-                "--quiet",
-            ],
-        );
+        let r = servoid_into(dir.path(), "simulate", &manifest, &out, &["--quiet"]);
         assert_eq!(r.code, 0, "{}", r.stderr);
         logs.push(out.join("logs").join("k1.csv"));
     }
@@ -309,15 +285,7 @@ fn refused(text: &str, key: &str, what: &str) {
     let dir = scratch();
     let manifest = write(dir.path(), "bad-sim.toml", text);
     let out = dir.path().join("out");
-    let r = servoid(
-        dir.path(),
-        &[
-            "simulate",
-            manifest.to_str().unwrap(),
-            "--out",
-            out.to_str().unwrap(),
-        ],
-    );
+    let r = servoid_into(dir.path(), "simulate", &manifest, &out, &[]);
     assert_eq!(r.code, 2, "{key}: stdout {} stderr {}", r.stdout, r.stderr);
     assert!(r.stderr.contains("bad-sim.toml"), "{key}: {}", r.stderr);
     assert!(r.stderr.contains(key), "expected {key} in: {}", r.stderr);
@@ -454,16 +422,7 @@ fn a_validation_run_with_the_wrong_specimen_is_flagged() {
     let dir = scratch();
     let manifest = write(dir.path(), "sim.toml", &text);
     let out = dir.path().join("out");
-    let r = servoid(
-        dir.path(),
-        &[
-            "simulate",
-            manifest.to_str().unwrap(),
-            "--out",
-            out.to_str().unwrap(),
-            "--quiet",
-        ],
-    );
+    let r = servoid_into(dir.path(), "simulate", &manifest, &out, &["--quiet"]);
     assert_eq!(r.code, 0, "{}", r.stderr);
     // The lab's mistake: v3's specimen written down wrong.
     let campaign = out.join("campaign.toml");
@@ -484,16 +443,7 @@ fn a_validation_run_with_the_wrong_specimen_is_flagged() {
         format!("{}{wrong}{}", &generated[..i], &generated[j..]),
     )
     .unwrap();
-    let r = servoid(
-        dir.path(),
-        &[
-            "run",
-            campaign.to_str().unwrap(),
-            "--out",
-            out.to_str().unwrap(),
-            "--quiet",
-        ],
-    );
+    let r = servoid_into(dir.path(), "run", &campaign, &out, &["--quiet"]);
     assert_eq!(r.code, 0, "{}", r.stderr);
     let results = json(&out.join("results.json"));
     let validation = |id: &str| {

@@ -24,6 +24,24 @@ pub fn servoid(cwd: &Path, args: &[&str]) -> Output {
     }
 }
 
+/// `servoid COMMAND MANIFEST --out OUT EXTRA...` in `cwd`.
+pub fn servoid_into(
+    cwd: &Path,
+    command: &str,
+    manifest: &Path,
+    out: &Path,
+    extra: &[&str],
+) -> Output {
+    let mut args = vec![
+        command,
+        manifest.to_str().expect("a UTF-8 path"),
+        "--out",
+        out.to_str().expect("a UTF-8 path"),
+    ];
+    args.extend_from_slice(extra);
+    servoid(cwd, &args)
+}
+
 /// The repository root.
 pub fn root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
