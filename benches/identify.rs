@@ -17,11 +17,11 @@
 use std::hint::black_box;
 
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
-use servoid::fit::{FitInput, FitOptions, fit};
+use servoid::fit::fit;
 use servoid::frf;
 use servoid::manifest::simulation::load_simulation_str;
 use servoid::manifest::{LogFormat, RunSource, load};
-use servoid::run::acquire::log_stage;
+use servoid::run::acquire::{FitData, fit_options, log_stage};
 use servoid::run::simulate::simulate_campaign;
 
 fn bench_identify(c: &mut Criterion) {
@@ -73,51 +73,16 @@ fn bench_identify(c: &mut Criterion) {
     group.bench_function("variance_only", |b| {
         b.iter(|| frf::h_variance_at(black_box(&h), black_box(&bins)))
     });
-    let var: Vec<f64> = frf::h_variance_at(&h, &bins)
-        .into_iter()
-        .map(|v| 2.0 * v)
-        .collect();
-    let fq: Vec<f64> = bins.iter().map(|&i| h.freq_hz[i]).collect();
-    let hh: Vec<_> = bins.iter().map(|&i| h.h[i]).collect();
-    let mut opts = FitOptions::new(ident.numerator_order, ident.denominator_order, fs);
-    opts.intersample = ident.intersample;
-    opts.delay = ident.delay;
-    group.bench_function(format!("fit_only/{}_bins", bins.len()), |b| {
-        b.iter(|| {
-            fit(
-                &FitInput {
-                    freq_hz: black_box(&fq),
-                    h: black_box(&hh),
-                    variance: black_box(&var),
-                },
-                &opts,
-            )
-            .unwrap()
-        })
+    let opts = fit_options(ident, fs);
+    let data = FitData::of(&h, &mask);
+    group.bench_function(format!("fit_only/{}_bins", data.freq_hz.len()), |b| {
+        b.iter(|| fit(black_box(&data.input()), &opts).unwrap())
     });
     group.bench_function("frf_and_fit", |b| {
         b.iter(|| {
             let h = frf::estimate(black_box(&u), black_box(&y), fs, &ident.frf).unwrap();
             let mask = frf::band_mask(&h, run.band_hz, ident.coherence_min);
-            let bins: Vec<usize> = (0..h.freq_hz.len()).filter(|&i| mask[i]).collect();
-            let var: Vec<f64> = frf::h_variance_at(&h, &bins)
-                .into_iter()
-                .map(|v| 2.0 * v)
-                .collect();
-            let fq: Vec<f64> = bins.iter().map(|&i| h.freq_hz[i]).collect();
-            let hh: Vec<_> = bins.iter().map(|&i| h.h[i]).collect();
-            let mut opts = FitOptions::new(ident.numerator_order, ident.denominator_order, fs);
-            opts.intersample = ident.intersample;
-            opts.delay = ident.delay;
-            fit(
-                &FitInput {
-                    freq_hz: &fq,
-                    h: &hh,
-                    variance: &var,
-                },
-                &opts,
-            )
-            .unwrap()
+            fit(&FitData::of(&h, &mask).input(), &opts).unwrap()
         })
     });
     group.finish();

@@ -22,6 +22,57 @@ pub struct LogStage {
     pub warnings: Vec<String>,
 }
 
+/// What the fit is given from an FRF: the bins of `mask` whose variance is
+/// defined, their frequencies, estimates and E|dH|^2.
+#[derive(Debug, Clone, PartialEq)]
+pub struct FitData {
+    pub freq_hz: Vec<f64>,
+    pub h: Vec<nalgebra::Complex<f64>>,
+    pub variance: Vec<f64>,
+}
+
+impl FitData {
+    pub fn of(h: &Frf, mask: &[bool]) -> Self {
+        let masked: Vec<usize> = (0..h.freq_hz.len()).filter(|&i| mask[i]).collect();
+        // frf gives the variance of Re(H) and of Im(H) each; fit wants
+        // E|dH|^2, their sum. A bin whose variance is undefined (no noise
+        // information around it) carries no weight and is left out.
+        let (bins, variance): (Vec<usize>, Vec<f64>) = masked
+            .iter()
+            .zip(frf::h_variance_at(h, &masked))
+            .filter(|(_, v)| v.is_finite())
+            .map(|(&i, v)| (i, 2.0 * v))
+            .unzip();
+        Self {
+            freq_hz: bins.iter().map(|&i| h.freq_hz[i]).collect(),
+            h: bins.iter().map(|&i| h.h[i]).collect(),
+            variance,
+        }
+    }
+
+    pub fn input(&self) -> FitInput<'_> {
+        FitInput {
+            freq_hz: &self.freq_hz,
+            h: &self.h,
+            variance: &self.variance,
+        }
+    }
+}
+
+/// The fit options of a campaign's identification settings for a log
+/// sampled at `sample_rate_hz`.
+pub fn fit_options(ident: &IdentificationPlan, sample_rate_hz: f64) -> FitOptions {
+    let mut opts = FitOptions::new(
+        ident.numerator_order,
+        ident.denominator_order,
+        sample_rate_hz,
+    );
+    opts.intersample = ident.intersample;
+    opts.delay = ident.delay;
+    opts.max_iterations = 200;
+    opts
+}
+
 /// Why a log stage failed; the message names the run's file.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum AcquireError {
@@ -164,31 +215,9 @@ pub fn log_stage(
                 coherence_min: ident.coherence_min,
             });
         }
-        let masked: Vec<usize> = (0..h.freq_hz.len()).filter(|&i| mask[i]).collect();
-        // frf gives the variance of Re(H) and of Im(H) each; fit wants
-        // E|dH|^2, their sum. A bin whose variance is undefined (no noise
-        // information around it) carries no weight and is left out.
-        let (bins, var): (Vec<usize>, Vec<f64>) = masked
-            .iter()
-            .zip(frf::h_variance_at(&h, &masked))
-            .filter(|(_, v)| v.is_finite())
-            .map(|(&i, v)| (i, 2.0 * v))
-            .unzip();
-        let fq: Vec<f64> = bins.iter().map(|&i| h.freq_hz[i]).collect();
-        let hh: Vec<_> = bins.iter().map(|&i| h.h[i]).collect();
-        let mut opts = FitOptions::new(ident.numerator_order, ident.denominator_order, fs);
-        opts.intersample = ident.intersample;
-        opts.delay = ident.delay;
-        opts.max_iterations = 200;
-        let fit = fit::fit(
-            &FitInput {
-                freq_hz: &fq,
-                h: &hh,
-                variance: &var,
-            },
-            &opts,
-        )
-        .map_err(|e| AcquireError::Fit {
+        let data = FitData::of(&h, &mask);
+        let opts = fit_options(ident, fs);
+        let fit = fit::fit(&data.input(), &opts).map_err(|e| AcquireError::Fit {
             path: path.clone(),
             message: e.to_string(),
         })?;
