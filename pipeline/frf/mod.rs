@@ -11,6 +11,7 @@
 //! the variance of the (detrended) signal (Parseval).
 
 use nalgebra::Complex;
+use rayon::prelude::*;
 use std::sync::Arc;
 
 use realfft::{RealFftPlanner, RealToComplex};
@@ -75,10 +76,11 @@ pub enum FrfError {
 /// Estimates the FRF u -> y with the plan's estimator and segment settings
 /// (for `Estimator::Etfe` the segments serve its coherence; see [`etfe`]).
 ///
-/// The result is the same bits for the same input on the same machine: one
-/// thread, segments accumulated in order. rustfft picks its AVX, SSE or
-/// scalar kernels at run time, so a machine with another instruction set may
-/// differ in the last bits.
+/// The result is the same bits for the same input on the same machine,
+/// whatever the thread count: Welch segments are accumulated in order on one
+/// thread, and the passes split across threads compute each bin on its own.
+/// rustfft picks its AVX, SSE or scalar kernels at run time, so a machine
+/// with another instruction set may differ in the last bits.
 pub fn estimate(
     u: &[f64],
     y: &[f64],
@@ -191,8 +193,14 @@ pub fn etfe(
         coherence_overlap,
     )?;
     let n = u.len();
-    let w = window(window_kind, n);
-    let scale = 1.0 / (sample_rate_hz * w.iter().map(|v| v * v).sum::<f64>());
+    // A rectangular window is not materialised: n ones would be 8n bytes of
+    // fresh memory for nothing, and first touches of fresh pages are a large
+    // part of this function's cost on a long record.
+    let w = (window_kind != Window::Rectangular).then(|| window(window_kind, n));
+    let energy = w
+        .as_ref()
+        .map_or(n as f64, |w| w.iter().map(|v| v * v).sum());
+    let scale = 1.0 / (sample_rate_hz * energy);
     let segments = Segmenting {
         length: coherence_segment_length,
         overlap: coherence_overlap,
@@ -206,32 +214,42 @@ pub fn etfe(
     let transform_of = |x: &[f64]| {
         let mut transform = SegmentTransform::new(n);
         let mut out = transform.make_output();
-        transform.run(x, &w, detrend_kind, &mut out);
+        transform.run(x, w.as_deref(), detrend_kind, &mut out);
         out
     };
-    let ((uf, yf), coarse) = rayon::join(
+    let ((mut h, mut suy), coarse) = rayon::join(
         || rayon::join(|| transform_of(u), || transform_of(y)),
         || welch_spectra(u, y, sample_rate_hz, &segments),
     );
-    let nb = uf.len();
-    let mut suu = Vec::with_capacity(nb);
-    let mut syy = Vec::with_capacity(nb);
-    let mut suy = Vec::with_capacity(nb);
-    let mut h = Vec::with_capacity(nb);
-    for k in 0..nb {
-        let s = scale * one_sided_factor(k, n);
-        suu.push(s * uf[k].norm_sqr());
-        syy.push(s * yf[k].norm_sqr());
-        suy.push(uf[k].conj() * yf[k] * s);
-        h.push(ratio(yf[k], uf[k]));
-    }
+
+    // Per bin, in place: the transforms U and Y become H = Y/U and
+    // Suy = conj(U) Y; Suu and Syy are new. Each bin is computed on its own,
+    // so splitting the bins across threads changes no bit of the result.
+    let nb = h.len();
+    let mut suu = vec![0.0; nb];
+    let mut syy = vec![0.0; nb];
+    h.par_iter_mut()
+        .zip(&mut suy)
+        .zip(&mut suu)
+        .zip(&mut syy)
+        .enumerate()
+        .with_min_len(PAR_MIN_BINS)
+        .for_each(|(k, (((h_k, suy_k), suu_k), syy_k))| {
+            let (uk, yk) = (*h_k, *suy_k);
+            let s = scale * one_sided_factor(k, n);
+            *suu_k = s * uk.norm_sqr();
+            *syy_k = s * yk.norm_sqr();
+            *suy_k = uk.conj() * yk * s;
+            *h_k = ratio(yk, uk);
+        });
 
     let resolution_hz = sample_rate_hz / n as f64;
     let freq_hz = bin_frequencies(nb, resolution_hz);
     let coarse_coherence = coherence_of(&coarse.suu, &coarse.syy, &coarse.suy);
     let coarse_resolution_hz = sample_rate_hz / coherence_segment_length as f64;
     let coherence = freq_hz
-        .iter()
+        .par_iter()
+        .with_min_len(PAR_MIN_BINS)
         .map(|&f| interpolate(&coarse_coherence, f / coarse_resolution_hz))
         .collect();
     Ok(Frf {
@@ -414,11 +432,18 @@ fn etfe_variance(frf: &Frf, bins: &[usize]) -> Vec<f64> {
         return Vec::new();
     };
     let span = lo.saturating_sub(s_half)..(hi + s_half + 1).min(nb);
+    // Each bin's local fit is independent of the others': computed once per
+    // bin of the span, side by side (the same bits on any thread count).
+    let density: Vec<f64> = span
+        .clone()
+        .into_par_iter()
+        .with_min_len(PAR_MIN_LOCAL_FITS)
+        .map(|j| etfe_local_noise_density(frf, j))
+        .collect();
     // Prefix sums of the finite densities and of their count over the span.
     let mut sum = vec![0.0; span.len() + 1];
     let mut count = vec![0usize; span.len() + 1];
-    for (i, j) in span.clone().enumerate() {
-        let d = etfe_local_noise_density(frf, j);
+    for (i, &d) in density.iter().enumerate() {
         let finite = d.is_finite();
         sum[i + 1] = sum[i] + if finite { d } else { 0.0 };
         count[i + 1] = count[i] + usize::from(finite);
@@ -431,7 +456,7 @@ fn etfe_variance(frf: &Frf, bins: &[usize]) -> Vec<f64> {
             let a = k.saturating_sub(s_half).max(span.start) - span.start;
             let b = (k + s_half + 1).min(span.end) - span.start;
             let n = count[b] - count[a];
-            if n == 0 || !etfe_local_noise_density(frf, k).is_finite() {
+            if n == 0 || !density[k - span.start].is_finite() {
                 return f64::INFINITY;
             }
             let density = (sum[b] - sum[a]) / n as f64;
@@ -564,6 +589,13 @@ fn check_inputs(
     Ok(())
 }
 
+/// Fewest bins per parallel task in the per-bin passes: below this, handing
+/// work to another thread costs more than it saves.
+const PAR_MIN_BINS: usize = 8192;
+
+/// Fewest local polynomial fits (about 0.2 us each) per parallel task.
+const PAR_MIN_LOCAL_FITS: usize = 512;
+
 thread_local! {
     // realfft keeps its plans by length; one planner per thread keeps them
     // across calls. A campaign's runs share their lengths, and planning a
@@ -572,10 +604,21 @@ thread_local! {
     // so which thread made one does not change a bit of the result.
     static PLANNER: std::cell::RefCell<RealFftPlanner<f64>> =
         std::cell::RefCell::new(RealFftPlanner::new());
+
+    // The input and scratch buffers of the last transforms this thread ran,
+    // kept for the next: a whole-record transform needs 16n bytes of them,
+    // and touching that much fresh memory on every call cost as much as the
+    // transform itself (page faults; about 3 us a page on a virtual
+    // machine). The thread holds at most the largest record's worth.
+    static SPARE_BUFFERS: std::cell::RefCell<(Vec<f64>, Vec<Complex<f64>>)> =
+        const { std::cell::RefCell::new((Vec::new(), Vec::new())) };
 }
 
 /// A planned real FFT of one length with its working buffers: built once per
 /// call and reused for every segment, so the segment loop does not allocate.
+/// The buffers come from the thread's spares and go back when it is dropped;
+/// their contents never matter, as `run` overwrites the input and realfft
+/// the scratch.
 struct SegmentTransform {
     r2c: Arc<dyn RealToComplex<f64>>,
     buf: Vec<f64>,
@@ -585,8 +628,9 @@ struct SegmentTransform {
 impl SegmentTransform {
     fn new(n: usize) -> Self {
         let r2c = PLANNER.with(|p| p.borrow_mut().plan_fft_forward(n));
-        let buf = r2c.make_input_vec();
-        let scratch = r2c.make_scratch_vec();
+        let (mut buf, mut scratch) = SPARE_BUFFERS.with(|s| std::mem::take(&mut *s.borrow_mut()));
+        buf.resize(n, 0.0);
+        scratch.resize(r2c.get_scratch_len(), Complex::new(0.0, 0.0));
         Self { r2c, buf, scratch }
     }
 
@@ -595,24 +639,54 @@ impl SegmentTransform {
         self.r2c.make_output_vec()
     }
 
-    /// Detrends `x`, multiplies it by `w` and writes its DFT (bins 0 ..= n/2)
-    /// into `out`; `x`, `w` and `out` have the planned lengths.
-    fn run(&mut self, x: &[f64], w: &[f64], detrend_kind: Detrend, out: &mut [Complex<f64>]) {
+    /// Detrends `x`, multiplies it by `w` (no window: rectangular) and writes
+    /// its DFT (bins 0 ..= n/2) into `out`; `x`, `w` and `out` have the
+    /// planned lengths.
+    fn run(
+        &mut self,
+        x: &[f64],
+        w: Option<&[f64]>,
+        detrend_kind: Detrend,
+        out: &mut [Complex<f64>],
+    ) {
         // One pass: detrend and window straight from `x` into the buffer.
         let trend = Trend::of(x, detrend_kind);
-        let samples = self.buf.iter_mut().zip(x).zip(w);
-        if trend.slope == 0.0 {
+        let buf = self.buf.iter_mut().zip(x);
+        match (w, trend.slope == 0.0) {
             // Mean or none: the same values as `detrend`, without the ramp.
-            samples.for_each(|((b, &v), &w)| *b = (v - trend.offset) * w);
-        } else {
-            samples
+            (Some(w), true) => buf
+                .zip(w)
+                .for_each(|((b, &v), &w)| *b = (v - trend.offset) * w),
+            (Some(w), false) => buf
+                .zip(w)
                 .enumerate()
-                .for_each(|(i, ((b, &v), &w))| *b = (v - trend.at(i)) * w);
+                .for_each(|(i, ((b, &v), &w))| *b = (v - trend.at(i)) * w),
+            (None, true) => buf.for_each(|(b, &v)| *b = v - trend.offset),
+            (None, false) => buf
+                .enumerate()
+                .for_each(|(i, (b, &v))| *b = v - trend.at(i)),
         }
         // realfft checks only the lengths, which come from the plan.
         self.r2c
             .process_with_scratch(&mut self.buf, out, &mut self.scratch)
             .expect("buffer lengths come from the plan");
+    }
+}
+
+impl Drop for SegmentTransform {
+    fn drop(&mut self) {
+        let buffers = (
+            std::mem::take(&mut self.buf),
+            std::mem::take(&mut self.scratch),
+        );
+        // Not kept when the thread is being torn down.
+        let _ = SPARE_BUFFERS.try_with(|s| {
+            let mut spare = s.borrow_mut();
+            // Keep the larger set when two transforms were alive at once.
+            if buffers.0.capacity() >= spare.0.capacity() {
+                *spare = buffers;
+            }
+        });
     }
 }
 
@@ -656,8 +730,8 @@ fn welch_spectra(u: &[f64], y: &[f64], sample_rate_hz: f64, segments: &Segmentin
 
     for s in 0..n_segments {
         let segment = s * hop..s * hop + l;
-        transform.run(&u[segment.clone()], &w, detrend_kind, &mut uf);
-        transform.run(&y[segment], &w, detrend_kind, &mut yf);
+        transform.run(&u[segment.clone()], Some(&w), detrend_kind, &mut uf);
+        transform.run(&y[segment], Some(&w), detrend_kind, &mut yf);
         for k in 0..nb {
             suu[k] += uf[k].norm_sqr();
             syy[k] += yf[k].norm_sqr();
@@ -742,7 +816,11 @@ fn ratio(num: Complex<f64>, den: Complex<f64>) -> Complex<f64> {
 }
 
 fn bin_frequencies(n_bins: usize, resolution_hz: f64) -> Vec<f64> {
-    (0..n_bins).map(|k| k as f64 * resolution_hz).collect()
+    (0..n_bins)
+        .into_par_iter()
+        .with_min_len(PAR_MIN_BINS)
+        .map(|k| k as f64 * resolution_hz)
+        .collect()
 }
 
 /// Linear interpolation of `values` (on bins 0, 1, 2, ...) at fractional bin

@@ -174,7 +174,9 @@ fn naive_dft_of_a_constant_is_n_times_it_at_dc() {
 #[test]
 fn segment_transform_matches_the_naive_dft_on_random_signals() {
     // Even, odd, prime and power-of-two lengths take different realfft paths.
-    for (seed, n) in [
+    // Growing, then shrinking: each transform takes the buffers the last one
+    // on this thread left behind, longer or shorter than it needs.
+    let lengths = [
         (1, 16),
         (2, 17),
         (3, 100),
@@ -182,13 +184,14 @@ fn segment_transform_matches_the_naive_dft_on_random_signals() {
         (5, 256),
         (6, 1000),
         (7, 1021),
-    ] {
+    ];
+    for &(seed, n) in lengths.iter().chain(lengths.iter().rev()) {
         let mut rng = SplitMix64(seed);
         let x: Vec<f64> = (0..n).map(|_| 2.0 * rng.uniform() - 1.0).collect();
         let w = vec![1.0; n];
         let mut transform = SegmentTransform::new(n);
         let mut fast = transform.make_output();
-        transform.run(&x, &w, Detrend::None, &mut fast);
+        transform.run(&x, Some(&w), Detrend::None, &mut fast);
         let slow = naive_dft(&x);
         assert_eq!(fast.len(), n / 2 + 1);
         let scale = slow.iter().map(|v| v.norm()).fold(0.0, f64::max);
@@ -196,6 +199,10 @@ fn segment_transform_matches_the_naive_dft_on_random_signals() {
             let err = (f - s).norm() / scale;
             assert!(err < 1e-12, "n = {n}, bin {k}: relative error {err:e}");
         }
+        // No window is the rectangular one: multiplying by 1 is exact.
+        let mut unwindowed = transform.make_output();
+        transform.run(&x, None, Detrend::None, &mut unwindowed);
+        assert_eq!(fast, unwindowed, "n = {n}");
     }
 }
 
@@ -710,6 +717,37 @@ fn the_same_input_gives_the_same_bits() {
         let b = estimate(&u, &y, FS_HZ, &plan).unwrap();
         assert_eq!(bits(&a), bits(&b), "{estimator:?}");
         assert_eq!(a.estimator, estimator);
+    }
+}
+
+#[test]
+fn etfe_and_its_variance_are_the_same_bits_on_one_thread_and_two() {
+    // Long enough that the per-bin passes (PAR_MIN_BINS) and the local fits
+    // (PAR_MIN_LOCAL_FITS) are split across threads; both windows, so both
+    // transform paths run.
+    let (u, y_clean) = filtered_white(31, 4 * PAR_MIN_BINS * 2 + 2);
+    let noise = white(32, u.len(), 0.1);
+    let y: Vec<f64> = y_clean.iter().zip(&noise).map(|(a, b)| a + b).collect();
+    let pool = |n| {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(n)
+            .build()
+            .unwrap()
+    };
+    for window_kind in [Window::Rectangular, Window::Hann] {
+        let run = || {
+            let h = etfe(&u, &y, FS_HZ, window_kind, Detrend::Linear, 1024, 0.5).unwrap();
+            let bins: Vec<usize> = (1..h.h.len() - 1).collect();
+            assert!(bins.len() > 4 * PAR_MIN_LOCAL_FITS);
+            let variance: Vec<u64> = h_variance_at(&h, &bins)
+                .iter()
+                .map(|v| v.to_bits())
+                .collect();
+            (bits(&h), variance)
+        };
+        let one = pool(1).install(run);
+        let two = pool(2).install(run);
+        assert!(one == two, "{window_kind:?}: the thread count changed bits");
     }
 }
 
