@@ -7,7 +7,8 @@
 //! synthesis as a ratio of two complex polynomials", IEEE Trans. Automatic
 //! Control 8 (1963) 56-58.
 
-use nalgebra::{Complex, DMatrix, DVector};
+use nalgebra::linalg::{QR, SVD};
+use nalgebra::{Complex, DMatrix, DVector, Dyn};
 
 use super::problem::FrfProblem;
 
@@ -25,69 +26,91 @@ pub struct RankDeficient {
     pub ratio: f64,
 }
 
+/// A tall matrix with its columns scaled to unit norm (so units do not
+/// count as ill-conditioning), factored once: Householder QR, and the SVD of
+/// the small p x p triangle R. With A = Q R and Q's columns orthonormal, A
+/// and R have the same singular values and right singular vectors, so the
+/// rank check and the covariance need no SVD of the tall matrix itself.
+#[derive(Debug)]
+pub struct ScaledFactors {
+    /// The norms the columns were divided by.
+    pub norms: Vec<f64>,
+    qr: QR<f64, Dyn, Dyn>,
+    /// SVD of R (right singular vectors requested).
+    pub svd: SVD<f64, Dyn, Dyn>,
+}
+
+impl ScaledFactors {
+    /// Factors `a` after checking that it has full column rank: the right
+    /// singular vector of the smallest singular value is the direction the
+    /// data cannot see; its largest component names the parameter.
+    pub fn of(mut a: DMatrix<f64>) -> Result<Self, RankDeficient> {
+        let norms: Vec<f64> = a.column_iter().map(|c| c.norm()).collect();
+        if let Some(column) = norms.iter().position(|&n| n == 0.0 || !n.is_finite()) {
+            return Err(RankDeficient { column, ratio: 0.0 });
+        }
+        let p = a.ncols();
+        if a.nrows() < p {
+            return Err(RankDeficient {
+                column: p - 1,
+                ratio: 0.0,
+            });
+        }
+        for (j, mut col) in a.column_iter_mut().enumerate() {
+            col /= norms[j];
+        }
+        let qr = a.qr();
+        let svd = qr.r().svd(false, true);
+        let sv = &svd.singular_values;
+        let (imin, smin) =
+            sv.iter().enumerate().fold(
+                (0, f64::INFINITY),
+                |acc, (i, &v)| if v < acc.1 { (i, v) } else { acc },
+            );
+        let smax = sv.iter().fold(0.0_f64, |m, &v| m.max(v));
+        let ratio = smin / smax;
+        if ratio < RANK_TOL || !ratio.is_finite() {
+            let v_t = svd.v_t.as_ref().expect("V^T was requested");
+            let row = v_t.row(imin);
+            let column = (0..p)
+                .max_by(|&x, &y| row[x].abs().total_cmp(&row[y].abs()))
+                .unwrap_or(0);
+            return Err(RankDeficient { column, ratio });
+        }
+        Ok(Self { norms, qr, svd })
+    }
+
+    /// min ||A x - b|| from the factors: x = S^-1 R^-1 Q^T b, S the column
+    /// scaling.
+    pub fn solve(&self, mut b: DVector<f64>) -> Result<DVector<f64>, RankDeficient> {
+        let p = self.norms.len();
+        self.qr.q_tr_mul(&mut b);
+        let rhs = b.rows(0, p).into_owned();
+        let y = self
+            .qr
+            .r()
+            .solve_upper_triangular(&rhs)
+            .ok_or(RankDeficient {
+                column: p - 1,
+                ratio: 0.0,
+            })?;
+        Ok(DVector::from_iterator(
+            p,
+            y.iter().zip(self.norms.iter()).map(|(v, n)| v / n),
+        ))
+    }
+}
+
 /// Checks that `a` has full column rank after each column is scaled to unit
-/// norm (so units do not count as ill-conditioning), and returns the column
-/// norms. Uses the SVD: the right singular vector of the smallest singular
-/// value is the direction the data cannot see; its largest component names
-/// the parameter.
+/// norm and returns the column norms ([`ScaledFactors::of`]).
 pub fn check_rank(a: &DMatrix<f64>) -> Result<Vec<f64>, RankDeficient> {
-    let norms: Vec<f64> = a.column_iter().map(|c| c.norm()).collect();
-    if let Some(column) = norms.iter().position(|&n| n == 0.0 || !n.is_finite()) {
-        return Err(RankDeficient { column, ratio: 0.0 });
-    }
-    let mut scaled = a.clone();
-    for (j, mut col) in scaled.column_iter_mut().enumerate() {
-        col /= norms[j];
-    }
-    let p = a.ncols();
-    if a.nrows() < p {
-        return Err(RankDeficient {
-            column: p - 1,
-            ratio: 0.0,
-        });
-    }
-    let svd = scaled.svd(false, true);
-    let sv = &svd.singular_values;
-    let (imin, smin) =
-        sv.iter().enumerate().fold(
-            (0, f64::INFINITY),
-            |acc, (i, &v)| if v < acc.1 { (i, v) } else { acc },
-        );
-    let smax = sv.iter().fold(0.0_f64, |m, &v| m.max(v));
-    let ratio = smin / smax;
-    if ratio < RANK_TOL || !ratio.is_finite() {
-        let v_t = svd.v_t.as_ref().expect("V^T was requested");
-        let row = v_t.row(imin);
-        let column = (0..p)
-            .max_by(|&x, &y| row[x].abs().total_cmp(&row[y].abs()))
-            .unwrap_or(0);
-        return Err(RankDeficient { column, ratio });
-    }
-    Ok(norms)
+    ScaledFactors::of(a.clone()).map(|f| f.norms)
 }
 
 /// min ||A x - b|| by Householder QR on column-normalised A (the normal
 /// equations would square the condition number), after a rank check.
 pub fn lstsq(a: &DMatrix<f64>, b: &DVector<f64>) -> Result<DVector<f64>, RankDeficient> {
-    let norms = check_rank(a)?;
-    let p = a.ncols();
-    let mut scaled = a.clone();
-    for (j, mut col) in scaled.column_iter_mut().enumerate() {
-        col /= norms[j];
-    }
-    let qr = scaled.qr();
-    let mut qtb = b.clone();
-    qr.q_tr_mul(&mut qtb);
-    let r = qr.r();
-    let rhs = qtb.rows(0, p).into_owned();
-    let y = r.solve_upper_triangular(&rhs).ok_or(RankDeficient {
-        column: p - 1,
-        ratio: 0.0,
-    })?;
-    Ok(DVector::from_iterator(
-        p,
-        y.iter().zip(norms.iter()).map(|(v, n)| v / n),
-    ))
+    ScaledFactors::of(a.clone())?.solve(b.clone())
 }
 
 /// Levy's linear least squares: minimise sum_i w_i |N'(s_i) - G_i D'(s_i)|^2
@@ -128,7 +151,7 @@ pub fn levy(
         b[i] = rhs.re;
         b[nb + i] = rhs.im;
     }
-    Ok(lstsq(&a, &b)?.iter().copied().collect())
+    Ok(ScaledFactors::of(a)?.solve(b)?.iter().copied().collect())
 }
 
 /// Result of [`sanathanan_koerner`].

@@ -48,6 +48,10 @@ pub struct LevenbergMarquardt {
     upper: Option<DVector<f64>>,
     lambda: f64,
     diag: DVector<f64>,
+    /// J^T J and J^T r at the current point: formed once when the point is
+    /// accepted (its convergence test needs them) and used by the next
+    /// iteration's steps.
+    normal: Option<(DMatrix<f64>, DVector<f64>)>,
     status: TerminationStatus,
 }
 
@@ -78,6 +82,7 @@ impl LevenbergMarquardt {
             upper: None,
             lambda: 1e-3,
             diag: DVector::zeros(0),
+            normal: None,
             status: TerminationStatus::NotTerminated,
         }
     }
@@ -223,19 +228,23 @@ impl LevenbergMarquardt {
         }
     }
 
-    /// Whether the undamped step at (theta, r, J) is negligible.
-    fn is_converged(&self, j: &DMatrix<f64>, r: &DVector<f64>, theta: &DVector<f64>) -> bool {
-        let cost = r.norm_squared();
+    /// Whether the undamped step at theta, with cost r^T r and the normal
+    /// matrices A = J^T J, g = J^T r there, is negligible.
+    fn is_converged(
+        &self,
+        a: &DMatrix<f64>,
+        g: &DVector<f64>,
+        cost: f64,
+        theta: &DVector<f64>,
+    ) -> bool {
         if cost == 0.0 {
             return true;
         }
-        let a = j.transpose() * j;
-        let g = j.transpose() * r;
-        let Some(delta) = self.step(&a, &g, 0.0, theta) else {
+        let Some(delta) = self.step(a, g, 0.0, theta) else {
             return false;
         };
         // Reduction predicted by the linear model: -(2 g.delta + delta' A delta).
-        let pred = -(2.0 * g.dot(&delta) + delta.dot(&(&a * &delta)));
+        let pred = -(2.0 * g.dot(&delta) + delta.dot(&(a * &delta)));
         let scaled_norm = |v: &DVector<f64>| {
             v.iter()
                 .zip(self.diag.iter())
@@ -288,14 +297,16 @@ where
             .into());
         }
         let j = problem.jacobian(&theta)?;
+        let (a, g) = (j.tr_mul(&j), j.tr_mul(&r));
         self.diag = DVector::zeros(0);
-        self.update_diag(&(j.transpose() * &j));
+        self.update_diag(&a);
         self.lambda = self.lambda0;
-        self.status = if self.is_converged(&j, &r, &theta) {
+        self.status = if self.is_converged(&a, &g, cost, &theta) {
             TerminationStatus::Terminated(TerminationReason::SolverConverged)
         } else {
             TerminationStatus::NotTerminated
         };
+        self.normal = Some((a, g));
         Ok((state.param(theta).residuals(r).jacobian(j).cost(cost), None))
     }
 
@@ -314,8 +325,10 @@ where
         let r = state.take_residuals().ok_or_else(|| missing("residuals"))?;
         let j = state.take_jacobian().ok_or_else(|| missing("jacobian"))?;
         let cost = state.get_cost();
-        let a = j.transpose() * &j;
-        let g = j.transpose() * &r;
+        let (a, g) = match self.normal.take() {
+            Some(normal) => normal,
+            None => (j.tr_mul(&j), j.tr_mul(&r)),
+        };
         self.update_diag(&a);
         let mut rejected = 0_u64;
         while self.lambda <= self.lambda_max {
@@ -326,10 +339,12 @@ where
                 if c_new.is_finite() && c_new < cost {
                     self.lambda = (self.lambda / self.factor).max(1e-15);
                     let j_new = problem.jacobian(&trial)?;
-                    if self.is_converged(&j_new, &r_new, &trial) {
+                    let (a_new, g_new) = (j_new.tr_mul(&j_new), j_new.tr_mul(&r_new));
+                    if self.is_converged(&a_new, &g_new, c_new, &trial) {
                         self.status =
                             TerminationStatus::Terminated(TerminationReason::SolverConverged);
                     }
+                    self.normal = Some((a_new, g_new));
                     let kv = kv!("lambda" => self.lambda; "rejected" => rejected;);
                     return Ok((
                         state
@@ -344,6 +359,7 @@ where
             rejected += 1;
             self.lambda *= self.factor;
         }
+        self.normal = Some((a, g));
         self.status = TerminationStatus::Terminated(TerminationReason::SolverExit(format!(
             "Levenberg-Marquardt: no step lowers the cost (lambda reached {:.1e}); the tolerances may be tighter than the data allow",
             self.lambda

@@ -407,20 +407,18 @@ pub fn fit_from(input: &FitInput, opts: &FitOptions, start: &[f64]) -> Result<Tf
 /// Covariance of least-squares parameters, (J^T J)^-1 * `scale`, for the
 /// Jacobian J of weighted residuals (so J^T J = J_u^T W J_u).
 ///
-/// Computed from the SVD of J with unit-norm columns (the normal equations
-/// would square its condition number). `fit` passes the reduced chi-square
-/// as `scale`: the weights 1/variance then need to be right only up to a
-/// common factor, and when the model cannot reproduce the data (chi2 per
-/// degree of freedom above 1) the uncertainty grows with the misfit instead
-/// of claiming a precision the residuals contradict.
+/// Computed from the SVD of J with unit-norm columns, taken through its QR
+/// factor R (the normal equations would square its condition number).
+/// `fit` passes the reduced chi-square as `scale`: the weights 1/variance
+/// then need to be right only up to a common factor, and when the model
+/// cannot reproduce the data (chi2 per degree of freedom above 1) the
+/// uncertainty grows with the misfit instead of claiming a precision the
+/// residuals contradict.
 pub fn covariance(jac: &DMatrix<f64>, scale: f64) -> Result<DMatrix<f64>, RankDeficient> {
-    let norms = linear::check_rank(jac)?;
-    let mut scaled = jac.clone();
-    for (j, mut col) in scaled.column_iter_mut().enumerate() {
-        col /= norms[j];
-    }
-    let svd = scaled.svd(false, true);
-    let v_t = svd.v_t.expect("V^T was requested");
+    let factors = linear::ScaledFactors::of(jac.clone())?;
+    let norms = &factors.norms;
+    let svd = &factors.svd;
+    let v_t = svd.v_t.as_ref().expect("V^T was requested");
     let p = jac.ncols();
     let mut cov = DMatrix::zeros(p, p);
     for k in 0..p {
