@@ -8,9 +8,11 @@
 //!   Welch coherence, the local-polynomial noise variance, and the
 //!   second-order fit with the hold modelled (throughput in file bytes/s);
 //! - `frf_and_fit`: the same FRF and fit on signals already in memory
-//!   (throughput in samples/s). Budget: under 20 ms. Measured on two cores:
-//!   19-21 ms, of which `frf_only` 12 ms, `variance_only` 2 ms and
-//!   `fit_only` 4 ms.
+//!   (throughput in samples/s). Budget: under 20 ms. Measured on two cores
+//!   (five runs): 13.6-16.2 ms, of which `frf_only` 8-10 ms,
+//!   `variance_only` 0.7 ms and `fit_only` 2.6 ms. The three apart add up
+//!   to less than together (most likely because each alone runs with its
+//!   data in cache; not page faults, which were counted).
 //!
 //! `cargo bench --bench identify`
 
