@@ -61,6 +61,11 @@ impl Default for LevenbergMarquardt {
     }
 }
 
+/// J^T J and J^T r, without a transposed copy of the tall J.
+fn normal_equations(j: &DMatrix<f64>, r: &DVector<f64>) -> (DMatrix<f64>, DVector<f64>) {
+    (j.tr_mul(j), j.tr_mul(r))
+}
+
 fn invalid(text: String) -> Error {
     ArgminError::InvalidParameter { text }.into()
 }
@@ -297,7 +302,7 @@ where
             .into());
         }
         let j = problem.jacobian(&theta)?;
-        let (a, g) = (j.tr_mul(&j), j.tr_mul(&r));
+        let (a, g) = normal_equations(&j, &r);
         self.diag = DVector::zeros(0);
         self.update_diag(&a);
         self.lambda = self.lambda0;
@@ -327,7 +332,7 @@ where
         let cost = state.get_cost();
         let (a, g) = match self.normal.take() {
             Some(normal) => normal,
-            None => (j.tr_mul(&j), j.tr_mul(&r)),
+            None => normal_equations(&j, &r),
         };
         self.update_diag(&a);
         let mut rejected = 0_u64;
@@ -339,7 +344,7 @@ where
                 if c_new.is_finite() && c_new < cost {
                     self.lambda = (self.lambda / self.factor).max(1e-15);
                     let j_new = problem.jacobian(&trial)?;
-                    let (a_new, g_new) = (j_new.tr_mul(&j_new), j_new.tr_mul(&r_new));
+                    let (a_new, g_new) = normal_equations(&j_new, &r_new);
                     if self.is_converged(&a_new, &g_new, c_new, &trial) {
                         self.status =
                             TerminationStatus::Terminated(TerminationReason::SolverConverged);
