@@ -4,6 +4,7 @@ mod cdp;
 mod util;
 
 mod accuracy;
+mod bad_logs;
 mod browser;
 mod manifest_errors;
 mod mts;
