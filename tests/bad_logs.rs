@@ -4,14 +4,18 @@
 //! rig is identified from them), the report is written, and the exit code
 //! is 1.
 
-use crate::util::{scratch, servoid_into, write};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+
+use crate::util::{paper_tf_runs, scratch, servoid_into, write};
 
 const FS_HZ: f64 = 1000.0;
 const SAMPLES: usize = 20_000;
 
 /// The rig comes from the paper's published transfer functions (Eqs. 36-37),
 /// so it does not depend on the bad logs; the two `fit` runs carry them.
-const MANIFEST: &str = r#"schema_version = 1
+const MANIFEST: &str = concat!(
+    r#"schema_version = 1
 
 [campaign]
 name = "bad-logs"
@@ -29,23 +33,9 @@ band_hz = [0.5, 30.0]
 coherence_min = 0.8
 frf = { estimator = "h1", segment_length = 1024, overlap = 0.5, window = "hann" }
 
-[[runs]]
-id = "ns"
-role = "no_specimen"
-p_gain = 1.0
-[runs.data.transfer_function]
-num = [3060.0]
-den = [1.0, 267.0, 3060.0]
-
-[[runs]]
-id = "k1"
-role = "spring"
-p_gain = 1.0
-specimen = { stiffness_n_per_m = 116640.0 }
-[runs.data.transfer_function]
-num = [2703.0]
-den = [1.0, 263.4, 3337.0]
-
+"#,
+    paper_tf_runs!(),
+    r#"
 [[runs]]
 id = "quiet"
 role = "fit"
@@ -57,21 +47,8 @@ id = "noise"
 role = "fit"
 p_gain = 1.0
 data = { log = "noise.csv" }
-"#;
-
-/// SplitMix64 (Steele, Lea & Flood 2014): seeded uniforms in [-1, 1).
-struct SplitMix64(u64);
-
-impl SplitMix64 {
-    fn uniform(&mut self) -> f64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^= z >> 31;
-        2.0 * (z >> 11) as f64 / (1u64 << 53) as f64 - 1.0
-    }
-}
+"#
+);
 
 fn csv(u: &[f64], x: &[f64]) -> String {
     let mut text = String::from("t,u,x\n");
@@ -104,9 +81,9 @@ fn logs_without_excitation_or_coherence_fail_alone_and_name_their_files() {
     // "noise": command and displacement independent white noise, so the
     // coherence is about 1/(number of averages) ~ 0.03 and no bin reaches
     // 0.8.
-    let mut rng = SplitMix64(2018);
-    let u_noise: Vec<f64> = (0..SAMPLES).map(|_| rng.uniform()).collect();
-    let x_noise: Vec<f64> = (0..SAMPLES).map(|_| rng.uniform()).collect();
+    let mut rng = ChaCha8Rng::seed_from_u64(2018);
+    let mut white = || -> Vec<f64> { (0..SAMPLES).map(|_| rng.random_range(-1.0..1.0)).collect() };
+    let (u_noise, x_noise) = (white(), white());
     write(dir.path(), "noise.csv", &csv(&u_noise, &x_noise));
     let manifest = write(dir.path(), "campaign.toml", MANIFEST);
     let out = dir.path().join("out");

@@ -10,7 +10,7 @@ use std::path::{Path, PathBuf};
 use serde_json::Value;
 
 use crate::cdp::{Browser, VIEWPORT_WIDTH_PX};
-use crate::util::{root, scratch, servoid, write};
+use crate::util::{paper_tf_runs, root, scratch, servoid, write};
 
 /// Start Chromium; without it the test fails saying how to install it (no
 /// silent skip: CI installs it).
@@ -206,7 +206,9 @@ fn the_harness_catches_console_errors_and_broken_images() {
 /// d0/n0 = 2600/2703 < 1), so identification fails and the validation run
 /// cannot be predicted; the same case as `manifest_errors`'s
 /// `a_failed_run_exits_1_and_the_others_complete`.
-const FAILING: &str = r#"schema_version = 1
+fn failing() -> String {
+    concat!(
+        r#"schema_version = 1
 
 [campaign]
 name = "failing"
@@ -214,34 +216,23 @@ name = "failing"
 [rig]
 name = "test rig"
 
-[[runs]]
-id = "ns"
-role = "no_specimen"
-p_gain = 1.0
-[runs.data.transfer_function]
-num = [3060.0]
-den = [1.0, 267.0, 3060.0]
-
-[[runs]]
-id = "k1"
-role = "spring"
-p_gain = 1.0
-specimen = { stiffness_n_per_m = 116640.0 }
-[runs.data.transfer_function]
-num = [2703.0]
-den = [1.0, 263.4, 2600.0]
-
+"#,
+        paper_tf_runs!(),
+        r#"
 [[runs]]
 id = "exp1"
 role = "validation"
 p_gain = 1.0
 specimen = { mass_kg = 3.8, damping_ns_per_m = 5.0, stiffness_n_per_m = 129400.0 }
-"#;
+"#
+    )
+    .replace("den = [1.0, 263.4, 3337.0]", "den = [1.0, 263.4, 2600.0]")
+}
 
 #[test]
 fn a_report_with_a_failed_run_renders_and_shows_the_error() {
     let dir = scratch();
-    let manifest = write(dir.path(), "campaign.toml", FAILING);
+    let manifest = write(dir.path(), "campaign.toml", &failing());
     let out = run_campaign(dir.path(), &manifest, 1);
     let results: Value =
         serde_json::from_slice(&std::fs::read(out.join("results.json")).unwrap()).unwrap();

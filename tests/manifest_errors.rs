@@ -1,10 +1,11 @@
 //! Bad manifests: each gives one clear message naming the file and the key
 //! or run, exit code 2, and no output written.
 
-use crate::util::{scratch, servoid, write};
+use crate::util::{paper_tf_runs, scratch, servoid, write};
 
 /// A small valid campaign: no specimen, one spring, one validation run.
-const BASE: &str = r#"schema_version = 1
+const BASE: &str = concat!(
+    r#"schema_version = 1
 
 [campaign]
 name = "tiny"
@@ -12,29 +13,16 @@ name = "tiny"
 [rig]
 name = "test rig"
 
-[[runs]]
-id = "ns"
-role = "no_specimen"
-p_gain = 1.0
-[runs.data.transfer_function]
-num = [3060.0]
-den = [1.0, 267.0, 3060.0]
-
-[[runs]]
-id = "k1"
-role = "spring"
-p_gain = 1.0
-specimen = { stiffness_n_per_m = 116640.0 }
-[runs.data.transfer_function]
-num = [2703.0]
-den = [1.0, 263.4, 3337.0]
-
+"#,
+    paper_tf_runs!(),
+    r#"
 [[runs]]
 id = "exp1"
 role = "validation"
 p_gain = 1.0
 specimen = { mass_kg = 3.8, damping_ns_per_m = 5.0, stiffness_n_per_m = 129400.0 }
-"#;
+"#
+);
 
 struct Checked {
     code: i32,

@@ -83,3 +83,31 @@ pub fn mts_data() -> Option<PathBuf> {
     }
     found
 }
+
+/// The paper's identification runs as its published transfer functions: no
+/// specimen, 3060/(s^2 + 267 s + 3060), and spring k1 = 116,640 N/m,
+/// 2703/(s^2 + 263.4 s + 3337) (Eqs. 36-37), as manifest `[[runs]]` tables:
+/// a rig identified without logs. A macro so that `concat!` builds `const`
+/// manifests around it.
+macro_rules! paper_tf_runs {
+    () => {
+        r#"[[runs]]
+id = "ns"
+role = "no_specimen"
+p_gain = 1.0
+[runs.data.transfer_function]
+num = [3060.0]
+den = [1.0, 267.0, 3060.0]
+
+[[runs]]
+id = "k1"
+role = "spring"
+p_gain = 1.0
+specimen = { stiffness_n_per_m = 116640.0 }
+[runs.data.transfer_function]
+num = [2703.0]
+den = [1.0, 263.4, 3337.0]
+"#
+    };
+}
+pub(crate) use paper_tf_runs;
