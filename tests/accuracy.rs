@@ -25,7 +25,7 @@ use servoid::results::Results;
 use servoid::run::analyse;
 use servoid::run::simulate::simulate_campaign;
 
-use crate::util::{root, scratch};
+use crate::util::{root, run_by_id, scratch};
 
 /// A campaign on a rig that is not the paper's: a no-specimen run and two
 /// springs at about 0.16 and 0.11 a2 (the paper's ratios), at 1 kHz.
@@ -214,12 +214,7 @@ fn the_standard_deviations_are_honest_across_seeds() {
         for run in &results.runs {
             let tf = run.tf.as_ref().expect("a fitted model");
             let std = tf.std.as_ref().expect("fitted coefficients have stds");
-            let t = truth["runs"]
-                .as_array()
-                .unwrap()
-                .iter()
-                .find(|t| t["id"] == run.id.as_str())
-                .unwrap();
+            let t = run_by_id(&truth, &run.id);
             let num: Vec<f64> = t["plant_tf_x1_u"]["num"]
                 .as_array()
                 .unwrap()

@@ -7,7 +7,7 @@
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
-use crate::util::{paper_tf_runs, scratch, servoid_into, write};
+use crate::util::{paper_tf_runs, run_by_id, scratch, servoid_into, write};
 
 const FS_HZ: f64 = 1000.0;
 const SAMPLES: usize = 20_000;
@@ -92,15 +92,7 @@ fn logs_without_excitation_or_coherence_fail_alone_and_name_their_files() {
     assert_eq!(o.code, 1, "a failed run exits 1; stderr:\n{}", o.stderr);
     let results: serde_json::Value =
         serde_json::from_slice(&std::fs::read(out.join("results.json")).unwrap()).unwrap();
-    let run = |id: &str| {
-        results["runs"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .find(|r| r["id"] == id)
-            .unwrap_or_else(|| panic!("run {id} in results.json"))
-            .clone()
-    };
+    let run = |id: &str| run_by_id(&results, id);
 
     let quiet = run("quiet");
     assert_eq!(quiet["status"], "failed");

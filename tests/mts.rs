@@ -30,7 +30,7 @@ use std::path::Path;
 
 use nalgebra::{Complex, DMatrix, DVector};
 
-use crate::util::{mts_data, root, scratch, servoid_into, write};
+use crate::util::{mts_data, root, run_by_id, scratch, servoid_into, write};
 
 /// (command, displacement) in mm.
 fn parse(path: &Path) -> (Vec<f64>, Vec<f64>) {
@@ -223,12 +223,7 @@ fn the_mts_logs_fit_as_an_independent_computation_does() {
     let results: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("results.json")).unwrap()).unwrap();
     for id in ["0A", "1A"] {
-        let run = results["runs"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .find(|r| r["id"] == id)
-            .unwrap();
+        let run = run_by_id(&results, id);
         assert_eq!(run["status"], "ok", "{id}: {run}");
         let tf = &run["tf"];
         let num: Vec<f64> = serde_json::from_value(tf["num"].clone()).unwrap();

@@ -5,7 +5,7 @@
 
 use serde_json::Value;
 
-use crate::util::{root, scratch, servoid};
+use crate::util::{root, run_by_id, scratch, servoid};
 
 fn run_paper(extra: &[&str]) -> (Value, Vec<u8>) {
     let dir = scratch();
@@ -90,8 +90,7 @@ fn controllable_canonical_form_and_natural_frequencies() {
         assert_ne!(c["poles_with_cn"], c["poles_without_cn"]);
     }
     // Specimen natural frequencies (Sec. 3.2.1): 29.4 Hz and 23.7 Hz.
-    let runs = r["runs"].as_array().unwrap();
-    let f = |id: &str| num(&runs.iter().find(|x| x["id"] == id).unwrap()["natural_frequency_hz"]);
+    let f = |id: &str| num(&run_by_id(&r, id)["natural_frequency_hz"]);
     assert!(rel(f("exp1"), 29.4) < 2e-3);
     assert!(rel(f("exp3"), 23.7) < 2e-3);
 }
@@ -145,12 +144,7 @@ fn results_json_keeps_its_contract() {
         assert!(r["comparisons"][0].get(key).is_some());
     }
     // Validation runs at P = 2 have twice the a1b0 (Table 3: 4.823e9).
-    let exp2 = r["runs"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .find(|x| x["id"] == "exp2")
-        .unwrap();
+    let exp2 = run_by_id(&r, "exp2");
     assert!(rel(num(&exp2["a1b0"]), 4.823e9) < 5e-3);
 }
 

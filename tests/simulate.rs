@@ -5,7 +5,7 @@
 
 use std::path::Path;
 
-use crate::util::{root, scratch, servoid, servoid_into, write};
+use crate::util::{root, run_by_id, scratch, servoid, servoid_into, write};
 
 /// A short campaign (20 s linear chirp at 1 kHz) on a rig that is not the
 /// paper's, so nothing here can lean on the bundled numbers.
@@ -158,15 +158,7 @@ fn simulate_then_run_is_a_closed_loop() {
     // Truth: x1/u by Eqs. 11-17, normalised to a monic denominator.
     let truth = json(&out.join("truth.json"));
     assert_eq!(truth["seed"].as_u64(), Some(7));
-    let run = |id: &str| {
-        truth["runs"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .find(|r| r["id"] == id)
-            .unwrap_or_else(|| panic!("truth of {id}"))
-            .clone()
-    };
+    let run = |id: &str| run_by_id(&truth, id);
     let check_tf = |id: &str, num: &[f64], den: &[f64]| {
         let t = &run(id)["plant_tf_x1_u"];
         let (n, d) = (floats(&t["num"]), floats(&t["den"]));
@@ -212,7 +204,7 @@ fn simulate_then_run_is_a_closed_loop() {
     assert!(runs.iter().all(|r| r["status"] == "ok"), "{runs:?}");
     // The validation run is predicted from the identified rig: close to the
     // log, whose only departures from the model are noise and quantisation.
-    let v = runs.iter().find(|r| r["id"] == "v1").unwrap();
+    let v = run_by_id(&results, "v1");
     let nrmse = v["validation"]["nrmse_pct"].as_f64().unwrap();
     assert!(nrmse < 1.0, "v1 NRMSE {nrmse} %");
 }
@@ -446,15 +438,7 @@ fn a_validation_run_with_the_wrong_specimen_is_flagged() {
     let r = servoid_into(dir.path(), "run", &campaign, &out, &["--quiet"]);
     assert_eq!(r.code, 0, "{}", r.stderr);
     let results = json(&out.join("results.json"));
-    let validation = |id: &str| {
-        results["runs"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .find(|r| r["id"] == id)
-            .unwrap()["validation"]
-            .clone()
-    };
+    let validation = |id: &str| run_by_id(&results, id)["validation"].clone();
     for id in ["v1", "v2", "v4"] {
         let v = validation(id);
         assert_eq!(v["outlier"], false, "{id}: {v}");

@@ -52,6 +52,17 @@ pub fn scratch() -> tempfile::TempDir {
     tempfile::tempdir().expect("a temporary folder")
 }
 
+/// The entry of `doc["runs"]` (results.json or truth.json) whose `id` is
+/// `id`; panics naming the id when there is none.
+pub fn run_by_id<'a>(doc: &'a serde_json::Value, id: &str) -> &'a serde_json::Value {
+    doc["runs"]
+        .as_array()
+        .unwrap_or_else(|| panic!("no runs array looking for run {id}"))
+        .iter()
+        .find(|r| r["id"] == id)
+        .unwrap_or_else(|| panic!("no run {id}"))
+}
+
 /// Write `text` to `dir/name` and return the path.
 pub fn write(dir: &Path, name: &str, text: &str) -> PathBuf {
     let p = dir.join(name);
