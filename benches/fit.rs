@@ -9,9 +9,9 @@ use std::hint::black_box;
 
 use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
 use nalgebra::Complex;
+use servoid::fit::Intersample;
 use servoid::fit::{DelayPlan, FitInput, FitOptions, fit};
 use servoid::lti::TransferFunction;
-use servoid::manifest::Intersample;
 
 const SAMPLE_RATE_HZ: f64 = 2048.0;
 const SEGMENT: usize = 8192;

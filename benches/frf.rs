@@ -10,7 +10,7 @@ use std::hint::black_box;
 
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use servoid::frf;
-use servoid::manifest::{Detrend, Estimator, FrfPlan, Window};
+use servoid::frf::{Detrend, Estimator, FrfPlan, Window};
 
 const FS_HZ: f64 = 2048.0;
 const DURATION_S: f64 = 170.0;

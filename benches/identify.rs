@@ -21,8 +21,9 @@ use std::hint::black_box;
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use servoid::fit::fit;
 use servoid::frf;
+use servoid::ingest::LogFormat;
 use servoid::manifest::simulation::load_simulation_str;
-use servoid::manifest::{LogFormat, RunSource, load};
+use servoid::manifest::{RunSource, load};
 use servoid::run::acquire::{FitData, fit_options, log_stage};
 use servoid::run::simulate::simulate_campaign;
 

@@ -9,10 +9,9 @@ use std::path::{Path, PathBuf};
 
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use servoid::ingest::read_log;
-use servoid::manifest::{
-    ChannelPlan, Column, CsvOptions, LogFormat, LogPlan, ResolvedChannels, TimePlan, Unit,
-};
+use servoid::ingest::{ChannelPlan, Channels, Column, CsvOptions, LogFormat, LogPlan, TimePlan};
 use servoid::report::logs::{write_csv, write_parquet};
+use servoid::units::Unit;
 
 const FS_HZ: f64 = 2048.0;
 const ROWS: usize = 348_160; // 170 s at 2048 Hz
@@ -31,14 +30,9 @@ fn plan(path: &Path, format: LogFormat, time: TimePlan, chans: [ChannelPlan; 3])
     LogPlan {
         path: path.to_path_buf(),
         format,
-        csv: CsvOptions {
-            delimiter: ",".into(),
-            skip_lines: 0,
-            comment_prefix: None,
-            header: true,
-        },
+        csv: CsvOptions::default(),
         sha256: None,
-        channels: ResolvedChannels {
+        channels: Channels {
             time,
             command,
             displacement,

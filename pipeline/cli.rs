@@ -1,14 +1,16 @@
-//! The command line: what the user typed (clap), dispatched to the stages,
-//! and the one place the exit code is decided: 2 for usage and manifest
-//! errors, 1 when a run failed or an output could not be written, 0 otherwise.
+//! The command line: what the user typed (clap), handed to the orchestrator
+//! (`run`), what it did printed, and the one place the exit code is decided:
+//! 2 for usage and manifest errors, 1 when a run failed or an output could
+//! not be written, 0 otherwise.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::process::ExitCode;
 
-use clap::{Parser, Subcommand};
+use clap::{Parser, Subcommand, ValueEnum};
 
+use crate::identify::Estimate;
 use crate::results::{Results, Status};
-use crate::{manifest, report, run, schema};
+use crate::run::{self, CampaignOutcome, FigureFormats, JobError, Settings};
 
 /// Identify servo-hydraulic actuators from lab logs (Maghareh, Silva & Dyke 2018).
 #[derive(Debug, Parser)]
@@ -30,6 +32,9 @@ pub enum Command {
         /// Worker threads (default: all cores); the output does not depend on it.
         #[arg(long, short)]
         jobs: Option<usize>,
+        /// Which figure files to draw (the page inlines PNG previews).
+        #[arg(long, value_enum, default_value_t = Figures::All)]
+        figures: Figures,
         /// Print nothing but errors.
         #[arg(long, short)]
         quiet: bool,
@@ -47,6 +52,9 @@ pub enum Command {
         /// Worker threads (default: all cores); the output does not depend on it.
         #[arg(long, short)]
         jobs: Option<usize>,
+        /// With --run: which figure files to draw (the page inlines PNG previews).
+        #[arg(long, value_enum, default_value_t = Figures::All, requires = "run")]
+        figures: Figures,
         /// Print nothing but errors.
         #[arg(long, short)]
         quiet: bool,
@@ -62,6 +70,30 @@ pub enum Command {
         #[arg(long, default_value = "schemas")]
         out_dir: PathBuf,
     },
+}
+
+/// `--figures`: which figure files a run draws.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum Figures {
+    /// PNG and SVG files.
+    All,
+    /// PNG files only.
+    Png,
+    /// SVG files only.
+    Svg,
+    /// No figure at all.
+    None,
+}
+
+impl From<Figures> for FigureFormats {
+    fn from(f: Figures) -> Self {
+        match f {
+            Figures::All => FigureFormats::All,
+            Figures::Png => FigureFormats::Png,
+            Figures::Svg => FigureFormats::Svg,
+            Figures::None => FigureFormats::None,
+        }
+    }
 }
 
 /// Exit codes.
@@ -87,167 +119,104 @@ fn dispatch(command: Command) -> u8 {
             manifest,
             out,
             jobs,
+            figures,
             quiet,
-        } => cmd_run(&manifest, out, jobs, quiet),
+        } => {
+            let settings = Settings {
+                out,
+                jobs,
+                figures: figures.into(),
+            };
+            match run::run_campaign(&manifest, &settings) {
+                Ok(outcome) => report_campaign(&outcome, quiet),
+                Err(e) => job_failed(&e),
+            }
+        }
         Command::Simulate {
             manifest,
             out,
             run,
             jobs,
+            figures,
             quiet,
-        } => cmd_simulate(&manifest, out, run, jobs, quiet),
-        Command::Check { manifest } => {
-            let checked = if is_simulation(&manifest) {
-                manifest::simulation::load_simulation(&manifest).map(|p| {
-                    format!(
-                        "simulation `{}`, {} runs",
-                        p.manifest.simulation.name,
-                        p.runs.len()
-                    )
-                })
-            } else {
-                manifest::load(&manifest)
-                    .map(|c| format!("campaign `{}`, {} runs", c.name, c.runs.len()))
+        } => {
+            let settings = Settings {
+                out,
+                jobs,
+                figures: figures.into(),
             };
-            match checked {
-                Ok(what) => {
-                    println!("{}: ok ({what})", manifest.display());
-                    EXIT_OK
-                }
-                Err(e) => {
-                    eprintln!("error: {e}");
-                    EXIT_USAGE
-                }
-            }
+            cmd_simulate(&manifest, &settings, run, quiet)
         }
-        Command::Schema { out_dir } => {
-            for (name, value) in schema::all() {
-                let path = out_dir.join(name);
-                if let Err(e) = report::write_atomic(&path, schema::render(&value).as_bytes()) {
-                    eprintln!("error: {e}");
-                    return EXIT_FAILED;
-                }
-                println!("wrote {}", path.display());
+        Command::Check { manifest } => match run::check(&manifest) {
+            Ok(checked) => {
+                println!("{}: ok ({checked})", manifest.display());
+                EXIT_OK
             }
-            EXIT_OK
-        }
+            Err(e) => {
+                eprintln!("error: {e}");
+                EXIT_USAGE
+            }
+        },
+        Command::Schema { out_dir } => match run::write_schemas(&out_dir) {
+            Ok(paths) => {
+                for p in paths {
+                    println!("wrote {}", p.display());
+                }
+                EXIT_OK
+            }
+            Err(e) => {
+                eprintln!("error: {e}");
+                EXIT_FAILED
+            }
+        },
     }
 }
 
-/// Whether a manifest is a simulation manifest (it has a `simulation` table).
-fn is_simulation(path: &Path) -> bool {
-    let Ok(text) = std::fs::read_to_string(path) else {
-        return false;
-    };
-    let is_json = path
-        .extension()
-        .is_some_and(|e| e.eq_ignore_ascii_case("json"));
-    if is_json {
-        serde_json::from_str::<serde_json::Value>(&text)
-            .ok()
-            .is_some_and(|v| v.get("simulation").is_some())
+/// Report a job that wrote nothing (or could not finish writing).
+fn job_failed(e: &JobError) -> u8 {
+    eprintln!("error: {e}");
+    if e.is_usage() {
+        EXIT_USAGE
     } else {
-        toml::from_str::<toml::Table>(&text)
-            .ok()
-            .is_some_and(|t| t.contains_key("simulation"))
+        EXIT_FAILED
     }
-}
-
-fn pool(jobs: Option<usize>) -> Result<rayon::ThreadPool, u8> {
-    rayon::ThreadPoolBuilder::new()
-        .num_threads(jobs.unwrap_or(0))
-        .build()
-        .map_err(|e| {
-            eprintln!("error: cannot start worker threads: {e}");
-            EXIT_FAILED
-        })
 }
 
 fn cmd_simulate(
-    manifest_path: &Path,
-    out: Option<PathBuf>,
+    manifest: &std::path::Path,
+    settings: &Settings,
     then_run: bool,
-    jobs: Option<usize>,
     quiet: bool,
 ) -> u8 {
-    let plan = match manifest::simulation::load_simulation(manifest_path) {
-        Ok(p) => p,
-        Err(e) => {
-            eprintln!("error: {e}");
-            return EXIT_USAGE;
-        }
-    };
-    let out_dir =
-        out.unwrap_or_else(|| PathBuf::from("reports").join(&plan.manifest.simulation.name));
-    let workers = match pool(jobs) {
-        Ok(p) => p,
-        Err(code) => return code,
-    };
-    let simulated = match workers.install(|| run::simulate::simulate_campaign(&plan, &out_dir)) {
-        Ok(s) => s,
-        Err(e) => {
-            eprintln!("error: {e}");
-            return EXIT_FAILED;
-        }
+    let outcome = match run::simulate(manifest, settings, then_run) {
+        Ok(o) => o,
+        Err(e) => return job_failed(&e),
     };
     if !quiet {
         println!(
             "simulated {} runs of `{}` (SYNTHETIC logs, seed {})",
-            simulated.logs.len(),
-            plan.manifest.simulation.name,
-            plan.manifest.simulation.seed
+            outcome.simulated.logs.len(),
+            outcome.name,
+            outcome.seed
         );
-        println!("wrote {}", simulated.truth.display());
-        println!("wrote {}", simulated.manifest.display());
+        println!("wrote {}", outcome.simulated.truth.display());
+        println!("wrote {}", outcome.simulated.manifest.display());
     }
-    if then_run {
-        cmd_run(&simulated.manifest, Some(out_dir), jobs, quiet)
-    } else {
-        EXIT_OK
+    match &outcome.campaign {
+        None => EXIT_OK,
+        Some(Ok(c)) => report_campaign(c, quiet),
+        Some(Err(e)) => job_failed(e),
     }
 }
 
-fn cmd_run(manifest_path: &Path, out: Option<PathBuf>, jobs: Option<usize>, quiet: bool) -> u8 {
-    let campaign = match manifest::load(manifest_path) {
-        Ok(c) => c,
-        Err(e) => {
-            eprintln!("error: {e}");
-            return EXIT_USAGE;
-        }
-    };
-    let out_dir = out.unwrap_or_else(|| PathBuf::from("reports").join(&campaign.name));
-    let workers = match pool(jobs) {
-        Ok(p) => p,
-        Err(code) => return code,
-    };
-    let (written, results) = workers.install(|| {
-        let mut analysis = run::analyse_full(&campaign);
-        let specs = run::figures::build(&analysis, &campaign);
-        let written = report::write_figures(&specs, &out_dir).and_then(|(figures, warnings)| {
-            analysis.results.warnings.extend(warnings);
-            let results = &analysis.results;
-            let json = report::write_results(results, &out_dir)?;
-            let page = report::write_page(
-                results,
-                &figures,
-                results.manifest.campaign.synthetic.as_deref(),
-                &out_dir,
-            )?;
-            Ok((json, page))
-        });
-        (written, analysis.results)
-    });
-    let (path, page) = match written {
-        Ok(p) => p,
-        Err(e) => {
-            eprintln!("error: cannot write the outputs: {e}");
-            return EXIT_FAILED;
-        }
-    };
+/// Print what a campaign run wrote and decide its exit code: 1 when any run
+/// failed (its error is in results.json too).
+fn report_campaign(outcome: &CampaignOutcome, quiet: bool) -> u8 {
+    let results = &outcome.results;
     if !quiet {
-        print_summary(&results);
-        println!("wrote {}", path.display());
-        println!("wrote {}", page.display());
+        print_summary(results);
+        println!("wrote {}", outcome.results_path.display());
+        println!("wrote {}", outcome.page_path.display());
     }
     for r in results.runs.iter().filter(|r| r.status == Status::Failed) {
         eprintln!(
@@ -256,7 +225,7 @@ fn cmd_run(manifest_path: &Path, out: Option<PathBuf>, jobs: Option<usize>, quie
             r.error.as_deref().unwrap_or("failed")
         );
     }
-    if run::any_failed(&results) {
+    if run::any_failed(results) {
         EXIT_FAILED
     } else {
         EXIT_OK
@@ -274,7 +243,7 @@ fn print_summary(r: &Results) {
     }
     match &r.rig {
         Some(rig) => {
-            let pm = |e: &crate::identify::Estimate| match e.std {
+            let pm = |e: &Estimate| match e.std {
                 Some(s) => format!("{:.5e} +/- {:.2e}", e.value, s),
                 None => format!("{:.5e}", e.value),
             };

@@ -38,13 +38,12 @@ pub struct SecondOrder {
 
 impl SecondOrder {
     /// From a transfer function that must be n0 / (d2 s^2 + d1 s + d0).
-    pub fn from_tf(tf: &TransferFunction) -> Result<Self, String> {
+    pub fn from_tf(tf: &TransferFunction) -> Result<Self, IdentifyError> {
         if tf.den.len() != 3 || tf.num.len() != 1 {
-            return Err(format!(
-                "the paper's procedure needs a second-order model n0/(s^2 + d1 s + d0); got numerator degree {} and denominator degree {}",
-                tf.num.len() - 1,
-                tf.den.len() - 1
-            ));
+            return Err(IdentifyError::NotSecondOrder {
+                numerator: tf.num.len() - 1,
+                denominator: tf.den.len() - 1,
+            });
         }
         let d2 = tf.den[0];
         Ok(Self {
@@ -125,6 +124,13 @@ pub enum IdentifyError {
     NoNoSpecimenRun,
     #[error("no spring run to give R2 and R3 (Eq. 19)")]
     NoSpringRun,
+    #[error(
+        "the paper's procedure needs a second-order model n0/(s^2 + d1 s + d0); got numerator degree {numerator} and denominator degree {denominator}"
+    )]
+    NotSecondOrder {
+        numerator: usize,
+        denominator: usize,
+    },
     #[error(
         "run {run}: {quantity} = {value:.6e} is not positive, so the rig parameters are not physical{hint}"
     )]

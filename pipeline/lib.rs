@@ -3,11 +3,33 @@
 //! actuator in controllable canonical form: identification and experimental
 //! validation", MSSP 100 (2018) 398-414.
 //!
-//! Stages, one module each, with one-way dependencies: `manifest` (what the
-//! lab wrote, checked) -> `identify` (Eqs. 18-20) over `model` (Eq. 10 and the
-//! canonical form) and `lti`/`poly` (transfer functions, state space) ->
-//! `results` (the results.json contract) -> `report` (writing). `run` is the
-//! only module that knows all of them; `cli` decides the exit code.
+//! # Layers
+//!
+//! Each module imports only from the layers below it (`tests/layering.rs`
+//! reads every `crate::` path under `pipeline/` and fails on an import that
+//! points up):
+//!
+//! 1. `cli`: parses arguments, prints, decides the exit code.
+//! 2. `run`: the only orchestrator. It loads either kind of manifest,
+//!    analyses, draws the figures and writes the outputs.
+//! 3. `report`: writes results.json, figures, the page and logs.
+//! 4. `results`: the output contract (results.json, truth.json).
+//! 5. `manifest`: reads and checks the manifests, and builds each stage's
+//!    own settings.
+//! 6. The stages, each owning its settings type: `ingest` (the only module
+//!    that reads data files), `frf`, `fit`, `identify` (Eqs. 18-20),
+//!    `validate` (Eqs. 47-48), `sensitivity`, `simulate`. Within this layer
+//!    two uses run one way only: `sensitivity` propagates through
+//!    `identify`'s algebra, and `validate` drives models with `simulate`'s
+//!    exact discretisation and integrators.
+//! 7. `model`: the plant of Eq. 10 and its canonical form (Eqs. 34-35).
+//! 8. `lti`: transfer functions and state spaces.
+//! 9. `poly` (real polynomials) and `units` (physical units and their SI
+//!    factors).
+//!
+//! The numerical core (layers 6-9) is pure: data in, typed results out, the
+//! same bits whatever the thread count. Errors are typed per stage and reach
+//! `run::RunError` through `#[from]`.
 
 pub mod cli;
 pub mod fit;
@@ -21,7 +43,7 @@ pub mod poly;
 pub mod report;
 pub mod results;
 pub mod run;
-pub mod schema;
 pub mod sensitivity;
 pub mod simulate;
+pub mod units;
 pub mod validate;

@@ -5,16 +5,27 @@
 //! Units: beta1, a3 [1/s]; a1b0 [N/(m s^2)]; a2 [N/m]; R1 [1/s^2];
 //! R2 [N/(m s)]; R3 [m s^2/N]; C1 [1/s^4], C2 [1/s^3], C3 [1/s^2], C4 [1/s],
 //! C5 [1/(kg s^2)]; poles [rad/s]; transfer functions in SI (m/m, N/m).
+//!
+//! truth.json, what `servoid simulate` says a campaign should find, is here
+//! too ([`Truth`]).
 
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
 use crate::identify::{Estimate, PerSpring};
 use crate::lti::TransferFunction;
-use crate::manifest::{CompareMode, Role};
+use crate::manifest::simulation::UnmodelledSpec;
+use crate::manifest::{CompareMode, Manifest, Role};
+use crate::model::RigParams;
+use crate::simulate::specimen::SpecimenModel;
 
 /// Version of the results.json format.
 pub const RESULTS_SCHEMA_VERSION: u32 = 1;
+
+/// The results.json schema.
+pub fn results_schema() -> serde_json::Value {
+    serde_json::to_value(schemars::schema_for!(Results)).expect("schema serialises")
+}
 
 /// Everything a campaign run produced.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
@@ -40,7 +51,7 @@ pub struct Results {
     /// Campaign-level warnings.
     pub warnings: Vec<String>,
     /// The manifest as read (after defaults), for provenance.
-    pub manifest: crate::manifest::Manifest,
+    pub manifest: Manifest,
 }
 
 /// What was analysed.
@@ -180,7 +191,7 @@ pub struct RunResult {
     pub error: Option<String>,
     /// Warnings that did not stop the run.
     pub warnings: Vec<String>,
-    pub specimen: crate::simulate::specimen::SpecimenModel,
+    pub specimen: SpecimenModel,
     /// Undamped natural frequency of an SDOF specimen (Hz).
     pub natural_frequency_hz: Option<f64>,
     /// a1b0 at this run's P gain [N/(m s^2)], when the rig is known.
@@ -208,7 +219,7 @@ pub struct LogInfo {
     pub duration_s: f64,
 }
 
-pub use crate::run::timedomain::{ValidationMetrics, WindowErrors};
+pub use crate::validate::{SimplifiedCcf, ValidationMetrics, WindowErrors};
 
 /// A transfer-function fit to a run's FRF.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
@@ -282,4 +293,44 @@ pub enum ComparisonStatus {
     Agrees,
     Differs,
     NotComputed,
+}
+
+/// truth.json: what the identification should find.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+pub struct Truth {
+    pub schema_version: u32,
+    pub servoid_version: String,
+    /// The simulation's name and its manifest's SHA-256.
+    pub simulation: String,
+    pub manifest_sha256: String,
+    pub seed: u64,
+    pub sample_rate_hz: f64,
+    /// The true rig parameters (a1b0 at `rig.p_gain`).
+    pub rig: RigParams,
+    /// True when the plant is exactly the paper's model (no unmodelled dynamics).
+    pub clean: bool,
+    pub unmodelled: Option<UnmodelledSpec>,
+    pub runs: Vec<TruthRun>,
+}
+
+/// One simulated run's truth.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+pub struct TruthRun {
+    pub id: String,
+    pub role: Role,
+    pub p_gain: f64,
+    /// The specimen as simulated.
+    pub specimen: SpecimenModel,
+    /// a1b0 at this run's P gain.
+    pub a1b0: f64,
+    /// x1/u of the paper's model (Eqs. 12, 14, 17) at the true parameters;
+    /// null for a nonlinear specimen.
+    pub model_tf_x1_u: Option<TransferFunction>,
+    /// x1/u of the simulated linear plant, unmodelled dynamics included;
+    /// equal to `model_tf_x1_u` for a clean campaign.
+    pub plant_tf_x1_u: Option<TransferFunction>,
+    /// The log, relative to the output folder.
+    pub log: String,
+    pub log_sha256: String,
+    pub n_samples: usize,
 }

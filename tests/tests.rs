@@ -6,6 +6,7 @@ mod util;
 mod accuracy;
 mod bad_logs;
 mod browser;
+mod layering;
 mod manifest_errors;
 mod mts;
 mod paper;

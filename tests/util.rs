@@ -90,7 +90,7 @@ pub fn mts_data() -> Option<PathBuf> {
         .map(|d| d.join("utfsm-mts-mrdamper"))
         .find(|d| d.join("0A.txt").exists() && d.join("1A.txt").exists());
     if found.is_none() {
-        eprintln!("SKIPPED: the MTS logs are not in any of {candidates:?}");
+        skipped(&format!("the MTS logs are not in any of {candidates:?}"));
     }
     found
 }
@@ -122,3 +122,11 @@ den = [1.0, 263.4, 3337.0]
     };
 }
 pub(crate) use paper_tf_runs;
+
+/// Say on the terminal that a test is skipped and why. Written to stderr
+/// directly, not through `eprintln!`, which the test harness captures and
+/// shows only for failing tests.
+pub fn skipped(why: &str) {
+    use std::io::Write;
+    let _ = writeln!(std::io::stderr(), "SKIPPED: {why}");
+}

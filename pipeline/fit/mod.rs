@@ -14,6 +14,7 @@
 pub mod linear;
 pub mod lm;
 pub mod problem;
+mod settings;
 
 #[cfg(test)]
 mod tests;
@@ -22,14 +23,12 @@ use argmin::core::{Executor, State, TerminationReason};
 use nalgebra::{Complex, DMatrix, DVector};
 
 use crate::lti::{LtiError, TransferFunction};
-use crate::manifest::Intersample;
 
 pub use linear::{RankDeficient, levy, sanathanan_koerner};
 pub use lm::LevenbergMarquardt;
 pub use problem::{FrfProblem, ModelShape, Scaling, hold_response};
 
-/// How a pure delay enters the fit: the manifest's checked plan.
-pub use crate::manifest::DelayPlan;
+pub use settings::{DelayPlan, Intersample};
 
 /// The bins to fit: already restricted to the band and to coherent bins.
 #[derive(Debug, Clone, Copy)]
@@ -187,9 +186,35 @@ pub enum FitError {
         ratio: f64,
     },
     #[error("the optimiser failed: {0}")]
-    Solver(String),
+    Solver(#[from] SolverError),
+    #[error("the optimiser failed: argmin returned no parameters")]
+    NoSolution,
     #[error("the fitted model is not a valid transfer function: {0}")]
     Model(#[from] LtiError),
+}
+
+/// An error from argmin. Its `Error` is an `anyhow::Error`, which does not
+/// implement `std::error::Error` itself; this wrapper does, and keeps the
+/// original as the source.
+#[derive(Debug)]
+pub struct SolverError(argmin::core::Error);
+
+impl std::fmt::Display for SolverError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        self.0.fmt(f)
+    }
+}
+
+impl std::error::Error for SolverError {
+    fn source(&self) -> Option<&(dyn std::error::Error + 'static)> {
+        self.0.source()
+    }
+}
+
+impl From<argmin::core::Error> for FitError {
+    fn from(e: argmin::core::Error) -> Self {
+        FitError::Solver(SolverError(e))
+    }
 }
 
 /// Everything the fit needs, checked.
@@ -449,21 +474,18 @@ fn refine(prep: &Prepared, opts: &FitOptions, start: Vec<f64>) -> Result<TfFit, 
         let mut upper = DVector::from_element(p, f64::INFINITY);
         lower[p - 1] = 0.0;
         upper[p - 1] = max_s * w0;
-        solver = solver
-            .with_bounds(lower, upper)
-            .map_err(|e| FitError::Solver(e.to_string()))?;
+        solver = solver.with_bounds(lower, upper)?;
     }
     let result = Executor::new(problem.clone(), solver)
         .configure(|s| {
             s.param(DVector::from_vec(start))
                 .max_iters(opts.max_iterations)
         })
-        .run()
-        .map_err(|e| FitError::Solver(e.to_string()))?;
+        .run()?;
     let state = result.state();
     let theta: Vec<f64> = state
         .get_best_param()
-        .ok_or_else(|| FitError::Solver("argmin returned no parameters".into()))?
+        .ok_or(FitError::NoSolution)?
         .iter()
         .copied()
         .collect();

@@ -10,7 +10,7 @@
 use argmin::core::{Error as ArgminError, Jacobian, Operator};
 use nalgebra::{Complex, DMatrix, DVector};
 
-use crate::manifest::Intersample;
+use super::settings::Intersample;
 
 /// Response of the command's intersample behaviour at `f_hz` (Hz).
 ///

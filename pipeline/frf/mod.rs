@@ -16,7 +16,9 @@ use std::sync::Arc;
 
 use realfft::{RealFftPlanner, RealToComplex};
 
-use crate::manifest::{Detrend, Estimator, FrfPlan, Window};
+mod settings;
+
+pub use settings::{Detrend, Estimator, FrfPlan, Window};
 
 /// Shortest Welch segment accepted (the manifest enforces the same bound).
 pub const MIN_SEGMENT_LENGTH: usize = 16;

@@ -15,8 +15,8 @@ use polars::prelude::{
     CsvParseOptions, CsvReadOptions, DataType, Field, Schema, SchemaRef, SerReader,
 };
 
+use super::plan::{Column, LogPlan};
 use super::{At, IngestError, Raw, Wanted, list, raw_from_table, wanted};
-use crate::manifest::{Column, LogPlan};
 
 /// Read a CSV log's wanted columns.
 pub(super) fn read<'a>(

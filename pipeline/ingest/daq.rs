@@ -30,8 +30,8 @@
 
 use std::path::Path;
 
+use super::plan::{Column, LogPlan, TimePlan};
 use super::{At, IngestError, Raw, RawTime, list, wanted};
-use crate::manifest::{Column, LogPlan, TimePlan};
 
 /// Header values used (others are ignored).
 #[derive(Default)]

@@ -20,8 +20,8 @@ use std::path::Path;
 
 use matfile::{Array, MatFile, NumericData};
 
+use super::plan::{Column, LogPlan, TimePlan};
 use super::{At, IngestError, Raw, RawTime, list, wanted};
-use crate::manifest::{Column, LogPlan, TimePlan};
 
 /// Length of the level-5 header: 116 bytes of text, 8 of subsystem offset,
 /// version (2) and endian indicator (2).

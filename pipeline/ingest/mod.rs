@@ -6,9 +6,9 @@
 //! text), verifies its SHA-256, and converts every channel to SI once, here:
 //! SI value = raw * gain + offset. [`check_log`] then judges whether the log
 //! suits the FRF settings (length, uniform sampling, clipping), and
-//! [`trim_to_excitation`], [`remove_mean`] and [`remove_trend`] prepare the
-//! signals. Every error and warning names the file and, where it helps, the
-//! 1-based line (text formats), row (Parquet) or element (MAT) at fault.
+//! [`trim_to_excitation`] keeps the excited part. Every error and warning
+//! names the file and, where it helps, the 1-based line (text formats), row
+//! (Parquet) or element (MAT) at fault.
 //!
 //! The file is read into memory once; the hash is taken over exactly the bytes
 //! that are parsed.
@@ -17,6 +17,7 @@ mod csv;
 mod daq;
 mod mat;
 mod parquet;
+mod plan;
 #[cfg(test)]
 mod tests;
 
@@ -25,7 +26,7 @@ use std::path::{Path, PathBuf};
 
 use sha2::{Digest, Sha256};
 
-use crate::manifest::{ChannelPlan, Column, LogFormat, LogPlan, TimePlan};
+pub use plan::{ChannelPlan, Channels, Column, CsvOptions, LogFormat, LogPlan, TimePlan};
 
 /// A log read and converted to SI.
 #[derive(Debug, Clone, PartialEq)]
@@ -269,13 +270,7 @@ pub fn read_log(plan: &LogPlan) -> Result<Log, IngestError> {
 
 /// SHA-256 of `bytes` as lowercase hexadecimal.
 pub fn sha256_hex(bytes: &[u8]) -> String {
-    use std::fmt::Write;
-    Sha256::digest(bytes)
-        .iter()
-        .fold(String::with_capacity(64), |mut s, b| {
-            let _ = write!(s, "{b:02x}");
-            s
-        })
+    format!("{:x}", Sha256::digest(bytes))
 }
 
 /// Raw channels as a format reader found them, before scaling.
@@ -654,40 +649,6 @@ pub fn trim_to_excitation(log: &Log, threshold_fraction: f64) -> Log {
     out.n_rows = end - start;
     out.t0_s = log.t0_s + start as f64 * dt_s;
     out
-}
-
-/// Subtract the mean from `x` in place.
-pub fn remove_mean(x: &mut [f64]) {
-    if x.is_empty() {
-        return;
-    }
-    let mean = x.iter().sum::<f64>() / x.len() as f64;
-    x.iter_mut().for_each(|v| *v -= mean);
-}
-
-/// Subtract the least-squares straight line a + b k (k the sample index) from
-/// `x` in place.
-pub fn remove_trend(x: &mut [f64]) {
-    let n = x.len();
-    if n < 2 {
-        remove_mean(x);
-        return;
-    }
-    // Centred index kc = k - (n-1)/2 makes the normal equations diagonal:
-    // a = mean(x), b = sum(kc x) / sum(kc^2).
-    let nf = n as f64;
-    let centre = (nf - 1.0) / 2.0;
-    let mean = x.iter().sum::<f64>() / nf;
-    let sxy: f64 = x
-        .iter()
-        .enumerate()
-        .map(|(k, v)| (k as f64 - centre) * v)
-        .sum();
-    let sxx = nf * (nf * nf - 1.0) / 12.0;
-    let slope = sxy / sxx;
-    x.iter_mut()
-        .enumerate()
-        .for_each(|(k, v)| *v -= mean + slope * (k as f64 - centre));
 }
 
 /// Comma-separated list of names for "available" messages.

@@ -7,8 +7,8 @@ use std::path::Path;
 
 use polars::prelude::{DataType, ParquetReader, SerReader};
 
+use super::plan::{Column, LogPlan};
 use super::{At, IngestError, Raw, list, raw_from_table, wanted};
-use crate::manifest::{Column, LogPlan};
 
 /// Read a Parquet log's wanted columns.
 pub(super) fn read<'a>(

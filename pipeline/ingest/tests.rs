@@ -7,8 +7,8 @@ use std::path::{Path, PathBuf};
 use approx::assert_relative_eq;
 
 use super::*;
-use crate::manifest::{CsvOptions, ResolvedChannels, Unit};
 use crate::report::logs::{csv_bytes, parquet_bytes, write_csv, write_parquet};
+use crate::units::Unit;
 
 // ---------------------------------------------------------------- helpers
 
@@ -27,12 +27,7 @@ fn name(n: &str) -> Column {
 }
 
 fn csv_options() -> CsvOptions {
-    CsvOptions {
-        delimiter: ",".into(),
-        skip_lines: 0,
-        comment_prefix: None,
-        header: true,
-    }
+    CsvOptions::default()
 }
 
 fn plan(
@@ -48,7 +43,7 @@ fn plan(
         format,
         csv: csv_options(),
         sha256: None,
-        channels: ResolvedChannels {
+        channels: Channels {
             time,
             command,
             displacement,
@@ -1148,25 +1143,4 @@ fn trim_keeps_the_excitation_and_half_a_second_around_it() {
     let flat = trim_to_excitation(&log_with_command(vec![0.25; 100], 1000.0), 0.05);
     assert_eq!(flat.n_rows, 100);
     assert_contains(&flat.warnings[0], &["mem.csv", "never departs"]);
-}
-
-#[test]
-fn mean_and_trend_removal() {
-    let mut x = [1.0, 2.0, 3.0, 6.0];
-    remove_mean(&mut x);
-    for (a, b) in x.iter().zip([-2.0, -1.0, 0.0, 3.0]) {
-        assert_relative_eq!(*a, b);
-    }
-    // A line plus a part orthogonal to both 1 and k (a quadratic minus its
-    // own least-squares line, computed by hand for k = 0..4: k^2 - 4k + 2
-    // has sum 0 and sum k (.) = 0), which must survive.
-    let q = [2.0, -1.0, -2.0, -1.0, 2.0];
-    let mut y: Vec<f64> = (0..5).map(|k| 3.0 - 0.7 * k as f64 + q[k]).collect();
-    remove_trend(&mut y);
-    for (a, b) in y.iter().zip(q) {
-        assert_relative_eq!(*a, b, epsilon = 1e-12);
-    }
-    let mut one = [5.0];
-    remove_trend(&mut one);
-    assert_relative_eq!(one[0], 0.0);
 }

@@ -5,18 +5,25 @@
 //! and lines); `schemas/simulation.schema.json` is generated from these types.
 
 use std::path::{Path, PathBuf};
+use std::sync::OnceLock;
 
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
-use sha2::{Digest, Sha256};
+use serde_json::Value;
 
+use super::checks::{check_identification, check_slug, check_specimen, positive};
+use super::document::{Document, read};
 use super::keypath::KeyPath;
-use super::load::{Document, ManifestError, Problem, read};
-use super::validate::{
-    IdentificationPlan, SpecimenPlan, check_identification, check_specimen, hex,
-};
-use super::{Identification, Reference, Role, SCHEMA_VERSION, Specimen, Unit, UnitKind};
+use super::problem::{ManifestError, Problem};
+use super::raw::{Identification, Reference, Role, SCHEMA_VERSION, Specimen};
+use crate::ingest::sha256_hex;
 use crate::model::RigParams;
+use crate::simulate::excitation::{ChirpLaw, Excitation, Padding};
+use crate::simulate::instrument::Sensor;
+use crate::simulate::ode::Integrator;
+use crate::simulate::plant::{self, PlantSpec, Unmodelled, ValveMode};
+use crate::simulate::specimen::SpecimenModel;
+use crate::units::UnitKind;
 
 /// A simulated campaign: the truth, the test program and the instruments.
 #[derive(Debug, Clone, Serialize, Deserialize, JsonSchema)]
@@ -202,43 +209,11 @@ pub enum ChirpLawSpec {
 #[schemars(deny_unknown_fields)]
 pub struct Instrument {
     /// The command as logged (the D/A's input).
-    pub command: SensorSpec,
+    pub command: Sensor,
     /// The displacement sensor (e.g. the actuator's LVDT).
-    pub displacement: SensorSpec,
+    pub displacement: Sensor,
     /// The load cell.
-    pub force: SensorSpec,
-}
-
-/// One channel's sensor and conditioning, in the channel's own unit.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
-#[schemars(deny_unknown_fields)]
-pub struct SensorSpec {
-    /// The unit the log records this channel in.
-    pub unit: Unit,
-    /// White noise RMS (in `unit`).
-    #[serde(default)]
-    pub noise_rms: f64,
-    /// Sensor and conditioning delay (s).
-    #[serde(default)]
-    pub delay_s: f64,
-    /// Constant offset (in `unit`).
-    #[serde(default)]
-    pub offset: f64,
-    /// Slow linear drift (`unit` per second).
-    #[serde(default)]
-    pub drift_per_s: f64,
-    /// ADC quantisation.
-    #[serde(default)]
-    pub quantization: Option<QuantizationSpec>,
-}
-
-/// ADC quantisation: `bits` over the symmetric range +/- `full_scale` (in the
-/// channel's unit), values beyond it clipped.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
-#[schemars(deny_unknown_fields)]
-pub struct QuantizationSpec {
-    pub bits: u32,
-    pub full_scale: f64,
+    pub force: Sensor,
 }
 
 /// One simulated run.
@@ -267,13 +242,29 @@ fn default_atol() -> f64 {
     1e-12
 }
 
-/// A checked simulation.
+/// The simulation manifest's JSON Schema (cached, as the campaign
+/// manifest's).
+pub fn simulation_schema() -> Value {
+    static CACHE: OnceLock<Value> = OnceLock::new();
+    CACHE
+        .get_or_init(|| {
+            serde_json::to_value(schemars::schema_for!(SimulationManifest))
+                .expect("schema serialises")
+        })
+        .clone()
+}
+
+/// A checked simulation: the manifest as read (the truth file and the
+/// generated analysis manifest echo it) and the simulator's own settings.
 #[derive(Debug, Clone)]
 pub struct SimulationPlan {
     pub file: PathBuf,
     pub manifest_sha256: String,
     pub manifest: SimulationManifest,
-    pub identification: IdentificationPlan,
+    /// The integrator for nonlinear plants.
+    pub integrator: Integrator,
+    /// The dynamics the paper's model lacks (none for a clean campaign).
+    pub unmodelled: Unmodelled,
     pub runs: Vec<SimRunPlan>,
 }
 
@@ -283,8 +274,11 @@ pub struct SimRunPlan {
     pub id: String,
     pub role: Role,
     pub p_gain: f64,
-    pub specimen: SpecimenPlan,
-    pub excitation: ExcitationSpec,
+    pub specimen: SpecimenModel,
+    /// The command's signal; multisine and random phases are drawn per run
+    /// from the campaign seed when the run is simulated.
+    pub excitation: Excitation,
+    pub padding: Padding,
 }
 
 /// Read and check a simulation manifest.
@@ -293,24 +287,108 @@ pub fn load_simulation(path: &Path) -> Result<SimulationPlan, ManifestError> {
     load_simulation_str(&text, path)
 }
 
+/// The sections that deserialized (a failed one is `None`, its problem
+/// recorded).
+struct Sections {
+    schema_version: Option<u32>,
+    info: Option<SimulationInfo>,
+    rig: Option<SimRig>,
+    excitation: Option<ExcitationSpec>,
+    instrument: Option<Instrument>,
+    identification: Option<Identification>,
+    runs: Vec<Option<SimRun>>,
+    raw_ids: Vec<Option<String>>,
+    references: Vec<Option<Reference>>,
+}
+
 /// Check simulation-manifest text as if read from `path`.
 pub fn load_simulation_str(text: &str, path: &Path) -> Result<SimulationPlan, ManifestError> {
-    let mut doc = Document::parse(text, path, crate::schema::simulation_schema())?;
+    let mut doc = Document::parse(text, path, simulation_schema())?;
     doc.check_top_level();
-    let schema_version: Option<u32> = doc.section("schema_version");
-    let info: Option<SimulationInfo> = doc.section("simulation");
-    let rig: Option<SimRig> = doc.section("rig");
-    let excitation: Option<ExcitationSpec> = doc.section("excitation");
-    let instrument: Option<Instrument> = doc.section("instrument");
-    let identification: Option<Identification> = doc.section("identification");
-    let runs: Vec<Option<SimRun>> = doc.array("runs");
-    let raw_ids: Vec<Option<String>> = doc.raw("runs", "id");
-    let references: Vec<Option<Reference>> = doc.array("references");
-
+    let s = Sections {
+        schema_version: doc.section("schema_version"),
+        info: doc.section("simulation"),
+        rig: doc.section("rig"),
+        excitation: doc.section("excitation"),
+        instrument: doc.section("instrument"),
+        identification: doc.section("identification"),
+        runs: doc.array("runs"),
+        raw_ids: doc.raw("runs", "id"),
+        references: doc.array("references"),
+    };
     let problems = &mut doc.problems;
     let mut bad = |path: KeyPath, msg: String| problems.push(Problem::new(path, msg));
+    let fs = s.info.as_ref().map(|i| i.sample_rate_hz);
+    check_header(&s, &mut bad);
+    if let Some(r) = &s.rig {
+        check_rig(r, &mut bad);
+    }
+    if let Some(e) = &s.excitation {
+        check_excitation(e, &KeyPath::root().key("excitation"), fs, &mut bad);
+    }
+    if let Some(ins) = &s.instrument {
+        check_instrument(ins, &mut bad);
+    }
+    let ident = s.identification.clone().unwrap_or_default();
+    check_simulated_identification(&ident, fs, &mut bad);
+    let runs = check_runs(&s, &mut bad);
+    for (i, r) in s.references.iter().enumerate() {
+        if let Some(r) = r
+            && !(r.published.is_finite() && r.published != 0.0)
+        {
+            bad(
+                KeyPath::root().key("references").index(i).key("published"),
+                "must be a finite, non-zero number".into(),
+            );
+        }
+    }
+    let result = assemble(s, ident, runs, text, path);
+    doc.finish(result)
+}
+
+/// The plan, when every section deserialized (problems found by the checks
+/// are reported by the caller either way).
+fn assemble(
+    s: Sections,
+    identification: Identification,
+    runs: Vec<SimRunPlan>,
+    text: &str,
+    path: &Path,
+) -> Option<SimulationPlan> {
+    let info = s.info?;
+    let rig = s.rig?;
+    let integrator = match info.integrator.method {
+        IntegratorMethod::Rk4 => Integrator::Rk4 {
+            substeps: info.integrator.substeps,
+        },
+        IntegratorMethod::DormandPrince => Integrator::DormandPrince {
+            rtol: info.integrator.rtol,
+            atol: info.integrator.atol,
+        },
+    };
+    Some(SimulationPlan {
+        file: path.to_path_buf(),
+        manifest_sha256: sha256_hex(text.as_bytes()),
+        integrator,
+        unmodelled: unmodelled(rig.unmodelled.as_ref()),
+        manifest: SimulationManifest {
+            schema_version: s.schema_version?,
+            simulation: info,
+            rig,
+            excitation: s.excitation?,
+            instrument: s.instrument?,
+            identification,
+            runs: s.runs.into_iter().collect::<Option<Vec<_>>>()?,
+            references: s.references.into_iter().collect::<Option<Vec<_>>>()?,
+        },
+        runs,
+    })
+}
+
+/// The format version and the `[simulation]` table.
+fn check_header(s: &Sections, bad: &mut impl FnMut(KeyPath, String)) {
     let root = KeyPath::root();
-    if let Some(v) = schema_version
+    if let Some(v) = s.schema_version
         && v != SCHEMA_VERSION
     {
         bad(
@@ -318,108 +396,106 @@ pub fn load_simulation_str(text: &str, path: &Path) -> Result<SimulationPlan, Ma
             format!("unsupported schema_version {v}; this servoid reads {SCHEMA_VERSION}"),
         );
     }
-    let fs = info.as_ref().map(|i| i.sample_rate_hz);
-    if let Some(i) = &info {
-        let p = root.key("simulation");
-        super::validate::check_slug(&i.name, &p.key("name"), &mut bad);
-        if !(i.sample_rate_hz.is_finite() && i.sample_rate_hz > 0.0) {
+    let Some(i) = &s.info else { return };
+    let p = root.key("simulation");
+    check_slug(&i.name, &p.key("name"), bad);
+    positive(i.sample_rate_hz, &p.key("sample_rate_hz"), bad);
+    let ip = p.key("integrator");
+    if i.integrator.substeps == 0 {
+        bad(ip.key("substeps"), "must be at least 1".into());
+    }
+    for (k, v) in [("rtol", i.integrator.rtol), ("atol", i.integrator.atol)] {
+        positive(v, &ip.key(k), bad);
+    }
+}
+
+/// The true rig: the paper's parameters must be physical, and unmodelled
+/// dynamics stable and positive.
+fn check_rig(r: &SimRig, bad: &mut impl FnMut(KeyPath, String)) {
+    let root = KeyPath::root();
+    let p = root.key("rig").key("parameters");
+    let par = &r.parameters;
+    for (k, v) in [
+        ("beta1_per_s", par.beta1_per_s),
+        ("a1b0_n_per_m_s2", par.a1b0_n_per_m_s2),
+        ("a2_n_per_m", par.a2_n_per_m),
+        ("a3_per_s", par.a3_per_s),
+        ("p_gain", par.p_gain),
+    ] {
+        if !(v.is_finite() && v > 0.0) {
             bad(
-                p.key("sample_rate_hz"),
-                format!("must be positive (got {})", i.sample_rate_hz),
+                p.key(k),
+                format!(
+                    "must be positive (got {v}); the true plant would not be the paper's stable rig"
+                ),
             );
         }
-        let ip = p.key("integrator");
-        if i.integrator.substeps == 0 {
-            bad(ip.key("substeps"), "must be at least 1".into());
-        }
-        for (k, v) in [("rtol", i.integrator.rtol), ("atol", i.integrator.atol)] {
-            if !(v.is_finite() && v > 0.0) {
-                bad(ip.key(k), format!("must be positive (got {v})"));
-            }
+    }
+    let Some(u) = &r.unmodelled else { return };
+    let up = root.key("rig").key("unmodelled");
+    if let Some(v) = &u.valve_mode {
+        let vp = up.key("valve_mode");
+        positive(v.natural_frequency_hz, &vp.key("natural_frequency_hz"), bad);
+        if !(v.damping_ratio.is_finite() && v.damping_ratio > 0.0) {
+            bad(
+                vp.key("damping_ratio"),
+                format!(
+                    "must be positive (got {}); an undamped or negatively damped valve mode is unstable",
+                    v.damping_ratio
+                ),
+            );
         }
     }
-    if let Some(r) = &rig {
-        let p = root.key("rig").key("parameters");
-        let par = &r.parameters;
-        for (k, v) in [
-            ("beta1_per_s", par.beta1_per_s),
-            ("a1b0_n_per_m_s2", par.a1b0_n_per_m_s2),
-            ("a2_n_per_m", par.a2_n_per_m),
-            ("a3_per_s", par.a3_per_s),
-            ("p_gain", par.p_gain),
-        ] {
-            if !(v.is_finite() && v > 0.0) {
-                bad(
-                    p.key(k),
-                    format!(
-                        "must be positive (got {v}); the true plant would not be the paper's stable rig"
-                    ),
-                );
-            }
-        }
-        if let Some(u) = &r.unmodelled {
-            let up = root.key("rig").key("unmodelled");
-            if let Some(v) = &u.valve_mode {
-                let vp = up.key("valve_mode");
-                if !(v.natural_frequency_hz.is_finite() && v.natural_frequency_hz > 0.0) {
-                    bad(
-                        vp.key("natural_frequency_hz"),
-                        format!("must be positive (got {})", v.natural_frequency_hz),
-                    );
-                }
-                if !(v.damping_ratio.is_finite() && v.damping_ratio > 0.0) {
-                    bad(
-                        vp.key("damping_ratio"),
-                        format!(
-                            "must be positive (got {}); an undamped or negatively damped valve mode is unstable",
-                            v.damping_ratio
-                        ),
-                    );
-                }
-            }
-            if let Some(m) = u.piston_mass_kg
-                && !(m.is_finite() && m > 0.0)
-            {
-                bad(
-                    up.key("piston_mass_kg"),
-                    format!("must be positive (got {m})"),
-                );
-            }
-        }
+    if let Some(m) = u.piston_mass_kg {
+        positive(m, &up.key("piston_mass_kg"), bad);
     }
-    if let Some(e) = &excitation {
-        check_excitation(e, &root.key("excitation"), fs, &mut bad);
+}
+
+/// Each channel's sensor fits its channel.
+fn check_instrument(ins: &Instrument, bad: &mut impl FnMut(KeyPath, String)) {
+    let p = KeyPath::root().key("instrument");
+    for (name, s, kind) in [
+        ("command", &ins.command, UnitKind::Length),
+        ("displacement", &ins.displacement, UnitKind::Length),
+        ("force", &ins.force, UnitKind::Force),
+    ] {
+        check_sensor(s, kind, &p.key(name), bad);
     }
-    if let Some(ins) = &instrument {
-        let p = root.key("instrument");
-        for (name, s, kind) in [
-            ("command", &ins.command, UnitKind::Length),
-            ("displacement", &ins.displacement, UnitKind::Length),
-            ("force", &ins.force, UnitKind::Force),
-        ] {
-            check_sensor(s, kind, &p.key(name), &mut bad);
-        }
-    }
-    let ident = identification.clone().unwrap_or_default();
-    let ident_plan = check_identification(&ident, &root.key("identification"), &mut bad);
-    // The logs will be sampled at simulation.sample_rate_hz: a band reaching
-    // Nyquist would fit bins that hold no information (and the hold's
-    // half-sample delay, exact only below Nyquist).
+}
+
+/// The identification options written into the analysis manifest. The logs
+/// will be sampled at simulation.sample_rate_hz: a band reaching Nyquist
+/// would fit bins that hold no information (and the hold's half-sample
+/// delay is exact only below Nyquist).
+fn check_simulated_identification(
+    ident: &Identification,
+    fs: Option<f64>,
+    bad: &mut impl FnMut(KeyPath, String),
+) {
+    let path = KeyPath::root().key("identification");
+    let plan = check_identification(ident, &path, bad);
     if let Some(ny) = fs.filter(|f| f.is_finite() && *f > 0.0).map(|f| 0.5 * f)
-        && ident_plan.band_hz.1 >= ny
+        && plan.band_hz.1 >= ny
     {
         bad(
-            root.key("identification").key("band_hz"),
+            path.key("band_hz"),
             format!(
                 "the band's upper edge {} Hz is at or above the Nyquist frequency ({ny} Hz at simulation.sample_rate_hz = {})",
-                ident_plan.band_hz.1,
+                plan.band_hz.1,
                 2.0 * ny
             ),
         );
     }
+}
 
+/// Every run: a unique name, a positive gain, a specimen its role allows,
+/// an excitation, and a true plant that is stable (Eq. 10 at this P gain
+/// with the specimen and any unmodelled dynamics: eigenvalues, or those of
+/// the linearisation at rest).
+fn check_runs(s: &Sections, bad: &mut impl FnMut(KeyPath, String)) -> Vec<SimRunPlan> {
+    let root = KeyPath::root();
     let mut first_seen = std::collections::BTreeMap::new();
-    for (i, id) in raw_ids.iter().enumerate() {
+    for (i, id) in s.raw_ids.iter().enumerate() {
         if let Some(id) = id {
             if let Some(j) = first_seen.get(id.as_str()) {
                 bad(
@@ -431,104 +507,97 @@ pub fn load_simulation_str(text: &str, path: &Path) -> Result<SimulationPlan, Ma
             }
         }
     }
-    if runs.is_empty() {
+    if s.runs.is_empty() {
         bad(root.key("runs"), "the simulation has no runs".into());
     }
-    let mut run_plans = Vec::new();
-    for (i, run) in runs.iter().enumerate() {
+    let fs = s.info.as_ref().map(|i| i.sample_rate_hz);
+    let mut plans = Vec::new();
+    for (i, run) in s.runs.iter().enumerate() {
         let Some(run) = run else { continue };
         let p = root.key("runs").index(i);
-        super::validate::check_slug(&run.id, &p.key("id"), &mut bad);
-        if !(run.p_gain.is_finite() && run.p_gain > 0.0) {
-            bad(
-                p.key("p_gain"),
-                format!("must be positive (got {})", run.p_gain),
-            );
-        }
-        let spec = check_specimen(
-            run.role,
-            run.specimen.as_ref(),
-            &p.key("specimen"),
-            &mut bad,
-        );
+        check_slug(&run.id, &p.key("id"), bad);
+        positive(run.p_gain, &p.key("p_gain"), bad);
+        let spec = check_specimen(run.role, run.specimen.as_ref(), &p.key("specimen"), bad);
         if let Some(e) = &run.excitation {
-            check_excitation(e, &p.key("excitation"), fs, &mut bad);
+            check_excitation(e, &p.key("excitation"), fs, bad);
         }
-        let exc = run.excitation.clone().or_else(|| excitation.clone());
-        // The true plant must be stable: Eq. 10 at this P gain with the
-        // specimen and any unmodelled dynamics (eigenvalues, or those of the
-        // linearisation at rest).
-        if let (Some(spec), Some(r)) = (&spec, &rig)
+        if let (Some(spec), Some(r)) = (&spec, &s.rig)
             && r.parameters.is_physical()
         {
-            let plant = crate::simulate::plant::PlantSpec {
+            let plant = PlantSpec {
                 rig: r.parameters.at_p_gain(run.p_gain),
                 specimen: *spec,
                 unmodelled: unmodelled(r.unmodelled.as_ref()),
             };
-            if let Err(e) = crate::simulate::plant::validate(&plant) {
+            if let Err(e) = plant::validate(&plant) {
                 bad(
                     p.clone(),
                     format!("the true plant of this run cannot be simulated: {e}"),
                 );
             }
         }
+        let exc = run.excitation.as_ref().or(s.excitation.as_ref());
         if let (Some(spec), Some(exc)) = (spec, exc) {
-            run_plans.push(SimRunPlan {
+            plans.push(SimRunPlan {
                 id: run.id.clone(),
                 role: run.role,
                 p_gain: run.p_gain,
                 specimen: spec,
-                excitation: exc,
+                excitation: excitation(exc),
+                padding: Padding {
+                    lead_in_s: exc.lead_in_s,
+                    lead_out_s: exc.lead_out_s,
+                },
             });
         }
     }
-    for (i, r) in references.iter().enumerate() {
-        if let Some(r) = r
-            && !(r.published.is_finite() && r.published != 0.0)
-        {
-            bad(
-                root.key("references").index(i).key("published"),
-                "must be a finite, non-zero number".into(),
-            );
-        }
-    }
-
-    let result = (|| {
-        Some(SimulationPlan {
-            file: path.to_path_buf(),
-            manifest_sha256: hex(&Sha256::digest(text.as_bytes())),
-            manifest: SimulationManifest {
-                schema_version: schema_version?,
-                simulation: info?,
-                rig: rig?,
-                excitation: excitation?,
-                instrument: instrument?,
-                identification: ident,
-                runs: runs.into_iter().collect::<Option<Vec<_>>>()?,
-                references: references.into_iter().collect::<Option<Vec<_>>>()?,
-            },
-            identification: ident_plan,
-            runs: run_plans,
-        })
-    })();
-    doc.finish(result)
+    plans
 }
 
 /// The simulator's form of the unmodelled dynamics.
-pub fn unmodelled(u: Option<&UnmodelledSpec>) -> crate::simulate::plant::Unmodelled {
+fn unmodelled(u: Option<&UnmodelledSpec>) -> Unmodelled {
     let Some(u) = u else {
-        return crate::simulate::plant::Unmodelled::default();
+        return Unmodelled::default();
     };
-    crate::simulate::plant::Unmodelled {
-        valve_mode: u
-            .valve_mode
-            .as_ref()
-            .map(|v| crate::simulate::plant::ValveMode {
-                natural_frequency_hz: v.natural_frequency_hz,
-                damping_ratio: v.damping_ratio,
-            }),
+    Unmodelled {
+        valve_mode: u.valve_mode.as_ref().map(|v| ValveMode {
+            natural_frequency_hz: v.natural_frequency_hz,
+            damping_ratio: v.damping_ratio,
+        }),
         piston_mass_kg: u.piston_mass_kg,
+    }
+}
+
+/// The simulator's form of a checked excitation (its keys are known to be
+/// there; the seed is set per run when it is simulated).
+fn excitation(spec: &ExcitationSpec) -> Excitation {
+    match spec.kind {
+        ExcitationKind::Chirp => Excitation::Chirp {
+            law: match spec.law.unwrap_or_default() {
+                ChirpLawSpec::Linear => ChirpLaw::Linear,
+                ChirpLawSpec::Quadratic => ChirpLaw::Quadratic,
+                ChirpLawSpec::Logarithmic => ChirpLaw::Logarithmic,
+            },
+            f0_hz: spec.f0_hz.unwrap_or_default(),
+            f1_hz: spec.f1_hz.unwrap_or_default(),
+            duration_s: spec.duration_s,
+            amplitude_m: spec.amplitude_m.unwrap_or_default(),
+        },
+        ExcitationKind::Multisine => Excitation::Multisine {
+            f_min_hz: spec.f_min_hz.unwrap_or_default(),
+            f_max_hz: spec.f_max_hz.unwrap_or_default(),
+            n_tones: spec.n_tones.unwrap_or(1),
+            rms_m: spec.rms_m.unwrap_or_default(),
+            duration_s: spec.duration_s,
+            seed: 0,
+        },
+        ExcitationKind::RandomBand => Excitation::RandomBand {
+            f_min_hz: spec.f_min_hz.unwrap_or_default(),
+            f_max_hz: spec.f_max_hz.unwrap_or_default(),
+            rms_m: spec.rms_m.unwrap_or_default(),
+            duration_s: spec.duration_s,
+            seed: 0,
+        },
     }
 }
 
@@ -626,12 +695,7 @@ fn kind_name(k: ExcitationKind) -> &'static str {
     }
 }
 
-fn check_sensor(
-    s: &SensorSpec,
-    kind: UnitKind,
-    p: &KeyPath,
-    bad: &mut impl FnMut(KeyPath, String),
-) {
+fn check_sensor(s: &Sensor, kind: UnitKind, p: &KeyPath, bad: &mut impl FnMut(KeyPath, String)) {
     if s.unit.kind() != kind {
         bad(
             p.key("unit"),

@@ -1,7 +1,9 @@
-//! The campaign's HTML report: one self-contained page (figures embedded as
-//! data URIs, no external resources) rendered from results.json and the
+//! The campaign's HTML report: one page rendered from results.json and the
 //! figures by a minijinja template (`report.html`), never by string
-//! concatenation. A failed run still appears with its error.
+//! concatenation. It opens offline from disk: each figure is inlined as a
+//! compact PNG preview (a data URI), with links to the full PNG and the SVG
+//! beside the page; with SVG files alone the page shows those. A failed run
+//! still appears with its error.
 
 use base64::Engine;
 use minijinja::value::Serde;
@@ -17,24 +19,34 @@ pub struct PageFigure {
     pub id: String,
     pub title: String,
     pub caption: String,
-    /// `data:image/png;base64,...`
-    pub png_data_uri: String,
+    /// The compact preview inlined in the page, `data:image/png;base64,...`
+    /// (only characters that need no HTML escaping).
+    pub preview_data_uri: Option<String>,
+    /// The full PNG beside the page, relative to it.
+    pub png_file: Option<String>,
     /// The SVG beside the page, relative to it.
     pub svg_file: Option<String>,
 }
 
 impl PageFigure {
-    pub fn new(id: &str, title: &str, caption: &str, png: &[u8], svg_file: Option<String>) -> Self {
+    pub fn new(id: &str, title: &str, caption: &str) -> Self {
         Self {
             id: id.to_string(),
             title: title.to_string(),
             caption: caption.to_string(),
-            png_data_uri: format!(
-                "data:image/png;base64,{}",
-                base64::engine::general_purpose::STANDARD.encode(png)
-            ),
-            svg_file,
+            preview_data_uri: None,
+            png_file: None,
+            svg_file: None,
         }
+    }
+
+    /// Inline `png` as the page's preview of the figure.
+    pub fn with_preview(mut self, png: &[u8]) -> Self {
+        self.preview_data_uri = Some(format!(
+            "data:image/png;base64,{}",
+            base64::engine::general_purpose::STANDARD.encode(png)
+        ));
+        self
     }
 }
 
@@ -46,11 +58,13 @@ pub enum HtmlError {
 }
 
 /// Render the page. `notice` is shown in a banner (e.g. that the logs are
-/// synthetic).
+/// synthetic); `figures_note` says why there are no figures when there are
+/// none.
 pub fn render(
     results: &Results,
     figures: &[PageFigure],
     notice: Option<&str>,
+    figures_note: &str,
 ) -> Result<String, HtmlError> {
     let mut env = Environment::new();
     env.add_filter("num", num);
@@ -71,6 +85,7 @@ pub fn render(
         r => Value::from(Serde(results)),
         figures => Value::from(Serde(figures)),
         notice => notice,
+        figures_note => figures_note,
         failed => failed,
         flagged => flagged,
         manifest_json => manifest_json,

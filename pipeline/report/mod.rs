@@ -1,6 +1,7 @@
-//! Writing outputs. Every file is written to a temporary sibling and renamed
-//! into place, so a reader never sees a half-written file and a failure never
-//! destroys the previous output. `html` renders the campaign's page.
+//! Writing outputs: results.json, the figures, the campaign's page
+//! (`html`) and, for the simulator, logs (`logs`). Every file is written to a
+//! temporary sibling and renamed into place, so a reader never sees a
+//! half-written file and a failure never destroys the previous output.
 
 pub mod html;
 
@@ -37,36 +38,87 @@ pub struct FigureSpec {
     pub size: (u32, u32),
 }
 
-/// Render every figure (in parallel; bytes do not depend on the thread
-/// count) and write `figures/<id>.png` and `.svg` into `out_dir`. A figure
-/// that cannot be drawn is reported in the returned warnings and left out;
-/// it never stops the report.
+/// Which figure files a run writes beside its page. The page inlines a
+/// compact PNG preview of each figure unless only SVG files are asked for,
+/// in which case it shows those.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub enum FigureFormats {
+    /// PNG and SVG files, and previews in the page.
+    #[default]
+    All,
+    /// PNG files, and previews in the page.
+    Png,
+    /// SVG files, shown by the page.
+    Svg,
+    /// No figure is drawn at all.
+    None,
+}
+
+impl FigureFormats {
+    /// What to render, or None when nothing is drawn.
+    fn formats(self) -> Option<shim::Formats> {
+        let (png, svg) = match self {
+            FigureFormats::All => (true, true),
+            FigureFormats::Png => (true, false),
+            FigureFormats::Svg => (false, true),
+            FigureFormats::None => return None,
+        };
+        Some(shim::Formats {
+            png,
+            svg,
+            preview: png,
+        })
+    }
+
+    /// What the page says when it shows no figure.
+    fn note(self) -> &'static str {
+        match self {
+            FigureFormats::None => "No figures were drawn for this report (--figures none).",
+            _ => "No figure could be drawn for this campaign (see the warnings).",
+        }
+    }
+}
+
+/// Render every figure the formats ask for (in parallel; bytes do not depend
+/// on the thread count) and write `figures/<id>.png` and `.svg` into
+/// `out_dir`. A figure that cannot be drawn is reported in the returned
+/// warnings and left out; it never stops the report.
 pub fn write_figures(
     specs: &[FigureSpec],
     out_dir: &Path,
+    choice: FigureFormats,
 ) -> Result<(Vec<html::PageFigure>, Vec<String>), WriteError> {
+    let Some(formats) = choice.formats() else {
+        return Ok((Vec::new(), Vec::new()));
+    };
     let jobs: Vec<(figures::Figure, (u32, u32))> =
         specs.iter().map(|s| (s.figure.clone(), s.size)).collect();
-    let rendered = figures::render_many(&jobs);
+    let rendered = shim::render_many(&jobs, formats);
     let mut page = Vec::new();
     let mut warnings = Vec::new();
     for (spec, r) in specs.iter().zip(rendered) {
-        match r {
-            Ok(r) => {
-                let png = out_dir.join("figures").join(format!("{}.png", spec.id));
-                let svg_name = format!("figures/{}.svg", spec.id);
-                write_atomic(&png, &r.png)?;
-                write_atomic(&out_dir.join(&svg_name), r.svg.as_bytes())?;
-                page.push(html::PageFigure::new(
-                    &spec.id,
-                    &spec.title,
-                    &spec.caption,
-                    &r.png,
-                    Some(svg_name),
-                ));
+        let r = match r {
+            Ok(r) => r,
+            Err(e) => {
+                warnings.push(format!("figure {}: {e}", spec.id));
+                continue;
             }
-            Err(e) => warnings.push(format!("figure {}: {e}", spec.id)),
+        };
+        let mut fig = html::PageFigure::new(&spec.id, &spec.title, &spec.caption);
+        if let Some(png) = &r.png {
+            let name = format!("figures/{}.png", spec.id);
+            write_atomic(&out_dir.join(&name), png)?;
+            fig.png_file = Some(name);
         }
+        if let Some(svg) = &r.svg {
+            let name = format!("figures/{}.svg", spec.id);
+            write_atomic(&out_dir.join(&name), svg.as_bytes())?;
+            fig.svg_file = Some(name);
+        }
+        if let Some(preview) = &r.preview {
+            fig = fig.with_preview(preview);
+        }
+        page.push(fig);
     }
     Ok((page, warnings))
 }
@@ -96,22 +148,26 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), WriteError> {
     result.map_err(io)
 }
 
-/// results.json as bytes: pretty JSON with a trailing newline. Floats are
-/// printed shortest-round-trip, so equal results give equal bytes.
-pub fn results_json(results: &Results) -> Vec<u8> {
-    let mut s = serde_json::to_string_pretty(results).expect("results serialise");
+/// A JSON document as servoid writes it (results.json, truth.json, the
+/// schemas): pretty, with a trailing newline. Floats are printed
+/// shortest-round-trip, so equal values give equal bytes.
+pub fn json_bytes(value: &impl serde::Serialize) -> Vec<u8> {
+    let mut s = serde_json::to_string_pretty(value).expect("servoid's outputs serialise to JSON");
     s.push('\n');
     s.into_bytes()
 }
 
 /// Write the HTML report `report.html` into `out_dir`; returns its path.
+/// `choice` is what the figures were drawn as (the page says why it has
+/// none).
 pub fn write_page(
     results: &Results,
     figures: &[html::PageFigure],
-    notice: Option<&str>,
+    choice: FigureFormats,
     out_dir: &Path,
 ) -> Result<PathBuf, WriteError> {
-    let page = html::render(results, figures, notice)?;
+    let notice = results.manifest.campaign.synthetic.as_deref();
+    let page = html::render(results, figures, notice, choice.note())?;
     let path = out_dir.join("report.html");
     write_atomic(&path, page.as_bytes())?;
     Ok(path)
@@ -120,6 +176,37 @@ pub fn write_page(
 /// Write `results.json` into `out_dir`; returns its path.
 pub fn write_results(results: &Results, out_dir: &Path) -> Result<PathBuf, WriteError> {
     let path = out_dir.join("results.json");
-    write_atomic(&path, &results_json(results))?;
+    write_atomic(&path, &json_bytes(results))?;
     Ok(path)
+}
+
+// TEMPORARY until the figures API lands.
+mod shim {
+    use super::figures;
+    #[derive(Clone, Copy)]
+    pub struct Formats {
+        pub png: bool,
+        pub svg: bool,
+        pub preview: bool,
+    }
+    pub struct Rendered {
+        pub png: Option<Vec<u8>>,
+        pub svg: Option<String>,
+        pub preview: Option<Vec<u8>>,
+    }
+    pub fn render_many(
+        figs: &[(figures::Figure, (u32, u32))],
+        f: Formats,
+    ) -> Vec<Result<Rendered, figures::FigureError>> {
+        figures::render_many(figs)
+            .into_iter()
+            .map(|r| {
+                r.map(|r| Rendered {
+                    png: f.png.then(|| r.png.clone()),
+                    svg: f.svg.then(|| r.svg.clone()),
+                    preview: f.preview.then_some(r.png),
+                })
+            })
+            .collect()
+    }
 }

@@ -1,12 +1,60 @@
-//! The first stage of a run with a log: read it (ingest), check it against
-//! the FRF settings, estimate the command-to-displacement and
-//! command-to-force FRFs, and, for the runs that identify or characterise the
-//! rig, fit the transfer function. Pure apart from `ingest` reading the file.
+//! The first stage of a run: its own transfer function, published or
+//! measured. A run with a log is read (ingest), checked against the FRF
+//! settings, its command-to-displacement and command-to-force FRFs
+//! estimated, and, for the runs that identify or characterise the rig, its
+//! transfer function fitted. Pure apart from `ingest` reading the file.
 
-use crate::fit::{self, FitInput, FitOptions, TfFit};
-use crate::frf::{self, Frf};
-use crate::ingest::{self, Log, Needs};
-use crate::manifest::{IdentificationPlan, LogPlan, Role, RunPlan};
+use std::path::PathBuf;
+
+use crate::fit::{self, DelayPlan, FitError, FitInput, FitOptions, TfFit};
+use crate::frf::{self, Frf, FrfError};
+use crate::ingest::{self, IngestError, Log, LogPlan, Needs};
+use crate::lti::TransferFunction;
+use crate::manifest::{Campaign, IdentificationPlan, Role, RunPlan, RunSource};
+use crate::results::TfSource;
+
+/// What the first stage gives for each run: its own transfer function, and
+/// the log's signals and spectra when it has a log.
+#[derive(Debug, Clone)]
+pub struct Acquired {
+    pub tf: Option<TransferFunction>,
+    /// Covariance of (n0, d1, d0) for a second-order fit.
+    pub cov: Option<[[f64; 3]; 3]>,
+    pub source: TfSource,
+    pub warnings: Vec<String>,
+    pub stage: Option<Box<LogStage>>,
+}
+
+/// The first stage of one run: its measured or published transfer function.
+pub fn acquire(campaign: &Campaign, run: &RunPlan) -> Result<Acquired, AcquireError> {
+    match &run.source {
+        RunSource::None => Ok(Acquired {
+            tf: None,
+            cov: None,
+            source: TfSource::Model,
+            warnings: Vec::new(),
+            stage: None,
+        }),
+        RunSource::Published { tf, .. } => Ok(Acquired {
+            tf: Some(tf.clone()),
+            cov: None,
+            source: TfSource::Published,
+            warnings: Vec::new(),
+            stage: None,
+        }),
+        RunSource::Log(plan) => {
+            let stage = log_stage(run, plan, &campaign.identification)?;
+            let fit = stage.fit.as_ref();
+            Ok(Acquired {
+                tf: fit.map(|f| f.tf.clone()),
+                cov: fit.and_then(|f| f.second_order_cov()),
+                source: TfSource::Fitted,
+                warnings: stage.warnings.clone(),
+                stage: Some(Box::new(stage)),
+            })
+        }
+    }
+}
 
 /// What a log gave: the signals and their spectra, and the fit when one was made.
 #[derive(Debug, Clone)]
@@ -74,52 +122,48 @@ pub fn fit_options(ident: &IdentificationPlan, sample_rate_hz: f64) -> FitOption
 }
 
 /// Why a log stage failed; the message names the run's file.
-#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[derive(Debug, thiserror::Error)]
 pub enum AcquireError {
-    #[error("{0}")]
-    Ingest(String),
-    #[error("{}: FRF: {message}", path.display())]
+    #[error(transparent)]
+    Ingest(#[from] IngestError),
+    #[error("{}: FRF: {source}", path.display())]
     Frf {
-        path: std::path::PathBuf,
-        message: String,
+        path: PathBuf,
+        #[source]
+        source: FrfError,
     },
     #[error("{}: the fit band's upper edge {hi} Hz (identification.band_hz) is at or above the log's Nyquist frequency {nyquist} Hz (sampled at {} Hz)", path.display(), 2.0 * nyquist)]
     BandAboveNyquist {
-        path: std::path::PathBuf,
+        path: PathBuf,
         hi: f64,
         nyquist: f64,
     },
     #[error("{}: the command has no energy in the fit band {lo}-{hi} Hz ({fraction:.2e} of its power)", path.display())]
     NoExcitation {
-        path: std::path::PathBuf,
+        path: PathBuf,
         lo: f64,
         hi: f64,
         fraction: f64,
     },
     #[error("{}: only {n} bins in {lo}-{hi} Hz have coherence >= {coherence_min}; the fit needs at least {need} (lower identification.coherence_min or widen the band)", path.display())]
     TooFewBins {
-        path: std::path::PathBuf,
+        path: PathBuf,
         n: usize,
         need: usize,
         lo: f64,
         hi: f64,
         coherence_min: f64,
     },
-    #[error("{}: transfer-function fit: {message}", path.display())]
+    #[error("{}: transfer-function fit: {source}", path.display())]
     Fit {
-        path: std::path::PathBuf,
-        message: String,
+        path: PathBuf,
+        #[source]
+        source: FitError,
     },
     #[error("{}: the fit did not converge ({termination}); refusing a model that is not an optimum", path.display())]
-    NotConverged {
-        path: std::path::PathBuf,
-        termination: String,
-    },
+    NotConverged { path: PathBuf, termination: String },
     #[error("{}: the fitted model is unstable (poles {poles}); refusing it", path.display())]
-    Unstable {
-        path: std::path::PathBuf,
-        poles: String,
-    },
+    Unstable { path: PathBuf, poles: String },
 }
 
 /// Largest tolerated sample-interval deviation (fraction of the interval)
@@ -137,21 +181,19 @@ pub fn log_stage(
     ident: &IdentificationPlan,
 ) -> Result<LogStage, AcquireError> {
     let path = plan.path.clone();
-    let mut log = ingest::read_log(plan).map_err(|e| AcquireError::Ingest(e.to_string()))?;
-    let mut warnings = log.warnings.clone();
+    let mut log = ingest::read_log(plan)?;
     let needs = Needs {
         min_samples: ident.frf.segment_length,
         max_jitter_fraction: MAX_JITTER_FRACTION,
         clip_fraction: CLIP_FRACTION,
     };
-    warnings
-        .extend(ingest::check_log(&log, &needs).map_err(|e| AcquireError::Ingest(e.to_string()))?);
+    // check_log returns the log's own warnings with its findings, so each
+    // warning is listed once.
+    let mut warnings = ingest::check_log(&log, &needs)?;
     if ident.trim_to_excitation {
         log = ingest::trim_to_excitation(&log, 0.01);
         // Trimming can leave too little for one segment.
-        warnings.extend(
-            ingest::check_log(&log, &needs).map_err(|e| AcquireError::Ingest(e.to_string()))?,
-        );
+        warnings = ingest::check_log(&log, &needs)?;
     }
     let fs = log.sample_rate_hz;
     // The manifest cannot know the rate of a log that carries its own (a
@@ -163,9 +205,9 @@ pub fn log_stage(
             nyquist: 0.5 * fs,
         });
     }
-    let frf_err = |e: frf::FrfError| AcquireError::Frf {
+    let frf_err = |source: FrfError| AcquireError::Frf {
         path: path.clone(),
-        message: e.to_string(),
+        source,
     };
     let h = frf::estimate(&log.command_m, &log.displacement_m, fs, &ident.frf).map_err(frf_err)?;
     let force_frf = match &log.force_n {
@@ -198,10 +240,7 @@ pub fn log_stage(
         let n_params = ident.numerator_order
             + 1
             + ident.denominator_order
-            + usize::from(matches!(
-                ident.delay,
-                crate::manifest::DelayPlan::Fit { .. }
-            ));
+            + usize::from(matches!(ident.delay, DelayPlan::Fit { .. }));
         let used = mask.iter().filter(|m| **m).count();
         // Each bin gives two real equations; ask for a margin over the bare minimum.
         let need = n_params.max(3);
@@ -217,9 +256,9 @@ pub fn log_stage(
         }
         let data = FitData::of(&h, &mask);
         let opts = fit_options(ident, fs);
-        let fit = fit::fit(&data.input(), &opts).map_err(|e| AcquireError::Fit {
+        let fit = fit::fit(&data.input(), &opts).map_err(|source| AcquireError::Fit {
             path: path.clone(),
-            message: e.to_string(),
+            source,
         })?;
         if !fit.stable {
             let poles = fit

@@ -6,32 +6,48 @@
 use std::path::{Path, PathBuf};
 
 use rayon::prelude::*;
-use schemars::JsonSchema;
-use serde::{Deserialize, Serialize};
 use sha2::{Digest, Sha256};
 
-use crate::lti::TransferFunction;
-use crate::manifest::simulation::{
-    ChirpLawSpec, ExcitationKind, ExcitationSpec, IntegratorMethod, OutputFormat, SensorSpec,
-    SimRunPlan, SimulationPlan, UnmodelledSpec,
-};
+use crate::ingest::{Column, sha256_hex};
+use crate::manifest::simulation::{OutputFormat, SimRunPlan, SimulationPlan};
 use crate::manifest::{
-    CampaignInfo, Channel, Channels, Column, Manifest, Reference, Rig, Role, Run, RunData,
-    SCHEMA_VERSION, TimeChannel, TimeUnit,
+    CampaignInfo, Channel, Channels, Manifest, Reference, Rig, Role, Run, RunData, SCHEMA_VERSION,
+    TimeChannel,
 };
-use crate::model::{self, RigParams};
-use crate::report;
-use crate::simulate::{excitation, instrument, ode, plant};
+use crate::model;
+use crate::report::logs::{self, LogWriteError};
+use crate::report::{self, WriteError};
+use crate::results::{Truth, TruthRun};
+use crate::simulate::excitation::{self, Excitation, ExcitationError};
+use crate::simulate::instrument::{self, InstrumentError, Sensor};
+use crate::simulate::{SimError, plant};
+use crate::units::TimeUnit;
 
 /// Why a simulation failed.
 #[derive(Debug, thiserror::Error)]
 pub enum SimulateError {
-    #[error("run {run}: {message}")]
-    Run { run: String, message: String },
+    #[error("run {run}: {source}")]
+    Excitation {
+        run: String,
+        #[source]
+        source: ExcitationError,
+    },
+    #[error("run {run}: {source}")]
+    Plant {
+        run: String,
+        #[source]
+        source: SimError,
+    },
+    #[error("run {run}: {source}")]
+    Instrument {
+        run: String,
+        #[source]
+        source: InstrumentError,
+    },
     #[error(transparent)]
-    Write(#[from] report::WriteError),
-    #[error("{}: {message}", path.display())]
-    Log { path: PathBuf, message: String },
+    Log(#[from] LogWriteError),
+    #[error(transparent)]
+    Write(#[from] WriteError),
 }
 
 /// What `servoid simulate` wrote.
@@ -43,161 +59,57 @@ pub struct Simulated {
     pub logs: Vec<PathBuf>,
 }
 
-/// truth.json: what the identification should find.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
-pub struct Truth {
-    pub schema_version: u32,
-    pub servoid_version: String,
-    /// The simulation's name and its manifest's SHA-256.
-    pub simulation: String,
-    pub manifest_sha256: String,
-    pub seed: u64,
-    pub sample_rate_hz: f64,
-    /// The true rig parameters (a1b0 at `rig.p_gain`).
-    pub rig: RigParams,
-    /// True when the plant is exactly the paper's model (no unmodelled dynamics).
-    pub clean: bool,
-    pub unmodelled: Option<UnmodelledSpec>,
-    pub runs: Vec<TruthRun>,
-}
-
-/// One simulated run's truth.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
-pub struct TruthRun {
-    pub id: String,
-    pub role: Role,
-    pub p_gain: f64,
-    /// The specimen as simulated.
-    pub specimen: crate::simulate::specimen::SpecimenModel,
-    /// a1b0 at this run's P gain.
-    pub a1b0: f64,
-    /// x1/u of the paper's model (Eqs. 12, 14, 17) at the true parameters;
-    /// null for a nonlinear specimen.
-    pub model_tf_x1_u: Option<TransferFunction>,
-    /// x1/u of the simulated linear plant, unmodelled dynamics included;
-    /// equal to `model_tf_x1_u` for a clean campaign.
-    pub plant_tf_x1_u: Option<TransferFunction>,
-    /// The log, relative to the output folder.
-    pub log: String,
-    pub log_sha256: String,
-    pub n_samples: usize,
-}
-
 /// The simulated signals of one run, in the channels' units.
 struct RunSignals {
     columns: Vec<(String, Vec<f64>)>,
     truth: TruthRun,
 }
 
-fn column_name(channel: &str, spec: &SensorSpec) -> String {
-    format!("{channel}_{}", spec.unit.symbol().to_ascii_lowercase())
-}
-
-fn excitation_of(spec: &ExcitationSpec) -> excitation::Excitation {
-    use excitation::{ChirpLaw, Excitation};
-    match spec.kind {
-        ExcitationKind::Chirp => Excitation::Chirp {
-            law: match spec.law.unwrap_or_default() {
-                ChirpLawSpec::Linear => ChirpLaw::Linear,
-                ChirpLawSpec::Quadratic => ChirpLaw::Quadratic,
-                ChirpLawSpec::Logarithmic => ChirpLaw::Logarithmic,
-            },
-            f0_hz: spec.f0_hz.unwrap_or_default(),
-            f1_hz: spec.f1_hz.unwrap_or_default(),
-            duration_s: spec.duration_s,
-            amplitude_m: spec.amplitude_m.unwrap_or_default(),
-        },
-        ExcitationKind::Multisine => Excitation::Multisine {
-            f_min_hz: spec.f_min_hz.unwrap_or_default(),
-            f_max_hz: spec.f_max_hz.unwrap_or_default(),
-            n_tones: spec.n_tones.unwrap_or(1),
-            rms_m: spec.rms_m.unwrap_or_default(),
-            duration_s: spec.duration_s,
-            seed: 0,
-        },
-        ExcitationKind::RandomBand => Excitation::RandomBand {
-            f_min_hz: spec.f_min_hz.unwrap_or_default(),
-            f_max_hz: spec.f_max_hz.unwrap_or_default(),
-            rms_m: spec.rms_m.unwrap_or_default(),
-            duration_s: spec.duration_s,
-            seed: 0,
-        },
-    }
-}
-
-fn chain_of(spec: &SensorSpec) -> instrument::SensorChain {
-    instrument::SensorChain {
-        noise_rms: spec.noise_rms,
-        offset: spec.offset,
-        drift_per_s: spec.drift_per_s,
-        quantization: spec
-            .quantization
-            .as_ref()
-            .map(|q| instrument::Quantization {
-                bits: q.bits,
-                full_scale: q.full_scale,
-            }),
-    }
+fn column_name(channel: &str, sensor: &Sensor) -> String {
+    format!("{channel}_{}", sensor.unit.symbol().to_ascii_lowercase())
 }
 
 /// Simulate one run: command, plant, instruments.
 fn simulate_run(plan: &SimulationPlan, run: &SimRunPlan) -> Result<RunSignals, SimulateError> {
     let m = &plan.manifest;
     let fs = m.simulation.sample_rate_hz;
-    let fail = |message: String| SimulateError::Run {
-        run: run.id.clone(),
-        message,
-    };
+    let id = || run.id.clone();
     let rig = m.rig.parameters.at_p_gain(run.p_gain);
     let spec = plant::PlantSpec {
         rig,
         specimen: run.specimen,
-        unmodelled: crate::manifest::simulation::unmodelled(m.rig.unmodelled.as_ref()),
+        unmodelled: plan.unmodelled,
     };
-    let mut exc = excitation_of(&run.excitation);
+    let mut exc = run.excitation.clone();
     // Multisine phases and random bands draw from the campaign seed, per run.
     let exc_seed = seed_for(m.simulation.seed, &format!("excitation/{}", run.id));
     match &mut exc {
-        excitation::Excitation::Multisine { seed, .. }
-        | excitation::Excitation::RandomBand { seed, .. } => *seed = exc_seed,
-        excitation::Excitation::Chirp { .. } => {}
+        Excitation::Multisine { seed, .. } | Excitation::RandomBand { seed, .. } => {
+            *seed = exc_seed
+        }
+        Excitation::Chirp { .. } => {}
     }
-    let u = excitation::generate(
-        &exc,
-        fs,
-        excitation::Padding {
-            lead_in_s: run.excitation.lead_in_s,
-            lead_out_s: run.excitation.lead_out_s,
-        },
-    )
-    .map_err(|e| fail(e.to_string()))?;
-    let integ = match m.simulation.integrator.method {
-        IntegratorMethod::Rk4 => ode::Integrator::Rk4 {
-            substeps: m.simulation.integrator.substeps,
-        },
-        IntegratorMethod::DormandPrince => ode::Integrator::DormandPrince {
-            rtol: m.simulation.integrator.rtol,
-            atol: m.simulation.integrator.atol,
-        },
-    };
+    let u = excitation::generate(&exc, fs, run.padding)
+        .map_err(|source| SimulateError::Excitation { run: id(), source })?;
     let ins = &m.instrument;
     let response = plant::simulate(
         &spec,
         &u,
         fs,
         [ins.displacement.delay_s, ins.force.delay_s],
-        integ,
+        plan.integrator,
     )
-    .map_err(|e| fail(e.to_string()))?;
+    .map_err(|source| SimulateError::Plant { run: id(), source })?;
 
     // Into the channels' units, then through each sensor chain with its own
     // reproducible random stream.
     let seed = m.simulation.seed;
-    let logged = |name: &str, spec: &SensorSpec, si: &[f64]| -> Result<Vec<f64>, SimulateError> {
-        let to_unit = 1.0 / spec.unit.to_si();
+    let logged = |name: &str, sensor: &Sensor, si: &[f64]| -> Result<Vec<f64>, SimulateError> {
+        let to_unit = 1.0 / sensor.unit.to_si();
         let raw: Vec<f64> = si.iter().map(|v| v * to_unit).collect();
         let mut rng = instrument::channel_rng(seed, &format!("{}/{name}", run.id));
-        instrument::apply(&raw, &chain_of(spec), fs, &mut rng).map_err(|e| fail(e.to_string()))
+        instrument::apply(&raw, sensor, fs, &mut rng)
+            .map_err(|source| SimulateError::Instrument { run: id(), source })
     };
     let n = u.len();
     let time: Vec<f64> = (0..n).map(|k| k as f64 / fs).collect();
@@ -261,7 +173,7 @@ pub fn simulate_campaign(
         OutputFormat::Csv => "csv",
         OutputFormat::Parquet => "parquet",
     };
-    let mut logs = Vec::new();
+    let mut log_paths = Vec::new();
     let mut truth_runs = Vec::new();
     for s in signals {
         let rel = format!("logs/{}.{ext}", s.truth.id);
@@ -272,19 +184,15 @@ pub fn simulate_campaign(
             .map(|(n, v)| (n.as_str(), v.as_slice()))
             .collect();
         let bytes = match m.simulation.log_format {
-            OutputFormat::Csv => report::logs::csv_bytes(&path, &cols),
-            OutputFormat::Parquet => report::logs::parquet_bytes(&path, &cols),
-        }
-        .map_err(|e| SimulateError::Log {
-            path: path.clone(),
-            message: e.to_string(),
-        })?;
+            OutputFormat::Csv => logs::csv_bytes(&path, &cols),
+            OutputFormat::Parquet => logs::parquet_bytes(&path, &cols),
+        }?;
         report::write_atomic(&path, &bytes)?;
         let mut t = s.truth;
         t.log = rel;
-        t.log_sha256 = crate::manifest::hex(&Sha256::digest(&bytes));
+        t.log_sha256 = sha256_hex(&bytes);
         truth_runs.push(t);
-        logs.push(path);
+        log_paths.push(path);
     }
 
     let truth = Truth {
@@ -300,9 +208,7 @@ pub fn simulate_campaign(
         runs: truth_runs,
     };
     let truth_path = out_dir.join("truth.json");
-    let mut truth_json = serde_json::to_string_pretty(&truth).expect("truth serialises");
-    truth_json.push('\n');
-    report::write_atomic(&truth_path, truth_json.as_bytes())?;
+    report::write_atomic(&truth_path, &report::json_bytes(&truth))?;
 
     let manifest = analysis_manifest(plan, &truth);
     let mut text = format!(
@@ -320,7 +226,7 @@ pub fn simulate_campaign(
         out_dir: out_dir.to_path_buf(),
         manifest: manifest_path,
         truth: truth_path,
-        logs,
+        logs: log_paths,
     })
 }
 
@@ -331,9 +237,9 @@ pub fn simulate_campaign(
 fn analysis_manifest(plan: &SimulationPlan, truth: &Truth) -> Manifest {
     let m = &plan.manifest;
     let ins = &m.instrument;
-    let channel = |name: &str, spec: &SensorSpec| Channel {
-        column: Column::Name(column_name(name, spec)),
-        unit: spec.unit,
+    let channel = |name: &str, sensor: &Sensor| Channel {
+        column: Column::Name(column_name(name, sensor)),
+        unit: sensor.unit,
         scale: 1.0,
         offset: 0.0,
     };

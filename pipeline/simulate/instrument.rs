@@ -10,20 +10,28 @@ use rand_distr::StandardNormal;
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
-/// One channel's sensor and conditioning, in the channel's own unit
-/// (m for displacement, N for force).
-#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize, JsonSchema)]
-#[schemars(deny_unknown_fields)]
-pub struct SensorChain {
-    /// Standard deviation of the white Gaussian noise.
+use crate::units::Unit;
+
+/// One channel's sensor and conditioning, in the channel's own unit.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[schemars(rename = "SensorSpec", deny_unknown_fields)]
+pub struct Sensor {
+    /// The unit the log records this channel in.
+    pub unit: Unit,
+    /// White noise RMS (in `unit`).
     #[serde(default)]
     pub noise_rms: f64,
-    /// Constant offset.
+    /// Sensor and conditioning delay (s), applied exactly by the plant
+    /// simulation.
+    #[serde(default)]
+    pub delay_s: f64,
+    /// Constant offset (in `unit`).
     #[serde(default)]
     pub offset: f64,
-    /// Drift rate (unit per second), zero at t = 0.
+    /// Slow linear drift (`unit` per second), zero at t = 0.
     #[serde(default)]
     pub drift_per_s: f64,
+    /// ADC quantisation.
     #[serde(default)]
     pub quantization: Option<Quantization>,
 }
@@ -34,7 +42,7 @@ pub struct SensorChain {
 /// levels (the most negative two's-complement code is left unused).
 /// Values beyond the range clip to its ends.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, JsonSchema)]
-#[schemars(deny_unknown_fields)]
+#[schemars(rename = "QuantizationSpec", deny_unknown_fields)]
 pub struct Quantization {
     pub bits: u32,
     pub full_scale: f64,
@@ -69,10 +77,17 @@ impl Quantization {
     }
 }
 
-impl SensorChain {
-    /// An ideal sensor: the true signal.
-    pub fn ideal() -> Self {
-        Self::default()
+impl Sensor {
+    /// An ideal sensor in `unit`: the true signal.
+    pub fn ideal(unit: Unit) -> Self {
+        Self {
+            unit,
+            noise_rms: 0.0,
+            delay_s: 0.0,
+            offset: 0.0,
+            drift_per_s: 0.0,
+            quantization: None,
+        }
     }
 
     pub fn validate(&self) -> Result<(), InstrumentError> {
@@ -114,7 +129,7 @@ impl SensorChain {
 /// sample order (no draws when `noise_rms` is zero).
 pub fn apply(
     signal: &[f64],
-    chain: &SensorChain,
+    chain: &Sensor,
     sample_rate_hz: f64,
     rng: &mut impl Rng,
 ) -> Result<Vec<f64>, InstrumentError> {
@@ -155,12 +170,12 @@ mod tests {
     use super::*;
     use approx::assert_relative_eq;
 
-    fn noisy() -> SensorChain {
-        SensorChain {
+    fn noisy() -> Sensor {
+        Sensor {
             noise_rms: 1e-5,
             offset: 2e-4,
             drift_per_s: 1e-5,
-            quantization: None,
+            ..Sensor::ideal(Unit::Meter)
         }
     }
 
@@ -204,7 +219,7 @@ mod tests {
             "rms {rms}"
         );
         // Without noise the chain is deterministic: offset + drift exactly.
-        let ideal = SensorChain {
+        let ideal = Sensor {
             noise_rms: 0.0,
             ..noisy()
         };
@@ -220,9 +235,9 @@ mod tests {
         };
         // 18 bits over +-10 mm: 131071 steps of 7.63e-8 m per side.
         assert_relative_eq!(q.lsb(), 0.01 / 131_071.0, max_relative = 1e-15);
-        let chain = SensorChain {
+        let chain = Sensor {
             quantization: Some(q),
-            ..SensorChain::ideal()
+            ..Sensor::ideal(Unit::Meter)
         };
         let signal: Vec<f64> = (0..20_001)
             .map(|k| -0.012 + 0.024 * k as f64 / 20_000.0)
@@ -260,35 +275,35 @@ mod tests {
 
     #[test]
     fn bad_settings_are_named() {
-        let msg = |c: SensorChain| {
+        let msg = |c: Sensor| {
             apply(&[0.0], &c, 1.0, &mut channel_rng(0, "x"))
                 .unwrap_err()
                 .to_string()
         };
         assert_eq!(
-            msg(SensorChain {
+            msg(Sensor {
                 noise_rms: -1.0,
-                ..SensorChain::ideal()
+                ..Sensor::ideal(Unit::Meter)
             }),
             "sensor chain: noise_rms must be finite and non-negative (got -1)"
         );
         assert_eq!(
-            msg(SensorChain {
+            msg(Sensor {
                 quantization: Some(Quantization {
                     bits: 1,
                     full_scale: 1.0
                 }),
-                ..SensorChain::ideal()
+                ..Sensor::ideal(Unit::Meter)
             }),
             "sensor chain: quantization.bits must be between 2 and 53 (got 1)"
         );
         assert_eq!(
-            msg(SensorChain {
+            msg(Sensor {
                 quantization: Some(Quantization {
                     bits: 16,
                     full_scale: 0.0
                 }),
-                ..SensorChain::ideal()
+                ..Sensor::ideal(Unit::Meter)
             }),
             "sensor chain: quantization.full_scale must be positive and finite (got 0)"
         );

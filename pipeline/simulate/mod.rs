@@ -29,7 +29,7 @@ pub use excitation::{
     ChirpLaw, Excitation, ExcitationError, Padding, generate, instantaneous_frequency_hz,
     time_at_frequency_s,
 };
-pub use instrument::{InstrumentError, Quantization, SensorChain, apply, channel_rng};
+pub use instrument::{InstrumentError, Quantization, Sensor, apply, channel_rng};
 pub use ode::{Integrator, OdeError, OdeSystem, simulate_held};
 pub use plant::{
     NonlinearPlant, PlantResponse, PlantSpec, Unmodelled, ValveMode, linear_state_space, simulate,

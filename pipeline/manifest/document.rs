@@ -1,126 +1,48 @@
-//! Reading a manifest: syntax (TOML or JSON), form (types and unknown keys)
-//! and meaning (`validate`), with every problem collected before any is
-//! reported, each with its key path, run and, for TOML, line and column.
+//! A manifest document as parsed (TOML or JSON), read section by section
+//! against its JSON Schema: unknown keys with suggestions, the first type
+//! error of each section, required keys, and every problem's line and
+//! column. Shared by every manifest kind servoid reads.
 
 use std::ops::Range;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use serde::de::DeserializeOwned;
 use serde_json::Value;
 
 use super::keypath::{KeyPath, Seg};
-use super::validate::{self, Campaign, Partial};
-use super::{CampaignInfo, Channels, Identification, Reference, Rig, Run};
-
-/// One problem in a manifest.
-#[derive(Debug, Clone, PartialEq)]
-pub struct Problem {
-    /// Where: the key path inside the manifest.
-    pub path: KeyPath,
-    /// The run's id when the problem is inside a run.
-    pub run: Option<String>,
-    /// Line and column (1-based) in a TOML manifest.
-    pub line_col: Option<(usize, usize)>,
-    pub message: String,
-}
-
-impl Problem {
-    pub fn new(path: KeyPath, message: impl Into<String>) -> Self {
-        Self {
-            path,
-            run: None,
-            line_col: None,
-            message: message.into(),
-        }
-    }
-}
-
-/// Why a manifest cannot be used.
-#[derive(Debug, thiserror::Error)]
-pub enum ManifestError {
-    #[error("{}: cannot read the manifest: {source}", file.display())]
-    Read {
-        file: PathBuf,
-        #[source]
-        source: std::io::Error,
-    },
-    #[error("{}:{line}:{column}: {format} syntax error: {message}", file.display())]
-    Syntax {
-        file: PathBuf,
-        format: &'static str,
-        line: usize,
-        column: usize,
-        message: String,
-    },
-    #[error("{}", render(file, problems))]
-    Invalid {
-        file: PathBuf,
-        problems: Vec<Problem>,
-    },
-}
-
-fn render(file: &Path, problems: &[Problem]) -> String {
-    let n = problems.len();
-    let mut out = format!(
-        "{}: {n} problem{} in the manifest:",
-        file.display(),
-        if n == 1 { "" } else { "s" }
-    );
-    for p in problems {
-        out.push_str("\n  ");
-        out.push_str(&file.display().to_string());
-        if let Some((l, c)) = p.line_col {
-            out.push_str(&format!(":{l}:{c}"));
-        }
-        out.push_str(&format!(": {}", p.path));
-        if let Some(run) = &p.run {
-            out.push_str(&format!(" (run \"{run}\")"));
-        }
-        out.push_str(&format!(": {}", p.message));
-    }
-    out
-}
-
-/// Read and check a manifest file (`.json` is read as JSON, anything else as TOML).
-pub fn load(path: &Path) -> Result<Campaign, ManifestError> {
-    let text = read(path)?;
-    load_str(&text, path)
-}
+use super::problem::{ManifestError, Problem};
 
 /// Read a manifest's text, naming the file when it cannot be read.
-pub(crate) fn read(path: &Path) -> Result<String, ManifestError> {
+pub(super) fn read(path: &Path) -> Result<String, ManifestError> {
     std::fs::read_to_string(path).map_err(|source| ManifestError::Read {
         file: path.to_path_buf(),
         source,
     })
 }
 
-/// Check manifest text as if read from `path` (relative log paths resolve
-/// against `path`'s folder).
-pub fn load_str(text: &str, path: &Path) -> Result<Campaign, ManifestError> {
-    let mut doc = Document::parse(text, path, crate::schema::manifest_schema())?;
-    doc.check_top_level();
-    // Each section, and each run and reference on its own, so that a type
-    // error in one does not hide the problems in the others.
-    let partial = Partial {
-        schema_version: doc.section("schema_version"),
-        campaign: doc.section::<CampaignInfo>("campaign"),
-        rig: doc.section::<Rig>("rig"),
-        channels: doc.section::<Channels>("channels"),
-        identification: doc.section::<Identification>("identification"),
-        runs: doc.array::<Run>("runs"),
-        raw_run_ids: doc.raw("runs", "id"),
-        raw_run_roles: doc.raw("runs", "role"),
-        references: doc.array::<Reference>("references"),
-    };
-    let base_dir = path.parent().unwrap_or(Path::new("")).to_path_buf();
-    let campaign = validate::validate(partial, path, text.as_bytes(), &base_dir, &mut doc.problems);
-    doc.finish(campaign)
+/// Whether the manifest text has the top-level key `key`, read leniently:
+/// text that does not parse has none.
+pub(super) fn has_top_level_key(text: &str, path: &Path, key: &str) -> bool {
+    if is_json(path) {
+        serde_json::from_str::<Value>(text)
+            .ok()
+            .is_some_and(|v| v.get(key).is_some())
+    } else {
+        toml::from_str::<toml::Table>(text)
+            .ok()
+            .is_some_and(|t| t.contains_key(key))
+    }
+}
+
+/// `.json` is read as JSON, anything else as TOML.
+fn is_json(path: &Path) -> bool {
+    path.extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("json"))
 }
 
 /// A parsed manifest document (TOML or JSON) and the problems found in it so
 /// far; shared by every manifest kind servoid reads.
-pub(crate) struct Document<'a> {
+pub(super) struct Document<'a> {
     path: &'a Path,
     text: &'a str,
     value: Value,
@@ -133,9 +55,6 @@ pub(crate) struct Document<'a> {
 impl<'a> Document<'a> {
     /// Parse the text; a syntax error names line and column.
     pub fn parse(text: &'a str, path: &'a Path, schema: Value) -> Result<Self, ManifestError> {
-        let is_json = path
-            .extension()
-            .is_some_and(|e| e.eq_ignore_ascii_case("json"));
         let syntax = |format, (line, column), message: String| ManifestError::Syntax {
             file: path.to_path_buf(),
             format,
@@ -143,7 +62,7 @@ impl<'a> Document<'a> {
             column,
             message,
         };
-        let (value, spans) = if is_json {
+        let (value, spans) = if is_json(path) {
             let v: Value = serde_json::from_str(text)
                 .map_err(|e| syntax("JSON", (e.line(), e.column()), e.to_string()))?;
             (v, None)
@@ -496,7 +415,7 @@ mod tests {
 
     #[test]
     fn schema_knows_the_keys_of_a_run_specimen() {
-        let schema = crate::schema::manifest_schema();
+        let schema = super::super::raw::manifest_schema();
         let keys = known_keys(&schema, &KeyPath::parse("runs[0].specimen"));
         assert!(keys.contains(&"stiffness_n_per_m".to_string()), "{keys:?}");
         assert!(keys.contains(&"mass_kg".to_string()));

@@ -13,14 +13,36 @@
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
-use crate::ingest::Log;
+use super::metrics::{self as validate, Errors, Window};
 use crate::lti::{StateSpace, TransferFunction};
 use crate::model::{self, CnTerm, LinearSdof, RigParams};
+use crate::simulate::SimError;
 use crate::simulate::discrete::simulate_linear;
 use crate::simulate::ode::Integrator;
 use crate::simulate::plant::{self, PlantSpec, Unmodelled};
 use crate::simulate::specimen::SpecimenModel;
-use crate::validate::{self, Errors, Window};
+
+/// A run's measured signals in SI, uniformly sampled, as the time-domain
+/// checks read them.
+#[derive(Debug, Clone, Copy)]
+pub struct Record<'a> {
+    pub sample_rate_hz: f64,
+    /// Command displacement u (m).
+    pub command_m: &'a [f64],
+    /// Measured actuator displacement x1 (m).
+    pub displacement_m: &'a [f64],
+    /// Measured actuator force f (N), when logged.
+    pub force_n: Option<&'a [f64]>,
+}
+
+/// Why a run cannot be checked in the time domain.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum ValidateError {
+    #[error(transparent)]
+    Simulation(#[from] SimError),
+    #[error("the measured displacement is identically zero")]
+    ZeroDisplacement,
+}
 
 /// Errors in one of the paper's windows.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
@@ -95,12 +117,11 @@ pub struct TimeStage {
 /// zero (the UTFSM logs rest at -0.21 mm). Simulated as the response to
 /// u - u[0] from rest plus the steady output G(0) u[0] (D u[0] when A is
 /// singular; `compare` removes a constant offset anyway).
-fn simulate(ss: &StateSpace, log: &Log, delay_s: f64) -> Result<Vec<Vec<f64>>, String> {
+fn simulate(ss: &StateSpace, rec: &Record<'_>, delay_s: f64) -> Result<Vec<Vec<f64>>, SimError> {
     let outputs = ss.c.nrows();
-    let u0 = log.command_m.first().copied().unwrap_or(0.0);
-    let u: Vec<f64> = log.command_m.iter().map(|v| v - u0).collect();
-    let mut out = simulate_linear(ss, &u, 1.0 / log.sample_rate_hz, &vec![delay_s; outputs])
-        .map_err(|e| e.to_string())?;
+    let u0 = rec.command_m.first().copied().unwrap_or(0.0);
+    let u: Vec<f64> = rec.command_m.iter().map(|v| v - u0).collect();
+    let mut out = simulate_linear(ss, &u, 1.0 / rec.sample_rate_hz, &vec![delay_s; outputs])?;
     for (i, y) in out.iter_mut().enumerate() {
         let dc = ss.eval(i, nalgebra::Complex::new(0.0, 0.0)).re;
         if dc.is_finite() {
@@ -142,13 +163,13 @@ fn compare(
 pub fn validation_run(
     rig_at_p: &RigParams,
     specimen: &SpecimenModel,
-    log: &Log,
-) -> Result<TimeStage, String> {
-    let fs = log.sample_rate_hz;
-    let windows = validate::locate_windows(&log.command_m, fs);
+    rec: &Record<'_>,
+) -> Result<TimeStage, ValidateError> {
+    let fs = rec.sample_rate_hz;
+    let windows = validate::locate_windows(rec.command_m, fs);
     let (x1, force) = match specimen.linear() {
         Some(lin) => {
-            let mut out = simulate(&model::state_space(rig_at_p, &lin), log, 0.0)?;
+            let mut out = simulate(&model::state_space(rig_at_p, &lin), rec, 0.0)?;
             let f = out.pop().expect("two outputs");
             (out.pop().expect("two outputs"), f)
         }
@@ -160,18 +181,17 @@ pub fn validation_run(
             };
             let r = plant::simulate(
                 &spec,
-                &log.command_m,
+                rec.command_m,
                 fs,
                 [0.0, 0.0],
                 Integrator::Rk4 { substeps: 8 },
-            )
-            .map_err(|e| e.to_string())?;
+            )?;
             (r.x1_m, r.force_n)
         }
     };
-    let (whole, per_window, offset, centred) = compare(&log.displacement_m, &x1, fs, &windows)
-        .ok_or("the measured displacement is identically zero")?;
-    let force_errors = log.force_n.as_ref().and_then(|f| {
+    let (whole, per_window, offset, centred) =
+        compare(rec.displacement_m, &x1, fs, &windows).ok_or(ValidateError::ZeroDisplacement)?;
+    let force_errors = rec.force_n.and_then(|f| {
         let n = f.len().min(force.len());
         let offset = (0..n).map(|k| f[k] - force[k]).sum::<f64>() / n.max(1) as f64;
         let centred: Vec<f64> = f[..n].iter().map(|v| v - offset).collect();
@@ -191,7 +211,7 @@ pub fn validation_run(
         };
         let kept = simulate(
             &model::ccf_linear_state_space(rig_at_p, &sdof, CnTerm::Kept),
-            log,
+            rec,
             0.0,
         )?;
         let peak = x1.iter().fold(0.0_f64, |m, v| m.max(v.abs()));
@@ -204,9 +224,9 @@ pub fn validation_run(
         let poles = dropped_ss.eigenvalues();
         let max_re = poles.iter().map(|p| p.re).fold(f64::NEG_INFINITY, f64::max);
         if max_re < 0.0 {
-            let dropped = simulate(&dropped_ss, log, 0.0)?;
+            let dropped = simulate(&dropped_ss, rec, 0.0)?;
             let x_dropped = dropped.into_iter().next().expect("x1 output");
-            let errors = compare(&log.displacement_m, &x_dropped, fs, &[]).map(|c| c.0);
+            let errors = compare(rec.displacement_m, &x_dropped, fs, &[]).map(|c| c.0);
             simplified_check = Some(SimplifiedCcf {
                 stable: true,
                 max_pole_real_per_s: max_re,
@@ -261,13 +281,13 @@ pub fn validation_run(
 
 /// An identification run: its fitted transfer function (hold exact, delay
 /// as fitted) driven by the measured command (the paper's Figs. 9, 12, 14).
-pub fn fitted_run(tf: &TransferFunction, log: &Log) -> Result<TimeStage, String> {
-    let fs = log.sample_rate_hz;
-    let windows = validate::locate_windows(&log.command_m, fs);
-    let out = simulate(&tf.to_state_space(), log, tf.delay_s)?;
+pub fn fitted_run(tf: &TransferFunction, rec: &Record<'_>) -> Result<TimeStage, ValidateError> {
+    let fs = rec.sample_rate_hz;
+    let windows = validate::locate_windows(rec.command_m, fs);
+    let out = simulate(&tf.to_state_space(), rec, tf.delay_s)?;
     let x1 = out.into_iter().next().expect("one output");
-    let (whole, per_window, offset, centred) = compare(&log.displacement_m, &x1, fs, &windows)
-        .ok_or("the measured displacement is identically zero")?;
+    let (whole, per_window, offset, centred) =
+        compare(rec.displacement_m, &x1, fs, &windows).ok_or(ValidateError::ZeroDisplacement)?;
     Ok(TimeStage {
         metrics: ValidationMetrics {
             nrmse_pct: whole.nrmse_pct,
@@ -341,7 +361,9 @@ mod tests {
         }
     }
 
-    fn log_of(rig: &RigParams, specimen: &SpecimenModel) -> Log {
+    /// Command, displacement and force (1 kHz, 20 s chirp) of the model's
+    /// own noise-free response.
+    fn signals_of(rig: &RigParams, specimen: &SpecimenModel) -> [Vec<f64>; 3] {
         let fs = 1000.0;
         let n = 20_000;
         let u: Vec<f64> = (0..n)
@@ -352,20 +374,18 @@ mod tests {
             })
             .collect();
         let lin = specimen.linear().expect("linear");
-        let y = simulate_linear(&model::state_space(rig, &lin), &u, 1.0 / fs, &[0.0, 0.0])
+        let mut y = simulate_linear(&model::state_space(rig, &lin), &u, 1.0 / fs, &[0.0, 0.0])
             .expect("simulates");
-        Log {
-            path: "mem.csv".into(),
-            sha256: String::new(),
-            format: crate::manifest::LogFormat::Csv,
-            sample_rate_hz: fs,
-            t0_s: 0.0,
-            displacement_m: y[0].clone(),
-            force_n: Some(y[1].clone()),
-            command_m: u,
-            n_rows: n,
-            timing: crate::ingest::Timing::Exact { dt_s: 1.0 / fs },
-            warnings: Vec::new(),
+        let f = y.pop().expect("force");
+        [u, y.pop().expect("x1"), f]
+    }
+
+    fn record(s: &[Vec<f64>; 3]) -> Record<'_> {
+        Record {
+            sample_rate_hz: 1000.0,
+            command_m: &s[0],
+            displacement_m: &s[1],
+            force_n: Some(&s[2]),
         }
     }
 
@@ -384,7 +404,8 @@ mod tests {
             damping_ns_per_m: 5.0,
             stiffness_n_per_m: 129_400.0,
         };
-        let stage = validation_run(&rig, &specimen, &log_of(&rig, &specimen)).unwrap();
+        let signals = signals_of(&rig, &specimen);
+        let stage = validation_run(&rig, &specimen, &record(&signals)).unwrap();
         let m = &stage.metrics;
         assert!(m.nrmse_pct < 1e-6, "full model NRMSE {}", m.nrmse_pct);
         assert!(m.ccf_consistency.unwrap() < 1e-9);
@@ -416,7 +437,8 @@ mod tests {
             damping_ns_per_m: 500.0,
             stiffness_n_per_m: 129_400.0,
         };
-        let stage = validation_run(&rig, &specimen, &log_of(&rig, &specimen)).unwrap();
+        let signals = signals_of(&rig, &specimen);
+        let stage = validation_run(&rig, &specimen, &record(&signals)).unwrap();
         let s = stage.metrics.simplified_ccf.as_ref().unwrap();
         assert!(s.stable);
         assert!(
@@ -471,8 +493,8 @@ mod tests {
     /// level (-0.21 mm) before the sweep. Simulated from zero state, the
     /// model answered that level with a step response the actuator never
     /// made (it had settled there long before the log began), which put
-    /// NAE at 12.3 % on the UTFSM 0A log (8.9 % from equilibrium). The plant here is a first-order lag
-    /// at rest at its equilibrium under the first command, then driven by a
+    /// NAE at 12.3 % on the UTFSM 0A log (8.9 % from equilibrium). The plant
+    /// here is a first-order lag at rest at its equilibrium under the first command, then driven by a
     /// step; the measured record is its exact held-input response, so the
     /// comparison must be exact to round-off.
     #[test]
@@ -493,20 +515,13 @@ mod tests {
         for k in 0..n - 1 {
             y[k + 1] = phi * y[k] + (1.0 - phi) * u[k];
         }
-        let log = Log {
-            path: "rest.csv".into(),
-            sha256: String::new(),
-            format: crate::manifest::LogFormat::Csv,
+        let rec = Record {
             sample_rate_hz: fs,
-            t0_s: 0.0,
-            command_m: u,
-            displacement_m: y,
+            command_m: &u,
+            displacement_m: &y,
             force_n: None,
-            n_rows: n,
-            timing: crate::ingest::Timing::Exact { dt_s: dt },
-            warnings: Vec::new(),
         };
-        let t = fitted_run(&tf, &log).unwrap();
+        let t = fitted_run(&tf, &rec).unwrap();
         assert!(t.metrics.nae_pct < 1e-8, "NAE {} %", t.metrics.nae_pct);
         assert!(t.metrics.offset_removed_m.abs() < 1e-12);
     }

@@ -1,0 +1,125 @@
+//! What ingest is asked to read: a [`LogPlan`] names the file, its format,
+//! the columns of each channel and their conversion to SI. The manifest
+//! builds it (its `data` and `channels` tables use [`Column`], [`LogFormat`]
+//! and [`CsvOptions`] as written).
+
+use std::path::PathBuf;
+
+use schemars::JsonSchema;
+use serde::{Deserialize, Serialize};
+
+use crate::units::Unit;
+
+/// A log to ingest, with its channels resolved.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LogPlan {
+    pub path: PathBuf,
+    pub format: LogFormat,
+    pub csv: CsvOptions,
+    pub sha256: Option<String>,
+    pub channels: Channels,
+}
+
+/// A run's channels, defaults and overrides merged, with SI conversion.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Channels {
+    pub time: TimePlan,
+    pub command: ChannelPlan,
+    pub displacement: ChannelPlan,
+    pub force: Option<ChannelPlan>,
+}
+
+/// How to get the time base.
+#[derive(Debug, Clone, PartialEq)]
+pub enum TimePlan {
+    Column {
+        column: Column,
+        to_s: f64,
+    },
+    SampleRate {
+        hz: f64,
+    },
+    /// The log's own header gives the rate (DAQ text, MAT).
+    FromLog,
+}
+
+/// One channel: SI value = raw * gain + offset.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ChannelPlan {
+    pub column: Column,
+    /// The unit the manifest gave.
+    pub unit: Unit,
+    /// scale * unit-to-SI.
+    pub gain: f64,
+    /// offset * unit-to-SI.
+    pub offset: f64,
+}
+
+/// A column by name or by 0-based index.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(untagged)]
+pub enum Column {
+    Name(String),
+    Index(usize),
+}
+
+impl std::fmt::Display for Column {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Column::Name(n) => write!(f, "`{n}`"),
+            Column::Index(i) => write!(f, "#{i}"),
+        }
+    }
+}
+
+/// Log file formats.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
+#[serde(rename_all = "snake_case")]
+pub enum LogFormat {
+    /// Delimited text with a header line (`.csv`, `.tsv`).
+    Csv,
+    /// Apache Parquet (`.parquet`).
+    Parquet,
+    /// MATLAB level-5 MAT-file (`.mat`), as real-time targets save logs.
+    Mat,
+    /// DAQ text export: a header block with the sampling rate, then
+    /// `Sample Number, Date/Time, CHANNEL0, ..., Events` (`.txt`).
+    DaqText,
+}
+
+/// Options for delimited text logs.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[schemars(deny_unknown_fields)]
+pub struct CsvOptions {
+    /// Field delimiter (one character).
+    #[serde(default = "comma")]
+    pub delimiter: String,
+    /// Lines skipped before the header.
+    #[serde(default)]
+    pub skip_lines: usize,
+    /// Lines starting with this are ignored.
+    #[serde(default)]
+    pub comment_prefix: Option<String>,
+    /// Whether the first line (after skipped lines) names the columns.
+    #[serde(default = "yes")]
+    pub header: bool,
+}
+
+impl Default for CsvOptions {
+    fn default() -> Self {
+        Self {
+            delimiter: comma(),
+            skip_lines: 0,
+            comment_prefix: None,
+            header: yes(),
+        }
+    }
+}
+
+fn comma() -> String {
+    ",".into()
+}
+
+fn yes() -> bool {
+    true
+}

@@ -1,0 +1,723 @@
+//! From the campaign manifest as written to a [`Campaign`] whose every value
+//! is usable: positive masses, stiffnesses and gains, specimens that fit their
+//! runs' roles, transfer functions that are proper, logs that exist,
+//! references that name quantities the campaign computes. Every problem is
+//! collected, with its key path, run and line.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use super::checks::{
+    IdentificationPlan, check_band, check_channels, check_identification, check_slug,
+    check_specimen, positive,
+};
+use super::document::{Document, read};
+use super::keypath::KeyPath;
+use super::problem::{ManifestError, Problem};
+use super::raw::{
+    CampaignInfo, Channel, Channels as RawChannels, CompareMode, Identification, Manifest,
+    Reference, Rig, Role, Run, RunData, SCHEMA_VERSION, manifest_schema,
+};
+use crate::ingest::{self, ChannelPlan, Channels, LogFormat, LogPlan, TimePlan};
+use crate::lti::{LtiError, TransferFunction};
+use crate::model::RigParams;
+use crate::simulate::specimen::SpecimenModel;
+use crate::units::TimeUnit;
+
+/// A checked campaign, ready to run.
+#[derive(Debug, Clone)]
+pub struct Campaign {
+    /// The manifest file it came from.
+    pub file: PathBuf,
+    /// SHA-256 of the manifest's bytes (hex), for provenance.
+    pub manifest_sha256: String,
+    pub name: String,
+    pub description: String,
+    pub rig_name: String,
+    pub rig_notes: String,
+    /// Rig parameters given in the manifest (identified earlier).
+    pub given_rig: Option<RigParams>,
+    pub identification: IdentificationPlan,
+    pub runs: Vec<RunPlan>,
+    pub references: Vec<ReferencePlan>,
+    /// The manifest as read, echoed into results for provenance.
+    pub manifest: Manifest,
+}
+
+impl Campaign {
+    /// Whether the campaign can identify the rig itself (Fig. 6, steps 3-5).
+    pub fn identifies_rig(&self) -> bool {
+        self.runs.iter().any(|r| r.role == Role::NoSpecimen)
+            && self.runs.iter().any(|r| r.role == Role::Spring)
+    }
+}
+
+/// A checked run.
+#[derive(Debug, Clone)]
+pub struct RunPlan {
+    /// Position in the manifest (results keep this order).
+    pub index: usize,
+    pub id: String,
+    pub role: Role,
+    pub description: String,
+    pub p_gain: f64,
+    /// The specimen as the simulator models it, linear or not.
+    pub specimen: SpecimenModel,
+    pub source: RunSource,
+    pub band_hz: (f64, f64),
+}
+
+/// Where a run's transfer function comes from.
+#[derive(Debug, Clone)]
+pub enum RunSource {
+    /// No data: the run is a prediction from the rig model only.
+    None,
+    /// A published transfer function.
+    Published {
+        tf: TransferFunction,
+        source: String,
+    },
+    /// A log to ingest.
+    Log(Box<LogPlan>),
+}
+
+/// A reference with its quantity parsed.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ReferencePlan {
+    pub quantity: Quantity,
+    pub published: f64,
+    pub source: String,
+    pub compare: CompareMode,
+    pub tolerance_pct: f64,
+}
+
+/// A quantity servoid computes and can compare: `<scope>.<name>`.
+#[derive(Debug, Clone, PartialEq, Eq, PartialOrd, Ord)]
+pub enum Quantity {
+    Rig(String),
+    PerSpring { run: String, name: String },
+    Run { run: String, name: String },
+    Ccf { run: String, name: String },
+}
+
+impl std::fmt::Display for Quantity {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Quantity::Rig(n) => write!(f, "rig.{n}"),
+            Quantity::PerSpring { run, name } => write!(f, "per_spring.{run}.{name}"),
+            Quantity::Run { run, name } => write!(f, "runs.{run}.{name}"),
+            Quantity::Ccf { run, name } => write!(f, "ccf.{run}.{name}"),
+        }
+    }
+}
+
+const RIG_QUANTITIES: &[&str] = &["beta1", "R1", "a1b0", "a2", "a3", "valve_time_constant_ms"];
+const SPRING_QUANTITIES: &[&str] = &["R2", "R3", "a1b0", "a2", "a3"];
+const RUN_QUANTITIES: &[&str] = &["a1b0", "natural_frequency_hz", "nrmse_pct", "nae_pct"];
+const CCF_QUANTITIES: &[&str] = &["C1", "C2", "C3", "C4", "C5"];
+
+/// Read and check a campaign manifest file (`.json` is read as JSON,
+/// anything else as TOML).
+pub fn load(path: &Path) -> Result<Campaign, ManifestError> {
+    let text = read(path)?;
+    load_str(&text, path)
+}
+
+/// Check campaign-manifest text as if read from `path` (relative log paths
+/// resolve against `path`'s folder).
+pub fn load_str(text: &str, path: &Path) -> Result<Campaign, ManifestError> {
+    let mut doc = Document::parse(text, path, manifest_schema())?;
+    doc.check_top_level();
+    // Each section, and each run and reference on its own, so that a type
+    // error in one does not hide the problems in the others.
+    let partial = Partial {
+        schema_version: doc.section("schema_version"),
+        campaign: doc.section::<CampaignInfo>("campaign"),
+        rig: doc.section::<Rig>("rig"),
+        channels: doc.section::<RawChannels>("channels"),
+        identification: doc.section::<Identification>("identification"),
+        runs: doc.array::<Run>("runs"),
+        raw_run_ids: doc.raw("runs", "id"),
+        raw_run_roles: doc.raw("runs", "role"),
+        references: doc.array::<Reference>("references"),
+    };
+    let base_dir = path.parent().unwrap_or(Path::new(""));
+    let campaign = validate(partial, path, text.as_bytes(), base_dir, &mut doc.problems);
+    doc.finish(campaign)
+}
+
+/// The sections that deserialized (a failed section is `None`; its problem is
+/// already recorded).
+#[derive(Debug, Default)]
+struct Partial {
+    schema_version: Option<u32>,
+    campaign: Option<CampaignInfo>,
+    rig: Option<Rig>,
+    channels: Option<RawChannels>,
+    identification: Option<Identification>,
+    runs: Vec<Option<Run>>,
+    /// Ids and roles read straight from the document, so cross-run checks
+    /// still see a run whose other keys failed to deserialize.
+    raw_run_ids: Vec<Option<String>>,
+    raw_run_roles: Vec<Option<Role>>,
+    references: Vec<Option<Reference>>,
+}
+
+/// What every run's checks share.
+struct RunContext<'a> {
+    default_channels: &'a RawChannels,
+    ident: &'a IdentificationPlan,
+    base_dir: &'a Path,
+}
+
+fn validate(
+    partial: Partial,
+    file: &Path,
+    bytes: &[u8],
+    base_dir: &Path,
+    problems: &mut Vec<Problem>,
+) -> Option<Campaign> {
+    let root = KeyPath::root();
+    let mut bad = |path: KeyPath, msg: String| problems.push(Problem::new(path, msg));
+
+    check_header(&partial, &mut bad);
+    let default_channels = partial.channels.clone().unwrap_or_default();
+    check_channels(&default_channels, &root.key("channels"), &mut bad);
+    let ident = partial.identification.clone().unwrap_or_default();
+    let ident_plan = check_identification(&ident, &root.key("identification"), &mut bad);
+
+    check_run_ids(&partial.raw_run_ids, &partial.runs, &mut bad);
+    let ctx = RunContext {
+        default_channels: &default_channels,
+        ident: &ident_plan,
+        base_dir,
+    };
+    let runs: Vec<RunPlan> = partial
+        .runs
+        .iter()
+        .enumerate()
+        .filter_map(|(i, run)| {
+            let run = run.as_ref()?;
+            check_run(run, i, &root.key("runs").index(i), &ctx, &mut bad)
+        })
+        .collect();
+    let given_rig = partial.rig.as_ref().and_then(|r| r.parameters);
+    check_rig_source(&partial.raw_run_roles, given_rig.is_some(), &mut bad);
+    let references = check_references(&partial.runs, &partial.references, &mut bad);
+
+    if !problems.is_empty() {
+        return None;
+    }
+    let campaign = partial.campaign?;
+    let rig = partial.rig?;
+    let manifest = Manifest {
+        schema_version: partial.schema_version?,
+        campaign: campaign.clone(),
+        rig: rig.clone(),
+        channels: default_channels,
+        identification: ident,
+        runs: partial.runs.into_iter().flatten().collect(),
+        references: partial.references.into_iter().flatten().collect(),
+    };
+    Some(Campaign {
+        file: file.to_path_buf(),
+        manifest_sha256: ingest::sha256_hex(bytes),
+        name: campaign.name,
+        description: campaign.description,
+        rig_name: rig.name,
+        rig_notes: rig.notes,
+        given_rig,
+        identification: ident_plan,
+        runs,
+        references,
+        manifest,
+    })
+}
+
+/// The format version, the campaign's name and the rig.
+fn check_header(partial: &Partial, bad: &mut impl FnMut(KeyPath, String)) {
+    let root = KeyPath::root();
+    if let Some(v) = partial.schema_version
+        && v != SCHEMA_VERSION
+    {
+        bad(
+            root.key("schema_version"),
+            format!("unsupported schema_version {v}; this servoid reads {SCHEMA_VERSION}"),
+        );
+    }
+    if let Some(c) = &partial.campaign {
+        check_slug(&c.name, &root.key("campaign").key("name"), bad);
+    }
+    if let Some(rig) = &partial.rig {
+        if rig.name.trim().is_empty() {
+            bad(root.key("rig").key("name"), "must not be empty".into());
+        }
+        if let Some(p) = &rig.parameters {
+            let base = root.key("rig").key("parameters");
+            for (k, v) in [
+                ("beta1_per_s", p.beta1_per_s),
+                ("a1b0_n_per_m_s2", p.a1b0_n_per_m_s2),
+                ("a2_n_per_m", p.a2_n_per_m),
+                ("a3_per_s", p.a3_per_s),
+                ("p_gain", p.p_gain),
+            ] {
+                positive(v, &base.key(k), bad);
+            }
+        }
+    }
+}
+
+/// Run ids are unique, and the campaign has runs.
+fn check_run_ids(
+    raw_ids: &[Option<String>],
+    runs: &[Option<Run>],
+    bad: &mut impl FnMut(KeyPath, String),
+) {
+    let root = KeyPath::root();
+    if runs.is_empty() && raw_ids.is_empty() {
+        bad(root.key("runs"), "the campaign has no runs".into());
+    }
+    let mut first_seen: BTreeMap<&str, usize> = BTreeMap::new();
+    for (i, id) in raw_ids.iter().enumerate() {
+        if let Some(id) = id {
+            if let Some(&j) = first_seen.get(id.as_str()) {
+                bad(
+                    root.key("runs").index(i).key("id"),
+                    format!("duplicate run id `{id}` (first used by runs[{j}])"),
+                );
+            } else {
+                first_seen.insert(id, i);
+            }
+        }
+    }
+}
+
+/// A campaign with validation runs needs the rig: given, or identified from
+/// a no-specimen run and springs (Eqs. 18-20).
+fn check_rig_source(
+    raw_roles: &[Option<Role>],
+    given_rig: bool,
+    bad: &mut impl FnMut(KeyPath, String),
+) {
+    let root = KeyPath::root();
+    let roles: Vec<Role> = raw_roles.iter().flatten().copied().collect();
+    let has_ns = roles.contains(&Role::NoSpecimen);
+    let has_spring = roles.contains(&Role::Spring);
+    if roles.contains(&Role::Validation) && !given_rig && !(has_ns && has_spring) {
+        let missing = match (has_ns, has_spring) {
+            (false, false) => "has neither a no_specimen run nor a spring run",
+            (false, true) => "has no no_specimen run",
+            _ => "has no spring run",
+        };
+        bad(
+            root.key("rig").key("parameters"),
+            format!(
+                "the validation runs need rig parameters, but the campaign gives no [rig.parameters] and {missing} to identify them from (Eqs. 18-20)"
+            ),
+        );
+    }
+    if has_spring && !has_ns && !given_rig {
+        bad(
+            root.key("runs"),
+            "spring runs need a no_specimen run (beta1 and R1, Eq. 18) to identify the rig".into(),
+        );
+    }
+}
+
+fn check_run(
+    run: &Run,
+    index: usize,
+    base: &KeyPath,
+    ctx: &RunContext<'_>,
+    bad: &mut impl FnMut(KeyPath, String),
+) -> Option<RunPlan> {
+    check_slug(&run.id, &base.key("id"), bad);
+    let p_ok = positive(run.p_gain, &base.key("p_gain"), bad);
+    let specimen = check_specimen(run.role, run.specimen.as_ref(), &base.key("specimen"), bad);
+    if let Some(b) = run.band_hz {
+        check_band(b, &base.key("band_hz"), bad);
+    }
+    if let Some(ch) = &run.channels {
+        check_channels(ch, &base.key("channels"), bad);
+    }
+    let source = check_source(run, base, ctx, bad);
+    let band = run
+        .band_hz
+        .unwrap_or([ctx.ident.band_hz.0, ctx.ident.band_hz.1]);
+    Some(RunPlan {
+        index,
+        id: run.id.clone(),
+        role: run.role,
+        description: run.description.clone(),
+        p_gain: run.p_gain,
+        specimen: specimen?,
+        source: source?,
+        band_hz: (band[0], band[1]),
+    })
+    .filter(|_| p_ok)
+}
+
+/// A run's data: nothing (a prediction), a published transfer function or a
+/// log, as its role allows.
+fn check_source(
+    run: &Run,
+    base: &KeyPath,
+    ctx: &RunContext<'_>,
+    bad: &mut impl FnMut(KeyPath, String),
+) -> Option<RunSource> {
+    let identification_role = matches!(run.role, Role::NoSpecimen | Role::Spring);
+    let data = run.data.clone().unwrap_or_default();
+    let dpath = base.key("data");
+    if data.log.is_none() {
+        for (k, given) in [
+            ("format", data.format.is_some()),
+            ("csv", data.csv.is_some()),
+            ("sha256", data.sha256.is_some()),
+        ] {
+            if given {
+                bad(dpath.key(k), "applies only to a `log`".into());
+            }
+        }
+    }
+    match (&data.log, &data.transfer_function) {
+        (Some(_), Some(_)) => {
+            bad(
+                dpath.clone(),
+                "give either `log` or `transfer_function`, not both".into(),
+            );
+            None
+        }
+        (None, None) => {
+            if identification_role || run.role == Role::Fit {
+                bad(
+                    dpath.clone(),
+                    format!(
+                        "a {} run needs data: a `log` file or a published `transfer_function`",
+                        run.role.as_str()
+                    ),
+                );
+                None
+            } else {
+                Some(RunSource::None)
+            }
+        }
+        (None, Some(tf)) => check_published(run.role, tf, &dpath.key("transfer_function"), bad),
+        (Some(log), None) => check_log(log, &data, run, base, ctx, bad),
+    }
+}
+
+/// A published transfer function: proper, and second order where the
+/// paper's procedure needs it.
+fn check_published(
+    role: Role,
+    tf: &super::raw::PublishedTf,
+    tpath: &KeyPath,
+    bad: &mut impl FnMut(KeyPath, String),
+) -> Option<RunSource> {
+    let t = match TransferFunction::with_delay(&tf.num, &tf.den, tf.delay_s) {
+        Ok(t) => t,
+        Err(e) => {
+            let key = match e {
+                LtiError::BadDelay(_) => "delay_s",
+                LtiError::EmptyNumerator => "num",
+                LtiError::NonFinite {
+                    which: "numerator", ..
+                } => "num",
+                _ => "den",
+            };
+            bad(tpath.key(key), e.to_string());
+            return None;
+        }
+    };
+    if matches!(role, Role::NoSpecimen | Role::Spring) && (t.num.len() != 1 || t.den.len() != 3) {
+        bad(
+            tpath.clone(),
+            format!(
+                "the paper's procedure needs a second-order model n0/(s^2 + d1 s + d0); got numerator degree {} and denominator degree {}",
+                t.num.len() - 1,
+                t.den.len() - 1
+            ),
+        );
+        None
+    } else if role == Role::Validation {
+        bad(
+            tpath.clone(),
+            "a validation run is checked against a log; published transfer functions are for identification (no_specimen, spring) and fit runs".into(),
+        );
+        None
+    } else {
+        Some(RunSource::Published {
+            tf: t,
+            source: tf.source.clone(),
+        })
+    }
+}
+
+/// A run's log: the file exists, its format is known, its CSV options and
+/// hash are well formed, and its channels (defaults merged with the run's
+/// overrides) are all there, each with its conversion to SI.
+fn check_log(
+    log: &str,
+    data: &RunData,
+    run: &Run,
+    base: &KeyPath,
+    ctx: &RunContext<'_>,
+    bad: &mut impl FnMut(KeyPath, String),
+) -> Option<RunSource> {
+    let dpath = base.key("data");
+    let path = ctx.base_dir.join(log);
+    let mut ok = true;
+    if !path.is_file() {
+        bad(
+            dpath.key("log"),
+            format!("log file not found: {}", path.display()),
+        );
+        ok = false;
+    }
+    let format = data.format.or_else(|| infer_format(&path));
+    if format.is_none() {
+        bad(
+            dpath.key("format"),
+            format!(
+                "cannot tell the format of `{log}` from its extension; give format = \"csv\", \"parquet\", \"mat\" or \"daq_text\""
+            ),
+        );
+        ok = false;
+    }
+    let csv = data.csv.clone().unwrap_or_default();
+    if csv.delimiter.chars().count() != 1 {
+        bad(
+            dpath.key("csv").key("delimiter"),
+            format!("must be one character (got {:?})", csv.delimiter),
+        );
+        ok = false;
+    }
+    if let Some(h) = &data.sha256
+        && (h.len() != 64 || !h.chars().all(|c| c.is_ascii_hexdigit()))
+    {
+        bad(dpath.key("sha256"), "must be 64 hexadecimal digits".into());
+        ok = false;
+    }
+    let merged = merge_channels(ctx.default_channels, run.channels.as_ref());
+    let channels = plan_channels(&merged, format, &base.key("channels"), bad);
+    let (channels, format) = (channels?, format?);
+    ok.then(|| {
+        RunSource::Log(Box::new(LogPlan {
+            path,
+            format,
+            csv,
+            sha256: data.sha256.as_ref().map(|s| s.to_ascii_lowercase()),
+            channels,
+        }))
+    })
+}
+
+/// The resolved channels of a log: command and displacement are required,
+/// and the time base comes from a column, a rate, or (DAQ text, MAT) the
+/// log's own header.
+fn plan_channels(
+    merged: &RawChannels,
+    format: Option<LogFormat>,
+    ch_path: &KeyPath,
+    bad: &mut impl FnMut(KeyPath, String),
+) -> Option<Channels> {
+    let mut need = |c: &Option<Channel>, name: &str| -> Option<ChannelPlan> {
+        match c {
+            Some(c) => Some(plan_channel(c)),
+            None => {
+                bad(
+                    ch_path.key(name),
+                    format!(
+                        "the log needs a `{name}` channel (set [channels.{name}] or this run's channels.{name})"
+                    ),
+                );
+                None
+            }
+        }
+    };
+    let command = need(&merged.command, "command");
+    let displacement = need(&merged.displacement, "displacement");
+    let time = match &merged.time {
+        Some(t) => match (&t.column, t.sample_rate_hz) {
+            (Some(c), _) => TimePlan::Column {
+                column: c.clone(),
+                to_s: t.unit.unwrap_or(TimeUnit::Second).to_si(),
+            },
+            (None, Some(hz)) => TimePlan::SampleRate { hz },
+            (None, None) => TimePlan::FromLog,
+        },
+        None if matches!(format, Some(LogFormat::DaqText | LogFormat::Mat)) => TimePlan::FromLog,
+        None => {
+            bad(
+                ch_path.key("time"),
+                "the log needs a time base: [channels.time] with `column` or `sample_rate_hz`"
+                    .into(),
+            );
+            return None;
+        }
+    };
+    Some(Channels {
+        time,
+        command: command?,
+        displacement: displacement?,
+        force: merged.force.as_ref().map(plan_channel),
+    })
+}
+
+fn merge_channels(defaults: &RawChannels, over: Option<&RawChannels>) -> RawChannels {
+    let mut out = defaults.clone();
+    if let Some(o) = over {
+        if o.time.is_some() {
+            out.time = o.time.clone();
+        }
+        if o.command.is_some() {
+            out.command = o.command.clone();
+        }
+        if o.displacement.is_some() {
+            out.displacement = o.displacement.clone();
+        }
+        if o.force.is_some() {
+            out.force = o.force.clone();
+        }
+    }
+    out
+}
+
+/// A channel's conversion to SI, decided once here and applied at ingest.
+fn plan_channel(c: &Channel) -> ChannelPlan {
+    let si = c.unit.to_si();
+    ChannelPlan {
+        column: c.column.clone(),
+        unit: c.unit,
+        gain: c.scale * si,
+        offset: c.offset * si,
+    }
+}
+
+fn infer_format(path: &Path) -> Option<LogFormat> {
+    let ext = path.extension()?.to_str()?.to_ascii_lowercase();
+    match ext.as_str() {
+        "csv" | "tsv" => Some(LogFormat::Csv),
+        "parquet" | "pq" => Some(LogFormat::Parquet),
+        "mat" => Some(LogFormat::Mat),
+        "txt" => Some(LogFormat::DaqText),
+        _ => None,
+    }
+}
+
+/// Every reference names a quantity the campaign computes.
+fn check_references(
+    runs: &[Option<Run>],
+    references: &[Option<Reference>],
+    bad: &mut impl FnMut(KeyPath, String),
+) -> Vec<ReferencePlan> {
+    let run_roles: BTreeMap<&str, (Role, bool)> = runs
+        .iter()
+        .flatten()
+        .map(|r| {
+            let has_mass = r.specimen.as_ref().is_some_and(|s| s.mass_kg.is_some());
+            (r.id.as_str(), (r.role, has_mass))
+        })
+        .collect();
+    references
+        .iter()
+        .enumerate()
+        .filter_map(|(i, r)| {
+            let base = KeyPath::root().key("references").index(i);
+            check_reference(r.as_ref()?, &base, &run_roles, bad)
+        })
+        .collect()
+}
+
+fn check_reference(
+    r: &Reference,
+    base: &KeyPath,
+    runs: &BTreeMap<&str, (Role, bool)>,
+    bad: &mut impl FnMut(KeyPath, String),
+) -> Option<ReferencePlan> {
+    let qpath = base.key("quantity");
+    if !(r.published.is_finite() && r.published != 0.0) {
+        bad(
+            base.key("published"),
+            "must be a finite, non-zero number (differences are relative to it)".into(),
+        );
+    }
+    if !(r.tolerance_pct.is_finite() && r.tolerance_pct > 0.0) {
+        bad(
+            base.key("tolerance_pct"),
+            format!("must be positive (got {})", r.tolerance_pct),
+        );
+    }
+    let parts: Vec<&str> = r.quantity.split('.').collect();
+    let pick = |list: &[&str], name: &str| list.contains(&name);
+    let run_must = |run: &str, bad: &mut dyn FnMut(KeyPath, String)| -> Option<(Role, bool)> {
+        let found = runs.get(run).copied();
+        if found.is_none() {
+            bad(
+                qpath.clone(),
+                format!(
+                    "`{}` names run `{run}`, which the campaign does not have",
+                    r.quantity
+                ),
+            );
+        }
+        found
+    };
+    let q = match parts.as_slice() {
+        ["rig", name] if pick(RIG_QUANTITIES, name) => Some(Quantity::Rig(name.to_string())),
+        ["per_spring", run, name] if pick(SPRING_QUANTITIES, name) => match run_must(run, bad) {
+            Some((Role::Spring, _)) => Some(Quantity::PerSpring {
+                run: run.to_string(),
+                name: name.to_string(),
+            }),
+            Some(_) => {
+                bad(qpath.clone(), format!("run `{run}` is not a spring run"));
+                None
+            }
+            None => None,
+        },
+        ["runs", run, name] if pick(RUN_QUANTITIES, name) => {
+            run_must(run, bad).map(|_| Quantity::Run {
+                run: run.to_string(),
+                name: name.to_string(),
+            })
+        }
+        ["ccf", run, name] if pick(CCF_QUANTITIES, name) => match run_must(run, bad) {
+            Some((_, true)) => Some(Quantity::Ccf {
+                run: run.to_string(),
+                name: name.to_string(),
+            }),
+            Some(_) => {
+                bad(
+                    qpath.clone(),
+                    format!(
+                        "run `{run}` has no specimen mass, so it has no controllable canonical form (Eq. 35 divides by m)"
+                    ),
+                );
+                None
+            }
+            None => None,
+        },
+        _ => {
+            bad(
+                qpath.clone(),
+                format!(
+                    "unknown quantity `{}`; use rig.{{{}}}, per_spring.<run>.{{{}}}, runs.<run>.{{{}}} or ccf.<run>.{{{}}}",
+                    r.quantity,
+                    RIG_QUANTITIES.join(","),
+                    SPRING_QUANTITIES.join(","),
+                    RUN_QUANTITIES.join(","),
+                    CCF_QUANTITIES.join(",")
+                ),
+            );
+            None
+        }
+    };
+    Some(ReferencePlan {
+        quantity: q?,
+        published: r.published,
+        source: r.source.clone(),
+        compare: r.compare,
+        tolerance_pct: r.tolerance_pct,
+    })
+}

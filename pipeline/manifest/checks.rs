@@ -1,0 +1,433 @@
+//! Checks that both manifest kinds share: names that become file names,
+//! positive numbers, channels and their units, the fit band, the
+//! identification section (into an [`IdentificationPlan`] of the stages' own
+//! settings) and specimens (into the simulator's [`SpecimenModel`]). Each
+//! check reports through `bad(key path, message)` and never stops at the
+//! first problem.
+
+use super::keypath::KeyPath;
+use super::raw::{Channel, Channels, DelayMode, Identification, Role, Specimen, SpecimenKind};
+use crate::fit::{DelayPlan, Intersample};
+use crate::frf::FrfPlan;
+use crate::ingest::Column;
+use crate::simulate::specimen::{BoucWen, Duffing, Friction, SpecimenModel};
+use crate::units::UnitKind;
+
+/// Checked identification options.
+#[derive(Debug, Clone, PartialEq)]
+pub struct IdentificationPlan {
+    pub band_hz: (f64, f64),
+    pub coherence_min: f64,
+    pub frf: FrfPlan,
+    pub intersample: Intersample,
+    pub delay: DelayPlan,
+    pub numerator_order: usize,
+    pub denominator_order: usize,
+    pub trim_to_excitation: bool,
+}
+
+pub(super) fn check_slug(s: &str, path: &KeyPath, bad: &mut impl FnMut(KeyPath, String)) {
+    if s.is_empty() {
+        bad(path.clone(), "must not be empty".into());
+    } else if !s
+        .chars()
+        .all(|c| c.is_ascii_alphanumeric() || matches!(c, '.' | '_' | '-'))
+        || s.starts_with('.')
+    {
+        bad(
+            path.clone(),
+            format!(
+                "`{s}` may hold only letters, digits, `.`, `_` and `-` (it names files and folders)"
+            ),
+        );
+    }
+}
+
+pub(super) fn positive(v: f64, path: &KeyPath, bad: &mut impl FnMut(KeyPath, String)) -> bool {
+    if v.is_finite() && v > 0.0 {
+        true
+    } else {
+        bad(path.clone(), format!("must be positive (got {v})"));
+        false
+    }
+}
+
+fn check_channel(
+    ch: &Channel,
+    kind: UnitKind,
+    path: &KeyPath,
+    bad: &mut impl FnMut(KeyPath, String),
+) {
+    if ch.unit.kind() != kind {
+        let need = match kind {
+            UnitKind::Length => "m, cm, mm or in",
+            UnitKind::Force => "N, kN or lbf",
+        };
+        bad(
+            path.key("unit"),
+            format!(
+                "`{}` does not fit this channel; use {need}",
+                ch.unit.symbol()
+            ),
+        );
+    }
+    if !(ch.scale.is_finite() && ch.scale != 0.0) {
+        bad(
+            path.key("scale"),
+            format!("must be finite and non-zero (got {})", ch.scale),
+        );
+    }
+    if !ch.offset.is_finite() {
+        bad(path.key("offset"), "must be finite".into());
+    }
+    if let Column::Name(n) = &ch.column
+        && n.is_empty()
+    {
+        bad(path.key("column"), "must not be empty".into());
+    }
+}
+
+pub(super) fn check_channels(ch: &Channels, path: &KeyPath, bad: &mut impl FnMut(KeyPath, String)) {
+    if let Some(t) = &ch.time {
+        let p = path.key("time");
+        match (&t.column, t.sample_rate_hz) {
+            (Some(_), Some(_)) => bad(
+                p.clone(),
+                "give either `column` or `sample_rate_hz`, not both".into(),
+            ),
+            (None, Some(hz)) => {
+                positive(hz, &p.key("sample_rate_hz"), bad);
+            }
+            (None, None) => bad(p.clone(), "give `column` or `sample_rate_hz`".into()),
+            (Some(_), None) => {}
+        }
+        if t.unit.is_some() && t.column.is_none() {
+            bad(p.key("unit"), "applies only to a time `column`".into());
+        }
+    }
+    if let Some(c) = &ch.command {
+        check_channel(c, UnitKind::Length, &path.key("command"), bad);
+    }
+    if let Some(c) = &ch.displacement {
+        check_channel(c, UnitKind::Length, &path.key("displacement"), bad);
+    }
+    if let Some(c) = &ch.force {
+        check_channel(c, UnitKind::Force, &path.key("force"), bad);
+    }
+}
+
+pub(super) fn check_band(band: [f64; 2], path: &KeyPath, bad: &mut impl FnMut(KeyPath, String)) {
+    let [lo, hi] = band;
+    if !(lo.is_finite() && hi.is_finite() && lo >= 0.0 && hi > lo) {
+        bad(
+            path.clone(),
+            format!("must be [low, high] with 0 <= low < high (got [{lo}, {hi}])"),
+        );
+    }
+}
+
+pub(super) fn check_identification(
+    id: &Identification,
+    path: &KeyPath,
+    bad: &mut impl FnMut(KeyPath, String),
+) -> IdentificationPlan {
+    check_band(id.band_hz, &path.key("band_hz"), bad);
+    if !(0.0..1.0).contains(&id.coherence_min) {
+        bad(
+            path.key("coherence_min"),
+            format!("must be in [0, 1) (got {})", id.coherence_min),
+        );
+    }
+    let frf = path.key("frf");
+    if id.frf.segment_length < 16 {
+        bad(
+            frf.key("segment_length"),
+            format!(
+                "must be at least 16 samples (got {})",
+                id.frf.segment_length
+            ),
+        );
+    }
+    if !(0.0..1.0).contains(&id.frf.overlap) {
+        bad(
+            frf.key("overlap"),
+            format!("must be in [0, 1) (got {})", id.frf.overlap),
+        );
+    }
+    let d = &id.delay;
+    let delay = match d.mode {
+        DelayMode::None => DelayPlan::None,
+        DelayMode::Fixed => {
+            if !(d.value_s.is_finite() && d.value_s >= 0.0) {
+                bad(
+                    path.key("delay").key("value_s"),
+                    format!("must be a non-negative delay (got {})", d.value_s),
+                );
+            }
+            DelayPlan::Fixed { delay_s: d.value_s }
+        }
+        DelayMode::Fit => {
+            positive(d.max_s, &path.key("delay").key("max_s"), bad);
+            DelayPlan::Fit { max_s: d.max_s }
+        }
+    };
+    if id.model.denominator == 0 || id.model.numerator > id.model.denominator {
+        bad(
+            path.key("model"),
+            format!(
+                "needs 1 <= denominator and numerator <= denominator (got {}/{})",
+                id.model.numerator, id.model.denominator
+            ),
+        );
+    }
+    IdentificationPlan {
+        band_hz: (id.band_hz[0], id.band_hz[1]),
+        coherence_min: id.coherence_min,
+        frf: FrfPlan {
+            estimator: id.frf.estimator,
+            segment_length: id.frf.segment_length,
+            overlap: id.frf.overlap,
+            window: id.frf.window,
+            detrend: id.frf.detrend,
+        },
+        intersample: id.command_intersample,
+        delay,
+        numerator_order: id.model.numerator,
+        denominator_order: id.model.denominator,
+        trim_to_excitation: id.trim_to_excitation,
+    }
+}
+
+pub(super) fn check_specimen(
+    role: Role,
+    spec: Option<&Specimen>,
+    path: &KeyPath,
+    bad: &mut impl FnMut(KeyPath, String),
+) -> Option<SpecimenModel> {
+    let s = spec.cloned().unwrap_or_default();
+    let mut ok = true;
+    for (k, v) in [
+        ("mass_kg", s.mass_kg),
+        ("stiffness_n_per_m", s.stiffness_n_per_m),
+    ] {
+        if let Some(v) = v {
+            ok &= positive(v, &path.key(k), bad);
+        }
+    }
+    if let Some(c) = s.damping_ns_per_m
+        && !(c.is_finite() && c >= 0.0)
+    {
+        bad(
+            path.key("damping_ns_per_m"),
+            format!("must be zero or positive (got {c})"),
+        );
+        ok = false;
+    }
+    // Keys that belong to one nonlinear model only.
+    let model_keys: [(&str, bool, SpecimenKind); 4] = [
+        (
+            "cubic_stiffness_n_per_m3",
+            s.cubic_stiffness_n_per_m3.is_some(),
+            SpecimenKind::Duffing,
+        ),
+        (
+            "coulomb_force_n",
+            s.coulomb_force_n.is_some(),
+            SpecimenKind::Friction,
+        ),
+        (
+            "smoothing_velocity_m_per_s",
+            s.smoothing_velocity_m_per_s.is_some(),
+            SpecimenKind::Friction,
+        ),
+        ("bouc_wen", s.bouc_wen.is_some(), SpecimenKind::BoucWen),
+    ];
+    for (key, given, owner) in model_keys {
+        if given && s.model != owner {
+            let name = serde_json::to_value(owner)
+                .ok()
+                .and_then(|v| v.as_str().map(str::to_string))
+                .unwrap_or_default();
+            bad(path.key(key), format!("applies only to model = \"{name}\""));
+            ok = false;
+        }
+    }
+    let given: Vec<&str> = [
+        ("mass_kg", s.mass_kg.is_some()),
+        ("damping_ns_per_m", s.damping_ns_per_m.is_some()),
+        ("stiffness_n_per_m", s.stiffness_n_per_m.is_some()),
+    ]
+    .iter()
+    .filter(|(_, g)| *g)
+    .map(|(k, _)| *k)
+    .collect();
+    if s.model != SpecimenKind::Linear && matches!(role, Role::NoSpecimen | Role::Spring) {
+        bad(
+            path.key("model"),
+            format!(
+                "a {} run identifies the rig with a linear specimen (Eqs. 18-19); nonlinear specimens are for validation and fit runs",
+                role.as_str()
+            ),
+        );
+        return None;
+    }
+    match role {
+        Role::NoSpecimen => {
+            if !given.is_empty() {
+                bad(
+                    path.clone(),
+                    format!(
+                        "a no_specimen run has no specimen; remove {}",
+                        given.join(", ")
+                    ),
+                );
+                return None;
+            }
+            Some(SpecimenModel::None)
+        }
+        Role::Spring => {
+            let Some(k) = s.stiffness_n_per_m else {
+                bad(
+                    path.key("stiffness_n_per_m"),
+                    "a spring run needs the spring's stiffness".into(),
+                );
+                return None;
+            };
+            if s.mass_kg.is_some() || s.damping_ns_per_m.is_some() {
+                bad(
+                    path.clone(),
+                    "a spring run is massless and undamped in the paper's model (Sec. 3.1); give only stiffness_n_per_m, or use role `validation` for a specimen with mass".into(),
+                );
+                return None;
+            }
+            ok.then_some(SpecimenModel::Spring {
+                stiffness_n_per_m: k,
+            })
+        }
+        Role::Validation | Role::Fit if s.model == SpecimenKind::Linear => {
+            linear_specimen(&s, path, bad).filter(|_| ok)
+        }
+        Role::Validation | Role::Fit => nonlinear_specimen(&s, ok, path, bad),
+    }
+}
+
+/// A linear specimen of a validation or fit run, by the keys given: none, a
+/// spring, or an SDOF (Eq. 15).
+fn linear_specimen(
+    s: &Specimen,
+    path: &KeyPath,
+    bad: &mut impl FnMut(KeyPath, String),
+) -> Option<SpecimenModel> {
+    use SpecimenModel as M;
+    let lin = match (s.mass_kg, s.damping_ns_per_m, s.stiffness_n_per_m) {
+        (None, None, None) => M::None,
+        (None, None, Some(k)) => M::Spring {
+            stiffness_n_per_m: k,
+        },
+        (Some(m), c, Some(k)) => M::LinearSdof {
+            mass_kg: m,
+            damping_ns_per_m: c.unwrap_or(0.0),
+            stiffness_n_per_m: k,
+        },
+        (Some(_), _, None) => {
+            bad(
+                path.key("stiffness_n_per_m"),
+                "an SDOF specimen needs its stiffness".into(),
+            );
+            return None;
+        }
+        (None, Some(_), _) => {
+            bad(
+                path.key("mass_kg"),
+                "a damped specimen needs its mass (the paper's massless model has no damping)"
+                    .into(),
+            );
+            return None;
+        }
+    };
+    Some(lin)
+}
+
+/// A nonlinear specimen of a validation or fit run: every parameter of its
+/// model is required, and its signs and ranges are the simulator's own
+/// checks (they name the parameter). `ok` says whether the common checks
+/// passed.
+fn nonlinear_specimen(
+    s: &Specimen,
+    mut ok: bool,
+    path: &KeyPath,
+    bad: &mut impl FnMut(KeyPath, String),
+) -> Option<SpecimenModel> {
+    use SpecimenModel as M;
+    let mut need = |key: &str, v: Option<f64>| -> f64 {
+        v.unwrap_or_else(|| {
+            bad(
+                path.key(key),
+                format!("a {} specimen needs `{key}`", model_name(s.model)),
+            );
+            ok = false;
+            f64::NAN
+        })
+    };
+    let m = need("mass_kg", s.mass_kg);
+    let k = need("stiffness_n_per_m", s.stiffness_n_per_m);
+    let c = s.damping_ns_per_m.unwrap_or(0.0);
+    let model = match s.model {
+        SpecimenKind::Duffing => M::Duffing(Duffing {
+            mass_kg: m,
+            damping_ns_per_m: c,
+            stiffness_n_per_m: k,
+            cubic_stiffness_n_per_m3: need("cubic_stiffness_n_per_m3", s.cubic_stiffness_n_per_m3),
+        }),
+        SpecimenKind::Friction => M::Friction(Friction {
+            mass_kg: m,
+            damping_ns_per_m: c,
+            stiffness_n_per_m: k,
+            coulomb_force_n: need("coulomb_force_n", s.coulomb_force_n),
+            smoothing_velocity_m_per_s: need(
+                "smoothing_velocity_m_per_s",
+                s.smoothing_velocity_m_per_s,
+            ),
+        }),
+        SpecimenKind::BoucWen => match &s.bouc_wen {
+            Some(bw) => M::BoucWen(BoucWen {
+                mass_kg: m,
+                damping_ns_per_m: c,
+                stiffness_n_per_m: k,
+                alpha: bw.alpha,
+                a: bw.a,
+                beta_per_m_pow_n: bw.beta_per_m_pow_n,
+                gamma_per_m_pow_n: bw.gamma_per_m_pow_n,
+                n: bw.n,
+            }),
+            None => {
+                bad(
+                    path.key("bouc_wen"),
+                    "a bouc_wen specimen needs its `bouc_wen` table (alpha, a, beta_per_m_pow_n, gamma_per_m_pow_n, n)".into(),
+                );
+                return None;
+            }
+        },
+        SpecimenKind::Linear => unreachable!("handled above"),
+    };
+    if !ok {
+        return None;
+    }
+    // Signs and ranges, by the simulator's own checks (they name the parameter).
+    match model.validate() {
+        Ok(()) => Some(model),
+        Err(e) => {
+            bad(path.clone(), e.to_string());
+            None
+        }
+    }
+}
+
+fn model_name(k: SpecimenKind) -> &'static str {
+    match k {
+        SpecimenKind::Linear => "linear",
+        SpecimenKind::Duffing => "duffing",
+        SpecimenKind::BoucWen => "bouc_wen",
+        SpecimenKind::Friction => "friction",
+    }
+}

@@ -1,0 +1,449 @@
+//! The campaign manifest as the user writes it (TOML, or the same structure
+//! in JSON): these types are checked only for form, by serde; `campaign`
+//! turns them into a checked [`super::Campaign`].
+//! `schemas/manifest.schema.json` is generated from them (`servoid schema`).
+
+use std::sync::OnceLock;
+
+use schemars::JsonSchema;
+use serde::{Deserialize, Serialize};
+use serde_json::Value;
+
+use crate::fit::Intersample;
+use crate::frf::{Detrend, Estimator, Window};
+use crate::ingest::{Column, CsvOptions, LogFormat};
+use crate::model::RigParams;
+use crate::units::{TimeUnit, Unit};
+
+/// The campaign manifest's JSON Schema (cached: the loader consults it for
+/// key suggestions).
+pub fn manifest_schema() -> Value {
+    static CACHE: OnceLock<Value> = OnceLock::new();
+    CACHE
+        .get_or_init(|| {
+            serde_json::to_value(schemars::schema_for!(Manifest)).expect("schema serialises")
+        })
+        .clone()
+}
+
+/// The manifest format version this servoid reads.
+pub const SCHEMA_VERSION: u32 = 1;
+
+/// An experiment manifest: one test campaign on one rig.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[schemars(deny_unknown_fields)]
+pub struct Manifest {
+    /// Version of the manifest format (this servoid reads 1).
+    pub schema_version: u32,
+    pub campaign: CampaignInfo,
+    pub rig: Rig,
+    /// Default channel mapping of the logs; a run may override any channel.
+    #[serde(default)]
+    pub channels: Channels,
+    /// How transfer functions are estimated and fitted.
+    #[serde(default)]
+    pub identification: Identification,
+    /// The runs of the campaign, in the order results are written.
+    pub runs: Vec<Run>,
+    /// Published values to compare the results against.
+    #[serde(default)]
+    pub references: Vec<Reference>,
+}
+
+/// What the campaign is.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[schemars(deny_unknown_fields)]
+pub struct CampaignInfo {
+    /// Short name; also the default output folder under `reports/`
+    /// (letters, digits, `.`, `_` and `-`).
+    pub name: String,
+    #[serde(default)]
+    pub description: String,
+    /// Set when the logs are synthetic: how they were made (shown as a banner
+    /// in the report). `servoid simulate` writes it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub synthetic: Option<String>,
+}
+
+/// The rig (hydraulic transfer system).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[schemars(deny_unknown_fields)]
+pub struct Rig {
+    pub name: String,
+    /// Free-form notes: actuator, servo-valve, controller, sensors.
+    #[serde(default)]
+    pub notes: String,
+    /// The rig's parameters when it was identified earlier; without them the
+    /// campaign must identify the rig from a no-specimen run and spring runs.
+    #[serde(default)]
+    pub parameters: Option<RigParams>,
+}
+
+/// Mapping from log columns to the physical channels.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[schemars(deny_unknown_fields)]
+pub struct Channels {
+    /// Time base: a column, or a sampling rate (or, for DAQ text logs, the header).
+    #[serde(default)]
+    pub time: Option<TimeChannel>,
+    /// Command displacement u sent to the controller.
+    #[serde(default)]
+    pub command: Option<Channel>,
+    /// Measured actuator displacement x1.
+    #[serde(default)]
+    pub displacement: Option<Channel>,
+    /// Measured actuator force f.
+    #[serde(default)]
+    pub force: Option<Channel>,
+}
+
+/// One measured channel: physical value = raw * scale + offset, in `unit`.
+/// For a channel recorded in volts, `unit` is the calibrated unit and `scale`
+/// the calibration (units per volt).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[schemars(deny_unknown_fields)]
+pub struct Channel {
+    /// Column name (or 0-based column index) in the log.
+    pub column: Column,
+    /// Unit of the scaled value.
+    pub unit: Unit,
+    #[serde(default = "one")]
+    pub scale: f64,
+    #[serde(default)]
+    pub offset: f64,
+}
+
+/// The time base of a log.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[schemars(deny_unknown_fields)]
+pub struct TimeChannel {
+    /// Column holding time stamps.
+    #[serde(default)]
+    pub column: Option<Column>,
+    /// Unit of the time column.
+    #[serde(default)]
+    pub unit: Option<TimeUnit>,
+    /// Uniform sampling rate (Hz), when the log has no time column.
+    #[serde(default)]
+    pub sample_rate_hz: Option<f64>,
+}
+
+/// Identification options (defaults suit a chirp logged at 1-2 kHz).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[schemars(deny_unknown_fields)]
+pub struct Identification {
+    /// Frequency band (Hz) the transfer functions are fitted over.
+    #[serde(default = "default_band")]
+    pub band_hz: [f64; 2],
+    /// Bins whose coherence is below this are left out of the fit.
+    #[serde(default = "default_coherence")]
+    pub coherence_min: f64,
+    #[serde(default)]
+    pub frf: FrfSettings,
+    /// How the command reaches the plant between samples: a D/A converter
+    /// holds each sample (a half-sample delay), or the log is already continuous.
+    #[serde(default)]
+    pub command_intersample: Intersample,
+    #[serde(default)]
+    pub delay: DelaySettings,
+    /// Orders of the fitted model n(s)/d(s); the paper's procedure uses 0/2.
+    #[serde(default)]
+    pub model: ModelOrders,
+    /// Trim each log to where the command has energy before estimating.
+    #[serde(default)]
+    pub trim_to_excitation: bool,
+}
+
+impl Default for Identification {
+    fn default() -> Self {
+        Self {
+            band_hz: default_band(),
+            coherence_min: default_coherence(),
+            frf: FrfSettings::default(),
+            command_intersample: Intersample::default(),
+            delay: DelaySettings::default(),
+            model: ModelOrders::default(),
+            trim_to_excitation: false,
+        }
+    }
+}
+
+/// Frequency-response estimation settings.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[schemars(deny_unknown_fields)]
+pub struct FrfSettings {
+    #[serde(default)]
+    pub estimator: Estimator,
+    /// Samples per Welch segment.
+    #[serde(default = "default_segment")]
+    pub segment_length: usize,
+    /// Fraction of a segment shared with the next, in [0, 1).
+    #[serde(default = "default_overlap")]
+    pub overlap: f64,
+    #[serde(default)]
+    pub window: Window,
+    #[serde(default)]
+    pub detrend: Detrend,
+}
+
+impl Default for FrfSettings {
+    fn default() -> Self {
+        Self {
+            estimator: Estimator::default(),
+            segment_length: default_segment(),
+            overlap: default_overlap(),
+            window: Window::default(),
+            detrend: Detrend::default(),
+        }
+    }
+}
+
+/// Pure delay in the fitted model (sensor and conditioning delays).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[schemars(deny_unknown_fields)]
+pub struct DelaySettings {
+    #[serde(default)]
+    pub mode: DelayMode,
+    /// Known delay (s) when `mode = "fixed"`.
+    #[serde(default)]
+    pub value_s: f64,
+    /// Upper bound (s) on a fitted delay.
+    #[serde(default = "default_max_delay")]
+    pub max_s: f64,
+}
+
+impl Default for DelaySettings {
+    fn default() -> Self {
+        Self {
+            mode: DelayMode::default(),
+            value_s: 0.0,
+            max_s: default_max_delay(),
+        }
+    }
+}
+
+/// How a pure delay is handled.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
+#[serde(rename_all = "snake_case")]
+pub enum DelayMode {
+    #[default]
+    None,
+    Fixed,
+    Fit,
+}
+
+/// Orders of the fitted transfer function.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
+#[schemars(deny_unknown_fields)]
+pub struct ModelOrders {
+    #[serde(default)]
+    pub numerator: usize,
+    #[serde(default = "two")]
+    pub denominator: usize,
+}
+
+impl Default for ModelOrders {
+    fn default() -> Self {
+        Self {
+            numerator: 0,
+            denominator: 2,
+        }
+    }
+}
+
+/// One run of the campaign.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[schemars(deny_unknown_fields)]
+pub struct Run {
+    /// Unique id (letters, digits, `.`, `_` and `-`).
+    pub id: String,
+    pub role: Role,
+    #[serde(default)]
+    pub description: String,
+    /// Proportional gain of the analog controller in this run.
+    pub p_gain: f64,
+    /// The physical specimen; omit for `no_specimen` runs.
+    #[serde(default)]
+    pub specimen: Option<Specimen>,
+    /// The run's data: a log file, or a published transfer function.
+    #[serde(default)]
+    pub data: Option<RunData>,
+    /// Channel overrides for this run's log (each given channel replaces the default).
+    #[serde(default)]
+    pub channels: Option<Channels>,
+    /// Fit band (Hz) for this run, overriding `identification.band_hz`.
+    #[serde(default)]
+    pub band_hz: Option<[f64; 2]>,
+}
+
+/// What a run is for.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
+#[serde(rename_all = "snake_case")]
+pub enum Role {
+    /// The actuator alone: gives beta1 and R1 (Eq. 18).
+    NoSpecimen,
+    /// A massless linear spring: gives R2 and R3 (Eq. 19).
+    Spring,
+    /// A specimen whose measured response is compared with the model's prediction.
+    Validation,
+    /// A transfer-function fit only, not used for the rig parameters
+    /// (e.g. a specimen the paper's procedure does not cover).
+    Fit,
+}
+
+impl Role {
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Role::NoSpecimen => "no_specimen",
+            Role::Spring => "spring",
+            Role::Validation => "validation",
+            Role::Fit => "fit",
+        }
+    }
+}
+
+/// The physical specimen. Springs give `stiffness_n_per_m`; a linear SDOF
+/// specimen gives `mass_kg`, `damping_ns_per_m` and `stiffness_n_per_m`;
+/// a nonlinear one names its `model` and adds that model's parameters.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[schemars(deny_unknown_fields)]
+pub struct Specimen {
+    /// Specimen model; `linear` unless a nonlinear model is named.
+    #[serde(default)]
+    pub model: SpecimenKind,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub mass_kg: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub damping_ns_per_m: Option<f64>,
+    /// Linear (or, for Bouc-Wen, initial elastic) stiffness.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub stiffness_n_per_m: Option<f64>,
+    /// Duffing: k3 in g = c x2 + k x1 + k3 x1^3 (hardening when positive).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub cubic_stiffness_n_per_m3: Option<f64>,
+    /// Friction: the sliding force f_c in g = c x2 + k x1 + f_c tanh(x2 / v_s).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub coulomb_force_n: Option<f64>,
+    /// Friction: the smoothing velocity v_s.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub smoothing_velocity_m_per_s: Option<f64>,
+    /// Bouc-Wen hysteresis parameters (Wen 1976).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub bouc_wen: Option<BoucWenParams>,
+}
+
+/// Specimen models servoid knows.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
+#[serde(rename_all = "snake_case")]
+pub enum SpecimenKind {
+    /// None, a spring, or a linear SDOF specimen (Eq. 15), by the keys given.
+    #[default]
+    Linear,
+    /// Cubic stiffness.
+    Duffing,
+    /// Bouc-Wen hysteresis.
+    BoucWen,
+    /// Viscous spring-mass with smoothed Coulomb friction.
+    Friction,
+}
+
+/// Bouc-Wen in Wen's form: g = c x2 + alpha k x1 + (1 - alpha) k z,
+/// z' = A x2 - beta |x2| |z|^(n-1) z - gamma x2 |z|^n.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[schemars(deny_unknown_fields)]
+pub struct BoucWenParams {
+    /// Post- to pre-yield stiffness ratio, in [0, 1].
+    pub alpha: f64,
+    /// A, the initial slope dz/dx1.
+    pub a: f64,
+    pub beta_per_m_pow_n: f64,
+    pub gamma_per_m_pow_n: f64,
+    /// n >= 1, sharpness of the transition.
+    pub n: f64,
+}
+
+/// A run's data.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[schemars(deny_unknown_fields)]
+pub struct RunData {
+    /// Log file, relative to the manifest's folder.
+    #[serde(default)]
+    pub log: Option<String>,
+    /// Log format; inferred from the extension when omitted.
+    #[serde(default)]
+    pub format: Option<LogFormat>,
+    /// Options for delimited text logs.
+    #[serde(default)]
+    pub csv: Option<CsvOptions>,
+    /// SHA-256 of the log (hex); when given, a log that differs is refused.
+    #[serde(default)]
+    pub sha256: Option<String>,
+    /// A published transfer function, when only the fitted model is known.
+    #[serde(default)]
+    pub transfer_function: Option<PublishedTf>,
+}
+
+/// A transfer function num(s)/den(s) exp(-s delay_s), highest power first.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[schemars(deny_unknown_fields)]
+pub struct PublishedTf {
+    pub num: Vec<f64>,
+    pub den: Vec<f64>,
+    #[serde(default)]
+    pub delay_s: f64,
+    /// Where it was published (e.g. "Eq. 36").
+    #[serde(default)]
+    pub source: String,
+}
+
+/// A published number to compare with the computed one.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[schemars(deny_unknown_fields)]
+pub struct Reference {
+    /// What is compared: `rig.beta1`, `rig.R1`, `rig.a1b0`, `rig.a2`, `rig.a3`,
+    /// `rig.valve_time_constant_ms`, `per_spring.<run>.{R2,R3,a1b0,a2,a3}`,
+    /// `runs.<run>.{a1b0,natural_frequency_hz,nrmse_pct,nae_pct}`,
+    /// `ccf.<run>.{C1,C2,C3,C4,C5}`.
+    pub quantity: String,
+    pub published: f64,
+    /// Where it was published (e.g. "Table 3").
+    #[serde(default)]
+    pub source: String,
+    /// `signed`, or `magnitude` where the publication lost the sign.
+    #[serde(default)]
+    pub compare: CompareMode,
+    /// Relative difference [%] above which the comparison is flagged.
+    #[serde(default = "one")]
+    pub tolerance_pct: f64,
+}
+
+/// How a published number is compared.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
+#[serde(rename_all = "snake_case")]
+pub enum CompareMode {
+    #[default]
+    Signed,
+    Magnitude,
+}
+
+fn one() -> f64 {
+    1.0
+}
+fn two() -> usize {
+    2
+}
+fn default_band() -> [f64; 2] {
+    [0.5, 30.0]
+}
+fn default_coherence() -> f64 {
+    0.8
+}
+fn default_segment() -> usize {
+    8192
+}
+fn default_overlap() -> f64 {
+    0.5
+}
+fn default_max_delay() -> f64 {
+    0.02
+}

@@ -1,0 +1,170 @@
+//! The campaign's rig: identified from its no-specimen and spring runs by the
+//! paper's procedure (Fig. 6, Eqs. 18-20) when it can be, else the
+//! parameters the manifest gives.
+
+use std::fmt;
+use std::sync::Arc;
+
+use super::acquire::{AcquireError, Acquired};
+use crate::identify::{self, Estimate, IdentifyError, SecondOrder, SpringRun, TfEstimate};
+use crate::manifest::{Campaign, Role};
+use crate::model::RigParams;
+use crate::results::{RigResult, RigSource, Spread};
+use crate::simulate::specimen::SpecimenModel;
+
+/// Why the campaign has no rig parameters.
+#[derive(Debug, thiserror::Error)]
+pub enum RigError {
+    #[error(
+        "the campaign neither gives [rig.parameters] nor has a no_specimen run and a spring run"
+    )]
+    Unavailable,
+    #[error("identification runs failed: {}", join(.0))]
+    RunsFailed(Vec<FailedRun>),
+    #[error(transparent)]
+    Identify(#[from] IdentifyError),
+}
+
+/// An identification run that gave no usable second-order model.
+#[derive(Debug)]
+pub enum FailedRun {
+    /// The run itself failed.
+    Failed {
+        run: String,
+        error: Arc<AcquireError>,
+    },
+    /// Its model is not the second-order form Eqs. 18-19 need.
+    NotSecondOrder { run: String, error: IdentifyError },
+}
+
+impl fmt::Display for FailedRun {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            FailedRun::Failed { run, error } => write!(f, "run {run} failed ({error})"),
+            FailedRun::NotSecondOrder { run, error } => write!(f, "run {run}: {error}"),
+        }
+    }
+}
+
+fn join(failed: &[FailedRun]) -> String {
+    failed
+        .iter()
+        .map(ToString::to_string)
+        .collect::<Vec<_>>()
+        .join("; ")
+}
+
+/// The rig: identified when the campaign can (Fig. 6), else given. A given
+/// rig beside an identifying campaign is reported in `warnings`.
+pub(super) fn establish(
+    campaign: &Campaign,
+    acquired: &[Result<Acquired, Arc<AcquireError>>],
+    warnings: &mut Vec<String>,
+) -> Result<(RigParams, RigResult), RigError> {
+    if !campaign.identifies_rig() {
+        return match campaign.given_rig {
+            Some(p) => Ok((p, given_result(&p))),
+            None => Err(RigError::Unavailable),
+        };
+    }
+    let mut no_spec = Vec::new();
+    let mut springs = Vec::new();
+    let mut failed = Vec::new();
+    for (plan, acq) in campaign.runs.iter().zip(acquired) {
+        if !matches!(plan.role, Role::NoSpecimen | Role::Spring) {
+            continue;
+        }
+        let run = plan.id.clone();
+        let estimate = match acq {
+            Ok(Acquired {
+                tf: Some(tf), cov, ..
+            }) => match SecondOrder::from_tf(tf) {
+                Ok(so) => TfEstimate {
+                    run,
+                    p_gain: plan.p_gain,
+                    tf: so,
+                    cov: *cov,
+                },
+                Err(error) => {
+                    failed.push(FailedRun::NotSecondOrder { run, error });
+                    continue;
+                }
+            },
+            Ok(_) => continue,
+            Err(error) => {
+                failed.push(FailedRun::Failed {
+                    run,
+                    error: error.clone(),
+                });
+                continue;
+            }
+        };
+        match plan.specimen {
+            SpecimenModel::Spring { stiffness_n_per_m } => springs.push(SpringRun {
+                stiffness_n_per_m,
+                estimate,
+            }),
+            _ => no_spec.push(estimate),
+        }
+    }
+    if !failed.is_empty() {
+        return Err(RigError::RunsFailed(failed));
+    }
+    let ident = identify::identify_rig(&no_spec, &springs)?;
+    if let Some(given) = &campaign.given_rig {
+        warnings.push(format!(
+            "the manifest gives [rig.parameters] and the campaign identifies the rig; the identified parameters are used (given: beta1 = {:.6e}, a1b0 = {:.6e} at P = {}, a2 = {:.6e}, a3 = {:.6e})",
+            given.beta1_per_s, given.a1b0_n_per_m_s2, given.p_gain, given.a2_n_per_m, given.a3_per_s
+        ));
+    }
+    let spread = (ident.per_spring.len() >= 2).then(|| {
+        let sd = |f: &dyn Fn(&identify::PerSpring) -> f64| {
+            let v: Vec<f64> = ident.per_spring.iter().map(f).collect();
+            let mean = v.iter().sum::<f64>() / v.len() as f64;
+            (v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (v.len() - 1) as f64).sqrt()
+        };
+        Spread {
+            a1b0: sd(&|s| s.a1b0.value),
+            a2: sd(&|s| s.a2.value),
+            a3: sd(&|s| s.a3.value),
+        }
+    });
+    let params = ident.params();
+    let result = RigResult {
+        source: RigSource::Identified,
+        p_gain: ident.p_gain,
+        beta1: ident.beta1,
+        a1b0: ident.a1b0,
+        a2: ident.a2,
+        a3: ident.a3,
+        R1: ident.r1,
+        valve_time_constant_ms: time_constant(&ident.beta1),
+        per_spring: ident.per_spring,
+        spread,
+    };
+    Ok((params, result))
+}
+
+/// 1/beta1 in ms, with its propagated std.
+fn time_constant(beta1: &Estimate) -> Estimate {
+    Estimate {
+        value: 1e3 / beta1.value,
+        std: beta1.std.map(|s| 1e3 * s / (beta1.value * beta1.value)),
+    }
+}
+
+fn given_result(p: &RigParams) -> RigResult {
+    let beta1 = Estimate::exact(p.beta1_per_s);
+    RigResult {
+        source: RigSource::Given,
+        p_gain: p.p_gain,
+        beta1,
+        a1b0: Estimate::exact(p.a1b0_n_per_m_s2),
+        a2: Estimate::exact(p.a2_n_per_m),
+        a3: Estimate::exact(p.a3_per_s),
+        R1: Estimate::exact(p.r1()),
+        valve_time_constant_ms: time_constant(&beta1),
+        per_spring: Vec::new(),
+        spread: None,
+    }
+}
