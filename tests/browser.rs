@@ -291,3 +291,87 @@ fn a_report_with_a_failed_run_renders_and_shows_the_error() {
     assert!(rig_error.contains("k1"), "{rig_error}");
     b.close().unwrap();
 }
+
+/// The page of the bundled default (the paper's campaign, simulated): under
+/// 3 MB, every figure inlined as a preview and linked to its PNG and SVG
+/// beside the page, and in Chromium complete, with every image decoded.
+/// The load time the browser measures (navigation start to the end of the
+/// load event) is printed, not asserted: tests never time.
+#[test]
+fn the_bundled_default_page_is_light_and_complete() {
+    let dir = scratch();
+    let out = dir.path().join("out");
+    let o = crate::util::servoid_into(
+        dir.path(),
+        "simulate",
+        &root().join("experiments/maghareh2018/simulation.toml"),
+        &out,
+        &["--run", "--quiet"],
+    );
+    assert_eq!(o.code, 0, "stderr:\n{}", o.stderr);
+    let page = out.join("report.html");
+    let bytes = std::fs::metadata(&page).unwrap().len();
+    assert!(
+        bytes < 3_000_000,
+        "report.html is {bytes} bytes; the page must stay under 3 MB"
+    );
+    // minijinja escapes `/` in attributes as `&#x2f;`; the browser reads both
+    // alike.
+    let html = std::fs::read_to_string(&page)
+        .unwrap()
+        .replace("&#x2f;", "/");
+    let svgs = figure_files(&out, "svg");
+    let pngs = figure_files(&out, "png");
+    assert!(svgs.len() >= 20, "{} SVG figures", svgs.len());
+    assert_eq!(svgs.len(), pngs.len());
+    for f in svgs.iter().chain(&pngs) {
+        assert!(
+            html.contains(&format!("href=\"figures/{f}\"")),
+            "the page links figures/{f}"
+        );
+    }
+    assert_eq!(
+        html.matches("src=\"data:image/png;base64,").count(),
+        svgs.len(),
+        "one inlined preview per figure"
+    );
+
+    let Some(mut b) = browser("the_bundled_default_page_is_light_and_complete") else {
+        return;
+    };
+    open_clean(&mut b, &out);
+    let state = b
+        .evaluate(
+            "({ ready: document.readyState, figures: document.querySelectorAll('figure img').length, \
+             load_ms: performance.getEntriesByType('navigation')[0].loadEventEnd })",
+        )
+        .unwrap();
+    assert_eq!(state["ready"], "complete");
+    assert_eq!(state["figures"].as_u64(), Some(svgs.len() as u64));
+    // Every section of the page is there, down to the provenance at its end.
+    for id in ["figures", "comparisons", "provenance"] {
+        let found = b
+            .evaluate(&format!("document.getElementById('{id}') !== null"))
+            .unwrap();
+        assert_eq!(found, serde_json::json!(true), "section #{id}");
+    }
+    let load_ms = state["load_ms"].as_f64().expect("a load time");
+    crate::util::note(&format!(
+        "the bundled default's report.html ({bytes} bytes, {} figures) loaded in Chromium in {load_ms:.0} ms",
+        svgs.len()
+    ));
+}
+
+/// File names under `out/figures` with extension `ext`, sorted.
+fn figure_files(out: &Path, ext: &str) -> Vec<String> {
+    let mut v: Vec<String> = std::fs::read_dir(out.join("figures"))
+        .map(|d| {
+            d.filter_map(|e| e.ok())
+                .map(|e| e.file_name().to_string_lossy().into_owned())
+                .filter(|n| n.ends_with(&format!(".{ext}")))
+                .collect()
+        })
+        .unwrap_or_default();
+    v.sort();
+    v
+}

@@ -358,3 +358,28 @@ fn a_failed_run_exits_1_and_the_others_complete() {
     assert_eq!(r["runs"][0]["status"], "ok");
     assert!(o.stderr.contains("run exp1"), "{}", o.stderr);
 }
+
+/// Each command is given the other kind of manifest: one message that says
+/// which kind it is and the command that takes it, exit 2, nothing written.
+#[test]
+fn a_manifest_of_the_other_kind_names_the_command_that_takes_it() {
+    let dir = scratch();
+    let campaign = write(dir.path(), "campaign.toml", BASE);
+    let sim = crate::util::root().join("experiments/maghareh2018/simulation.toml");
+    let out = dir.path().join("out");
+    let o = crate::util::servoid_into(dir.path(), "run", &sim, &out, &[]);
+    assert_eq!(o.code, 2, "{}", o.stderr);
+    assert!(
+        o.stderr.contains("simulation.toml: this is a simulation manifest; simulate it and run the campaign it writes with `servoid simulate"),
+        "{}",
+        o.stderr
+    );
+    let o = crate::util::servoid_into(dir.path(), "simulate", &campaign, &out, &[]);
+    assert_eq!(o.code, 2, "{}", o.stderr);
+    assert!(
+        o.stderr.contains("campaign.toml: this is a campaign manifest; a simulation manifest has a [simulation] table; run a campaign with `servoid run"),
+        "{}",
+        o.stderr
+    );
+    assert!(!out.exists(), "nothing written");
+}

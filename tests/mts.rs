@@ -285,3 +285,48 @@ fn the_mts_logs_fit_as_an_independent_computation_does() {
         );
     }
 }
+
+/// Regression: a warning found while reading a log (here a sampling rate in
+/// the manifest that overrides the DAQ header's) was listed twice in the
+/// run's warnings, once from the reader and once from the log checks that
+/// repeat the reader's warnings.
+#[test]
+fn a_warning_from_reading_a_log_is_listed_once() {
+    let Some(data) = mts_data() else {
+        return;
+    };
+    let bundled =
+        std::fs::read_to_string(root().join("experiments/utfsm-mts-mrdamper/campaign.toml"))
+            .unwrap();
+    let text = bundled
+        .replace(
+            "../../../shared/data/utfsm-mts-mrdamper/",
+            &format!("{}/", data.display()),
+        )
+        .replace(
+            "[channels]\n",
+            "[channels]\ntime = { sample_rate_hz = 1000.5 }\n",
+        );
+    let dir = scratch();
+    let manifest = write(dir.path(), "campaign.toml", &text);
+    let out = dir.path().join("out");
+    let r = servoid_into(
+        dir.path(),
+        "run",
+        &manifest,
+        &out,
+        &["--quiet", "--figures", "none"],
+    );
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    let results: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("results.json")).unwrap()).unwrap();
+    let warnings: Vec<String> =
+        serde_json::from_value(run_by_id(&results, "0A")["warnings"].clone()).unwrap();
+    let overrides: Vec<&String> = warnings
+        .iter()
+        .filter(|w| {
+            w.contains("the manifest's sampling rate 1000.5 Hz overrides the header's 1000 Hz")
+        })
+        .collect();
+    assert_eq!(overrides.len(), 1, "{warnings:#?}");
+}

@@ -6,6 +6,7 @@ mod util;
 mod accuracy;
 mod bad_logs;
 mod browser;
+mod figure_formats;
 mod layering;
 mod manifest_errors;
 mod mts;

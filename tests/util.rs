@@ -123,10 +123,15 @@ den = [1.0, 263.4, 3337.0]
 }
 pub(crate) use paper_tf_runs;
 
-/// Say on the terminal that a test is skipped and why. Written to stderr
-/// directly, not through `eprintln!`, which the test harness captures and
-/// shows only for failing tests.
+/// Say on the terminal that a test is skipped and why.
 pub fn skipped(why: &str) {
+    note(&format!("SKIPPED: {why}"));
+}
+
+/// A line on the terminal, written to stderr directly, not through
+/// `eprintln!`, which the test harness captures and shows only for failing
+/// tests.
+pub fn note(line: &str) {
     use std::io::Write;
-    let _ = writeln!(std::io::stderr(), "SKIPPED: {why}");
+    let _ = writeln!(std::io::stderr(), "{line}");
 }

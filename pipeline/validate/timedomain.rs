@@ -197,67 +197,25 @@ pub fn validation_run(
         let centred: Vec<f64> = f[..n].iter().map(|v| v - offset).collect();
         validate::errors(&centred, &force[..n])
     });
-    let (mut simplified, mut simplified_check, mut consistency) = (None, None, None);
-    if let SpecimenModel::LinearSdof {
-        mass_kg,
-        damping_ns_per_m,
-        stiffness_n_per_m,
-    } = *specimen
-    {
-        let sdof = LinearSdof {
+    let canonical = match *specimen {
+        SpecimenModel::LinearSdof {
             mass_kg,
             damping_ns_per_m,
             stiffness_n_per_m,
-        };
-        let kept = simulate(
-            &model::ccf_linear_state_space(rig_at_p, &sdof, CnTerm::Kept),
-            rec,
-            0.0,
-        )?;
-        let peak = x1.iter().fold(0.0_f64, |m, v| m.max(v.abs()));
-        let diff = kept[0]
-            .iter()
-            .zip(&x1)
-            .fold(0.0_f64, |m, (a, b)| m.max((a - b).abs()));
-        consistency = (peak > 0.0).then(|| diff / peak);
-        let dropped_ss = model::ccf_linear_state_space(rig_at_p, &sdof, CnTerm::Dropped);
-        let poles = dropped_ss.eigenvalues();
-        let max_re = poles.iter().map(|p| p.re).fold(f64::NEG_INFINITY, f64::max);
-        if max_re < 0.0 {
-            let dropped = simulate(&dropped_ss, rec, 0.0)?;
-            let x_dropped = dropped.into_iter().next().expect("x1 output");
-            let errors = compare(rec.displacement_m, &x_dropped, fs, &[]).map(|c| c.0);
-            simplified_check = Some(SimplifiedCcf {
-                stable: true,
-                max_pole_real_per_s: max_re,
-                errors,
-                note: "stable; simulated beside the full form".into(),
-            });
-            simplified = Some(x_dropped);
-        } else {
-            let worst = poles
-                .iter()
-                .filter(|p| p.re >= 0.0)
-                .map(|p| {
-                    format!(
-                        "{:.1} {} {:.1}j",
-                        p.re,
-                        if p.im < 0.0 { '-' } else { '+' },
-                        p.im.abs()
-                    )
-                })
-                .collect::<Vec<_>>()
-                .join(", ");
-            simplified_check = Some(SimplifiedCcf {
-                stable: false,
-                max_pole_real_per_s: max_re,
-                errors: None,
-                note: format!(
-                    "unstable with Cn dropped (poles {worst} rad/s), so not simulated: at these rig parameters the paper's simplification does not describe the plant; the form with Cn kept does"
-                ),
-            });
+        } => {
+            let sdof = LinearSdof {
+                mass_kg,
+                damping_ns_per_m,
+                stiffness_n_per_m,
+            };
+            Some(canonical_forms(rig_at_p, &sdof, rec, &x1)?)
         }
-    }
+        _ => None,
+    };
+    let (simplified_check, consistency, simplified) = match canonical {
+        Some(c) => (Some(c.check), c.consistency, c.x1_simplified),
+        None => (None, None, None),
+    };
     Ok(TimeStage {
         metrics: ValidationMetrics {
             nrmse_pct: whole.nrmse_pct,
@@ -276,6 +234,81 @@ pub fn validation_run(
         x1_measured: centred,
         x1_simulated: x1,
         x1_simplified: simplified,
+    })
+}
+
+/// The canonical forms of a linear SDOF validation run (Eqs. 34-35).
+struct CanonicalForms {
+    check: SimplifiedCcf,
+    /// max |x1(CCF with Cn) - x1(physical)| / max |x1(physical)|.
+    consistency: Option<f64>,
+    /// x1 of the simplified form, when it was stable enough to simulate.
+    x1_simplified: Option<Vec<f64>>,
+}
+
+/// The form with Cn kept must reproduce the physical form's `x1` (one model,
+/// so the difference is round-off); the paper's simplified form (Cn
+/// dropped) is simulated beside it only when its poles are stable, and
+/// otherwise says which poles are not.
+fn canonical_forms(
+    rig_at_p: &RigParams,
+    sdof: &LinearSdof,
+    rec: &Record<'_>,
+    x1: &[f64],
+) -> Result<CanonicalForms, ValidateError> {
+    let kept = simulate(
+        &model::ccf_linear_state_space(rig_at_p, sdof, CnTerm::Kept),
+        rec,
+        0.0,
+    )?;
+    let peak = x1.iter().fold(0.0_f64, |m, v| m.max(v.abs()));
+    let diff = kept[0]
+        .iter()
+        .zip(x1)
+        .fold(0.0_f64, |m, (a, b)| m.max((a - b).abs()));
+    let consistency = (peak > 0.0).then(|| diff / peak);
+    let dropped_ss = model::ccf_linear_state_space(rig_at_p, sdof, CnTerm::Dropped);
+    let poles = dropped_ss.eigenvalues();
+    let max_re = poles.iter().map(|p| p.re).fold(f64::NEG_INFINITY, f64::max);
+    if max_re < 0.0 {
+        let dropped = simulate(&dropped_ss, rec, 0.0)?;
+        let x_dropped = dropped.into_iter().next().expect("x1 output");
+        let errors = compare(rec.displacement_m, &x_dropped, rec.sample_rate_hz, &[]).map(|c| c.0);
+        return Ok(CanonicalForms {
+            check: SimplifiedCcf {
+                stable: true,
+                max_pole_real_per_s: max_re,
+                errors,
+                note: "stable; simulated beside the full form".into(),
+            },
+            consistency,
+            x1_simplified: Some(x_dropped),
+        });
+    }
+    let worst = poles
+        .iter()
+        .filter(|p| p.re >= 0.0)
+        .map(|p| {
+            format!(
+                "{:.1} {} {:.1}j",
+                p.re,
+                if p.im < 0.0 { '-' } else { '+' },
+                p.im.abs()
+            )
+        })
+        .collect::<Vec<_>>()
+        .join(", ");
+    Ok(CanonicalForms {
+        check: SimplifiedCcf {
+            stable: false,
+            max_pole_real_per_s: max_re,
+            errors: None,
+            note: format!(
+                "unstable with Cn dropped (poles {worst} rad/s), so not simulated: at these rig parameters the paper's simplification does not describe the plant; the form with Cn kept does"
+            ),
+        },
+        consistency,
+        x1_simplified: None,
     })
 }
 

@@ -1,0 +1,94 @@
+//! `--figures all|png|svg|none`: which figure files a run writes, what the
+//! page shows of them, and that results.json does not depend on the choice.
+
+use std::path::Path;
+
+use crate::util::{root, scratch, servoid, servoid_into};
+
+/// Run paper.toml with `--figures choice`; the output folder's results.json,
+/// page and figure file names.
+fn run_with(dir: &Path, choice: &str) -> (Vec<u8>, String, Vec<String>) {
+    let out = dir.join(choice);
+    let o = servoid_into(
+        dir,
+        "run",
+        &root().join("experiments/maghareh2018/paper.toml"),
+        &out,
+        &["--figures", choice, "--quiet"],
+    );
+    assert_eq!(o.code, 0, "--figures {choice}: {}", o.stderr);
+    let mut files: Vec<String> = std::fs::read_dir(out.join("figures"))
+        .map(|d| {
+            d.filter_map(|e| e.ok())
+                .map(|e| e.file_name().to_string_lossy().into_owned())
+                .collect()
+        })
+        .unwrap_or_default();
+    files.sort();
+    (
+        std::fs::read(out.join("results.json")).unwrap(),
+        // minijinja escapes `/` in attributes as `&#x2f;`; the browser reads
+        // both alike.
+        std::fs::read_to_string(out.join("report.html"))
+            .unwrap()
+            .replace("&#x2f;", "/"),
+        files,
+    )
+}
+
+#[test]
+fn each_choice_writes_its_files_and_the_page_says_what_it_has() {
+    let dir = scratch();
+    let (json_all, page_all, files_all) = run_with(dir.path(), "all");
+    // paper.toml has published transfer functions, no logs: its one figure
+    // is the stiffness sensitivity.
+    assert_eq!(files_all, ["sensitivity.png", "sensitivity.svg"]);
+    assert!(page_all.contains("src=\"data:image/png;base64,"));
+    assert!(page_all.contains("href=\"figures/sensitivity.png\""));
+    assert!(page_all.contains("href=\"figures/sensitivity.svg\""));
+
+    let (json_png, page_png, files_png) = run_with(dir.path(), "png");
+    assert_eq!(files_png, ["sensitivity.png"]);
+    assert!(page_png.contains("src=\"data:image/png;base64,"));
+    assert!(!page_png.contains(".svg"));
+
+    let (json_svg, page_svg, files_svg) = run_with(dir.path(), "svg");
+    assert_eq!(files_svg, ["sensitivity.svg"]);
+    assert!(page_svg.contains("<img src=\"figures/sensitivity.svg\""));
+    assert!(!page_svg.contains("data:image/png"));
+
+    let (json_none, page_none, files_none) = run_with(dir.path(), "none");
+    assert!(files_none.is_empty(), "{files_none:?}");
+    assert!(!page_none.contains("<figure"));
+    assert!(page_none.contains("No figures were drawn for this report (--figures none)."));
+
+    for (choice, json) in [("png", &json_png), ("svg", &json_svg), ("none", &json_none)] {
+        assert!(
+            json == &json_all,
+            "results.json with --figures {choice} differs from --figures all"
+        );
+    }
+}
+
+#[test]
+fn figures_without_run_and_an_unknown_choice_are_usage_errors() {
+    let dir = scratch();
+    let sim = root().join("experiments/maghareh2018/simulation.toml");
+    let o = servoid(
+        dir.path(),
+        &["simulate", sim.to_str().unwrap(), "--figures", "none"],
+    );
+    assert_eq!(o.code, 2, "{}", o.stderr);
+    assert!(o.stderr.contains("--run"), "{}", o.stderr);
+    let paper = root().join("experiments/maghareh2018/paper.toml");
+    let o = servoid(
+        dir.path(),
+        &["run", paper.to_str().unwrap(), "--figures", "jpeg"],
+    );
+    assert_eq!(o.code, 2, "{}", o.stderr);
+    assert!(
+        o.stderr.contains("possible values: all, png, svg, none"),
+        "{}",
+        o.stderr
+    );
+}
