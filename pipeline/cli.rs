@@ -188,7 +188,7 @@ fn cmd_simulate(
     then_run: bool,
     quiet: bool,
 ) -> u8 {
-    let outcome = match run::simulate(manifest, settings, then_run) {
+    let outcome = match run::run_simulation(manifest, settings, then_run) {
         Ok(o) => o,
         Err(e) => return job_failed(&e),
     };

@@ -1,6 +1,6 @@
 //! The orchestrator: the one module that knows every stage. It loads a
 //! manifest of either kind, analyses a campaign ([`analyse`]), simulates one
-//! ([`simulate`]), draws the figures ([`figures`]) and writes the outputs
+//! ([`run_simulation`], through [`simulate`]), draws the figures ([`figures`]) and writes the outputs
 //! (through `report`). It never prints: each entry point returns what it did,
 //! or a [`JobError`] that says why nothing was written, for `cli` to report.
 
@@ -136,7 +136,7 @@ pub fn run_campaign(path: &Path, settings: &Settings) -> Result<CampaignOutcome,
 /// Simulate a campaign from a simulation manifest (logs, truth.json and an
 /// analysis manifest), then, with `then_run`, run that campaign into the
 /// same folder.
-pub fn simulate(
+pub fn run_simulation(
     path: &Path,
     settings: &Settings,
     then_run: bool,

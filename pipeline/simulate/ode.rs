@@ -183,6 +183,45 @@ struct Stepper {
 // The stage loops index several state-sized buffers at once; ranges read
 // closer to the tableau than zipped iterators.
 #[allow(clippy::needless_range_loop)]
+// Dormand & Prince (1980), Hairer et al. II.5 Table 5.2.
+// The system is autonomous over a segment (u held), so the nodes c_i
+// are not needed.
+const A2: [f64; 1] = [1.0 / 5.0];
+const A3: [f64; 2] = [3.0 / 40.0, 9.0 / 40.0];
+const A4: [f64; 3] = [44.0 / 45.0, -56.0 / 15.0, 32.0 / 9.0];
+const A5: [f64; 4] = [
+    19372.0 / 6561.0,
+    -25360.0 / 2187.0,
+    64448.0 / 6561.0,
+    -212.0 / 729.0,
+];
+const A6: [f64; 5] = [
+    9017.0 / 3168.0,
+    -355.0 / 33.0,
+    46732.0 / 5247.0,
+    49.0 / 176.0,
+    -5103.0 / 18656.0,
+];
+// Fifth-order weights (= the last stage's row: FSAL).
+const B: [f64; 6] = [
+    35.0 / 384.0,
+    0.0,
+    500.0 / 1113.0,
+    125.0 / 192.0,
+    -2187.0 / 6784.0,
+    11.0 / 84.0,
+];
+// B minus the embedded fourth-order weights.
+const E: [f64; 7] = [
+    71.0 / 57600.0,
+    0.0,
+    -71.0 / 16695.0,
+    71.0 / 1920.0,
+    -17253.0 / 339200.0,
+    22.0 / 525.0,
+    -1.0 / 40.0,
+];
+
 impl Stepper {
     fn new<S: OdeSystem>(sys: &S, integ: Integrator, dt_s: f64) -> Result<Self, OdeError> {
         match integ {
@@ -325,6 +364,54 @@ impl Stepper {
         (100.0 * h0).min(h1)
     }
 
+    /// One Dormand-Prince trial step of size `h` from `x` (k1 in `self.k[0]`):
+    /// the stages into `self.k`, the fifth-order solution into `self.y_new`
+    /// with its derivative (FSAL) into `self.k[6]`, and the RMS of the
+    /// embedded error estimate scaled by the tolerances.
+    fn trial_step<S: OdeSystem>(
+        &mut self,
+        sys: &S,
+        x: &[f64],
+        u: f64,
+        h: f64,
+        rtol: f64,
+        atol: f64,
+    ) -> f64 {
+        let stages: [&[f64]; 5] = [&A2, &A3, &A4, &A5, &A6];
+        for (s, a) in stages.iter().enumerate() {
+            for (i, xi) in x.iter().enumerate() {
+                let mut acc = 0.0;
+                for (j, aj) in a.iter().enumerate() {
+                    acc += aj * self.k[j][i];
+                }
+                self.tmp[i] = xi + h * acc;
+            }
+            let (_, rest) = self.k.split_at_mut(s + 1);
+            sys.deriv(&self.tmp, u, &mut rest[0]);
+        }
+        for (i, xi) in x.iter().enumerate() {
+            let mut acc = 0.0;
+            for (j, bj) in B.iter().enumerate() {
+                acc += bj * self.k[j][i];
+            }
+            self.y_new[i] = xi + h * acc;
+        }
+        {
+            let (_, rest) = self.k.split_at_mut(6);
+            sys.deriv(&self.y_new, u, &mut rest[0]);
+        }
+        let mut err = 0.0;
+        for (i, xi) in x.iter().enumerate() {
+            let mut acc = 0.0;
+            for (j, ej) in E.iter().enumerate() {
+                acc += ej * self.k[j][i];
+            }
+            let sc = atol + rtol * xi.abs().max(self.y_new[i].abs());
+            err += (h * acc / sc).powi(2);
+        }
+        (err / x.len() as f64).sqrt()
+    }
+
     #[allow(clippy::too_many_arguments)]
     fn dopri_segment<S: OdeSystem>(
         &mut self,
@@ -337,49 +424,10 @@ impl Stepper {
         rtol: f64,
         atol: f64,
     ) -> Result<(), OdeError> {
-        // Dormand & Prince (1980), Hairer et al. II.5 Table 5.2.
-        // The system is autonomous over a segment (u held), so the nodes c_i
-        // are not needed.
-        const A2: [f64; 1] = [1.0 / 5.0];
-        const A3: [f64; 2] = [3.0 / 40.0, 9.0 / 40.0];
-        const A4: [f64; 3] = [44.0 / 45.0, -56.0 / 15.0, 32.0 / 9.0];
-        const A5: [f64; 4] = [
-            19372.0 / 6561.0,
-            -25360.0 / 2187.0,
-            64448.0 / 6561.0,
-            -212.0 / 729.0,
-        ];
-        const A6: [f64; 5] = [
-            9017.0 / 3168.0,
-            -355.0 / 33.0,
-            46732.0 / 5247.0,
-            49.0 / 176.0,
-            -5103.0 / 18656.0,
-        ];
-        // Fifth-order weights (= the last stage's row: FSAL).
-        const B: [f64; 6] = [
-            35.0 / 384.0,
-            0.0,
-            500.0 / 1113.0,
-            125.0 / 192.0,
-            -2187.0 / 6784.0,
-            11.0 / 84.0,
-        ];
-        // B minus the embedded fourth-order weights.
-        const E: [f64; 7] = [
-            71.0 / 57600.0,
-            0.0,
-            -71.0 / 16695.0,
-            71.0 / 1920.0,
-            -17253.0 / 339200.0,
-            22.0 / 525.0,
-            -1.0 / 40.0,
-        ];
         const SAFETY: f64 = 0.9;
         const FAC_MIN: f64 = 0.2;
         const FAC_MAX: f64 = 5.0;
 
-        let n = x.len();
         if !self.k1_valid {
             sys.deriv(x, u, &mut self.k[0]);
             self.k1_valid = true;
@@ -419,39 +467,7 @@ impl Stepper {
                     },
                 });
             }
-            let stages: [&[f64]; 5] = [&A2, &A3, &A4, &A5, &A6];
-            for (s, a) in stages.iter().enumerate() {
-                for i in 0..n {
-                    let mut acc = 0.0;
-                    for (j, aj) in a.iter().enumerate() {
-                        acc += aj * self.k[j][i];
-                    }
-                    self.tmp[i] = x[i] + h * acc;
-                }
-                let (_, rest) = self.k.split_at_mut(s + 1);
-                sys.deriv(&self.tmp, u, &mut rest[0]);
-            }
-            for i in 0..n {
-                let mut acc = 0.0;
-                for (j, bj) in B.iter().enumerate() {
-                    acc += bj * self.k[j][i];
-                }
-                self.y_new[i] = x[i] + h * acc;
-            }
-            {
-                let (_, rest) = self.k.split_at_mut(6);
-                sys.deriv(&self.y_new, u, &mut rest[0]);
-            }
-            let mut err = 0.0;
-            for i in 0..n {
-                let mut acc = 0.0;
-                for (j, ej) in E.iter().enumerate() {
-                    acc += ej * self.k[j][i];
-                }
-                let sc = atol + rtol * x[i].abs().max(self.y_new[i].abs());
-                err += (h * acc / sc).powi(2);
-            }
-            let err = (err / n as f64).sqrt();
+            let err = self.trial_step(sys, x, u, h, rtol, atol);
             if let Some(component) = self.y_new.iter().position(|v| !v.is_finite()) {
                 nonfinite = Some(component);
                 h_prop = h * FAC_MIN;
