@@ -618,6 +618,13 @@ mod tests {
             e.to_string(),
             "state-space dimensions disagree: 2 output delay(s) for 1 output(s)"
         );
+        let mut wide = ss.clone();
+        wide.d = DVector::zeros(2);
+        let e = simulate_linear(&wide, &[0.0], 0.5, &[0.0]).unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "state-space dimensions disagree: A is 1x1, B has 1 rows, C is 1x1, D has 2 rows"
+        );
         let e = simulate_linear(&ss, &[0.0], 0.0, &[0.0]).unwrap_err();
         assert_eq!(
             e.to_string(),
