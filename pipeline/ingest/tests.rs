@@ -1392,3 +1392,40 @@ fn parquet_format_errors_word_for_word() {
         ),
     );
 }
+
+#[test]
+fn format_errors_keep_their_causes_typed() {
+    // Causes no crafted file reaches: polars losing a column it has just
+    // read, or failing to cast a numeric column to f64.
+    let polars = || PolarsError::ComputeError("no such luck".into());
+    let lost = FormatProblem::ColumnLost {
+        column: "u".into(),
+        source: polars(),
+    };
+    assert_eq!(
+        lost.to_string(),
+        format!("column `u` lost in reading: {}", polars())
+    );
+    let cast = FormatProblem::NotF64 {
+        column: "u".into(),
+        source: polars(),
+    };
+    assert_eq!(
+        cast.to_string(),
+        format!("column `u` cannot become f64: {}", polars())
+    );
+
+    // A foreign error is the problem's source, and the problem the error's.
+    let dir = tempfile::tempdir().unwrap();
+    let mut file = matw::header();
+    file[124..126].copy_from_slice(&0x0200u16.to_le_bytes());
+    file.extend(matw::matrix("u", 3, 1, &[1.0, 2.0, 3.0]));
+    let path = write_file(dir.path(), "version.mat", &file);
+    let e = read_log(&mat_plan(&path)).unwrap_err();
+    let problem = std::error::Error::source(&e)
+        .and_then(|s| s.downcast_ref::<FormatProblem>())
+        .expect("the problem is the source");
+    assert!(matches!(problem, FormatProblem::MatUnreadable { .. }));
+    let cause = std::error::Error::source(problem).expect("matfile's error is kept");
+    assert!(cause.is::<matfile::Error>());
+}
