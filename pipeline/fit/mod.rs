@@ -152,7 +152,7 @@ pub enum FitError {
     NonFinite {
         field: &'static str,
         index: usize,
-        value: String,
+        value: InputValue,
     },
     #[error("freq_hz[{index}] must be positive (got {value} Hz)")]
     NonPositiveFrequency { index: usize, value: f64 },
@@ -191,6 +191,23 @@ pub enum FitError {
     NoSolution,
     #[error("the fitted model is not a valid transfer function: {0}")]
     Model(#[from] LtiError),
+}
+
+/// An input value as an error reports it: a frequency or variance is real,
+/// a response complex, and each prints as its own type does.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum InputValue {
+    Real(f64),
+    Complex(Complex<f64>),
+}
+
+impl std::fmt::Display for InputValue {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            InputValue::Real(v) => std::fmt::Display::fmt(v, f),
+            InputValue::Complex(z) => std::fmt::Display::fmt(z, f),
+        }
+    }
 }
 
 /// An error from argmin. Its `Error` is an `anyhow::Error`, which does not
@@ -290,7 +307,7 @@ fn check_input(input: &FitInput, opts: &FitOptions, shape: &ModelShape) -> Resul
             return Err(FitError::NonFinite {
                 field: "freq_hz",
                 index,
-                value: f.to_string(),
+                value: InputValue::Real(f),
             });
         }
         if f <= 0.0 {
@@ -313,7 +330,7 @@ fn check_input(input: &FitInput, opts: &FitOptions, shape: &ModelShape) -> Resul
         return Err(FitError::NonFinite {
             field: "h",
             index,
-            value: h.to_string(),
+            value: InputValue::Complex(*h),
         });
     }
     for (index, &v) in input.variance.iter().enumerate() {
@@ -321,7 +338,7 @@ fn check_input(input: &FitInput, opts: &FitOptions, shape: &ModelShape) -> Resul
             return Err(FitError::NonFinite {
                 field: "variance",
                 index,
-                value: v.to_string(),
+                value: InputValue::Real(v),
             });
         }
         if v <= 0.0 {

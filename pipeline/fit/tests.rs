@@ -537,8 +537,21 @@ fn bad_inputs_give_errors_that_say_what_and_where() {
         "h[1] is not finite (NaN+0i)"
     );
     assert_eq!(
+        err(
+            &f3,
+            &[Complex::new(f64::INFINITY, -2.5), one, one],
+            &v3,
+            &opts
+        ),
+        "h[0] is not finite (inf-2.5i)"
+    );
+    assert_eq!(
         err(&[1.0, f64::INFINITY, 3.0], &h3, &v3, &opts),
         "freq_hz[1] is not finite (inf)"
+    );
+    assert_eq!(
+        err(&f3, &h3, &[1.0, 1.0, f64::NEG_INFINITY], &opts),
+        "variance[2] is not finite (-inf)"
     );
     assert_eq!(
         err(&[0.0, 2.0, 3.0], &h3, &v3, &opts),

@@ -16,7 +16,7 @@ use polars::prelude::{
 };
 
 use super::plan::{Column, LogPlan};
-use super::{At, IngestError, Raw, Wanted, list, raw_from_table, wanted};
+use super::{At, FormatProblem, IngestError, Raw, Wanted, list, raw_from_table, wanted};
 
 /// Read a CSV log's wanted columns.
 pub(super) fn read<'a>(
@@ -182,13 +182,12 @@ impl<'p> Layout<'p> {
     fn new(path: &Path, plan: &'p LogPlan) -> Result<Self, IngestError> {
         let d = plan.csv.delimiter.as_bytes();
         if d.len() != 1 {
-            return Err(IngestError::Format {
-                path: path.to_path_buf(),
-                message: format!(
-                    "the CSV delimiter must be one ASCII character (got {:?})",
-                    plan.csv.delimiter
-                ),
-            });
+            return Err(IngestError::format(
+                path,
+                FormatProblem::Delimiter {
+                    delimiter: plan.csv.delimiter.clone(),
+                },
+            ));
         }
         Ok(Layout {
             sep: d[0],
@@ -248,15 +247,14 @@ fn resolve(
                     "columns: {}",
                     list(names.iter().map(|n| format!("`{n}`")))
                 ))),
-                _ => Err(IngestError::Format {
-                    path: path.to_path_buf(),
-                    message: format!(
-                        "column `{n}` ({} channel) appears {} times in the header (fields {}); rename one or address it by index",
-                        w.channel,
-                        hits.len(),
-                        list(&hits)
-                    ),
-                }),
+                _ => Err(IngestError::format(
+                    path,
+                    FormatProblem::DuplicateColumn {
+                        name: n.clone(),
+                        channel: w.channel,
+                        fields: hits,
+                    },
+                )),
             }
         }
         (Column::Name(_), None) => Err(missing(format!(

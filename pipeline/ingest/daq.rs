@@ -31,7 +31,7 @@
 use std::path::Path;
 
 use super::plan::{Column, LogPlan, TimePlan};
-use super::{At, IngestError, Raw, RawTime, list, wanted};
+use super::{At, FormatProblem, IngestError, Raw, RawTime, list, wanted};
 
 /// Header values used (others are ignored).
 #[derive(Default)]
@@ -51,10 +51,6 @@ pub(super) fn read<'a>(
     bytes: &'a [u8],
     plan: &'a LogPlan,
 ) -> Result<Raw<'a>, IngestError> {
-    let format = |message: String| IngestError::Format {
-        path: path.to_path_buf(),
-        message,
-    };
     let mut lines = Lines {
         bytes,
         pos: 0,
@@ -79,10 +75,14 @@ pub(super) fn read<'a>(
         };
         let (key, value) = (key.trim(), value.trim());
         let bad = || {
-            format(format!(
-                "line {}: header `{key}` is {value:?}, not a positive number",
-                lines.no
-            ))
+            IngestError::format(
+                path,
+                FormatProblem::HeaderValue {
+                    line: lines.no,
+                    key: key.to_string(),
+                    value: value.to_string(),
+                },
+            )
         };
         let positive = |v: f64| v.is_finite() && v > 0.0;
         match key {
@@ -141,10 +141,14 @@ pub(super) fn read<'a>(
             });
         };
         if TEXT_COLUMNS.contains(&names[i]) {
-            return Err(format(format!(
-                "column `{}` (index {i}, {} channel) holds text, not numbers",
-                names[i], w.channel
-            )));
+            return Err(IngestError::format(
+                path,
+                FormatProblem::TextColumn {
+                    name: names[i].to_string(),
+                    index: i,
+                    channel: w.channel,
+                },
+            ));
         }
         index.push(i);
     }
@@ -290,12 +294,7 @@ pub(super) fn read<'a>(
             }
         }
         TimePlan::FromLog => RawTime::Rate {
-            hz: header_hz.ok_or_else(|| {
-                format(
-                    "no `Sampling Rate` or `Sampling Interval` in the header; give channels.time.sample_rate_hz"
-                        .into(),
-                )
-            })?,
+            hz: header_hz.ok_or_else(|| IngestError::format(path, FormatProblem::NoHeaderRate))?,
             from: "DAQ header",
         },
     };

@@ -21,7 +21,7 @@ use std::path::Path;
 use matfile::{Array, MatFile, NumericData};
 
 use super::plan::{Column, LogPlan, TimePlan};
-use super::{At, IngestError, Raw, RawTime, list, wanted};
+use super::{At, FormatProblem, IngestError, MatVariable, Raw, RawTime, dims, list, wanted};
 
 /// Length of the level-5 header: 116 bytes of text, 8 of subsystem offset,
 /// version (2) and endian indicator (2).
@@ -33,21 +33,13 @@ pub(super) fn read<'a>(
     bytes: &'a [u8],
     plan: &'a LogPlan,
 ) -> Result<Raw<'a>, IngestError> {
-    let format = |message: String| IngestError::Format {
-        path: path.to_path_buf(),
-        message,
-    };
+    let format = |problem| IngestError::format(path, problem);
     if bytes.starts_with(b"MATLAB 7.3") {
-        return Err(format(
-            "a MAT v7.3 file (HDF5) is not supported; save it with `save(..., '-v7')`".into(),
-        ));
+        return Err(format(FormatProblem::MatV73));
     }
     let endian = bytes.get(126..HEADER_LEN);
     if bytes.len() < HEADER_LEN || !matches!(endian, Some(b"IM" | b"MI")) {
-        return Err(format(
-            "not a level-5 MAT-file (no 128-byte header ending in the `IM`/`MI` endian mark)"
-                .into(),
-        ));
+        return Err(format(FormatProblem::NotMat));
     }
     if bytes.len() == HEADER_LEN {
         return Err(IngestError::HeaderOnly {
@@ -56,8 +48,8 @@ pub(super) fn read<'a>(
         });
     }
     check_elements(path, bytes)?;
-    let mat = MatFile::parse(bytes)
-        .map_err(|e| format(format!("not a readable level-5 MAT-file (matfile: {e})")))?;
+    let mat =
+        MatFile::parse(bytes).map_err(|source| format(FormatProblem::MatUnreadable { source }))?;
     if mat.arrays().is_empty() {
         return Err(IngestError::HeaderOnly {
             path: path.to_path_buf(),
@@ -65,11 +57,13 @@ pub(super) fn read<'a>(
         });
     }
     let variables = || {
-        list(
-            mat.arrays()
-                .iter()
-                .map(|a| format!("`{}` ({})", a.name(), dims(a))),
-        )
+        mat.arrays()
+            .iter()
+            .map(|a| MatVariable {
+                name: a.name().to_string(),
+                size: a.size().clone(),
+            })
+            .collect::<Vec<_>>()
     };
 
     let want = wanted(plan);
@@ -79,7 +73,7 @@ pub(super) fn read<'a>(
             path: path.to_path_buf(),
             channel: w.channel,
             column: w.column.to_string(),
-            available: format!("variables: {}", variables()),
+            available: format!("variables: {}", list(variables())),
         };
         let v = match w.column {
             Column::Name(n) => match mat.find_by_name(n) {
@@ -98,18 +92,18 @@ pub(super) fn read<'a>(
                 match tables.as_slice() {
                     [a] => channel(path, a, *i, w.channel)?,
                     [] => {
-                        return Err(format(format!(
-                            "the {} channel is column #{i}, but no variable is a 2-D table (variables: {}); name a vector variable instead",
-                            w.channel,
-                            variables()
-                        )));
+                        return Err(format(FormatProblem::NoTable {
+                            channel: w.channel,
+                            index: *i,
+                            variables: variables(),
+                        }));
                     }
                     _ => {
-                        return Err(format(format!(
-                            "the {} channel is column #{i}, but several variables are 2-D tables ({}); write it as \"variable:{i}\"",
-                            w.channel,
-                            list(tables.iter().map(|a| format!("`{}`", a.name())))
-                        )));
+                        return Err(format(FormatProblem::SeveralTables {
+                            channel: w.channel,
+                            index: *i,
+                            tables: tables.iter().map(|a| a.name().to_string()).collect(),
+                        }));
                     }
                 }
             }
@@ -133,10 +127,9 @@ pub(super) fn read<'a>(
                 .find_by_name("t")
                 .or_else(|| mat.find_by_name("time"))
                 .ok_or_else(|| {
-                    format(format!(
-                        "no time base: no vector variable `t` or `time` (variables: {}); give channels.time.column or sample_rate_hz",
-                        variables()
-                    ))
+                    format(FormatProblem::NoTimeBase {
+                        variables: variables(),
+                    })
                 })?;
             RawTime::Column {
                 raw: vector(path, a, "time")?,
@@ -151,10 +144,7 @@ pub(super) fn read<'a>(
         lengths.insert(0, ("time", raw.len()));
     }
     if lengths.iter().any(|(_, n)| *n != lengths[0].1) {
-        return Err(format(format!(
-            "the channels differ in length: {}",
-            list(lengths.iter().map(|(c, n)| format!("{c} {n}")))
-        )));
+        return Err(format(FormatProblem::Lengths { lengths }));
     }
     let mut rest = rest.into_iter().map(|(_, v)| v);
     let command = rest.next().expect("command wanted");
@@ -192,16 +182,14 @@ fn check_elements(path: &Path, bytes: &[u8]) -> Result<(), IngestError> {
             None
         };
         if declared.is_none_or(|size| size > remain - 8) {
-            return Err(IngestError::Format {
-                path: path.to_path_buf(),
-                message: format!(
-                    "the MAT-file is cut short: the data element at byte {pos} needs {} bytes but {remain} remain",
-                    declared.map_or_else(
-                        || "an 8-byte tag and data".to_string(),
-                        |s| (s + 8).to_string()
-                    )
-                ),
-            });
+            return Err(IngestError::format(
+                path,
+                FormatProblem::CutShort {
+                    at_byte: pos,
+                    needed: declared.map(|size| size + 8),
+                    remain,
+                },
+            ));
         }
         let size = declared.unwrap_or(0);
         // miCOMPRESSED (15) elements are not padded; others are padded to
@@ -216,30 +204,24 @@ fn check_elements(path: &Path, bytes: &[u8]) -> Result<(), IngestError> {
     Ok(())
 }
 
-fn dims(a: &Array) -> String {
-    a.size()
-        .iter()
-        .map(usize::to_string)
-        .collect::<Vec<_>>()
-        .join("x")
-}
-
 /// A 1 x N or N x 1 array (an empty or scalar one counts too).
 fn is_vector(a: &Array) -> bool {
     a.size().len() == 2 && a.size().iter().filter(|&&d| d > 1).count() <= 1
 }
 
 /// The real values of `a` as f64, column-major.
-fn real_f64(path: &Path, a: &Array, channel: &str) -> Result<Vec<f64>, IngestError> {
+fn real_f64(path: &Path, a: &Array, channel: &'static str) -> Result<Vec<f64>, IngestError> {
     fn widen<T: Copy + Into<f64>>(v: &[T]) -> Vec<f64> {
         v.iter().map(|&x| x.into()).collect()
     }
-    let complex = || IngestError::Format {
-        path: path.to_path_buf(),
-        message: format!(
-            "variable `{}` ({channel} channel) is complex; a log channel must be real",
-            a.name()
-        ),
+    let complex = || {
+        IngestError::format(
+            path,
+            FormatProblem::Complex {
+                variable: a.name().to_string(),
+                channel,
+            },
+        )
     };
     Ok(match a.data() {
         NumericData::Double { real, imag: None } => real.clone(),
@@ -259,17 +241,16 @@ fn real_f64(path: &Path, a: &Array, channel: &str) -> Result<Vec<f64>, IngestErr
 }
 
 /// A vector variable's values.
-fn vector(path: &Path, a: &Array, channel: &str) -> Result<Vec<f64>, IngestError> {
+fn vector(path: &Path, a: &Array, channel: &'static str) -> Result<Vec<f64>, IngestError> {
     if !is_vector(a) {
-        return Err(IngestError::Format {
-            path: path.to_path_buf(),
-            message: format!(
-                "variable `{}` ({channel} channel) is {}, not a vector; address one of its channels as \"{}:0\"",
-                a.name(),
-                dims(a),
-                a.name()
-            ),
-        });
+        return Err(IngestError::format(
+            path,
+            FormatProblem::NotVector {
+                variable: a.name().to_string(),
+                channel,
+                size: a.size().clone(),
+            },
+        ));
     }
     real_f64(path, a, channel)
 }
@@ -283,16 +264,15 @@ fn channel(
     channel: &'static str,
 ) -> Result<Vec<f64>, IngestError> {
     let size = a.size();
-    let format = |message: String| IngestError::Format {
-        path: path.to_path_buf(),
-        message,
-    };
     if size.len() != 2 {
-        return Err(format(format!(
-            "variable `{}` ({channel} channel) is {}, not a 2-D table",
-            a.name(),
-            dims(a)
-        )));
+        return Err(IngestError::format(
+            path,
+            FormatProblem::NotTable {
+                variable: a.name().to_string(),
+                channel,
+                size: size.clone(),
+            },
+        ));
     }
     let (rows, cols) = (size[0], size[1]);
     let wide = rows < cols;
@@ -305,7 +285,7 @@ fn channel(
             available: format!(
                 "`{}` is {} and holds channels 0 to {} in its {}",
                 a.name(),
-                dims(a),
+                dims(size),
                 n_channels.saturating_sub(1),
                 if wide { "rows" } else { "columns" }
             ),

@@ -24,6 +24,7 @@ mod tests;
 use std::fmt;
 use std::path::{Path, PathBuf};
 
+use polars::prelude::{DataType, PolarsError};
 use sha2::{Digest, Sha256};
 
 pub use plan::{ChannelPlan, Channels, Column, CsvOptions, LogFormat, LogPlan, TimePlan};
@@ -226,8 +227,201 @@ pub enum IngestError {
         hz: f64,
         from: &'static str,
     },
-    #[error("{}: {message}", path.display())]
-    Format { path: PathBuf, message: String },
+    #[error("{}: {problem}", path.display())]
+    Format {
+        path: PathBuf,
+        #[source]
+        problem: FormatProblem,
+    },
+}
+
+impl IngestError {
+    /// The file at `path` has `problem`.
+    fn format(path: &Path, problem: FormatProblem) -> Self {
+        IngestError::Format {
+            path: path.to_path_buf(),
+            problem,
+        }
+    }
+}
+
+/// What is wrong with a file's layout, beyond any one value: the cause of an
+/// [`IngestError::Format`].
+#[derive(Debug, thiserror::Error)]
+pub enum FormatProblem {
+    // Table formats (CSV, Parquet).
+    /// The plan asks the log for its rate, but a table holds samples only.
+    #[error(
+        "a {} log has no sampling rate of its own; give channels.time.column or channels.time.sample_rate_hz",
+        format_name(*format)
+    )]
+    NoRate { format: LogFormat },
+
+    // CSV.
+    #[error("the CSV delimiter must be one ASCII character (got {delimiter:?})")]
+    Delimiter { delimiter: String },
+    /// A column addressed by name has several fields of that name (0-based
+    /// indices).
+    #[error(
+        "column `{name}` ({channel} channel) appears {} times in the header (fields {}); rename one or address it by index",
+        fields.len(),
+        list(fields)
+    )]
+    DuplicateColumn {
+        name: String,
+        channel: &'static str,
+        fields: Vec<usize>,
+    },
+
+    // DAQ text.
+    /// A header value used (`Header Size`, `Sample Count`, `Sampling Rate`,
+    /// `Sampling Interval`) is not a positive number.
+    #[error("line {line}: header `{key}` is {value:?}, not a positive number")]
+    HeaderValue {
+        line: usize,
+        key: String,
+        value: String,
+    },
+    /// A channel addressed the `Date/Time` or `Events` column.
+    #[error("column `{name}` (index {index}, {channel} channel) holds text, not numbers")]
+    TextColumn {
+        name: String,
+        index: usize,
+        channel: &'static str,
+    },
+    #[error(
+        "no `Sampling Rate` or `Sampling Interval` in the header; give channels.time.sample_rate_hz"
+    )]
+    NoHeaderRate,
+
+    // MAT.
+    #[error("a MAT v7.3 file (HDF5) is not supported; save it with `save(..., '-v7')`")]
+    MatV73,
+    #[error("not a level-5 MAT-file (no 128-byte header ending in the `IM`/`MI` endian mark)")]
+    NotMat,
+    /// A data element runs past the end of the file.
+    #[error(
+        "the MAT-file is cut short: the data element at byte {at_byte} needs {} bytes but {remain} remain",
+        needed_bytes(*needed)
+    )]
+    CutShort {
+        at_byte: usize,
+        /// Bytes the element needs, its 8-byte tag included; `None` when
+        /// not even the tag is whole.
+        needed: Option<usize>,
+        remain: usize,
+    },
+    #[error("not a readable level-5 MAT-file (matfile: {source})")]
+    MatUnreadable {
+        #[source]
+        source: matfile::Error,
+    },
+    /// A channel addressed by index, with no 2-D variable to index.
+    #[error(
+        "the {channel} channel is column #{index}, but no variable is a 2-D table (variables: {}); name a vector variable instead",
+        list(variables)
+    )]
+    NoTable {
+        channel: &'static str,
+        index: usize,
+        variables: Vec<MatVariable>,
+    },
+    /// A channel addressed by index, with several 2-D variables (named).
+    #[error(
+        "the {channel} channel is column #{index}, but several variables are 2-D tables ({}); write it as \"variable:{index}\"",
+        list(tables.iter().map(|name| format!("`{name}`")))
+    )]
+    SeveralTables {
+        channel: &'static str,
+        index: usize,
+        tables: Vec<String>,
+    },
+    /// The plan asks the log for its time base, and there is no `t` or
+    /// `time` variable.
+    #[error(
+        "no time base: no vector variable `t` or `time` (variables: {}); give channels.time.column or sample_rate_hz",
+        list(variables)
+    )]
+    NoTimeBase { variables: Vec<MatVariable> },
+    /// Each channel with its number of samples.
+    #[error(
+        "the channels differ in length: {}",
+        list(lengths.iter().map(|(channel, n)| format!("{channel} {n}")))
+    )]
+    Lengths { lengths: Vec<(&'static str, usize)> },
+    #[error("variable `{variable}` ({channel} channel) is complex; a log channel must be real")]
+    Complex {
+        variable: String,
+        channel: &'static str,
+    },
+    /// A variable addressed as a vector has several rows and columns.
+    #[error(
+        "variable `{variable}` ({channel} channel) is {}, not a vector; address one of its channels as \"{variable}:0\"",
+        dims(size)
+    )]
+    NotVector {
+        variable: String,
+        channel: &'static str,
+        size: Vec<usize>,
+    },
+    /// A variable addressed as `variable:channel` has more than 2 dimensions.
+    #[error(
+        "variable `{variable}` ({channel} channel) is {}, not a 2-D table",
+        dims(size)
+    )]
+    NotTable {
+        variable: String,
+        channel: &'static str,
+        size: Vec<usize>,
+    },
+
+    // Parquet.
+    /// The footer (schema) cannot be read.
+    #[error("not a readable Parquet file: {source}")]
+    ParquetUnreadable {
+        #[source]
+        source: PolarsError,
+    },
+    /// The schema reads, the wanted columns do not.
+    #[error("polars cannot read it as Parquet: {source}")]
+    ParquetRead {
+        #[source]
+        source: PolarsError,
+    },
+    #[error("column `{column}` lost in reading: {source}")]
+    ColumnLost {
+        column: String,
+        #[source]
+        source: PolarsError,
+    },
+    #[error("column `{column}` ({channel} channel) holds {dtype}, not numbers")]
+    NotNumeric {
+        column: String,
+        channel: &'static str,
+        /// Boxed: polars' type is 48 bytes, and inline it would make every
+        /// `Result<_, IngestError>` too large to return cheaply.
+        dtype: Box<DataType>,
+    },
+    #[error("column `{column}` cannot become f64: {source}")]
+    NotF64 {
+        column: String,
+        #[source]
+        source: PolarsError,
+    },
+}
+
+/// A MAT variable as messages list it: `` `name` (rows x cols) ``.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct MatVariable {
+    pub name: String,
+    /// Its dimensions, as the file gives them.
+    pub size: Vec<usize>,
+}
+
+impl fmt::Display for MatVariable {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "`{}` ({})", self.name, dims(&self.size))
+    }
 }
 
 /// Read a log as `plan` describes it and convert its channels to SI.
@@ -350,13 +544,12 @@ fn raw_from_table<'a>(
             from: "manifest",
         },
         TimePlan::FromLog => {
-            return Err(IngestError::Format {
-                path: path.to_path_buf(),
-                message: format!(
-                    "a {} log has no sampling rate of its own; give channels.time.column or channels.time.sample_rate_hz",
-                    format_name(plan.format)
-                ),
-            });
+            return Err(IngestError::format(
+                path,
+                FormatProblem::NoRate {
+                    format: plan.format,
+                },
+            ));
         }
     };
     let command = it.next().expect("command wanted");
@@ -651,7 +844,7 @@ pub fn trim_to_excitation(log: &Log, threshold_fraction: f64) -> Log {
     out
 }
 
-/// Comma-separated list of names for "available" messages.
+/// Comma-separated list of names for messages ("none" when empty).
 fn list(names: impl IntoIterator<Item = impl fmt::Display>) -> String {
     let v: Vec<String> = names.into_iter().map(|n| n.to_string()).collect();
     if v.is_empty() {
@@ -659,4 +852,17 @@ fn list(names: impl IntoIterator<Item = impl fmt::Display>) -> String {
     } else {
         v.join(", ")
     }
+}
+
+/// Dimensions as MATLAB writes them: `300x2`.
+fn dims(size: &[usize]) -> String {
+    size.iter()
+        .map(usize::to_string)
+        .collect::<Vec<_>>()
+        .join("x")
+}
+
+/// What a cut-short MAT element needs, for [`FormatProblem::CutShort`].
+fn needed_bytes(needed: Option<usize>) -> String {
+    needed.map_or_else(|| "an 8-byte tag and data".to_string(), |n| n.to_string())
 }

@@ -8,7 +8,7 @@ use std::path::Path;
 use polars::prelude::{DataType, ParquetReader, SerReader};
 
 use super::plan::{Column, LogPlan};
-use super::{At, IngestError, Raw, list, raw_from_table, wanted};
+use super::{At, FormatProblem, IngestError, Raw, list, raw_from_table, wanted};
 
 /// Read a Parquet log's wanted columns.
 pub(super) fn read<'a>(
@@ -16,14 +16,11 @@ pub(super) fn read<'a>(
     bytes: &'a [u8],
     plan: &'a LogPlan,
 ) -> Result<Raw<'a>, IngestError> {
-    let format = |message: String| IngestError::Format {
-        path: path.to_path_buf(),
-        message,
-    };
+    let format = |problem| IngestError::format(path, problem);
     let mut reader = ParquetReader::new(Cursor::new(bytes));
     let schema = reader
         .schema()
-        .map_err(|e| format(format!("not a readable Parquet file: {e}")))?;
+        .map_err(|source| format(FormatProblem::ParquetUnreadable { source }))?;
     let names: Vec<String> = schema.iter_names().map(|n| n.to_string()).collect();
 
     let want = wanted(plan);
@@ -51,7 +48,7 @@ pub(super) fn read<'a>(
     let df = reader
         .with_projection(Some(projection))
         .finish()
-        .map_err(|e| format(format!("polars cannot read it as Parquet: {e}")))?;
+        .map_err(|source| format(FormatProblem::ParquetRead { source }))?;
     if df.height() == 0 {
         return Err(IngestError::HeaderOnly {
             path: path.to_path_buf(),
@@ -62,22 +59,27 @@ pub(super) fn read<'a>(
     let mut columns = Vec::with_capacity(want.len());
     for (w, &i) in want.iter().zip(&index) {
         let name = &names[i];
-        let col = df
-            .column(name)
-            .map_err(|e| format(format!("column `{name}` lost in reading: {e}")))?;
+        let col = df.column(name).map_err(|source| {
+            format(FormatProblem::ColumnLost {
+                column: name.clone(),
+                source,
+            })
+        })?;
         if !col.dtype().is_primitive_numeric() {
-            return Err(format(format!(
-                "column `{name}` ({} channel) holds {}, not numbers",
-                w.channel,
-                col.dtype()
-            )));
+            return Err(format(FormatProblem::NotNumeric {
+                column: name.clone(),
+                channel: w.channel,
+                dtype: Box::new(col.dtype().clone()),
+            }));
         }
-        let col = col
-            .cast(&DataType::Float64)
-            .map_err(|e| format(format!("column `{name}` cannot become f64: {e}")))?;
-        let ca = col
-            .f64()
-            .map_err(|e| format(format!("column `{name}` cannot become f64: {e}")))?;
+        let not_f64 = |source| {
+            format(FormatProblem::NotF64 {
+                column: name.clone(),
+                source,
+            })
+        };
+        let col = col.cast(&DataType::Float64).map_err(not_f64)?;
+        let ca = col.f64().map_err(not_f64)?;
         if ca.null_count() > 0 {
             let row = ca.iter().position(|v| v.is_none()).expect("a null exists");
             return Err(IngestError::MissingValue {

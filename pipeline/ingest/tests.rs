@@ -530,9 +530,10 @@ fn writers_refuse_ragged_columns_and_bad_names() {
 /// in the upper half of the first u32, data in the second). A variable is a
 /// miMATRIX (type 14) holding: array flags (miUINT32, class in the low byte,
 /// mxDOUBLE_CLASS = 6), dimensions (miINT32), name (miINT8) and the real part
-/// (miDOUBLE, type 9), column-major. A compressed variable is a miCOMPRESSED
-/// element (type 15) holding the zlib stream of the whole miMATRIX element,
-/// unpadded.
+/// (miDOUBLE, type 9), column-major, then for a complex variable (flag
+/// 0x0800 in the array flags) the imaginary part likewise. A compressed
+/// variable is a miCOMPRESSED element (type 15) holding the zlib stream of
+/// the whole miMATRIX element, unpadded.
 mod matw {
     pub const MI_INT8: u32 = 1;
     pub const MI_INT32: u32 = 5;
@@ -541,6 +542,7 @@ mod matw {
     pub const MI_MATRIX: u32 = 14;
     pub const MI_COMPRESSED: u32 = 15;
     pub const MX_DOUBLE_CLASS: u32 = 6;
+    pub const MX_COMPLEX_FLAG: u32 = 0x0800;
 
     pub fn header() -> Vec<u8> {
         let mut h = format!(
@@ -572,18 +574,29 @@ mod matw {
 
     /// A rows x cols double variable, `values` column-major.
     pub fn matrix(name: &str, rows: usize, cols: usize, values: &[f64]) -> Vec<u8> {
-        assert_eq!(values.len(), rows * cols);
+        array(name, &[rows, cols], values, None)
+    }
+
+    /// A double variable of any dimensions, `real` column-major; an `imag`
+    /// part makes it complex (the complex flag in the array flags, the
+    /// imaginary part after the real one).
+    pub fn array(name: &str, dims: &[usize], real: &[f64], imag: Option<&[f64]>) -> Vec<u8> {
+        assert_eq!(real.len(), dims.iter().product::<usize>());
+        let flags = MX_DOUBLE_CLASS | if imag.is_some() { MX_COMPLEX_FLAG } else { 0 };
         let mut body = element(
             MI_UINT32,
-            &[MX_DOUBLE_CLASS.to_le_bytes(), 0u32.to_le_bytes()].concat(),
+            &[flags.to_le_bytes(), 0u32.to_le_bytes()].concat(),
         );
-        body.extend(element(
-            MI_INT32,
-            &[(rows as i32).to_le_bytes(), (cols as i32).to_le_bytes()].concat(),
-        ));
+        let dims: Vec<u8> = dims
+            .iter()
+            .flat_map(|&d| (d as i32).to_le_bytes())
+            .collect();
+        body.extend(element(MI_INT32, &dims));
         body.extend(element(MI_INT8, name.as_bytes()));
-        let data: Vec<u8> = values.iter().flat_map(|v| v.to_le_bytes()).collect();
-        body.extend(element(MI_DOUBLE, &data));
+        for part in std::iter::once(real).chain(imag) {
+            let data: Vec<u8> = part.iter().flat_map(|v| v.to_le_bytes()).collect();
+            body.extend(element(MI_DOUBLE, &data));
+        }
         element(MI_MATRIX, &body)
     }
 
@@ -1143,4 +1156,276 @@ fn trim_keeps_the_excitation_and_half_a_second_around_it() {
     let flat = trim_to_excitation(&log_with_command(vec![0.25; 100], 1000.0), 0.05);
     assert_eq!(flat.n_rows, 100);
     assert_contains(&flat.warnings[0], &["mem.csv", "never departs"]);
+}
+
+// ------------------------------------------- format errors, word for word
+
+/// Asserts that reading `plan` fails with exactly `text` after the file's
+/// path: results.json carries these messages, so their wording is pinned.
+fn assert_refused(plan: &LogPlan, text: &str) {
+    assert_eq!(err(plan), format!("{}: {text}", plan.path.display()));
+}
+
+#[test]
+fn table_logs_have_no_rate_of_their_own() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = write_file(dir.path(), "log.csv", b"t,u,x,f\n0,1,2,3\n1,1,2,3\n");
+    let mut p = plan_by_name(&path, LogFormat::Csv);
+    p.channels.time = TimePlan::FromLog;
+    assert_refused(
+        &p,
+        "a CSV log has no sampling rate of its own; give channels.time.column or channels.time.sample_rate_hz",
+    );
+
+    let path = dir.path().join("log.parquet");
+    write_parquet(&path, &borrowed(&table(10))).unwrap();
+    let mut p = plan_by_name(&path, LogFormat::Parquet);
+    p.channels.time = TimePlan::FromLog;
+    assert_refused(
+        &p,
+        "a Parquet log has no sampling rate of its own; give channels.time.column or channels.time.sample_rate_hz",
+    );
+}
+
+#[test]
+fn csv_format_errors_word_for_word() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = write_file(dir.path(), "log.csv", b"t,u,x,u,f\n0,1,2,1,3\n1,1,2,1,3\n");
+    let mut p = plan_by_name(&path, LogFormat::Csv);
+    assert_refused(
+        &p,
+        "column `u` (command channel) appears 2 times in the header (fields 1, 3); rename one or address it by index",
+    );
+    p.csv.delimiter = ";;".into();
+    assert_refused(
+        &p,
+        "the CSV delimiter must be one ASCII character (got \";;\")",
+    );
+}
+
+#[test]
+fn daq_format_errors_word_for_word() {
+    let dir = tempfile::tempdir().unwrap();
+    let body = format!("{DAQ_HEAD}{}{}", daq_line(1, "0.1"), daq_line(2, "0.2"));
+    let bad_rate = body.replace("Sampling Rate:  1000", "Sampling Rate:  fast");
+    let path = write_file(dir.path(), "rate.txt", bad_rate.as_bytes());
+    assert_refused(
+        &daq_plan(&path),
+        "line 4: header `Sampling Rate` is \"fast\", not a positive number",
+    );
+    let bad_size = body.replace("Header Size:  7", "Header Size:  -7");
+    let path = write_file(dir.path(), "size.txt", bad_size.as_bytes());
+    assert_refused(
+        &daq_plan(&path),
+        "line 1: header `Header Size` is \"-7\", not a positive number",
+    );
+
+    let path = write_file(dir.path(), "ok.txt", body.as_bytes());
+    let mut p = daq_plan(&path);
+    p.channels.displacement.column = Column::Index(5);
+    assert_refused(
+        &p,
+        "column `Events` (index 5, displacement channel) holds text, not numbers",
+    );
+
+    let norate = body.replace("Sampling Interval:  0.001\r\nSampling Rate:  1000\r\n", "");
+    let path = write_file(dir.path(), "norate.txt", norate.as_bytes());
+    assert_refused(
+        &daq_plan(&path),
+        "no `Sampling Rate` or `Sampling Interval` in the header; give channels.time.sample_rate_hz",
+    );
+}
+
+#[test]
+fn mat_format_errors_word_for_word() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut v73 = b"MATLAB 7.3 MAT-file, Platform: GLNXA64".to_vec();
+    v73.resize(512, 0);
+    let path = write_file(dir.path(), "v73.mat", &v73);
+    assert_refused(
+        &mat_plan(&path),
+        "a MAT v7.3 file (HDF5) is not supported; save it with `save(..., '-v7')`",
+    );
+    let path = write_file(dir.path(), "text.mat", &[b'x'; 200]);
+    assert_refused(
+        &mat_plan(&path),
+        "not a level-5 MAT-file (no 128-byte header ending in the `IM`/`MI` endian mark)",
+    );
+
+    // Version 2 in the header: matfile refuses it.
+    let mut file = matw::header();
+    file[124..126].copy_from_slice(&0x0200u16.to_le_bytes());
+    file.extend(matw::matrix("u", 3, 1, &[1.0, 2.0, 3.0]));
+    let path = write_file(dir.path(), "version.mat", &file);
+    let e = matfile::MatFile::parse(&file[..]).unwrap_err();
+    assert_refused(
+        &mat_plan(&path),
+        &format!("not a readable level-5 MAT-file (matfile: {e})"),
+    );
+
+    // Cut inside the first tag, and inside the first element's data.
+    let mut file = matw::header();
+    file.extend([0u8; 4]);
+    let path = write_file(dir.path(), "tag.mat", &file);
+    assert_refused(
+        &mat_plan(&path),
+        "the MAT-file is cut short: the data element at byte 128 needs an 8-byte tag and data bytes but 4 remain",
+    );
+    let mut file = matw::header();
+    file.extend(matw::MI_MATRIX.to_le_bytes());
+    file.extend(100u32.to_le_bytes());
+    file.extend([0u8; 8]);
+    let path = write_file(dir.path(), "data.mat", &file);
+    assert_refused(
+        &mat_plan(&path),
+        "the MAT-file is cut short: the data element at byte 128 needs 108 bytes but 16 remain",
+    );
+
+    // Addressing: tables, vectors and the time base.
+    let path = write_file(dir.path(), "log.mat", &mat_file(false, 5));
+    assert_refused(
+        &mat_plan(&path),
+        "the force channel is column #2, but several variables are 2-D tables (`data`, `sim`); write it as \"variable:2\"",
+    );
+    let mut p = mat_plan(&path);
+    p.channels.force = None;
+    p.channels.command.column = name("data");
+    assert_refused(
+        &p,
+        "variable `data` (command channel) is 5x3, not a vector; address one of its channels as \"data:0\"",
+    );
+
+    let mut file = matw::header();
+    file.extend(matw::matrix("u", 3, 1, &[1.0, 2.0, 3.0]));
+    file.extend(matw::matrix("x", 1, 3, &[1.0, 2.0, 3.0]));
+    let path = write_file(dir.path(), "vectors.mat", &file);
+    let mut p = mat_plan(&path);
+    p.channels.displacement.column = Column::Index(1);
+    assert_refused(
+        &p,
+        "the displacement channel is column #1, but no variable is a 2-D table (variables: `u` (3x1), `x` (1x3)); name a vector variable instead",
+    );
+    p.channels.displacement.column = name("x");
+    p.channels.force = None;
+    assert_refused(
+        &p,
+        "no time base: no vector variable `t` or `time` (variables: `u` (3x1), `x` (1x3)); give channels.time.column or sample_rate_hz",
+    );
+
+    let mut file = matw::header();
+    file.extend(matw::matrix("t", 4, 1, &[0.0, 1.0, 2.0, 3.0]));
+    file.extend(matw::matrix("u", 3, 1, &[1.0, 2.0, 3.0]));
+    file.extend(matw::matrix("data", 2, 2, &[1.0, 2.0, 3.0, 4.0]));
+    file.extend(matw::array("cube", &[2, 2, 2], &[0.0; 8], None));
+    file.extend(matw::array("z", &[3, 1], &[1.0; 3], Some(&[0.5; 3])));
+    let path = write_file(dir.path(), "short.mat", &file);
+    let mut p = mat_plan(&path);
+    p.channels.force = None;
+    assert_refused(
+        &p,
+        "the channels differ in length: time 4, command 3, displacement 2",
+    );
+    p.channels.time = TimePlan::SampleRate { hz: 10.0 };
+    assert_refused(
+        &p,
+        "the channels differ in length: command 3, displacement 2",
+    );
+    p.channels.displacement.column = name("cube:0");
+    assert_refused(
+        &p,
+        "variable `cube` (displacement channel) is 2x2x2, not a 2-D table",
+    );
+    p.channels.displacement.column = name("z");
+    assert_refused(
+        &p,
+        "variable `z` (displacement channel) is complex; a log channel must be real",
+    );
+}
+
+#[test]
+fn parquet_format_errors_word_for_word() {
+    use polars::prelude::{DataFrame, DataType, ParquetReader, ParquetWriter, SerReader};
+
+    let dir = tempfile::tempdir().unwrap();
+    let junk = b"PAR1 but not a Parquet file".to_vec();
+    let path = write_file(dir.path(), "junk.parquet", &junk);
+    let e = ParquetReader::new(std::io::Cursor::new(&junk))
+        .schema()
+        .unwrap_err();
+    assert_refused(
+        &plan_by_name(&path, LogFormat::Parquet),
+        &format!("not a readable Parquet file: {e}"),
+    );
+
+    // A readable schema, but the first page header (right after the magic
+    // `PAR1`) is corrupt.
+    let path = dir.path().join("pages.parquet");
+    write_parquet(&path, &borrowed(&table(50))).unwrap();
+    let mut bytes = std::fs::read(&path).unwrap();
+    bytes[4] = 0xff;
+    std::fs::write(&path, &bytes).unwrap();
+    let e = ParquetReader::new(std::io::Cursor::new(&bytes))
+        .with_projection(Some(vec![0, 1, 2, 3]))
+        .finish()
+        .unwrap_err();
+    assert_refused(
+        &plan_by_name(&path, LogFormat::Parquet),
+        &format!("polars cannot read it as Parquet: {e}"),
+    );
+
+    let cols = vec![
+        polars::prelude::Column::new("t".into(), &[0.0, 1.0]),
+        polars::prelude::Column::new("u".into(), &["a", "b"]),
+        polars::prelude::Column::new("x".into(), &[2.0, 2.0]),
+    ];
+    let mut df = DataFrame::new(2, cols).unwrap();
+    let mut bytes = Vec::new();
+    ParquetWriter::new(&mut bytes).finish(&mut df).unwrap();
+    let path = write_file(dir.path(), "text.parquet", &bytes);
+    let mut p = plan_by_name(&path, LogFormat::Parquet);
+    p.channels.force = None;
+    assert_refused(
+        &p,
+        &format!(
+            "column `u` (command channel) holds {}, not numbers",
+            DataType::String
+        ),
+    );
+}
+
+#[test]
+fn format_errors_keep_their_causes_typed() {
+    // Causes no crafted file reaches: polars losing a column it has just
+    // read, or failing to cast a numeric column to f64.
+    let polars = || PolarsError::ComputeError("no such luck".into());
+    let lost = FormatProblem::ColumnLost {
+        column: "u".into(),
+        source: polars(),
+    };
+    assert_eq!(
+        lost.to_string(),
+        format!("column `u` lost in reading: {}", polars())
+    );
+    let cast = FormatProblem::NotF64 {
+        column: "u".into(),
+        source: polars(),
+    };
+    assert_eq!(
+        cast.to_string(),
+        format!("column `u` cannot become f64: {}", polars())
+    );
+
+    // A foreign error is the problem's source, and the problem the error's.
+    let dir = tempfile::tempdir().unwrap();
+    let mut file = matw::header();
+    file[124..126].copy_from_slice(&0x0200u16.to_le_bytes());
+    file.extend(matw::matrix("u", 3, 1, &[1.0, 2.0, 3.0]));
+    let path = write_file(dir.path(), "version.mat", &file);
+    let e = read_log(&mat_plan(&path)).unwrap_err();
+    let problem = std::error::Error::source(&e)
+        .and_then(|s| s.downcast_ref::<FormatProblem>())
+        .expect("the problem is the source");
+    assert!(matches!(problem, FormatProblem::MatUnreadable { .. }));
+    let cause = std::error::Error::source(problem).expect("matfile's error is kept");
+    assert!(cause.is::<matfile::Error>());
 }

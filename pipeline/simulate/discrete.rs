@@ -157,22 +157,20 @@ pub fn simulate_linear(
     let n = ss.order();
     let outputs = ss.c.nrows();
     if ss.a.ncols() != n || ss.b.len() != n || ss.c.ncols() != n || ss.d.len() != outputs {
-        return Err(SimError::Dimensions(format!(
-            "A is {}x{}, B has {} rows, C is {}x{}, D has {} rows",
-            ss.a.nrows(),
-            ss.a.ncols(),
-            ss.b.len(),
-            ss.c.nrows(),
-            ss.c.ncols(),
-            ss.d.len()
-        )));
+        return Err(SimError::Dimensions {
+            a_rows: ss.a.nrows(),
+            a_cols: ss.a.ncols(),
+            b_rows: ss.b.len(),
+            c_rows: ss.c.nrows(),
+            c_cols: ss.c.ncols(),
+            d_rows: ss.d.len(),
+        });
     }
     if output_delay_s.len() != outputs {
-        return Err(SimError::Dimensions(format!(
-            "{} output delay(s) for {} output(s)",
-            output_delay_s.len(),
-            outputs
-        )));
+        return Err(SimError::OutputDelays {
+            delays: output_delay_s.len(),
+            outputs,
+        });
     }
     super::require_positive("linear simulation", "dt_s", dt_s)?;
     for &delay in output_delay_s {
@@ -617,6 +615,13 @@ mod tests {
         assert_eq!(
             e.to_string(),
             "state-space dimensions disagree: 2 output delay(s) for 1 output(s)"
+        );
+        let mut wide = ss.clone();
+        wide.d = DVector::zeros(2);
+        let e = simulate_linear(&wide, &[0.0], 0.5, &[0.0]).unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "state-space dimensions disagree: A is 1x1, B has 1 rows, C is 1x1, D has 2 rows"
         );
         let e = simulate_linear(&ss, &[0.0], 0.0, &[0.0]).unwrap_err();
         assert_eq!(

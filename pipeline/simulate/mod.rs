@@ -67,9 +67,23 @@ pub enum SimError {
     /// A command sample is NaN or infinite.
     #[error("command sample {index} (t = {t_s} s) is not finite ({value})")]
     NonFiniteCommand { index: usize, t_s: f64, value: f64 },
-    /// The state space handed to the linear simulator is inconsistent.
-    #[error("state-space dimensions disagree: {0}")]
-    Dimensions(String),
+    /// The state space handed to the linear simulator is inconsistent: A
+    /// is not n x n, or B, C and D do not fit it.
+    #[error(
+        "state-space dimensions disagree: A is {a_rows}x{a_cols}, B has {b_rows} rows, C is {c_rows}x{c_cols}, D has {d_rows} rows"
+    )]
+    Dimensions {
+        a_rows: usize,
+        a_cols: usize,
+        b_rows: usize,
+        c_rows: usize,
+        c_cols: usize,
+        d_rows: usize,
+    },
+    /// The linear simulator needs one output delay per output (row of C)
+    /// and was given another number.
+    #[error("state-space dimensions disagree: {delays} output delay(s) for {outputs} output(s)")]
+    OutputDelays { delays: usize, outputs: usize },
     /// The numerical integration of a nonlinear plant failed.
     #[error("integration failed: {0}")]
     Ode(#[from] OdeError),
