@@ -31,7 +31,7 @@
 use std::path::Path;
 
 use super::plan::{Column, LogPlan, TimePlan};
-use super::{At, FormatProblem, IngestError, Raw, RawTime, list, wanted};
+use super::{At, FormatProblem, IngestError, Raw, RawTime, Wanted, list, wanted};
 
 /// Header values used (others are ignored).
 #[derive(Default)]
@@ -56,8 +56,113 @@ pub(super) fn read<'a>(
         pos: 0,
         no: 0,
     };
+    let (header, names) = read_header(path, &mut lines)?;
+    let names_line = lines.no;
+    let display = || path.display();
+    let mut warnings = Vec::new();
+    if let Some(size) = header.header_size
+        && size != names_line
+    {
+        warnings.push(format!(
+            "{}: the header says `Header Size: {size}` but the column names are on line {names_line}",
+            display()
+        ));
+    }
+    let want = wanted(plan);
+    let index = resolve_columns(path, &want, &names, names_line)?;
+    let check_samples = names
+        .first()
+        .is_some_and(|n| n.eq_ignore_ascii_case("Sample Number"));
+    let data = read_rows(path, &mut lines, &want, &index, &names, check_samples)?;
+    if data.rows == 0 {
+        return Err(IngestError::HeaderOnly {
+            path: path.to_path_buf(),
+            what: format!("nothing after the column names on line {names_line}"),
+        });
+    }
+    if let Some(count) = header.sample_count
+        && count != data.rows
+    {
+        warnings.push(format!(
+            "{}: the header says `Sample Count: {count}` but the file has {} data lines{}",
+            display(),
+            data.rows,
+            if data.rows < count {
+                " (truncated?)"
+            } else {
+                ""
+            }
+        ));
+    }
 
-    // Header block, up to the column-name line.
+    // Time base.
+    let header_hz = match (header.rate_hz, header.interval_s) {
+        (Some(hz), Some(dt)) => {
+            if ((hz * dt) - 1.0).abs() > 1e-9 {
+                warnings.push(format!(
+                    "{}: the header's `Sampling Rate: {hz}` and `Sampling Interval: {dt}` disagree; the rate is used",
+                    display()
+                ));
+            }
+            Some(hz)
+        }
+        (Some(hz), None) => Some(hz),
+        (None, Some(dt)) => Some(1.0 / dt),
+        (None, None) => None,
+    };
+    let mut it = data.columns.into_iter();
+    let time = match &plan.channels.time {
+        TimePlan::Column { column, to_s } => RawTime::Column {
+            raw: it.next().expect("time wanted"),
+            to_s: *to_s,
+            column: column.to_string(),
+        },
+        TimePlan::SampleRate { hz } => {
+            if let Some(h) = header_hz
+                && ((h - hz) / hz).abs() > 1e-9
+            {
+                warnings.push(format!(
+                    "{}: the manifest's sampling rate {hz} Hz overrides the header's {h} Hz",
+                    display()
+                ));
+            }
+            RawTime::Rate {
+                hz: *hz,
+                from: "manifest",
+            }
+        }
+        TimePlan::FromLog => RawTime::Rate {
+            hz: header_hz.ok_or_else(|| IngestError::format(path, FormatProblem::NoHeaderRate))?,
+            from: "DAQ header",
+        },
+    };
+    let command = it.next().expect("command wanted");
+    let displacement = it.next().expect("displacement wanted");
+    let force = it.next();
+    let (first_line, blanks) = (data.first_line, data.blanks);
+    let locate = Box::new(move |i: usize| {
+        let skipped: usize = blanks
+            .iter()
+            .take_while(|(r, _)| *r <= i)
+            .map(|(_, k)| k)
+            .sum();
+        At::Line(first_line + i + skipped)
+    });
+    Ok(Raw {
+        time,
+        command,
+        displacement,
+        force,
+        locate,
+        warnings,
+    })
+}
+
+/// The header block, up to the column-name line, and the column names.
+fn read_header<'a>(
+    path: &Path,
+    lines: &mut Lines<'a>,
+) -> Result<(Header, Vec<&'a str>), IngestError> {
     let mut header = Header::default();
     let names: Vec<&str> = loop {
         let Some(line) = lines.next() else {
@@ -107,22 +212,18 @@ pub(super) fn read<'a>(
             _ => {}
         }
     };
-    let names_line = lines.no;
-    let display = || path.display();
-    let mut warnings = Vec::new();
-    if let Some(size) = header.header_size
-        && size != names_line
-    {
-        warnings.push(format!(
-            "{}: the header says `Header Size: {size}` but the column names are on line {names_line}",
-            display()
-        ));
-    }
+    Ok((header, names))
+}
 
-    // Resolve the wanted columns to field indices.
-    let want = wanted(plan);
+/// The field index of each wanted column; text columns cannot be channels.
+fn resolve_columns(
+    path: &Path,
+    want: &[Wanted<'_>],
+    names: &[&str],
+    names_line: usize,
+) -> Result<Vec<usize>, IngestError> {
     let mut index = Vec::with_capacity(want.len());
-    for w in &want {
+    for w in want {
         let found = match w.column {
             Column::Name(n) => names.iter().position(|c| c == n),
             Column::Index(i) => (*i < names.len()).then_some(*i),
@@ -152,20 +253,38 @@ pub(super) fn read<'a>(
         }
         index.push(i);
     }
-    let check_samples = names
-        .first()
-        .is_some_and(|n| n.eq_ignore_ascii_case("Sample Number"));
-    let last_field = index.iter().copied().max().unwrap_or(0);
+    Ok(index)
+}
 
-    // Data lines.
-    let expect_rows = bytes.len() / 64;
+/// The data lines: the wanted columns' values, with where blank lines
+/// fell (for naming a sample's line later).
+struct Rows {
+    columns: Vec<Vec<f64>>,
+    rows: usize,
+    /// Line number of the first data line.
+    first_line: usize,
+    /// (rows read before it, blank lines skipped) for blank lines among data.
+    blanks: Vec<(usize, usize)>,
+}
+
+/// Read the data lines: each wanted field a number, sample numbers (when
+/// the first column holds them) consecutive.
+fn read_rows(
+    path: &Path,
+    lines: &mut Lines<'_>,
+    want: &[Wanted<'_>],
+    index: &[usize],
+    names: &[&str],
+    check_samples: bool,
+) -> Result<Rows, IngestError> {
+    let last_field = index.iter().copied().max().unwrap_or(0);
+    let expect_rows = lines.bytes.len() / 64;
     let mut columns: Vec<Vec<f64>> = want
         .iter()
         .map(|_| Vec::with_capacity(expect_rows))
         .collect();
     let mut fields: Vec<&[u8]> = Vec::with_capacity(last_field + 2);
     let mut first_line = 0;
-    // (rows read before it, blank lines skipped) for blank lines among data.
     let mut blanks: Vec<(usize, usize)> = Vec::new();
     let mut prev_sample: Option<u64> = None;
     let mut rows = 0usize;
@@ -206,7 +325,7 @@ pub(super) fn read<'a>(
             }
             prev_sample = Some(n);
         }
-        for ((w, &i), col) in want.iter().zip(&index).zip(&mut columns) {
+        for ((w, &i), col) in want.iter().zip(index).zip(&mut columns) {
             let Some(field) = fields.get(i) else {
                 return Err(IngestError::MissingValue {
                     path: path.to_path_buf(),
@@ -241,81 +360,11 @@ pub(super) fn read<'a>(
         }
         rows += 1;
     }
-    if rows == 0 {
-        return Err(IngestError::HeaderOnly {
-            path: path.to_path_buf(),
-            what: format!("nothing after the column names on line {names_line}"),
-        });
-    }
-    if let Some(count) = header.sample_count
-        && count != rows
-    {
-        warnings.push(format!(
-            "{}: the header says `Sample Count: {count}` but the file has {rows} data lines{}",
-            display(),
-            if rows < count { " (truncated?)" } else { "" }
-        ));
-    }
-
-    // Time base.
-    let header_hz = match (header.rate_hz, header.interval_s) {
-        (Some(hz), Some(dt)) => {
-            if ((hz * dt) - 1.0).abs() > 1e-9 {
-                warnings.push(format!(
-                    "{}: the header's `Sampling Rate: {hz}` and `Sampling Interval: {dt}` disagree; the rate is used",
-                    display()
-                ));
-            }
-            Some(hz)
-        }
-        (Some(hz), None) => Some(hz),
-        (None, Some(dt)) => Some(1.0 / dt),
-        (None, None) => None,
-    };
-    let mut it = columns.into_iter();
-    let time = match &plan.channels.time {
-        TimePlan::Column { column, to_s } => RawTime::Column {
-            raw: it.next().expect("time wanted"),
-            to_s: *to_s,
-            column: column.to_string(),
-        },
-        TimePlan::SampleRate { hz } => {
-            if let Some(h) = header_hz
-                && ((h - hz) / hz).abs() > 1e-9
-            {
-                warnings.push(format!(
-                    "{}: the manifest's sampling rate {hz} Hz overrides the header's {h} Hz",
-                    display()
-                ));
-            }
-            RawTime::Rate {
-                hz: *hz,
-                from: "manifest",
-            }
-        }
-        TimePlan::FromLog => RawTime::Rate {
-            hz: header_hz.ok_or_else(|| IngestError::format(path, FormatProblem::NoHeaderRate))?,
-            from: "DAQ header",
-        },
-    };
-    let command = it.next().expect("command wanted");
-    let displacement = it.next().expect("displacement wanted");
-    let force = it.next();
-    let locate = Box::new(move |i: usize| {
-        let skipped: usize = blanks
-            .iter()
-            .take_while(|(r, _)| *r <= i)
-            .map(|(_, k)| k)
-            .sum();
-        At::Line(first_line + i + skipped)
-    });
-    Ok(Raw {
-        time,
-        command,
-        displacement,
-        force,
-        locate,
-        warnings,
+    Ok(Rows {
+        columns,
+        rows,
+        first_line,
+        blanks,
     })
 }
 

@@ -21,7 +21,9 @@ use std::path::Path;
 use matfile::{Array, MatFile, NumericData};
 
 use super::plan::{Column, LogPlan, TimePlan};
-use super::{At, FormatProblem, IngestError, MatVariable, Raw, RawTime, dims, list, wanted};
+use super::{
+    At, FormatProblem, IngestError, MatVariable, Raw, RawTime, Wanted, dims, list, wanted,
+};
 
 /// Length of the level-5 header: 116 bytes of text, 8 of subsystem offset,
 /// version (2) and endian indicator (2).
@@ -56,61 +58,7 @@ pub(super) fn read<'a>(
             what: "no numeric variables".into(),
         });
     }
-    let variables = || {
-        mat.arrays()
-            .iter()
-            .map(|a| MatVariable {
-                name: a.name().to_string(),
-                size: a.size().clone(),
-            })
-            .collect::<Vec<_>>()
-    };
-
-    let want = wanted(plan);
-    let mut columns = Vec::with_capacity(want.len());
-    for w in &want {
-        let missing = || IngestError::MissingColumn {
-            path: path.to_path_buf(),
-            channel: w.channel,
-            column: w.column.to_string(),
-            available: format!("variables: {}", list(variables())),
-        };
-        let v = match w.column {
-            Column::Name(n) => match mat.find_by_name(n) {
-                Some(a) => vector(path, a, w.channel)?,
-                None => {
-                    let (var, ch) = n
-                        .rsplit_once(':')
-                        .and_then(|(v, c)| Some((v, c.trim().parse::<usize>().ok()?)))
-                        .ok_or_else(missing)?;
-                    let a = mat.find_by_name(var).ok_or_else(missing)?;
-                    channel(path, a, ch, w.channel)?
-                }
-            },
-            Column::Index(i) => {
-                let tables: Vec<&Array> = mat.arrays().iter().filter(|a| !is_vector(a)).collect();
-                match tables.as_slice() {
-                    [a] => channel(path, a, *i, w.channel)?,
-                    [] => {
-                        return Err(format(FormatProblem::NoTable {
-                            channel: w.channel,
-                            index: *i,
-                            variables: variables(),
-                        }));
-                    }
-                    _ => {
-                        return Err(format(FormatProblem::SeveralTables {
-                            channel: w.channel,
-                            index: *i,
-                            tables: tables.iter().map(|a| a.name().to_string()).collect(),
-                        }));
-                    }
-                }
-            }
-        };
-        columns.push((w.channel, v));
-    }
-
+    let columns = wanted_columns(path, &mat, &wanted(plan))?;
     let mut it = columns.into_iter();
     let time = match &plan.channels.time {
         TimePlan::Column { column, to_s } => RawTime::Column {
@@ -128,7 +76,7 @@ pub(super) fn read<'a>(
                 .or_else(|| mat.find_by_name("time"))
                 .ok_or_else(|| {
                     format(FormatProblem::NoTimeBase {
-                        variables: variables(),
+                        variables: variables(&mat),
                     })
                 })?;
             RawTime::Column {
@@ -158,6 +106,71 @@ pub(super) fn read<'a>(
         locate: Box::new(|i| At::Element(i + 1)),
         warnings: Vec::new(),
     })
+}
+
+/// Each wanted column's values: a vector variable by name, one column of
+/// a 2-D variable as `name:index`, or by index the one 2-D table's column.
+fn wanted_columns(
+    path: &Path,
+    mat: &MatFile,
+    want: &[Wanted<'_>],
+) -> Result<Vec<(&'static str, Vec<f64>)>, IngestError> {
+    let format = |problem| IngestError::format(path, problem);
+    let mut columns = Vec::with_capacity(want.len());
+    for w in want {
+        let missing = || IngestError::MissingColumn {
+            path: path.to_path_buf(),
+            channel: w.channel,
+            column: w.column.to_string(),
+            available: format!("variables: {}", list(variables(mat))),
+        };
+        let v = match w.column {
+            Column::Name(n) => match mat.find_by_name(n) {
+                Some(a) => vector(path, a, w.channel)?,
+                None => {
+                    let (var, ch) = n
+                        .rsplit_once(':')
+                        .and_then(|(v, c)| Some((v, c.trim().parse::<usize>().ok()?)))
+                        .ok_or_else(missing)?;
+                    let a = mat.find_by_name(var).ok_or_else(missing)?;
+                    channel(path, a, ch, w.channel)?
+                }
+            },
+            Column::Index(i) => {
+                let tables: Vec<&Array> = mat.arrays().iter().filter(|a| !is_vector(a)).collect();
+                match tables.as_slice() {
+                    [a] => channel(path, a, *i, w.channel)?,
+                    [] => {
+                        return Err(format(FormatProblem::NoTable {
+                            channel: w.channel,
+                            index: *i,
+                            variables: variables(mat),
+                        }));
+                    }
+                    _ => {
+                        return Err(format(FormatProblem::SeveralTables {
+                            channel: w.channel,
+                            index: *i,
+                            tables: tables.iter().map(|a| a.name().to_string()).collect(),
+                        }));
+                    }
+                }
+            }
+        };
+        columns.push((w.channel, v));
+    }
+    Ok(columns)
+}
+
+/// The file's variables, for messages.
+fn variables(mat: &MatFile) -> Vec<MatVariable> {
+    mat.arrays()
+        .iter()
+        .map(|a| MatVariable {
+            name: a.name().to_string(),
+            size: a.size().clone(),
+        })
+        .collect()
 }
 
 /// Walk the top-level elements' tags (type, byte count) and refuse a file
