@@ -99,7 +99,13 @@ pub(crate) fn box_size(font: &FontRef<'static>, size_px: f64, text: &str) -> (i3
         }
         prev = Some(id);
     }
-    (width as i32, (size_px / 1.24) as i32)
+    (width as i32, line_height(size_px))
+}
+
+/// Height of the layout box of one line of text at `size_px`, as plotters
+/// reckons it.
+pub(crate) fn line_height(size_px: f64) -> i32 {
+    (size_px / 1.24) as i32
 }
 
 /// Where plotters asked for a text to go.
