@@ -2,7 +2,9 @@
 //! response functions (the paper's Figs. 8, 11, 13, 15-17), grids of
 //! measured-versus-simulated time windows (Figs. 9, 12, 14, 19-22) and
 //! generic x-y lines (residuals, sensitivity curves). Each figure renders to
-//! PNG bytes and an SVG string showing the same drawing.
+//! PNG bytes and an SVG string showing the same drawing: plotters lays the
+//! chart out once into a list of primitives (`canvas`), which `svg` writes
+//! and `raster` draws with tiny-skia for the PNG (`encode`).
 //!
 //! Text uses DejaVu Sans compiled into the binary: the PNG rasterises it and
 //! the SVG holds the glyph outlines as paths (no `<text>`), so a figure looks
@@ -15,6 +17,7 @@
 mod canvas;
 mod chart;
 mod decimate;
+mod encode;
 mod raster;
 mod svg;
 #[cfg(test)]
@@ -640,23 +643,24 @@ fn render_sheet(
     m: &Metrics,
 ) -> Result<Rendered, FigureError> {
     text::ensure_registered()?;
-    let draw_err = |e: chart::DrawError| FigureError::Draw {
+    let draw_err = |message: String| FigureError::Draw {
         figure: name.to_string(),
-        message: e.to_string(),
+        message,
     };
     let mut ops = Vec::new();
     {
         let root = Recorder::new(&mut ops, size).into_drawing_area();
-        chart::draw_sheet(&root, &mut sheet, m).map_err(draw_err)?;
-        root.present().map_err(draw_err)?;
+        chart::draw_sheet(&root, &mut sheet, m).map_err(|e| draw_err(e.to_string()))?;
+        root.present().map_err(|e| draw_err(e.to_string()))?;
     }
-    let (png, svg) = rayon::join(
-        || raster::render(&ops, size),
-        || svg::write(&ops, size, &sheet.title),
-    );
-    let png = png.map_err(|e| FigureError::Png {
-        figure: name.to_string(),
-        message: e.to_string(),
-    })?;
-    Ok(Rendered { png, svg })
+    let png = || {
+        let rgb = raster::rgb(&ops, size)
+            .ok_or_else(|| draw_err("tiny-skia could not allocate the canvas".into()))?;
+        encode::rgb_png(&rgb, size).map_err(|e| FigureError::Png {
+            figure: name.to_string(),
+            message: e.to_string(),
+        })
+    };
+    let (png, svg) = rayon::join(png, || svg::write(&ops, size, &sheet.title));
+    Ok(Rendered { png: png?, svg })
 }

@@ -1,6 +1,6 @@
-//! Figure-level tests: the files decode, text is really drawn, data land
-//! where the axes say, bytes repeat, and degenerate inputs behave as
-//! documented.
+//! Figure-level tests: the files decode, the PNG and the SVG show the same
+//! picture, text is really drawn, data land where the axes say, bytes
+//! repeat, and degenerate inputs behave as documented.
 
 use std::sync::Arc;
 
@@ -114,11 +114,11 @@ fn lines_fig(title: &str) -> LinesFigure {
 
 // ------------------------------------------------------------- readers
 
-/// Decoded PNG: (width, height, RGB bytes).
+/// Decoded 8-bit RGB PNG: (width, height, RGB bytes).
 fn decode_png(bytes: &[u8]) -> (u32, u32, Vec<u8>) {
-    let decoder = png::Decoder::new(bytes);
+    let decoder = png::Decoder::new(std::io::Cursor::new(bytes));
     let mut reader = decoder.read_info().expect("PNG header");
-    let mut buf = vec![0; reader.output_buffer_size()];
+    let mut buf = vec![0; reader.output_buffer_size().expect("PNG size")];
     let info = reader.next_frame(&mut buf).expect("PNG data");
     assert_eq!(info.color_type, png::ColorType::Rgb);
     assert_eq!(info.bit_depth, png::BitDepth::Eight);
@@ -703,4 +703,89 @@ fn log_axes_draw() {
     assert!(labels.contains(&"1e6".to_string()));
     // Bluish green (#009E73) from palette slot 2.
     assert!(!strokes_of(&doc, "#009e73").is_empty());
+}
+
+// ------------------------------------------------------ PNG against SVG
+
+/// Per-channel absolute differences of two RGB images: (mean, share of
+/// pixels where some channel differs by more than `far`).
+fn difference(a: &[u8], b: &[u8], far: u8) -> (f64, f64) {
+    assert_eq!(a.len(), b.len());
+    let total: u64 = a
+        .iter()
+        .zip(b)
+        .map(|(x, y)| u64::from(x.abs_diff(*y)))
+        .sum();
+    let far_px = a
+        .chunks(3)
+        .zip(b.chunks(3))
+        .filter(|(p, q)| p.iter().zip(*q).any(|(x, y)| x.abs_diff(*y) > far))
+        .count();
+    (
+        total as f64 / a.len() as f64,
+        far_px as f64 / (a.len() / 3) as f64,
+    )
+}
+
+/// `svg` drawn on white by resvg, an SVG renderer that shares nothing with
+/// `svg.rs` or `raster.rs` but the rasteriser underneath: it parses the
+/// document and builds its own geometry from the path data, circles and
+/// rectangles written there.
+fn resvg_rgb(svg: &str, size: (u32, u32)) -> Vec<u8> {
+    use resvg::tiny_skia::{Color, Pixmap, Transform};
+    let tree = resvg::usvg::Tree::from_str(svg, &resvg::usvg::Options::default())
+        .expect("resvg parses the SVG");
+    let mut pixmap = Pixmap::new(size.0, size.1).unwrap();
+    pixmap.fill(Color::WHITE);
+    resvg::render(&tree, Transform::identity(), &mut pixmap.as_mut());
+    pixmap
+        .data()
+        .chunks_exact(4)
+        .flat_map(|p| [p[0], p[1], p[2]])
+        .collect()
+}
+
+#[test]
+fn png_and_svg_are_the_same_picture() {
+    let mut kinds = all_kinds();
+    let single = LinesFigure {
+        series: vec![XySeries {
+            label: "one".into(),
+            x: vec![2.0],
+            y: vec![5.0],
+            trace: Trace::Measured,
+            palette_index: None,
+        }],
+        ..lines_fig("Single point")
+    };
+    kinds.push((Figure::Lines(single), FULL_WIDTH));
+    // Dotted references: dots one pixel long, some of them a single point.
+    let mut dotted = lines_fig("Dotted");
+    dotted.series[0].trace = Trace::Reference;
+    kinds.push((Figure::Lines(dotted), FULL_WIDTH));
+    for (fig, size) in kinds {
+        let r = render(&fig, size).unwrap();
+        let (_, _, png) = decode_png(&r.png);
+        let svg = resvg_rgb(&r.svg, size);
+        // Both are anti-aliased renderings of the same geometry, so they
+        // differ only where rounding of coverage does: a tenth of a level on
+        // average, no pixel by more than a quarter of the range.
+        let (mean, far) = difference(&png, &svg, 64);
+        assert!(mean < 0.1, "mean difference {mean}");
+        assert_eq!(far, 0.0, "pixels differ by more than 64 levels");
+        // And the ink lands in the same places: of the pixels dark in
+        // either picture (a quarter of the way to black), 99.5 % are dark
+        // in both.
+        let ink = |px: &[u8]| -> Vec<bool> {
+            px.chunks(3)
+                .map(|p| p.iter().map(|&v| u32::from(v)).sum::<u32>() < 3 * 192)
+                .collect()
+        };
+        let (a, b) = (ink(&png), ink(&svg));
+        let both = a.iter().zip(&b).filter(|(x, y)| **x && **y).count();
+        let either = a.iter().zip(&b).filter(|(x, y)| **x || **y).count();
+        let overlap = both as f64 / either as f64;
+        assert!(either > 5000, "only {either} dark pixels");
+        assert!(overlap > 0.995, "ink overlap {overlap}");
+    }
 }
