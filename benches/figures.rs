@@ -1,11 +1,12 @@
 //! Rendering cost of a seven-run campaign's figures (paper Figs. 8-22 plus
 //! residuals): 3 identification Bode figures with coherence, 1 overlay of the
 //! 3 identification runs, 4 command-to-force FRFs, 7 four-window time figures
-//! and 7 residual figures from 348,160-sample records, each as PNG and SVG,
-//! rendered in parallel with rayon.
+//! and 7 residual figures from 348,160-sample records, rendered in parallel
+//! with rayon: as PNG and SVG, and as PNG, SVG and the page's preview.
 //!
-//! `cargo bench --bench figures`. With SERVOID_FIGURE_EXAMPLES=<dir> one PNG
-//! and SVG of each kind is also written there (outside the timed loop).
+//! `cargo bench --bench figures`. With SERVOID_FIGURE_EXAMPLES=<dir> the PNG,
+//! SVG and preview of one figure of each kind are also written there
+//! (outside the timed loop).
 
 use std::f64::consts::PI;
 use std::hint::black_box;
@@ -15,8 +16,8 @@ use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use nalgebra::Complex;
 use servoid::model::{LinearSpecimen, PAPER_RIG, tf_f_u, tf_x1_u};
 use servoid::report::figures::{
-    BodeFigure, BodeSeries, FULL_WIDTH, Figure, LinesFigure, PanelsFigure, TimePanel, TimeSeries,
-    Trace, XySeries, render_many,
+    BodeFigure, BodeSeries, FULL_WIDTH, Figure, Formats, LinesFigure, PanelsFigure, TimePanel,
+    TimeSeries, Trace, XySeries, render_many,
 };
 
 const FS_HZ: f64 = 2000.0;
@@ -315,10 +316,17 @@ fn save_examples(figs: &[(Figure, (u32, u32))], dir: &str) {
     ];
     std::fs::create_dir_all(dir).expect("create the examples directory");
     let picked: Vec<(Figure, (u32, u32))> = wanted.iter().map(|&(i, _)| figs[i].clone()).collect();
-    for (r, &(_, name)) in render_many(&picked).into_iter().zip(&wanted) {
+    let all = Formats {
+        png: true,
+        svg: true,
+        preview: true,
+    };
+    for (r, &(_, name)) in render_many(&picked, all).into_iter().zip(&wanted) {
         let r = r.expect("example figure renders");
-        std::fs::write(format!("{dir}/{name}.png"), &r.png).expect("write PNG");
-        std::fs::write(format!("{dir}/{name}.svg"), &r.svg).expect("write SVG");
+        let (png, svg, preview) = (r.png.unwrap(), r.svg.unwrap(), r.preview.unwrap());
+        std::fs::write(format!("{dir}/{name}.png"), png).expect("write PNG");
+        std::fs::write(format!("{dir}/{name}.svg"), svg).expect("write SVG");
+        std::fs::write(format!("{dir}/{name}.preview.png"), preview).expect("write preview");
     }
 }
 
@@ -331,13 +339,23 @@ fn bench(c: &mut Criterion) {
     let mut g = c.benchmark_group("figures");
     g.sample_size(10);
     g.throughput(Throughput::Elements(figs.len() as u64));
-    g.bench_function("campaign_7_runs_22_figures_png_svg", |b| {
-        b.iter(|| {
-            let out = render_many(black_box(&figs));
-            assert!(out.iter().all(Result::is_ok));
-            out
-        })
-    });
+    for (id, preview) in [
+        ("campaign_7_runs_22_figures_png_svg", false),
+        ("campaign_7_runs_22_figures_png_svg_preview", true),
+    ] {
+        let formats = Formats {
+            png: true,
+            svg: true,
+            preview,
+        };
+        g.bench_function(id, |b| {
+            b.iter(|| {
+                let out = render_many(black_box(&figs), formats);
+                assert!(out.iter().all(Result::is_ok));
+                out
+            })
+        });
+    }
     g.finish();
 }
 

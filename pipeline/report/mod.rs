@@ -56,14 +56,14 @@ pub enum FigureFormats {
 
 impl FigureFormats {
     /// What to render, or None when nothing is drawn.
-    fn formats(self) -> Option<shim::Formats> {
+    fn formats(self) -> Option<figures::Formats> {
         let (png, svg) = match self {
             FigureFormats::All => (true, true),
             FigureFormats::Png => (true, false),
             FigureFormats::Svg => (false, true),
             FigureFormats::None => return None,
         };
-        Some(shim::Formats {
+        Some(figures::Formats {
             png,
             svg,
             preview: png,
@@ -93,7 +93,7 @@ pub fn write_figures(
     };
     let jobs: Vec<(figures::Figure, (u32, u32))> =
         specs.iter().map(|s| (s.figure.clone(), s.size)).collect();
-    let rendered = shim::render_many(&jobs, formats);
+    let rendered = figures::render_many(&jobs, formats);
     let mut page = Vec::new();
     let mut warnings = Vec::new();
     for (spec, r) in specs.iter().zip(rendered) {
@@ -178,35 +178,4 @@ pub fn write_results(results: &Results, out_dir: &Path) -> Result<PathBuf, Write
     let path = out_dir.join("results.json");
     write_atomic(&path, &json_bytes(results))?;
     Ok(path)
-}
-
-// TEMPORARY until the figures API lands.
-mod shim {
-    use super::figures;
-    #[derive(Clone, Copy)]
-    pub struct Formats {
-        pub png: bool,
-        pub svg: bool,
-        pub preview: bool,
-    }
-    pub struct Rendered {
-        pub png: Option<Vec<u8>>,
-        pub svg: Option<String>,
-        pub preview: Option<Vec<u8>>,
-    }
-    pub fn render_many(
-        figs: &[(figures::Figure, (u32, u32))],
-        f: Formats,
-    ) -> Vec<Result<Rendered, figures::FigureError>> {
-        figures::render_many(figs)
-            .into_iter()
-            .map(|r| {
-                r.map(|r| Rendered {
-                    png: f.png.then(|| r.png.clone()),
-                    svg: f.svg.then(|| r.svg.clone()),
-                    preview: f.preview.then_some(r.png),
-                })
-            })
-            .collect()
-    }
 }

@@ -1,7 +1,9 @@
 //! The drawing surface plotters draws on: a recorder that keeps every
 //! primitive (strokes, fills, text as glyph outlines) in device pixels. The
 //! chart is laid out once; `svg.rs` writes the list as SVG and `raster.rs`
-//! rasterises the same list into the PNG, so both files show one drawing.
+//! rasterises the same list into pixels, so both files show one drawing.
+//! The geometry both of them trace (pixel centres, glyph contours) is
+//! produced here and in `text.rs` through the `Outline` trait, once.
 //!
 //! Coordinates: plotters' integer coordinate (x, y) names the pixel whose
 //! centre is (x + 0.5, y + 0.5); strokes and polygons are drawn through pixel
@@ -14,7 +16,7 @@ use plotters_backend::{
     BackendColor, BackendCoord, BackendStyle, BackendTextStyle, DrawingBackend, DrawingErrorKind,
 };
 
-use super::text::{self, Placement, Seg};
+use super::text::{self, Placement, Pt, Seg};
 
 /// An sRGB colour with opacity in 0..=1.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -29,6 +31,38 @@ impl From<BackendColor> for Rgba {
             rgb: c.rgb,
             alpha: c.alpha.clamp(0.0, 1.0),
         }
+    }
+}
+
+/// Receives path geometry in device pixels. The SVG writer and the
+/// rasteriser both implement it, so each primitive's outline is described
+/// once for both outputs.
+pub(crate) trait Outline {
+    fn move_to(&mut self, p: Pt);
+    fn line_to(&mut self, p: Pt);
+    fn quad_to(&mut self, c: Pt, p: Pt);
+    fn cubic_to(&mut self, c1: Pt, c2: Pt, p: Pt);
+    fn close(&mut self);
+}
+
+/// The centre of pixel `p`.
+pub(crate) fn centre(p: BackendCoord) -> Pt {
+    (p.0 as f32 + 0.5, p.1 as f32 + 0.5)
+}
+
+/// An open polyline through the centres of `points`. A lone point becomes a
+/// zero-length segment, which round caps draw as a dot (a bare move-to would
+/// draw nothing).
+pub(crate) fn polyline(points: &[BackendCoord], out: &mut impl Outline) {
+    let Some((&first, rest)) = points.split_first() else {
+        return;
+    };
+    out.move_to(centre(first));
+    if rest.is_empty() {
+        out.line_to(centre(first));
+    }
+    for &p in rest {
+        out.line_to(centre(p));
     }
 }
 

@@ -75,18 +75,13 @@ impl Metrics {
         (text::FAMILY, size_px).into_font().color(&BLACK)
     }
 
-    /// Height plotters reserves for one line of text of `size_px`.
-    fn line_h(size_px: f64) -> i32 {
-        (size_px / 1.24) as i32
-    }
-
     /// Room below a plot for tick labels and the axis label; the glyphs of
     /// the tick labels reach a little below their layout box.
     fn x_area(&self) -> i32 {
         2 * self.tick_len
-            + Self::line_h(self.tick_px)
+            + text::line_height(self.tick_px)
             + (0.5 * self.tick_px) as i32
-            + Self::line_h(self.desc_px)
+            + text::line_height(self.desc_px)
             + self.pad / 2
     }
 }
@@ -650,7 +645,7 @@ struct PanelBox {
 
 fn caption_h(m: &Metrics, title: &Option<String>) -> i32 {
     match title {
-        Some(t) if !t.is_empty() => Metrics::line_h(m.caption_px) + m.pad / 2,
+        Some(t) if !t.is_empty() => text::line_height(m.caption_px) + m.pad / 2,
         _ => 0,
     }
 }
@@ -691,7 +686,7 @@ fn y_area_w(m: &Metrics, p: &Panel<'_>) -> i32 {
             .map(|&v| text_w(m.tick_px, &format_tick(v, f)))
             .max()
             .unwrap_or(0);
-    2 * m.tick_len + widest + (0.5 * m.tick_px) as i32 + Metrics::line_h(m.desc_px) + m.pad / 2
+    2 * m.tick_len + widest + (0.5 * m.tick_px) as i32 + text::line_height(m.desc_px) + m.pad / 2
 }
 
 fn choose_x_ticks(m: &Metrics, axis: &mut Axis, plot_w: i32) {
@@ -721,17 +716,38 @@ struct Bands {
     rows: Vec<Vec<(usize, i32)>>,
 }
 
-const SAMPLE_LEN_EM: f64 = 2.2;
+/// Legend geometry: each entry is a line sample, a gap and the label;
+/// entries are `spacing` apart in rows `row_h` tall.
+struct LegendLayout {
+    sample: i32,
+    gap: i32,
+    spacing: i32,
+    row_h: i32,
+}
+
+impl LegendLayout {
+    fn new(m: &Metrics) -> Self {
+        LegendLayout {
+            sample: (2.2 * m.legend_px) as i32,
+            gap: (0.4 * m.legend_px) as i32,
+            spacing: (1.5 * m.legend_px) as i32,
+            row_h: text::line_height(m.legend_px) + (0.5 * m.legend_px) as i32,
+        }
+    }
+}
 
 fn bands(sheet: &Sheet, m: &Metrics, width: i32) -> Bands {
     let title_h = if sheet.title.is_empty() {
         m.pad
     } else {
-        Metrics::line_h(m.title_px) + 2 * m.pad
+        text::line_height(m.title_px) + 2 * m.pad
     };
-    let sample = (SAMPLE_LEN_EM * m.legend_px) as i32;
-    let gap = (0.4 * m.legend_px) as i32;
-    let spacing = (1.5 * m.legend_px) as i32;
+    let LegendLayout {
+        sample,
+        gap,
+        spacing,
+        row_h,
+    } = LegendLayout::new(m);
     let avail = width - 2 * m.pad;
     let mut rows: Vec<Vec<(usize, i32)>> = Vec::new();
     let mut used = 0;
@@ -749,7 +765,6 @@ fn bands(sheet: &Sheet, m: &Metrics, width: i32) -> Bands {
         }
         rows.last_mut().expect("a row exists").push((i, w));
     }
-    let row_h = Metrics::line_h(m.legend_px) + (0.5 * m.legend_px) as i32;
     let legend_h = if rows.is_empty() {
         0
     } else {
@@ -858,10 +873,12 @@ fn draw_legend(
         return Ok(());
     }
     let (w, _) = area.dim_in_pixel();
-    let sample = (SAMPLE_LEN_EM * m.legend_px) as i32;
-    let gap = (0.4 * m.legend_px) as i32;
-    let spacing = (1.5 * m.legend_px) as i32;
-    let row_h = Metrics::line_h(m.legend_px) + (0.5 * m.legend_px) as i32;
+    let LegendLayout {
+        sample,
+        gap,
+        spacing,
+        row_h,
+    } = LegendLayout::new(m);
     for (r, row) in rows.iter().enumerate() {
         let total: i32 =
             row.iter().map(|(_, ew)| ew).sum::<i32>() + spacing * (row.len() as i32 - 1);

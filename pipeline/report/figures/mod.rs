@@ -2,7 +2,10 @@
 //! response functions (the paper's Figs. 8, 11, 13, 15-17), grids of
 //! measured-versus-simulated time windows (Figs. 9, 12, 14, 19-22) and
 //! generic x-y lines (residuals, sensitivity curves). Each figure renders to
-//! PNG bytes and an SVG string showing the same drawing.
+//! whichever of PNG bytes, an SVG string and a compact palette PNG preview
+//! are asked for, all showing the same drawing: plotters lays the chart out
+//! once into a list of primitives (`canvas`), which `svg` writes and
+//! `raster` draws with tiny-skia for the two PNGs (`encode`).
 //!
 //! Text uses DejaVu Sans compiled into the binary: the PNG rasterises it and
 //! the SVG holds the glyph outlines as paths (no `<text>`), so a figure looks
@@ -15,6 +18,7 @@
 mod canvas;
 mod chart;
 mod decimate;
+mod encode;
 mod raster;
 mod svg;
 #[cfg(test)]
@@ -40,11 +44,25 @@ pub const FULL_WIDTH: (u32, u32) = (1200, 700);
 pub const MIN_SIZE: (u32, u32) = (200, 150);
 pub const MAX_SIZE: (u32, u32) = (8192, 8192);
 
-/// A figure as PNG bytes and as an SVG document.
+/// Which files a render produces.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Formats {
+    /// The full-colour PNG (8-bit RGB).
+    pub png: bool,
+    /// The SVG document.
+    pub svg: bool,
+    /// A compact PNG of the same pixels for inlining in a page: 8-bit
+    /// indexed, at most 256 colours, the same size as the PNG.
+    pub preview: bool,
+}
+
+/// A figure as PNG bytes, an SVG document, and a compact preview PNG, each
+/// when asked for.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct Rendered {
-    pub png: Vec<u8>,
-    pub svg: String,
+    pub png: Option<Vec<u8>>,
+    pub svg: Option<String>,
+    pub preview: Option<Vec<u8>>,
 }
 
 /// What a series is, which decides its line style.
@@ -229,20 +247,26 @@ pub enum FigureError {
     Png { figure: String, message: String },
 }
 
-/// Render any figure.
-pub fn render(fig: &Figure, size: (u32, u32)) -> Result<Rendered, FigureError> {
+/// Render any figure in the formats asked for. Nothing is rasterised unless
+/// the PNG or the preview is asked for, and no SVG is written unless it is.
+/// Bad input (size, ranges, lengths, nothing to draw) is an error whatever
+/// the formats.
+pub fn render(fig: &Figure, size: (u32, u32), formats: Formats) -> Result<Rendered, FigureError> {
     match fig {
-        Figure::Bode(f) => render_bode(f, size),
-        Figure::Panels(f) => render_panels(f, size),
-        Figure::Lines(f) => render_lines(f, size),
+        Figure::Bode(f) => render_bode(f, size, formats),
+        Figure::Panels(f) => render_panels(f, size, formats),
+        Figure::Lines(f) => render_lines(f, size, formats),
     }
 }
 
 /// Render figures in parallel (rayon); results come back in input order and
 /// each figure's bytes do not depend on the number of threads.
-pub fn render_many(figs: &[(Figure, (u32, u32))]) -> Vec<Result<Rendered, FigureError>> {
+pub fn render_many(
+    figs: &[(Figure, (u32, u32))],
+    formats: Formats,
+) -> Vec<Result<Rendered, FigureError>> {
     figs.par_iter()
-        .map(|(fig, size)| render(fig, *size))
+        .map(|(fig, size)| render(fig, *size, formats))
         .collect()
 }
 
@@ -250,7 +274,11 @@ pub fn render_many(figs: &[(Figure, (u32, u32))]) -> Vec<Result<Rendered, Figure
 /// along frequency inside the range; coherence (-). Points outside the
 /// frequency range or with a non-finite value are left out (a gap in the
 /// line). Series without a finite point in range are left out of the legend.
-pub fn render_bode(fig: &BodeFigure, size: (u32, u32)) -> Result<Rendered, FigureError> {
+fn render_bode(
+    fig: &BodeFigure,
+    size: (u32, u32),
+    formats: Formats,
+) -> Result<Rendered, FigureError> {
     let name = figure_name(&fig.title);
     check_size(&name, size)?;
     let (f0, f1) = check_range(&name, "freq_range_hz", fig.freq_range_hz, fig.log_frequency)?;
@@ -374,13 +402,17 @@ pub fn render_bode(fig: &BodeFigure, size: (u32, u32)) -> Result<Rendered, Figur
         legend,
         arrangement: Arrangement::Stack(stack),
     };
-    render_sheet(&name, size, sheet, &m)
+    render_sheet(&name, size, sheet, &m, formats)
 }
 
 /// Time panels in a grid. Each panel shows its window of the records
 /// (min/max-decimated to the plot's pixel columns, so peaks survive);
 /// non-finite samples leave gaps. The legend lists each (label, style) once.
-pub fn render_panels(fig: &PanelsFigure, size: (u32, u32)) -> Result<Rendered, FigureError> {
+fn render_panels(
+    fig: &PanelsFigure,
+    size: (u32, u32),
+    formats: Formats,
+) -> Result<Rendered, FigureError> {
     let name = figure_name(&fig.title);
     check_size(&name, size)?;
     if fig.columns == 0 {
@@ -430,13 +462,17 @@ pub fn render_panels(fig: &PanelsFigure, size: (u32, u32)) -> Result<Rendered, F
             columns: fig.columns,
         },
     };
-    render_sheet(&name, size, sheet, &m)
+    render_sheet(&name, size, sheet, &m, formats)
 }
 
 /// Generic lines. With no `x_range` the axis spans the finite data exactly
 /// (positive data on a log axis); long monotone records are min/max
 /// decimated like time panels.
-pub fn render_lines(fig: &LinesFigure, size: (u32, u32)) -> Result<Rendered, FigureError> {
+fn render_lines(
+    fig: &LinesFigure,
+    size: (u32, u32),
+    formats: Formats,
+) -> Result<Rendered, FigureError> {
     let name = figure_name(&fig.title);
     check_size(&name, size)?;
     for s in &fig.series {
@@ -496,7 +532,7 @@ pub fn render_lines(fig: &LinesFigure, size: (u32, u32)) -> Result<Rendered, Fig
         legend,
         arrangement: Arrangement::Stack(vec![(panel, 1.0)]),
     };
-    render_sheet(&name, size, sheet, &m)
+    render_sheet(&name, size, sheet, &m, formats)
 }
 
 /// Phase (rad) inside [f_lo, f_hi], unwrapped in frequency order: each step
@@ -630,33 +666,57 @@ fn check_len(
     }
 }
 
-/// Draw a sheet once into the recorder, then write the SVG and rasterise
-/// the PNG from the same primitives (in parallel; neither depends on the
-/// other).
+/// Draw a sheet once into the recorder, then write the SVG and rasterise the
+/// pixels for the PNG and the preview from the same primitives, each only
+/// when asked for (the SVG and the pixels in parallel; neither depends on
+/// the other).
 fn render_sheet(
     name: &str,
     size: (u32, u32),
     mut sheet: Sheet<'_>,
     m: &Metrics,
+    formats: Formats,
 ) -> Result<Rendered, FigureError> {
     text::ensure_registered()?;
-    let draw_err = |e: chart::DrawError| FigureError::Draw {
+    let draw_err = |message: String| FigureError::Draw {
         figure: name.to_string(),
-        message: e.to_string(),
+        message,
     };
     let mut ops = Vec::new();
     {
         let root = Recorder::new(&mut ops, size).into_drawing_area();
-        chart::draw_sheet(&root, &mut sheet, m).map_err(draw_err)?;
-        root.present().map_err(draw_err)?;
+        chart::draw_sheet(&root, &mut sheet, m).map_err(|e| draw_err(e.to_string()))?;
+        root.present().map_err(|e| draw_err(e.to_string()))?;
     }
-    let (png, svg) = rayon::join(
-        || raster::render(&ops, size),
-        || svg::write(&ops, size, &sheet.title),
-    );
-    let png = png.map_err(|e| FigureError::Png {
+    let png_err = |e: png::EncodingError| FigureError::Png {
         figure: name.to_string(),
         message: e.to_string(),
-    })?;
-    Ok(Rendered { png, svg })
+    };
+    let pixels = || -> Result<Rendered, FigureError> {
+        let mut out = Rendered {
+            png: None,
+            svg: None,
+            preview: None,
+        };
+        if !(formats.png || formats.preview) {
+            return Ok(out);
+        }
+        let rgb = raster::rgb(&ops, size)
+            .ok_or_else(|| draw_err("tiny-skia could not allocate the canvas".into()))?;
+        let (png, preview) = rayon::join(
+            || formats.png.then(|| encode::rgb_png(&rgb, size)).transpose(),
+            || {
+                formats
+                    .preview
+                    .then(|| encode::preview_png(&rgb, size))
+                    .transpose()
+            },
+        );
+        out.png = png.map_err(png_err)?;
+        out.preview = preview.map_err(png_err)?;
+        Ok(out)
+    };
+    let svg = || formats.svg.then(|| svg::write(&ops, size, &sheet.title));
+    let (pixels, svg) = rayon::join(pixels, svg);
+    Ok(Rendered { svg, ..pixels? })
 }

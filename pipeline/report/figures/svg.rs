@@ -4,8 +4,8 @@
 
 use std::fmt::Write;
 
-use super::canvas::{Op, Rgba};
-use super::text::{Pt, Seg};
+use super::canvas::{self, Op, Outline, Rgba};
+use super::text::{self, Pt};
 
 /// The SVG document for `ops` on a `size` canvas; `title` becomes `<title>`.
 pub(crate) fn write(ops: &[Op], size: (u32, u32), title: &str) -> String {
@@ -25,7 +25,7 @@ pub(crate) fn write(ops: &[Op], size: (u32, u32), title: &str) -> String {
             Op::Stroke { width, colour, .. } => {
                 // Consecutive strokes of one style (a dashed line is one
                 // stroke per dash) share a <path> element.
-                let mut d = String::new();
+                let mut d = PathData::default();
                 while let Some(Op::Stroke {
                     points,
                     width: w2,
@@ -35,12 +35,13 @@ pub(crate) fn write(ops: &[Op], size: (u32, u32), title: &str) -> String {
                     if w2 != width || c2 != colour {
                         break;
                     }
-                    stroke_data(&mut d, points);
+                    canvas::polyline(points, &mut d);
                     i += 1;
                 }
                 let _ = writeln!(
                     s,
-                    "<path d=\"{d}\" fill=\"none\" stroke=\"{}\"{} stroke-width=\"{width}\" stroke-linecap=\"round\" stroke-linejoin=\"round\"/>",
+                    "<path d=\"{}\" fill=\"none\" stroke=\"{}\"{} stroke-width=\"{width}\" stroke-linecap=\"round\" stroke-linejoin=\"round\"/>",
+                    d.0,
                     hex(colour),
                     opacity("stroke-opacity", colour)
                 );
@@ -63,12 +64,13 @@ pub(crate) fn write(ops: &[Op], size: (u32, u32), title: &str) -> String {
                 );
             }
             Op::Polygon { points, colour } => {
-                let mut d = String::new();
-                stroke_data(&mut d, points);
-                d.push('Z');
+                let mut d = PathData::default();
+                canvas::polyline(points, &mut d);
+                d.close();
                 let _ = writeln!(
                     s,
-                    "<path d=\"{d}\" fill=\"{}\"{}/>",
+                    "<path d=\"{}\" fill=\"{}\"{}/>",
+                    d.0,
                     hex(colour),
                     opacity("fill-opacity", colour)
                 );
@@ -92,10 +94,12 @@ pub(crate) fn write(ops: &[Op], size: (u32, u32), title: &str) -> String {
                         opacity("stroke-opacity", colour)
                     )
                 };
+                let (cx, cy) = canvas::centre(*centre);
                 let _ = writeln!(
                     s,
-                    "<circle cx=\"{}.5\" cy=\"{}.5\" r=\"{radius}\" {paint}/>",
-                    centre.0, centre.1
+                    "<circle cx=\"{}\" cy=\"{}\" r=\"{radius}\" {paint}/>",
+                    num(cx),
+                    num(cy)
                 );
             }
             Op::Text {
@@ -111,7 +115,9 @@ pub(crate) fn write(ops: &[Op], size: (u32, u32), title: &str) -> String {
                     opacity("fill-opacity", colour)
                 );
                 for glyph in glyphs {
-                    let _ = writeln!(s, "<path d=\"{}\"/>", glyph_data(glyph));
+                    let mut d = PathData::default();
+                    text::trace_glyph(glyph, &mut d);
+                    let _ = writeln!(s, "<path d=\"{}\"/>", d.0);
                 }
                 s.push_str("</g>\n");
             }
@@ -134,63 +140,38 @@ fn opacity(attr: &str, c: &Rgba) -> String {
     }
 }
 
-/// "M x y L x y ..." through pixel centres.
-fn stroke_data(d: &mut String, points: &[(i32, i32)]) {
-    for (k, p) in points.iter().enumerate() {
-        let _ = write!(d, "{}{}.5 {}.5", if k == 0 { 'M' } else { 'L' }, p.0, p.1);
+/// SVG path data ("M x y L x y ... Z"), coordinates rounded by `num`.
+#[derive(Default)]
+struct PathData(String);
+
+impl PathData {
+    fn command(&mut self, c: char, points: &[Pt]) {
+        self.0.push(c);
+        for (k, p) in points.iter().enumerate() {
+            if k > 0 {
+                self.0.push(' ');
+            }
+            let _ = write!(self.0, "{} {}", num(p.0), num(p.1));
+        }
     }
 }
 
-/// Path data of one glyph; a new subpath starts wherever a segment does not
-/// continue the previous one (the contours of the outline).
-fn glyph_data(glyph: &[Seg]) -> String {
-    let mut d = String::with_capacity(glyph.len() * 24);
-    let mut last: Option<Pt> = None;
-    let mut contour_start: Pt = (0.0, 0.0);
-    for (k, seg) in glyph.iter().enumerate() {
-        let start = seg.start();
-        if last.is_none_or(|l| !same(l, start)) {
-            if last.is_some() {
-                d.push('Z');
-            }
-            let _ = write!(d, "M{} {}", num(start.0), num(start.1));
-            contour_start = start;
-        }
-        // A closing line back to the contour's start is what Z does.
-        let closes = glyph
-            .get(k + 1)
-            .is_none_or(|next| !same(seg.end(), next.start()));
-        match *seg {
-            Seg::Line(_, b) if closes && same(b, contour_start) => {}
-            Seg::Line(_, b) => {
-                let _ = write!(d, "L{} {}", num(b.0), num(b.1));
-            }
-            Seg::Quad(_, c, b) => {
-                let _ = write!(d, "Q{} {} {} {}", num(c.0), num(c.1), num(b.0), num(b.1));
-            }
-            Seg::Cubic(_, c1, c2, b) => {
-                let _ = write!(
-                    d,
-                    "C{} {} {} {} {} {}",
-                    num(c1.0),
-                    num(c1.1),
-                    num(c2.0),
-                    num(c2.1),
-                    num(b.0),
-                    num(b.1)
-                );
-            }
-        }
-        last = Some(seg.end());
+impl Outline for PathData {
+    fn move_to(&mut self, p: Pt) {
+        self.command('M', &[p]);
     }
-    if last.is_some() {
-        d.push('Z');
+    fn line_to(&mut self, p: Pt) {
+        self.command('L', &[p]);
     }
-    d
-}
-
-fn same(a: Pt, b: Pt) -> bool {
-    (a.0 - b.0).abs() < 1e-4 && (a.1 - b.1).abs() < 1e-4
+    fn quad_to(&mut self, c: Pt, p: Pt) {
+        self.command('Q', &[c, p]);
+    }
+    fn cubic_to(&mut self, c1: Pt, c2: Pt, p: Pt) {
+        self.command('C', &[c1, c2, p]);
+    }
+    fn close(&mut self) {
+        self.0.push('Z');
+    }
 }
 
 /// A coordinate rounded to 1/100 px, without trailing zeros or "-0".
@@ -268,5 +249,21 @@ mod tests {
         assert_eq!(s.matches("<path").count(), 1);
         assert!(s.contains("d=\"M0.5 0.5L10.5 0.5M20.5 0.5L30.5 0.5\""));
         assert!(s.contains("stroke=\"#0072b2\""));
+    }
+
+    #[test]
+    fn pixel_centres_left_of_zero_and_lone_points() {
+        // Pixel -3 has its centre at -2.5; a lone point is a zero-length
+        // segment, which round caps draw as a dot (a bare M draws nothing).
+        let ops = vec![Op::Stroke {
+            points: vec![(-3, 2)],
+            width: 2,
+            colour: Rgba {
+                rgb: (0, 0, 0),
+                alpha: 1.0,
+            },
+        }];
+        let s = write(&ops, (10, 10), "");
+        assert!(s.contains("d=\"M-2.5 2.5L-2.5 2.5\""), "{s}");
     }
 }

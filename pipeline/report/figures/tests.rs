@@ -1,6 +1,7 @@
-//! Figure-level tests: the files decode, text is really drawn, data land
-//! where the axes say, bytes repeat, and degenerate inputs behave as
-//! documented.
+//! Figure-level tests: the files decode, the PNG, its preview and the SVG
+//! show the same picture, text is really drawn, data land where the axes
+//! say, bytes repeat, only the formats asked for are made, and degenerate
+//! inputs behave as documented.
 
 use std::sync::Arc;
 
@@ -112,18 +113,76 @@ fn lines_fig(title: &str) -> LinesFigure {
     }
 }
 
+// ----------------------------------------------------------- rendering
+
+const ALL: Formats = Formats {
+    png: true,
+    svg: true,
+    preview: true,
+};
+
+/// Every output of one figure.
+#[derive(Debug)]
+struct Files {
+    png: Vec<u8>,
+    svg: String,
+    preview: Vec<u8>,
+}
+
+fn files(fig: Figure, size: (u32, u32)) -> Result<Files, FigureError> {
+    let r = render(&fig, size, ALL)?;
+    Ok(Files {
+        png: r.png.expect("PNG asked for"),
+        svg: r.svg.expect("SVG asked for"),
+        preview: r.preview.expect("preview asked for"),
+    })
+}
+
+fn render_bode(fig: &BodeFigure, size: (u32, u32)) -> Result<Files, FigureError> {
+    files(Figure::Bode(fig.clone()), size)
+}
+
+fn render_panels(fig: &PanelsFigure, size: (u32, u32)) -> Result<Files, FigureError> {
+    files(Figure::Panels(fig.clone()), size)
+}
+
+fn render_lines(fig: &LinesFigure, size: (u32, u32)) -> Result<Files, FigureError> {
+    files(Figure::Lines(fig.clone()), size)
+}
+
 // ------------------------------------------------------------- readers
 
-/// Decoded PNG: (width, height, RGB bytes).
+/// Decoded 8-bit RGB PNG: (width, height, RGB bytes).
 fn decode_png(bytes: &[u8]) -> (u32, u32, Vec<u8>) {
-    let decoder = png::Decoder::new(bytes);
-    let mut reader = decoder.read_info().expect("PNG header");
-    let mut buf = vec![0; reader.output_buffer_size()];
-    let info = reader.next_frame(&mut buf).expect("PNG data");
+    let (info, buf, _) = decode_raw(bytes);
     assert_eq!(info.color_type, png::ColorType::Rgb);
     assert_eq!(info.bit_depth, png::BitDepth::Eight);
-    buf.truncate(info.buffer_size());
     (info.width, info.height, buf)
+}
+
+/// Decoded 8-bit indexed PNG: (width, height, RGB bytes looked up in its
+/// palette, number of palette entries).
+fn decode_indexed_png(bytes: &[u8]) -> (u32, u32, Vec<u8>, usize) {
+    let (info, indices, palette) = decode_raw(bytes);
+    assert_eq!(info.color_type, png::ColorType::Indexed);
+    assert_eq!(info.bit_depth, png::BitDepth::Eight);
+    let palette = palette.expect("an indexed PNG has a palette");
+    let rgb = indices
+        .iter()
+        .flat_map(|&i| palette[3 * i as usize..3 * i as usize + 3].to_vec())
+        .collect();
+    (info.width, info.height, rgb, palette.len() / 3)
+}
+
+/// The first frame as stored (no expansion) and the palette, if any.
+fn decode_raw(bytes: &[u8]) -> (png::OutputInfo, Vec<u8>, Option<Vec<u8>>) {
+    let decoder = png::Decoder::new(std::io::Cursor::new(bytes));
+    let mut reader = decoder.read_info().expect("PNG header");
+    let palette = reader.info().palette.as_ref().map(|p| p.to_vec());
+    let mut buf = vec![0; reader.output_buffer_size().expect("PNG size")];
+    let info = reader.next_frame(&mut buf).expect("PNG data");
+    buf.truncate(info.buffer_size());
+    (info, buf, palette)
 }
 
 /// Subpaths of an SVG path made of M and L commands only.
@@ -242,7 +301,7 @@ fn all_kinds() -> Vec<(Figure, (u32, u32))> {
 #[test]
 fn png_decodes_at_the_requested_size() {
     for (fig, size) in all_kinds() {
-        let r = render(&fig, size).unwrap();
+        let r = files(fig, size).unwrap();
         assert_eq!(&r.png[..8], b"\x89PNG\r\n\x1a\n");
         let (w, h, px) = decode_png(&r.png);
         assert_eq!((w, h), size);
@@ -253,7 +312,7 @@ fn png_decodes_at_the_requested_size() {
 #[test]
 fn svg_is_well_formed_sized_and_has_no_text_elements() {
     for (fig, size) in all_kinds() {
-        let r = render(&fig, size).unwrap();
+        let r = files(fig, size).unwrap();
         let doc = roxmltree::Document::parse(&r.svg).expect("well-formed XML");
         let root = doc.root_element();
         assert_eq!(root.tag_name().name(), "svg");
@@ -465,8 +524,14 @@ fn long_record_keeps_its_spike_after_decimation() {
 #[test]
 fn same_data_same_bytes_whatever_the_thread_count() {
     let figs = all_kinds();
-    let once: Vec<Rendered> = figs.iter().map(|(f, s)| render(f, *s).unwrap()).collect();
-    let twice: Vec<Rendered> = figs.iter().map(|(f, s)| render(f, *s).unwrap()).collect();
+    let once: Vec<Rendered> = figs
+        .iter()
+        .map(|(f, s)| render(f, *s, ALL).unwrap())
+        .collect();
+    let twice: Vec<Rendered> = figs
+        .iter()
+        .map(|(f, s)| render(f, *s, ALL).unwrap())
+        .collect();
     assert_eq!(once, twice);
     let pool = |n| {
         rayon::ThreadPoolBuilder::new()
@@ -474,8 +539,8 @@ fn same_data_same_bytes_whatever_the_thread_count() {
             .build()
             .unwrap()
     };
-    let one = pool(1).install(|| render_many(&figs));
-    let two = pool(2).install(|| render_many(&figs));
+    let one = pool(1).install(|| render_many(&figs, ALL));
+    let two = pool(2).install(|| render_many(&figs, ALL));
     for ((a, b), c) in one.into_iter().zip(two).zip(&once) {
         let (a, b) = (a.unwrap(), b.unwrap());
         assert_eq!(&a, c);
@@ -703,4 +768,142 @@ fn log_axes_draw() {
     assert!(labels.contains(&"1e6".to_string()));
     // Bluish green (#009E73) from palette slot 2.
     assert!(!strokes_of(&doc, "#009e73").is_empty());
+}
+
+// ------------------------------------------------------ formats, preview
+
+#[test]
+fn only_the_formats_asked_for_are_made() {
+    let fig = Figure::Lines(lines_fig("Formats"));
+    let all = render(&fig, FULL_WIDTH, ALL).unwrap();
+    for png in [false, true] {
+        for svg in [false, true] {
+            for preview in [false, true] {
+                let formats = Formats { png, svg, preview };
+                let r = render(&fig, FULL_WIDTH, formats).unwrap();
+                // Each file is there exactly when asked for, and the same
+                // bytes as when everything is asked for.
+                assert_eq!(r.png.is_some(), png);
+                assert_eq!(r.svg.is_some(), svg);
+                assert_eq!(r.preview.is_some(), preview);
+                assert!(r.png.is_none_or(|b| Some(b) == all.png));
+                assert!(r.svg.is_none_or(|s| Some(s) == all.svg));
+                assert!(r.preview.is_none_or(|b| Some(b) == all.preview));
+            }
+        }
+    }
+    // Bad input is an error whatever the formats, even none.
+    let none = Formats {
+        png: false,
+        svg: false,
+        preview: false,
+    };
+    assert!(matches!(
+        render(&fig, (100, 50), none),
+        Err(FigureError::BadSize { .. })
+    ));
+}
+
+/// Per-channel absolute differences of two RGB images: (mean, share of
+/// pixels where some channel differs by more than `far`).
+fn difference(a: &[u8], b: &[u8], far: u8) -> (f64, f64) {
+    assert_eq!(a.len(), b.len());
+    let total: u64 = a
+        .iter()
+        .zip(b)
+        .map(|(x, y)| u64::from(x.abs_diff(*y)))
+        .sum();
+    let far_px = a
+        .chunks(3)
+        .zip(b.chunks(3))
+        .filter(|(p, q)| p.iter().zip(*q).any(|(x, y)| x.abs_diff(*y) > far))
+        .count();
+    (
+        total as f64 / a.len() as f64,
+        far_px as f64 / (a.len() / 3) as f64,
+    )
+}
+
+#[test]
+fn preview_is_an_indexed_png_of_the_same_picture() {
+    for (fig, size) in all_kinds() {
+        let r = files(fig, size).unwrap();
+        let (w, h, full) = decode_png(&r.png);
+        let (pw, ph, preview, colours) = decode_indexed_png(&r.preview);
+        assert_eq!((pw, ph), (w, h));
+        assert!(colours <= 256);
+        // Quantising moves only the anti-aliased blends where curves of
+        // different colours meet, a small share of the picture: on average
+        // under a quarter of a level, and under 0.2 % of the pixels by more
+        // than 32 levels (about an eighth of the range) in some channel.
+        let (mean, far) = difference(&full, &preview, 32);
+        assert!(mean < 0.25, "mean difference {mean}");
+        assert!(far < 0.002, "{far} of the pixels differ by more than 32");
+        assert!(r.preview.len() < r.png.len());
+    }
+}
+
+// ------------------------------------------------------ PNG against SVG
+
+/// `svg` drawn on white by resvg, an SVG renderer that shares nothing with
+/// `svg.rs` or `raster.rs` but the rasteriser underneath: it parses the
+/// document and builds its own geometry from the path data, circles and
+/// rectangles written there.
+fn resvg_rgb(svg: &str, size: (u32, u32)) -> Vec<u8> {
+    use resvg::tiny_skia::{Color, Pixmap, Transform};
+    let tree = resvg::usvg::Tree::from_str(svg, &resvg::usvg::Options::default())
+        .expect("resvg parses the SVG");
+    let mut pixmap = Pixmap::new(size.0, size.1).unwrap();
+    pixmap.fill(Color::WHITE);
+    resvg::render(&tree, Transform::identity(), &mut pixmap.as_mut());
+    pixmap
+        .data()
+        .chunks_exact(4)
+        .flat_map(|p| [p[0], p[1], p[2]])
+        .collect()
+}
+
+#[test]
+fn png_and_svg_are_the_same_picture() {
+    let mut kinds = all_kinds();
+    let single = LinesFigure {
+        series: vec![XySeries {
+            label: "one".into(),
+            x: vec![2.0],
+            y: vec![5.0],
+            trace: Trace::Measured,
+            palette_index: None,
+        }],
+        ..lines_fig("Single point")
+    };
+    kinds.push((Figure::Lines(single), FULL_WIDTH));
+    // Dotted references: dots one pixel long, some of them a single point.
+    let mut dotted = lines_fig("Dotted");
+    dotted.series[0].trace = Trace::Reference;
+    kinds.push((Figure::Lines(dotted), FULL_WIDTH));
+    for (fig, size) in kinds {
+        let r = files(fig, size).unwrap();
+        let (_, _, png) = decode_png(&r.png);
+        let svg = resvg_rgb(&r.svg, size);
+        // Both are anti-aliased renderings of the same geometry, so they
+        // differ only where rounding of coverage does: a tenth of a level on
+        // average, no pixel by more than a quarter of the range.
+        let (mean, far) = difference(&png, &svg, 64);
+        assert!(mean < 0.1, "mean difference {mean}");
+        assert_eq!(far, 0.0, "pixels differ by more than 64 levels");
+        // And the ink lands in the same places: of the pixels dark in
+        // either picture (a quarter of the way to black), 99.5 % are dark
+        // in both.
+        let ink = |px: &[u8]| -> Vec<bool> {
+            px.chunks(3)
+                .map(|p| p.iter().map(|&v| u32::from(v)).sum::<u32>() < 3 * 192)
+                .collect()
+        };
+        let (a, b) = (ink(&png), ink(&svg));
+        let both = a.iter().zip(&b).filter(|(x, y)| **x && **y).count();
+        let either = a.iter().zip(&b).filter(|(x, y)| **x || **y).count();
+        let overlap = both as f64 / either as f64;
+        assert!(either > 5000, "only {either} dark pixels");
+        assert!(overlap > 0.995, "ink overlap {overlap}");
+    }
 }

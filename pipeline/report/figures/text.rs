@@ -1,7 +1,8 @@
 //! The embedded font and the one text layout that both outputs use: a string
 //! at a plotters anchor, size and rotation becomes glyph outlines in device
-//! pixels. The PNG rasterises those outlines and the SVG writes them as paths,
-//! so the two files show the same letters in the same places.
+//! pixels, traced into contours by `trace_glyph`. The PNG fills those
+//! contours and the SVG writes them as paths, so the two files show the same
+//! letters in the same places.
 //!
 //! Why outlines rather than an SVG `@font-face`: an SVG shown through `<img>`
 //! may not load external fonts, and an embedded subset would need a font
@@ -16,6 +17,7 @@ use plotters_backend::FontTransform;
 use plotters_backend::text_anchor::{HPos, Pos, VPos};
 
 use super::FigureError;
+use super::canvas::Outline;
 
 /// The family name the charts ask plotters for.
 pub(crate) const FAMILY: &str = "sans-serif";
@@ -63,23 +65,15 @@ pub(crate) enum Seg {
 }
 
 impl Seg {
-    pub(crate) fn start(&self) -> Pt {
+    fn start(&self) -> Pt {
         match *self {
             Seg::Line(a, _) | Seg::Quad(a, _, _) | Seg::Cubic(a, _, _, _) => a,
         }
     }
-    pub(crate) fn end(&self) -> Pt {
+    fn end(&self) -> Pt {
         match *self {
             Seg::Line(_, b) | Seg::Quad(_, _, b) | Seg::Cubic(_, _, _, b) => b,
         }
-    }
-    pub(crate) fn points(&self) -> impl Iterator<Item = Pt> {
-        let v: [Option<Pt>; 4] = match *self {
-            Seg::Line(a, b) => [Some(a), Some(b), None, None],
-            Seg::Quad(a, b, c) => [Some(a), Some(b), Some(c), None],
-            Seg::Cubic(a, b, c, d) => [Some(a), Some(b), Some(c), Some(d)],
-        };
-        v.into_iter().flatten()
     }
 }
 
@@ -99,7 +93,49 @@ pub(crate) fn box_size(font: &FontRef<'static>, size_px: f64, text: &str) -> (i3
         }
         prev = Some(id);
     }
-    (width as i32, (size_px / 1.24) as i32)
+    (width as i32, line_height(size_px))
+}
+
+/// Height of the layout box of one line of text at `size_px`, as plotters
+/// reckons it.
+pub(crate) fn line_height(size_px: f64) -> i32 {
+    (size_px / 1.24) as i32
+}
+
+/// Trace one glyph's outline: a new contour starts wherever a segment does
+/// not continue the previous one, and every contour is closed (a last line
+/// back to the contour's start is what closing draws, so it is left out).
+pub(crate) fn trace_glyph(glyph: &[Seg], out: &mut impl Outline) {
+    let mut last: Option<Pt> = None;
+    let mut contour_start: Pt = (0.0, 0.0);
+    for (k, seg) in glyph.iter().enumerate() {
+        let start = seg.start();
+        if last.is_none_or(|l| !same(l, start)) {
+            if last.is_some() {
+                out.close();
+            }
+            out.move_to(start);
+            contour_start = start;
+        }
+        let closes = glyph
+            .get(k + 1)
+            .is_none_or(|next| !same(seg.end(), next.start()));
+        match *seg {
+            Seg::Line(_, b) if closes && same(b, contour_start) => {}
+            Seg::Line(_, b) => out.line_to(b),
+            Seg::Quad(_, c, b) => out.quad_to(c, b),
+            Seg::Cubic(_, c1, c2, b) => out.cubic_to(c1, c2, b),
+        }
+        last = Some(seg.end());
+    }
+    if last.is_some() {
+        out.close();
+    }
+}
+
+/// Whether two outline points coincide (to a ten-thousandth of a pixel).
+fn same(a: Pt, b: Pt) -> bool {
+    (a.0 - b.0).abs() < 1e-4 && (a.1 - b.1).abs() < 1e-4
 }
 
 /// Where plotters asked for a text to go.
@@ -202,8 +238,15 @@ mod tests {
 
     fn bounds(glyphs: &[Vec<Seg>]) -> (f32, f32, f32, f32) {
         let mut b = (f32::MAX, f32::MAX, f32::MIN, f32::MIN);
-        for p in glyphs.iter().flatten().flat_map(|s| s.points()) {
-            b = (b.0.min(p.0), b.1.min(p.1), b.2.max(p.0), b.3.max(p.1));
+        for seg in glyphs.iter().flatten() {
+            let points: &[Pt] = match seg {
+                Seg::Line(a, c) => &[*a, *c],
+                Seg::Quad(a, c, d) => &[*a, *c, *d],
+                Seg::Cubic(a, c, d, e) => &[*a, *c, *d, *e],
+            };
+            for p in points {
+                b = (b.0.min(p.0), b.1.min(p.1), b.2.max(p.0), b.3.max(p.1));
+            }
         }
         b
     }
