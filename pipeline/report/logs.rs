@@ -27,8 +27,12 @@ pub enum LogWriteError {
     },
     #[error("{}: column name {name:?} must be non-empty, unique and free of commas, quotes and line breaks", path.display())]
     BadName { path: PathBuf, name: String },
-    #[error("{}: Parquet encoding failed: {message}", path.display())]
-    Parquet { path: PathBuf, message: String },
+    #[error("{}: Parquet encoding failed: {source}", path.display())]
+    Parquet {
+        path: PathBuf,
+        #[source]
+        source: polars::prelude::PolarsError,
+    },
 }
 
 /// Write `columns` as CSV: a header line of the names, then one line per
@@ -86,9 +90,9 @@ pub fn write_parquet(path: &Path, columns: &[(&str, &[f64])]) -> Result<(), LogW
 /// The bytes [`write_parquet`] writes (`path` only names the file in errors).
 pub fn parquet_bytes(path: &Path, columns: &[(&str, &[f64])]) -> Result<Vec<u8>, LogWriteError> {
     let n = check(path, columns)?;
-    let parquet = |e: polars::prelude::PolarsError| LogWriteError::Parquet {
+    let parquet = |source| LogWriteError::Parquet {
         path: path.to_path_buf(),
-        message: e.to_string(),
+        source,
     };
     let cols: Vec<Column> = columns
         .iter()

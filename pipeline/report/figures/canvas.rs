@@ -261,9 +261,7 @@ impl DrawingBackend for Recorder<'_> {
         }
         // `ensure_registered` ran before any chart was built, so the font is
         // there; a failure here would be a bug, reported as a font error.
-        let font = text::font().map_err(|e| {
-            DrawingErrorKind::FontError(Box::new(std::io::Error::other(e.to_string())))
-        })?;
+        let font = text::font().map_err(|e| DrawingErrorKind::FontError(Box::new(e)))?;
         let glyphs = text::layout(
             font,
             text,
@@ -287,9 +285,7 @@ impl DrawingBackend for Recorder<'_> {
         text: &str,
         style: &TStyle,
     ) -> Result<(u32, u32), DrawingErrorKind<Infallible>> {
-        let font = text::font().map_err(|e| {
-            DrawingErrorKind::FontError(Box::new(std::io::Error::other(e.to_string())))
-        })?;
+        let font = text::font().map_err(|e| DrawingErrorKind::FontError(Box::new(e)))?;
         let (w, h) = text::box_size(font, style.size(), text);
         Ok((w.max(0) as u32, h.max(0) as u32))
     }

@@ -240,11 +240,30 @@ pub enum FigureError {
     #[error("figure \"{figure}\": columns = 0; a grid needs at least one column")]
     NoColumns { figure: String },
     #[error("embedded font: {0}")]
-    Font(String),
-    #[error("figure \"{figure}\": drawing failed: {message}")]
-    Draw { figure: String, message: String },
-    #[error("figure \"{figure}\": PNG encoding failed: {message}")]
-    Png { figure: String, message: String },
+    Font(FontProblem),
+    #[error("figure \"{figure}\": drawing failed: {source}")]
+    Draw {
+        figure: String,
+        #[source]
+        source: chart::DrawError,
+    },
+    #[error("figure \"{figure}\": drawing failed: tiny-skia could not allocate the canvas")]
+    Canvas { figure: String },
+    #[error("figure \"{figure}\": PNG encoding failed: {source}")]
+    Png {
+        figure: String,
+        #[source]
+        source: png::EncodingError,
+    },
+}
+
+/// What is wrong with the font compiled into the binary.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+pub enum FontProblem {
+    #[error("the embedded DejaVu Sans does not parse")]
+    DoesNotParse,
+    #[error("plotters rejected the embedded DejaVu Sans")]
+    Rejected,
 }
 
 /// Render any figure in the formats asked for. Nothing is rasterised unless
@@ -678,19 +697,19 @@ fn render_sheet(
     formats: Formats,
 ) -> Result<Rendered, FigureError> {
     text::ensure_registered()?;
-    let draw_err = |message: String| FigureError::Draw {
+    let draw_err = |source| FigureError::Draw {
         figure: name.to_string(),
-        message,
+        source,
     };
     let mut ops = Vec::new();
     {
         let root = Recorder::new(&mut ops, size).into_drawing_area();
-        chart::draw_sheet(&root, &mut sheet, m).map_err(|e| draw_err(e.to_string()))?;
-        root.present().map_err(|e| draw_err(e.to_string()))?;
+        chart::draw_sheet(&root, &mut sheet, m).map_err(draw_err)?;
+        root.present().map_err(draw_err)?;
     }
-    let png_err = |e: png::EncodingError| FigureError::Png {
+    let png_err = |source| FigureError::Png {
         figure: name.to_string(),
-        message: e.to_string(),
+        source,
     };
     let pixels = || -> Result<Rendered, FigureError> {
         let mut out = Rendered {
@@ -701,8 +720,9 @@ fn render_sheet(
         if !(formats.png || formats.preview) {
             return Ok(out);
         }
-        let rgb = raster::rgb(&ops, size)
-            .ok_or_else(|| draw_err("tiny-skia could not allocate the canvas".into()))?;
+        let rgb = raster::rgb(&ops, size).ok_or_else(|| FigureError::Canvas {
+            figure: name.to_string(),
+        })?;
         let (png, preview) = rayon::join(
             || formats.png.then(|| encode::rgb_png(&rgb, size)).transpose(),
             || {

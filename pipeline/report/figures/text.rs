@@ -16,8 +16,8 @@ use plotters::style::FontStyle;
 use plotters_backend::FontTransform;
 use plotters_backend::text_anchor::{HPos, Pos, VPos};
 
-use super::FigureError;
 use super::canvas::Outline;
+use super::{FigureError, FontProblem};
 
 /// The family name the charts ask plotters for.
 pub(crate) const FAMILY: &str = "sans-serif";
@@ -32,7 +32,7 @@ pub(crate) fn font() -> Result<&'static FontRef<'static>, FigureError> {
     static FONT: OnceLock<Option<FontRef<'static>>> = OnceLock::new();
     FONT.get_or_init(|| FontRef::try_from_slice(font_bytes()).ok())
         .as_ref()
-        .ok_or_else(|| FigureError::Font("the embedded DejaVu Sans does not parse".into()))
+        .ok_or(FigureError::Font(FontProblem::DoesNotParse))
 }
 
 /// Register the embedded font with plotters (once per process). Without a
@@ -47,9 +47,7 @@ pub(crate) fn ensure_registered() -> Result<(), FigureError> {
     if ok {
         font().map(|_| ())
     } else {
-        Err(FigureError::Font(
-            "plotters rejected the embedded DejaVu Sans".into(),
-        ))
+        Err(FigureError::Font(FontProblem::Rejected))
     }
 }
 
