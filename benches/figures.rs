@@ -319,14 +319,12 @@ fn save_examples(figs: &[(Figure, (u32, u32))], dir: &str) {
     let all = Formats {
         png: true,
         svg: true,
-        preview: true,
     };
     for (r, &(_, name)) in render_many(&picked, all).into_iter().zip(&wanted) {
         let r = r.expect("example figure renders");
-        let (png, svg, preview) = (r.png.unwrap(), r.svg.unwrap(), r.preview.unwrap());
+        let (png, svg) = (r.png.unwrap(), r.svg.unwrap());
         std::fs::write(format!("{dir}/{name}.png"), png).expect("write PNG");
         std::fs::write(format!("{dir}/{name}.svg"), svg).expect("write SVG");
-        std::fs::write(format!("{dir}/{name}.preview.png"), preview).expect("write preview");
     }
 }
 
@@ -339,15 +337,12 @@ fn bench(c: &mut Criterion) {
     let mut g = c.benchmark_group("figures");
     g.sample_size(10);
     g.throughput(Throughput::Elements(figs.len() as u64));
-    for (id, preview) in [
-        ("campaign_7_runs_22_figures_png_svg", false),
-        ("campaign_7_runs_22_figures_png_svg_preview", true),
+    for (id, png, svg) in [
+        ("campaign_7_runs_22_figures_png_svg", true, true),
+        ("campaign_7_runs_22_figures_png", true, false),
+        ("campaign_7_runs_22_figures_svg", false, true),
     ] {
-        let formats = Formats {
-            png: true,
-            svg: true,
-            preview,
-        };
+        let formats = Formats { png, svg };
         g.bench_function(id, |b| {
             b.iter(|| {
                 let out = render_many(black_box(&figs), formats);

@@ -2,15 +2,21 @@
 //! (`run`), what it did printed, and the one place the exit code is decided:
 //! 2 for usage and manifest errors, 1 when a run failed or an output could
 //! not be written, 0 otherwise.
+//!
+//! What a run does as it goes is shown as a progress bar on a terminal, or
+//! as JSON lines (`--log-format json`) for a cron job; either way a summary
+//! line ends the run. Output to a closed pipe is dropped, not a panic.
 
-use std::path::PathBuf;
+use std::io::{IsTerminal, Write};
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 use clap::{Parser, Subcommand, ValueEnum};
+use indicatif::{ProgressBar, ProgressStyle};
 
 use crate::identify::Estimate;
 use crate::results::{Results, Status};
-use crate::run::{self, CampaignOutcome, FigureFormats, JobError, Settings};
+use crate::run::{self, CampaignOutcome, Event, FigureFormats, JobError, Observer, Settings};
 
 /// Identify servo-hydraulic actuators from lab logs (Maghareh, Silva & Dyke 2018).
 #[derive(Debug, Parser)]
@@ -20,44 +26,46 @@ pub struct Cli {
     pub command: Command,
 }
 
+/// How a campaign is run and reported.
+#[derive(Debug, clap::Args)]
+pub struct RunArgs {
+    /// Output folder (default: `reports/<name>`).
+    #[arg(long)]
+    out: Option<PathBuf>,
+    /// Worker threads (default: all cores); the output does not depend on it.
+    #[arg(long, short)]
+    jobs: Option<usize>,
+    /// Which figure files to draw.
+    #[arg(long, value_enum, default_value_t = Figures::All)]
+    figures: Figures,
+    /// `text`: a progress bar on a terminal and a summary; `json`: one JSON
+    /// object per line (each run started, finished or failed, with its
+    /// duration, then a summary) on stdout, for cron.
+    #[arg(long, value_enum, default_value_t = LogFormat::Text)]
+    log_format: LogFormat,
+    /// Print nothing but errors.
+    #[arg(long, short)]
+    quiet: bool,
+}
+
 #[derive(Debug, Subcommand)]
 pub enum Command {
     /// Run a campaign: identify the rig, predict and validate, write results.json.
     Run {
         /// The campaign manifest (TOML, or JSON with a .json extension).
         manifest: PathBuf,
-        /// Output folder (default: `reports/<campaign name>`).
-        #[arg(long)]
-        out: Option<PathBuf>,
-        /// Worker threads (default: all cores); the output does not depend on it.
-        #[arg(long, short)]
-        jobs: Option<usize>,
-        /// Which figure files to draw (the page inlines PNG previews).
-        #[arg(long, value_enum, default_value_t = Figures::All)]
-        figures: Figures,
-        /// Print nothing but errors.
-        #[arg(long, short)]
-        quiet: bool,
+        #[command(flatten)]
+        args: RunArgs,
     },
     /// Simulate a campaign: lab logs, truth.json and an analysis manifest.
     Simulate {
         /// The simulation manifest (TOML, or JSON with a .json extension).
         manifest: PathBuf,
-        /// Output folder (default: `reports/<simulation name>`).
-        #[arg(long)]
-        out: Option<PathBuf>,
         /// Then run the generated campaign into the same folder.
         #[arg(long)]
         run: bool,
-        /// Worker threads (default: all cores); the output does not depend on it.
-        #[arg(long, short)]
-        jobs: Option<usize>,
-        /// With --run: which figure files to draw (the page inlines PNG previews).
-        #[arg(long, value_enum, default_value_t = Figures::All, requires = "run")]
-        figures: Figures,
-        /// Print nothing but errors.
-        #[arg(long, short)]
-        quiet: bool,
+        #[command(flatten)]
+        args: RunArgs,
     },
     /// Check a manifest (campaign or simulation) and report every problem, without running it.
     Check {
@@ -96,6 +104,13 @@ impl From<Figures> for FigureFormats {
     }
 }
 
+/// `--log-format`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum LogFormat {
+    Text,
+    Json,
+}
+
 /// Exit codes.
 pub const EXIT_OK: u8 = 0;
 pub const EXIT_FAILED: u8 = 1;
@@ -113,68 +128,70 @@ pub fn main() -> ExitCode {
     ExitCode::from(dispatch(cli.command))
 }
 
+/// A line on stdout; a closed pipe (`servoid run ... | head -1`) drops it
+/// instead of panicking, and the exit code stays the run's own.
+fn say(line: &str) {
+    let mut out = std::io::stdout().lock();
+    let _ = writeln!(out, "{line}");
+}
+
+/// A line on stderr, dropped when stderr is closed.
+fn warn(line: &str) {
+    let _ = writeln!(std::io::stderr().lock(), "{line}");
+}
+
 fn dispatch(command: Command) -> u8 {
     match command {
-        Command::Run {
-            manifest,
-            out,
-            jobs,
-            figures,
-            quiet,
-        } => {
-            let settings = Settings {
-                out,
-                jobs,
-                figures: figures.into(),
-            };
-            match run::run_campaign(&manifest, &settings) {
-                Ok(outcome) => report_campaign(&outcome, quiet),
+        Command::Run { manifest, args } => {
+            let watch = Watch::new(&args);
+            let code = match run::run_campaign(&manifest, &settings(&args), &watch) {
+                Ok(outcome) => watch.campaign(&outcome),
                 Err(e) => job_failed(&e),
-            }
+            };
+            watch.done();
+            code
         }
         Command::Simulate {
             manifest,
-            out,
             run,
-            jobs,
-            figures,
-            quiet,
-        } => {
-            let settings = Settings {
-                out,
-                jobs,
-                figures: figures.into(),
-            };
-            cmd_simulate(&manifest, &settings, run, quiet)
-        }
+            args,
+        } => cmd_simulate(&manifest, run, &args),
         Command::Check { manifest } => match run::check(&manifest) {
             Ok(checked) => {
-                println!("{}: ok ({checked})", manifest.display());
+                say(&format!("{}: ok ({checked})", manifest.display()));
                 EXIT_OK
             }
             Err(e) => {
-                eprintln!("error: {e}");
+                warn(&format!("error: {e}"));
                 EXIT_USAGE
             }
         },
         Command::Schema { out_dir } => match run::write_schemas(&out_dir) {
             Ok(paths) => {
                 for p in paths {
-                    println!("wrote {}", p.display());
+                    say(&format!("wrote {}", p.display()));
                 }
                 EXIT_OK
             }
             Err(e) => {
-                eprintln!("error: {e}");
+                warn(&format!("error: {e}"));
                 EXIT_FAILED
             }
         },
     }
 }
 
+fn settings(args: &RunArgs) -> Settings {
+    Settings {
+        out: args.out.clone(),
+        jobs: args.jobs,
+        figures: args.figures.into(),
+    }
+}
+
 /// Report a job that wrote nothing (or could not finish writing).
 fn job_failed(e: &JobError) -> u8 {
-    eprintln!("error: {e}");
+    warn(&format!("error: {e}"));
     if e.is_usage() {
         EXIT_USAGE
     } else {
@@ -182,64 +199,167 @@ fn job_failed(e: &JobError) -> u8 {
     }
 }
 
-fn cmd_simulate(
-    manifest: &std::path::Path,
-    settings: &Settings,
-    then_run: bool,
-    quiet: bool,
-) -> u8 {
-    let outcome = match run::run_simulation(manifest, settings, then_run) {
+fn cmd_simulate(manifest: &Path, then_run: bool, args: &RunArgs) -> u8 {
+    if args.figures != Figures::All && !then_run {
+        warn("error: --figures draws a campaign's figures; it needs --run");
+        return EXIT_USAGE;
+    }
+    let watch = Watch::new(args);
+    let outcome = match run::run_simulation(manifest, &settings(args), then_run, &watch) {
         Ok(o) => o,
         Err(e) => return job_failed(&e),
     };
-    if !quiet {
-        println!(
+    if watch.text() {
+        say(&format!(
             "simulated {} runs of `{}` (SYNTHETIC logs, seed {})",
             outcome.simulated.logs.len(),
             outcome.name,
             outcome.seed
-        );
-        println!("wrote {}", outcome.simulated.truth.display());
-        println!("wrote {}", outcome.simulated.manifest.display());
+        ));
+        say(&format!("wrote {}", outcome.simulated.truth.display()));
+        say(&format!("wrote {}", outcome.simulated.manifest.display()));
     }
-    match &outcome.campaign {
+    let code = match &outcome.campaign {
         None => EXIT_OK,
-        Some(Ok(c)) => report_campaign(c, quiet),
+        Some(Ok(c)) => watch.campaign(c),
         Some(Err(e)) => job_failed(e),
+    };
+    watch.done();
+    code
+}
+
+/// What the user sees of a run as it goes: a progress bar on a terminal (a
+/// text log whose stdout is a terminal), JSON lines, or nothing.
+struct Watch {
+    json: bool,
+    quiet: bool,
+    bar: Option<ProgressBar>,
+}
+
+impl Watch {
+    fn new(args: &RunArgs) -> Self {
+        let json = args.log_format == LogFormat::Json;
+        let bar = (!json && !args.quiet && std::io::stdout().is_terminal()).then(|| {
+            let bar = ProgressBar::new(0);
+            bar.set_style(
+                ProgressStyle::with_template("{bar:40} {pos}/{len} runs, {elapsed} ({per_sec})")
+                    .expect("the progress template is valid"),
+            );
+            bar
+        });
+        Self {
+            json,
+            quiet: args.quiet,
+            bar,
+        }
+    }
+
+    /// Whether text output is wanted.
+    fn text(&self) -> bool {
+        !self.json && !self.quiet
+    }
+
+    fn done(&self) {
+        if let Some(bar) = &self.bar {
+            bar.finish_and_clear();
+        }
+    }
+
+    /// Print what a campaign run wrote, with its summary line, and decide
+    /// its exit code: 1 when any run failed (its error is in results.json
+    /// too).
+    fn campaign(&self, outcome: &CampaignOutcome) -> u8 {
+        self.done();
+        let results = &outcome.results;
+        let n = results.runs.len();
+        let failed = outcome.failed();
+        let per_s = n as f64 / outcome.seconds.max(1e-9);
+        if self.json {
+            say(&serde_json::json!({
+                "event": "summary",
+                "campaign": results.campaign.name,
+                "ok": n - failed,
+                "failed": failed,
+                "cached": 0,
+                "seconds": outcome.seconds,
+                "logs_per_s": per_s,
+                "results": outcome.results_path,
+            })
+            .to_string());
+        } else if !self.quiet {
+            print_summary(results);
+            say(&format!("wrote {}", outcome.results_path.display()));
+            say(&format!("wrote {}", outcome.page_path.display()));
+            say(&format!(
+                "summary: {} ok, {failed} failed, 0 cached in {:.2} s ({per_s:.1} logs/s)",
+                n - failed,
+                outcome.seconds
+            ));
+        }
+        for r in results.runs.iter().filter(|r| r.status == Status::Failed) {
+            warn(&format!(
+                "error: run {}: {}",
+                r.id,
+                r.error.as_deref().unwrap_or("failed")
+            ));
+        }
+        if failed > 0 { EXIT_FAILED } else { EXIT_OK }
     }
 }
 
-/// Print what a campaign run wrote and decide its exit code: 1 when any run
-/// failed (its error is in results.json too).
-fn report_campaign(outcome: &CampaignOutcome, quiet: bool) -> u8 {
-    let results = &outcome.results;
-    if !quiet {
-        print_summary(results);
-        println!("wrote {}", outcome.results_path.display());
-        println!("wrote {}", outcome.page_path.display());
-    }
-    for r in results.runs.iter().filter(|r| r.status == Status::Failed) {
-        eprintln!(
-            "error: run {}: {}",
-            r.id,
-            r.error.as_deref().unwrap_or("failed")
-        );
-    }
-    if run::any_failed(results) {
-        EXIT_FAILED
-    } else {
-        EXIT_OK
+impl Observer for Watch {
+    fn event(&self, event: &Event<'_>) {
+        match *event {
+            Event::Started { runs } => {
+                if let Some(bar) = &self.bar {
+                    bar.set_length(runs as u64);
+                }
+            }
+            Event::RunStarted { id } => {
+                if self.json {
+                    say(&serde_json::json!({"event": "run_started", "run": id}).to_string());
+                }
+            }
+            Event::RunFinished {
+                id,
+                status,
+                seconds,
+            } => {
+                if let Some(bar) = &self.bar {
+                    bar.inc(1);
+                }
+                if self.json {
+                    let event = match status {
+                        Status::Ok => "run_finished",
+                        Status::Failed => "run_failed",
+                    };
+                    say(
+                        &serde_json::json!({"event": event, "run": id, "seconds": seconds})
+                            .to_string(),
+                    );
+                }
+            }
+        }
     }
 }
 
 fn print_summary(r: &Results) {
-    println!("campaign {}", r.campaign.name);
+    say(&format!("campaign {}", r.campaign.name));
     for run in &r.runs {
-        let status = match run.status {
-            Status::Ok => "ok",
-            Status::Failed => "FAILED",
+        let status = match (
+            run.status,
+            run.validation.as_ref().is_some_and(|v| v.outlier),
+        ) {
+            (Status::Failed, _) => "FAILED",
+            (Status::Ok, true) => "ok (OUTLIER)",
+            (Status::Ok, false) => "ok",
         };
-        println!("  run {:<16} {:<12} {}", run.id, run.role.as_str(), status);
+        say(&format!(
+            "  run {:<16} {:<12} {}",
+            run.id,
+            run.role.as_str(),
+            status
+        ));
     }
     match &r.rig {
         Some(rig) => {
@@ -247,26 +367,29 @@ fn print_summary(r: &Results) {
                 Some(s) => format!("{:.5e} +/- {:.2e}", e.value, s),
                 None => format!("{:.5e}", e.value),
             };
-            println!("  rig ({:?}, a1b0 at P = {}):", rig.source, rig.p_gain);
-            println!("    beta1 = {} 1/s", pm(&rig.beta1));
-            println!("    a1b0  = {} N/(m s^2)", pm(&rig.a1b0));
-            println!("    a2    = {} N/m", pm(&rig.a2));
-            println!("    a3    = {} 1/s", pm(&rig.a3));
+            say(&format!(
+                "  rig ({:?}, a1b0 at P = {}):",
+                rig.source, rig.p_gain
+            ));
+            say(&format!("    beta1 = {} 1/s", pm(&rig.beta1)));
+            say(&format!("    a1b0  = {} N/(m s^2)", pm(&rig.a1b0)));
+            say(&format!("    a2    = {} N/m", pm(&rig.a2)));
+            say(&format!("    a3    = {} 1/s", pm(&rig.a3)));
         }
         None => {
             if let Some(e) = &r.rig_error {
-                println!("  rig: unavailable ({e})");
+                say(&format!("  rig: unavailable ({e})"));
             }
         }
     }
     let flagged = r.comparisons.iter().filter(|c| c.flag).count();
     if !r.comparisons.is_empty() {
-        println!(
+        say(&format!(
             "  comparisons: {} with published values, {flagged} flagged",
             r.comparisons.len()
-        );
+        ));
     }
     for w in &r.warnings {
-        println!("  warning: {w}");
+        say(&format!("  warning: {w}"));
     }
 }

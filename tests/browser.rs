@@ -292,13 +292,14 @@ fn a_report_with_a_failed_run_renders_and_shows_the_error() {
     b.close().unwrap();
 }
 
-/// The page of the bundled default (the paper's campaign, simulated): under
-/// 3 MB, every figure inlined as a preview and linked to its PNG and SVG
-/// beside the page, and in Chromium complete, with every image decoded.
-/// The load time the browser measures (navigation start to the end of the
-/// load event) is printed, not asserted: tests never time.
+/// The pages of the bundled default (the paper's campaign, simulated): the
+/// campaign's page small (under 3 MB; figures are files beside it, not
+/// inlined), one page per run linked from it with that run's figures, and
+/// in Chromium every page complete, with every image decoded. The load time
+/// the browser measures (navigation start to the end of the load event) is
+/// printed, not asserted: tests never time.
 #[test]
-fn the_bundled_default_page_is_light_and_complete() {
+fn the_bundled_default_pages_are_light_and_complete() {
     let dir = scratch();
     let out = dir.path().join("out");
     let o = crate::util::servoid_into(
@@ -317,49 +318,82 @@ fn the_bundled_default_page_is_light_and_complete() {
     );
     // minijinja escapes `/` in attributes as `&#x2f;`; the browser reads both
     // alike.
-    let html = std::fs::read_to_string(&page)
-        .unwrap()
-        .replace("&#x2f;", "/");
+    let read = |p: &Path| std::fs::read_to_string(p).unwrap().replace("&#x2f;", "/");
+    let html = read(&page);
     let svgs = figure_files(&out, "svg");
     let pngs = figure_files(&out, "png");
     assert!(svgs.len() >= 20, "{} SVG figures", svgs.len());
     assert_eq!(svgs.len(), pngs.len());
-    for f in svgs.iter().chain(&pngs) {
+    let runs = [
+        "no-specimen",
+        "spring-k1",
+        "spring-k2",
+        "exp1",
+        "exp2",
+        "exp3",
+        "exp4",
+    ];
+    // Every figure is linked from exactly one page, as PNG and as SVG.
+    let mut pages = vec![html.clone()];
+    for id in runs {
         assert!(
-            html.contains(&format!("href=\"figures/{f}\"")),
-            "the page links figures/{f}"
+            html.contains(&format!("href=\"runs/{id}.html\"")),
+            "the campaign page links run {id}'s page"
         );
+        pages.push(read(&out.join(format!("runs/{id}.html"))));
     }
-    assert_eq!(
-        html.matches("src=\"data:image/png;base64,").count(),
-        svgs.len(),
-        "one inlined preview per figure"
-    );
+    for f in svgs.iter().chain(&pngs) {
+        let linked = pages
+            .iter()
+            .filter(|p| p.contains(&format!("figures/{f}\"")))
+            .count();
+        assert_eq!(linked, 1, "figures/{f} is linked from one page");
+    }
 
-    let Some(mut b) = browser("the_bundled_default_page_is_light_and_complete") else {
+    let Some(mut b) = browser("the_bundled_default_pages_are_light_and_complete") else {
         return;
     };
     open_clean(&mut b, &out);
-    let state = b
-        .evaluate(
-            "({ ready: document.readyState, figures: document.querySelectorAll('figure img').length, \
-             load_ms: performance.getEntriesByType('navigation')[0].loadEventEnd })",
-        )
-        .unwrap();
-    assert_eq!(state["ready"], "complete");
-    assert_eq!(state["figures"].as_u64(), Some(svgs.len() as u64));
-    // Every section of the page is there, down to the provenance at its end.
-    for id in ["figures", "comparisons", "provenance"] {
+    let load_ms = load_time_ms(&mut b);
+    for id in ["figures", "runs", "comparisons", "provenance"] {
         let found = b
             .evaluate(&format!("document.getElementById('{id}') !== null"))
             .unwrap();
         assert_eq!(found, serde_json::json!(true), "section #{id}");
     }
-    let load_ms = state["load_ms"].as_f64().expect("a load time");
+    let mut figures = b
+        .evaluate("document.querySelectorAll('figure img').length")
+        .unwrap()
+        .as_u64()
+        .unwrap();
+    for id in runs {
+        let run_page = out.join(format!("runs/{id}.html"));
+        b.open(&run_page).unwrap();
+        let errors = b.errors().unwrap();
+        assert!(errors.is_empty(), "{id}: {}", errors.join("\n"));
+        let images = b.images().unwrap();
+        assert!(images.broken.is_empty(), "{id}: {:?}", images.broken);
+        figures += images.total as u64;
+    }
+    assert_eq!(figures, svgs.len() as u64, "every figure is shown once");
     crate::util::note(&format!(
-        "the bundled default's report.html ({bytes} bytes, {} figures) loaded in Chromium in {load_ms:.0} ms",
-        svgs.len()
+        "the bundled default's report.html ({bytes} bytes) loaded in Chromium in {load_ms:.0} ms; {} figures over {} pages",
+        svgs.len(),
+        runs.len() + 1
     ));
+}
+
+/// The document's load time as the browser measured it (ms), after checking
+/// the document is complete.
+fn load_time_ms(b: &mut Browser) -> f64 {
+    let state = b
+        .evaluate(
+            "({ ready: document.readyState, \
+             load_ms: performance.getEntriesByType('navigation')[0].loadEventEnd })",
+        )
+        .unwrap();
+    assert_eq!(state["ready"], "complete");
+    state["load_ms"].as_f64().expect("a load time")
 }
 
 /// File names under `out/figures` with extension `ext`, sorted.

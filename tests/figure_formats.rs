@@ -41,21 +41,21 @@ fn each_choice_writes_its_files_and_the_page_says_what_it_has() {
     let dir = scratch();
     let (json_all, page_all, files_all) = run_with(dir.path(), "all");
     // paper.toml has published transfer functions, no logs: its one figure
-    // is the stiffness sensitivity.
+    // is the stiffness sensitivity, on the campaign's page.
     assert_eq!(files_all, ["sensitivity.png", "sensitivity.svg"]);
-    assert!(page_all.contains("src=\"data:image/png;base64,"));
+    assert!(page_all.contains("<img src=\"figures/sensitivity.png\""));
     assert!(page_all.contains("href=\"figures/sensitivity.png\""));
     assert!(page_all.contains("href=\"figures/sensitivity.svg\""));
 
     let (json_png, page_png, files_png) = run_with(dir.path(), "png");
     assert_eq!(files_png, ["sensitivity.png"]);
-    assert!(page_png.contains("src=\"data:image/png;base64,"));
+    assert!(page_png.contains("<img src=\"figures/sensitivity.png\""));
     assert!(!page_png.contains(".svg"));
 
     let (json_svg, page_svg, files_svg) = run_with(dir.path(), "svg");
     assert_eq!(files_svg, ["sensitivity.svg"]);
     assert!(page_svg.contains("<img src=\"figures/sensitivity.svg\""));
-    assert!(!page_svg.contains("data:image/png"));
+    assert!(!page_svg.contains(".png"));
 
     let (json_none, page_none, files_none) = run_with(dir.path(), "none");
     assert!(files_none.is_empty(), "{files_none:?}");

@@ -232,6 +232,10 @@ fn the_same_seed_gives_the_same_bytes_whatever_the_thread_count() {
     assert_eq!(names(&trees[0]), names(&trees[1]));
     assert!(trees[0].len() > 10, "logs, truth, results, figures");
     for ((name, a), (_, b)) in trees[0].iter().zip(&trees[1]) {
+        // run.jsonl is where the wall clock and durations go, by design.
+        if name.ends_with("run.jsonl") {
+            continue;
+        }
         assert!(a == b, "{name} differs between --jobs 1 and --jobs 2");
     }
 }

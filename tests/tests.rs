@@ -5,6 +5,7 @@ mod util;
 
 mod accuracy;
 mod bad_logs;
+mod batch;
 mod browser;
 mod figure_formats;
 mod layering;

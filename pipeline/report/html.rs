@@ -1,30 +1,34 @@
-//! The campaign's HTML report: one page rendered from results.json and the
-//! figures by a minijinja template (`report.html`), never by string
-//! concatenation. It opens offline from disk: each figure is inlined as a
-//! compact PNG preview (a data URI), with links to the full PNG and the SVG
-//! beside the page; with SVG files alone the page shows those. A failed run
-//! still appears with its error.
+//! The campaign's HTML pages, rendered from results.json and the figures'
+//! file names by minijinja templates, never by string concatenation: the
+//! campaign's page `report.html` (`report.html` template) summarises every
+//! run in one table and shows the campaign's figures; each run's page
+//! `runs/<id>.html` (`run.html`) holds its details and figures. Figures are
+//! the files beside the pages, so a page stays small and opens offline from
+//! disk. A failed run still appears with its error.
+//!
+//! Rendering is linear in the number of runs: the results become a
+//! template value once, and nothing in a template searches the runs.
 
-use base64::Engine;
+use std::collections::{BTreeMap, HashMap};
+
 use minijinja::value::Serde;
 use minijinja::{Environment, Value};
 
-use crate::results::{Results, Status};
+use crate::results::{Results, RunResult, Status};
 
-const TEMPLATE: &str = include_str!("report.html");
+const CAMPAIGN_TEMPLATE: &str = include_str!("report.html");
+const RUN_TEMPLATE: &str = include_str!("run.html");
+const STYLE: &str = include_str!("style.html");
 
-/// A figure as the page shows it.
+/// A figure as a page shows it.
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct PageFigure {
     pub id: String,
     pub title: String,
     pub caption: String,
-    /// The compact preview inlined in the page, `data:image/png;base64,...`
-    /// (only characters that need no HTML escaping).
-    pub preview_data_uri: Option<String>,
-    /// The full PNG beside the page, relative to it.
+    /// The PNG, relative to the output folder.
     pub png_file: Option<String>,
-    /// The SVG beside the page, relative to it.
+    /// The SVG, relative to the output folder.
     pub svg_file: Option<String>,
 }
 
@@ -34,63 +38,114 @@ impl PageFigure {
             id: id.to_string(),
             title: title.to_string(),
             caption: caption.to_string(),
-            preview_data_uri: None,
             png_file: None,
             svg_file: None,
         }
     }
-
-    /// Inline `png` as the page's preview of the figure.
-    pub fn with_preview(mut self, png: &[u8]) -> Self {
-        self.preview_data_uri = Some(format!(
-            "data:image/png;base64,{}",
-            base64::engine::general_purpose::STANDARD.encode(png)
-        ));
-        self
-    }
 }
 
-/// Why the page could not be rendered.
+/// A serialisable value as a template value.
+fn ser<T: serde::Serialize>(v: T) -> Value {
+    Value::from(Serde(v))
+}
+
+/// A run's page, relative to the output folder.
+pub fn run_page(id: &str) -> String {
+    format!("runs/{id}.html")
+}
+
+/// Why a page could not be rendered.
 #[derive(Debug, thiserror::Error)]
 pub enum HtmlError {
     #[error("report template: {0}")]
     Template(#[from] minijinja::Error),
 }
 
-/// Render the page. `notice` is shown in a banner (e.g. that the logs are
-/// synthetic); `figures_note` says why there are no figures when there are
-/// none.
-pub fn render(
-    results: &Results,
-    figures: &[PageFigure],
-    notice: Option<&str>,
-    figures_note: &str,
-) -> Result<String, HtmlError> {
-    let mut env = Environment::new();
-    env.add_filter("num", num);
-    env.add_filter("pm", pm);
-    env.add_filter("pct", pct);
-    env.add_filter("specimen", specimen);
-    env.add_filter("poles", poles);
-    env.add_template("report.html", TEMPLATE)?;
-    let failed = results
-        .runs
-        .iter()
-        .filter(|r| r.status == Status::Failed)
-        .count();
-    let flagged = results.comparisons.iter().filter(|c| c.flag).count();
-    let manifest_json =
-        serde_json::to_string_pretty(&results.manifest).unwrap_or_else(|e| e.to_string());
-    let ctx = minijinja::context! {
-        r => Value::from(Serde(results)),
-        figures => Value::from(Serde(figures)),
-        notice => notice,
-        figures_note => figures_note,
-        failed => failed,
-        flagged => flagged,
-        manifest_json => manifest_json,
-    };
-    Ok(env.get_template("report.html")?.render(ctx)?)
+/// The pages of one campaign: the templates and the results, made ready once.
+pub struct Pages<'a> {
+    env: Environment<'static>,
+    results: &'a Results,
+    /// The results as a template value (built once: it is large).
+    r: Value,
+    /// Each run's canonical form, by run id.
+    ccf_of: HashMap<&'a str, usize>,
+    figures_note: Option<&'static str>,
+}
+
+impl<'a> Pages<'a> {
+    /// `figures_note` says why the pages have no figures, when none were
+    /// drawn.
+    pub fn new(
+        results: &'a Results,
+        figures_note: Option<&'static str>,
+    ) -> Result<Self, HtmlError> {
+        let mut env = Environment::new();
+        env.add_filter("num", num);
+        env.add_filter("pm", pm);
+        env.add_filter("pct", pct);
+        env.add_filter("specimen", specimen);
+        env.add_filter("poles", poles);
+        env.add_template("style.html", STYLE)?;
+        env.add_template("report.html", CAMPAIGN_TEMPLATE)?;
+        env.add_template("run.html", RUN_TEMPLATE)?;
+        Ok(Self {
+            env,
+            results,
+            r: ser(results),
+            ccf_of: (results.ccf.iter().enumerate())
+                .map(|(i, c)| (c.run.as_str(), i))
+                .collect(),
+            figures_note,
+        })
+    }
+
+    /// The campaign's page, with the campaign's own figures.
+    pub fn campaign(&self, figures: &[PageFigure]) -> Result<String, HtmlError> {
+        let results = self.results;
+        let failed = results
+            .runs
+            .iter()
+            .filter(|r| r.status == Status::Failed)
+            .count();
+        let flagged = results.comparisons.iter().filter(|c| c.flag).count();
+        let manifest_json =
+            serde_json::to_string_pretty(&results.manifest).unwrap_or_else(|e| e.to_string());
+        // Table 3 heads each run's column with its a1b0; looked up here once.
+        let a1b0: BTreeMap<&str, Option<f64>> = results
+            .runs
+            .iter()
+            .map(|r| (r.id.as_str(), r.a1b0))
+            .collect();
+        let ctx = minijinja::context! {
+            r => self.r.clone(),
+            figures => ser(figures),
+            notice => results.manifest.campaign.synthetic.as_deref(),
+            figures_note => self.figures_note,
+            failed => failed,
+            flagged => flagged,
+            a1b0_of => ser(&a1b0),
+            manifest_json => manifest_json,
+        };
+        Ok(self.env.get_template("report.html")?.render(ctx)?)
+    }
+
+    /// A run's page, with its figures.
+    pub fn run(&self, run: &RunResult, figures: &[PageFigure]) -> Result<String, HtmlError> {
+        let ccf = self
+            .ccf_of
+            .get(run.id.as_str())
+            .map(|&i| &self.results.ccf[i]);
+        let ctx = minijinja::context! {
+            campaign => ser(&self.results.campaign),
+            servoid_version => self.results.servoid_version.as_str(),
+            notice => self.results.manifest.campaign.synthetic.as_deref(),
+            run => ser(run),
+            ccf => ser(ccf),
+            figures => ser(figures),
+            figures_note => self.figures_note,
+        };
+        Ok(self.env.get_template("run.html")?.render(ctx)?)
+    }
 }
 
 fn as_f64(v: &Value) -> Option<f64> {

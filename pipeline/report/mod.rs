@@ -9,6 +9,8 @@ pub mod figures;
 
 pub mod logs;
 
+pub use html::PageFigure;
+
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
@@ -38,17 +40,16 @@ pub struct FigureSpec {
     pub size: (u32, u32),
 }
 
-/// Which figure files a run writes beside its page. The page inlines a
-/// compact PNG preview of each figure unless only SVG files are asked for,
-/// in which case it shows those.
+/// Which figure files a run writes beside its pages, which show them from
+/// there (PNG where there is one, else SVG).
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub enum FigureFormats {
-    /// PNG and SVG files, and previews in the page.
+    /// PNG and SVG files.
     #[default]
     All,
-    /// PNG files, and previews in the page.
+    /// PNG files.
     Png,
-    /// SVG files, shown by the page.
+    /// SVG files.
     Svg,
     /// No figure is drawn at all.
     None,
@@ -63,64 +64,69 @@ impl FigureFormats {
             FigureFormats::Svg => (false, true),
             FigureFormats::None => return None,
         };
-        Some(figures::Formats {
-            png,
-            svg,
-            preview: png,
-        })
+        Some(figures::Formats { png, svg })
     }
 
-    /// What the page says when it shows no figure.
-    fn note(self) -> &'static str {
-        match self {
-            FigureFormats::None => "No figures were drawn for this report (--figures none).",
-            _ => "No figure could be drawn for this campaign (see the warnings).",
-        }
+    /// What a page says in place of its figures when none were drawn.
+    fn note(self) -> Option<&'static str> {
+        (self == FigureFormats::None)
+            .then_some("No figures were drawn for this report (--figures none).")
     }
 }
 
-/// Render every figure the formats ask for (in parallel; bytes do not depend
-/// on the thread count) and write `figures/<id>.png` and `.svg` into
-/// `out_dir`. A figure that cannot be drawn is reported in the returned
-/// warnings and left out; it never stops the report.
-pub fn write_figures(
-    specs: &[FigureSpec],
-    out_dir: &Path,
-    choice: FigureFormats,
-) -> Result<(Vec<html::PageFigure>, Vec<String>), WriteError> {
-    let Some(formats) = choice.formats() else {
-        return Ok((Vec::new(), Vec::new()));
-    };
-    let jobs: Vec<(figures::Figure, (u32, u32))> =
-        specs.iter().map(|s| (s.figure.clone(), s.size)).collect();
-    let rendered = figures::render_many(&jobs, formats);
-    let mut page = Vec::new();
-    let mut warnings = Vec::new();
-    for (spec, r) in specs.iter().zip(rendered) {
-        let r = match r {
-            Ok(r) => r,
-            Err(e) => {
-                warnings.push(format!("figure {}: {e}", spec.id));
-                continue;
-            }
-        };
-        let mut fig = html::PageFigure::new(&spec.id, &spec.title, &spec.caption);
-        if let Some(png) = &r.png {
-            let name = format!("figures/{}.png", spec.id);
-            write_atomic(&out_dir.join(&name), png)?;
-            fig.png_file = Some(name);
-        }
-        if let Some(svg) = &r.svg {
-            let name = format!("figures/{}.svg", spec.id);
-            write_atomic(&out_dir.join(&name), svg.as_bytes())?;
-            fig.svg_file = Some(name);
-        }
-        if let Some(preview) = &r.preview {
-            fig = fig.with_preview(preview);
-        }
-        page.push(fig);
+/// Where figures go: `figures/<id>.png` and `.svg` under an output folder,
+/// in the formats asked for.
+#[derive(Debug, Clone, Copy)]
+pub struct FigureFiles<'a> {
+    out_dir: &'a Path,
+    formats: figures::Formats,
+}
+
+impl<'a> FigureFiles<'a> {
+    /// None when `choice` draws no figure.
+    pub fn new(out_dir: &'a Path, choice: FigureFormats) -> Option<Self> {
+        Some(Self {
+            out_dir,
+            formats: choice.formats()?,
+        })
     }
-    Ok((page, warnings))
+
+    /// Render the figures (in parallel; bytes do not depend on the thread
+    /// count) and write their files. A figure that cannot be drawn is
+    /// reported in the returned warnings and left out; it never stops the
+    /// report.
+    pub fn write(
+        &self,
+        specs: &[FigureSpec],
+    ) -> Result<(Vec<PageFigure>, Vec<String>), WriteError> {
+        let jobs: Vec<(figures::Figure, (u32, u32))> =
+            specs.iter().map(|s| (s.figure.clone(), s.size)).collect();
+        let rendered = figures::render_many(&jobs, self.formats);
+        let mut page = Vec::new();
+        let mut warnings = Vec::new();
+        for (spec, r) in specs.iter().zip(rendered) {
+            let r = match r {
+                Ok(r) => r,
+                Err(e) => {
+                    warnings.push(format!("figure {}: {e}", spec.id));
+                    continue;
+                }
+            };
+            let mut fig = PageFigure::new(&spec.id, &spec.title, &spec.caption);
+            if let Some(png) = &r.png {
+                let name = format!("figures/{}.png", spec.id);
+                write_atomic(&self.out_dir.join(&name), png)?;
+                fig.png_file = Some(name);
+            }
+            if let Some(svg) = &r.svg {
+                let name = format!("figures/{}.svg", spec.id);
+                write_atomic(&self.out_dir.join(&name), svg.as_bytes())?;
+                fig.svg_file = Some(name);
+            }
+            page.push(fig);
+        }
+        Ok((page, warnings))
+    }
 }
 
 /// Write `bytes` to `path` atomically (temporary file, fsync, rename).
@@ -157,19 +163,24 @@ pub fn json_bytes(value: &impl serde::Serialize) -> Vec<u8> {
     s.into_bytes()
 }
 
-/// Write the HTML report `report.html` into `out_dir`; returns its path.
-/// `choice` is what the figures were drawn as (the page says why it has
-/// none).
-pub fn write_page(
+/// Write the campaign's page `report.html` and each run's page
+/// `runs/<id>.html` into `out_dir`; returns the campaign page's path.
+/// `run_figures` follow `results.runs`; `choice` is what the figures were
+/// drawn as (a page without figures says why).
+pub fn write_pages(
     results: &Results,
-    figures: &[html::PageFigure],
+    run_figures: &[Vec<PageFigure>],
+    campaign_figures: &[PageFigure],
     choice: FigureFormats,
     out_dir: &Path,
 ) -> Result<PathBuf, WriteError> {
-    let notice = results.manifest.campaign.synthetic.as_deref();
-    let page = html::render(results, figures, notice, choice.note())?;
+    let pages = html::Pages::new(results, choice.note())?;
+    for (run, figures) in results.runs.iter().zip(run_figures) {
+        let page = pages.run(run, figures)?;
+        write_atomic(&out_dir.join(html::run_page(&run.id)), page.as_bytes())?;
+    }
     let path = out_dir.join("report.html");
-    write_atomic(&path, page.as_bytes())?;
+    write_atomic(&path, pages.campaign(campaign_figures)?.as_bytes())?;
     Ok(path)
 }
 

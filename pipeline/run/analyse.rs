@@ -1,27 +1,43 @@
-//! A campaign's analysis: each run's first stage in parallel (results keep
-//! the manifest's order, so the output does not depend on the thread
-//! count), the rig, then each run's model, prediction and time-domain
-//! validation, the canonical forms, the stiffness sensitivity and the
+//! A campaign's analysis in two passes over its runs, each in parallel
+//! (results keep the manifest's order, so the output does not depend on the
+//! thread count), holding one log per worker at a time:
+//!
+//! 1. every run that does not need the rig (no-specimen, spring and fit
+//!    runs) is read, estimated, fitted and checked in the time domain, its
+//!    figures drawn, and its signals dropped; what the rig needs (the fitted
+//!    model and covariance) and what its later figure needs (the force FRF's
+//!    plotted bins) are kept;
+//! 2. the rig is identified from them (Fig. 6, Eqs. 18-20) or taken as
+//!    given; then the validation runs are read, predicted and validated,
+//!    their figures drawn and their signals dropped, and the other runs get
+//!    what depends on the rig (a1b0 at their P gain, the force model and its
+//!    figure).
+//!
+//! Then the canonical forms, outliers, the stiffness sensitivity and the
 //! comparisons with published numbers. A failed run is recorded in its
-//! result and the batch goes on. Pure apart from ingest reading the logs.
+//! result and the batch goes on. Pure apart from ingest reading the logs and
+//! the figures going to their files.
 
 use std::sync::Arc;
+use std::time::Instant;
 
 use rayon::prelude::*;
 
 use super::acquire::{AcquireError, Acquired, LogStage, acquire};
 use super::compare::compare;
-use super::rig::{self, RigError};
+use super::figures::{self, ForceBins, OverlayRun};
+use super::rig::{self, RigError, RigInput};
 use crate::fit::TfFit;
 use crate::ingest::Log;
 use crate::manifest::{Campaign, Role, RunPlan, RunSource};
 use crate::model::{self, CnTerm, LinearSdof, LinearSpecimen, RigParams};
+use crate::report::{FigureFiles, FigureSpec, PageFigure, WriteError};
 use crate::results::{
     CampaignSummary, CcfResult, ComplexValue, FitSummary, LogInfo, RESULTS_SCHEMA_VERSION, Results,
     RunResult, SensitivityResult, Status, TfResult, TfSource,
 };
 use crate::simulate::specimen::SpecimenModel;
-use crate::validate::{self, Record, TimeStage, ValidateError, ValidationMetrics};
+use crate::validate::{self, Record, ValidateError, ValidationMetrics};
 
 /// Why one run failed; recorded in that run's result.
 #[derive(Debug, thiserror::Error)]
@@ -40,55 +56,96 @@ impl From<Arc<RigError>> for RunError {
     }
 }
 
-/// What a run leaves for the figures besides its result.
-#[derive(Debug, Clone, Default)]
-pub struct RunArtifacts {
-    pub stage: Option<Box<LogStage>>,
-    pub time: Option<TimeStage>,
+/// What happens as a campaign runs, for whoever watches it (a progress bar,
+/// an event log). Called from the worker threads.
+pub trait Observer: Sync {
+    fn event(&self, event: &Event<'_>);
 }
 
-/// A campaign's results and the signals behind them.
+/// One thing that happened.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Event<'a> {
+    /// The campaign starts with this many runs.
+    Started { runs: usize },
+    /// A run's log work starts.
+    RunStarted { id: &'a str },
+    /// A run's log work is done (or it failed), after `seconds`.
+    RunFinished {
+        id: &'a str,
+        status: Status,
+        seconds: f64,
+    },
+}
+
+/// An observer that watches nothing.
+pub struct Unobserved;
+
+impl Observer for Unobserved {
+    fn event(&self, _: &Event<'_>) {}
+}
+
+/// A campaign analysed, with the figures written for it.
 #[derive(Debug, Clone)]
-pub struct Analysis {
+pub struct Analysed {
     pub results: Results,
-    /// One per run, in manifest order.
-    pub artifacts: Vec<RunArtifacts>,
+    /// Each run's figures as written, in manifest order.
+    pub run_figures: Vec<Vec<PageFigure>>,
+    /// The campaign's own figures as written.
+    pub campaign_figures: Vec<PageFigure>,
+    /// Each run's log work (s), in manifest order: for run.jsonl, never
+    /// results.json.
+    pub seconds: Vec<f64>,
 }
 
-/// Analyse a campaign. Pure apart from the ingest stage reading the logs.
+/// Analyse a campaign without drawing figures.
 pub fn analyse(campaign: &Campaign) -> Results {
-    analyse_full(campaign).results
+    analyse_with(campaign, None, &Unobserved)
+        .expect("nothing is written without figures")
+        .results
 }
 
-/// Analyse a campaign and keep the signals for the figures.
-pub fn analyse_full(campaign: &Campaign) -> Analysis {
-    let acquired: Vec<Result<Acquired, Arc<AcquireError>>> = campaign
+/// Analyse a campaign, writing its figures through `files` when given.
+pub(super) fn analyse_with(
+    campaign: &Campaign,
+    files: Option<&FigureFiles<'_>>,
+    observer: &dyn Observer,
+) -> Result<Analysed, WriteError> {
+    observer.event(&Event::Started {
+        runs: campaign.runs.len(),
+    });
+    let intersample = campaign.identification.intersample;
+    let draw = Drawer { files, intersample };
+    let first: Vec<FirstPass> = campaign
         .runs
         .par_iter()
-        .map(|r| acquire(campaign, r).map_err(Arc::new))
-        .collect();
+        .map(|plan| first_pass(campaign, plan, &draw, observer))
+        .collect::<Result<_, _>>()?;
 
     let mut warnings = Vec::new();
-    let rig = rig::establish(campaign, &acquired, &mut warnings).map_err(Arc::new);
+    let rig = rig::establish(campaign, first.iter().map(|f| &f.rig_input), &mut warnings)
+        .map_err(Arc::new);
     let rig_params = rig.as_ref().ok().map(|(p, _)| *p);
-    let rig_for_runs = rig.as_ref().map(|(p, _)| p).map_err(Arc::clone);
+    let rig_for_runs = rig.as_ref().map(|(p, _)| *p).map_err(Arc::clone);
 
-    let (mut runs, artifacts): (Vec<RunResult>, Vec<RunArtifacts>) = campaign
+    let second: Vec<Done> = campaign
         .runs
         .par_iter()
-        .zip(acquired)
-        .map(|(plan, acq)| run_result(plan, acq, rig_for_runs.clone()))
-        .collect::<Vec<_>>()
-        .into_iter()
-        .unzip();
-    // Validation runs far worse than the others are flagged (the specimen
-    // may differ from its log's behaviour).
-    let mut validation: Vec<&mut ValidationMetrics> = runs
-        .iter_mut()
-        .filter(|r| r.role == Role::Validation)
-        .filter_map(|r| r.validation.as_mut())
-        .collect();
-    validate::flag_outliers(&mut validation);
+        .zip(first)
+        .map(|(plan, first)| second_pass(campaign, plan, first, &rig_for_runs, &draw, observer))
+        .collect::<Result<_, _>>()?;
+
+    let mut runs = Vec::with_capacity(second.len());
+    let mut run_figures = Vec::with_capacity(second.len());
+    let mut seconds = Vec::with_capacity(second.len());
+    let mut overlay = Vec::new();
+    for done in second {
+        runs.push(done.result);
+        run_figures.push(done.figures);
+        warnings.extend(done.figure_warnings);
+        seconds.push(done.seconds);
+        overlay.extend(done.overlay);
+    }
+    flag_outliers(&mut runs);
 
     let ccf = match &rig_params {
         Some(rig) => campaign
@@ -98,7 +155,6 @@ pub fn analyse_full(campaign: &Campaign) -> Analysis {
             .collect(),
         None => Vec::new(),
     };
-
     let needs_rig = campaign.runs.iter().any(|r| r.role == Role::Validation)
         || campaign.identifies_rig()
         || campaign.given_rig.is_some();
@@ -109,18 +165,7 @@ pub fn analyse_full(campaign: &Campaign) -> Analysis {
     let mut results = Results {
         schema_version: RESULTS_SCHEMA_VERSION,
         servoid_version: env!("CARGO_PKG_VERSION").to_string(),
-        campaign: CampaignSummary {
-            name: campaign.name.clone(),
-            description: campaign.description.clone(),
-            rig_name: campaign.rig_name.clone(),
-            rig_notes: campaign.rig_notes.clone(),
-            manifest: campaign
-                .file
-                .file_name()
-                .map(|f| f.to_string_lossy().into_owned())
-                .unwrap_or_default(),
-            manifest_sha256: campaign.manifest_sha256.clone(),
-        },
+        campaign: summary(campaign),
         rig: rig_result,
         rig_error,
         runs,
@@ -132,7 +177,307 @@ pub fn analyse_full(campaign: &Campaign) -> Analysis {
     };
     results.sensitivity = rig_params.and_then(|rig| sensitivity(campaign, &rig, &results));
     results.comparisons = compare(campaign, &results);
-    Analysis { results, artifacts }
+    let specs = figures::campaign_figures(&overlay, results.sensitivity.as_ref());
+    let (campaign_figures, figure_warnings) = draw.write(&specs)?;
+    results.warnings.extend(figure_warnings);
+    Ok(Analysed {
+        results,
+        run_figures,
+        campaign_figures,
+        seconds,
+    })
+}
+
+fn summary(campaign: &Campaign) -> CampaignSummary {
+    CampaignSummary {
+        name: campaign.name.clone(),
+        description: campaign.description.clone(),
+        rig_name: campaign.rig_name.clone(),
+        rig_notes: campaign.rig_notes.clone(),
+        manifest: campaign
+            .file
+            .file_name()
+            .map(|f| f.to_string_lossy().into_owned())
+            .unwrap_or_default(),
+        manifest_sha256: campaign.manifest_sha256.clone(),
+    }
+}
+
+/// Validation runs far worse than the others are flagged (the specimen may
+/// differ from its log's behaviour).
+fn flag_outliers(runs: &mut [RunResult]) {
+    let mut validation: Vec<&mut ValidationMetrics> = runs
+        .iter_mut()
+        .filter(|r| r.role == Role::Validation)
+        .filter_map(|r| r.validation.as_mut())
+        .collect();
+    validate::flag_outliers(&mut validation);
+}
+
+/// Draws a run's figures into their files, or nothing when the campaign
+/// draws none.
+struct Drawer<'a> {
+    files: Option<&'a FigureFiles<'a>>,
+    intersample: crate::fit::Intersample,
+}
+
+impl Drawer<'_> {
+    fn write(&self, specs: &[FigureSpec]) -> Result<(Vec<PageFigure>, Vec<String>), WriteError> {
+        match self.files {
+            Some(files) if !specs.is_empty() => files.write(specs),
+            _ => Ok((Vec::new(), Vec::new())),
+        }
+    }
+
+    fn enabled(&self) -> bool {
+        self.files.is_some()
+    }
+}
+
+/// What a run keeps from the first pass: everything but its signals.
+struct FirstPass {
+    /// None for a validation run, which waits for the rig.
+    result: Option<RunResult>,
+    rig_input: RigInput,
+    /// Whether the log was read and analysed (the rig's force model then
+    /// applies to it).
+    acquired: bool,
+    force: Option<ForceBins>,
+    overlay: Option<OverlayRun>,
+    figures: Vec<PageFigure>,
+    figure_warnings: Vec<String>,
+    seconds: f64,
+}
+
+/// A run done.
+struct Done {
+    result: RunResult,
+    figures: Vec<PageFigure>,
+    figure_warnings: Vec<String>,
+    overlay: Option<OverlayRun>,
+    seconds: f64,
+}
+
+/// A run's result before anything is known of it.
+fn new_result(plan: &RunPlan) -> RunResult {
+    RunResult {
+        id: plan.id.clone(),
+        role: plan.role,
+        description: plan.description.clone(),
+        p_gain: plan.p_gain,
+        status: Status::Ok,
+        error: None,
+        warnings: Vec::new(),
+        specimen: plan.specimen,
+        natural_frequency_hz: plan.specimen.natural_frequency_hz(),
+        a1b0: None,
+        tf: None,
+        force_tf: None,
+        fit: None,
+        validation: None,
+        log: None,
+    }
+}
+
+/// The first pass of one run: everything that does not need the rig.
+fn first_pass(
+    campaign: &Campaign,
+    plan: &RunPlan,
+    draw: &Drawer<'_>,
+    observer: &dyn Observer,
+) -> Result<FirstPass, WriteError> {
+    let mut pass = FirstPass {
+        result: None,
+        rig_input: RigInput::Nothing,
+        acquired: false,
+        force: None,
+        overlay: None,
+        figures: Vec::new(),
+        figure_warnings: Vec::new(),
+        seconds: 0.0,
+    };
+    if plan.role == Role::Validation {
+        return Ok(pass);
+    }
+    observer.event(&Event::RunStarted { id: &plan.id });
+    let start = Instant::now();
+    let mut out = new_result(plan);
+    match acquire(campaign, plan) {
+        Err(e) => {
+            let e = Arc::new(e);
+            pass.rig_input = RigInput::Failed(e.clone());
+            out = failed(out, e.into());
+        }
+        Ok(acq) => {
+            pass.acquired = true;
+            pass.rig_input = match &acq.tf {
+                Some(tf) => RigInput::Estimate {
+                    tf: tf.clone(),
+                    cov: acq.cov,
+                },
+                None => RigInput::Nothing,
+            };
+            let (result, stage, time) = fitted(plan, out, acq);
+            out = result;
+            if let Some(st) = &stage {
+                pass.force = ForceBins::of(st);
+                if draw.enabled() {
+                    let (specs, overlay) =
+                        figures::log_figures(&out, st, time.as_ref(), draw.intersample);
+                    (pass.figures, pass.figure_warnings) = draw.write(&specs)?;
+                    pass.overlay = overlay;
+                }
+            }
+        }
+    }
+    pass.seconds = start.elapsed().as_secs_f64();
+    observer.event(&Event::RunFinished {
+        id: &plan.id,
+        status: out.status,
+        seconds: pass.seconds,
+    });
+    pass.result = Some(out);
+    Ok(pass)
+}
+
+/// The second pass of one run: a validation run's whole work, and for the
+/// others what depends on the rig.
+fn second_pass(
+    campaign: &Campaign,
+    plan: &RunPlan,
+    first: FirstPass,
+    rig: &Result<RigParams, Arc<RigError>>,
+    draw: &Drawer<'_>,
+    observer: &dyn Observer,
+) -> Result<Done, WriteError> {
+    let rig_at_p = rig.as_ref().ok().map(|r| r.at_p_gain(plan.p_gain));
+    let Some(mut out) = first.result else {
+        return validation_run(campaign, plan, rig, draw, observer);
+    };
+    out.a1b0 = rig_at_p.map(|r| r.a1b0_n_per_m_s2);
+    let mut figures = first.figures;
+    let mut figure_warnings = first.figure_warnings;
+    if first.acquired {
+        out.force_tf = force_model(&rig_at_p, &plan.specimen);
+        if let (Some(bins), Some(model)) = (&first.force, &out.force_tf) {
+            let spec = figures::force_figure(&out, bins, model, draw.intersample);
+            let (f, w) = draw.write(std::slice::from_ref(&spec))?;
+            // Figs. 16-17 come right after the run's FRF, as on the page.
+            let at = figures.len().min(1);
+            figures.splice(at..at, f);
+            figure_warnings.extend(w);
+        }
+    }
+    Ok(Done {
+        result: out,
+        figures,
+        figure_warnings,
+        overlay: first.overlay,
+        seconds: first.seconds,
+    })
+}
+
+/// The model's force path f/u (Eq. 45), for a linear specimen.
+fn force_model(rig_at_p: &Option<RigParams>, specimen: &SpecimenModel) -> Option<TfResult> {
+    let (r, lin) = (rig_at_p.as_ref()?, specimen.linear()?);
+    (!matches!(lin, LinearSpecimen::None))
+        .then(|| TfResult::new(&model::tf_f_u(r, &lin), TfSource::Model))
+}
+
+/// A validation run: the identified rig with its specimen, driven by its
+/// measured command (Sec. 4), or the model's prediction alone without a log.
+fn validation_run(
+    campaign: &Campaign,
+    plan: &RunPlan,
+    rig: &Result<RigParams, Arc<RigError>>,
+    draw: &Drawer<'_>,
+    observer: &dyn Observer,
+) -> Result<Done, WriteError> {
+    observer.event(&Event::RunStarted { id: &plan.id });
+    let start = Instant::now();
+    let mut out = new_result(plan);
+    let figures = (Vec::new(), Vec::new());
+    // The log's own failure comes first; a good log without a rig still
+    // records what it is.
+    let acq = match acquire(campaign, plan) {
+        Ok(a) => a,
+        Err(e) => {
+            out.a1b0 = rig
+                .as_ref()
+                .ok()
+                .map(|r| r.at_p_gain(plan.p_gain).a1b0_n_per_m_s2);
+            out = failed(out, Arc::new(e).into());
+            return Ok(finish(plan, out, figures, start, observer));
+        }
+    };
+    out.warnings = acq.warnings.clone();
+    out.log = log_info(plan, acq.stage.as_deref());
+    let rig_at_p = match rig {
+        Ok(r) => r.at_p_gain(plan.p_gain),
+        Err(e) => {
+            // The measured FRF is still worth seeing.
+            out = failed(out, e.clone().into());
+            let figures = match (&acq.stage, draw.enabled()) {
+                (Some(st), true) => {
+                    draw.write(&figures::log_figures(&out, st, None, draw.intersample).0)?
+                }
+                _ => figures,
+            };
+            return Ok(finish(plan, out, figures, start, observer));
+        }
+    };
+    out.a1b0 = Some(rig_at_p.a1b0_n_per_m_s2);
+    let specimen = plan.specimen;
+    out.force_tf = force_model(&Some(rig_at_p), &specimen);
+    let linear = specimen.linear();
+    out.tf = linear.map(|lin| TfResult::new(&model::tf_x1_u(&rig_at_p, &lin), TfSource::Model));
+    let Some(st) = &acq.stage else {
+        return Ok(finish(plan, out, figures, start, observer));
+    };
+    let time = match validate::validation_run(&rig_at_p, &specimen, &record(&st.log)) {
+        Ok(t) => {
+            out.validation = Some(t.metrics.clone());
+            Some(t)
+        }
+        Err(e) => {
+            out = failed(out, e.into());
+            None
+        }
+    };
+    if draw.enabled() {
+        let (mut specs, _) = figures::log_figures(&out, st, time.as_ref(), draw.intersample);
+        if let (Some(bins), Some(model)) = (ForceBins::of(st), &out.force_tf) {
+            specs.insert(
+                1,
+                figures::force_figure(&out, &bins, model, draw.intersample),
+            );
+        }
+        return Ok(finish(plan, out, draw.write(&specs)?, start, observer));
+    }
+    Ok(finish(plan, out, figures, start, observer))
+}
+
+/// A validation run done: its log work timed and reported.
+fn finish(
+    plan: &RunPlan,
+    result: RunResult,
+    (figures, figure_warnings): (Vec<PageFigure>, Vec<String>),
+    start: Instant,
+    observer: &dyn Observer,
+) -> Done {
+    let seconds = start.elapsed().as_secs_f64();
+    observer.event(&Event::RunFinished {
+        id: &plan.id,
+        status: result.status,
+        seconds,
+    });
+    Done {
+        result,
+        figures,
+        figure_warnings,
+        overlay: None,
+        seconds,
+    }
 }
 
 /// A log's signals as the time-domain checks read them.
@@ -145,68 +490,22 @@ fn record(log: &Log) -> Record<'_> {
     }
 }
 
-/// One run's result from its first stage and the rig (or why there is none).
-fn run_result(
-    plan: &RunPlan,
-    acq: Result<Acquired, Arc<AcquireError>>,
-    rig: Result<&RigParams, Arc<RigError>>,
-) -> (RunResult, RunArtifacts) {
-    let specimen = plan.specimen;
-    let rig_at_p = rig.as_ref().ok().map(|r| r.at_p_gain(plan.p_gain));
-    let mut out = RunResult {
-        id: plan.id.clone(),
-        role: plan.role,
-        description: plan.description.clone(),
-        p_gain: plan.p_gain,
-        status: Status::Ok,
-        error: None,
-        warnings: Vec::new(),
-        specimen,
-        natural_frequency_hz: specimen.natural_frequency_hz(),
-        a1b0: rig_at_p.map(|r| r.a1b0_n_per_m_s2),
-        tf: None,
-        force_tf: None,
-        fit: None,
-        validation: None,
-        log: None,
+/// Provenance of a run's log, when it has one.
+fn log_info(plan: &RunPlan, stage: Option<&LogStage>) -> Option<LogInfo> {
+    let (st, RunSource::Log(lp)) = (stage?, &plan.source) else {
+        return None;
     };
-    let acq = match acq {
-        Ok(a) => a,
-        Err(e) => return (failed(out, e.into()), RunArtifacts::default()),
-    };
-    out.warnings = acq.warnings.clone();
-    if let (Some(st), RunSource::Log(lp)) = (&acq.stage, &plan.source) {
-        out.log = Some(LogInfo {
-            file: lp
-                .path
-                .file_name()
-                .map(|f| f.to_string_lossy().into_owned())
-                .unwrap_or_default(),
-            sha256: st.log.sha256.clone(),
-            sample_rate_hz: st.log.sample_rate_hz,
-            n_samples: st.log.n_rows,
-            duration_s: st.log.n_rows as f64 / st.log.sample_rate_hz,
-        });
-    }
-    // The model's transfer functions exist for linear specimens only.
-    let linear = specimen.linear();
-    if let (Some(r), Some(lin)) = (&rig_at_p, &linear)
-        && !matches!(lin, LinearSpecimen::None)
-    {
-        out.force_tf = Some(TfResult::new(&model::tf_f_u(r, lin), TfSource::Model));
-    }
-    match plan.role {
-        Role::Validation => match (rig_at_p, rig) {
-            (Some(r), _) => {
-                out.tf =
-                    linear.map(|lin| TfResult::new(&model::tf_x1_u(&r, &lin), TfSource::Model));
-                predicted(out, &r, &specimen, acq.stage)
-            }
-            (None, Err(e)) => (failed(out, e.into()), RunArtifacts::default()),
-            (None, Ok(_)) => unreachable!("rig_at_p is the rig at this run's P gain"),
-        },
-        _ => fitted(plan, out, acq),
-    }
+    Some(LogInfo {
+        file: lp
+            .path
+            .file_name()
+            .map(|f| f.to_string_lossy().into_owned())
+            .unwrap_or_default(),
+        sha256: st.log.sha256.clone(),
+        sample_rate_hz: st.log.sample_rate_hz,
+        n_samples: st.log.n_rows,
+        duration_s: st.log.n_rows as f64 / st.log.sample_rate_hz,
+    })
 }
 
 /// A run marked failed with its error.
@@ -216,37 +515,22 @@ fn failed(mut out: RunResult, e: RunError) -> RunResult {
     out
 }
 
-/// A validation run: the identified rig with its specimen, driven by its
-/// measured command (Sec. 4).
-fn predicted(
-    mut out: RunResult,
-    rig_at_p: &RigParams,
-    specimen: &SpecimenModel,
-    stage: Option<Box<LogStage>>,
-) -> (RunResult, RunArtifacts) {
-    let Some(st) = &stage else {
-        return (out, RunArtifacts::default());
-    };
-    match validate::validation_run(rig_at_p, specimen, &record(&st.log)) {
-        Ok(t) => {
-            out.validation = Some(t.metrics.clone());
-            (
-                out,
-                RunArtifacts {
-                    stage,
-                    time: Some(t),
-                },
-            )
-        }
-        Err(e) => (failed(out, e.into()), RunArtifacts { stage, time: None }),
-    }
-}
-
 /// An identification or fit run: its published or fitted model with the
 /// coefficients' uncertainty, and the fitted model in the time domain (Figs.
 /// 9, 12, 14). A failure of the time-domain check is a warning: the fit
-/// stands on its own.
-fn fitted(plan: &RunPlan, mut out: RunResult, acq: Acquired) -> (RunResult, RunArtifacts) {
+/// stands on its own. Returns the result, the log stage and the
+/// time-domain check for the figures.
+fn fitted(
+    plan: &RunPlan,
+    mut out: RunResult,
+    acq: Acquired,
+) -> (
+    RunResult,
+    Option<Box<LogStage>>,
+    Option<validate::TimeStage>,
+) {
+    out.warnings = acq.warnings.clone();
+    out.log = log_info(plan, acq.stage.as_deref());
     let stage = acq.stage;
     let fit = stage.as_ref().and_then(|s| s.fit.as_ref());
     out.tf = acq.tf.as_ref().map(|tf| {
@@ -278,7 +562,7 @@ fn fitted(plan: &RunPlan, mut out: RunResult, acq: Acquired) -> (RunResult, RunA
                 .push(format!("time-domain check of the fitted model: {e}")),
         }
     }
-    (out, RunArtifacts { stage, time })
+    (out, stage, time)
 }
 
 fn fit_summary(plan: &RunPlan, st: &LogStage, fit: &TfFit) -> FitSummary {
@@ -390,9 +674,4 @@ fn sensitivity(
         sweep,
         springs_n_per_m: springs,
     })
-}
-
-/// Whether any run failed.
-pub fn any_failed(results: &Results) -> bool {
-    results.runs.iter().any(|r| r.status == Status::Failed)
 }

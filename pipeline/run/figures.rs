@@ -3,18 +3,19 @@
 //! run; Fig. 15 all together; Figs. 16-17 command to force; Figs. 9, 12, 14,
 //! 19-22 in the paper's four time windows), residuals, and the stiffness
 //! sensitivity. Axis ranges follow the paper's figures. One builder per
-//! figure kind; [`build`] puts them in a fixed order.
+//! figure kind: a run's figures are built while its log is in memory (the
+//! force FRF, which needs the rig's model, from a small copy of its bins),
+//! the campaign's at the end.
 
 use std::sync::Arc;
 
 use nalgebra::Complex;
 
 use super::acquire::LogStage;
-use super::analyse::Analysis;
 use crate::fit::{Intersample, hold_response};
 use crate::frf::Estimator;
 use crate::lti::TransferFunction;
-use crate::manifest::{Campaign, Role};
+use crate::manifest::Role;
 use crate::report::FigureSpec;
 use crate::report::figures::{
     BodeFigure, BodeSeries, Figure, LinesFigure, PanelsFigure, TimePanel, TimeSeries, Trace,
@@ -26,43 +27,72 @@ use crate::validate::TimeStage;
 /// Frequency (Hz) where the paper's FRF figures stop.
 const FRF_MAX_HZ: f64 = 30.0;
 
-/// Every figure of an analysed campaign, in a fixed order: per run its FRF,
-/// force FRF, time windows and residual; then the identification runs
-/// together and the sensitivity.
-pub fn build(analysis: &Analysis, campaign: &Campaign) -> Vec<FigureSpec> {
-    let intersample = campaign.identification.intersample;
+/// A run's figures that do not depend on the rig, drawn as soon as its log
+/// is analysed: the FRF (for a validation run the caller passes the
+/// result with the rig's model), the time windows and the residual. For an
+/// identification run, also what Fig. 15 needs of it.
+pub(super) fn log_figures(
+    run: &RunResult,
+    stage: &LogStage,
+    time: Option<&TimeStage>,
+    intersample: Intersample,
+) -> (Vec<FigureSpec>, Option<OverlayRun>) {
+    let frf = RunFrf::new(run, stage, intersample);
+    let mut out = vec![frf_figure(run, stage, &frf)];
+    let overlay = match (&frf.model, run.role) {
+        (Some((model, _)), Role::NoSpecimen | Role::Spring) => Some(OverlayRun {
+            id: run.id.clone(),
+            freq_hz: frf.freq_hz.clone(),
+            measured: frf.h.clone(),
+            model: model.clone(),
+        }),
+        _ => None,
+    };
+    if let Some(time) = time {
+        let fs = stage.log.sample_rate_hz;
+        out.extend(time_figure(run, time, fs));
+        out.push(residual_figure(run, time, fs));
+    }
+    (out, overlay)
+}
+
+/// The campaign's own figures: the identification runs together (Fig. 15,
+/// when there are two or more) and the stiffness sensitivity.
+pub(super) fn campaign_figures(
+    overlay: &[OverlayRun],
+    sensitivity: Option<&SensitivityResult>,
+) -> Vec<FigureSpec> {
     let mut out = Vec::new();
-    let mut overlay = Vec::new();
-    for (run, art) in analysis.results.runs.iter().zip(&analysis.artifacts) {
-        let Some(stage) = &art.stage else { continue };
-        let frf = RunFrf::new(run, stage, intersample);
-        out.push(frf_figure(run, stage, &frf));
-        if matches!(run.role, Role::NoSpecimen | Role::Spring)
-            && let Some((model, _)) = &frf.model
-        {
-            overlay.push(OverlayRun {
-                id: run.id.clone(),
-                freq_hz: frf.freq_hz.clone(),
-                measured: frf.h.clone(),
-                model: model.clone(),
-            });
-        }
-        if let (Some(measured), Some(model)) = (&stage.force_frf, &run.force_tf) {
-            out.push(force_figure(run, measured, model, stage, intersample));
-        }
-        if let Some(time) = &art.time {
-            let fs = stage.log.sample_rate_hz;
-            out.extend(time_figure(run, time, fs));
-            out.push(residual_figure(run, time, fs));
-        }
-    }
     if overlay.len() >= 2 {
-        out.push(overlay_figure(&overlay));
+        out.push(overlay_figure(overlay));
     }
-    if let Some(s) = &analysis.results.sensitivity {
+    if let Some(s) = sensitivity {
         out.push(sensitivity_figure(s));
     }
     out
+}
+
+/// A log's measured command-to-force FRF as Figs. 16-17 show it (5-35 Hz),
+/// kept small so that it can wait for the rig while the log is dropped.
+#[derive(Debug, Clone)]
+pub(super) struct ForceBins {
+    sample_rate_hz: f64,
+    freq_hz: Vec<f64>,
+    h: Vec<Complex<f64>>,
+    coherence: Vec<f64>,
+}
+
+impl ForceBins {
+    pub(super) fn of(stage: &LogStage) -> Option<Self> {
+        let ff = stage.force_frf.as_ref()?;
+        let (freq_hz, h, coherence) = measured_bins(&ff.freq_hz, &ff.h, &ff.coherence, 35.0);
+        Some(Self {
+            sample_rate_hz: stage.log.sample_rate_hz,
+            freq_hz,
+            h,
+            coherence,
+        })
+    }
 }
 
 /// The bins a figure shows: positive frequencies up to `f_max`.
@@ -208,16 +238,20 @@ fn frf_figure(run: &RunResult, stage: &LogStage, frf: &RunFrf) -> FigureSpec {
 
 /// Figs. 16-17: command to force, measured against Eq. 45; the specimen's
 /// poles are zeros of the force path.
-fn force_figure(
+pub(super) fn force_figure(
     run: &RunResult,
-    measured: &crate::frf::Frf,
+    measured: &ForceBins,
     model: &TfResult,
-    stage: &LogStage,
     intersample: Intersample,
 ) -> FigureSpec {
-    let fs = stage.log.sample_rate_hz;
-    let (freq, h, coh) = measured_bins(&measured.freq_hz, &measured.h, &measured.coherence, 35.0);
-    let hm = model_response(&tf_of(model, 0.0), intersample, fs, &freq);
+    let freq = measured.freq_hz.clone();
+    let (h, coh) = (measured.h.clone(), measured.coherence.clone());
+    let hm = model_response(
+        &tf_of(model, 0.0),
+        intersample,
+        measured.sample_rate_hz,
+        &freq,
+    );
     let fig = BodeFigure {
         title: format!("{}: command to force", run.id),
         series: vec![
@@ -388,7 +422,8 @@ fn residual_figure(run: &RunResult, time: &TimeStage, fs: f64) -> FigureSpec {
 }
 
 /// An identification run's FRF kept for Fig. 15.
-struct OverlayRun {
+#[derive(Debug, Clone)]
+pub(super) struct OverlayRun {
     id: String,
     freq_hz: Vec<f64>,
     measured: Vec<Complex<f64>>,

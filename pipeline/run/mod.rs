@@ -13,13 +13,13 @@ pub mod simulate;
 
 use std::path::{Path, PathBuf};
 
-pub use analyse::{Analysis, RunArtifacts, RunError, analyse, analyse_full, any_failed};
+pub use analyse::{Event, Observer, RunError, Unobserved, analyse};
 pub use rig::{FailedRun, RigError};
 
 use crate::manifest::{self, Campaign, Loaded, ManifestError};
 pub use crate::report::FigureFormats;
-use crate::report::{self, WriteError};
-use crate::results::{self, Results};
+use crate::report::{self, FigureFiles, WriteError};
+use crate::results::{self, Results, Status};
 use simulate::{SimulateError, Simulated};
 
 /// How a job runs and what it writes.
@@ -66,6 +66,21 @@ pub struct CampaignOutcome {
     pub results: Results,
     pub results_path: PathBuf,
     pub page_path: PathBuf,
+    /// Where each run's timing went (run.jsonl).
+    pub log_path: PathBuf,
+    /// Wall-clock time of the analysis and its outputs (s).
+    pub seconds: f64,
+}
+
+impl CampaignOutcome {
+    /// Runs that failed.
+    pub fn failed(&self) -> usize {
+        self.results
+            .runs
+            .iter()
+            .filter(|r| r.status == Status::Failed)
+            .count()
+    }
 }
 
 /// What `servoid simulate` produced, and the campaign run after it when one
@@ -111,7 +126,11 @@ pub fn check(path: &Path) -> Result<Checked, ManifestError> {
 
 /// Run a campaign manifest: analyse, draw the figures, write results.json
 /// and the page into the output folder.
-pub fn run_campaign(path: &Path, settings: &Settings) -> Result<CampaignOutcome, JobError> {
+pub fn run_campaign(
+    path: &Path,
+    settings: &Settings,
+    observer: &dyn Observer,
+) -> Result<CampaignOutcome, JobError> {
     let campaign = match manifest::load_any(path)? {
         Loaded::Campaign(c) => c,
         Loaded::Simulation(_) => {
@@ -130,7 +149,7 @@ pub fn run_campaign(path: &Path, settings: &Settings) -> Result<CampaignOutcome,
         .clone()
         .unwrap_or_else(|| PathBuf::from("reports").join(&campaign.name));
     let workers = pool(settings.jobs)?;
-    workers.install(|| write_campaign(&campaign, &out_dir, settings.figures))
+    workers.install(|| write_campaign(&campaign, &out_dir, settings, observer))
 }
 
 /// Simulate a campaign from a simulation manifest (logs, truth.json and an
@@ -140,6 +159,7 @@ pub fn run_simulation(
     path: &Path,
     settings: &Settings,
     then_run: bool,
+    observer: &dyn Observer,
 ) -> Result<SimulationOutcome, JobError> {
     let plan = match manifest::load_any(path)? {
         Loaded::Simulation(p) => p,
@@ -165,7 +185,7 @@ pub fn run_simulation(
             out: Some(out_dir),
             ..settings.clone()
         };
-        run_campaign(&simulated.manifest, &settings)
+        run_campaign(&simulated.manifest, &settings, observer)
     });
     Ok(SimulationOutcome {
         name: plan.manifest.simulation.name.clone(),
@@ -202,27 +222,83 @@ fn pool(jobs: Option<usize>) -> Result<rayon::ThreadPool, JobError> {
         .build()?)
 }
 
-/// Analyse a checked campaign and write its outputs: the figures first (a
-/// figure that cannot be drawn becomes a warning in results.json), then
-/// results.json, then the page.
+/// Analyse a checked campaign and write its outputs: each run's figures as
+/// it finishes (a figure that cannot be drawn becomes a warning in
+/// results.json), then results.json, the pages and run.jsonl.
 fn write_campaign(
     campaign: &Campaign,
     out_dir: &Path,
-    choice: FigureFormats,
+    settings: &Settings,
+    observer: &dyn Observer,
 ) -> Result<CampaignOutcome, JobError> {
-    let mut analysis = analyse_full(campaign);
-    let specs = match choice {
-        FigureFormats::None => Vec::new(),
-        _ => figures::build(&analysis, campaign),
-    };
-    let (page_figures, warnings) = report::write_figures(&specs, out_dir, choice)?;
-    analysis.results.warnings.extend(warnings);
-    let results = analysis.results;
+    let started = std::time::SystemTime::now();
+    let clock = std::time::Instant::now();
+    let files = FigureFiles::new(out_dir, settings.figures);
+    let analysed = analyse::analyse_with(campaign, files.as_ref(), observer)?;
+    let results = analysed.results;
     let results_path = report::write_results(&results, out_dir)?;
-    let page_path = report::write_page(&results, &page_figures, choice, out_dir)?;
+    let page_path = report::write_pages(
+        &results,
+        &analysed.run_figures,
+        &analysed.campaign_figures,
+        settings.figures,
+        out_dir,
+    )?;
+    let seconds = clock.elapsed().as_secs_f64();
+    let log = RunLog {
+        started,
+        seconds,
+        jobs: rayon::current_num_threads(),
+        runs: &results.runs,
+        run_seconds: &analysed.seconds,
+    };
+    let log_path = out_dir.join("run.jsonl");
+    report::write_atomic(&log_path, &log.jsonl())?;
     Ok(CampaignOutcome {
         results,
         results_path,
         page_path,
+        log_path,
+        seconds,
     })
+}
+
+/// run.jsonl: when the campaign ran and how long each run's log took. Wall
+/// clocks and durations live here, never in results.json, whose bytes
+/// depend on the inputs alone.
+struct RunLog<'a> {
+    started: std::time::SystemTime,
+    seconds: f64,
+    jobs: usize,
+    runs: &'a [results::RunResult],
+    run_seconds: &'a [f64],
+}
+
+impl RunLog<'_> {
+    fn jsonl(&self) -> Vec<u8> {
+        let mut out = Vec::new();
+        let mut line = |v: serde_json::Value| {
+            out.extend_from_slice(v.to_string().as_bytes());
+            out.push(b'\n');
+        };
+        let n = self.runs.len();
+        line(serde_json::json!({
+            "event": "campaign",
+            "started": humantime::format_rfc3339_millis(self.started).to_string(),
+            "seconds": self.seconds,
+            "runs": n,
+            "logs_per_s": n as f64 / self.seconds.max(1e-9),
+            "jobs": self.jobs,
+            "servoid_version": env!("CARGO_PKG_VERSION"),
+        }));
+        for (run, seconds) in self.runs.iter().zip(self.run_seconds) {
+            line(serde_json::json!({
+                "event": "run",
+                "run": run.id,
+                "status": run.status,
+                "seconds": seconds,
+            }));
+        }
+        out
+    }
 }

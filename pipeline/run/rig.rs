@@ -5,8 +5,9 @@
 use std::fmt;
 use std::sync::Arc;
 
-use super::acquire::{AcquireError, Acquired};
+use super::acquire::AcquireError;
 use crate::identify::{self, Estimate, IdentifyError, SecondOrder, SpringRun, TfEstimate};
+use crate::lti::TransferFunction;
 use crate::manifest::{Campaign, Role};
 use crate::model::RigParams;
 use crate::results::{RigResult, RigSource, Spread};
@@ -54,11 +55,27 @@ fn join(failed: &[FailedRun]) -> String {
         .join("; ")
 }
 
+/// What a run gives the rig's identification.
+#[derive(Debug, Clone)]
+pub(super) enum RigInput {
+    /// Its transfer function, with the covariance of (n0, d1, d0) when
+    /// fitted.
+    Estimate {
+        tf: TransferFunction,
+        cov: Option<[[f64; 3]; 3]>,
+    },
+    /// Its first stage failed.
+    Failed(Arc<AcquireError>),
+    /// Nothing (a run without a model of its own).
+    Nothing,
+}
+
 /// The rig: identified when the campaign can (Fig. 6), else given. A given
-/// rig beside an identifying campaign is reported in `warnings`.
-pub(super) fn establish(
+/// rig beside an identifying campaign is reported in `warnings`. `inputs`
+/// follow the campaign's runs.
+pub(super) fn establish<'a>(
     campaign: &Campaign,
-    acquired: &[Result<Acquired, Arc<AcquireError>>],
+    inputs: impl Iterator<Item = &'a RigInput>,
     warnings: &mut Vec<String>,
 ) -> Result<(RigParams, RigResult), RigError> {
     if !campaign.identifies_rig() {
@@ -70,15 +87,13 @@ pub(super) fn establish(
     let mut no_spec = Vec::new();
     let mut springs = Vec::new();
     let mut failed = Vec::new();
-    for (plan, acq) in campaign.runs.iter().zip(acquired) {
+    for (plan, input) in campaign.runs.iter().zip(inputs) {
         if !matches!(plan.role, Role::NoSpecimen | Role::Spring) {
             continue;
         }
         let run = plan.id.clone();
-        let estimate = match acq {
-            Ok(Acquired {
-                tf: Some(tf), cov, ..
-            }) => match SecondOrder::from_tf(tf) {
+        let estimate = match input {
+            RigInput::Estimate { tf, cov } => match SecondOrder::from_tf(tf) {
                 Ok(so) => TfEstimate {
                     run,
                     p_gain: plan.p_gain,
@@ -90,8 +105,8 @@ pub(super) fn establish(
                     continue;
                 }
             },
-            Ok(_) => continue,
-            Err(error) => {
+            RigInput::Nothing => continue,
+            RigInput::Failed(error) => {
                 failed.push(FailedRun::Failed {
                     run,
                     error: error.clone(),

@@ -2,10 +2,10 @@
 //! response functions (the paper's Figs. 8, 11, 13, 15-17), grids of
 //! measured-versus-simulated time windows (Figs. 9, 12, 14, 19-22) and
 //! generic x-y lines (residuals, sensitivity curves). Each figure renders to
-//! whichever of PNG bytes, an SVG string and a compact palette PNG preview
-//! are asked for, all showing the same drawing: plotters lays the chart out
-//! once into a list of primitives (`canvas`), which `svg` writes and
-//! `raster` draws with tiny-skia for the two PNGs (`encode`).
+//! whichever of PNG bytes and an SVG string are asked for, both showing the
+//! same drawing: plotters lays the chart out once into a list of primitives
+//! (`canvas`), which `svg` writes and `raster` draws with tiny-skia for the
+//! PNG (`encode`).
 //!
 //! Text uses DejaVu Sans compiled into the binary: the PNG rasterises it and
 //! the SVG holds the glyph outlines as paths (no `<text>`), so a figure looks
@@ -51,18 +51,13 @@ pub struct Formats {
     pub png: bool,
     /// The SVG document.
     pub svg: bool,
-    /// A compact PNG of the same pixels for inlining in a page: 8-bit
-    /// indexed, at most 256 colours, the same size as the PNG.
-    pub preview: bool,
 }
 
-/// A figure as PNG bytes, an SVG document, and a compact preview PNG, each
-/// when asked for.
+/// A figure as PNG bytes and an SVG document, each when asked for.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct Rendered {
     pub png: Option<Vec<u8>>,
     pub svg: Option<String>,
-    pub preview: Option<Vec<u8>>,
 }
 
 /// What a series is, which decides its line style.
@@ -267,7 +262,7 @@ pub enum FontProblem {
 }
 
 /// Render any figure in the formats asked for. Nothing is rasterised unless
-/// the PNG or the preview is asked for, and no SVG is written unless it is.
+/// the PNG is asked for, and no SVG is written unless it is.
 /// Bad input (size, ranges, lengths, nothing to draw) is an error whatever
 /// the formats.
 pub fn render(fig: &Figure, size: (u32, u32), formats: Formats) -> Result<Rendered, FigureError> {
@@ -686,9 +681,8 @@ fn check_len(
 }
 
 /// Draw a sheet once into the recorder, then write the SVG and rasterise the
-/// pixels for the PNG and the preview from the same primitives, each only
-/// when asked for (the SVG and the pixels in parallel; neither depends on
-/// the other).
+/// PNG from the same primitives, each only when asked for (in parallel;
+/// neither depends on the other).
 fn render_sheet(
     name: &str,
     size: (u32, u32),
@@ -711,32 +705,16 @@ fn render_sheet(
         figure: name.to_string(),
         source,
     };
-    let pixels = || -> Result<Rendered, FigureError> {
-        let mut out = Rendered {
-            png: None,
-            svg: None,
-            preview: None,
-        };
-        if !(formats.png || formats.preview) {
-            return Ok(out);
+    let png = || -> Result<Option<Vec<u8>>, FigureError> {
+        if !formats.png {
+            return Ok(None);
         }
         let rgb = raster::rgb(&ops, size).ok_or_else(|| FigureError::Canvas {
             figure: name.to_string(),
         })?;
-        let (png, preview) = rayon::join(
-            || formats.png.then(|| encode::rgb_png(&rgb, size)).transpose(),
-            || {
-                formats
-                    .preview
-                    .then(|| encode::preview_png(&rgb, size))
-                    .transpose()
-            },
-        );
-        out.png = png.map_err(png_err)?;
-        out.preview = preview.map_err(png_err)?;
-        Ok(out)
+        encode::rgb_png(&rgb, size).map(Some).map_err(png_err)
     };
     let svg = || formats.svg.then(|| svg::write(&ops, size, &sheet.title));
-    let (pixels, svg) = rayon::join(pixels, svg);
-    Ok(Rendered { svg, ..pixels? })
+    let (png, svg) = rayon::join(png, svg);
+    Ok(Rendered { png: png?, svg })
 }

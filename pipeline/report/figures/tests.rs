@@ -118,7 +118,6 @@ fn lines_fig(title: &str) -> LinesFigure {
 const ALL: Formats = Formats {
     png: true,
     svg: true,
-    preview: true,
 };
 
 /// Every output of one figure.
@@ -126,7 +125,6 @@ const ALL: Formats = Formats {
 struct Files {
     png: Vec<u8>,
     svg: String,
-    preview: Vec<u8>,
 }
 
 fn files(fig: Figure, size: (u32, u32)) -> Result<Files, FigureError> {
@@ -134,7 +132,6 @@ fn files(fig: Figure, size: (u32, u32)) -> Result<Files, FigureError> {
     Ok(Files {
         png: r.png.expect("PNG asked for"),
         svg: r.svg.expect("SVG asked for"),
-        preview: r.preview.expect("preview asked for"),
     })
 }
 
@@ -154,35 +151,34 @@ fn render_lines(fig: &LinesFigure, size: (u32, u32)) -> Result<Files, FigureErro
 
 /// Decoded 8-bit RGB PNG: (width, height, RGB bytes).
 fn decode_png(bytes: &[u8]) -> (u32, u32, Vec<u8>) {
-    let (info, buf, _) = decode_raw(bytes);
+    let decoder = png::Decoder::new(std::io::Cursor::new(bytes));
+    let mut reader = decoder.read_info().expect("PNG header");
+    let mut buf = vec![0; reader.output_buffer_size().expect("PNG size")];
+    let info = reader.next_frame(&mut buf).expect("PNG data");
+    buf.truncate(info.buffer_size());
     assert_eq!(info.color_type, png::ColorType::Rgb);
     assert_eq!(info.bit_depth, png::BitDepth::Eight);
     (info.width, info.height, buf)
 }
 
-/// Decoded 8-bit indexed PNG: (width, height, RGB bytes looked up in its
-/// palette, number of palette entries).
-fn decode_indexed_png(bytes: &[u8]) -> (u32, u32, Vec<u8>, usize) {
-    let (info, indices, palette) = decode_raw(bytes);
-    assert_eq!(info.color_type, png::ColorType::Indexed);
-    assert_eq!(info.bit_depth, png::BitDepth::Eight);
-    let palette = palette.expect("an indexed PNG has a palette");
-    let rgb = indices
+/// Per-channel absolute differences of two RGB images: (mean, share of
+/// pixels where some channel differs by more than `far`).
+fn difference(a: &[u8], b: &[u8], far: u8) -> (f64, f64) {
+    assert_eq!(a.len(), b.len());
+    let total: u64 = a
         .iter()
-        .flat_map(|&i| palette[3 * i as usize..3 * i as usize + 3].to_vec())
-        .collect();
-    (info.width, info.height, rgb, palette.len() / 3)
-}
-
-/// The first frame as stored (no expansion) and the palette, if any.
-fn decode_raw(bytes: &[u8]) -> (png::OutputInfo, Vec<u8>, Option<Vec<u8>>) {
-    let decoder = png::Decoder::new(std::io::Cursor::new(bytes));
-    let mut reader = decoder.read_info().expect("PNG header");
-    let palette = reader.info().palette.as_ref().map(|p| p.to_vec());
-    let mut buf = vec![0; reader.output_buffer_size().expect("PNG size")];
-    let info = reader.next_frame(&mut buf).expect("PNG data");
-    buf.truncate(info.buffer_size());
-    (info, buf, palette)
+        .zip(b)
+        .map(|(x, y)| u64::from(x.abs_diff(*y)))
+        .sum();
+    let far_px = a
+        .chunks(3)
+        .zip(b.chunks(3))
+        .filter(|(p, q)| p.iter().zip(*q).any(|(x, y)| x.abs_diff(*y) > far))
+        .count();
+    (
+        total as f64 / a.len() as f64,
+        far_px as f64 / (a.len() / 3) as f64,
+    )
 }
 
 /// Subpaths of an SVG path made of M and L commands only.
@@ -770,7 +766,7 @@ fn log_axes_draw() {
     assert!(!strokes_of(&doc, "#009e73").is_empty());
 }
 
-// ------------------------------------------------------ formats, preview
+// ------------------------------------------------------------- formats
 
 #[test]
 fn only_the_formats_asked_for_are_made() {
@@ -778,69 +774,24 @@ fn only_the_formats_asked_for_are_made() {
     let all = render(&fig, FULL_WIDTH, ALL).unwrap();
     for png in [false, true] {
         for svg in [false, true] {
-            for preview in [false, true] {
-                let formats = Formats { png, svg, preview };
-                let r = render(&fig, FULL_WIDTH, formats).unwrap();
-                // Each file is there exactly when asked for, and the same
-                // bytes as when everything is asked for.
-                assert_eq!(r.png.is_some(), png);
-                assert_eq!(r.svg.is_some(), svg);
-                assert_eq!(r.preview.is_some(), preview);
-                assert!(r.png.is_none_or(|b| Some(b) == all.png));
-                assert!(r.svg.is_none_or(|s| Some(s) == all.svg));
-                assert!(r.preview.is_none_or(|b| Some(b) == all.preview));
-            }
+            let r = render(&fig, FULL_WIDTH, Formats { png, svg }).unwrap();
+            // Each file is there exactly when asked for, and the same bytes
+            // as when everything is asked for.
+            assert_eq!(r.png.is_some(), png);
+            assert_eq!(r.svg.is_some(), svg);
+            assert!(r.png.is_none_or(|b| Some(b) == all.png));
+            assert!(r.svg.is_none_or(|s| Some(s) == all.svg));
         }
     }
     // Bad input is an error whatever the formats, even none.
     let none = Formats {
         png: false,
         svg: false,
-        preview: false,
     };
     assert!(matches!(
         render(&fig, (100, 50), none),
         Err(FigureError::BadSize { .. })
     ));
-}
-
-/// Per-channel absolute differences of two RGB images: (mean, share of
-/// pixels where some channel differs by more than `far`).
-fn difference(a: &[u8], b: &[u8], far: u8) -> (f64, f64) {
-    assert_eq!(a.len(), b.len());
-    let total: u64 = a
-        .iter()
-        .zip(b)
-        .map(|(x, y)| u64::from(x.abs_diff(*y)))
-        .sum();
-    let far_px = a
-        .chunks(3)
-        .zip(b.chunks(3))
-        .filter(|(p, q)| p.iter().zip(*q).any(|(x, y)| x.abs_diff(*y) > far))
-        .count();
-    (
-        total as f64 / a.len() as f64,
-        far_px as f64 / (a.len() / 3) as f64,
-    )
-}
-
-#[test]
-fn preview_is_an_indexed_png_of_the_same_picture() {
-    for (fig, size) in all_kinds() {
-        let r = files(fig, size).unwrap();
-        let (w, h, full) = decode_png(&r.png);
-        let (pw, ph, preview, colours) = decode_indexed_png(&r.preview);
-        assert_eq!((pw, ph), (w, h));
-        assert!(colours <= 256);
-        // Quantising moves only the anti-aliased blends where curves of
-        // different colours meet, a small share of the picture: on average
-        // under a quarter of a level, and under 0.2 % of the pixels by more
-        // than 32 levels (about an eighth of the range) in some channel.
-        let (mean, far) = difference(&full, &preview, 32);
-        assert!(mean < 0.25, "mean difference {mean}");
-        assert!(far < 0.002, "{far} of the pixels differ by more than 32");
-        assert!(r.preview.len() < r.png.len());
-    }
 }
 
 // ------------------------------------------------------ PNG against SVG
