@@ -43,6 +43,10 @@ pub struct RunArgs {
     /// duration, then a summary) on stdout, for cron.
     #[arg(long, value_enum, default_value_t = LogFormat::Text)]
     log_format: LogFormat,
+    /// Ignore the cache of earlier runs into the same folder: every run is
+    /// done again (and the cache refreshed).
+    #[arg(long)]
+    force: bool,
     /// Print nothing but errors.
     #[arg(long, short)]
     quiet: bool,
@@ -186,6 +190,7 @@ fn settings(args: &RunArgs) -> Settings {
         out: args.out.clone(),
         jobs: args.jobs,
         figures: args.figures.into(),
+        force: args.force,
     }
 }
 
@@ -280,7 +285,7 @@ impl Watch {
                 "campaign": results.campaign.name,
                 "ok": n - failed,
                 "failed": failed,
-                "cached": 0,
+                "cached": outcome.cached,
                 "seconds": outcome.seconds,
                 "logs_per_s": per_s,
                 "results": outcome.results_path,
@@ -291,8 +296,9 @@ impl Watch {
             say(&format!("wrote {}", outcome.results_path.display()));
             say(&format!("wrote {}", outcome.page_path.display()));
             say(&format!(
-                "summary: {} ok, {failed} failed, 0 cached in {:.2} s ({per_s:.1} logs/s)",
+                "summary: {} ok, {failed} failed, {} cached in {:.2} s ({per_s:.1} logs/s)",
                 n - failed,
+                outcome.cached,
                 outcome.seconds
             ));
         }
@@ -335,6 +341,17 @@ impl Observer for Watch {
                     };
                     say(
                         &serde_json::json!({"event": event, "run": id, "seconds": seconds})
+                            .to_string(),
+                    );
+                }
+            }
+            Event::RunCached { id, seconds } => {
+                if let Some(bar) = &self.bar {
+                    bar.inc(1);
+                }
+                if self.json {
+                    say(
+                        &serde_json::json!({"event": "run_cached", "run": id, "seconds": seconds})
                             .to_string(),
                     );
                 }

@@ -34,9 +34,7 @@ fn json_events_name_every_run_and_end_with_a_summary() {
     let runs = manifest.matches("[[runs]]").count();
     // paper.toml: no-specimen, two springs and Exp1-Exp4.
     assert_eq!(runs, 7);
-    let of = |kind: &str| -> Vec<&Value> {
-        events.iter().filter(|e| e["event"] == kind).collect()
-    };
+    let of = |kind: &str| -> Vec<&Value> { events.iter().filter(|e| e["event"] == kind).collect() };
     assert_eq!(of("run_started").len(), runs);
     let finished = of("run_finished");
     assert_eq!(finished.len(), runs);
@@ -52,14 +50,32 @@ fn json_events_name_every_run_and_end_with_a_summary() {
 
     // run.jsonl: the campaign line, then one line per run in manifest order.
     let log = std::fs::read_to_string(out.join("run.jsonl")).unwrap();
-    let lines: Vec<Value> = log.lines().map(|l| serde_json::from_str(l).unwrap()).collect();
+    let lines: Vec<Value> = log
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
     assert_eq!(lines.len(), runs + 1);
     assert_eq!(lines[0]["event"], "campaign");
-    assert!(lines[0]["started"].as_str().is_some_and(|s| s.ends_with('Z')));
-    let ids: Vec<&str> = lines[1..].iter().map(|l| l["run"].as_str().unwrap()).collect();
+    assert!(
+        lines[0]["started"]
+            .as_str()
+            .is_some_and(|s| s.ends_with('Z'))
+    );
+    let ids: Vec<&str> = lines[1..]
+        .iter()
+        .map(|l| l["run"].as_str().unwrap())
+        .collect();
     assert_eq!(
         ids,
-        ["no-specimen", "spring-k1", "spring-k2", "exp1", "exp2", "exp3", "exp4"]
+        [
+            "no-specimen",
+            "spring-k1",
+            "spring-k2",
+            "exp1",
+            "exp2",
+            "exp3",
+            "exp4"
+        ]
     );
     // Nothing of the wall clock reaches results.json.
     let results = std::fs::read_to_string(out.join("results.json")).unwrap();
@@ -88,16 +104,192 @@ fn a_closed_stdout_is_not_a_panic() {
     let dir = scratch();
     let out = dir.path().join("out");
     let mut child = Command::new(env!("CARGO_BIN_EXE_servoid"))
-        .args(["run", paper().to_str().unwrap(), "--out", out.to_str().unwrap()])
+        .args([
+            "run",
+            paper().to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ])
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
         .spawn()
         .unwrap();
     drop(child.stdout.take());
     let mut stderr = String::new();
-    child.stderr.take().unwrap().read_to_string(&mut stderr).unwrap();
+    child
+        .stderr
+        .take()
+        .unwrap()
+        .read_to_string(&mut stderr)
+        .unwrap();
     let status = child.wait().unwrap();
     assert_eq!(status.code(), Some(0), "stderr:\n{stderr}");
     assert!(!stderr.contains("panicked"), "{stderr}");
     assert!(out.join("results.json").is_file());
+}
+
+/// The bundled default simulated twice (seeds 2018 and 7), its manifest
+/// without the logs' pinned hashes so that a log can be swapped for the
+/// other seed's.
+struct Night {
+    dir: tempfile::TempDir,
+}
+
+impl Night {
+    fn new() -> Self {
+        let dir = scratch();
+        let sim = std::fs::read_to_string(root().join("experiments/maghareh2018/simulation.toml"))
+            .unwrap();
+        for (name, seed) in [("a", "2018"), ("b", "7")] {
+            let text = sim.replace("seed = 2018", &format!("seed = {seed}"));
+            let manifest = crate::util::write(dir.path(), &format!("{name}.toml"), &text);
+            let o = servoid_into(
+                dir.path(),
+                "simulate",
+                &manifest,
+                &dir.path().join(name),
+                &[],
+            );
+            assert_eq!(o.code, 0, "{}", o.stderr);
+        }
+        let campaign = dir.path().join("a/campaign.toml");
+        let text = std::fs::read_to_string(&campaign).unwrap();
+        let unpinned: String = text
+            .lines()
+            .filter(|l| !l.starts_with("sha256 = "))
+            .collect::<Vec<_>>()
+            .join("\n");
+        assert!(!unpinned.contains("sha256 ="), "{unpinned}");
+        std::fs::write(&campaign, unpinned).unwrap();
+        Self { dir }
+    }
+
+    fn campaign(&self) -> std::path::PathBuf {
+        self.dir.path().join("a/campaign.toml")
+    }
+
+    fn out(&self) -> std::path::PathBuf {
+        self.dir.path().join("out")
+    }
+
+    /// Run the campaign into `out` with JSON events: (exit code, the runs
+    /// done afresh, the runs taken from the cache, results.json).
+    fn run(&self, extra: &[&str]) -> (i32, Vec<String>, Vec<String>, Vec<u8>) {
+        let mut args = vec!["--log-format", "json"];
+        args.extend_from_slice(extra);
+        let o = servoid_into(self.dir.path(), "run", &self.campaign(), &self.out(), &args);
+        let events: Vec<Value> = o
+            .stdout
+            .lines()
+            .map(|l| serde_json::from_str(l).unwrap())
+            .collect();
+        let ids = |kind: &str| -> Vec<String> {
+            let mut v: Vec<String> = events
+                .iter()
+                .filter(|e| e["event"] == kind)
+                .map(|e| e["run"].as_str().unwrap().to_string())
+                .collect();
+            v.sort();
+            v
+        };
+        let results = std::fs::read(self.out().join("results.json")).unwrap();
+        (o.code, ids("run_finished"), ids("run_cached"), results)
+    }
+
+    /// Put run `id`'s log of the other seed in place of its own.
+    fn swap_log(&self, id: &str) {
+        let from = self.dir.path().join(format!("b/logs/{id}.csv"));
+        let to = self.dir.path().join(format!("a/logs/{id}.csv"));
+        std::fs::copy(from, to).unwrap();
+    }
+}
+
+fn sorted(ids: &[&str]) -> Vec<String> {
+    let mut v: Vec<String> = ids.iter().map(|s| s.to_string()).collect();
+    v.sort();
+    v
+}
+
+const ALL: [&str; 7] = [
+    "no-specimen",
+    "spring-k1",
+    "spring-k2",
+    "exp1",
+    "exp2",
+    "exp3",
+    "exp4",
+];
+const VALIDATION: [&str; 4] = ["exp1", "exp2", "exp3", "exp4"];
+
+/// Reruns: nothing changed is all cached and byte-identical; a changed
+/// validation log redoes that run alone; a changed spring log redoes the
+/// spring and every validation run (the rig changed) but not the no-specimen
+/// run; `--force` redoes everything. After each change the results are the
+/// bytes a fresh `--force` run gives.
+#[test]
+fn reruns_redo_what_changed_and_what_depends_on_it() {
+    let night = Night::new();
+    let (code, fresh, cached, first) = night.run(&[]);
+    assert_eq!(code, 0);
+    assert_eq!(fresh, sorted(&ALL));
+    assert!(cached.is_empty());
+
+    let (_, fresh, cached, again) = night.run(&[]);
+    assert!(fresh.is_empty(), "{fresh:?}");
+    assert_eq!(cached, sorted(&ALL));
+    assert!(
+        again == first,
+        "a cached rerun's results.json is byte-identical"
+    );
+
+    night.swap_log("exp2");
+    let (_, fresh, cached, after) = night.run(&[]);
+    assert_eq!(fresh, ["exp2"]);
+    assert_eq!(cached.len(), 6);
+    assert!(after != first);
+    let (_, _, _, forced) = night.run(&["--force"]);
+    assert!(after == forced, "incremental and fresh results agree");
+
+    night.swap_log("spring-k1");
+    let (_, fresh, cached, after) = night.run(&[]);
+    let mut want: Vec<&str> = VALIDATION.to_vec();
+    want.push("spring-k1");
+    assert_eq!(fresh, sorted(&want));
+    assert_eq!(cached, sorted(&["no-specimen", "spring-k2"]));
+    let (_, fresh, cached, forced) = night.run(&["--force"]);
+    assert_eq!(fresh, sorted(&ALL));
+    assert!(cached.is_empty());
+    assert!(after == forced, "incremental and fresh results agree");
+}
+
+/// An unchanged log is not even read: its size and modification time are
+/// what the cache compares. Here a log's bytes change behind servoid's back
+/// with its size and time kept, and the rerun still takes the run from the
+/// cache (the documented limit of stamps, as for make); a log whose time
+/// changes is read and recomputed.
+#[test]
+fn an_unchanged_log_is_not_read_again() {
+    let night = Night::new();
+    let (_, _, _, first) = night.run(&[]);
+    let log = night.dir.path().join("a/logs/exp3.csv");
+    let modified = std::fs::metadata(&log).unwrap().modified().unwrap();
+    let mut bytes = std::fs::read(&log).unwrap();
+    // Another sample's last digit: same size, other content.
+    let at = bytes.len() - 3;
+    bytes[at] = if bytes[at] == b'1' { b'2' } else { b'1' };
+    std::fs::write(&log, &bytes).unwrap();
+    let f = std::fs::File::options().write(true).open(&log).unwrap();
+    f.set_modified(modified).unwrap();
+    drop(f);
+    let (_, fresh, cached, again) = night.run(&[]);
+    assert!(fresh.is_empty(), "{fresh:?}");
+    assert_eq!(cached.len(), 7);
+    assert!(again == first);
+    // Touched: read, hashed, found changed, recomputed.
+    let f = std::fs::File::options().write(true).open(&log).unwrap();
+    f.set_modified(modified + std::time::Duration::from_secs(60))
+        .unwrap();
+    drop(f);
+    let (_, fresh, _, _) = night.run(&[]);
+    assert_eq!(fresh, ["exp3"]);
 }

@@ -433,12 +433,60 @@ impl fmt::Display for MatVariable {
 /// depend on the analysis (length, jitter, clipping) are left to
 /// [`check_log`].
 pub fn read_log(plan: &LogPlan) -> Result<Log, IngestError> {
+    read_log_from(plan, LogFile::read(&plan.path)?)
+}
+
+/// A log file's bytes and their SHA-256, read once: a cache can look a run
+/// up by the hash before the bytes are parsed, and parse them on a miss.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct LogFile {
+    pub path: PathBuf,
+    bytes: Vec<u8>,
+    /// SHA-256 of the bytes, lowercase hexadecimal.
+    pub sha256: String,
+}
+
+impl LogFile {
+    pub fn read(path: &Path) -> Result<Self, IngestError> {
+        let bytes = std::fs::read(path).map_err(|source| IngestError::Io {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        Ok(Self {
+            path: path.to_path_buf(),
+            sha256: sha256_hex(&bytes),
+            bytes,
+        })
+    }
+}
+
+/// What the file system says of a file without reading it: its size and
+/// modification time. A file whose stamp has not changed since its hash was
+/// taken is taken to hold the same bytes (as make and git do).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub struct FileStamp {
+    pub size: u64,
+    pub modified_ns: u128,
+}
+
+impl FileStamp {
+    /// None when the file cannot be looked at (the read that follows will
+    /// say why).
+    pub fn of(path: &Path) -> Option<Self> {
+        let meta = std::fs::metadata(path).ok()?;
+        let modified = meta.modified().ok()?;
+        let since = modified.duration_since(std::time::UNIX_EPOCH).ok()?;
+        Some(Self {
+            size: meta.len(),
+            modified_ns: since.as_nanos(),
+        })
+    }
+}
+
+/// Parse a log file already read, as `plan` describes it; see [`read_log`].
+pub fn read_log_from(plan: &LogPlan, file: LogFile) -> Result<Log, IngestError> {
     let path = plan.path.as_path();
-    let bytes = std::fs::read(path).map_err(|source| IngestError::Io {
-        path: path.to_path_buf(),
-        source,
-    })?;
-    let sha256 = sha256_hex(&bytes);
+    let LogFile { bytes, sha256, .. } = file;
     if let Some(expected) = &plan.sha256
         && !expected.eq_ignore_ascii_case(&sha256)
     {

@@ -21,7 +21,7 @@ const RUN_TEMPLATE: &str = include_str!("run.html");
 const STYLE: &str = include_str!("style.html");
 
 /// A figure as a page shows it.
-#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct PageFigure {
     pub id: String,
     pub title: String,

@@ -91,6 +91,14 @@ impl<'a> FigureFiles<'a> {
         })
     }
 
+    /// The size of a figure file (named relative to the output folder),
+    /// None when it is not there.
+    pub fn size_of(&self, name: &str) -> Option<u64> {
+        std::fs::metadata(self.out_dir.join(name))
+            .ok()
+            .map(|m| m.len())
+    }
+
     /// Render the figures (in parallel; bytes do not depend on the thread
     /// count) and write their files. A figure that cannot be drawn is
     /// reported in the returned warnings and left out; it never stops the

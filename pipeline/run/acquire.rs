@@ -8,7 +8,7 @@ use std::path::PathBuf;
 
 use crate::fit::{self, DelayPlan, FitError, FitInput, FitOptions, TfFit};
 use crate::frf::{self, Frf, FrfError};
-use crate::ingest::{self, IngestError, Log, LogPlan, Needs};
+use crate::ingest::{self, IngestError, Log, LogFile, LogPlan, Needs};
 use crate::lti::TransferFunction;
 use crate::manifest::{Campaign, IdentificationPlan, Role, RunPlan, RunSource};
 use crate::results::TfSource;
@@ -27,6 +27,16 @@ pub struct Acquired {
 
 /// The first stage of one run: its measured or published transfer function.
 pub fn acquire(campaign: &Campaign, run: &RunPlan) -> Result<Acquired, AcquireError> {
+    acquire_with(campaign, run, None)
+}
+
+/// The first stage of one run, its log's bytes already read when given
+/// (they are the log the plan names).
+pub fn acquire_with(
+    campaign: &Campaign,
+    run: &RunPlan,
+    file: Option<LogFile>,
+) -> Result<Acquired, AcquireError> {
     match &run.source {
         RunSource::None => Ok(Acquired {
             tf: None,
@@ -43,7 +53,11 @@ pub fn acquire(campaign: &Campaign, run: &RunPlan) -> Result<Acquired, AcquireEr
             stage: None,
         }),
         RunSource::Log(plan) => {
-            let stage = log_stage(run, plan, &campaign.identification)?;
+            let file = match file {
+                Some(f) => f,
+                None => LogFile::read(&plan.path)?,
+            };
+            let stage = log_stage_from(run, plan, &campaign.identification, file)?;
             let fit = stage.fit.as_ref();
             Ok(Acquired {
                 tf: fit.map(|f| f.tf.clone()),
@@ -180,8 +194,18 @@ pub fn log_stage(
     plan: &LogPlan,
     ident: &IdentificationPlan,
 ) -> Result<LogStage, AcquireError> {
+    log_stage_from(run, plan, ident, LogFile::read(&plan.path)?)
+}
+
+/// The log stage of one run whose log file is already read.
+pub fn log_stage_from(
+    run: &RunPlan,
+    plan: &LogPlan,
+    ident: &IdentificationPlan,
+    file: LogFile,
+) -> Result<LogStage, AcquireError> {
     let path = plan.path.clone();
-    let mut log = ingest::read_log(plan)?;
+    let mut log = ingest::read_log_from(plan, file)?;
     let needs = Needs {
         min_samples: ident.frf.segment_length,
         max_jitter_fraction: MAX_JITTER_FRACTION,

@@ -23,15 +23,17 @@ use std::time::Instant;
 
 use rayon::prelude::*;
 
-use super::acquire::{AcquireError, Acquired, LogStage, acquire};
+use super::acquire::{AcquireError, Acquired, LogStage, acquire_with};
+use super::cache::{self, Cache, Probe};
 use super::compare::compare;
 use super::figures::{self, ForceBins, OverlayRun};
 use super::rig::{self, RigError, RigInput};
 use crate::fit::TfFit;
 use crate::ingest::Log;
+use crate::lti::TransferFunction;
 use crate::manifest::{Campaign, Role, RunPlan, RunSource};
 use crate::model::{self, CnTerm, LinearSdof, LinearSpecimen, RigParams};
-use crate::report::{FigureFiles, FigureSpec, PageFigure, WriteError};
+use crate::report::{FigureFiles, FigureFormats, FigureSpec, PageFigure, WriteError};
 use crate::results::{
     CampaignSummary, CcfResult, ComplexValue, FitSummary, LogInfo, RESULTS_SCHEMA_VERSION, Results,
     RunResult, SensitivityResult, Status, TfResult, TfSource,
@@ -75,6 +77,8 @@ pub enum Event<'a> {
         status: Status,
         seconds: f64,
     },
+    /// A run's outcome came from the cache, after `seconds`.
+    RunCached { id: &'a str, seconds: f64 },
 }
 
 /// An observer that watches nothing.
@@ -95,30 +99,36 @@ pub struct Analysed {
     /// Each run's log work (s), in manifest order: for run.jsonl, never
     /// results.json.
     pub seconds: Vec<f64>,
+    /// Whether each run's outcome came from the cache.
+    pub cached: Vec<bool>,
 }
 
-/// Analyse a campaign without drawing figures.
+/// Analyse a campaign without drawing figures or caching.
 pub fn analyse(campaign: &Campaign) -> Results {
-    analyse_with(campaign, None, &Unobserved)
-        .expect("nothing is written without figures")
+    let draw = Drawer {
+        files: None,
+        choice: FigureFormats::None,
+        intersample: campaign.identification.intersample,
+        cache: None,
+    };
+    analyse_with(campaign, &draw, &Unobserved)
+        .expect("nothing is written without figures or a cache")
         .results
 }
 
-/// Analyse a campaign, writing its figures through `files` when given.
+/// Analyse a campaign, its figures and cache as `draw` says.
 pub(super) fn analyse_with(
     campaign: &Campaign,
-    files: Option<&FigureFiles<'_>>,
+    draw: &Drawer<'_>,
     observer: &dyn Observer,
 ) -> Result<Analysed, WriteError> {
     observer.event(&Event::Started {
         runs: campaign.runs.len(),
     });
-    let intersample = campaign.identification.intersample;
-    let draw = Drawer { files, intersample };
     let first: Vec<FirstPass> = campaign
         .runs
         .par_iter()
-        .map(|plan| first_pass(campaign, plan, &draw, observer))
+        .map(|plan| first_pass(campaign, plan, draw, observer))
         .collect::<Result<_, _>>()?;
 
     let mut warnings = Vec::new();
@@ -131,18 +141,20 @@ pub(super) fn analyse_with(
         .runs
         .par_iter()
         .zip(first)
-        .map(|(plan, first)| second_pass(campaign, plan, first, &rig_for_runs, &draw, observer))
+        .map(|(plan, first)| second_pass(campaign, plan, first, &rig_for_runs, draw, observer))
         .collect::<Result<_, _>>()?;
 
     let mut runs = Vec::with_capacity(second.len());
     let mut run_figures = Vec::with_capacity(second.len());
     let mut seconds = Vec::with_capacity(second.len());
+    let mut cached = Vec::with_capacity(second.len());
     let mut overlay = Vec::new();
     for done in second {
         runs.push(done.result);
         run_figures.push(done.figures);
         warnings.extend(done.figure_warnings);
         seconds.push(done.seconds);
+        cached.push(done.cached);
         overlay.extend(done.overlay);
     }
     flag_outliers(&mut runs);
@@ -180,11 +192,15 @@ pub(super) fn analyse_with(
     let specs = figures::campaign_figures(&overlay, results.sensitivity.as_ref());
     let (campaign_figures, figure_warnings) = draw.write(&specs)?;
     results.warnings.extend(figure_warnings);
+    if let Some(cache) = draw.cache {
+        cache.finish()?;
+    }
     Ok(Analysed {
         results,
         run_figures,
         campaign_figures,
         seconds,
+        cached,
     })
 }
 
@@ -214,11 +230,13 @@ fn flag_outliers(runs: &mut [RunResult]) {
     validate::flag_outliers(&mut validation);
 }
 
-/// Draws a run's figures into their files, or nothing when the campaign
-/// draws none.
-struct Drawer<'a> {
-    files: Option<&'a FigureFiles<'a>>,
-    intersample: crate::fit::Intersample,
+/// How a campaign's runs are done: where their figures go (nowhere when the
+/// campaign draws none) and the cache they are kept in, if any.
+pub(super) struct Drawer<'a> {
+    pub files: Option<&'a FigureFiles<'a>>,
+    pub choice: FigureFormats,
+    pub intersample: crate::fit::Intersample,
+    pub cache: Option<&'a Cache>,
 }
 
 impl Drawer<'_> {
@@ -232,6 +250,47 @@ impl Drawer<'_> {
     fn enabled(&self) -> bool {
         self.files.is_some()
     }
+
+    /// Whether every figure file `stored` wrote is still there, as it was
+    /// written.
+    fn still_there(&self, stored: &Stored) -> bool {
+        let Some(files) = self.files else {
+            return stored.files.is_empty();
+        };
+        stored
+            .files
+            .iter()
+            .all(|(name, size)| files.size_of(name) == Some(*size))
+    }
+
+    /// Each file a run's figures were written to, with its size.
+    fn sizes(&self, figures: &[PageFigure]) -> Vec<(String, u64)> {
+        let Some(files) = self.files else {
+            return Vec::new();
+        };
+        figures
+            .iter()
+            .flat_map(|f| [&f.png_file, &f.svg_file])
+            .flatten()
+            .filter_map(|name| files.size_of(name).map(|size| (name.clone(), size)))
+            .collect()
+    }
+}
+
+/// A run's outcome as the cache keeps it: everything the campaign needs of
+/// it once its log is dropped.
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
+struct Stored {
+    result: RunResult,
+    /// The transfer function the rig is identified from, with the
+    /// covariance of (n0, d1, d0) when fitted.
+    estimate: Option<(TransferFunction, Option<[[f64; 3]; 3]>)>,
+    force: Option<ForceBins>,
+    overlay: Option<OverlayRun>,
+    figures: Vec<PageFigure>,
+    figure_warnings: Vec<String>,
+    /// The figure files with their sizes, to tell they are still there.
+    files: Vec<(String, u64)>,
 }
 
 /// What a run keeps from the first pass: everything but its signals.
@@ -247,6 +306,7 @@ struct FirstPass {
     figures: Vec<PageFigure>,
     figure_warnings: Vec<String>,
     seconds: f64,
+    cached: bool,
 }
 
 /// A run done.
@@ -256,6 +316,7 @@ struct Done {
     figure_warnings: Vec<String>,
     overlay: Option<OverlayRun>,
     seconds: f64,
+    cached: bool,
 }
 
 /// A run's result before anything is known of it.
@@ -279,6 +340,31 @@ fn new_result(plan: &RunPlan) -> RunResult {
     }
 }
 
+/// The cache's verdict on a run: its stored outcome, or the key to store
+/// the new one under and its log's bytes when they were read on the way.
+fn probe(
+    draw: &Drawer<'_>,
+    plan: &RunPlan,
+    parts: &[&dyn std::fmt::Debug],
+) -> (
+    Option<Stored>,
+    Option<String>,
+    Option<crate::ingest::LogFile>,
+) {
+    let (Some(cache), RunSource::Log(lp)) = (draw.cache, &plan.source) else {
+        return (None, None, None);
+    };
+    let key = |sha: &str| {
+        let mut all: Vec<&dyn std::fmt::Debug> = parts.to_vec();
+        all.extend([plan as &dyn std::fmt::Debug, &draw.choice, &sha]);
+        cache::key(&all)
+    };
+    match cache.probe(&lp.path, key, |s: &Stored| draw.still_there(s)) {
+        Probe::Hit(stored) => (Some(stored), None, None),
+        Probe::Miss { key, file } => (None, Some(key), file),
+    }
+}
+
 /// The first pass of one run: everything that does not need the rig.
 fn first_pass(
     campaign: &Campaign,
@@ -295,14 +381,33 @@ fn first_pass(
         figures: Vec::new(),
         figure_warnings: Vec::new(),
         seconds: 0.0,
+        cached: false,
     };
     if plan.role == Role::Validation {
         return Ok(pass);
     }
     observer.event(&Event::RunStarted { id: &plan.id });
     let start = Instant::now();
+    let (stored, key, file) = probe(draw, plan, &[&"first pass", &campaign.identification]);
+    if let Some(s) = stored {
+        pass.seconds = start.elapsed().as_secs_f64();
+        observer.event(&Event::RunCached {
+            id: &plan.id,
+            seconds: pass.seconds,
+        });
+        pass.rig_input = match s.estimate {
+            Some((tf, cov)) => RigInput::Estimate { tf, cov },
+            None => RigInput::Nothing,
+        };
+        pass.result = Some(s.result);
+        pass.acquired = true;
+        (pass.force, pass.overlay) = (s.force, s.overlay);
+        (pass.figures, pass.figure_warnings) = (s.figures, s.figure_warnings);
+        pass.cached = true;
+        return Ok(pass);
+    }
     let mut out = new_result(plan);
-    match acquire(campaign, plan) {
+    match acquire_with(campaign, plan, file) {
         Err(e) => {
             let e = Arc::new(e);
             pass.rig_input = RigInput::Failed(e.clone());
@@ -310,10 +415,11 @@ fn first_pass(
         }
         Ok(acq) => {
             pass.acquired = true;
-            pass.rig_input = match &acq.tf {
-                Some(tf) => RigInput::Estimate {
+            let estimate = acq.tf.clone().map(|tf| (tf, acq.cov));
+            pass.rig_input = match &estimate {
+                Some((tf, cov)) => RigInput::Estimate {
                     tf: tf.clone(),
-                    cov: acq.cov,
+                    cov: *cov,
                 },
                 None => RigInput::Nothing,
             };
@@ -327,6 +433,20 @@ fn first_pass(
                     (pass.figures, pass.figure_warnings) = draw.write(&specs)?;
                     pass.overlay = overlay;
                 }
+            }
+            if let (Some(cache), Some(key)) = (draw.cache, &key) {
+                cache.store(
+                    key,
+                    &Stored {
+                        result: out.clone(),
+                        estimate,
+                        force: pass.force.clone(),
+                        overlay: pass.overlay.clone(),
+                        files: draw.sizes(&pass.figures),
+                        figures: pass.figures.clone(),
+                        figure_warnings: pass.figure_warnings.clone(),
+                    },
+                )?;
             }
         }
     }
@@ -374,6 +494,7 @@ fn second_pass(
         figure_warnings,
         overlay: first.overlay,
         seconds: first.seconds,
+        cached: first.cached,
     })
 }
 
@@ -395,11 +516,39 @@ fn validation_run(
 ) -> Result<Done, WriteError> {
     observer.event(&Event::RunStarted { id: &plan.id });
     let start = Instant::now();
+    // The key holds the rig at this run's P gain: a new rig redoes the run.
+    let (stored, key, file) = match rig {
+        Ok(r) => probe(
+            draw,
+            plan,
+            &[
+                &"validation",
+                &campaign.identification,
+                &r.at_p_gain(plan.p_gain),
+            ],
+        ),
+        Err(_) => (None, None, None),
+    };
+    if let Some(s) = stored {
+        let seconds = start.elapsed().as_secs_f64();
+        observer.event(&Event::RunCached {
+            id: &plan.id,
+            seconds,
+        });
+        return Ok(Done {
+            result: s.result,
+            figures: s.figures,
+            figure_warnings: s.figure_warnings,
+            overlay: None,
+            seconds,
+            cached: true,
+        });
+    }
     let mut out = new_result(plan);
     let figures = (Vec::new(), Vec::new());
     // The log's own failure comes first; a good log without a rig still
     // records what it is.
-    let acq = match acquire(campaign, plan) {
+    let acq = match acquire_with(campaign, plan, file) {
         Ok(a) => a,
         Err(e) => {
             out.a1b0 = rig
@@ -444,7 +593,7 @@ fn validation_run(
             None
         }
     };
-    if draw.enabled() {
+    let figures = if draw.enabled() {
         let (mut specs, _) = figures::log_figures(&out, st, time.as_ref(), draw.intersample);
         if let (Some(bins), Some(model)) = (ForceBins::of(st), &out.force_tf) {
             specs.insert(
@@ -452,7 +601,23 @@ fn validation_run(
                 figures::force_figure(&out, &bins, model, draw.intersample),
             );
         }
-        return Ok(finish(plan, out, draw.write(&specs)?, start, observer));
+        draw.write(&specs)?
+    } else {
+        figures
+    };
+    if let (Some(cache), Some(key)) = (draw.cache, &key) {
+        cache.store(
+            key,
+            &Stored {
+                result: out.clone(),
+                estimate: None,
+                force: None,
+                overlay: None,
+                files: draw.sizes(&figures.0),
+                figures: figures.0.clone(),
+                figure_warnings: figures.1.clone(),
+            },
+        )?;
     }
     Ok(finish(plan, out, figures, start, observer))
 }
@@ -477,6 +642,7 @@ fn finish(
         figure_warnings,
         overlay: None,
         seconds,
+        cached: false,
     }
 }
 

@@ -74,10 +74,11 @@ pub(super) fn campaign_figures(
 
 /// A log's measured command-to-force FRF as Figs. 16-17 show it (5-35 Hz),
 /// kept small so that it can wait for the rig while the log is dropped.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
 pub(super) struct ForceBins {
     sample_rate_hz: f64,
     freq_hz: Vec<f64>,
+    #[serde(with = "complex_vec")]
     h: Vec<Complex<f64>>,
     coherence: Vec<f64>,
 }
@@ -422,12 +423,32 @@ fn residual_figure(run: &RunResult, time: &TimeStage, fs: f64) -> FigureSpec {
 }
 
 /// An identification run's FRF kept for Fig. 15.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
 pub(super) struct OverlayRun {
     id: String,
     freq_hz: Vec<f64>,
+    #[serde(with = "complex_vec")]
     measured: Vec<Complex<f64>>,
+    #[serde(with = "complex_vec")]
     model: Vec<Complex<f64>>,
+}
+
+/// Complex numbers as [re, im] pairs, for the run cache.
+mod complex_vec {
+    use nalgebra::Complex;
+    use serde::{Deserialize, Deserializer, Serializer};
+
+    pub fn serialize<S: Serializer>(v: &[Complex<f64>], s: S) -> Result<S::Ok, S::Error> {
+        s.collect_seq(v.iter().map(|c| [c.re, c.im]))
+    }
+
+    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<Vec<Complex<f64>>, D::Error> {
+        let pairs = Vec::<[f64; 2]>::deserialize(d)?;
+        Ok(pairs
+            .into_iter()
+            .map(|[re, im]| Complex::new(re, im))
+            .collect())
+    }
 }
 
 /// Fig. 15: every identification run together, 0-15 Hz.

@@ -6,6 +6,7 @@
 
 pub mod acquire;
 mod analyse;
+mod cache;
 mod compare;
 pub mod figures;
 mod rig;
@@ -20,6 +21,8 @@ use crate::manifest::{self, Campaign, Loaded, ManifestError};
 pub use crate::report::FigureFormats;
 use crate::report::{self, FigureFiles, WriteError};
 use crate::results::{self, Results, Status};
+use analyse::Drawer;
+use cache::Cache;
 use simulate::{SimulateError, Simulated};
 
 /// How a job runs and what it writes.
@@ -31,6 +34,8 @@ pub struct Settings {
     pub jobs: Option<usize>,
     /// Which figure files to draw.
     pub figures: FigureFormats,
+    /// Ignore the cache of earlier runs (it is refreshed).
+    pub force: bool,
 }
 
 /// Why a job wrote nothing (or, for an output, could not finish writing).
@@ -70,6 +75,8 @@ pub struct CampaignOutcome {
     pub log_path: PathBuf,
     /// Wall-clock time of the analysis and its outputs (s).
     pub seconds: f64,
+    /// Runs whose outcome came from the cache.
+    pub cached: usize,
 }
 
 impl CampaignOutcome {
@@ -234,7 +241,14 @@ fn write_campaign(
     let started = std::time::SystemTime::now();
     let clock = std::time::Instant::now();
     let files = FigureFiles::new(out_dir, settings.figures);
-    let analysed = analyse::analyse_with(campaign, files.as_ref(), observer)?;
+    let cache = Cache::open(out_dir, settings.force);
+    let draw = Drawer {
+        files: files.as_ref(),
+        choice: settings.figures,
+        intersample: campaign.identification.intersample,
+        cache: Some(&cache),
+    };
+    let analysed = analyse::analyse_with(campaign, &draw, observer)?;
     let results = analysed.results;
     let results_path = report::write_results(&results, out_dir)?;
     let page_path = report::write_pages(
@@ -251,10 +265,12 @@ fn write_campaign(
         jobs: rayon::current_num_threads(),
         runs: &results.runs,
         run_seconds: &analysed.seconds,
+        cached: &analysed.cached,
     };
     let log_path = out_dir.join("run.jsonl");
     report::write_atomic(&log_path, &log.jsonl())?;
     Ok(CampaignOutcome {
+        cached: analysed.cached.iter().filter(|c| **c).count(),
         results,
         results_path,
         page_path,
@@ -272,6 +288,7 @@ struct RunLog<'a> {
     jobs: usize,
     runs: &'a [results::RunResult],
     run_seconds: &'a [f64],
+    cached: &'a [bool],
 }
 
 impl RunLog<'_> {
@@ -291,11 +308,12 @@ impl RunLog<'_> {
             "jobs": self.jobs,
             "servoid_version": env!("CARGO_PKG_VERSION"),
         }));
-        for (run, seconds) in self.runs.iter().zip(self.run_seconds) {
+        for ((run, seconds), cached) in self.runs.iter().zip(self.run_seconds).zip(self.cached) {
             line(serde_json::json!({
                 "event": "run",
                 "run": run.id,
                 "status": run.status,
+                "cached": cached,
                 "seconds": seconds,
             }));
         }

@@ -1,0 +1,181 @@
+//! Incremental reruns: each run's outcome kept under a key made of what
+//! decides it (the servoid version, the run's checked plan, the campaign's
+//! identification settings, the figure formats, the SHA-256 of its log and,
+//! for a run that needs the rig, the rig's parameters to the last bit), so
+//! a rerun with nothing changed does no per-log work, and a changed log
+//! recomputes its own run and what depends on it (a changed identification
+//! log changes the rig, and with it every validation run's key).
+//!
+//! The cache is the orchestrator's own state, kept in `.cache/` inside the
+//! output folder: `runs/<key>.json` per run outcome, and `stamps.json`, the
+//! size and modification time each log had when it was hashed, so that an
+//! unchanged log is not even read (as make and git do). Entries are JSON
+//! with shortest round-trip floats, so a cached outcome gives the same
+//! results.json bytes as a fresh one. Entries the campaign no longer uses
+//! are removed when it finishes. Anything unreadable is a miss.
+
+use std::collections::{BTreeMap, BTreeSet};
+use std::path::{Path, PathBuf};
+use std::sync::Mutex;
+
+use serde::Serialize;
+use serde::de::DeserializeOwned;
+
+use crate::ingest::{FileStamp, LogFile, sha256_hex};
+use crate::report::{self, WriteError};
+
+/// A log's stamp when its hash was taken.
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
+struct Stamped {
+    stamp: FileStamp,
+    sha256: String,
+}
+
+/// The cache of one output folder.
+pub(super) struct Cache {
+    dir: PathBuf,
+    /// Set by `--force`: nothing is read from the cache, everything is
+    /// computed and stored afresh.
+    fresh: bool,
+    stamps: Mutex<BTreeMap<String, Stamped>>,
+    used: Mutex<BTreeSet<String>>,
+}
+
+/// What a probe found: the stored outcome, or the key to store one under
+/// and the log's bytes when they were read on the way.
+pub(super) enum Probe<T> {
+    Hit(T),
+    Miss { key: String, file: Option<LogFile> },
+}
+
+impl Cache {
+    /// The cache in `out_dir/.cache`, empty when there is none; `fresh`
+    /// ignores what it holds.
+    pub(super) fn open(out_dir: &Path, fresh: bool) -> Self {
+        let dir = out_dir.join(".cache");
+        let stamps = if fresh {
+            BTreeMap::new()
+        } else {
+            read_json(&dir.join("stamps.json")).unwrap_or_default()
+        };
+        Self {
+            dir,
+            fresh,
+            stamps: Mutex::new(stamps),
+            used: Mutex::new(BTreeSet::new()),
+        }
+    }
+
+    /// Look a run up: `key` makes its key from its log's SHA-256. The log
+    /// is read only when its stamp changed since it was last hashed.
+    pub(super) fn probe<T: DeserializeOwned>(
+        &self,
+        log: &Path,
+        key: impl Fn(&str) -> String,
+        usable: impl Fn(&T) -> bool,
+    ) -> Probe<T> {
+        let name = log.to_string_lossy().into_owned();
+        let stamp = FileStamp::of(log);
+        let known = {
+            let stamps = self.stamps.lock().expect("the stamps' lock");
+            stamps
+                .get(&name)
+                .filter(|s| Some(s.stamp) == stamp)
+                .map(|s| s.sha256.clone())
+        };
+        if let Some(sha) = known
+            && let Some(hit) = self.load(&key(&sha), &usable)
+        {
+            return Probe::Hit(hit);
+        }
+        let Ok(file) = LogFile::read(log) else {
+            // The run reads it again and reports why it cannot.
+            return Probe::Miss {
+                key: String::new(),
+                file: None,
+            };
+        };
+        if let Some(stamp) = stamp {
+            self.stamps.lock().expect("the stamps' lock").insert(
+                name,
+                Stamped {
+                    stamp,
+                    sha256: file.sha256.clone(),
+                },
+            );
+        }
+        let k = key(&file.sha256);
+        match self.load(&k, &usable) {
+            Some(hit) => Probe::Hit(hit),
+            None => Probe::Miss {
+                key: k,
+                file: Some(file),
+            },
+        }
+    }
+
+    fn load<T: DeserializeOwned>(&self, key: &str, usable: &impl Fn(&T) -> bool) -> Option<T> {
+        if self.fresh {
+            return None;
+        }
+        let entry: T = read_json(&self.entry(key))?;
+        if !usable(&entry) {
+            return None;
+        }
+        self.used
+            .lock()
+            .expect("the used keys' lock")
+            .insert(key.to_string());
+        Some(entry)
+    }
+
+    /// Keep a run's outcome under `key` (from a miss).
+    pub(super) fn store(&self, key: &str, value: &impl Serialize) -> Result<(), WriteError> {
+        if key.is_empty() {
+            return Ok(());
+        }
+        report::write_atomic(&self.entry(key), &report::json_bytes(value))?;
+        self.used
+            .lock()
+            .expect("the used keys' lock")
+            .insert(key.to_string());
+        Ok(())
+    }
+
+    /// Write the stamps and remove the entries this campaign did not use.
+    pub(super) fn finish(&self) -> Result<(), WriteError> {
+        let stamps = self.stamps.lock().expect("the stamps' lock");
+        report::write_atomic(&self.dir.join("stamps.json"), &report::json_bytes(&*stamps))?;
+        let used = self.used.lock().expect("the used keys' lock");
+        if let Ok(entries) = std::fs::read_dir(self.dir.join("runs")) {
+            for e in entries.flatten() {
+                let name = e.file_name().to_string_lossy().into_owned();
+                let key = name.trim_end_matches(".json");
+                if !used.contains(key) {
+                    let _ = std::fs::remove_file(e.path());
+                }
+            }
+        }
+        Ok(())
+    }
+
+    fn entry(&self, key: &str) -> PathBuf {
+        self.dir.join("runs").join(format!("{key}.json"))
+    }
+}
+
+/// A key from the text of what decides a run's outcome. The plan's Debug
+/// text holds every setting with its floats to the last bit; a rebuild that
+/// printed them differently could only change the key (a miss), never make
+/// two different plans share one.
+pub(super) fn key(parts: &[&dyn std::fmt::Debug]) -> String {
+    let mut text = format!("servoid {}\n", env!("CARGO_PKG_VERSION"));
+    for p in parts {
+        text.push_str(&format!("{p:?}\n"));
+    }
+    sha256_hex(text.as_bytes())
+}
+
+fn read_json<T: DeserializeOwned>(path: &Path) -> Option<T> {
+    serde_json::from_slice(&std::fs::read(path).ok()?).ok()
+}
