@@ -71,6 +71,18 @@ pub enum Command {
         #[command(flatten)]
         args: RunArgs,
     },
+    /// Rerun the analysis a results.json records (its manifest and logs
+    /// checked by their hashes) and list every quantity that differs.
+    Verify {
+        /// The results.json to verify.
+        results: PathBuf,
+        /// The manifest, when it is no longer where results.json says.
+        #[arg(long)]
+        manifest: Option<PathBuf>,
+        /// Worker threads (default: all cores).
+        #[arg(long, short)]
+        jobs: Option<usize>,
+    },
     /// Check a manifest (campaign or simulation) and report every problem, without running it.
     Check {
         /// The manifest.
@@ -160,6 +172,11 @@ fn dispatch(command: Command) -> u8 {
             run,
             args,
         } => cmd_simulate(&manifest, run, &args),
+        Command::Verify {
+            results,
+            manifest,
+            jobs,
+        } => cmd_verify(&results, manifest.as_deref(), jobs),
         Command::Check { manifest } => match run::check(&manifest) {
             Ok(checked) => {
                 say(&format!("{}: ok ({checked})", manifest.display()));
@@ -182,6 +199,37 @@ fn dispatch(command: Command) -> u8 {
                 EXIT_FAILED
             }
         },
+    }
+}
+
+/// Exit 0 when every recomputed quantity equals the recorded one, 1
+/// otherwise, each difference on its own line.
+fn cmd_verify(results: &Path, manifest: Option<&Path>, jobs: Option<usize>) -> u8 {
+    let v = match run::verify_results(results, manifest, jobs) {
+        Ok(v) => v,
+        Err(e) => return job_failed(&e),
+    };
+    for d in &v.differences {
+        say(&format!(
+            "differs: {}: recorded {}, recomputed {}",
+            d.key, d.recorded, d.recomputed
+        ));
+    }
+    let what = format!(
+        "{}: rerun from {} ({} logs checked by their hashes)",
+        results.display(),
+        v.manifest.display(),
+        v.logs
+    );
+    if v.differences.is_empty() {
+        say(&format!("{what}: every quantity matches"));
+        EXIT_OK
+    } else {
+        say(&format!(
+            "{what}: {} quantities differ",
+            v.differences.len()
+        ));
+        EXIT_FAILED
     }
 }
 

@@ -65,6 +65,11 @@ pub struct CampaignSummary {
     pub manifest: String,
     /// SHA-256 of the manifest's bytes.
     pub manifest_sha256: String,
+    /// The manifest's path relative to the folder holding results.json
+    /// (`/`-separated), where `servoid verify` looks for it; null when the
+    /// results were not written to a folder.
+    #[serde(default)]
+    pub manifest_path: Option<String>,
 }
 
 /// Where the rig parameters come from.

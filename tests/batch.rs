@@ -293,3 +293,134 @@ fn an_unchanged_log_is_not_read_again() {
     let (_, fresh, _, _) = night.run(&[]);
     assert_eq!(fresh, ["exp3"]);
 }
+
+/// Parquet columns of `file` under `out/tables`, as f64 (booleans as 0/1).
+fn table(out: &std::path::Path, file: &str) -> std::collections::BTreeMap<String, Vec<f64>> {
+    use polars::prelude::{DataType, ParquetReader, SerReader};
+    let f = std::fs::File::open(out.join("tables").join(file)).unwrap();
+    let df = ParquetReader::new(f).finish().unwrap();
+    df.columns()
+        .iter()
+        .filter(|c| c.dtype() != &DataType::String)
+        .map(|c| {
+            let v = c.cast(&DataType::Float64).unwrap();
+            let v: Vec<f64> = v
+                .f64()
+                .unwrap()
+                .iter()
+                .map(|x| x.unwrap_or(f64::NAN))
+                .collect();
+            (c.name().to_string(), v)
+        })
+        .collect()
+}
+
+/// Each run's tables beside results.json: the model table holds the fitted
+/// parameters of results.json, and the FRF table's model column is that
+/// fitted n0/(s^2 + d1 s + d0) times the command's zero-order hold, computed
+/// here from the parameters (exp(-jwT/2) sin(wT/2)/(wT/2), T = 1/2048 s).
+#[test]
+fn each_run_has_its_frf_and_model_as_parquet_tables() {
+    let night = Night::new();
+    let (code, _, _, results) = night.run(&[]);
+    assert_eq!(code, 0);
+    let results: Value = serde_json::from_slice(&results).unwrap();
+    let out = night.out();
+    for id in ALL {
+        assert!(
+            out.join(format!("tables/frf-{id}.parquet")).is_file(),
+            "{id}"
+        );
+        assert!(
+            out.join(format!("tables/model-{id}.parquet")).is_file(),
+            "{id}"
+        );
+    }
+    let run = crate::util::run_by_id(&results, "spring-k1");
+    let params: Vec<f64> = serde_json::from_value(run["fit"]["params"].clone()).unwrap();
+    let model = table(&out, "model-spring-k1.parquet");
+    assert_eq!(model["value"], params);
+    let frf = table(&out, "frf-spring-k1.parquet");
+    let (n0, d1, d0) = (params[0], params[1], params[2]);
+    let t = 1.0 / 2048.0;
+    let fitted = frf["in_fit"].iter().filter(|b| **b == 1.0).count();
+    assert!(fitted >= run["fit"]["n_bins"].as_u64().unwrap() as usize);
+    for (k, f) in frf["freq_hz"].iter().enumerate().step_by(97) {
+        let w = 2.0 * std::f64::consts::PI * f;
+        let s = nalgebra::Complex::new(0.0, w);
+        let half = w * t / 2.0;
+        let hold = nalgebra::Complex::from_polar(half.sin() / half, -half);
+        let h = n0 / (s * s + d1 * s + d0) * hold;
+        let got = nalgebra::Complex::new(frf["model_re"][k], frf["model_im"][k]);
+        assert!(
+            (got - h).norm() <= 1e-10 * h.norm(),
+            "{f} Hz: {got} against {h}"
+        );
+    }
+    // The bins go to 35 Hz, the highest the figures show.
+    let top = frf["freq_hz"].iter().copied().fold(0.0, f64::max);
+    assert!(top <= 35.0 && top > 34.9, "{top}");
+}
+
+/// `servoid verify`: a results.json reruns to the same numbers (exit 0);
+/// a number edited in it, and a log changed since, are each named (exit 1);
+/// a file that is not a results.json is a usage error (exit 2).
+#[test]
+fn verify_reruns_the_recorded_analysis_and_names_what_differs() {
+    let night = Night::new();
+    let (code, _, _, _) = night.run(&["--figures", "none"]);
+    assert_eq!(code, 0);
+    let results = night.out().join("results.json");
+    let verify = |extra: &[&str]| {
+        let mut args = vec!["verify", results.to_str().unwrap()];
+        args.extend_from_slice(extra);
+        crate::util::servoid(night.dir.path(), &args)
+    };
+    let o = verify(&[]);
+    assert_eq!(o.code, 0, "{}{}", o.stdout, o.stderr);
+    assert!(o.stdout.contains("every quantity matches"), "{}", o.stdout);
+    assert!(
+        o.stdout.contains("(7 logs checked by their hashes)"),
+        "{}",
+        o.stdout
+    );
+
+    // An edited number.
+    let text = std::fs::read_to_string(&results).unwrap();
+    let doc: Value = serde_json::from_str(&text).unwrap();
+    let a2 = doc["rig"]["a2"]["value"].as_f64().unwrap();
+    let edited = text.replacen(&format!("\"value\": {a2}"), "\"value\": 1.0", 1);
+    assert_ne!(edited, text);
+    std::fs::write(&results, &edited).unwrap();
+    let o = verify(&[]);
+    assert_eq!(o.code, 1, "{}", o.stdout);
+    assert!(
+        o.stdout.contains(&format!(
+            "differs: rig.a2.value: recorded 1.0, recomputed {a2}"
+        )),
+        "{}",
+        o.stdout
+    );
+    std::fs::write(&results, &text).unwrap();
+
+    // A log changed since.
+    night.swap_log("exp4");
+    let o = verify(&[]);
+    assert_eq!(o.code, 1, "{}", o.stdout);
+    assert!(
+        o.stdout.contains("differs: runs[6].log.sha256"),
+        "{}",
+        o.stdout
+    );
+
+    let o = crate::util::servoid(
+        night.dir.path(),
+        &["verify", night.campaign().to_str().unwrap()],
+    );
+    assert_eq!(o.code, 2, "{}", o.stderr);
+    assert!(
+        o.stderr.contains("not a results.json servoid wrote"),
+        "{}",
+        o.stderr
+    );
+}

@@ -9,6 +9,8 @@ pub mod figures;
 
 pub mod logs;
 
+pub mod tables;
+
 pub use html::PageFigure;
 
 use std::io::Write;
@@ -21,6 +23,8 @@ use crate::results::Results;
 pub enum WriteError {
     #[error(transparent)]
     Html(#[from] html::HtmlError),
+    #[error(transparent)]
+    Table(Box<logs::LogWriteError>),
     #[error("{}: {source}", path.display())]
     Io {
         path: PathBuf,

@@ -18,6 +18,7 @@
 //! result and the batch goes on. Pure apart from ingest reading the logs and
 //! the figures going to their files.
 
+use std::path::Path;
 use std::sync::Arc;
 use std::time::Instant;
 
@@ -28,6 +29,7 @@ use super::cache::{self, Cache, Probe};
 use super::compare::compare;
 use super::figures::{self, ForceBins, OverlayRun};
 use super::rig::{self, RigError, RigInput};
+use super::tables;
 use crate::fit::TfFit;
 use crate::ingest::Log;
 use crate::lti::TransferFunction;
@@ -106,6 +108,7 @@ pub struct Analysed {
 /// Analyse a campaign without drawing figures or caching.
 pub fn analyse(campaign: &Campaign) -> Results {
     let draw = Drawer {
+        out_dir: None,
         files: None,
         choice: FigureFormats::None,
         intersample: campaign.identification.intersample,
@@ -216,6 +219,7 @@ fn summary(campaign: &Campaign) -> CampaignSummary {
             .map(|f| f.to_string_lossy().into_owned())
             .unwrap_or_default(),
         manifest_sha256: campaign.manifest_sha256.clone(),
+        manifest_path: None,
     }
 }
 
@@ -233,6 +237,8 @@ fn flag_outliers(runs: &mut [RunResult]) {
 /// How a campaign's runs are done: where their figures go (nowhere when the
 /// campaign draws none) and the cache they are kept in, if any.
 pub(super) struct Drawer<'a> {
+    /// The output folder, for the runs' tables; None writes none.
+    pub out_dir: Option<&'a Path>,
     pub files: Option<&'a FigureFiles<'a>>,
     pub choice: FigureFormats,
     pub intersample: crate::fit::Intersample,
@@ -251,28 +257,38 @@ impl Drawer<'_> {
         self.files.is_some()
     }
 
-    /// Whether every figure file `stored` wrote is still there, as it was
-    /// written.
+    /// Write a run's tables, when there is an output folder.
+    fn tables(&self, run: &RunResult, stage: Option<&LogStage>) -> Result<Vec<String>, WriteError> {
+        match self.out_dir {
+            Some(dir) => tables::write(dir, run, stage, self.intersample),
+            None => Ok(Vec::new()),
+        }
+    }
+
+    /// The size of a file under the output folder, None when it is not
+    /// there.
+    fn size_of(&self, name: &str) -> Option<u64> {
+        let dir = self.out_dir?;
+        std::fs::metadata(dir.join(name)).ok().map(|m| m.len())
+    }
+
+    /// Whether every file `stored` wrote (figures, tables) is still there,
+    /// as it was written.
     fn still_there(&self, stored: &Stored) -> bool {
-        let Some(files) = self.files else {
-            return stored.files.is_empty();
-        };
         stored
             .files
             .iter()
-            .all(|(name, size)| files.size_of(name) == Some(*size))
+            .all(|(name, size)| self.size_of(name) == Some(*size))
     }
 
-    /// Each file a run's figures were written to, with its size.
-    fn sizes(&self, figures: &[PageFigure]) -> Vec<(String, u64)> {
-        let Some(files) = self.files else {
-            return Vec::new();
-        };
+    /// Each file a run wrote (its figures and tables), with its size.
+    fn sizes(&self, figures: &[PageFigure], tables: &[String]) -> Vec<(String, u64)> {
         figures
             .iter()
             .flat_map(|f| [&f.png_file, &f.svg_file])
             .flatten()
-            .filter_map(|name| files.size_of(name).map(|size| (name.clone(), size)))
+            .chain(tables)
+            .filter_map(|name| self.size_of(name).map(|size| (name.clone(), size)))
             .collect()
     }
 }
@@ -289,7 +305,8 @@ struct Stored {
     overlay: Option<OverlayRun>,
     figures: Vec<PageFigure>,
     figure_warnings: Vec<String>,
-    /// The figure files with their sizes, to tell they are still there.
+    /// The figure and table files with their sizes, to tell they are still
+    /// there.
     files: Vec<(String, u64)>,
 }
 
@@ -434,6 +451,7 @@ fn first_pass(
                     pass.overlay = overlay;
                 }
             }
+            let tables = draw.tables(&out, stage.as_deref())?;
             if let (Some(cache), Some(key)) = (draw.cache, &key) {
                 cache.store(
                     key,
@@ -442,7 +460,7 @@ fn first_pass(
                         estimate,
                         force: pass.force.clone(),
                         overlay: pass.overlay.clone(),
-                        files: draw.sizes(&pass.figures),
+                        files: draw.sizes(&pass.figures, &tables),
                         figures: pass.figures.clone(),
                         figure_warnings: pass.figure_warnings.clone(),
                     },
@@ -581,6 +599,7 @@ fn validation_run(
     let linear = specimen.linear();
     out.tf = linear.map(|lin| TfResult::new(&model::tf_x1_u(&rig_at_p, &lin), TfSource::Model));
     let Some(st) = &acq.stage else {
+        draw.tables(&out, None)?;
         return Ok(finish(plan, out, figures, start, observer));
     };
     let time = match validate::validation_run(&rig_at_p, &specimen, &record(&st.log)) {
@@ -605,6 +624,7 @@ fn validation_run(
     } else {
         figures
     };
+    let tables = draw.tables(&out, Some(st))?;
     if let (Some(cache), Some(key)) = (draw.cache, &key) {
         cache.store(
             key,
@@ -613,7 +633,7 @@ fn validation_run(
                 estimate: None,
                 force: None,
                 overlay: None,
-                files: draw.sizes(&figures.0),
+                files: draw.sizes(&figures.0, &tables),
                 figures: figures.0.clone(),
                 figure_warnings: figures.1.clone(),
             },

@@ -116,7 +116,7 @@ fn measured_bins(
 
 /// The model as the measurement sees it: plant, delay and the command's
 /// hold.
-fn model_response(
+pub(super) fn model_response(
     tf: &TransferFunction,
     intersample: Intersample,
     fs: f64,

@@ -11,11 +11,14 @@ mod compare;
 pub mod figures;
 mod rig;
 pub mod simulate;
+mod tables;
+mod verify;
 
 use std::path::{Path, PathBuf};
 
 pub use analyse::{Event, Observer, RunError, Unobserved, analyse};
 pub use rig::{FailedRun, RigError};
+pub use verify::{Difference, Verification, VerifyError};
 
 use crate::manifest::{self, Campaign, Loaded, ManifestError};
 pub use crate::report::FigureFormats;
@@ -55,13 +58,18 @@ pub enum JobError {
     Write(#[from] WriteError),
     #[error(transparent)]
     Simulate(#[from] SimulateError),
+    #[error(transparent)]
+    Verify(#[from] VerifyError),
 }
 
 impl JobError {
     /// Whether the job was asked for wrongly (a bad manifest or the wrong
     /// kind of one), as opposed to failing while it ran.
     pub fn is_usage(&self) -> bool {
-        matches!(self, JobError::Manifest(_) | JobError::WrongKind { .. })
+        matches!(
+            self,
+            JobError::Manifest(_) | JobError::WrongKind { .. } | JobError::Verify(_)
+        )
     }
 }
 
@@ -202,6 +210,16 @@ pub fn run_simulation(
     })
 }
 
+/// Rerun the analysis a results.json records and list what differs (see
+/// [`verify`]); `manifest` overrides where results.json says it is.
+pub fn verify_results(
+    results: &Path,
+    manifest: Option<&Path>,
+    jobs: Option<usize>,
+) -> Result<Verification, JobError> {
+    pool(jobs)?.install(|| verify::verify(results, manifest))
+}
+
 /// Write the JSON Schemas of both manifests and of results.json into `dir`.
 pub fn write_schemas(dir: &Path) -> Result<Vec<PathBuf>, WriteError> {
     schemas()
@@ -243,13 +261,15 @@ fn write_campaign(
     let files = FigureFiles::new(out_dir, settings.figures);
     let cache = Cache::open(out_dir, settings.force);
     let draw = Drawer {
+        out_dir: Some(out_dir),
         files: files.as_ref(),
         choice: settings.figures,
         intersample: campaign.identification.intersample,
         cache: Some(&cache),
     };
     let analysed = analyse::analyse_with(campaign, &draw, observer)?;
-    let results = analysed.results;
+    let mut results = analysed.results;
+    results.campaign.manifest_path = relative_to(&campaign.file, out_dir);
     let results_path = report::write_results(&results, out_dir)?;
     let page_path = report::write_pages(
         &results,
@@ -319,4 +339,18 @@ impl RunLog<'_> {
         }
         out
     }
+}
+
+/// `path` relative to the folder `dir` (`/`-separated), as `servoid verify`
+/// finds the manifest from results.json; None when there is no relative
+/// path (another drive).
+fn relative_to(path: &Path, dir: &Path) -> Option<String> {
+    let abs = |p: &Path| std::path::absolute(p).ok();
+    let rel = pathdiff::diff_paths(abs(path)?, abs(dir)?)?;
+    Some(
+        rel.components()
+            .map(|c| c.as_os_str().to_string_lossy())
+            .collect::<Vec<_>>()
+            .join("/"),
+    )
 }
