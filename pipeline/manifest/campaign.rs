@@ -8,7 +8,7 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use super::checks::{
-    IdentificationPlan, check_band, check_channels, check_identification, check_slug,
+    IdentificationPlan, check_band, check_channels, check_date, check_identification, check_slug,
     check_specimen, positive,
 };
 use super::document::{Document, read};
@@ -60,6 +60,9 @@ pub struct RunPlan {
     pub id: String,
     pub role: Role,
     pub description: String,
+    /// When the run was made: ISO 8601 (`YYYY-MM-DD` or
+    /// `YYYY-MM-DDTHH:MM:SS`, optionally ending in `Z`), normalised.
+    pub date: Option<String>,
     pub p_gain: f64,
     /// The specimen as the simulator models it, linear or not.
     pub specimen: SpecimenModel,
@@ -341,6 +344,10 @@ fn check_run(
         check_channels(ch, &base.key("channels"), bad);
     }
     let source = check_source(run, base, ctx, bad);
+    let date = run
+        .date
+        .as_ref()
+        .map(|d| check_date(d, &base.key("date"), bad));
     let band = run
         .band_hz
         .unwrap_or([ctx.ident.band_hz.0, ctx.ident.band_hz.1]);
@@ -349,6 +356,7 @@ fn check_run(
         id: run.id.clone(),
         role: run.role,
         description: run.description.clone(),
+        date: date.flatten(),
         p_gain: run.p_gain,
         specimen: specimen?,
         source: source?,

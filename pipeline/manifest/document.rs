@@ -71,10 +71,11 @@ impl<'a> Document<'a> {
                 let at = e.span().map(|s| line_col(text, s.start)).unwrap_or((1, 1));
                 syntax("TOML", at, e.message().to_string())
             })?;
-            let v: Value = toml::from_str(text).map_err(|e| {
+            let mut v: Value = toml::from_str(text).map_err(|e| {
                 let at = e.span().map(|s| line_col(text, s.start)).unwrap_or((1, 1));
                 syntax("TOML", at, e.message().to_string())
             })?;
+            datetimes_as_text(&mut v);
             (v, Some(doc))
         };
         Ok(Self {
@@ -198,6 +199,28 @@ impl<'a> Document<'a> {
             file: self.path.to_path_buf(),
             problems,
         })
+    }
+}
+
+/// How the toml crate hands a TOML date or time to serde: a map with this
+/// one key, whose value is the date's text.
+const TOML_DATETIME: &str = "$__toml_private_datetime";
+
+/// Every TOML date and time (`date = 2024-05-01`, unquoted) as its text, as
+/// if quoted: the manifest reads dates as strings and checks them itself.
+fn datetimes_as_text(v: &mut Value) {
+    match v {
+        Value::Object(map) => {
+            if map.len() == 1
+                && let Some(Value::String(text)) = map.get(TOML_DATETIME)
+            {
+                *v = Value::String(text.clone());
+                return;
+            }
+            map.values_mut().for_each(datetimes_as_text);
+        }
+        Value::Array(items) => items.iter_mut().for_each(datetimes_as_text),
+        _ => {}
     }
 }
 

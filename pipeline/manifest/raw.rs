@@ -260,6 +260,10 @@ pub struct Run {
     pub role: Role,
     #[serde(default)]
     pub description: String,
+    /// When the run was made (ISO 8601: `YYYY-MM-DD` or
+    /// `YYYY-MM-DDTHH:MM:SS`, optionally ending in `Z`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub date: Option<String>,
     /// Proportional gain of the analog controller in this run.
     pub p_gain: f64,
     /// The physical specimen; omit for `no_specimen` runs.
