@@ -112,6 +112,11 @@ impl<'a> Document<'a> {
         }
     }
 
+    /// Whether the document has the top-level key `key`, whatever its value.
+    pub fn has(&self, key: &str) -> bool {
+        self.value.get(key).is_some()
+    }
+
     /// A top-level section; None when absent or when it failed (the problem is recorded).
     pub fn section<T: DeserializeOwned>(&mut self, key: &str) -> Option<T> {
         let v = self.value.get(key)?.clone();
@@ -189,6 +194,8 @@ impl<'a> Document<'a> {
                 .unwrap_or((usize::MAX, 0))
                 .cmp(&b.line_col.unwrap_or((usize::MAX, 0)))
                 .then(a.path.cmp(&b.path))
+                // A run table's problems by row, each row's by column.
+                .then(a.table.cmp(&b.table))
         });
         problems.dedup();
         if problems.is_empty() {
@@ -270,17 +277,26 @@ fn section<T: DeserializeOwned>(
 
 fn unknown_key(schema: &Value, parent: &KeyPath, name: &str) -> Problem {
     let known = known_keys(schema, parent);
+    let hint = suggest(&known, name);
+    Problem::new(parent.key(name), format!("unknown key `{name}`{hint}"))
+}
+
+/// What to say after an unknown `name`: the closest of `known`
+/// (`; did you mean `x`?`), else the list of them, else nothing.
+pub(super) fn suggest(known: &[impl AsRef<str>], name: &str) -> String {
     let best = known
         .iter()
-        .map(|k| (strsim::jaro_winkler(k, name), k))
+        .map(|k| (strsim::jaro_winkler(k.as_ref(), name), k.as_ref()))
         .filter(|(score, _)| *score > 0.85)
         .max_by(|a, b| a.0.total_cmp(&b.0));
-    let hint = match best {
+    match best {
         Some((_, k)) => format!("; did you mean `{k}`?"),
-        None if !known.is_empty() => format!("; expected one of: {}", known.join(", ")),
+        None if !known.is_empty() => {
+            let names: Vec<&str> = known.iter().map(AsRef::as_ref).collect();
+            format!("; expected one of: {}", names.join(", "))
+        }
         None => String::new(),
-    };
-    Problem::new(parent.key(name), format!("unknown key `{name}`{hint}"))
+    }
 }
 
 fn from_ignored(p: &serde_ignored::Path<'_>) -> KeyPath {

@@ -334,5 +334,6 @@ fn analysis_manifest(plan: &SimulationPlan, truth: &Truth) -> Manifest {
         identification: m.identification.clone(),
         runs,
         references,
+        run_table: None,
     }
 }
