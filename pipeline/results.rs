@@ -15,7 +15,7 @@ use serde::{Deserialize, Serialize};
 use crate::identify::{Estimate, PerSpring};
 use crate::lti::TransferFunction;
 use crate::manifest::simulation::UnmodelledSpec;
-use crate::manifest::{CompareMode, Manifest, Role};
+use crate::manifest::{CompareMode, Manifest, Role, RunTableInfo};
 use crate::model::RigParams;
 use crate::simulate::specimen::SpecimenModel;
 
@@ -70,6 +70,9 @@ pub struct CampaignSummary {
     /// results were not written to a folder.
     #[serde(default)]
     pub manifest_path: Option<String>,
+    /// The run table the campaign's runs came from, when they did.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub run_table: Option<RunTableInfo>,
 }
 
 /// Where the rig parameters come from.

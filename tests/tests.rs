@@ -12,5 +12,6 @@ mod layering;
 mod manifest_errors;
 mod mts;
 mod paper;
+mod run_table;
 mod schemas;
 mod simulate;

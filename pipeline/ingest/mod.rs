@@ -12,12 +12,16 @@
 //!
 //! The file is read into memory once; the hash is taken over exactly the bytes
 //! that are parsed.
+//!
+//! [`read_table`] reads a side table (a campaign's run table, CSV or
+//! Parquet) as text cells for the manifest to check.
 
 mod csv;
 mod daq;
 mod mat;
 mod parquet;
 mod plan;
+mod table;
 #[cfg(test)]
 mod tests;
 
@@ -28,6 +32,7 @@ use polars::prelude::{DataType, PolarsError};
 use sha2::{Digest, Sha256};
 
 pub use plan::{ChannelPlan, Channels, Column, CsvOptions, LogFormat, LogPlan, TimePlan};
+pub use table::{Table, TableError, TableFormat, TableProblem, read_table};
 
 /// A log read and converted to SI.
 #[derive(Debug, Clone, PartialEq)]

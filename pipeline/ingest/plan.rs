@@ -3,7 +3,7 @@
 //! builds it (its `data` and `channels` tables use [`Column`], [`LogFormat`]
 //! and [`CsvOptions`] as written).
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
@@ -85,6 +85,21 @@ pub enum LogFormat {
     /// DAQ text export: a header block with the sampling rate, then
     /// `Sample Number, Date/Time, CHANNEL0, ..., Events` (`.txt`).
     DaqText,
+}
+
+impl LogFormat {
+    /// The format a log's extension names (`.csv`, `.tsv`, `.parquet`,
+    /// `.pq`, `.mat`, `.txt`, in any case), if it names one.
+    pub fn from_path(path: &Path) -> Option<Self> {
+        let ext = path.extension()?.to_str()?.to_ascii_lowercase();
+        match ext.as_str() {
+            "csv" | "tsv" => Some(LogFormat::Csv),
+            "parquet" | "pq" => Some(LogFormat::Parquet),
+            "mat" => Some(LogFormat::Mat),
+            "txt" => Some(LogFormat::DaqText),
+            _ => None,
+        }
+    }
 }
 
 /// Options for delimited text logs.

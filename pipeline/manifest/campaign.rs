@@ -2,22 +2,24 @@
 //! is usable: positive masses, stiffnesses and gains, specimens that fit their
 //! runs' roles, transfer functions that are proper, logs that exist,
 //! references that name quantities the campaign computes. Every problem is
-//! collected, with its key path, run and line.
+//! collected, with its key path, run and line. The runs of a `[run_table]`
+//! (checked in `table`) follow those of `[[runs]]`.
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use super::checks::{
-    IdentificationPlan, check_band, check_channels, check_identification, check_slug,
+    IdentificationPlan, check_band, check_channels, check_date, check_identification, check_slug,
     check_specimen, positive,
 };
 use super::document::{Document, read};
 use super::keypath::KeyPath;
-use super::problem::{ManifestError, Problem};
+use super::problem::{ManifestError, Problem, TablePlace};
 use super::raw::{
     CampaignInfo, Channel, Channels as RawChannels, CompareMode, Identification, Manifest,
-    Reference, Rig, Role, Run, RunData, SCHEMA_VERSION, manifest_schema,
+    Reference, Rig, Role, Run, RunData, RunTable, SCHEMA_VERSION, manifest_schema,
 };
+use super::table::{CheckedTable, RowKey, RunTableInfo, TableRun, check_table};
 use crate::ingest::{self, ChannelPlan, Channels, LogFormat, LogPlan, TimePlan};
 use crate::lti::{LtiError, TransferFunction};
 use crate::model::RigParams;
@@ -38,10 +40,16 @@ pub struct Campaign {
     /// Rig parameters given in the manifest (identified earlier).
     pub given_rig: Option<RigParams>,
     pub identification: IdentificationPlan,
+    /// The `[[runs]]` runs, then the run table's in table order.
     pub runs: Vec<RunPlan>,
     pub references: Vec<ReferencePlan>,
     /// The manifest as read, echoed into results for provenance.
     pub manifest: Manifest,
+    /// The run table's file, hash and rows, when the manifest names one.
+    pub run_table: Option<RunTableInfo>,
+    /// What is odd but not wrong (a log the run table's `logs` matched that
+    /// no run uses); each names its file.
+    pub warnings: Vec<String>,
 }
 
 impl Campaign {
@@ -55,11 +63,15 @@ impl Campaign {
 /// A checked run.
 #[derive(Debug, Clone)]
 pub struct RunPlan {
-    /// Position in the manifest (results keep this order).
+    /// Position among the campaign's runs, `[[runs]]` first, then the run
+    /// table's rows (results keep this order).
     pub index: usize,
     pub id: String,
     pub role: Role,
     pub description: String,
+    /// When the run was made: ISO 8601 (`YYYY-MM-DD` or
+    /// `YYYY-MM-DDTHH:MM:SS`, optionally ending in `Z`), normalised.
+    pub date: Option<String>,
     pub p_gain: f64,
     /// The specimen as the simulator models it, linear or not.
     pub specimen: SpecimenModel,
@@ -140,6 +152,8 @@ pub fn load_str(text: &str, path: &Path) -> Result<Campaign, ManifestError> {
         raw_run_ids: doc.raw("runs", "id"),
         raw_run_roles: doc.raw("runs", "role"),
         references: doc.array::<Reference>("references"),
+        run_table: doc.section::<RunTable>("run_table"),
+        run_table_given: doc.has("run_table"),
     };
     let base_dir = path.parent().unwrap_or(Path::new(""));
     let campaign = validate(partial, path, text.as_bytes(), base_dir, &mut doc.problems);
@@ -161,6 +175,9 @@ struct Partial {
     raw_run_ids: Vec<Option<String>>,
     raw_run_roles: Vec<Option<Role>>,
     references: Vec<Option<Reference>>,
+    run_table: Option<RunTable>,
+    /// Whether the manifest has a `run_table` section, read or not.
+    run_table_given: bool,
 }
 
 /// What every run's checks share.
@@ -177,6 +194,11 @@ fn validate(
     base_dir: &Path,
     problems: &mut Vec<Problem>,
 ) -> Option<Campaign> {
+    // The run table first: its problems name the table, not a key.
+    let table = match &partial.run_table {
+        Some(spec) => check_table(spec, base_dir, &run_logs(&partial.runs, base_dir), problems),
+        None => CheckedTable::default(),
+    };
     let root = KeyPath::root();
     let mut bad = |path: KeyPath, msg: String| problems.push(Problem::new(path, msg));
 
@@ -186,13 +208,22 @@ fn validate(
     let ident = partial.identification.clone().unwrap_or_default();
     let ident_plan = check_identification(&ident, &root.key("identification"), &mut bad);
 
-    check_run_ids(&partial.raw_run_ids, &partial.runs, &mut bad);
+    // A run table that failed to read is already a problem: not also "no runs".
+    let table_unread = partial.run_table_given && table.info.is_none();
+    let mut table_problems = Vec::new();
+    check_run_ids(
+        &partial,
+        &table.keys,
+        table_unread,
+        &mut bad,
+        &mut table_problems,
+    );
     let ctx = RunContext {
         default_channels: &default_channels,
         ident: &ident_plan,
         base_dir,
     };
-    let runs: Vec<RunPlan> = partial
+    let mut runs: Vec<RunPlan> = partial
         .runs
         .iter()
         .enumerate()
@@ -201,9 +232,25 @@ fn validate(
             check_run(run, i, &root.key("runs").index(i), &ctx, &mut bad)
         })
         .collect();
+    let first = partial.runs.len();
+    runs.extend(
+        table
+            .runs
+            .iter()
+            .enumerate()
+            .filter_map(|(k, t)| table_run_plan(t, first + k, &ctx, &mut bad)),
+    );
     let given_rig = partial.rig.as_ref().and_then(|r| r.parameters);
-    check_rig_source(&partial.raw_run_roles, given_rig.is_some(), &mut bad);
-    let references = check_references(&partial.runs, &partial.references, &mut bad);
+    let roles: Vec<Option<Role>> = (partial.raw_run_roles.iter().copied())
+        .chain(table.keys.iter().map(|k| k.role))
+        .collect();
+    check_rig_source(&roles, given_rig.is_some(), &mut bad);
+    let references = check_references(
+        &run_roles(&partial.runs, &table.keys),
+        &partial.references,
+        &mut bad,
+    );
+    problems.extend(table_problems);
 
     if !problems.is_empty() {
         return None;
@@ -218,6 +265,7 @@ fn validate(
         identification: ident,
         runs: partial.runs.into_iter().flatten().collect(),
         references: partial.references.into_iter().flatten().collect(),
+        run_table: partial.run_table,
     };
     Some(Campaign {
         file: file.to_path_buf(),
@@ -231,6 +279,66 @@ fn validate(
         runs,
         references,
         manifest,
+        run_table: table.info,
+        warnings: table.warnings,
+    })
+}
+
+/// The logs the `[[runs]]` name, as paths from the manifest's folder.
+fn run_logs(runs: &[Option<Run>], base_dir: &Path) -> Vec<PathBuf> {
+    runs.iter()
+        .flatten()
+        .filter_map(|r| r.data.as_ref()?.log.as_ref())
+        .map(|log| base_dir.join(log))
+        .collect()
+}
+
+/// Each run's role and whether it has a specimen mass, by id, from
+/// `[[runs]]` and the run table alike: what references may name.
+fn run_roles<'a>(runs: &'a [Option<Run>], rows: &'a [RowKey]) -> BTreeMap<&'a str, (Role, bool)> {
+    let listed = runs.iter().flatten().map(|r| {
+        let has_mass = r.specimen.as_ref().is_some_and(|s| s.mass_kg.is_some());
+        (r.id.as_str(), (r.role, has_mass))
+    });
+    let tabled = rows
+        .iter()
+        .filter_map(|k| Some((k.id.as_deref()?, (k.role?, k.has_mass))));
+    listed.chain(tabled).collect()
+}
+
+/// A run of the run table as the stages run it: the campaign's channels and
+/// identification settings, its log read as its extension says.
+fn table_run_plan(
+    t: &TableRun,
+    index: usize,
+    ctx: &RunContext<'_>,
+    bad: &mut impl FnMut(KeyPath, String),
+) -> Option<RunPlan> {
+    let source = match &t.log {
+        None => RunSource::None,
+        Some((path, format)) => {
+            let ch_path = KeyPath::root().key("channels");
+            let channels =
+                plan_channels(ctx.default_channels, Some(*format), &ch_path, false, bad)?;
+            RunSource::Log(Box::new(LogPlan {
+                path: path.clone(),
+                format: *format,
+                csv: Default::default(),
+                sha256: None,
+                channels,
+            }))
+        }
+    };
+    Some(RunPlan {
+        index,
+        id: t.id.clone(),
+        role: t.role,
+        description: String::new(),
+        date: t.date.clone(),
+        p_gain: t.p_gain,
+        specimen: t.specimen,
+        source,
+        band_hz: ctx.ident.band_hz,
     })
 }
 
@@ -267,27 +375,55 @@ fn check_header(partial: &Partial, bad: &mut impl FnMut(KeyPath, String)) {
     }
 }
 
-/// Run ids are unique, and the campaign has runs.
+/// Run ids are unique across `[[runs]]` and the run table, and the
+/// campaign has runs. A duplicate in the table is a problem of its row (in
+/// `table_problems`), naming where the id was first used.
 fn check_run_ids(
-    raw_ids: &[Option<String>],
-    runs: &[Option<Run>],
+    partial: &Partial,
+    rows: &[RowKey],
+    table_unread: bool,
     bad: &mut impl FnMut(KeyPath, String),
+    table_problems: &mut Vec<Problem>,
 ) {
     let root = KeyPath::root();
-    if runs.is_empty() && raw_ids.is_empty() {
-        bad(root.key("runs"), "the campaign has no runs".into());
+    if partial.runs.is_empty() && partial.raw_run_ids.is_empty() && rows.is_empty() && !table_unread
+    {
+        bad(
+            root.key("runs"),
+            "the campaign has no runs: give [[runs]] tables or a [run_table] with rows".into(),
+        );
     }
-    let mut first_seen: BTreeMap<&str, usize> = BTreeMap::new();
-    for (i, id) in raw_ids.iter().enumerate() {
+    let mut first_seen: BTreeMap<&str, String> = BTreeMap::new();
+    for (i, id) in partial.raw_run_ids.iter().enumerate() {
         if let Some(id) = id {
-            if let Some(&j) = first_seen.get(id.as_str()) {
+            if let Some(first) = first_seen.get(id.as_str()) {
                 bad(
                     root.key("runs").index(i).key("id"),
-                    format!("duplicate run id `{id}` (first used by runs[{j}])"),
+                    format!("duplicate run id `{id}` (first used by {first})"),
                 );
             } else {
-                first_seen.insert(id, i);
+                first_seen.insert(id, format!("runs[{i}]"));
             }
+        }
+    }
+    let file = partial.run_table.as_ref().map_or("", |t| t.file.as_str());
+    for key in rows {
+        let Some(id) = key.id.as_deref() else {
+            continue;
+        };
+        if let Some(first) = first_seen.get(id) {
+            let place = TablePlace {
+                file: file.to_string(),
+                row: Some(key.row),
+                column: Some("id".into()),
+            };
+            table_problems.push(Problem::in_table(
+                place,
+                Some(id.to_string()),
+                format!("duplicate run id `{id}` (first used by {first})"),
+            ));
+        } else {
+            first_seen.insert(id, format!("row {} of {file}", key.row));
         }
     }
 }
@@ -341,6 +477,10 @@ fn check_run(
         check_channels(ch, &base.key("channels"), bad);
     }
     let source = check_source(run, base, ctx, bad);
+    let date = run
+        .date
+        .as_ref()
+        .map(|d| check_date(d, &base.key("date"), bad));
     let band = run
         .band_hz
         .unwrap_or([ctx.ident.band_hz.0, ctx.ident.band_hz.1]);
@@ -349,6 +489,7 @@ fn check_run(
         id: run.id.clone(),
         role: run.role,
         description: run.description.clone(),
+        date: date.flatten(),
         p_gain: run.p_gain,
         specimen: specimen?,
         source: source?,
@@ -474,7 +615,7 @@ fn check_log(
         );
         ok = false;
     }
-    let format = data.format.or_else(|| infer_format(&path));
+    let format = data.format.or_else(|| LogFormat::from_path(&path));
     if format.is_none() {
         bad(
             dpath.key("format"),
@@ -499,7 +640,7 @@ fn check_log(
         ok = false;
     }
     let merged = merge_channels(ctx.default_channels, run.channels.as_ref());
-    let channels = plan_channels(&merged, format, &base.key("channels"), bad);
+    let channels = plan_channels(&merged, format, &base.key("channels"), true, bad);
     let (channels, format) = (channels?, format?);
     ok.then(|| {
         RunSource::Log(Box::new(LogPlan {
@@ -514,22 +655,29 @@ fn check_log(
 
 /// The resolved channels of a log: command and displacement are required,
 /// and the time base comes from a column, a rate, or (DAQ text, MAT) the
-/// log's own header.
+/// log's own header. `per_run` says whether the run may override a channel
+/// (a `[[runs]]` run may, a run-table row may not), for the hint.
 fn plan_channels(
     merged: &RawChannels,
     format: Option<LogFormat>,
     ch_path: &KeyPath,
+    per_run: bool,
     bad: &mut impl FnMut(KeyPath, String),
 ) -> Option<Channels> {
     let mut need = |c: &Option<Channel>, name: &str| -> Option<ChannelPlan> {
         match c {
             Some(c) => Some(plan_channel(c)),
             None => {
+                let hint = if per_run {
+                    format!("set [channels.{name}] or this run's channels.{name}")
+                } else {
+                    format!(
+                        "set [channels.{name}]; the run table's runs use the campaign's channels"
+                    )
+                };
                 bad(
                     ch_path.key(name),
-                    format!(
-                        "the log needs a `{name}` channel (set [channels.{name}] or this run's channels.{name})"
-                    ),
+                    format!("the log needs a `{name}` channel ({hint})"),
                 );
                 None
             }
@@ -594,37 +742,19 @@ fn plan_channel(c: &Channel) -> ChannelPlan {
     }
 }
 
-fn infer_format(path: &Path) -> Option<LogFormat> {
-    let ext = path.extension()?.to_str()?.to_ascii_lowercase();
-    match ext.as_str() {
-        "csv" | "tsv" => Some(LogFormat::Csv),
-        "parquet" | "pq" => Some(LogFormat::Parquet),
-        "mat" => Some(LogFormat::Mat),
-        "txt" => Some(LogFormat::DaqText),
-        _ => None,
-    }
-}
-
-/// Every reference names a quantity the campaign computes.
+/// Every reference names a quantity the campaign computes; `run_roles` has
+/// each run's role and whether it has a specimen mass.
 fn check_references(
-    runs: &[Option<Run>],
+    run_roles: &BTreeMap<&str, (Role, bool)>,
     references: &[Option<Reference>],
     bad: &mut impl FnMut(KeyPath, String),
 ) -> Vec<ReferencePlan> {
-    let run_roles: BTreeMap<&str, (Role, bool)> = runs
-        .iter()
-        .flatten()
-        .map(|r| {
-            let has_mass = r.specimen.as_ref().is_some_and(|s| s.mass_kg.is_some());
-            (r.id.as_str(), (r.role, has_mass))
-        })
-        .collect();
     references
         .iter()
         .enumerate()
         .filter_map(|(i, r)| {
             let base = KeyPath::root().key("references").index(i);
-            check_reference(r.as_ref()?, &base, &run_roles, bad)
+            check_reference(r.as_ref()?, &base, run_roles, bad)
         })
         .collect()
 }

@@ -43,6 +43,83 @@ pub(super) fn check_slug(s: &str, path: &KeyPath, bad: &mut impl FnMut(KeyPath, 
     }
 }
 
+/// A date as ISO 8601 `YYYY-MM-DD`, or `YYYY-MM-DDTHH:MM:SS` optionally
+/// ending in `Z`, checked against the calendar. Returns the normalised text
+/// (no surrounding space, upper-case `T` and `Z`; a space or `t` between date
+/// and time, as RFC 3339 allows, becomes `T`) or, when it is not such a
+/// date, the message saying so.
+pub(super) fn normalise_date(text: &str) -> Result<String, String> {
+    let s = text.trim();
+    let fail = |why: String| {
+        Err(format!(
+            "must be an ISO 8601 date, YYYY-MM-DD or YYYY-MM-DDTHH:MM:SS[Z] (got {text:?}: {why})"
+        ))
+    };
+    let (date, time) = match s.find(['T', 't', ' ']) {
+        Some(i) => (&s[..i], Some(&s[i + 1..])),
+        None => (s, None),
+    };
+    let Some([y, m, d]) = digit_fields(date, '-', [4, 2, 2]) else {
+        return fail("the date is not YYYY-MM-DD".into());
+    };
+    if !(1..=12).contains(&m) {
+        return fail(format!("there is no month {m:02}"));
+    }
+    let leap = y % 4 == 0 && (y % 100 != 0 || y % 400 == 0);
+    let days = match m {
+        2 if leap => 29,
+        2 => 28,
+        4 | 6 | 9 | 11 => 30,
+        _ => 31,
+    };
+    if !(1..=days).contains(&d) {
+        return fail(format!("{y:04}-{m:02} has days 01 to {days}"));
+    }
+    let Some(time) = time else {
+        return Ok(date.to_string());
+    };
+    let (clock, zulu) = match time.strip_suffix(['Z', 'z']) {
+        Some(c) => (c, "Z"),
+        None => (time, ""),
+    };
+    let Some([h, min, sec]) = digit_fields(clock, ':', [2, 2, 2]) else {
+        return fail("the time is not HH:MM:SS, optionally followed by Z".into());
+    };
+    if h > 23 || min > 59 || sec > 59 {
+        return fail(format!("there is no time {clock}"));
+    }
+    Ok(format!("{date}T{clock}{zulu}"))
+}
+
+/// The numbers of `text` split at `sep`, each field all ASCII digits of the
+/// given width; None when it is not so.
+fn digit_fields<const N: usize>(text: &str, sep: char, widths: [usize; N]) -> Option<[u32; N]> {
+    let fields: Vec<&str> = text.split(sep).collect();
+    if fields.len() != N {
+        return None;
+    }
+    let mut out = [0; N];
+    for ((f, w), o) in fields.iter().zip(widths).zip(&mut out) {
+        if f.len() != w || !f.bytes().all(|b| b.is_ascii_digit()) {
+            return None;
+        }
+        *o = f.parse().ok()?;
+    }
+    Some(out)
+}
+
+/// A run's `date`, normalised (see [`normalise_date`]); None, with the
+/// problem reported, when it is not an ISO 8601 date.
+pub(super) fn check_date(
+    text: &str,
+    path: &KeyPath,
+    bad: &mut impl FnMut(KeyPath, String),
+) -> Option<String> {
+    normalise_date(text)
+        .map_err(|message| bad(path.clone(), message))
+        .ok()
+}
+
 pub(super) fn positive(v: f64, path: &KeyPath, bad: &mut impl FnMut(KeyPath, String)) -> bool {
     if v.is_finite() && v > 0.0 {
         true
@@ -429,5 +506,51 @@ fn model_name(k: SpecimenKind) -> &'static str {
         SpecimenKind::Duffing => "duffing",
         SpecimenKind::BoucWen => "bouc_wen",
         SpecimenKind::Friction => "friction",
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::normalise_date;
+
+    #[test]
+    fn dates_are_iso_8601_and_come_back_normalised() {
+        for (given, normal) in [
+            ("2024-05-01", "2024-05-01"),
+            (" 2024-02-29 ", "2024-02-29"),
+            ("2000-02-29T23:59:59", "2000-02-29T23:59:59"),
+            ("2024-05-01t07:30:00z", "2024-05-01T07:30:00Z"),
+            ("2024-05-01 07:30:00Z", "2024-05-01T07:30:00Z"),
+        ] {
+            assert_eq!(normalise_date(given).as_deref(), Ok(normal), "{given:?}");
+        }
+        for (given, why) in [
+            ("2023-02-29", "2023-02 has days 01 to 28"),
+            ("1900-02-29", "1900-02 has days 01 to 28"),
+            ("2024-04-31", "2024-04 has days 01 to 30"),
+            ("2024-13-01", "there is no month 13"),
+            ("2024-00-10", "there is no month 00"),
+            ("24-05-01", "the date is not YYYY-MM-DD"),
+            ("2024-5-1", "the date is not YYYY-MM-DD"),
+            ("01/05/2024", "the date is not YYYY-MM-DD"),
+            ("2024-05-01T24:00:00", "there is no time 24:00:00"),
+            (
+                "2024-05-01T10:00",
+                "the time is not HH:MM:SS, optionally followed by Z",
+            ),
+            (
+                "2024-05-01T10:00:00+02:00",
+                "the time is not HH:MM:SS, optionally followed by Z",
+            ),
+            ("", "the date is not YYYY-MM-DD"),
+        ] {
+            assert_eq!(
+                normalise_date(given),
+                Err(format!(
+                    "must be an ISO 8601 date, YYYY-MM-DD or YYYY-MM-DDTHH:MM:SS[Z] (got {given:?}: {why})"
+                )),
+                "{given:?}"
+            );
+        }
     }
 }

@@ -71,10 +71,11 @@ impl<'a> Document<'a> {
                 let at = e.span().map(|s| line_col(text, s.start)).unwrap_or((1, 1));
                 syntax("TOML", at, e.message().to_string())
             })?;
-            let v: Value = toml::from_str(text).map_err(|e| {
+            let mut v: Value = toml::from_str(text).map_err(|e| {
                 let at = e.span().map(|s| line_col(text, s.start)).unwrap_or((1, 1));
                 syntax("TOML", at, e.message().to_string())
             })?;
+            datetimes_as_text(&mut v);
             (v, Some(doc))
         };
         Ok(Self {
@@ -109,6 +110,11 @@ impl<'a> Document<'a> {
                 self.problems.push(unknown_key(&self.schema, &root, key));
             }
         }
+    }
+
+    /// Whether the document has the top-level key `key`, whatever its value.
+    pub fn has(&self, key: &str) -> bool {
+        self.value.get(key).is_some()
     }
 
     /// A top-level section; None when absent or when it failed (the problem is recorded).
@@ -188,6 +194,8 @@ impl<'a> Document<'a> {
                 .unwrap_or((usize::MAX, 0))
                 .cmp(&b.line_col.unwrap_or((usize::MAX, 0)))
                 .then(a.path.cmp(&b.path))
+                // A run table's problems by row, each row's by column.
+                .then(a.table.cmp(&b.table))
         });
         problems.dedup();
         if problems.is_empty() {
@@ -198,6 +206,28 @@ impl<'a> Document<'a> {
             file: self.path.to_path_buf(),
             problems,
         })
+    }
+}
+
+/// How the toml crate hands a TOML date or time to serde: a map with this
+/// one key, whose value is the date's text.
+const TOML_DATETIME: &str = "$__toml_private_datetime";
+
+/// Every TOML date and time (`date = 2024-05-01`, unquoted) as its text, as
+/// if quoted: the manifest reads dates as strings and checks them itself.
+fn datetimes_as_text(v: &mut Value) {
+    match v {
+        Value::Object(map) => {
+            if map.len() == 1
+                && let Some(Value::String(text)) = map.get(TOML_DATETIME)
+            {
+                *v = Value::String(text.clone());
+                return;
+            }
+            map.values_mut().for_each(datetimes_as_text);
+        }
+        Value::Array(items) => items.iter_mut().for_each(datetimes_as_text),
+        _ => {}
     }
 }
 
@@ -247,17 +277,26 @@ fn section<T: DeserializeOwned>(
 
 fn unknown_key(schema: &Value, parent: &KeyPath, name: &str) -> Problem {
     let known = known_keys(schema, parent);
+    let hint = suggest(&known, name);
+    Problem::new(parent.key(name), format!("unknown key `{name}`{hint}"))
+}
+
+/// What to say after an unknown `name`: the closest of `known`
+/// (`; did you mean `x`?`), else the list of them, else nothing.
+pub(super) fn suggest(known: &[impl AsRef<str>], name: &str) -> String {
     let best = known
         .iter()
-        .map(|k| (strsim::jaro_winkler(k, name), k))
+        .map(|k| (strsim::jaro_winkler(k.as_ref(), name), k.as_ref()))
         .filter(|(score, _)| *score > 0.85)
         .max_by(|a, b| a.0.total_cmp(&b.0));
-    let hint = match best {
+    match best {
         Some((_, k)) => format!("; did you mean `{k}`?"),
-        None if !known.is_empty() => format!("; expected one of: {}", known.join(", ")),
+        None if !known.is_empty() => {
+            let names: Vec<&str> = known.iter().map(AsRef::as_ref).collect();
+            format!("; expected one of: {}", names.join(", "))
+        }
         None => String::new(),
-    };
-    Problem::new(parent.key(name), format!("unknown key `{name}`{hint}"))
+    }
 }
 
 fn from_ignored(p: &serde_ignored::Path<'_>) -> KeyPath {

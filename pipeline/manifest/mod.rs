@@ -11,7 +11,8 @@
 //!
 //! Inside: `keypath` and `problem` say where and what; `document` parses and
 //! reads sections against a schema; `checks` holds what both kinds check;
-//! `campaign` and `simulation` build the plans.
+//! `table` reads and checks a campaign's run table; `campaign` and
+//! `simulation` build the plans.
 
 mod campaign;
 mod checks;
@@ -20,19 +21,21 @@ mod keypath;
 mod problem;
 mod raw;
 pub mod simulation;
+mod table;
 
 use std::path::Path;
 
 pub use campaign::{Campaign, Quantity, ReferencePlan, RunPlan, RunSource, load, load_str};
 pub use checks::IdentificationPlan;
 pub use keypath::{KeyPath, Seg};
-pub use problem::{ManifestError, Problem};
+pub use problem::{ManifestError, Problem, TablePlace};
 pub use raw::{
     BoucWenParams, CampaignInfo, Channel, Channels, CompareMode, DelayMode, DelaySettings,
     FrfSettings, Identification, Manifest, ModelOrders, PublishedTf, Reference, Rig, Role, Run,
-    RunData, SCHEMA_VERSION, Specimen, SpecimenKind, TimeChannel, manifest_schema,
+    RunData, RunTable, SCHEMA_VERSION, Specimen, SpecimenKind, TimeChannel, manifest_schema,
 };
 pub use simulation::{SimulationPlan, load_simulation, simulation_schema};
+pub use table::RunTableInfo;
 
 /// A manifest of either kind, checked.
 #[derive(Debug, Clone)]

@@ -11,7 +11,7 @@ use serde_json::Value;
 
 use crate::fit::Intersample;
 use crate::frf::{Detrend, Estimator, Window};
-use crate::ingest::{Column, CsvOptions, LogFormat};
+use crate::ingest::{Column, CsvOptions, LogFormat, TableFormat};
 use crate::model::RigParams;
 use crate::units::{TimeUnit, Unit};
 
@@ -43,11 +43,42 @@ pub struct Manifest {
     /// How transfer functions are estimated and fitted.
     #[serde(default)]
     pub identification: Identification,
-    /// The runs of the campaign, in the order results are written.
+    /// The runs of the campaign, in the order results are written (before
+    /// those of `run_table`).
+    #[serde(default)]
     pub runs: Vec<Run>,
     /// Published values to compare the results against.
     #[serde(default)]
     pub references: Vec<Reference>,
+    /// More runs, one per row of a side table, after those of `runs`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub run_table: Option<RunTable>,
+}
+
+/// Runs named by a side table instead of one `[[runs]]` table each, as a
+/// nightly batch over new logs writes them. The table has a header line of
+/// column names: `id`, `role` and `p_gain` (required), `mass_kg`,
+/// `damping_ns_per_m` and `stiffness_n_per_m` (as the role needs), `date`
+/// (ISO 8601) and `log` (a path relative to the table's folder); an empty
+/// cell is an absent value. The campaign's `channels` and `identification`
+/// apply to every row.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[schemars(deny_unknown_fields)]
+pub struct RunTable {
+    /// The table, relative to the manifest's folder.
+    pub file: String,
+    /// Table format; inferred from the extension (`.csv`, `.parquet`, `.pq`)
+    /// when omitted.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub format: Option<TableFormat>,
+    /// Where the logs are, relative to the manifest's folder: a glob
+    /// (`logs/*.parquet`) or a folder (every file in it with a log extension:
+    /// csv, tsv, parquet, pq, mat, txt); hidden files (`.name`) are left out.
+    /// A row without a `log` cell takes the matched file whose stem is its
+    /// id; when there is none, its run fails alone (the log is not there
+    /// yet), and a matched file no run uses is a warning.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub logs: Option<String>,
 }
 
 /// What the campaign is.
@@ -260,6 +291,10 @@ pub struct Run {
     pub role: Role,
     #[serde(default)]
     pub description: String,
+    /// When the run was made (ISO 8601: `YYYY-MM-DD` or
+    /// `YYYY-MM-DDTHH:MM:SS`, optionally ending in `Z`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub date: Option<String>,
     /// Proportional gain of the analog controller in this run.
     pub p_gain: f64,
     /// The physical specimen; omit for `no_specimen` runs.
@@ -292,6 +327,9 @@ pub enum Role {
 }
 
 impl Role {
+    /// Every role, in the order messages list them.
+    pub const ALL: [Role; 4] = [Role::NoSpecimen, Role::Spring, Role::Validation, Role::Fit];
+
     pub fn as_str(self) -> &'static str {
         match self {
             Role::NoSpecimen => "no_specimen",

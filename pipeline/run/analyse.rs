@@ -134,7 +134,9 @@ pub(super) fn analyse_with(
         .map(|plan| first_pass(campaign, plan, draw, observer))
         .collect::<Result<_, _>>()?;
 
-    let mut warnings = Vec::new();
+    // What the manifest found (an unused log matched by the run table's
+    // glob, say), then what the analysis finds.
+    let mut warnings = campaign.warnings.clone();
     let rig = rig::establish(campaign, first.iter().map(|f| &f.rig_input), &mut warnings)
         .map_err(Arc::new);
     let rig_params = rig.as_ref().ok().map(|(p, _)| *p);
@@ -220,6 +222,7 @@ fn summary(campaign: &Campaign) -> CampaignSummary {
             .unwrap_or_default(),
         manifest_sha256: campaign.manifest_sha256.clone(),
         manifest_path: None,
+        run_table: campaign.run_table.clone(),
     }
 }
 

@@ -256,6 +256,7 @@ fn analysis_manifest(plan: &SimulationPlan, truth: &Truth) -> Manifest {
                 .find(|x| x.id == r.id)
                 .map(|x| x.description.clone())
                 .unwrap_or_default(),
+            date: None,
             p_gain: r.p_gain,
             specimen: m
                 .runs
@@ -333,5 +334,6 @@ fn analysis_manifest(plan: &SimulationPlan, truth: &Truth) -> Manifest {
         identification: m.identification.clone(),
         runs,
         references,
+        run_table: None,
     }
 }
