@@ -1,7 +1,7 @@
 //! The command line: what the user typed (clap), handed to the orchestrator
 //! (`run`), what it did printed, and the one place the exit code is decided:
-//! 2 for usage and manifest errors, 1 when a run failed or an output could
-//! not be written, 0 otherwise.
+//! 3 when the rig drifted (an alarm), 2 for usage and manifest errors, 1
+//! when a run failed or an output could not be written, 0 otherwise.
 //!
 //! What a run does as it goes is shown as a progress bar on a terminal, or
 //! as JSON lines (`--log-format json`) for a cron job; either way a summary
@@ -131,6 +131,9 @@ pub enum LogFormat {
 pub const EXIT_OK: u8 = 0;
 pub const EXIT_FAILED: u8 = 1;
 pub const EXIT_USAGE: u8 = 2;
+/// The rig drifted: a parameter moved beyond its history's limit. Before 1:
+/// the outputs are written, and a nightly job pages on it.
+pub const EXIT_ALARM: u8 = 3;
 
 pub fn main() -> ExitCode {
     let cli = match Cli::try_parse() {
@@ -334,6 +337,7 @@ impl Watch {
                 "ok": n - failed,
                 "failed": failed,
                 "cached": outcome.cached,
+                "alarms": results.drift.as_ref().map_or(0, |d| d.alarms.len()),
                 "seconds": outcome.seconds,
                 "logs_per_s": per_s,
                 "results": outcome.results_path,
@@ -357,7 +361,17 @@ impl Watch {
                 r.error.as_deref().unwrap_or("failed")
             ));
         }
-        if failed > 0 { EXIT_FAILED } else { EXIT_OK }
+        let alarms = results.drift.as_ref().map_or(&[][..], |d| &d.alarms[..]);
+        for a in alarms {
+            warn(&format!("ALARM: {a}"));
+        }
+        if !alarms.is_empty() {
+            EXIT_ALARM
+        } else if failed > 0 {
+            EXIT_FAILED
+        } else {
+            EXIT_OK
+        }
     }
 }
 

@@ -18,7 +18,8 @@
 //!    own settings.
 //! 6. The stages, each owning its settings type: `ingest` (the only module
 //!    that reads data files), `frf`, `fit`, `identify` (Eqs. 18-20),
-//!    `validate` (Eqs. 47-48), `sensitivity`, `simulate`. Within this layer
+//!    `validate` (Eqs. 47-48), `sensitivity`, `simulate`, `drift` (the rig's
+//!    history and its alarm rule). Within this layer
 //!    two uses run one way only: `sensitivity` propagates through
 //!    `identify`'s algebra, and `validate` drives models with `simulate`'s
 //!    exact discretisation and integrators.
@@ -32,6 +33,7 @@
 //! `run::RunError` through `#[from]`.
 
 pub mod cli;
+pub mod drift;
 pub mod fit;
 pub mod frf;
 pub mod identify;

@@ -12,6 +12,7 @@
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
+use crate::drift::Check;
 use crate::identify::{Estimate, PerSpring};
 use crate::lti::TransferFunction;
 use crate::manifest::simulation::UnmodelledSpec;
@@ -48,6 +49,9 @@ pub struct Results {
     /// How the rig parameters' precision depends on the spring stiffness
     /// (paper Sec. 2.3), when the rig is known.
     pub sensitivity: Option<SensitivityResult>,
+    /// The rig against its history: each parameter checked for drift, and
+    /// the alarms raised; null when the campaign has no rig.
+    pub drift: Option<DriftResult>,
     /// Campaign-level warnings.
     pub warnings: Vec<String>,
     /// The manifest as read (after defaults), for provenance.
@@ -114,6 +118,23 @@ pub struct SensitivityResult {
     pub sweep: crate::sensitivity::StiffnessSensitivity,
     /// The campaign's spring stiffnesses (N/m).
     pub springs_n_per_m: Vec<f64>,
+}
+
+/// The rig checked against its history (see `servoid::drift` for the rule).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+pub struct DriftResult {
+    /// The rig's name, which keys its history.
+    pub rig: String,
+    /// The history table, as the manifest or the default names it.
+    pub history_file: String,
+    /// Entries of this rig before this campaign.
+    pub earlier_entries: usize,
+    /// K and N of the rule.
+    pub window: usize,
+    pub threshold: f64,
+    pub checks: Vec<Check>,
+    /// One line per parameter in alarm.
+    pub alarms: Vec<String>,
 }
 
 /// Sample standard deviation of the per-spring values.

@@ -24,6 +24,7 @@ const LAYERS: &[&[&str]] = &[
         "validate",
         "sensitivity",
         "simulate",
+        "drift",
     ],
     &["model"],
     &["lti"],

@@ -383,3 +383,19 @@ fn a_manifest_of_the_other_kind_names_the_command_that_takes_it() {
     );
     assert!(!out.exists(), "nothing written");
 }
+
+#[test]
+fn a_history_window_too_short_and_a_threshold_not_positive() {
+    let text = format!("{BASE}\n[history]\nwindow = 2\nthreshold = 0.0\nfile = \"\"\n");
+    let c = check(&text);
+    assert_eq!(c.code, 2);
+    for f in [
+        "history.window: must be at least 3 (the median of fewer entries says little; got 2)",
+        "history.threshold: must be positive (got 0)",
+        "history.file: must not be empty",
+        "3 problems",
+    ] {
+        assert!(c.stderr.contains(f), "missing {f:?} in:\n{}", c.stderr);
+    }
+    assert!(!c.wrote_output);
+}

@@ -16,10 +16,11 @@ use super::document::{Document, read};
 use super::keypath::KeyPath;
 use super::problem::{ManifestError, Problem, TablePlace};
 use super::raw::{
-    CampaignInfo, Channel, Channels as RawChannels, CompareMode, Identification, Manifest,
+    CampaignInfo, Channel, Channels as RawChannels, CompareMode, History, Identification, Manifest,
     Reference, Rig, Role, Run, RunData, RunTable, SCHEMA_VERSION, manifest_schema,
 };
 use super::table::{CheckedTable, RowKey, RunTableInfo, TableRun, check_table};
+use crate::drift::{MIN_HISTORY, Rule};
 use crate::ingest::{self, ChannelPlan, Channels, LogFormat, LogPlan, TimePlan};
 use crate::lti::{LtiError, TransferFunction};
 use crate::model::RigParams;
@@ -50,6 +51,17 @@ pub struct Campaign {
     /// What is odd but not wrong (a log the run table's `logs` matched that
     /// no run uses); each names its file.
     pub warnings: Vec<String>,
+    /// Where the rig's history is kept and when it raises an alarm.
+    pub history: HistoryPlan,
+}
+
+/// The rig history's checked settings.
+#[derive(Debug, Clone, PartialEq)]
+pub struct HistoryPlan {
+    /// The table, resolved against the manifest's folder; None keeps it in
+    /// the output folder.
+    pub file: Option<PathBuf>,
+    pub rule: Rule,
 }
 
 impl Campaign {
@@ -154,6 +166,7 @@ pub fn load_str(text: &str, path: &Path) -> Result<Campaign, ManifestError> {
         references: doc.array::<Reference>("references"),
         run_table: doc.section::<RunTable>("run_table"),
         run_table_given: doc.has("run_table"),
+        history: doc.section::<History>("history"),
     };
     let base_dir = path.parent().unwrap_or(Path::new(""));
     let campaign = validate(partial, path, text.as_bytes(), base_dir, &mut doc.problems);
@@ -178,6 +191,7 @@ struct Partial {
     run_table: Option<RunTable>,
     /// Whether the manifest has a `run_table` section, read or not.
     run_table_given: bool,
+    history: Option<History>,
 }
 
 /// What every run's checks share.
@@ -203,6 +217,7 @@ fn validate(
     let mut bad = |path: KeyPath, msg: String| problems.push(Problem::new(path, msg));
 
     check_header(&partial, &mut bad);
+    let history = check_history(partial.history.as_ref(), base_dir, &mut bad);
     let default_channels = partial.channels.clone().unwrap_or_default();
     check_channels(&default_channels, &root.key("channels"), &mut bad);
     let ident = partial.identification.clone().unwrap_or_default();
@@ -266,6 +281,7 @@ fn validate(
         runs: partial.runs.into_iter().flatten().collect(),
         references: partial.references.into_iter().flatten().collect(),
         run_table: partial.run_table,
+        history: partial.history,
     };
     Some(Campaign {
         file: file.to_path_buf(),
@@ -281,7 +297,41 @@ fn validate(
         manifest,
         run_table: table.info,
         warnings: table.warnings,
+        history,
     })
+}
+
+/// The history's settings: a window the rule can use and a positive
+/// threshold.
+fn check_history(
+    h: Option<&History>,
+    base_dir: &Path,
+    bad: &mut impl FnMut(KeyPath, String),
+) -> HistoryPlan {
+    let h = h.cloned().unwrap_or_default();
+    let path = KeyPath::root().key("history");
+    if h.window < MIN_HISTORY {
+        bad(
+            path.key("window"),
+            format!(
+                "must be at least {MIN_HISTORY} (the median of fewer entries says little; got {})",
+                h.window
+            ),
+        );
+    }
+    positive(h.threshold, &path.key("threshold"), bad);
+    if let Some(f) = &h.file
+        && f.trim().is_empty()
+    {
+        bad(path.key("file"), "must not be empty".into());
+    }
+    HistoryPlan {
+        file: h.file.as_ref().map(|f| base_dir.join(f)),
+        rule: Rule {
+            window: h.window,
+            threshold: h.threshold,
+        },
+    }
 }
 
 /// The logs the `[[runs]]` name, as paths from the manifest's folder.

@@ -53,6 +53,48 @@ pub struct Manifest {
     /// More runs, one per row of a side table, after those of `runs`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub run_table: Option<RunTable>,
+    /// Where the rig's history is kept and when its drift raises an alarm
+    /// (defaults apply when the table is absent).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub history: Option<History>,
+}
+
+/// The rig's history: every campaign adds its identified (or given) rig to
+/// a Parquet table, and a parameter that moves from the median of its last
+/// `window` entries by more than `threshold` times the larger of its own
+/// standard deviation and the history's scatter raises an alarm (exit code
+/// 3).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[schemars(deny_unknown_fields)]
+pub struct History {
+    /// The history table, relative to the manifest's folder; by default
+    /// `history.parquet` in the output folder.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub file: Option<String>,
+    /// K: the entries the median is taken over (at least 3).
+    #[serde(default = "default_window")]
+    pub window: usize,
+    /// N: how many standard deviations a parameter may move.
+    #[serde(default = "default_threshold")]
+    pub threshold: f64,
+}
+
+impl Default for History {
+    fn default() -> Self {
+        Self {
+            file: None,
+            window: default_window(),
+            threshold: default_threshold(),
+        }
+    }
+}
+
+fn default_window() -> usize {
+    10
+}
+
+fn default_threshold() -> f64 {
+    4.0
 }
 
 /// Runs named by a side table instead of one `[[runs]]` table each, as a

@@ -11,6 +11,8 @@ pub mod logs;
 
 pub mod tables;
 
+pub mod history;
+
 pub use html::PageFigure;
 
 use std::io::Write;
@@ -193,12 +195,5 @@ pub fn write_pages(
     }
     let path = out_dir.join("report.html");
     write_atomic(&path, pages.campaign(campaign_figures)?.as_bytes())?;
-    Ok(path)
-}
-
-/// Write `results.json` into `out_dir`; returns its path.
-pub fn write_results(results: &Results, out_dir: &Path) -> Result<PathBuf, WriteError> {
-    let path = out_dir.join("results.json");
-    write_atomic(&path, &json_bytes(results))?;
     Ok(path)
 }

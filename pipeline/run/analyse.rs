@@ -189,6 +189,7 @@ pub(super) fn analyse_with(
         ccf,
         comparisons: Vec::new(),
         sensitivity: None,
+        drift: None,
         warnings,
         manifest: campaign.manifest.clone(),
     };

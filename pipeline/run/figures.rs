@@ -549,3 +549,66 @@ fn sensitivity_figure(s: &SensitivityResult) -> FigureSpec {
         size: (1200, 600),
     }
 }
+
+/// The rig's history: each parameter over the campaigns (a1b0 referred to
+/// P = 1), with its +-2 std band; the last point is this campaign. None with
+/// fewer than two entries.
+pub(super) fn history_figure(entries: &[crate::drift::Entry]) -> Option<FigureSpec> {
+    if entries.len() < 2 {
+        return None;
+    }
+    let x: Arc<[f64]> = (1..=entries.len()).map(|k| k as f64).collect();
+    let n = entries.len() as f64;
+    let units = [
+        ("beta1", "beta1 (1/s)"),
+        ("a1b0", "a1b0 at P = 1 (N/(m s^2))"),
+        ("a2", "a2 (N/m)"),
+        ("a3", "a3 (1/s)"),
+    ];
+    let panels = units
+        .iter()
+        .map(|&(name, label)| {
+            let p: Vec<(f64, f64)> = entries
+                .iter()
+                .map(|e| {
+                    let (v, s) = e.parameter(name).expect("a known parameter");
+                    (v, s.unwrap_or(0.0))
+                })
+                .collect();
+            let line = |f: &dyn Fn(&(f64, f64)) -> f64| -> Arc<[f64]> { p.iter().map(f).collect() };
+            let series = |label: &str, y: Arc<[f64]>, trace| TimeSeries {
+                label: label.into(),
+                y,
+                trace,
+                palette_index: Some(0),
+            };
+            TimePanel {
+                title: name.to_string(),
+                t_s: x.clone(),
+                series: vec![
+                    series("value", line(&|q| q.0), Trace::Measured),
+                    series("+2 std", line(&|q| q.0 + 2.0 * q.1), Trace::Reference),
+                    series("-2 std", line(&|q| q.0 - 2.0 * q.1), Trace::Reference),
+                ],
+                t_range_s: (0.5, n + 0.5),
+                y_label: label.into(),
+                y_range: None,
+            }
+        })
+        .collect();
+    let fig = PanelsFigure {
+        title: format!("Rig history: {}", entries[0].rig),
+        panels,
+        columns: 2,
+    };
+    Some(FigureSpec {
+        id: "history".into(),
+        title: "The rig's history".into(),
+        caption: format!(
+            "Each identified parameter over the rig's last {} campaigns (entry number; the last is this campaign), with its +-2 std band. An alarm is raised when a value moves from the median of its recent entries by more than the manifest's threshold times the larger of its std and the history's scatter.",
+            entries.len()
+        ),
+        size: fig.recommended_size(),
+        figure: Figure::Panels(fig),
+    })
+}

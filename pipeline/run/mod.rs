@@ -9,6 +9,7 @@ mod analyse;
 mod cache;
 mod compare;
 pub mod figures;
+mod history;
 mod rig;
 pub mod simulate;
 mod tables;
@@ -270,11 +271,25 @@ fn write_campaign(
     let analysed = analyse::analyse_with(campaign, &draw, observer)?;
     let mut results = analysed.results;
     results.campaign.manifest_path = relative_to(&campaign.file, out_dir);
-    let results_path = report::write_results(&results, out_dir)?;
+    let history = history::check(campaign, out_dir, &mut results);
+    let mut campaign_figures = analysed.campaign_figures;
+    if let (Some(h), Some(files)) = (&history, &files)
+        && let Some(spec) = figures::history_figure(&h.rig_entries())
+    {
+        let (figures, warnings) = files.write(std::slice::from_ref(&spec))?;
+        campaign_figures.extend(figures);
+        results.warnings.extend(warnings);
+    }
+    let json = report::json_bytes(&results);
+    let results_path = out_dir.join("results.json");
+    report::write_atomic(&results_path, &json)?;
+    if let Some(h) = history {
+        h.write(&json)?;
+    }
     let page_path = report::write_pages(
         &results,
         &analysed.run_figures,
-        &analysed.campaign_figures,
+        &campaign_figures,
         settings.figures,
         out_dir,
     )?;

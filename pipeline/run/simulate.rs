@@ -335,5 +335,6 @@ fn analysis_manifest(plan: &SimulationPlan, truth: &Truth) -> Manifest {
         runs,
         references,
         run_table: None,
+        history: None,
     }
 }

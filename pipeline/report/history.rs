@@ -1,0 +1,71 @@
+//! The rig history as a Parquet table, one row per campaign (see
+//! `servoid::drift`), for the next campaign and for anyone who plots a
+//! rig's life in polars or pandas. Units: beta1 and a3 in 1/s, a1b0 in
+//! N/(m s^2) at the row's p_gain, a2 in N/m. Same entries, same bytes.
+
+use std::path::Path;
+
+use polars::prelude::{Column, DataFrame, ParquetCompression, ParquetWriter};
+
+use super::logs::LogWriteError;
+use super::write_atomic;
+use crate::drift::Entry;
+
+/// The table's columns, in order: those of [`Entry`].
+pub const COLUMNS: [&str; 15] = [
+    "rig",
+    "campaign",
+    "date",
+    "inputs_sha256",
+    "results_sha256",
+    "p_gain",
+    "beta1",
+    "beta1_std",
+    "a1b0",
+    "a1b0_std",
+    "a2",
+    "a2_std",
+    "a3",
+    "a3_std",
+    "servoid_version",
+];
+
+/// Write the history atomically: readers see the old table or the new.
+pub fn write(path: &Path, entries: &[Entry]) -> Result<(), LogWriteError> {
+    let text = |f: fn(&Entry) -> &str| entries.iter().map(f).map(String::from).collect::<Vec<_>>();
+    let num = |f: fn(&Entry) -> f64| entries.iter().map(f).collect::<Vec<f64>>();
+    let opt = |f: fn(&Entry) -> Option<f64>| entries.iter().map(f).collect::<Vec<Option<f64>>>();
+    let n = entries.len();
+    let cols = vec![
+        Column::new("rig".into(), text(|e| &e.rig)),
+        Column::new("campaign".into(), text(|e| &e.campaign)),
+        Column::new(
+            "date".into(),
+            entries.iter().map(|e| e.date.clone()).collect::<Vec<_>>(),
+        ),
+        Column::new("inputs_sha256".into(), text(|e| &e.inputs_sha256)),
+        Column::new("results_sha256".into(), text(|e| &e.results_sha256)),
+        Column::new("p_gain".into(), num(|e| e.p_gain)),
+        Column::new("beta1".into(), num(|e| e.beta1)),
+        Column::new("beta1_std".into(), opt(|e| e.beta1_std)),
+        Column::new("a1b0".into(), num(|e| e.a1b0)),
+        Column::new("a1b0_std".into(), opt(|e| e.a1b0_std)),
+        Column::new("a2".into(), num(|e| e.a2)),
+        Column::new("a2_std".into(), opt(|e| e.a2_std)),
+        Column::new("a3".into(), num(|e| e.a3)),
+        Column::new("a3_std".into(), opt(|e| e.a3_std)),
+        Column::new("servoid_version".into(), text(|e| &e.servoid_version)),
+    ];
+    let parquet = |source| LogWriteError::Parquet {
+        path: path.to_path_buf(),
+        source,
+    };
+    let mut df = DataFrame::new(n, cols).map_err(parquet)?;
+    let mut buf = Vec::new();
+    ParquetWriter::new(&mut buf)
+        .with_compression(ParquetCompression::Snappy)
+        .finish(&mut df)
+        .map_err(parquet)?;
+    write_atomic(path, &buf)?;
+    Ok(())
+}

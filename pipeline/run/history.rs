@@ -1,0 +1,243 @@
+//! The rig's history around one campaign: read the table (through ingest),
+//! check this campaign's rig against the entries before it
+//! (`drift::check`), and, once results.json is written, put this campaign's
+//! entry in (in place of its own earlier entry on a rerun, so reruns add
+//! nothing and give the same bytes).
+
+use std::path::{Path, PathBuf};
+
+use crate::drift::{self, Entry};
+use crate::ingest::{self, Table, TableFormat};
+use crate::manifest::Campaign;
+use crate::report::{self, WriteError, logs::LogWriteError};
+use crate::results::{DriftResult, Results};
+
+/// A campaign's place in its rig's history.
+pub(super) struct History {
+    path: PathBuf,
+    /// Every entry of the table, every rig, in table order.
+    entries: Vec<Entry>,
+    /// Where this campaign's entry goes: its own earlier entry's place, or
+    /// the end.
+    slot: usize,
+    entry: Entry,
+}
+
+/// The history file: the manifest's, else `history.parquet` in `out_dir`.
+pub(super) fn path(campaign: &Campaign, out_dir: &Path) -> PathBuf {
+    campaign
+        .history
+        .file
+        .clone()
+        .unwrap_or_else(|| out_dir.join("history.parquet"))
+}
+
+/// Check `results`' rig against its history and record the checks in
+/// `results.drift`. Returns the history to update once results.json is
+/// written, or a warning (in results) when the table cannot be read: it is
+/// then left as it is for someone to look at.
+pub(super) fn check(campaign: &Campaign, out_dir: &Path, results: &mut Results) -> Option<History> {
+    let rig = results.rig.as_ref()?;
+    let path = path(campaign, out_dir);
+    let entries = if path.exists() {
+        match ingest::read_table(&path, TableFormat::Parquet)
+            .map_err(|e| e.to_string())
+            .and_then(|t| entries(&t).map_err(|e| format!("{}: {e}", path.display())))
+        {
+            Ok(e) => e,
+            Err(e) => {
+                results.warnings.push(format!(
+                    "the rig history cannot be read, so the rig was not checked for drift and the history was not updated: {e}"
+                ));
+                return None;
+            }
+        }
+    } else {
+        Vec::new()
+    };
+    let entry = Entry {
+        rig: campaign.rig_name.clone(),
+        campaign: campaign.name.clone(),
+        date: campaign.runs.iter().filter_map(|r| r.date.clone()).max(),
+        inputs_sha256: inputs_sha256(results),
+        results_sha256: String::new(),
+        servoid_version: env!("CARGO_PKG_VERSION").to_string(),
+        p_gain: rig.p_gain,
+        beta1: rig.beta1.value,
+        beta1_std: rig.beta1.std,
+        a1b0: rig.a1b0.value,
+        a1b0_std: rig.a1b0.std,
+        a2: rig.a2.value,
+        a2_std: rig.a2.std,
+        a3: rig.a3.value,
+        a3_std: rig.a3.std,
+    };
+    let own = entries
+        .iter()
+        .position(|e| e.rig == entry.rig && e.inputs_sha256 == entry.inputs_sha256);
+    let slot = own.unwrap_or(entries.len());
+    let earlier: Vec<Entry> = entries[..slot]
+        .iter()
+        .filter(|e| e.rig == entry.rig)
+        .cloned()
+        .collect();
+    let rule = campaign.history.rule;
+    let checks = drift::check(&earlier, &entry, rule);
+    let alarms = checks
+        .iter()
+        .filter(|c| c.alarm)
+        .map(|c| {
+            format!(
+                "rig `{}`: {} = {:.6e} moved {:+.3e} from the median {:.6e} of its last {} entries, beyond {} x {:.3e} = {:.3e}",
+                entry.rig,
+                c.parameter,
+                c.value,
+                c.deviation.unwrap_or(0.0),
+                c.median.unwrap_or(0.0),
+                c.entries,
+                rule.threshold,
+                c.limit.unwrap_or(0.0) / rule.threshold,
+                c.limit.unwrap_or(0.0)
+            )
+        })
+        .collect();
+    results.drift = Some(DriftResult {
+        rig: entry.rig.clone(),
+        // As the output folder sees it, so results.json does not depend on
+        // where the folder is.
+        history_file: super::relative_to(&path, out_dir)
+            .unwrap_or_else(|| path.display().to_string()),
+        earlier_entries: earlier.len(),
+        window: rule.window,
+        threshold: rule.threshold,
+        checks,
+        alarms,
+    });
+    Some(History {
+        path,
+        entries,
+        slot,
+        entry,
+    })
+}
+
+impl History {
+    /// This rig's entries with this campaign's in its place, oldest first
+    /// (for the trend figure).
+    pub(super) fn rig_entries(&self) -> Vec<Entry> {
+        let mut all = self.entries.clone();
+        put(&mut all, self.slot, self.entry.clone());
+        all.into_iter()
+            .filter(|e| e.rig == self.entry.rig)
+            .collect()
+    }
+
+    /// Put this campaign's entry in, with the hash of its results.json.
+    pub(super) fn write(mut self, results_json: &[u8]) -> Result<(), WriteError> {
+        self.entry.results_sha256 = ingest::sha256_hex(results_json);
+        put(&mut self.entries, self.slot, self.entry);
+        report::history::write(&self.path, &self.entries).map_err(|e| match e {
+            LogWriteError::Write(w) => w,
+            other => WriteError::Table(Box::new(other)),
+        })
+    }
+}
+
+fn put(entries: &mut Vec<Entry>, slot: usize, entry: Entry) {
+    if slot < entries.len() {
+        entries[slot] = entry;
+    } else {
+        entries.push(entry);
+    }
+}
+
+/// What a campaign's results come from: the servoid version, the manifest
+/// and every log, by their hashes.
+fn inputs_sha256(results: &Results) -> String {
+    let mut text = format!(
+        "servoid {}\n{}\n",
+        results.servoid_version, results.campaign.manifest_sha256
+    );
+    if let Some(t) = &results.campaign.run_table {
+        text.push_str(&format!("table {}\n", t.sha256));
+    }
+    for r in &results.runs {
+        let log = r.log.as_ref().map_or("-", |l| l.sha256.as_str());
+        text.push_str(&format!("{} {log}\n", r.id));
+    }
+    ingest::sha256_hex(text.as_bytes())
+}
+
+/// Why a history table's rows do not read as entries.
+#[derive(Debug, thiserror::Error)]
+pub(super) enum HistoryError {
+    #[error("column `{0}` is missing: not a servoid history table")]
+    MissingColumn(&'static str),
+    #[error("row {row}: `{column}` is {value:?}, not a number")]
+    NotANumber {
+        row: usize,
+        column: &'static str,
+        value: String,
+    },
+    #[error("row {row}: `{column}` is empty")]
+    Empty { row: usize, column: &'static str },
+}
+
+/// The table's rows as entries (its floats come back bit for bit: Parquet
+/// holds them as doubles, the reader prints them shortest round-trip).
+fn entries(t: &Table) -> Result<Vec<Entry>, HistoryError> {
+    let col = |name: &'static str| t.column(name).ok_or(HistoryError::MissingColumn(name));
+    let idx: Vec<usize> = report::history::COLUMNS
+        .iter()
+        .map(|c| col(c))
+        .collect::<Result<_, _>>()?;
+    let at = |k: usize| report::history::COLUMNS[k];
+    t.rows
+        .iter()
+        .enumerate()
+        .map(|(i, row)| {
+            let row_no = i + 1;
+            let cell = |k: usize| row[idx[k]].clone();
+            let text = |k: usize| {
+                cell(k).ok_or(HistoryError::Empty {
+                    row: row_no,
+                    column: at(k),
+                })
+            };
+            let opt = |k: usize| -> Result<Option<f64>, HistoryError> {
+                cell(k)
+                    .map(|v| {
+                        v.parse::<f64>().map_err(|_| HistoryError::NotANumber {
+                            row: row_no,
+                            column: at(k),
+                            value: v.clone(),
+                        })
+                    })
+                    .transpose()
+            };
+            let num = |k: usize| {
+                opt(k)?.ok_or(HistoryError::Empty {
+                    row: row_no,
+                    column: at(k),
+                })
+            };
+            Ok(Entry {
+                rig: text(0)?,
+                campaign: text(1)?,
+                date: cell(2),
+                inputs_sha256: text(3)?,
+                results_sha256: text(4)?,
+                p_gain: num(5)?,
+                beta1: num(6)?,
+                beta1_std: opt(7)?,
+                a1b0: num(8)?,
+                a1b0_std: opt(9)?,
+                a2: num(10)?,
+                a2_std: opt(11)?,
+                a3: num(12)?,
+                a3_std: opt(13)?,
+                servoid_version: text(14)?,
+            })
+        })
+        .collect()
+}
