@@ -47,6 +47,10 @@ pub struct RunArgs {
     /// done again (and the cache refreshed).
     #[arg(long)]
     force: bool,
+    /// Do the i-th of n shares of the per-log work (0 <= i < n) into its
+    /// own folder, for `servoid merge` (e.g. one Slurm array task each).
+    #[arg(long, value_name = "I/N")]
+    shard: Option<run::Shard>,
     /// Print nothing but errors.
     #[arg(long, short)]
     quiet: bool,
@@ -68,6 +72,15 @@ pub enum Command {
         /// Then run the generated campaign into the same folder.
         #[arg(long)]
         run: bool,
+        #[command(flatten)]
+        args: RunArgs,
+    },
+    /// Merge the folders of `servoid run --shard i/n` into the campaign's
+    /// results and pages, as one run over all the logs writes them.
+    Merge {
+        /// The shard folders, one per share.
+        #[arg(required = true)]
+        shards: Vec<PathBuf>,
         #[command(flatten)]
         args: RunArgs,
     },
@@ -163,7 +176,22 @@ fn dispatch(command: Command) -> u8 {
     match command {
         Command::Run { manifest, args } => {
             let watch = Watch::new(&args);
-            let code = match run::run_campaign(&manifest, &settings(&args), &watch) {
+            let code = match args.shard {
+                Some(shard) => match run::run_shard(&manifest, &settings(&args), shard, &watch) {
+                    Ok(outcome) => watch.shard(&outcome),
+                    Err(e) => job_failed(&e),
+                },
+                None => match run::run_campaign(&manifest, &settings(&args), &watch) {
+                    Ok(outcome) => watch.campaign(&outcome),
+                    Err(e) => job_failed(&e),
+                },
+            };
+            watch.done();
+            code
+        }
+        Command::Merge { shards, args } => {
+            let watch = Watch::new(&args);
+            let code = match run::merge(&shards, &settings(&args), &watch) {
                 Ok(outcome) => watch.campaign(&outcome),
                 Err(e) => job_failed(&e),
             };
@@ -368,6 +396,45 @@ impl Watch {
         if !alarms.is_empty() {
             EXIT_ALARM
         } else if failed > 0 {
+            EXIT_FAILED
+        } else {
+            EXIT_OK
+        }
+    }
+}
+
+impl Watch {
+    /// Print what a shard did; exit 1 when a run of its share failed.
+    fn shard(&self, outcome: &run::ShardOutcome) -> u8 {
+        self.done();
+        let info = &outcome.info;
+        let n = info.runs.len();
+        if self.json {
+            say(&serde_json::json!({
+                "event": "summary",
+                "campaign": info.campaign,
+                "shard": format!("{}/{}", info.shard.index, info.shard.count),
+                "ok": n - outcome.failed,
+                "failed": outcome.failed,
+                "cached": outcome.cached,
+                "seconds": outcome.seconds,
+                "logs_per_s": n as f64 / outcome.seconds.max(1e-9),
+            })
+            .to_string());
+        } else if !self.quiet {
+            say(&format!(
+                "shard {}/{} of `{}`: {} runs into {} ({} failed, {} cached in {:.2} s); merge the shards with `servoid merge`",
+                info.shard.index,
+                info.shard.count,
+                info.campaign,
+                n,
+                outcome.out_dir.display(),
+                outcome.failed,
+                outcome.cached,
+                outcome.seconds
+            ));
+        }
+        if outcome.failed > 0 {
             EXIT_FAILED
         } else {
             EXIT_OK

@@ -15,4 +15,5 @@ mod mts;
 mod paper;
 mod run_table;
 mod schemas;
+mod shards;
 mod simulate;

@@ -365,6 +365,7 @@ fn new_result(plan: &RunPlan) -> RunResult {
 /// the new one under and its log's bytes when they were read on the way.
 fn probe(
     draw: &Drawer<'_>,
+    campaign: &Campaign,
     plan: &RunPlan,
     parts: &[&dyn std::fmt::Debug],
 ) -> (
@@ -375,9 +376,16 @@ fn probe(
     let (Some(cache), RunSource::Log(lp)) = (draw.cache, &plan.source) else {
         return (None, None, None);
     };
+    // The plan as the manifest states it: its log relative to the
+    // manifest's folder, so the key does not depend on the folder the job
+    // ran from (shards on other machines find each other's runs).
+    let mut keyed = plan.clone();
+    if let (RunSource::Log(kp), Some(base)) = (&mut keyed.source, campaign.file.parent()) {
+        kp.path = kp.path.strip_prefix(base).unwrap_or(&kp.path).to_path_buf();
+    }
     let key = |sha: &str| {
         let mut all: Vec<&dyn std::fmt::Debug> = parts.to_vec();
-        all.extend([plan as &dyn std::fmt::Debug, &draw.choice, &sha]);
+        all.extend([&keyed as &dyn std::fmt::Debug, &draw.choice, &sha]);
         cache::key(&all)
     };
     match cache.probe(&lp.path, key, |s: &Stored| draw.still_there(s)) {
@@ -409,7 +417,12 @@ fn first_pass(
     }
     observer.event(&Event::RunStarted { id: &plan.id });
     let start = Instant::now();
-    let (stored, key, file) = probe(draw, plan, &[&"first pass", &campaign.identification]);
+    let (stored, key, file) = probe(
+        draw,
+        campaign,
+        plan,
+        &[&"first pass", &campaign.identification],
+    );
     if let Some(s) = stored {
         pass.seconds = start.elapsed().as_secs_f64();
         observer.event(&Event::RunCached {
@@ -542,6 +555,7 @@ fn validation_run(
     let (stored, key, file) = match rig {
         Ok(r) => probe(
             draw,
+            campaign,
             plan,
             &[
                 &"validation",

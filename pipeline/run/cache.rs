@@ -74,7 +74,11 @@ impl Cache {
         key: impl Fn(&str) -> String,
         usable: impl Fn(&T) -> bool,
     ) -> Probe<T> {
-        let name = log.to_string_lossy().into_owned();
+        // By absolute path: the same log whichever folder the job ran from.
+        let name = std::path::absolute(log)
+            .unwrap_or_else(|_| log.to_path_buf())
+            .to_string_lossy()
+            .into_owned();
         let stamp = FileStamp::of(log);
         let known = {
             let stamps = self.stamps.lock().expect("the stamps' lock");
@@ -162,6 +166,19 @@ impl Cache {
     fn entry(&self, key: &str) -> PathBuf {
         self.dir.join("runs").join(format!("{key}.json"))
     }
+}
+
+/// Fold the log stamps other caches (a merge's shards, in `dirs`) hold into
+/// `out_dir`'s, so that the logs they hashed are not read again.
+pub(super) fn merge_stamps(out_dir: &Path, dirs: &[PathBuf]) -> Result<(), WriteError> {
+    let path = out_dir.join(".cache").join("stamps.json");
+    let mut stamps: BTreeMap<String, Stamped> = read_json(&path).unwrap_or_default();
+    for d in dirs {
+        let theirs: BTreeMap<String, Stamped> =
+            read_json(&d.join(".cache").join("stamps.json")).unwrap_or_default();
+        stamps.extend(theirs);
+    }
+    report::write_atomic(&path, &report::json_bytes(&stamps))
 }
 
 /// A key from the text of what decides a run's outcome. The plan's Debug

@@ -11,6 +11,7 @@ mod compare;
 pub mod figures;
 mod history;
 mod rig;
+mod shard;
 pub mod simulate;
 mod tables;
 mod verify;
@@ -19,6 +20,7 @@ use std::path::{Path, PathBuf};
 
 pub use analyse::{Event, Observer, RunError, Unobserved, analyse};
 pub use rig::{FailedRun, RigError};
+pub use shard::{MergeError, Shard, ShardInfo};
 pub use verify::{Difference, Verification, VerifyError};
 
 use crate::manifest::{self, Campaign, Loaded, ManifestError};
@@ -61,6 +63,8 @@ pub enum JobError {
     Simulate(#[from] SimulateError),
     #[error(transparent)]
     Verify(#[from] VerifyError),
+    #[error(transparent)]
+    Merge(#[from] MergeError),
 }
 
 impl JobError {
@@ -69,7 +73,10 @@ impl JobError {
     pub fn is_usage(&self) -> bool {
         matches!(
             self,
-            JobError::Manifest(_) | JobError::WrongKind { .. } | JobError::Verify(_)
+            JobError::Manifest(_)
+                | JobError::WrongKind { .. }
+                | JobError::Verify(_)
+                | JobError::Merge(_)
         )
     }
 }
@@ -147,19 +154,7 @@ pub fn run_campaign(
     settings: &Settings,
     observer: &dyn Observer,
 ) -> Result<CampaignOutcome, JobError> {
-    let campaign = match manifest::load_any(path)? {
-        Loaded::Campaign(c) => c,
-        Loaded::Simulation(_) => {
-            return Err(JobError::WrongKind {
-                file: path.to_path_buf(),
-                found: "simulation",
-                hint: format!(
-                    "simulate it and run the campaign it writes with `servoid simulate {} --run`",
-                    path.display()
-                ),
-            });
-        }
-    };
+    let campaign = load_campaign(path)?;
     let out_dir = settings
         .out
         .clone()
@@ -209,6 +204,116 @@ pub fn run_simulation(
         simulated,
         campaign,
     })
+}
+
+/// What `servoid run --shard i/n` did.
+#[derive(Debug, Clone)]
+pub struct ShardOutcome {
+    pub info: ShardInfo,
+    pub out_dir: PathBuf,
+    /// Runs of the share that failed, and that came from the cache.
+    pub failed: usize,
+    pub cached: usize,
+    pub seconds: f64,
+}
+
+/// Do one share of a campaign's per-log work into its own folder (see
+/// [`shard`]); default folder `reports/<campaign>-shard-<i>-of-<n>`.
+pub fn run_shard(
+    path: &Path,
+    settings: &Settings,
+    shard: Shard,
+    observer: &dyn Observer,
+) -> Result<ShardOutcome, JobError> {
+    let campaign = load_campaign(path)?;
+    let out_dir = settings.out.clone().unwrap_or_else(|| {
+        PathBuf::from("reports").join(format!(
+            "{}-shard-{}-of-{}",
+            campaign.name, shard.index, shard.count
+        ))
+    });
+    let share = shard.of(&campaign);
+    let clock = std::time::Instant::now();
+    let workers = pool(settings.jobs)?;
+    let files = FigureFiles::new(&out_dir, settings.figures);
+    let cache = Cache::open(&out_dir, settings.force);
+    let draw = Drawer {
+        out_dir: Some(&out_dir),
+        files: files.as_ref(),
+        choice: settings.figures,
+        intersample: share.identification.intersample,
+        cache: Some(&cache),
+    };
+    let analysed = workers.install(|| analyse::analyse_with(&share, &draw, observer))?;
+    let info = ShardInfo {
+        servoid_version: env!("CARGO_PKG_VERSION").to_string(),
+        campaign: campaign.name.clone(),
+        manifest_sha256: campaign.manifest_sha256.clone(),
+        manifest: std::path::absolute(&campaign.file).unwrap_or_else(|_| campaign.file.clone()),
+        shard,
+        runs: share.runs.iter().map(|r| r.id.clone()).collect(),
+    };
+    shard::write_info(&out_dir, &info)?;
+    Ok(ShardOutcome {
+        failed: (analysed.results.runs.iter())
+            .filter(|r| r.status == Status::Failed)
+            .count(),
+        cached: analysed.cached.iter().filter(|c| **c).count(),
+        seconds: clock.elapsed().as_secs_f64(),
+        info,
+        out_dir,
+    })
+}
+
+/// Merge the shards of one campaign into `settings.out` (default
+/// `reports/<campaign>`): their runs from their caches, then the campaign's
+/// results and pages as one run would write them.
+pub fn merge(
+    dirs: &[PathBuf],
+    settings: &Settings,
+    observer: &dyn Observer,
+) -> Result<CampaignOutcome, JobError> {
+    let shards = shard::check(dirs)?;
+    let first = &shards[0].1;
+    let out_dir = settings
+        .out
+        .clone()
+        .unwrap_or_else(|| PathBuf::from("reports").join(&first.campaign));
+    for (dir, _) in &shards {
+        shard::gather(dir, &out_dir)?;
+    }
+    let shard_dirs: Vec<PathBuf> = shards.iter().map(|(d, _)| d.clone()).collect();
+    cache::merge_stamps(&out_dir, &shard_dirs)?;
+    let campaign = load_campaign(&first.manifest)?;
+    if campaign.manifest_sha256 != first.manifest_sha256 {
+        return Err(MergeError::ManifestChanged {
+            manifest: first.manifest.clone(),
+            recorded: first.manifest_sha256.clone(),
+            now: campaign.manifest_sha256.clone(),
+        }
+        .into());
+    }
+    let settings = Settings {
+        out: Some(out_dir.clone()),
+        ..settings.clone()
+    };
+    let workers = pool(settings.jobs)?;
+    workers.install(|| write_campaign(&campaign, &out_dir, &settings, observer))
+}
+
+/// A campaign manifest, refusing a simulation manifest with a hint.
+fn load_campaign(path: &Path) -> Result<Box<Campaign>, JobError> {
+    match manifest::load_any(path)? {
+        Loaded::Campaign(c) => Ok(c),
+        Loaded::Simulation(_) => Err(JobError::WrongKind {
+            file: path.to_path_buf(),
+            found: "simulation",
+            hint: format!(
+                "simulate it and run the campaign it writes with `servoid simulate {} --run`",
+                path.display()
+            ),
+        }),
+    }
 }
 
 /// Rerun the analysis a results.json records and list what differs (see

@@ -1,0 +1,135 @@
+//! Scale-out: `servoid run --shard i/n` shares out the per-log work and
+//! `servoid merge` puts the shares together into exactly what one run over
+//! all the logs writes; shards that do not belong together are refused.
+//! (The same on a real Slurm cluster: scripts/slurm-shards.sh.)
+
+use std::path::{Path, PathBuf};
+
+use crate::util::{root, scratch, servoid, servoid_into};
+
+/// Every file under `dir` but the run cache and run.jsonl (timings), with
+/// its bytes, by path.
+fn outputs(dir: &Path) -> Vec<(String, Vec<u8>)> {
+    fn walk(base: &Path, dir: &Path, out: &mut Vec<(String, Vec<u8>)>) {
+        for e in std::fs::read_dir(dir).unwrap() {
+            let p = e.unwrap().path();
+            let rel = p.strip_prefix(base).unwrap().to_string_lossy().into_owned();
+            if rel.starts_with(".cache") || rel == "run.jsonl" {
+                continue;
+            }
+            if p.is_dir() {
+                walk(base, &p, out);
+            } else {
+                out.push((rel, std::fs::read(&p).unwrap()));
+            }
+        }
+    }
+    let mut out = Vec::new();
+    walk(dir, dir, &mut out);
+    out.sort_by(|a, b| a.0.cmp(&b.0));
+    out
+}
+
+/// The bundled default simulated into `dir/sim`; its analysis manifest.
+fn campaign(dir: &Path) -> PathBuf {
+    let o = servoid_into(
+        dir,
+        "simulate",
+        &root().join("experiments/maghareh2018/simulation.toml"),
+        &dir.join("sim"),
+        &["--quiet"],
+    );
+    assert_eq!(o.code, 0, "{}", o.stderr);
+    dir.join("sim/campaign.toml")
+}
+
+fn shard(dir: &Path, manifest: &Path, i: usize, n: usize) -> PathBuf {
+    let out = dir.join(format!("shard-{i}"));
+    let o = servoid_into(
+        dir,
+        "run",
+        manifest,
+        &out,
+        &["--shard", &format!("{i}/{n}"), "--quiet"],
+    );
+    assert_eq!(o.code, 0, "{}", o.stderr);
+    out
+}
+
+fn merge(dir: &Path, shards: &[&Path], out: &str) -> crate::util::Output {
+    let mut args = vec!["merge"];
+    args.extend(shards.iter().map(|s| s.to_str().unwrap()));
+    let out = dir.join(out);
+    args.extend(["--out", out.to_str().unwrap(), "--log-format", "json"]);
+    servoid(dir, &args)
+}
+
+#[test]
+fn three_shards_merge_into_the_bytes_of_one_run() {
+    let dir = scratch();
+    let manifest = campaign(dir.path());
+    let single = dir.path().join("single");
+    let o = servoid_into(dir.path(), "run", &manifest, &single, &["--quiet"]);
+    assert_eq!(o.code, 0);
+    // Each shard has the three identification runs and every third of the
+    // four validation runs.
+    let shards: Vec<PathBuf> = (0..3).map(|i| shard(dir.path(), &manifest, i, 3)).collect();
+    let info: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(shards[1].join("shard.json")).unwrap()).unwrap();
+    assert_eq!(
+        info["runs"],
+        serde_json::json!(["no-specimen", "spring-k1", "spring-k2", "exp2"])
+    );
+    // Given in any order.
+    let o = merge(dir.path(), &[&shards[2], &shards[0], &shards[1]], "merged");
+    assert_eq!(o.code, 0, "{}", o.stderr);
+    let summary: serde_json::Value =
+        serde_json::from_str(o.stdout.lines().last().unwrap()).unwrap();
+    assert_eq!(summary["cached"], 7, "the merge does no per-log work");
+    let (a, b) = (outputs(&single), outputs(&dir.path().join("merged")));
+    let names = |t: &[(String, Vec<u8>)]| t.iter().map(|x| x.0.clone()).collect::<Vec<_>>();
+    assert_eq!(names(&a), names(&b));
+    assert!(a.len() > 40, "results, pages, figures, tables, history");
+    for ((name, x), (_, y)) in a.iter().zip(&b) {
+        assert!(
+            x == y,
+            "{name} differs between one run and the merged shards"
+        );
+    }
+}
+
+#[test]
+fn shards_that_do_not_belong_together_are_refused() {
+    let dir = scratch();
+    let manifest = campaign(dir.path());
+    let s0 = shard(dir.path(), &manifest, 0, 2);
+    let s1 = shard(dir.path(), &manifest, 1, 2);
+    let refused = |shards: &[&Path], want: &str| {
+        let o = merge(dir.path(), shards, "refused");
+        assert_eq!(o.code, 2, "{}", o.stderr);
+        assert!(o.stderr.contains(want), "missing {want:?} in {}", o.stderr);
+        assert!(!dir.path().join("refused").exists(), "nothing written");
+    };
+    refused(&[&s0], "shards [1] of 2 are missing");
+    refused(&[&s0, &s0], "shard 0/2 is given twice");
+    refused(
+        &[&dir.path().join("sim")],
+        "not a shard folder (no shard.json)",
+    );
+    // Another campaign's shard.
+    let other = dir.path().join("paper-shard");
+    let o = servoid_into(
+        dir.path(),
+        "run",
+        &root().join("experiments/maghareh2018/paper.toml"),
+        &other,
+        &["--shard", "1/2", "--quiet"],
+    );
+    assert_eq!(o.code, 0);
+    refused(&[&s0, &other], "a shard of another campaign");
+    // Another servoid's shard.
+    let info = s1.join("shard.json");
+    let text = std::fs::read_to_string(&info).unwrap();
+    std::fs::write(&info, text.replace(env!("CARGO_PKG_VERSION"), "0.0.1")).unwrap();
+    refused(&[&s0, &s1], "a shard of another servoid version (0.0.1;");
+}
