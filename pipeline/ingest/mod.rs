@@ -507,12 +507,30 @@ pub fn read_log_from(plan: &LogPlan, file: LogFile) -> Result<Log, IngestError> 
         });
     }
     let raw = match plan.format {
-        LogFormat::Csv => csv::read(path, &bytes, plan)?,
-        LogFormat::Parquet => parquet::read(path, &bytes, plan)?,
+        LogFormat::Csv => off_pool(|| csv::read(path, &bytes, plan))?,
+        LogFormat::Parquet => off_pool(|| parquet::read(path, &bytes, plan))?,
         LogFormat::Mat => mat::read(path, &bytes, plan)?,
         LogFormat::DaqText => daq::read(path, &bytes, plan)?,
     };
     assemble(plan, sha256, raw)
+}
+
+/// Run a polars call off the caller's rayon pool, on a thread of its own.
+///
+/// polars parallelises on a pool of its own, and a worker of another rayon
+/// pool that calls into it waits by running its own pool's jobs. With one
+/// job per run those waits nest as deep as there are runs, and a campaign of
+/// a few hundred runs overflowed a worker's stack (seen at 500 runs, two
+/// workers). On a thread that belongs to no pool, polars runs the call on
+/// that thread alone: the parallelism is across runs.
+pub fn off_pool<R: Send>(f: impl FnOnce() -> R + Send) -> R {
+    if rayon::current_thread_index().is_none() {
+        return f();
+    }
+    std::thread::scope(|s| match s.spawn(f).join() {
+        Ok(r) => r,
+        Err(panic) => std::panic::resume_unwind(panic),
+    })
 }
 
 /// SHA-256 of `bytes` as lowercase hexadecimal.
@@ -527,7 +545,7 @@ struct Raw<'a> {
     displacement: Vec<f64>,
     force: Option<Vec<f64>>,
     /// Where sample `i` (0-based) sits in the file.
-    locate: Box<dyn Fn(usize) -> At + 'a>,
+    locate: Box<dyn Fn(usize) -> At + Send + 'a>,
     warnings: Vec<String>,
 }
 
@@ -583,7 +601,7 @@ fn raw_from_table<'a>(
     path: &Path,
     plan: &LogPlan,
     mut columns: Vec<Vec<f64>>,
-    locate: Box<dyn Fn(usize) -> At + 'a>,
+    locate: Box<dyn Fn(usize) -> At + Send + 'a>,
 ) -> Result<Raw<'a>, IngestError> {
     let mut it = columns.drain(..);
     let time = match &plan.channels.time {

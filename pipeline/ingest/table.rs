@@ -105,7 +105,7 @@ pub fn read_table(path: &Path, format: TableFormat) -> Result<Table, TableError>
         problem,
     };
     let bytes = std::fs::read(path).map_err(|source| fail(TableProblem::Io { source }))?;
-    let df = match format {
+    let df = super::off_pool(|| match format {
         TableFormat::Csv => {
             // A UTF-8 byte-order mark is not part of the first column's name.
             let text = bytes.strip_prefix(b"\xEF\xBB\xBF").unwrap_or(&bytes);
@@ -116,12 +116,12 @@ pub fn read_table(path: &Path, format: TableFormat) -> Result<Table, TableError>
                 .with_raise_if_empty(false)
                 .into_reader_with_file_handle(Cursor::new(text))
                 .finish()
-                .map_err(|source| fail(TableProblem::Csv { source }))?
+                .map_err(|source| fail(TableProblem::Csv { source }))
         }
         TableFormat::Parquet => ParquetReader::new(Cursor::new(bytes.as_slice()))
             .finish()
-            .map_err(|source| fail(TableProblem::Parquet { source }))?,
-    };
+            .map_err(|source| fail(TableProblem::Parquet { source })),
+    })?;
     let (columns, rows) = text_cells(&df).map_err(fail)?;
     Ok(Table {
         path: path.to_path_buf(),

@@ -62,10 +62,13 @@ pub fn write(path: &Path, entries: &[Entry]) -> Result<(), LogWriteError> {
     };
     let mut df = DataFrame::new(n, cols).map_err(parquet)?;
     let mut buf = Vec::new();
-    ParquetWriter::new(&mut buf)
-        .with_compression(ParquetCompression::Snappy)
-        .finish(&mut df)
-        .map_err(parquet)?;
+    // Off the caller's rayon pool: see `ingest::off_pool`.
+    crate::ingest::off_pool(|| {
+        ParquetWriter::new(&mut buf)
+            .with_compression(ParquetCompression::Snappy)
+            .finish(&mut df)
+    })
+    .map_err(parquet)?;
     write_atomic(path, &buf)?;
     Ok(())
 }

@@ -100,10 +100,13 @@ pub fn parquet_bytes(path: &Path, columns: &[(&str, &[f64])]) -> Result<Vec<u8>,
         .collect();
     let mut df = DataFrame::new(n, cols).map_err(parquet)?;
     let mut buf = Vec::new();
-    ParquetWriter::new(&mut buf)
-        .with_compression(ParquetCompression::Snappy)
-        .finish(&mut df)
-        .map_err(parquet)?;
+    // Off the caller's rayon pool: see `ingest::off_pool`.
+    crate::ingest::off_pool(|| {
+        ParquetWriter::new(&mut buf)
+            .with_compression(ParquetCompression::Snappy)
+            .finish(&mut df)
+    })
+    .map_err(parquet)?;
     Ok(buf)
 }
 

@@ -218,7 +218,7 @@ pub struct ShardOutcome {
 }
 
 /// Do one share of a campaign's per-log work into its own folder (see
-/// [`shard`]); default folder `reports/<campaign>-shard-<i>-of-<n>`.
+/// `run/shard.rs`); default folder `reports/<campaign>-shard-<i>-of-<n>`.
 pub fn run_shard(
     path: &Path,
     settings: &Settings,
@@ -317,7 +317,7 @@ fn load_campaign(path: &Path) -> Result<Box<Campaign>, JobError> {
 }
 
 /// Rerun the analysis a results.json records and list what differs (see
-/// [`verify`]); `manifest` overrides where results.json says it is.
+/// `run/verify.rs`); `manifest` overrides where results.json says it is.
 pub fn verify_results(
     results: &Path,
     manifest: Option<&Path>,
