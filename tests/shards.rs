@@ -5,33 +5,10 @@
 
 use std::path::{Path, PathBuf};
 
-use crate::util::{root, scratch, servoid, servoid_into};
-
-/// Every file under `dir` but the run cache and run.jsonl (timings), with
-/// its bytes, by path.
-fn outputs(dir: &Path) -> Vec<(String, Vec<u8>)> {
-    fn walk(base: &Path, dir: &Path, out: &mut Vec<(String, Vec<u8>)>) {
-        for e in std::fs::read_dir(dir).unwrap() {
-            let p = e.unwrap().path();
-            let rel = p.strip_prefix(base).unwrap().to_string_lossy().into_owned();
-            if rel.starts_with(".cache") || rel == "run.jsonl" {
-                continue;
-            }
-            if p.is_dir() {
-                walk(base, &p, out);
-            } else {
-                out.push((rel, std::fs::read(&p).unwrap()));
-            }
-        }
-    }
-    let mut out = Vec::new();
-    walk(dir, dir, &mut out);
-    out.sort_by(|a, b| a.0.cmp(&b.0));
-    out
-}
+use crate::util::{outputs, root, scratch, servoid, servoid_into};
 
 /// The bundled default simulated into `dir/sim`; its analysis manifest.
-fn campaign(dir: &Path) -> PathBuf {
+pub fn campaign(dir: &Path) -> PathBuf {
     let o = servoid_into(
         dir,
         "simulate",

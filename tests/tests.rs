@@ -17,3 +17,4 @@ mod run_table;
 mod schemas;
 mod shards;
 mod simulate;
+mod slurm;
