@@ -536,9 +536,16 @@ fn median(mut v: Vec<f64>) -> f64 {
     }
 }
 
-/// "median (min-max)" of a quantity over the samples.
-fn spread(samples: &[Sample], f: impl Fn(&Sample) -> f64, digits: usize) -> String {
-    let v: Vec<f64> = samples.iter().map(f).collect();
+/// "median (min-max)" of a quantity over the samples, "-" for none.
+fn spread<'a>(
+    samples: impl IntoIterator<Item = &'a Sample>,
+    f: impl Fn(&Sample) -> f64,
+    digits: usize,
+) -> String {
+    let v: Vec<f64> = samples.into_iter().map(f).collect();
+    if v.is_empty() {
+        return "-".to_string();
+    }
     let lo = v.iter().copied().fold(f64::INFINITY, f64::min);
     let hi = v.iter().copied().fold(f64::NEG_INFINITY, f64::max);
     if v.len() == 1 {
@@ -548,114 +555,130 @@ fn spread(samples: &[Sample], f: impl Fn(&Sample) -> f64, digits: usize) -> Stri
     }
 }
 
+impl Row {
+    /// The runs that exited with 0: throughput means nothing for the
+    /// others.
+    fn ok(&self) -> impl Iterator<Item = &Sample> {
+        self.samples.iter().filter(|s| s.failure.is_none())
+    }
+
+    fn failures(&self) -> Vec<&str> {
+        self.samples
+            .iter()
+            .filter_map(|s| s.failure.as_deref())
+            .collect()
+    }
+
+    fn run(&self) -> &'static str {
+        if self.cached { "cached rerun" } else { "fresh" }
+    }
+}
+
+fn cpu_share(s: &Sample) -> f64 {
+    (s.user_s + s.system_s) / s.wall_s
+}
+
 fn table(config: &Config, rows: &[Row], cores: usize, total_s: f64) -> String {
     let mut t = String::new();
+    let sizes: Vec<String> = config.sizes.iter().map(|n| n.to_string()).collect();
     let _ = writeln!(
         t,
-        "\n## servoid night: {} logs of {LOG_SECONDS} s at {SAMPLE_RATE_HZ} Hz, {} cores, {} runs each (median (min-max))\n",
-        config
-            .sizes
-            .iter()
-            .map(|n| n.to_string())
-            .collect::<Vec<_>>()
-            .join(" and "),
-        cores,
+        "\n## servoid night: {} logs of {LOG_SECONDS} s at {SAMPLE_RATE_HZ} Hz, {cores} cores, {} runs each: median (min-max)\n",
+        sizes.join(" and "),
         config.repeats,
     );
     let _ = writeln!(
         t,
-        "| logs | format | MB of logs | figures | run | wall s | logs/s | MB/s of logs | CPU (user+sys)/wall | peak RSS kB | others' CPU/wall | failed |"
+        "| logs | format | MB of logs | figures | run | wall s | logs/s | MB/s of logs | CPU/wall | peak RSS kB | others' CPU/wall | failed |"
     );
     let _ = writeln!(t, "|---|---|---|---|---|---|---|---|---|---|---|---|");
     for row in rows {
         let n = row.logs as f64;
         let mb = row.log_bytes as f64 / 1e6;
-        let failed: Vec<&str> = row
-            .samples
-            .iter()
-            .filter_map(|s| s.failure.as_deref())
-            .collect();
+        let failures = row.failures();
         let _ = writeln!(
             t,
-            "| {} | {} | {:.0} | {} | {} | {} | {} | {} | {} | {} | {} | {} |",
+            "| {} | {} | {mb:.0} | {} | {} | {} | {} | {} | {} | {} | {} | {} |",
             row.logs,
             row.format.name(),
-            mb,
             row.figures,
-            if row.cached { "cached rerun" } else { "fresh" },
+            row.run(),
             spread(&row.samples, |s| s.wall_s, 2),
-            spread(&row.samples, |s| n / s.wall_s, 0),
+            spread(row.ok(), |s| n / s.wall_s, 0),
             // A cached rerun reads no log (their sizes and times match).
             if row.cached {
                 "-".to_string()
             } else {
-                spread(&row.samples, |s| mb / s.wall_s, 0)
+                spread(row.ok(), |s| mb / s.wall_s, 0)
             },
-            spread(&row.samples, |s| (s.user_s + s.system_s) / s.wall_s, 2),
+            spread(&row.samples, cpu_share, 2),
             spread(&row.samples, |s| s.peak_rss_kb as f64, 0),
             if row.samples.iter().all(|s| s.other_cpu_s.is_some()) {
                 spread(&row.samples, |s| s.other_cpu_s.unwrap_or(0.0) / s.wall_s, 2)
             } else {
                 "-".to_string()
             },
-            if failed.is_empty() {
-                "0".to_string()
-            } else {
-                format!("{}: {}", failed.len(), failed[0])
+            match failures.first() {
+                None => "0".to_string(),
+                Some(f) => format!("{} of {}: {f}", failures.len(), row.samples.len()),
             },
+        );
+    }
+    let _ = writeln!(
+        t,
+        "\nCPU/wall: user + system CPU time over wall time, in cores. Others' CPU/wall: the CPU time the rest of the machine used meanwhile, in cores; above about 0.1 the run shared its cores and its times are pessimistic. Throughput is over the runs that succeeded; the wall time, CPU and RSS of a failed run are up to its failure."
+    );
+    if rows
+        .iter()
+        .flat_map(|r| r.failures())
+        .any(|f| f.contains("stack overflow"))
+    {
+        let _ = writeln!(
+            t,
+            "\nA stack overflow: a worker thread ran out of its stack (2 MiB by default). To measure past it, RUST_MIN_STACK (bytes, e.g. 268435456) in the bench's environment reaches servoid's threads."
         );
     }
 
     // The targets.
     let _ = writeln!(
         t,
-        "\nTargets ({cores} cores): Parquet without figures at least {TARGET_LOGS_PER_S} logs/s with CPU/wall at least {:.1}; peak RSS under {TARGET_PEAK_RSS_KB} kB everywhere and not growing with the number of logs.\n",
+        "\n### Targets ({cores} cores)\n\nParquet without figures at least {TARGET_LOGS_PER_S} logs/s with CPU/wall at least {:.1}; peak RSS under {TARGET_PEAK_RSS_KB} kB, and not growing with the number of logs.\n",
         TARGET_CPU_SHARE * cores as f64
     );
     for row in rows
         .iter()
         .filter(|r| r.format == Format::Parquet && r.figures == "none" && !r.cached)
     {
-        let logs_s = median(
-            row.samples
-                .iter()
-                .map(|s| row.logs as f64 / s.wall_s)
-                .collect(),
-        );
-        let cpu = median(
-            row.samples
-                .iter()
-                .map(|s| (s.user_s + s.system_s) / s.wall_s)
-                .collect(),
-        );
-        let ok = logs_s >= TARGET_LOGS_PER_S
-            && cpu >= TARGET_CPU_SHARE * cores as f64
-            && row.samples.iter().all(|s| s.failure.is_none());
-        let _ = writeln!(
-            t,
-            "- {} Parquet logs, no figures: {logs_s:.0} logs/s, CPU/wall {cpu:.2}: {}",
-            row.logs,
-            if ok { "met" } else { "NOT met" }
-        );
+        let failures = row.failures();
+        let verdict = if !failures.is_empty() {
+            format!(
+                "NOT met: {} of {} failed",
+                failures.len(),
+                row.samples.len()
+            )
+        } else {
+            let logs_s = median(row.ok().map(|s| row.logs as f64 / s.wall_s).collect());
+            let cpu = median(row.ok().map(cpu_share).collect());
+            let ok = logs_s >= TARGET_LOGS_PER_S && cpu >= TARGET_CPU_SHARE * cores as f64;
+            format!(
+                "{logs_s:.0} logs/s, CPU/wall {cpu:.2}: {}",
+                if ok { "met" } else { "NOT met" }
+            )
+        };
+        let _ = writeln!(t, "- {} Parquet logs, no figures: {verdict}", row.logs);
     }
-    let worst = rows
-        .iter()
-        .flat_map(|r| r.samples.iter().map(move |s| (r, s.peak_rss_kb)))
-        .max_by_key(|(_, kb)| *kb);
-    if let Some((r, kb)) = worst {
-        let _ = writeln!(
-            t,
-            "- largest peak RSS: {kb} kB ({} {} logs, figures {}, {}): {}",
-            r.logs,
-            r.format.name(),
-            r.figures,
-            if r.cached { "cached rerun" } else { "fresh" },
-            if kb < TARGET_PEAK_RSS_KB {
-                "met"
-            } else {
-                "NOT met"
-            }
-        );
+    for row in rows {
+        let worst = row.samples.iter().map(|s| s.peak_rss_kb).max().unwrap_or(0);
+        if worst >= TARGET_PEAK_RSS_KB {
+            let _ = writeln!(
+                t,
+                "- peak RSS NOT met: {worst} kB ({} {} logs, figures {}, {})",
+                row.logs,
+                row.format.name(),
+                row.figures,
+                row.run()
+            );
+        }
     }
     if config.sizes.len() > 1 {
         for &format in &config.formats {
@@ -664,34 +687,22 @@ fn table(config: &Config, rows: &[Row], cores: usize, total_s: f64) -> String {
                     .sizes
                     .iter()
                     .filter_map(|&n| {
-                        rows.iter()
-                            .find(|r| {
-                                r.logs == n
-                                    && r.format == format
-                                    && r.figures == figures
-                                    && !r.cached
-                            })
-                            .map(|r| {
-                                let kb = median(
-                                    r.samples.iter().map(|s| s.peak_rss_kb as f64).collect(),
-                                );
-                                format!("{kb:.0} kB at {n}")
-                            })
+                        let r = rows.iter().find(|r| {
+                            r.logs == n && r.format == format && r.figures == figures && !r.cached
+                        })?;
+                        let kb = median(r.samples.iter().map(|s| s.peak_rss_kb as f64).collect());
+                        Some(format!("{kb:.0} kB at {n} logs"))
                     })
                     .collect();
                 let _ = writeln!(
                     t,
-                    "- peak RSS by night size, {} figures {figures}: {}",
+                    "- peak RSS by the night's size, {} figures {figures}, fresh: {}",
                     format.name(),
                     per_size.join(", ")
                 );
             }
         }
     }
-    let _ = writeln!(
-        t,
-        "\nOthers' CPU/wall: the CPU time the rest of the machine used during the run, in cores; above about 0.1 the run shared its cores and its times are pessimistic."
-    );
     let _ = writeln!(
         t,
         "\nservoid: {}; {:.0} s in all, log generation included.",
