@@ -472,6 +472,63 @@ v1,validation,1.5,4,10,120000,
 }
 
 #[test]
+fn unreadable_files_matched_by_the_glob_fail_their_runs_alone() {
+    let dir = scratch();
+    let sim = simulate(dir.path());
+    std::fs::create_dir_all(sim.join("night")).unwrap();
+    write(&sim, "night/specimens.csv", TABLE_CSV);
+    let manifest = table_manifest(
+        &sim,
+        "file = \"night/specimens.csv\"\nlogs = \"logs/*.csv\"",
+    );
+    // A night that went right first: its report must survive the next.
+    let (code, stderr, before) = run(&sim, &manifest, "out");
+    assert_eq!(code, 0, "{stderr}");
+
+    // v1's log is now a folder, v2's a named pipe (a read would block
+    // until a writer came), and a dangling link matches the glob too.
+    let logs = sim.join("logs");
+    std::fs::remove_file(logs.join("v1.csv")).unwrap();
+    std::fs::create_dir(logs.join("v1.csv")).unwrap();
+    std::fs::remove_file(logs.join("v2.csv")).unwrap();
+    let fifo = std::process::Command::new("mkfifo")
+        .arg(logs.join("v2.csv"))
+        .status()
+        .expect("mkfifo runs");
+    assert!(fifo.success());
+    std::os::unix::fs::symlink(logs.join("nowhere.csv"), logs.join("v9.csv")).unwrap();
+
+    let (code, stderr, after) = run(&sim, &manifest, "out");
+    assert_eq!(code, 1, "{stderr}");
+    for (id, what) in [("v1", "a folder"), ("v2", "a named pipe")] {
+        let r = run_by_id(&after, id);
+        assert_eq!(r["status"], "failed", "{id}");
+        let expected = format!(
+            "{}: is {what}, not a regular file",
+            logs.join(format!("{id}.csv")).display()
+        );
+        let error = r["error"].as_str().unwrap();
+        assert!(error.starts_with(&expected), "{id}: {error:?}");
+        assert!(
+            stderr.contains(&format!("run {id}: {expected}")),
+            "{stderr}"
+        );
+    }
+    // The runs that can be read give what they gave before.
+    for id in ["bare", "k1", "k2"] {
+        assert_eq!(run_by_id(&after, id), run_by_id(&before, id), "{id}");
+    }
+    assert_eq!(after["rig"], before["rig"]);
+    // Nothing half-written is left beside the new report.
+    let stray: Vec<_> = std::fs::read_dir(sim.join("out"))
+        .unwrap()
+        .flatten()
+        .filter(|e| e.file_name().to_string_lossy().contains(".tmp-"))
+        .collect();
+    assert!(stray.is_empty(), "{stray:?}");
+}
+
+#[test]
 fn dates_are_checked_and_normalised_in_both_places() {
     let dir = scratch();
     let manifest = PREDICTIONS

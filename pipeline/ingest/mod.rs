@@ -130,6 +130,17 @@ pub enum IngestError {
         #[source]
         source: std::io::Error,
     },
+    #[error("{}: is {what}, not a regular file: name the log file itself", path.display())]
+    NotAFile { path: PathBuf, what: &'static str },
+    #[error(
+        "{}: changed while it was read ({before} before, {after} after): is it still being written? The run is left out; rerun when the file is complete",
+        path.display()
+    )]
+    Changed {
+        path: PathBuf,
+        before: String,
+        after: String,
+    },
     #[error(
         "{}: SHA-256 is {actual} but the manifest expects {expected}: the file changed or is not the one recorded",
         path.display()
@@ -449,20 +460,86 @@ pub struct LogFile {
     bytes: Vec<u8>,
     /// SHA-256 of the bytes, lowercase hexadecimal.
     pub sha256: String,
+    /// The file's stamp when the bytes were read (unchanged during the
+    /// read), for a cache that skips hashing an unchanged file next time.
+    pub stamp: Option<FileStamp>,
 }
 
 impl LogFile {
+    /// Read a log whole. Only a regular file is read (a FIFO matched by a
+    /// glob would block a night forever, a folder cannot be a log), and
+    /// its size and modification time must be the same before and after
+    /// the read, and the size what was read: a log still being written (a
+    /// DAQ appending to it, a copy in progress) is refused, not analysed
+    /// half-written.
     pub fn read(path: &Path) -> Result<Self, IngestError> {
-        let bytes = std::fs::read(path).map_err(|source| IngestError::Io {
+        let io = |source| IngestError::Io {
             path: path.to_path_buf(),
             source,
-        })?;
+        };
+        let meta = std::fs::metadata(path).map_err(io)?;
+        if !meta.is_file() {
+            return Err(IngestError::NotAFile {
+                path: path.to_path_buf(),
+                what: kind_of(&meta.file_type()),
+            });
+        }
+        let before = FileStamp::from_meta(&meta);
+        let bytes = std::fs::read(path).map_err(io)?;
+        let after = std::fs::metadata(path)
+            .ok()
+            .and_then(|m| FileStamp::from_meta(&m));
+        unchanged(path, before, after, bytes.len())?;
         Ok(Self {
             path: path.to_path_buf(),
             sha256: sha256_hex(&bytes),
             bytes,
+            stamp: after,
         })
     }
+}
+
+/// What a path that is not a regular file is.
+fn kind_of(t: &std::fs::FileType) -> &'static str {
+    use std::os::unix::fs::FileTypeExt;
+    if t.is_dir() {
+        "a folder"
+    } else if t.is_fifo() {
+        "a named pipe"
+    } else if t.is_socket() {
+        "a socket"
+    } else if t.is_block_device() || t.is_char_device() {
+        "a device"
+    } else {
+        "not a file"
+    }
+}
+
+/// The check of [`LogFile::read`]: the stamps before and after a read of
+/// `len` bytes agree with each other and with the length.
+fn unchanged(
+    path: &Path,
+    before: Option<FileStamp>,
+    after: Option<FileStamp>,
+    len: usize,
+) -> Result<(), IngestError> {
+    let show = |s: Option<FileStamp>| match s {
+        Some(s) => format!("{} bytes, modified at {} ns", s.size, s.modified_ns),
+        None => "gone".to_string(),
+    };
+    let same = before == after && after.is_some_and(|a| a.size == len as u64);
+    if same {
+        return Ok(());
+    }
+    let after = match after {
+        Some(a) if before == Some(a) => format!("{len} bytes read"),
+        a => show(a),
+    };
+    Err(IngestError::Changed {
+        path: path.to_path_buf(),
+        before: show(before),
+        after,
+    })
 }
 
 /// What the file system says of a file without reading it: its size and
@@ -478,7 +555,10 @@ impl FileStamp {
     /// None when the file cannot be looked at (the read that follows will
     /// say why).
     pub fn of(path: &Path) -> Option<Self> {
-        let meta = std::fs::metadata(path).ok()?;
+        Self::from_meta(&std::fs::metadata(path).ok()?)
+    }
+
+    fn from_meta(meta: &std::fs::Metadata) -> Option<Self> {
         let modified = meta.modified().ok()?;
         let since = modified.duration_since(std::time::UNIX_EPOCH).ok()?;
         Some(Self {

@@ -1429,3 +1429,78 @@ fn format_errors_keep_their_causes_typed() {
     let cause = std::error::Error::source(problem).expect("matfile's error is kept");
     assert!(cause.is::<matfile::Error>());
 }
+
+// ------------------------------------------- files that cannot be read whole
+
+#[test]
+fn a_log_that_changes_during_its_read_is_refused_naming_the_file() {
+    let path = Path::new("logs/exp1.csv");
+    let stamp = |size, modified_ns| Some(FileStamp { size, modified_ns });
+    // Unchanged, and the size what was read: accepted.
+    assert!(unchanged(path, stamp(100, 7), stamp(100, 7), 100).is_ok());
+    // A writer appended during the read: the size and time moved.
+    let e = unchanged(path, stamp(100, 7), stamp(180, 9), 140).unwrap_err();
+    assert!(matches!(e, IngestError::Changed { .. }), "{e:?}");
+    let msg = e.to_string();
+    assert!(
+        msg.starts_with("logs/exp1.csv: changed while it was read"),
+        "{msg}"
+    );
+    assert!(
+        msg.contains("100 bytes") && msg.contains("180 bytes"),
+        "{msg}"
+    );
+    // Rewritten in place within one time stamp: the length read differs.
+    let msg = unchanged(path, stamp(100, 7), stamp(100, 7), 60)
+        .unwrap_err()
+        .to_string();
+    assert!(msg.contains("60 bytes read"), "{msg}");
+    // Removed during the read.
+    let msg = unchanged(path, stamp(100, 7), None, 100)
+        .unwrap_err()
+        .to_string();
+    assert!(msg.contains("gone"), "{msg}");
+}
+
+#[test]
+fn a_folder_or_a_named_pipe_is_not_read_as_a_log() {
+    let dir = tempfile::tempdir().unwrap();
+    let folder = dir.path().join("exp1.csv");
+    std::fs::create_dir(&folder).unwrap();
+    let e = LogFile::read(&folder).unwrap_err();
+    assert!(
+        matches!(
+            e,
+            IngestError::NotAFile {
+                what: "a folder",
+                ..
+            }
+        ),
+        "{e:?}"
+    );
+    assert!(e.to_string().contains("exp1.csv: is a folder"), "{e}");
+
+    // A FIFO would block a read until a writer came: refused at once.
+    let fifo = dir.path().join("exp2.csv");
+    let made = std::process::Command::new("mkfifo").arg(&fifo).status();
+    if made.is_ok_and(|s| s.success()) {
+        let e = LogFile::read(&fifo).unwrap_err();
+        assert!(
+            matches!(
+                e,
+                IngestError::NotAFile {
+                    what: "a named pipe",
+                    ..
+                }
+            ),
+            "{e:?}"
+        );
+    }
+
+    // A regular file is read, and its stamp kept for the cache.
+    let file = dir.path().join("exp3.csv");
+    std::fs::write(&file, b"t,u,y\n0,0,0\n").unwrap();
+    let read = LogFile::read(&file).unwrap();
+    assert_eq!(read.stamp.map(|s| s.size), Some(12));
+    assert_eq!(read.stamp, FileStamp::of(&file));
+}

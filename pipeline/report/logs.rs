@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 
 use polars::prelude::{Column, DataFrame, ParquetCompression, ParquetWriter};
 
-use super::{WriteError, write_atomic};
+use super::{WriteError, write_artifact};
 
 /// Why a log could not be written.
 #[derive(Debug, thiserror::Error)]
@@ -42,7 +42,7 @@ pub enum LogWriteError {
 /// non-finite values).
 pub fn write_csv(path: &Path, columns: &[(&str, &[f64])]) -> Result<(), LogWriteError> {
     let bytes = csv_bytes(path, columns)?;
-    write_atomic(path, &bytes)?;
+    write_artifact(path, &bytes)?;
     Ok(())
 }
 
@@ -83,7 +83,7 @@ fn push_shortest(s: &mut String, x: f64) {
 /// same bytes: the writer stamps no time or host into the file.
 pub fn write_parquet(path: &Path, columns: &[(&str, &[f64])]) -> Result<(), LogWriteError> {
     let bytes = parquet_bytes(path, columns)?;
-    write_atomic(path, &bytes)?;
+    write_artifact(path, &bytes)?;
     Ok(())
 }
 

@@ -10,7 +10,7 @@ use nalgebra::Complex;
 use polars::prelude::{Column, DataFrame, ParquetCompression, ParquetWriter};
 
 use super::logs::LogWriteError;
-use super::write_atomic;
+use super::write_artifact;
 
 /// A run's measured FRF with what the fit and the model make of it.
 #[derive(Debug, Clone, PartialEq)]
@@ -84,6 +84,6 @@ fn write(path: &Path, rows: usize, cols: Vec<Column>) -> Result<(), LogWriteErro
             .finish(&mut df)
     })
     .map_err(parquet)?;
-    write_atomic(path, &buf)?;
+    write_artifact(path, &buf)?;
     Ok(())
 }

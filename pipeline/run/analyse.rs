@@ -131,7 +131,7 @@ pub(super) fn analyse_with(
     let first: Vec<FirstPass> = campaign
         .runs
         .par_iter()
-        .map(|plan| first_pass(campaign, plan, draw, observer))
+        .map(|plan| first_pass(campaign, plan, draw, observer).map_err(|e| e.in_run(&plan.id)))
         .collect::<Result<_, _>>()?;
 
     // What the manifest found (an unused log matched by the run table's
@@ -146,7 +146,10 @@ pub(super) fn analyse_with(
         .runs
         .par_iter()
         .zip(first)
-        .map(|(plan, first)| second_pass(campaign, plan, first, &rig_for_runs, draw, observer))
+        .map(|(plan, first)| {
+            second_pass(campaign, plan, first, &rig_for_runs, draw, observer)
+                .map_err(|e| e.in_run(&plan.id))
+        })
         .collect::<Result<_, _>>()?;
 
     let mut runs = Vec::with_capacity(second.len());

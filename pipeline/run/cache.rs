@@ -99,7 +99,8 @@ impl Cache {
                 file: None,
             };
         };
-        if let Some(stamp) = stamp {
+        // The stamp the read saw, unchanged from its start to its end.
+        if let Some(stamp) = file.stamp {
             self.stamps.lock().expect("the stamps' lock").insert(
                 name,
                 Stamped {
@@ -138,7 +139,7 @@ impl Cache {
         if key.is_empty() {
             return Ok(());
         }
-        report::write_atomic(&self.entry(key), &report::json_bytes(value))?;
+        report::write_artifact(&self.entry(key), &report::json_bytes(value))?;
         self.used
             .lock()
             .expect("the used keys' lock")

@@ -253,6 +253,7 @@ pub fn run_shard(
         shard,
         runs: share.runs.iter().map(|r| r.id.clone()).collect(),
     };
+    report::settle(&out_dir)?;
     shard::write_info(&out_dir, &info)?;
     Ok(ShardOutcome {
         failed: (analysed.results.runs.iter())
@@ -387,6 +388,7 @@ fn write_campaign(
     }
     let json = report::json_bytes(&results);
     let results_path = out_dir.join("results.json");
+    report::settle(out_dir)?;
     report::write_atomic(&results_path, &json)?;
     if let Some(h) = history {
         h.write(&json)?;

@@ -230,7 +230,7 @@ pub fn gather(shard: &Path, out_dir: &Path) -> Result<(), WriteError> {
                 path: from.clone(),
                 source,
             })?;
-            report::write_atomic(&to, &bytes)?;
+            report::write_artifact(&to, &bytes)?;
         }
     }
     Ok(())

@@ -187,7 +187,7 @@ pub fn simulate_campaign(
             OutputFormat::Csv => logs::csv_bytes(&path, &cols),
             OutputFormat::Parquet => logs::parquet_bytes(&path, &cols),
         }?;
-        report::write_atomic(&path, &bytes)?;
+        report::write_artifact(&path, &bytes)?;
         let mut t = s.truth;
         t.log = rel;
         t.log_sha256 = sha256_hex(&bytes);
@@ -208,6 +208,7 @@ pub fn simulate_campaign(
         runs: truth_runs,
     };
     let truth_path = out_dir.join("truth.json");
+    report::settle(out_dir)?;
     report::write_atomic(&truth_path, &report::json_bytes(&truth))?;
 
     let manifest = analysis_manifest(plan, &truth);

@@ -135,11 +135,13 @@ pub fn instantaneous_frequency(u: &[f64], sample_rate_hz: f64) -> Vec<(f64, f64)
         .collect()
 }
 
-/// The median (upper middle element for an even count).
+/// The median (upper middle element for an even count), by selection: the
+/// element a full sort would put there, in linear time (a sort of each
+/// 120 000-sample command was a fifth of a validation run).
 fn median(x: &[f64]) -> f64 {
-    let mut sorted = x.to_vec();
-    sorted.sort_by(f64::total_cmp);
-    sorted[sorted.len() / 2]
+    let mut v = x.to_vec();
+    let mid = v.len() / 2;
+    *v.select_nth_unstable_by(mid, f64::total_cmp).1
 }
 
 /// Locate the paper's windows in a record from its command: each window is
