@@ -24,8 +24,8 @@
 //! - `SERVOID_NIGHT_REPEATS`: runs of each measurement (default 3; the
 //!   table gives medians and ranges);
 //! - `SERVOID_NIGHT_FORMATS`: `csv,parquet` (the default) or either alone;
-//! - `SERVOID_NIGHT_JOBS`: passed as `--jobs` (default: servoid's, all
-//!   cores);
+//! - `SERVOID_NIGHT_JOBS`: passed as `--jobs` (default: servoid's, two
+//!   workers per core);
 //! - `SERVOID_NIGHT_MAX_OTHERS`: on a shared machine, measure a run again
 //!   (up to 5 tries) when the rest of the machine used more than this many
 //!   cores during it (read from /proc/stat; e.g. 0.1); unset, every run

@@ -23,7 +23,10 @@ use servoid::results::Results;
 /// The paper's results with `n` runs: its runs repeated in turn, each copy
 /// under its own id (and its canonical form with it).
 fn campaign(n: usize) -> Results {
-    let manifest = concat!(env!("CARGO_MANIFEST_DIR"), "/experiments/maghareh2018/paper.toml");
+    let manifest = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/experiments/maghareh2018/paper.toml"
+    );
     let campaign = servoid::manifest::load(std::path::Path::new(manifest)).expect("paper.toml");
     let paper = servoid::run::analyse(&campaign);
     let mut results = paper.clone();

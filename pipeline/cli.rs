@@ -32,7 +32,7 @@ pub struct RunArgs {
     /// Output folder (default: `reports/<name>`).
     #[arg(long)]
     out: Option<PathBuf>,
-    /// Worker threads (default: all cores); the output does not depend on it.
+    /// Worker threads (default: two per core); the output does not depend on it.
     #[arg(long, short)]
     jobs: Option<usize>,
     /// Which figure files to draw.
@@ -92,7 +92,7 @@ pub enum Command {
         /// The manifest, when it is no longer where results.json says.
         #[arg(long)]
         manifest: Option<PathBuf>,
-        /// Worker threads (default: all cores).
+        /// Worker threads (default: two per core).
         #[arg(long, short)]
         jobs: Option<usize>,
     },
