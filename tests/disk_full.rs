@@ -13,7 +13,7 @@ use std::path::Path;
 use std::process::Command;
 
 use crate::shards::campaign;
-use crate::util::{scratch, servoid_into, skipped};
+use crate::util::{scratch, servoid_into, skip_unless_required};
 
 const REQUIRE: &str = "SERVOID_REQUIRE_NAMESPACES";
 
@@ -41,13 +41,11 @@ fn kb(dir: &Path) -> u64 {
 #[test]
 fn a_full_disk_fails_the_night_and_keeps_the_previous_report() {
     let Some(unshare) = namespace() else {
-        if std::env::var_os(REQUIRE).is_none_or(|v| v == "0") {
-            skipped(&format!(
-                "disk full: no private mount namespace here (unshare -m, as root); set {REQUIRE}=1 to make this a failure"
-            ));
-            return;
-        }
-        panic!("{REQUIRE} is set but `unshare -m` cannot mount a tmpfs here");
+        return skip_unless_required(
+            "disk full",
+            REQUIRE,
+            "no private mount namespace to mount a tmpfs in (unshare -m, as root)",
+        );
     };
     let dir = scratch();
     let manifest = campaign(dir.path());

@@ -12,7 +12,7 @@
 use std::process::Command;
 
 use crate::shards::campaign;
-use crate::util::{outputs, root, scratch, skipped};
+use crate::util::{outputs, root, scratch, skip_unless_required};
 
 const REQUIRE_SLURM: &str = "SERVOID_REQUIRE_SLURM";
 const SHARDS: usize = 3;
@@ -42,13 +42,7 @@ fn missing() -> Option<String> {
 #[test]
 fn an_array_job_on_a_slurm_cluster_merges_to_the_single_run() {
     if let Some(why) = missing() {
-        if std::env::var_os(REQUIRE_SLURM).is_none_or(|v| v == "0") {
-            skipped(&format!(
-                "slurm: {why}; set {REQUIRE_SLURM}=1 to make this a failure"
-            ));
-            return;
-        }
-        panic!("{REQUIRE_SLURM} is set but this machine cannot run Slurm: {why}");
+        return skip_unless_required("slurm", REQUIRE_SLURM, &why);
     }
     let dir = scratch();
     let manifest = campaign(dir.path());

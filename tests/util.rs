@@ -128,6 +128,19 @@ pub fn skipped(why: &str) {
     note(&format!("SKIPPED: {why}"));
 }
 
+/// A test that needs what this machine may lack (`why` it cannot run):
+/// SKIPPED, unless the environment variable `require` is set (to anything
+/// but `0`, as `.ci/run` does), when the absence is a failure.
+pub fn skip_unless_required(test: &str, require: &str, why: &str) {
+    if std::env::var_os(require).is_none_or(|v| v == "0") {
+        skipped(&format!(
+            "{test}: {why}; set {require}=1 to make this a failure"
+        ));
+    } else {
+        panic!("{require} is set but {test} cannot run here: {why}");
+    }
+}
+
 /// A line on the terminal, written to stderr directly, not through
 /// `eprintln!`, which the test harness captures and shows only for failing
 /// tests.
