@@ -389,6 +389,17 @@ impl Watch {
                 r.error.as_deref().unwrap_or("failed")
             ));
         }
+        // Springs that disagree are a warning to act on before the rig is
+        // trusted, even with every run ok: said on stderr, as alarms are.
+        if let Some(c) = results.rig.as_ref().and_then(|r| r.consistency.as_ref())
+            && c.consistent == Some(false)
+        {
+            warn(&format!(
+                "warning: rig: {}; likely causes: {}",
+                c.note,
+                c.likely_causes.join("; ")
+            ));
+        }
         let alarms = results.drift.as_ref().map_or(&[][..], |d| &d.alarms[..]);
         for a in alarms {
             warn(&format!("ALARM: {a}"));

@@ -108,6 +108,10 @@ pub struct RigResult {
     /// Scatter of the per-spring values (sample standard deviation), when
     /// there are at least two springs.
     pub spread: Option<Spread>,
+    /// Whether the springs agree within their propagated stds (a
+    /// chi-square across springs, leave-one-out values, likely causes);
+    /// null when the rig was given.
+    pub consistency: Option<crate::identify::consistency::Consistency>,
 }
 
 /// The stiffness sensitivity analysis, with where the campaign's springs sit.

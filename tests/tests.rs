@@ -7,6 +7,7 @@ mod accuracy;
 mod bad_logs;
 mod batch;
 mod browser;
+mod consistency;
 mod disk_full;
 mod drift;
 mod figure_formats;

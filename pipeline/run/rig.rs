@@ -144,6 +144,13 @@ pub(super) fn establish<'a>(
             a3: sd(&|s| s.a3.value),
         }
     });
+    if ident.consistency.consistent == Some(false) {
+        warnings.push(format!(
+            "rig: {}; likely causes: {}",
+            ident.consistency.note,
+            ident.consistency.likely_causes.join("; ")
+        ));
+    }
     let params = ident.params();
     let result = RigResult {
         source: RigSource::Identified,
@@ -156,6 +163,7 @@ pub(super) fn establish<'a>(
         valve_time_constant_ms: time_constant(&ident.beta1),
         per_spring: ident.per_spring,
         spread,
+        consistency: Some(ident.consistency),
     };
     Ok((params, result))
 }
@@ -181,5 +189,6 @@ fn given_result(p: &RigParams) -> RigResult {
         valve_time_constant_ms: time_constant(&beta1),
         per_spring: Vec::new(),
         spread: None,
+        consistency: None,
     }
 }

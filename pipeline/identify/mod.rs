@@ -7,6 +7,8 @@
 //! experiments, so their covariances form a block-diagonal Sigma, and the
 //! shared no-specimen run correlates the springs (J is taken over everything).
 
+pub mod consistency;
+
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
@@ -102,6 +104,8 @@ pub struct RigIdentification {
     pub a2: Estimate,
     pub a3: Estimate,
     pub per_spring: Vec<PerSpring>,
+    /// Whether the springs agree within their propagated stds.
+    pub consistency: consistency::Consistency,
 }
 
 impl RigIdentification {
@@ -245,6 +249,15 @@ pub fn identify_rig(
     }
 
     let stds = propagate(&theta, no_spec, springs, p_ref, &values);
+    let consistency = consistency::check(
+        &(springs.iter().enumerate())
+            .map(|(j, s)| consistency::PerSpringValues {
+                run: s.estimate.run.clone(),
+                values: [2, 3, 4].map(|i| values[HEAD + PER_SPRING * j + i]),
+            })
+            .collect::<Vec<_>>(),
+        spring_covariances(&theta, no_spec, springs, p_ref).as_ref(),
+    );
     let est = |i: usize| Estimate {
         value: values[i],
         std: stds.as_ref().map(|s| s[i]),
@@ -273,6 +286,7 @@ pub fn identify_rig(
         a2: est(3),
         a3: est(4),
         per_spring,
+        consistency,
     })
 }
 
@@ -286,27 +300,9 @@ fn propagate(
     p_ref: f64,
     values: &[f64],
 ) -> Option<Vec<f64>> {
-    let covs: Vec<[[f64; 3]; 3]> = no_spec
-        .iter()
-        .map(|e| e.cov)
-        .chain(springs.iter().map(|s| s.estimate.cov))
-        .collect::<Option<Vec<_>>>()?;
-    let n = theta.len();
+    let covs = run_covariances(no_spec, springs)?;
     let m = values.len();
-    // jac[i][o] = d out_o / d theta_i
-    let mut jac = vec![vec![0.0; m]; n];
-    let mut t = theta.to_vec();
-    for i in 0..n {
-        let h = 1e-6 * theta[i].abs().max(1e-12);
-        t[i] = theta[i] + h;
-        let plus = compute(&t, no_spec, springs, p_ref);
-        t[i] = theta[i] - h;
-        let minus = compute(&t, no_spec, springs, p_ref);
-        t[i] = theta[i];
-        for o in 0..m {
-            jac[i][o] = (plus[o] - minus[o]) / (2.0 * h);
-        }
-    }
+    let jac = jacobian(theta, no_spec, springs, p_ref);
     let mut var = vec![0.0; m];
     for (b, cov) in covs.iter().enumerate() {
         for p in 0..3 {
@@ -322,6 +318,70 @@ fn propagate(
         }
     }
     Some(var.into_iter().map(|v| v.max(0.0).sqrt()).collect())
+}
+
+/// The runs' coefficient covariances in theta's order; None when any run
+/// lacks one.
+fn run_covariances(no_spec: &[TfEstimate], springs: &[SpringRun]) -> Option<Vec<[[f64; 3]; 3]>> {
+    no_spec
+        .iter()
+        .map(|e| e.cov)
+        .chain(springs.iter().map(|s| s.estimate.cov))
+        .collect()
+}
+
+/// jac[i][o] = d out_o / d theta_i of [`compute`], by central differences.
+fn jacobian(
+    theta: &[f64],
+    no_spec: &[TfEstimate],
+    springs: &[SpringRun],
+    p_ref: f64,
+) -> Vec<Vec<f64>> {
+    let mut jac = Vec::with_capacity(theta.len());
+    let mut t = theta.to_vec();
+    for i in 0..theta.len() {
+        let h = 1e-6 * theta[i].abs().max(1e-12);
+        t[i] = theta[i] + h;
+        let plus = compute(&t, no_spec, springs, p_ref);
+        t[i] = theta[i] - h;
+        let minus = compute(&t, no_spec, springs, p_ref);
+        t[i] = theta[i];
+        jac.push(
+            plus.iter()
+                .zip(&minus)
+                .map(|(p, m)| (p - m) / (2.0 * h))
+                .collect(),
+        );
+    }
+    jac
+}
+
+/// The joint covariance over the springs of each of a1b0, a2 and a3 (Eq.
+/// 20), by first-order propagation: the springs share the no-specimen run,
+/// so their values are correlated. None without the runs' covariances.
+fn spring_covariances(
+    theta: &[f64],
+    no_spec: &[TfEstimate],
+    springs: &[SpringRun],
+    p_ref: f64,
+) -> Option<[nalgebra::DMatrix<f64>; 3]> {
+    let covs = run_covariances(no_spec, springs)?;
+    let jac = jacobian(theta, no_spec, springs, p_ref);
+    let n = springs.len();
+    Some([2, 3, 4].map(|i| {
+        let out = |j: usize| HEAD + PER_SPRING * j + i;
+        nalgebra::DMatrix::from_fn(n, n, |a, b| {
+            let mut c = 0.0;
+            for (r, cov) in covs.iter().enumerate() {
+                for p in 0..3 {
+                    for q in 0..3 {
+                        c += jac[3 * r + p][out(a)] * cov[p][q] * jac[3 * r + q][out(b)];
+                    }
+                }
+            }
+            c
+        })
+    }))
 }
 
 #[cfg(test)]

@@ -1,0 +1,324 @@
+//! Do the springs agree? Each spring run gives its own a1b0, a2 and a3
+//! (Eqs. 19-20); the paper averages them. If the model holds and the
+//! manifest is right, their spread is what their propagated standard
+//! deviations predict. A stiffness typed wrong, two logs swapped, a channel
+//! in the wrong unit or dynamics the model leaves out make the springs
+//! disagree far beyond it, while each spring's own fit, and the validation
+//! of the averaged rig, can look fine.
+//!
+//! The test, per parameter: with the springs' values x (n of them) and
+//! their joint covariance S (first-order propagation through Eqs. 18-20,
+//! which keeps the correlation the shared no-specimen run gives them), the
+//! generalised-least-squares mean m = (1' S^-1 x) / (1' S^-1 1) and
+//! chi2 = (x - m 1)' S^-1 (x - m 1), which follows a chi-square law with
+//! n - 1 degrees of freedom when the springs agree. A p-value below
+//! [`ALPHA`] flags the campaign.
+
+use nalgebra::{DMatrix, DVector};
+use schemars::JsonSchema;
+use serde::{Deserialize, Serialize};
+use statrs::distribution::{ChiSquared, ContinuousCDF};
+
+/// The test's significance level: one campaign in a thousand whose springs
+/// do agree is flagged.
+pub const ALPHA: f64 = 1e-3;
+
+/// The parameters compared, in the order of [`PerSpringValues`].
+pub const PARAMETERS: [&str; 3] = ["a1b0", "a2", "a3"];
+
+/// One spring's values of a1b0, a2 and a3 (a1b0 at the rig's reference P).
+#[derive(Debug, Clone, PartialEq)]
+pub struct PerSpringValues {
+    pub run: String,
+    pub values: [f64; 3],
+}
+
+/// The springs' agreement, as results.json states it (`rig.consistency`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+pub struct Consistency {
+    /// Spring runs compared.
+    pub springs: usize,
+    /// Significance level of each parameter's test.
+    pub alpha: f64,
+    /// One test per parameter (a1b0, a2, a3); empty when none can be made.
+    pub checks: Vec<ConsistencyCheck>,
+    /// Whether the springs agree; null when the check cannot be made (a
+    /// single spring, or fits without a covariance).
+    pub consistent: Option<bool>,
+    /// What was found, or why nothing could be, in words.
+    pub note: String,
+    /// With two or more springs: the rig from all springs but one, for
+    /// each spring left out (the paper's average of the others).
+    pub leave_one_out: Vec<LeaveOneOut>,
+    /// When the springs disagree: what usually makes them.
+    pub likely_causes: Vec<String>,
+}
+
+/// One parameter's chi-square test across the springs.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+pub struct ConsistencyCheck {
+    pub parameter: String,
+    /// The generalised-least-squares mean over the springs.
+    pub weighted_mean: f64,
+    pub chi2: f64,
+    /// Degrees of freedom: springs - 1.
+    pub dof: usize,
+    /// Probability of a chi2 this large or larger if the springs agree.
+    pub p_value: f64,
+    pub consistent: bool,
+}
+
+/// The rig from every spring but one.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+pub struct LeaveOneOut {
+    /// The spring run left out.
+    pub left_out: String,
+    pub a1b0: f64,
+    pub a2: f64,
+    pub a3: f64,
+    /// Whether the springs that remain agree (null with fewer than two, or
+    /// without covariances).
+    pub rest_consistent: Option<bool>,
+}
+
+/// Test the springs: `springs` their values, `cov[p]` the joint covariance
+/// of parameter p's values over the springs (None when the fits carry no
+/// covariance).
+pub fn check(springs: &[PerSpringValues], cov: Option<&[DMatrix<f64>; 3]>) -> Consistency {
+    let n = springs.len();
+    let mut out = Consistency {
+        springs: n,
+        alpha: ALPHA,
+        checks: Vec::new(),
+        consistent: None,
+        note: String::new(),
+        leave_one_out: Vec::new(),
+        likely_causes: Vec::new(),
+    };
+    if n < 2 {
+        out.note = "one spring run: the springs' agreement cannot be checked (a second spring of another stiffness makes the check possible)".into();
+        return out;
+    }
+    out.leave_one_out = (0..n)
+        .map(|left| {
+            let keep: Vec<usize> = (0..n).filter(|&j| j != left).collect();
+            let mean = |p: usize| {
+                keep.iter().map(|&j| springs[j].values[p]).sum::<f64>() / keep.len() as f64
+            };
+            let rest_consistent = match cov {
+                Some(c) if keep.len() >= 2 => {
+                    tests(springs, c, &keep).map(|t| t.iter().all(|c| c.consistent))
+                }
+                _ => None,
+            };
+            LeaveOneOut {
+                left_out: springs[left].run.clone(),
+                a1b0: mean(0),
+                a2: mean(1),
+                a3: mean(2),
+                rest_consistent,
+            }
+        })
+        .collect();
+    let Some(cov) = cov else {
+        out.note = "the spring runs' fits carry no covariance (published transfer functions), so their agreement cannot be tested; the leave-one-out values show their spread".into();
+        return out;
+    };
+    let all: Vec<usize> = (0..n).collect();
+    let Some(checks) = tests(springs, cov, &all) else {
+        out.note = "the springs' propagated covariance is not positive definite, so their agreement cannot be tested".into();
+        return out;
+    };
+    let bad: Vec<&ConsistencyCheck> = checks.iter().filter(|c| !c.consistent).collect();
+    out.consistent = Some(bad.is_empty());
+    if bad.is_empty() {
+        out.note = format!(
+            "the {n} springs agree: a1b0, a2 and a3 scatter as their propagated standard deviations predict (chi-square, p >= {ALPHA})"
+        );
+    } else {
+        let what: Vec<String> = bad
+            .iter()
+            .map(|c| {
+                format!(
+                    "{} (chi2 = {:.3e} on {} dof, p = {:.1e})",
+                    c.parameter, c.chi2, c.dof, c.p_value
+                )
+            })
+            .collect();
+        out.note = format!(
+            "the {n} springs disagree far beyond their standard deviations: {}. The averaged rig and its stated std are not to be trusted until the cause is found",
+            what.join(", ")
+        );
+        out.likely_causes = causes(&out.leave_one_out);
+    }
+    out.checks = checks;
+    out
+}
+
+/// Each parameter's test over the springs `keep`; None when a covariance
+/// is not positive definite.
+fn tests(
+    springs: &[PerSpringValues],
+    cov: &[DMatrix<f64>; 3],
+    keep: &[usize],
+) -> Option<Vec<ConsistencyCheck>> {
+    let n = keep.len();
+    PARAMETERS
+        .iter()
+        .enumerate()
+        .map(|(p, name)| {
+            let x = DVector::from_iterator(n, keep.iter().map(|&j| springs[j].values[p]));
+            let s = DMatrix::from_fn(n, n, |a, b| cov[p][(keep[a], keep[b])]);
+            let chol = s.cholesky()?;
+            let ones = DVector::from_element(n, 1.0);
+            let si_x = chol.solve(&x);
+            let si_1 = chol.solve(&ones);
+            let mean = ones.dot(&si_x) / ones.dot(&si_1);
+            let r = &x - &ones * mean;
+            let chi2 = r.dot(&chol.solve(&r)).max(0.0);
+            let dof = n - 1;
+            let p_value = ChiSquared::new(dof as f64).ok()?.sf(chi2);
+            Some(ConsistencyCheck {
+                parameter: (*name).to_string(),
+                weighted_mean: mean,
+                chi2,
+                dof,
+                p_value,
+                consistent: p_value >= ALPHA,
+            })
+        })
+        .collect()
+}
+
+/// What makes springs disagree, the odd one first when leaving one spring
+/// out makes the rest agree.
+fn causes(loo: &[LeaveOneOut]) -> Vec<String> {
+    let mut out = Vec::new();
+    let odd: Vec<&str> = loo
+        .iter()
+        .filter(|l| l.rest_consistent == Some(true))
+        .map(|l| l.left_out.as_str())
+        .collect();
+    if let [one] = odd.as_slice() {
+        out.push(format!(
+            "spring run {one} is the odd one out: without it the other springs agree"
+        ));
+    }
+    out.extend(
+        [
+            "a spring's stiffness typed wrong in the manifest or the run table (stiffness_n_per_m)",
+            "the logs of two runs swapped (each run's log = ... names the file it analyses)",
+            "a channel in the wrong unit or scale in one run (its [channels] or the DAQ's range)",
+            "dynamics the model leaves out: a spring's own mass or a stiff spring beyond the paper's massless, linearised assumption, friction, the servo-valve's higher modes",
+        ]
+        .map(String::from),
+    );
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use approx::assert_relative_eq;
+
+    fn spring(run: &str, a1b0: f64, a2: f64, a3: f64) -> PerSpringValues {
+        PerSpringValues {
+            run: run.into(),
+            values: [a1b0, a2, a3],
+        }
+    }
+
+    /// Independent springs with stds sd: chi2 = sum ((x - mean) / sd)^2 with
+    /// the inverse-variance mean; for two springs of equal sd it is
+    /// (x1 - x2)^2 / (2 sd^2). p-values from the chi-square law by hand:
+    /// for 1 dof, P(chi2 > 4) = erfc(sqrt 2) = 0.0455003, and for 2 dof
+    /// P(chi2 > x) = exp(-x / 2).
+    #[test]
+    fn chi_square_by_hand() {
+        let sd = [10.0, 1000.0, 0.1];
+        let diag = |n: usize| -> [DMatrix<f64>; 3] {
+            [0, 1, 2].map(|p| DMatrix::from_diagonal_element(n, n, sd[p] * sd[p]))
+        };
+        // Two springs, 2 sd apart in every parameter: chi2 = 2, p = 0.1573.
+        let two = [
+            spring("k1", 100.0, 5000.0, 1.0),
+            spring("k2", 100.0 + 20.0, 7000.0, 1.2),
+        ];
+        let c = check(&two, Some(&diag(2)));
+        assert_eq!(c.consistent, Some(true));
+        for t in &c.checks {
+            assert_relative_eq!(t.chi2, 2.0, max_relative = 1e-12);
+            assert_eq!(t.dof, 1);
+            assert_relative_eq!(t.p_value, 0.157_299_207_050_285_1, max_relative = 1e-9);
+        }
+        assert_relative_eq!(c.checks[0].weighted_mean, 110.0, max_relative = 1e-12);
+
+        // Three springs, x = mean + (-2, 0, 2) sd in a2: chi2 = 8, 2 dof,
+        // p = exp(-4) = 0.0183; a3 off by 20 sd in one spring: flagged.
+        let three = [
+            spring("k1", 100.0, 3000.0, 1.0),
+            spring("k2", 100.0, 5000.0, 1.0),
+            spring("k3", 100.0, 7000.0, 3.0),
+        ];
+        let c = check(&three, Some(&diag(3)));
+        assert_relative_eq!(c.checks[1].chi2, 8.0, max_relative = 1e-12);
+        assert_relative_eq!(c.checks[1].p_value, (-4.0f64).exp(), max_relative = 1e-9);
+        assert!(c.checks[1].consistent);
+        // a3: mean 5/3, residuals (-2/3, -2/3, 4/3) / 0.1 -> chi2 = 266.67.
+        assert_relative_eq!(c.checks[2].chi2, 800.0 / 3.0, max_relative = 1e-12);
+        assert!(!c.checks[2].consistent);
+        assert_eq!(c.consistent, Some(false));
+        // Without k3 the others agree: it is named first.
+        assert_eq!(c.leave_one_out[2].rest_consistent, Some(true));
+        assert_eq!(c.leave_one_out[0].rest_consistent, Some(false));
+        assert!(
+            c.likely_causes[0].starts_with("spring run k3 is the odd one out"),
+            "{:?}",
+            c.likely_causes
+        );
+        assert!(
+            c.likely_causes
+                .iter()
+                .any(|s| s.contains("stiffness typed wrong"))
+        );
+        assert!(c.likely_causes.iter().any(|s| s.contains("swapped")));
+        assert!(c.likely_causes.iter().any(|s| s.contains("unit")));
+        assert!(c.likely_causes.iter().any(|s| s.contains("leaves out")));
+        // Leave-one-out values: the plain mean of the others.
+        assert_relative_eq!(c.leave_one_out[0].a2, 6000.0, max_relative = 1e-12);
+    }
+
+    /// Correlated values: with S = sd^2 [[1, r], [r, 1]] the two-spring
+    /// chi2 is (x1 - x2)^2 / (2 sd^2 (1 - r)): a common error that both
+    /// springs share does not count as disagreement.
+    #[test]
+    fn a_shared_error_is_not_disagreement() {
+        let (sd, r) = (2.0, 0.9);
+        let s = DMatrix::from_row_slice(2, 2, &[sd * sd, r * sd * sd, r * sd * sd, sd * sd]);
+        let cov = [s.clone(), s.clone(), s];
+        let two = [spring("a", 10.0, 10.0, 10.0), spring("b", 12.0, 12.0, 12.0)];
+        let c = check(&two, Some(&cov));
+        assert_relative_eq!(
+            c.checks[0].chi2,
+            4.0 / (2.0 * 4.0 * 0.1),
+            max_relative = 1e-12
+        );
+        assert_relative_eq!(c.checks[0].weighted_mean, 11.0, max_relative = 1e-12);
+    }
+
+    #[test]
+    fn one_spring_or_no_covariance_says_why_not() {
+        let c = check(&[spring("k1", 1.0, 2.0, 3.0)], None);
+        assert_eq!(c.consistent, None);
+        assert!(c.note.starts_with("one spring run"), "{}", c.note);
+        assert!(c.leave_one_out.is_empty());
+        let c = check(
+            &[spring("k1", 1.0, 2.0, 3.0), spring("k2", 1.5, 2.0, 3.0)],
+            None,
+        );
+        assert_eq!(c.consistent, None);
+        assert!(c.note.contains("no covariance"), "{}", c.note);
+        assert_eq!(c.leave_one_out.len(), 2);
+        assert_eq!(c.leave_one_out[0].a1b0, 1.5);
+    }
+}
