@@ -44,6 +44,9 @@ pub struct Results {
     pub runs: Vec<RunResult>,
     /// Controllable canonical form (Eqs. 34-35) for every run with a specimen mass.
     pub ccf: Vec<CcfResult>,
+    /// Control-structure interaction (Sec. 3.2.1, Eq. 45) per validation
+    /// run with an SDOF specimen, in manifest order.
+    pub csi: Vec<crate::validate::csi::Csi>,
     /// Published numbers beside the recomputed ones.
     pub comparisons: Vec<Comparison>,
     /// How the rig parameters' precision depends on the spring stiffness

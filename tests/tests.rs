@@ -8,6 +8,7 @@ mod bad_logs;
 mod batch;
 mod browser;
 mod consistency;
+mod csi;
 mod disk_full;
 mod drift;
 mod figure_formats;

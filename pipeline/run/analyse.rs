@@ -41,6 +41,7 @@ use crate::results::{
     RunResult, SensitivityResult, Status, TfResult, TfSource,
 };
 use crate::simulate::specimen::SpecimenModel;
+use crate::validate::csi::Csi;
 use crate::validate::{self, Record, ValidateError, ValidationMetrics};
 
 /// Why one run failed; recorded in that run's result.
@@ -157,7 +158,9 @@ pub(super) fn analyse_with(
     let mut seconds = Vec::with_capacity(second.len());
     let mut cached = Vec::with_capacity(second.len());
     let mut overlay = Vec::new();
+    let mut csi = Vec::new();
     for done in second {
+        csi.extend(done.csi);
         runs.push(done.result);
         run_figures.push(done.figures);
         warnings.extend(done.figure_warnings);
@@ -190,6 +193,7 @@ pub(super) fn analyse_with(
         rig_error,
         runs,
         ccf,
+        csi,
         comparisons: Vec::new(),
         sensitivity: None,
         drift: None,
@@ -310,6 +314,9 @@ struct Stored {
     estimate: Option<(TransferFunction, Option<[[f64; 3]; 3]>)>,
     force: Option<ForceBins>,
     overlay: Option<OverlayRun>,
+    /// A validation run's control-structure interaction.
+    #[serde(default)]
+    csi: Option<Csi>,
     figures: Vec<PageFigure>,
     figure_warnings: Vec<String>,
     /// The figure and table files with their sizes, to tell they are still
@@ -336,6 +343,7 @@ struct FirstPass {
 /// A run done.
 struct Done {
     result: RunResult,
+    csi: Option<Csi>,
     figures: Vec<PageFigure>,
     figure_warnings: Vec<String>,
     overlay: Option<OverlayRun>,
@@ -480,6 +488,7 @@ fn first_pass(
                         estimate,
                         force: pass.force.clone(),
                         overlay: pass.overlay.clone(),
+                        csi: None,
                         files: draw.sizes(&pass.figures, &tables),
                         figures: pass.figures.clone(),
                         figure_warnings: pass.figure_warnings.clone(),
@@ -518,7 +527,7 @@ fn second_pass(
     if first.acquired {
         out.force_tf = force_model(&rig_at_p, &plan.specimen);
         if let (Some(bins), Some(model)) = (&first.force, &out.force_tf) {
-            let spec = figures::force_figure(&out, bins, model, draw.intersample);
+            let spec = figures::force_figure(&out, bins, model, draw.intersample, None);
             let (f, w) = draw.write(std::slice::from_ref(&spec))?;
             // Figs. 16-17 come right after the run's FRF, as on the page.
             let at = figures.len().min(1);
@@ -528,6 +537,7 @@ fn second_pass(
     }
     Ok(Done {
         result: out,
+        csi: None,
         figures,
         figure_warnings,
         overlay: first.overlay,
@@ -576,6 +586,7 @@ fn validation_run(
         });
         return Ok(Done {
             result: s.result,
+            csi: s.csi,
             figures: s.figures,
             figure_warnings: s.figure_warnings,
             overlay: None,
@@ -633,12 +644,21 @@ fn validation_run(
             None
         }
     };
+    let bins = ForceBins::of(st);
+    let csi = linear.and_then(|lin| {
+        validate::csi::csi(
+            &plan.id,
+            &rig_at_p,
+            &lin,
+            bins.as_ref().map(ForceBins::bins),
+        )
+    });
     let figures = if draw.enabled() {
         let (mut specs, _) = figures::log_figures(&out, st, time.as_ref(), draw.intersample);
-        if let (Some(bins), Some(model)) = (ForceBins::of(st), &out.force_tf) {
+        if let (Some(bins), Some(model)) = (&bins, &out.force_tf) {
             specs.insert(
                 1,
-                figures::force_figure(&out, &bins, model, draw.intersample),
+                figures::force_figure(&out, bins, model, draw.intersample, csi.as_ref()),
             );
         }
         draw.write(&specs)?
@@ -654,13 +674,17 @@ fn validation_run(
                 estimate: None,
                 force: None,
                 overlay: None,
+                csi: csi.clone(),
                 files: draw.sizes(&figures.0, &tables),
                 figures: figures.0.clone(),
                 figure_warnings: figures.1.clone(),
             },
         )?;
     }
-    Ok(finish(plan, out, figures, start, observer))
+    Ok(Done {
+        csi,
+        ..finish(plan, out, figures, start, observer)
+    })
 }
 
 /// A validation run done: its log work timed and reported.
@@ -679,6 +703,7 @@ fn finish(
     });
     Done {
         result,
+        csi: None,
         figures,
         figure_warnings,
         overlay: None,

@@ -23,6 +23,7 @@ use crate::report::figures::{
 };
 use crate::results::{RunResult, SensitivityResult, TfResult};
 use crate::validate::TimeStage;
+use crate::validate::csi::Csi;
 
 /// Frequency (Hz) where the paper's FRF figures stop.
 const FRF_MAX_HZ: f64 = 30.0;
@@ -84,6 +85,11 @@ pub(super) struct ForceBins {
 }
 
 impl ForceBins {
+    /// The bins as (frequency Hz, f/u N/m).
+    pub(super) fn bins(&self) -> (&[f64], &[Complex<f64>]) {
+        (&self.freq_hz, &self.h)
+    }
+
     pub(super) fn of(stage: &LogStage) -> Option<Self> {
         let ff = stage.force_frf.as_ref()?;
         let (freq_hz, h, coherence) = measured_bins(&ff.freq_hz, &ff.h, &ff.coherence, 35.0);
@@ -244,6 +250,7 @@ pub(super) fn force_figure(
     measured: &ForceBins,
     model: &TfResult,
     intersample: Intersample,
+    csi: Option<&Csi>,
 ) -> FigureSpec {
     let freq = measured.freq_hz.clone();
     let (h, coh) = (measured.h.clone(), measured.coherence.clone());
@@ -280,6 +287,58 @@ pub(super) fn force_figure(
         log_frequency: false,
         mag_label: "Force/command (dB re 1 N/m)".into(),
     };
+    let mut fig = fig;
+    let mut notes = String::new();
+    if let Some(c) = csi {
+        // The notches marked as vertical strokes over the magnitude panel,
+        // from 10 dB under the lower notch to 10 dB over the top of the
+        // measured and modelled curves in view.
+        let level = |h: &[Complex<f64>]| {
+            fig.series[0]
+                .freq_hz
+                .iter()
+                .zip(h)
+                .filter(|(f, _)| (5.0..=35.0).contains(*f))
+                .map(|(_, h)| 20.0 * h.norm().log10())
+                .filter(|v| v.is_finite())
+                .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), v| {
+                    (lo.min(v), hi.max(v))
+                })
+        };
+        let (lo_m, hi_m) = level(&fig.series[0].h);
+        let (lo_s, hi_s) = level(&fig.series[1].h);
+        let (lo, hi) = (lo_m.min(lo_s) - 10.0, hi_m.max(hi_s) + 10.0);
+        for (notch, label, slot) in [
+            (c.notch_measured, "measured notch", 0),
+            (c.notch_model, "model notch", 1),
+        ] {
+            if let Some(n) = notch {
+                fig.series.push(BodeSeries {
+                    label: format!(
+                        "{label} {:.2} Hz, {:.0} dB deep",
+                        n.frequency_hz, n.depth_db
+                    ),
+                    freq_hz: vec![n.frequency_hz; 2],
+                    h: [lo, hi]
+                        .iter()
+                        .map(|db| Complex::new(10f64.powf(db / 20.0), 0.0))
+                        .collect(),
+                    coherence: None,
+                    trace: Trace::Reference,
+                    palette_index: Some(slot),
+                });
+            }
+        }
+        notes = format!(
+            " The notches of |f/u| are marked (Sec. 3.2.1): measured {} and modelled {}.",
+            c.notch_measured
+                .map(|n| format!("{:.2} Hz", n.frequency_hz))
+                .unwrap_or_else(|| "not found".into()),
+            c.notch_model
+                .map(|n| format!("{:.2} Hz", n.frequency_hz))
+                .unwrap_or_else(|| "not found".into()),
+        );
+    }
     FigureSpec {
         id: format!("force-{}", run.id),
         title: format!("{}: frequency response, command to force", run.id),
@@ -288,7 +347,7 @@ pub(super) fn force_figure(
             run.natural_frequency_hz
                 .map(|f| format!("; its natural frequency is {f:.1} Hz"))
                 .unwrap_or_default()
-        ),
+        ) + &notes,
         size: fig.recommended_size(),
         figure: Figure::Bode(fig),
     }

@@ -10,6 +10,7 @@
 //!
 //! Pure: signals in, typed results out.
 
+pub mod csi;
 pub mod metrics;
 pub mod timedomain;
 
