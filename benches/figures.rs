@@ -124,6 +124,7 @@ fn campaign() -> Vec<(Figure, (u32, u32))> {
                     coherence: Some(coh),
                     trace: Trace::Measured,
                     palette_index: None,
+                    band: None,
                 },
                 BodeSeries {
                     label: "Identified model".into(),
@@ -132,6 +133,7 @@ fn campaign() -> Vec<(Figure, (u32, u32))> {
                     coherence: None,
                     trace: Trace::Model,
                     palette_index: None,
+                    band: None,
                 },
             ],
             freq_range_hz: (0.0, 30.0),
@@ -154,6 +156,7 @@ fn campaign() -> Vec<(Figure, (u32, u32))> {
                 coherence: None,
                 trace,
                 palette_index: Some(k),
+                band: None,
             });
         }
     }
@@ -197,6 +200,7 @@ fn campaign() -> Vec<(Figure, (u32, u32))> {
                         coherence: None,
                         trace: Trace::Measured,
                         palette_index: None,
+                        band: None,
                     },
                     BodeSeries {
                         label: "Simulated".into(),
@@ -205,6 +209,7 @@ fn campaign() -> Vec<(Figure, (u32, u32))> {
                         coherence: None,
                         trace: Trace::Model,
                         palette_index: None,
+                        band: None,
                     },
                 ],
                 freq_range_hz: (5.0, 35.0),

@@ -12,14 +12,15 @@ use std::sync::Arc;
 use nalgebra::Complex;
 
 use super::acquire::LogStage;
+use crate::fit::band::response_std;
 use crate::fit::{Intersample, hold_response};
 use crate::frf::Estimator;
 use crate::lti::TransferFunction;
 use crate::manifest::Role;
 use crate::report::FigureSpec;
 use crate::report::figures::{
-    BodeFigure, BodeSeries, Figure, LinesFigure, PanelsFigure, TimePanel, TimeSeries, Trace,
-    XySeries, decimate_minmax,
+    BodeBand, BodeFigure, BodeSeries, Figure, LinesFigure, PanelsFigure, TimePanel, TimeSeries,
+    Trace, XySeries, decimate_minmax,
 };
 use crate::results::{RunResult, SensitivityResult, TfResult};
 use crate::validate::TimeStage;
@@ -150,6 +151,8 @@ struct RunFrf {
     h: Vec<Complex<f64>>,
     coherence: Vec<f64>,
     model: Option<(Vec<Complex<f64>>, &'static str)>,
+    /// The fitted model's +-2 std band (identification runs).
+    band: Option<BodeBand>,
 }
 
 impl RunFrf {
@@ -175,12 +178,21 @@ impl RunFrf {
             }),
             _ => None,
         };
+        // The fitted model's uncertainty, propagated from its covariance.
+        let band = stage.fit.as_ref().map(|fit| {
+            let sd = response_std(fit, &freq_hz);
+            BodeBand {
+                magnitude_db: sd.magnitude_db,
+                phase_rad: sd.phase_rad,
+            }
+        });
         Self {
             f_max,
             freq_hz,
             h,
             coherence,
             model,
+            band,
         }
     }
 }
@@ -195,15 +207,20 @@ fn frf_figure(run: &RunResult, stage: &LogStage, frf: &RunFrf) -> FigureSpec {
         coherence: Some(frf.coherence.clone()),
         trace: Trace::Measured,
         palette_index: Some(0),
+        band: None,
     }];
     if let Some((hm, label)) = &frf.model {
         series.push(BodeSeries {
-            label: label.to_string(),
+            label: match frf.band {
+                Some(_) => format!("{label} (+-2 std shaded)"),
+                None => label.to_string(),
+            },
             freq_hz: frf.freq_hz.clone(),
             h: hm.clone(),
             coherence: None,
             trace: Trace::Model,
             palette_index: Some(1),
+            band: frf.band.clone(),
         });
     }
     let bode = BodeFigure {
@@ -270,6 +287,7 @@ pub(super) fn force_figure(
                 coherence: Some(coh),
                 trace: Trace::Measured,
                 palette_index: Some(0),
+                band: None,
             },
             BodeSeries {
                 label: "Simulated (Eq. 45)".into(),
@@ -278,6 +296,7 @@ pub(super) fn force_figure(
                 coherence: None,
                 trace: Trace::Model,
                 palette_index: Some(1),
+                band: None,
             },
         ],
         freq_range_hz: (5.0, 35.0),
@@ -326,6 +345,7 @@ pub(super) fn force_figure(
                     coherence: None,
                     trace: Trace::Reference,
                     palette_index: Some(slot),
+                    band: None,
                 });
             }
         }
@@ -521,6 +541,7 @@ fn overlay_figure(runs: &[OverlayRun]) -> FigureSpec {
             coherence: None,
             trace: Trace::Measured,
             palette_index: Some(k),
+            band: None,
         });
         series.push(BodeSeries {
             label: format!("{} (identified)", r.id),
@@ -529,6 +550,7 @@ fn overlay_figure(runs: &[OverlayRun]) -> FigureSpec {
             coherence: None,
             trace: Trace::Model,
             palette_index: Some(k),
+            band: None,
         });
     }
     let fig = BodeFigure {

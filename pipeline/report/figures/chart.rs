@@ -181,6 +181,47 @@ impl<'a> RawCurve<'a> {
     }
 }
 
+/// A shaded band between two curves over x (an uncertainty band), drawn
+/// under the panel's curves in a light tint of `rgb`.
+#[derive(Clone, Debug)]
+pub(crate) struct RawBand<'a> {
+    x: &'a [f64],
+    lo: Vec<f64>,
+    hi: Vec<f64>,
+    rgb: (u8, u8, u8),
+}
+
+impl<'a> RawBand<'a> {
+    pub(crate) fn new(x: &'a [f64], lo: Vec<f64>, hi: Vec<f64>, rgb: (u8, u8, u8)) -> Self {
+        RawBand { x, lo, hi, rgb }
+    }
+}
+
+/// A band's opacity: the curves stay legible through it.
+const BAND_ALPHA: f64 = 0.25;
+/// At most this many points along a band's edges (it is smooth: a model's
+/// uncertainty), so that its SVG path stays small.
+const BAND_POINTS: usize = 400;
+
+/// The band's outline in data coordinates, inside the x range and clamped
+/// to the y range: its upper edge forward, its lower edge back.
+fn band_outline(b: &RawBand<'_>, (x0, x1, y0, y1): (f64, f64, f64, f64)) -> Vec<(f64, f64)> {
+    let keep: Vec<usize> = (0..b.x.len().min(b.lo.len()).min(b.hi.len()))
+        .filter(|&i| (x0..=x1).contains(&b.x[i]) && b.lo[i].is_finite() && b.hi[i].is_finite())
+        .collect();
+    let stride = keep.len().div_ceil(BAND_POINTS).max(1);
+    let mut picked: Vec<usize> = keep.iter().copied().step_by(stride).collect();
+    if let (Some(&last), Some(&end)) = (keep.last(), picked.last())
+        && last != end
+    {
+        picked.push(last);
+    }
+    let clamp = |v: f64| v.clamp(y0, y1);
+    let upper = picked.iter().map(|&i| (b.x[i], clamp(b.hi[i])));
+    let lower = picked.iter().rev().map(|&i| (b.x[i], clamp(b.lo[i])));
+    upper.chain(lower).collect()
+}
+
 /// One chart of a sheet. The y range is fixed, or (`y_auto`) chosen from
 /// the data inside the x range once the plot height is known; the curves are
 /// clipped and decimated once the plot width is known.
@@ -191,6 +232,9 @@ pub(crate) struct Panel<'a> {
     pub y: Axis,
     pub y_auto: bool,
     pub raw: Vec<RawCurve<'a>>,
+    /// Shaded bands, under the curves; they do not widen an automatic y
+    /// range.
+    pub bands: Vec<RawBand<'a>>,
     pub zero_line: bool,
     curves: Vec<Curve>,
 }
@@ -209,6 +253,7 @@ impl<'a> Panel<'a> {
             y,
             y_auto,
             raw,
+            bands: Vec::new(),
             zero_line: false,
             curves: Vec::new(),
         }
@@ -1004,6 +1049,16 @@ fn draw_panel(area: &Area<'_>, p: &Panel<'_>, m: &Metrics, y_area: i32) -> Resul
     mesh.draw()?;
 
     let (x0, x1, y0, y1) = (p.x.lo, p.x.hi, p.y.lo, p.y.hi);
+    for b in &p.bands {
+        let outline = band_outline(b, (x0, x1, y0, y1));
+        if outline.len() >= 3 {
+            let (r, g, bl) = b.rgb;
+            chart.draw_series(std::iter::once(Polygon::new(
+                outline,
+                RGBColor(r, g, bl).mix(BAND_ALPHA).filled(),
+            )))?;
+        }
+    }
     for c in &p.curves {
         for run in &c.runs {
             if run.len() == 1 {

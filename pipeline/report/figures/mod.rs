@@ -32,7 +32,7 @@ use plotters::prelude::IntoDrawingArea;
 use rayon::prelude::*;
 
 use canvas::Recorder;
-use chart::{Arrangement, Axis, Dash, Metrics, PALETTE, Panel, RawCurve, Sheet, Style};
+use chart::{Arrangement, Axis, Dash, Metrics, PALETTE, Panel, RawBand, RawCurve, Sheet, Style};
 
 pub use decimate::decimate_minmax;
 
@@ -87,6 +87,17 @@ pub struct BodeSeries {
     /// series' position in the figure. Give a run's measured and model
     /// series the same slot to pair them by colour.
     pub palette_index: Option<usize>,
+    /// An uncertainty band: +-2 of these standard deviations about the
+    /// series, shaded in its colour.
+    pub band: Option<BodeBand>,
+}
+
+/// Standard deviations of a series' magnitude (dB) and phase (rad), at its
+/// frequencies.
+#[derive(Clone, Debug, PartialEq)]
+pub struct BodeBand {
+    pub magnitude_db: Vec<f64>,
+    pub phase_rad: Vec<f64>,
 }
 
 /// Magnitude (dB), optionally phase (rad) and coherence panels, stacked over
@@ -350,22 +361,37 @@ fn render_bode(
         fig.mag_label.as_str()
     };
     let (m0, m1) = fig.mag_range_db.unwrap_or((0.0, 1.0));
-    let mag_panel = Panel::new(
+    let mut mag_panel = Panel::new(
         None,
         x_axis(0),
         Axis::new(m0, m1, false, mag_label, true),
         fig.mag_range_db.is_none(),
         raw_curves(&fig.series, &mag, &styles),
     );
+    // +-2 std about each series that has a band.
+    let bands = |values: &[Vec<f64>], std_of: &dyn Fn(&BodeBand) -> &[f64]| {
+        fig.series
+            .iter()
+            .zip(values)
+            .zip(&styles)
+            .filter_map(|((s, v), st)| {
+                let sd = std_of(s.band.as_ref()?);
+                let at = |sign: f64| v.iter().zip(sd).map(|(v, d)| v + sign * 2.0 * d).collect();
+                Some(RawBand::new(&s.freq_hz, at(-1.0), at(1.0), st.rgb))
+            })
+            .collect::<Vec<_>>()
+    };
+    mag_panel.bands = bands(&mag, &|b| &b.magnitude_db);
     let mut stack = vec![(mag_panel, if show_coh { 1.0 } else { 1.2 })];
     if show_phase {
-        let p = Panel::new(
+        let mut p = Panel::new(
             None,
             x_axis(1),
             Axis::new(0.0, 1.0, false, "Phase (rad)", true),
             true,
             raw_curves(&fig.series, &phase, &styles),
         );
+        p.bands = bands(&phase, &|b| &b.phase_rad);
         stack.push((p, 1.0));
     }
     if show_coh {

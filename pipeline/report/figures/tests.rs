@@ -34,6 +34,7 @@ fn bode_fig(title: &str) -> BodeFigure {
                 coherence: Some(coh),
                 trace: Trace::Measured,
                 palette_index: None,
+                band: None,
             },
             BodeSeries {
                 label: "Identified model".into(),
@@ -42,6 +43,7 @@ fn bode_fig(title: &str) -> BodeFigure {
                 coherence: None,
                 trace: Trace::Model,
                 palette_index: None,
+                band: None,
             },
         ],
         freq_range_hz: (0.0, 30.0),
@@ -411,6 +413,7 @@ fn magnitude_lands_where_the_axis_says_and_is_clipped_to_the_plot() {
         coherence: None,
         trace,
         palette_index: None,
+        band: None,
     };
     let fig = BodeFigure {
         title: "Placement".into(),
@@ -857,4 +860,44 @@ fn png_and_svg_are_the_same_picture() {
         assert!(either > 5000, "only {either} dark pixels");
         assert!(overlap > 0.995, "ink overlap {overlap}");
     }
+}
+
+/// A series' uncertainty band is shaded in a quarter-strength tint of its
+/// colour under the curves, in both panels, in the PNG and the SVG; without
+/// a band there is no such tint.
+#[test]
+fn a_band_is_shaded_in_a_tint_of_its_series() {
+    let plain = bode_fig("band");
+    let mut banded = plain.clone();
+    let n = banded.series[1].freq_hz.len();
+    banded.series[1].band = Some(BodeBand {
+        magnitude_db: vec![1.5; n],
+        phase_rad: vec![0.1; n],
+    });
+    // Series 1 takes palette slot 1, vermillion (213, 94, 0); a quarter of
+    // it over white is (244, 215, 191).
+    let tint = |png: &[u8]| {
+        let (_, _, rgb) = decode_png(png);
+        rgb.chunks(3)
+            .filter(|p| {
+                (p[0] as i32 - 244).abs() <= 3
+                    && (p[1] as i32 - 215).abs() <= 3
+                    && (p[2] as i32 - 191).abs() <= 3
+            })
+            .count()
+    };
+    let size = (1200, 900);
+    let a = render_bode(&plain, size).unwrap();
+    let b = render_bode(&banded, size).unwrap();
+    // Without a band only the anti-aliased edges of the dashed line come
+    // near that tint.
+    assert!(tint(&a.png) < 500, "{}", tint(&a.png));
+    // Two bands of +-2 std, each tens of pixels tall over ~1000 px wide.
+    assert!(tint(&b.png) > 20_000, "{}", tint(&b.png));
+    assert_eq!(
+        b.svg.matches("fill-opacity=\"0.25\"").count(),
+        2,
+        "one band a panel"
+    );
+    assert!(!a.svg.contains("fill-opacity=\"0.25\""));
 }
