@@ -20,8 +20,9 @@
 //!    that reads data files), `frf`, `fit`, `identify` (Eqs. 18-20),
 //!    `validate` (Eqs. 47-48), `sensitivity`, `simulate`, `drift` (the rig's
 //!    history and its alarm rule). Within this layer
-//!    two uses run one way only: `sensitivity` propagates through
-//!    `identify`'s algebra, and `validate` drives models with `simulate`'s
+//!    three uses run one way only: `sensitivity` propagates through
+//!    `identify`'s algebra and predicts planned runs' covariance with
+//!    `fit`'s Jacobian, and `validate` drives models with `simulate`'s
 //!    exact discretisation and integrators.
 //! 7. `model`: the plant of Eq. 10 and its canonical form (Eqs. 34-35).
 //! 8. `lti`: transfer functions and state spaces.

@@ -32,7 +32,11 @@ const LAYERS: &[&[&str]] = &[
 ];
 
 /// Uses inside one layer that run one way (from, to).
-const WITHIN_LAYER: &[(&str, &str)] = &[("sensitivity", "identify"), ("validate", "simulate")];
+const WITHIN_LAYER: &[(&str, &str)] = &[
+    ("sensitivity", "identify"),
+    ("sensitivity", "fit"),
+    ("validate", "simulate"),
+];
 
 fn layer_of(module: &str) -> Option<usize> {
     LAYERS.iter().position(|l| l.contains(&module))

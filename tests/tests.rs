@@ -18,6 +18,7 @@ mod mts;
 mod paper;
 mod run_table;
 mod schemas;
+mod sensitivity;
 mod shards;
 mod simulate;
 mod slurm;

@@ -480,6 +480,41 @@ pub fn covariance(jac: &DMatrix<f64>, scale: f64) -> Result<DMatrix<f64>, RankDe
     Ok(cov)
 }
 
+/// The covariance a fit of `input`'s bins would state for a model whose
+/// parameters are `params` (laid out as [`TfFit::params`]), were the data
+/// that model plus noise of `input.variance`: (J' W J)^-1 at `params`, the
+/// fit's own Jacobian and weights, without the scaling by the reduced chi2
+/// (which is 1 in expectation when the variances are honest). `input.h`
+/// only has to be finite. For planning: how precisely a run that has not
+/// been made would be fitted.
+pub fn predicted_covariance(
+    input: &FitInput,
+    opts: &FitOptions,
+    params: &[f64],
+) -> Result<DMatrix<f64>, FitError> {
+    let prep = prepare(input, opts)?;
+    let shape = prep.problem.shape;
+    let p = shape.n_params();
+    if params.len() != p {
+        return Err(FitError::InvalidOption {
+            option: "params",
+            reason: format!(
+                "needs {p} values ({}), got {}",
+                prep.names.join(", "),
+                params.len()
+            ),
+        });
+    }
+    let theta = prep.scaling.to_scaled(&shape, params);
+    let jac = prep.problem.jacobian_matrix(&theta);
+    let cov_scaled = covariance(&jac, 1.0)
+        .map_err(|e| not_identifiable(&prep, e, "Jacobian at the planned model (J^T W J)"))?;
+    let factors = prep.scaling.factors(&shape);
+    Ok(DMatrix::from_fn(p, p, |i, j| {
+        cov_scaled[(i, j)] * factors[i] * factors[j]
+    }))
+}
+
 /// Levenberg-Marquardt from `start` (scaled), then the covariance and report.
 fn refine(prep: &Prepared, opts: &FitOptions, start: Vec<f64>) -> Result<TfFit, FitError> {
     let problem = &prep.problem;

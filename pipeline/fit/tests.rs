@@ -276,6 +276,20 @@ fn standard_deviations_are_honest_in_monte_carlo() {
             .sqrt();
         let reported = stds[k].iter().sum::<f64>() / reps as f64;
         assert_relative_eq!(reported, empirical, max_relative = 0.15);
+        // The covariance predicted for this plan before any data (the
+        // clean response at the truth, the same variances) is that spread
+        // too: what the stiffness sensitivity relies on.
+        let planned = predicted_covariance(
+            &FitInput {
+                freq_hz: &freq,
+                h: &clean,
+                variance: &variance,
+            },
+            &opts,
+            &truth,
+        )
+        .unwrap();
+        assert_relative_eq!(planned[(k, k)].sqrt(), empirical, max_relative = 0.15);
     }
 }
 

@@ -24,7 +24,7 @@ use std::time::Instant;
 
 use rayon::prelude::*;
 
-use super::acquire::{AcquireError, Acquired, LogStage, acquire_with};
+use super::acquire::{self, AcquireError, Acquired, FitData, LogStage, acquire_with};
 use super::cache::{self, Cache, Probe};
 use super::compare::compare;
 use super::figures::{self, ForceBins, OverlayRun};
@@ -40,6 +40,7 @@ use crate::results::{
     CampaignSummary, CcfResult, ComplexValue, FitSummary, LogInfo, RESULTS_SCHEMA_VERSION, Results,
     RunResult, SensitivityResult, Status, TfResult, TfSource,
 };
+use crate::sensitivity::{CoefficientNoise, NoiseProfile};
 use crate::simulate::specimen::SpecimenModel;
 use crate::validate::csi::Csi;
 use crate::validate::{self, Record, ValidateError, ValidationMetrics};
@@ -137,6 +138,8 @@ pub(super) fn analyse_with(
 
     // What the manifest found (an unused log matched by the run table's
     // glob, say), then what the analysis finds.
+    // The first no-specimen run's noise, in manifest order.
+    let noise = first.iter().find_map(|f| f.noise.clone());
     let mut warnings = campaign.warnings.clone();
     let rig = rig::establish(campaign, first.iter().map(|f| &f.rig_input), &mut warnings)
         .map_err(Arc::new);
@@ -200,7 +203,8 @@ pub(super) fn analyse_with(
         warnings,
         manifest: campaign.manifest.clone(),
     };
-    results.sensitivity = rig_params.and_then(|rig| sensitivity(campaign, &rig, &results));
+    results.sensitivity =
+        rig_params.and_then(|rig| sensitivity(campaign, &rig, &results, noise.as_ref()));
     results.comparisons = compare(campaign, &results);
     let specs = figures::campaign_figures(&overlay, results.sensitivity.as_ref());
     let (campaign_figures, figure_warnings) = draw.write(&specs)?;
@@ -317,6 +321,9 @@ struct Stored {
     /// A validation run's control-structure interaction.
     #[serde(default)]
     csi: Option<Csi>,
+    /// A no-specimen run's FRF noise.
+    #[serde(default)]
+    noise: Option<NoiseProfile>,
     figures: Vec<PageFigure>,
     figure_warnings: Vec<String>,
     /// The figure and table files with their sizes, to tell they are still
@@ -334,6 +341,8 @@ struct FirstPass {
     acquired: bool,
     force: Option<ForceBins>,
     overlay: Option<OverlayRun>,
+    /// A no-specimen run's FRF noise, for the stiffness sensitivity.
+    noise: Option<NoiseProfile>,
     figures: Vec<PageFigure>,
     figure_warnings: Vec<String>,
     seconds: f64,
@@ -418,6 +427,7 @@ fn first_pass(
         acquired: false,
         force: None,
         overlay: None,
+        noise: None,
         figures: Vec::new(),
         figure_warnings: Vec::new(),
         seconds: 0.0,
@@ -446,7 +456,7 @@ fn first_pass(
         };
         pass.result = Some(s.result);
         pass.acquired = true;
-        (pass.force, pass.overlay) = (s.force, s.overlay);
+        (pass.force, pass.overlay, pass.noise) = (s.force, s.overlay, s.noise);
         (pass.figures, pass.figure_warnings) = (s.figures, s.figure_warnings);
         pass.cached = true;
         return Ok(pass);
@@ -472,6 +482,9 @@ fn first_pass(
             out = result;
             if let Some(st) = &stage {
                 pass.force = ForceBins::of(st);
+                if plan.role == Role::NoSpecimen {
+                    pass.noise = noise_profile(plan, st);
+                }
                 if draw.enabled() {
                     let (specs, overlay) =
                         figures::log_figures(&out, st, time.as_ref(), draw.intersample);
@@ -489,6 +502,7 @@ fn first_pass(
                         force: pass.force.clone(),
                         overlay: pass.overlay.clone(),
                         csi: None,
+                        noise: pass.noise.clone(),
                         files: draw.sizes(&pass.figures, &tables),
                         figures: pass.figures.clone(),
                         figure_warnings: pass.figure_warnings.clone(),
@@ -543,6 +557,20 @@ fn second_pass(
         overlay: first.overlay,
         seconds: first.seconds,
         cached: first.cached,
+    })
+}
+
+/// What run `plan`'s log says of its FRF noise: the bins its fit used and
+/// their variance.
+fn noise_profile(plan: &RunPlan, st: &LogStage) -> Option<NoiseProfile> {
+    let fit = st.fit.as_ref()?;
+    let data = FitData::of(&st.frf, &st.mask);
+    (!data.freq_hz.is_empty()).then(|| NoiseProfile {
+        run: plan.id.clone(),
+        freq_hz: data.freq_hz,
+        variance: data.variance,
+        sample_rate_hz: st.log.sample_rate_hz,
+        delay_s: fit.tf.delay_s,
     })
 }
 
@@ -675,6 +703,7 @@ fn validation_run(
                 force: None,
                 overlay: None,
                 csi: csi.clone(),
+                noise: None,
                 files: draw.sizes(&figures.0, &tables),
                 figures: figures.0.clone(),
                 figure_warnings: figures.1.clone(),
@@ -871,6 +900,7 @@ fn sensitivity(
     campaign: &Campaign,
     rig: &RigParams,
     results: &Results,
+    noise: Option<&NoiseProfile>,
 ) -> Option<SensitivityResult> {
     let springs: Vec<f64> = campaign
         .runs
@@ -880,6 +910,33 @@ fn sensitivity(
             _ => None,
         })
         .collect();
+    let a2 = rig.a2_n_per_m;
+    let range = (0.01 * a2, 10.0 * a2);
+    // The campaign's own noise when a no-specimen log measured it: its
+    // FRF variance through the fit's Jacobian (Sec. 2.3's analysis with
+    // the lab's noise, not an assumed one).
+    if let Some(profile) = noise {
+        let opts = acquire::fit_options(&campaign.identification, profile.sample_rate_hz);
+        let measured = CoefficientNoise::Measured {
+            profile,
+            opts: &opts,
+        };
+        if let Ok(sweep) = crate::sensitivity::stiffness_sweep(rig, range, 61, measured) {
+            let (f0, f1) = (
+                profile.freq_hz.first().copied().unwrap_or(f64::NAN),
+                profile.freq_hz.last().copied().unwrap_or(f64::NAN),
+            );
+            return Some(SensitivityResult {
+                basis: format!(
+                    "the FRF noise run {} measured ({} bins, {f0:.3}-{f1:.2} Hz) through the fit's Jacobian, for runs with the same excitation and sensors",
+                    profile.run,
+                    profile.freq_hz.len()
+                ),
+                sweep,
+                springs_n_per_m: springs,
+            });
+        }
+    }
     let mut rel: Vec<f64> = results
         .runs
         .iter()
@@ -892,15 +949,16 @@ fn sensitivity(
     let (eps, basis) = match rel.get(rel.len() / 2) {
         Some(&m) if !rel.is_empty() => (
             m,
-            format!("median relative std of the campaign's fitted coefficients ({m:.2e})"),
+            format!("median relative std of the campaign's fitted coefficients ({m:.2e}), each assumed independent"),
         ),
         _ => (
             1e-3,
             "assumed 0.1 % relative std per coefficient (the campaign's models carry no uncertainty)".to_string(),
         ),
     };
-    let a2 = rig.a2_n_per_m;
-    let sweep = crate::sensitivity::stiffness_sweep(rig, (0.01 * a2, 10.0 * a2), 61, eps).ok()?;
+    let sweep =
+        crate::sensitivity::stiffness_sweep(rig, range, 61, CoefficientNoise::Relative(eps))
+            .ok()?;
     Some(SensitivityResult {
         basis,
         sweep,
