@@ -123,6 +123,9 @@ pub struct SensitivityResult {
     /// Where the assumed coefficient precision comes from.
     pub basis: String,
     pub sweep: crate::sensitivity::StiffnessSensitivity,
+    /// Where each parameter is within the manifest's target, and the spring
+    /// tests a +-2 % a2 and a3 need.
+    pub recommendation: crate::sensitivity::Recommendation,
     /// The campaign's spring stiffnesses (N/m).
     pub springs_n_per_m: Vec<f64>,
 }

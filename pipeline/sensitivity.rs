@@ -194,10 +194,306 @@ fn coefficient_cov(
     }
 }
 
+/// What a lab can act on: where each parameter's predicted relative std
+/// is within the target, and how many spring tests a precision needs.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+pub struct Recommendation {
+    /// The relative std aimed at (fraction).
+    pub target_rel_std: f64,
+    /// Per parameter, the stiffnesses of the sweep where it is within the
+    /// target.
+    pub ranges: Vec<StiffnessRange>,
+    /// Spring tests for +-2 % on a2 and a3 at 95 % confidence.
+    pub spring_tests: Vec<SpringTests>,
+    /// A paragraph for the lab engineer.
+    pub summary: String,
+}
+
+/// Where one parameter meets the target: from `low` to `high` (N/m), each
+/// null where the sweep's own end is reached (the soft end then meets the
+/// target already; the stiff end is the sweep's top, beyond which the
+/// massless-spring model is not trusted anyway).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+pub struct StiffnessRange {
+    pub parameter: String,
+    /// False when no stiffness of the sweep meets the target.
+    pub reachable: bool,
+    pub low_n_per_m: Option<f64>,
+    pub high_n_per_m: Option<f64>,
+}
+
+/// How many spring tests, averaged as the paper does, give a parameter to
+/// `half_width_rel` at 95 % confidence: n = (1.96 s / half width)^2 with s
+/// the relative std of one test.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+pub struct SpringTests {
+    pub parameter: String,
+    pub half_width_rel: f64,
+    /// The stiffness the tests are planned at: the geometric mean of the
+    /// campaign's springs.
+    pub stiffness_n_per_m: f64,
+    /// One test's relative std: the larger of the predicted one and the
+    /// scatter between the campaign's springs.
+    pub rel_std_per_test: f64,
+    /// What set `rel_std_per_test`: "predicted" or "scatter between springs".
+    pub basis: String,
+    pub tests: u64,
+}
+
+/// Two-sided 95 % normal quantile.
+const Z95: f64 = 1.959_963_984_540_054;
+/// The precision the paper's users ask of a2 and a3.
+const SPRING_TEST_HALF_WIDTH: f64 = 0.02;
+
+/// The recommendation from a sweep: `springs` the campaign's spring
+/// stiffnesses, `scatter` the relative sample std of the per-spring a2
+/// and a3 when there are two springs or more.
+pub fn recommend(
+    sweep: &StiffnessSensitivity,
+    target_rel_std: f64,
+    springs: &[f64],
+    scatter: Option<[f64; 2]>,
+) -> Recommendation {
+    let ks = &sweep.stiffness_n_per_m;
+    let series: [(&str, &Vec<f64>); 4] = [
+        ("beta1", &sweep.rel_std_beta1),
+        ("a1b0", &sweep.rel_std_a1b0),
+        ("a2", &sweep.rel_std_a2),
+        ("a3", &sweep.rel_std_a3),
+    ];
+    let ranges: Vec<StiffnessRange> = series
+        .iter()
+        .map(|(name, rel)| within(name, ks, rel, target_rel_std))
+        .collect();
+    let k_plan = if springs.is_empty() {
+        None
+    } else {
+        Some((springs.iter().map(|k| k.ln()).sum::<f64>() / springs.len() as f64).exp())
+    };
+    let spring_tests: Vec<SpringTests> = match k_plan {
+        Some(k) => [("a2", &sweep.rel_std_a2, 0), ("a3", &sweep.rel_std_a3, 1)]
+            .iter()
+            .map(|(name, rel, j)| {
+                let predicted = log_interp(ks, rel, k);
+                let seen = scatter.map(|s| s[*j]).unwrap_or(0.0);
+                let (s, basis) = if seen > predicted {
+                    (seen, "scatter between springs")
+                } else {
+                    (predicted, "predicted")
+                };
+                SpringTests {
+                    parameter: name.to_string(),
+                    half_width_rel: SPRING_TEST_HALF_WIDTH,
+                    stiffness_n_per_m: k,
+                    rel_std_per_test: s,
+                    basis: basis.into(),
+                    tests: ((Z95 * s / SPRING_TEST_HALF_WIDTH).powi(2).ceil() as u64).max(1),
+                }
+            })
+            .collect(),
+        None => Vec::new(),
+    };
+    let summary = summary(
+        &ranges,
+        &spring_tests,
+        target_rel_std,
+        springs,
+        ks,
+        sweep.coefficient_rel_std,
+    );
+    Recommendation {
+        target_rel_std,
+        ranges,
+        spring_tests,
+        summary,
+    }
+}
+
+/// The part of the sweep where `rel <= target`, its ends interpolated in
+/// log k and log rel between the grid points that straddle them.
+fn within(name: &str, ks: &[f64], rel: &[f64], target: f64) -> StiffnessRange {
+    let ok: Vec<bool> = rel.iter().map(|r| *r <= target).collect();
+    let Some(first) = ok.iter().position(|o| *o) else {
+        return StiffnessRange {
+            parameter: name.into(),
+            reachable: false,
+            low_n_per_m: None,
+            high_n_per_m: None,
+        };
+    };
+    let last = ok.iter().rposition(|o| *o).unwrap_or(first);
+    let cross = |i: usize, j: usize| {
+        // rel crosses target between grid points i and j.
+        let t = (target / rel[i]).ln() / (rel[j] / rel[i]).ln();
+        (ks[i].ln() + t * (ks[j] / ks[i]).ln()).exp()
+    };
+    StiffnessRange {
+        parameter: name.into(),
+        reachable: true,
+        low_n_per_m: (first > 0).then(|| cross(first - 1, first)),
+        high_n_per_m: (last + 1 < ks.len()).then(|| cross(last, last + 1)),
+    }
+}
+
+/// `ys` at `x` by linear interpolation in log x and log y (clamped to the
+/// grid's ends).
+fn log_interp(xs: &[f64], ys: &[f64], x: f64) -> f64 {
+    if x <= xs[0] {
+        return ys[0];
+    }
+    let Some(i) = xs.windows(2).position(|w| x <= w[1]) else {
+        return ys[ys.len() - 1];
+    };
+    let t = (x / xs[i]).ln() / (xs[i + 1] / xs[i]).ln();
+    (ys[i].ln() + t * (ys[i + 1] / ys[i]).ln()).exp()
+}
+
+fn summary(
+    ranges: &[StiffnessRange],
+    tests: &[SpringTests],
+    target: f64,
+    springs: &[f64],
+    ks: &[f64],
+    assumed: Option<f64>,
+) -> String {
+    let kn = |k: f64| format!("{:.1} kN/m", k / 1e3);
+    let mut out = String::new();
+    let noise = match assumed {
+        None => "this campaign's measured noise".to_string(),
+        Some(e) => format!(
+            "an assumed {} % relative std of each fitted coefficient (no log measured the noise)",
+            100.0 * e
+        ),
+    };
+    let parts: Vec<String> = ranges
+        .iter()
+        .map(|r| match (r.reachable, r.low_n_per_m, r.high_n_per_m) {
+            (false, ..) => format!(
+                "{} nowhere in {}-{}",
+                r.parameter,
+                kn(ks[0]),
+                kn(ks[ks.len() - 1])
+            ),
+            (true, None, None) => format!("{} everywhere in the sweep", r.parameter),
+            (true, Some(lo), None) => format!("{} above {}", r.parameter, kn(lo)),
+            (true, None, Some(hi)) => format!("{} below {}", r.parameter, kn(hi)),
+            (true, Some(lo), Some(hi)) => format!("{} from {} to {}", r.parameter, kn(lo), kn(hi)),
+        })
+        .collect();
+    out.push_str(&format!(
+        "With this rig and {noise}, one no-specimen run and one spring give each parameter within {} % (1 std) for springs: {}.",
+        100.0 * target,
+        parts.join("; ")
+    ));
+    if !springs.is_empty() {
+        let soft: Vec<String> = springs
+            .iter()
+            .filter(|k| {
+                ranges
+                    .iter()
+                    .any(|r| !r.reachable || r.low_n_per_m.is_some_and(|lo| **k < lo))
+            })
+            .map(|k| kn(*k))
+            .collect();
+        if soft.is_empty() {
+            out.push_str(" The campaign's springs are all stiff enough.");
+        } else {
+            out.push_str(&format!(
+                " Too soft for the target: {} (soft springs amplify the fit's error about (k + a2)/k times); choose a stiffer spring or repeat it.",
+                soft.join(", ")
+            ));
+        }
+    }
+    for t in tests {
+        out.push_str(&format!(
+            " For +-{:.0} % on {} at 95 % confidence: {} spring test{} at {} (one test's relative std {:.2e}, {}).",
+            100.0 * t.half_width_rel,
+            t.parameter,
+            t.tests,
+            if t.tests == 1 { "" } else { "s" },
+            kn(t.stiffness_n_per_m),
+            t.rel_std_per_test,
+            t.basis
+        ));
+    }
+    if tests.iter().any(|t| t.basis != "predicted") {
+        out.push_str(" The springs scatter more than their noise explains: more tests average it down only if that scatter is random; check the springs' consistency first.");
+    }
+    out.push_str(" What limits the stiff end is not noise but the paper's massless, linearised spring (Eq. 14): a spring whose own mass or attachment moves within the band, or a stiffness comparable to the actuator's oil column a2, is outside the model, which this analysis cannot see.");
+    out
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
     use approx::assert_relative_eq;
+
+    /// A sweep whose relative stds fall as c/k (soft springs amplify):
+    /// log-log linear, so the target's crossing interpolates exactly to
+    /// k = c / target.
+    fn falling(c: [f64; 4]) -> StiffnessSensitivity {
+        let ks: Vec<f64> = (0..31).map(|i| 1e4 * 10f64.powf(i as f64 / 10.0)).collect();
+        let rel = |c: f64| ks.iter().map(|k| c / k).collect::<Vec<_>>();
+        StiffnessSensitivity {
+            coefficient_rel_std: None,
+            rel_std_beta1: vec![1e-4; ks.len()],
+            rel_std_a1b0: rel(c[1]),
+            rel_std_a2: rel(c[2]),
+            rel_std_a3: rel(c[3]),
+            stiffness_n_per_m: ks,
+        }
+    }
+
+    #[test]
+    fn ranges_cross_the_target_where_the_law_says() {
+        // a1b0: 2000/k <= 0.01 from k = 2e5; a2 never below 1 % (1e6/k at
+        // k <= 1e7 is >= 0.1); a3 within it everywhere (50/k <= 0.005).
+        let r = recommend(&falling([0.0, 2000.0, 1e6, 50.0]), 0.01, &[1e5], None);
+        let by = |p: &str| r.ranges.iter().find(|x| x.parameter == p).unwrap().clone();
+        assert_relative_eq!(by("a1b0").low_n_per_m.unwrap(), 2e5, max_relative = 1e-9);
+        assert_eq!(by("a1b0").high_n_per_m, None);
+        assert!(!by("a2").reachable);
+        assert!(by("a3").reachable && by("a3").low_n_per_m.is_none());
+        assert!(r.summary.contains("a1b0 above 200.0 kN/m"), "{}", r.summary);
+        assert!(
+            r.summary.contains("Too soft for the target: 100.0 kN/m"),
+            "{}",
+            r.summary
+        );
+        assert!(r.summary.contains("massless"), "{}", r.summary);
+    }
+
+    /// n = ceil((1.96 s / 0.02)^2): s = 1 % needs 1 test (0.96), s = 5 %
+    /// needs 25 (24.01); the scatter between springs counts when larger.
+    #[test]
+    fn spring_tests_follow_the_normal_law() {
+        // At k = 1e5: a2's predicted rel std 1000/1e5 = 1 %, a3's 5000/1e5 = 5 %.
+        let r = recommend(&falling([0.0, 1.0, 1000.0, 5000.0]), 0.01, &[1e5], None);
+        assert_eq!(r.spring_tests[0].tests, 1);
+        assert_eq!(r.spring_tests[1].tests, 25);
+        assert_eq!(r.spring_tests[1].basis, "predicted");
+        // Two springs around 1e5 (geometric mean 1e5) that scatter 10 % in a2.
+        let r = recommend(
+            &falling([0.0, 1.0, 1000.0, 5000.0]),
+            0.01,
+            &[5e4, 2e5],
+            Some([0.1, 0.01]),
+        );
+        assert_relative_eq!(
+            r.spring_tests[0].stiffness_n_per_m,
+            1e5,
+            max_relative = 1e-12
+        );
+        assert_eq!(r.spring_tests[0].basis, "scatter between springs");
+        // (1.96 * 0.1 / 0.02)^2 = 96.04.
+        assert_eq!(r.spring_tests[0].tests, 97);
+        assert_eq!(r.spring_tests[1].tests, 25);
+        assert!(
+            r.summary.contains("check the springs' consistency"),
+            "{}",
+            r.summary
+        );
+    }
 
     #[test]
     fn a1b0_error_follows_the_closed_form_conditioning() {

@@ -399,3 +399,30 @@ fn a_history_window_too_short_and_a_threshold_not_positive() {
     }
     assert!(!c.wrote_output);
 }
+
+#[test]
+fn a_bad_sensitivity_range_too_few_points_and_a_target_not_positive() {
+    let text = format!(
+        "{BASE}\n[sensitivity]\nstiffness_range_n_per_m = [0.0, 1e6]\npoints = 1\ntarget_rel_std = -0.01\n"
+    );
+    let c = check(&text);
+    assert_eq!(c.code, 2);
+    for f in [
+        "sensitivity.stiffness_range_n_per_m: must be two stiffnesses 0 < low < high in N/m (got [0, 1000000])",
+        "sensitivity.points: must be at least 2 (a sweep needs two stiffnesses; got 1)",
+        "sensitivity.target_rel_std: must be a positive fraction, 0.01 for 1 % (got -0.01)",
+        "3 problems",
+    ] {
+        assert!(c.stderr.contains(f), "missing {f:?} in:\n{}", c.stderr);
+    }
+    assert!(!c.wrote_output);
+    // A range high below low is as wrong; a good section passes.
+    let c = check(&format!(
+        "{BASE}\n[sensitivity]\nstiffness_range_n_per_m = [1e6, 1e5]\n"
+    ));
+    assert!(c.stderr.contains("(got [1000000, 100000])"), "{}", c.stderr);
+    let c = check(&format!(
+        "{BASE}\n[sensitivity]\nstiffness_range_n_per_m = [1e4, 1e7]\npoints = 21\ntarget_rel_std = 0.02\n"
+    ));
+    assert_eq!(c.code, 0, "{}", c.stderr);
+}

@@ -17,7 +17,8 @@ use super::keypath::KeyPath;
 use super::problem::{ManifestError, Problem, TablePlace};
 use super::raw::{
     CampaignInfo, Channel, Channels as RawChannels, CompareMode, History, Identification, Manifest,
-    Reference, Rig, Role, Run, RunData, RunTable, SCHEMA_VERSION, manifest_schema,
+    Reference, Rig, Role, Run, RunData, RunTable, SCHEMA_VERSION, SensitivitySettings,
+    manifest_schema,
 };
 use super::table::{CheckedTable, RowKey, RunTableInfo, TableRun, check_table};
 use crate::drift::{MIN_HISTORY, Rule};
@@ -53,6 +54,17 @@ pub struct Campaign {
     pub warnings: Vec<String>,
     /// Where the rig's history is kept and when it raises an alarm.
     pub history: HistoryPlan,
+    /// The stiffness sensitivity's sweep and target.
+    pub sensitivity: SensitivityPlan,
+}
+
+/// The stiffness sensitivity's checked settings.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SensitivityPlan {
+    /// None: 0.01 to 10 times the identified a2.
+    pub range_n_per_m: Option<(f64, f64)>,
+    pub points: usize,
+    pub target_rel_std: f64,
 }
 
 /// The rig history's checked settings.
@@ -167,6 +179,7 @@ pub fn load_str(text: &str, path: &Path) -> Result<Campaign, ManifestError> {
         run_table: doc.section::<RunTable>("run_table"),
         run_table_given: doc.has("run_table"),
         history: doc.section::<History>("history"),
+        sensitivity: doc.section::<SensitivitySettings>("sensitivity"),
     };
     let base_dir = path.parent().unwrap_or(Path::new(""));
     let campaign = validate(partial, path, text.as_bytes(), base_dir, &mut doc.problems);
@@ -192,6 +205,7 @@ struct Partial {
     /// Whether the manifest has a `run_table` section, read or not.
     run_table_given: bool,
     history: Option<History>,
+    sensitivity: Option<SensitivitySettings>,
 }
 
 /// What every run's checks share.
@@ -218,6 +232,7 @@ fn validate(
 
     check_header(&partial, &mut bad);
     let history = check_history(partial.history.as_ref(), base_dir, &mut bad);
+    let sensitivity = check_sensitivity(partial.sensitivity.as_ref(), &mut bad);
     let default_channels = partial.channels.clone().unwrap_or_default();
     check_channels(&default_channels, &root.key("channels"), &mut bad);
     let ident = partial.identification.clone().unwrap_or_default();
@@ -282,6 +297,7 @@ fn validate(
         references: partial.references.into_iter().flatten().collect(),
         run_table: partial.run_table,
         history: partial.history,
+        sensitivity: partial.sensitivity,
     };
     Some(Campaign {
         file: file.to_path_buf(),
@@ -298,7 +314,49 @@ fn validate(
         run_table: table.info,
         warnings: table.warnings,
         history,
+        sensitivity,
     })
+}
+
+/// The sensitivity's settings: a range 0 < low < high, at least two
+/// points, a positive target.
+fn check_sensitivity(
+    s: Option<&SensitivitySettings>,
+    bad: &mut impl FnMut(KeyPath, String),
+) -> SensitivityPlan {
+    let s = s.cloned().unwrap_or_default();
+    let path = KeyPath::root().key("sensitivity");
+    if let Some([lo, hi]) = s.stiffness_range_n_per_m
+        && !(lo.is_finite() && hi.is_finite() && lo > 0.0 && hi > lo)
+    {
+        bad(
+            path.key("stiffness_range_n_per_m"),
+            format!("must be two stiffnesses 0 < low < high in N/m (got [{lo}, {hi}])"),
+        );
+    }
+    if s.points < 2 {
+        bad(
+            path.key("points"),
+            format!(
+                "must be at least 2 (a sweep needs two stiffnesses; got {})",
+                s.points
+            ),
+        );
+    }
+    if !(s.target_rel_std.is_finite() && s.target_rel_std > 0.0) {
+        bad(
+            path.key("target_rel_std"),
+            format!(
+                "must be a positive fraction, 0.01 for 1 % (got {})",
+                s.target_rel_std
+            ),
+        );
+    }
+    SensitivityPlan {
+        range_n_per_m: s.stiffness_range_n_per_m.map(|[lo, hi]| (lo, hi)),
+        points: s.points,
+        target_rel_std: s.target_rel_std,
+    }
 }
 
 /// The history's settings: a window the rule can use and a positive

@@ -57,6 +57,46 @@ pub struct Manifest {
     /// (defaults apply when the table is absent).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub history: Option<History>,
+    /// The stiffness sensitivity's sweep and the precision it recommends
+    /// springs for (defaults apply when the table is absent).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sensitivity: Option<SensitivitySettings>,
+}
+
+/// The stiffness sensitivity (paper Sec. 2.3): which stiffnesses to sweep
+/// and the relative standard deviation the recommendation aims at.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[schemars(deny_unknown_fields)]
+pub struct SensitivitySettings {
+    /// [low, high] in N/m, 0 < low < high; by default 0.01 to 10 times the
+    /// identified rig's a2.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub stiffness_range_n_per_m: Option<[f64; 2]>,
+    /// Stiffnesses in the sweep, log-spaced (at least 2).
+    #[serde(default = "default_points")]
+    pub points: usize,
+    /// The relative standard deviation (fraction, > 0) the recommendation
+    /// finds springs for; 0.01 is 1 %.
+    #[serde(default = "default_target_rel_std")]
+    pub target_rel_std: f64,
+}
+
+impl Default for SensitivitySettings {
+    fn default() -> Self {
+        Self {
+            stiffness_range_n_per_m: None,
+            points: default_points(),
+            target_rel_std: default_target_rel_std(),
+        }
+    }
+}
+
+fn default_points() -> usize {
+    61
+}
+
+fn default_target_rel_std() -> f64 {
+    0.01
 }
 
 /// The rig's history: every campaign adds its identified (or given) rig to

@@ -910,8 +910,18 @@ fn sensitivity(
             _ => None,
         })
         .collect();
+    let plan = &campaign.sensitivity;
     let a2 = rig.a2_n_per_m;
-    let range = (0.01 * a2, 10.0 * a2);
+    let range = plan.range_n_per_m.unwrap_or((0.01 * a2, 10.0 * a2));
+    let points = plan.points;
+    // The scatter between springs, relative, when there are two or more.
+    let scatter = results.rig.as_ref().and_then(|r| {
+        let s = r.spread.as_ref()?;
+        Some([s.a2 / r.a2.value.abs(), s.a3 / r.a3.value.abs()])
+    });
+    let recommend = |sweep: &crate::sensitivity::StiffnessSensitivity| {
+        crate::sensitivity::recommend(sweep, plan.target_rel_std, &springs, scatter)
+    };
     // The campaign's own noise when a no-specimen log measured it: its
     // FRF variance through the fit's Jacobian (Sec. 2.3's analysis with
     // the lab's noise, not an assumed one).
@@ -921,7 +931,7 @@ fn sensitivity(
             profile,
             opts: &opts,
         };
-        if let Ok(sweep) = crate::sensitivity::stiffness_sweep(rig, range, 61, measured) {
+        if let Ok(sweep) = crate::sensitivity::stiffness_sweep(rig, range, points, measured) {
             let (f0, f1) = (
                 profile.freq_hz.first().copied().unwrap_or(f64::NAN),
                 profile.freq_hz.last().copied().unwrap_or(f64::NAN),
@@ -932,6 +942,7 @@ fn sensitivity(
                     profile.run,
                     profile.freq_hz.len()
                 ),
+                recommendation: recommend(&sweep),
                 sweep,
                 springs_n_per_m: springs,
             });
@@ -957,10 +968,11 @@ fn sensitivity(
         ),
     };
     let sweep =
-        crate::sensitivity::stiffness_sweep(rig, range, 61, CoefficientNoise::Relative(eps))
+        crate::sensitivity::stiffness_sweep(rig, range, points, CoefficientNoise::Relative(eps))
             .ok()?;
     Some(SensitivityResult {
         basis,
+        recommendation: recommend(&sweep),
         sweep,
         springs_n_per_m: springs,
     })
