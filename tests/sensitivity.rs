@@ -6,6 +6,8 @@
 //! covariance, from its own noisy data, propagated through the same
 //! equations): within 5 %.
 
+use std::path::Path;
+
 use serde_json::Value;
 
 use crate::shards::campaign;
@@ -18,21 +20,25 @@ fn at(ks: &[f64], ys: &[f64], x: f64) -> f64 {
     (ys[i].ln() + t * (ys[i + 1] / ys[i]).ln()).exp()
 }
 
-#[test]
-fn the_measured_noise_predicts_the_springs_own_precision() {
-    let dir = scratch();
-    let manifest = campaign(dir.path());
-    let out = dir.path().join("out");
+/// Run `manifest` into `dir/out` without figures; its results.json.
+fn run(dir: &Path, manifest: &Path) -> Value {
+    let out = dir.join("out");
     let o = servoid_into(
-        dir.path(),
+        dir,
         "run",
-        &manifest,
+        manifest,
         &out,
         &["--figures", "none", "--quiet"],
     );
     assert_eq!(o.code, 0, "{}", o.stderr);
-    let r: Value =
-        serde_json::from_slice(&std::fs::read(out.join("results.json")).unwrap()).unwrap();
+    serde_json::from_slice(&std::fs::read(out.join("results.json")).unwrap()).unwrap()
+}
+
+#[test]
+fn the_measured_noise_predicts_the_springs_own_precision() {
+    let dir = scratch();
+    let manifest = campaign(dir.path());
+    let r = run(dir.path(), &manifest);
     let s = &r["sensitivity"];
     assert!(
         s["basis"]
@@ -109,17 +115,7 @@ fn the_measured_noise_predicts_the_springs_own_precision() {
 fn the_papers_campaign_gets_a_recommendation_a_lab_can_act_on() {
     let dir = scratch();
     let manifest = crate::util::root().join("experiments/maghareh2018/paper.toml");
-    let out = dir.path().join("out");
-    let o = servoid_into(
-        dir.path(),
-        "run",
-        &manifest,
-        &out,
-        &["--figures", "none", "--quiet"],
-    );
-    assert_eq!(o.code, 0, "{}", o.stderr);
-    let r: Value =
-        serde_json::from_slice(&std::fs::read(out.join("results.json")).unwrap()).unwrap();
+    let r = run(dir.path(), &manifest);
     let s = &r["sensitivity"];
     assert_eq!(s["sweep"]["coefficient_rel_std"], 1e-3);
     let rec = &s["recommendation"];
@@ -166,6 +162,6 @@ fn the_papers_campaign_gets_a_recommendation_a_lab_can_act_on() {
     assert_eq!(rec["spring_tests"][0]["parameter"], "a2");
     assert_eq!(tests, (1.959_964 * s_rel / 0.02).powi(2).ceil() as u64);
     assert!(tests > 100, "the paper's springs disagree: {tests}");
-    let page = std::fs::read_to_string(out.join("report.html")).unwrap();
+    let page = std::fs::read_to_string(dir.path().join("out/report.html")).unwrap();
     assert!(page.contains("id=\"recommendation-summary\""));
 }

@@ -426,17 +426,7 @@ pub fn fit(input: &FitInput, opts: &FitOptions) -> Result<TfFit, FitError> {
 /// from `start`, physical parameters laid out as [`TfFit::params`].
 pub fn fit_from(input: &FitInput, opts: &FitOptions, start: &[f64]) -> Result<TfFit, FitError> {
     let prep = prepare(input, opts)?;
-    let p = prep.problem.shape.n_params();
-    if start.len() != p {
-        return Err(FitError::InvalidOption {
-            option: "start",
-            reason: format!(
-                "needs {p} values ({}), got {}",
-                prep.names.join(", "),
-                start.len()
-            ),
-        });
-    }
+    check_param_count(&prep, "start", start)?;
     if let Some((i, v)) = start.iter().enumerate().find(|(_, v)| !v.is_finite()) {
         return Err(FitError::InvalidOption {
             option: "start",
@@ -495,16 +485,7 @@ pub fn predicted_covariance(
     let prep = prepare(input, opts)?;
     let shape = prep.problem.shape;
     let p = shape.n_params();
-    if params.len() != p {
-        return Err(FitError::InvalidOption {
-            option: "params",
-            reason: format!(
-                "needs {p} values ({}), got {}",
-                prep.names.join(", "),
-                params.len()
-            ),
-        });
-    }
+    check_param_count(&prep, "params", params)?;
     let theta = prep.scaling.to_scaled(&shape, params);
     let jac = prep.problem.jacobian_matrix(&theta);
     let cov_scaled = covariance(&jac, 1.0)
@@ -513,6 +494,26 @@ pub fn predicted_covariance(
     Ok(DMatrix::from_fn(p, p, |i, j| {
         cov_scaled[(i, j)] * factors[i] * factors[j]
     }))
+}
+
+/// `values` has one value per parameter of the prepared model.
+fn check_param_count(
+    prep: &Prepared,
+    option: &'static str,
+    values: &[f64],
+) -> Result<(), FitError> {
+    let p = prep.problem.shape.n_params();
+    if values.len() == p {
+        return Ok(());
+    }
+    Err(FitError::InvalidOption {
+        option,
+        reason: format!(
+            "needs {p} values ({}), got {}",
+            prep.names.join(", "),
+            values.len()
+        ),
+    })
 }
 
 /// Levenberg-Marquardt from `start` (scaled), then the covariance and report.
