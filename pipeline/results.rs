@@ -115,6 +115,10 @@ pub struct RigResult {
     /// chi-square across springs, leave-one-out values, likely causes);
     /// null when the rig was given.
     pub consistency: Option<crate::identify::consistency::Consistency>,
+    /// Covariance of (beta1, a1b0, a2, a3) (a1b0 at `p_gain`), first-order
+    /// propagated from the fits; null when given or without the fits'
+    /// covariances.
+    pub covariance: Option<[[f64; 4]; 4]>,
 }
 
 /// The stiffness sensitivity analysis, with where the campaign's springs sit.

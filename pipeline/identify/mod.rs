@@ -106,6 +106,9 @@ pub struct RigIdentification {
     pub per_spring: Vec<PerSpring>,
     /// Whether the springs agree within their propagated stds.
     pub consistency: consistency::Consistency,
+    /// Covariance of (beta1, a1b0, a2, a3), a1b0 at `p_gain`, by
+    /// first-order propagation; None without the runs' covariances.
+    pub covariance: Option<[[f64; 4]; 4]>,
 }
 
 impl RigIdentification {
@@ -258,6 +261,8 @@ pub fn identify_rig(
             .collect::<Vec<_>>(),
         spring_covariances(&theta, no_spec, springs, p_ref).as_ref(),
     );
+    let covariance = output_covariance(&theta, no_spec, springs, p_ref, &[0, 2, 3, 4])
+        .map(|c| std::array::from_fn(|i| std::array::from_fn(|j| c[(i, j)])));
     let est = |i: usize| Estimate {
         value: values[i],
         std: stds.as_ref().map(|s| s[i]),
@@ -287,6 +292,7 @@ pub fn identify_rig(
         a3: est(4),
         per_spring,
         consistency,
+        covariance,
     })
 }
 
@@ -356,6 +362,35 @@ fn jacobian(
     jac
 }
 
+/// The covariance of the outputs `at` of [`compute`], by first-order
+/// propagation; None without the runs' covariances.
+fn output_covariance(
+    theta: &[f64],
+    no_spec: &[TfEstimate],
+    springs: &[SpringRun],
+    p_ref: f64,
+    at: &[usize],
+) -> Option<nalgebra::DMatrix<f64>> {
+    let covs = run_covariances(no_spec, springs)?;
+    let jac = jacobian(theta, no_spec, springs, p_ref);
+    Some(propagated(&jac, &covs, at))
+}
+
+/// J C J' restricted to the outputs `at`, C block-diagonal by run.
+fn propagated(jac: &[Vec<f64>], covs: &[[[f64; 3]; 3]], at: &[usize]) -> nalgebra::DMatrix<f64> {
+    nalgebra::DMatrix::from_fn(at.len(), at.len(), |a, b| {
+        let mut c = 0.0;
+        for (r, cov) in covs.iter().enumerate() {
+            for p in 0..3 {
+                for q in 0..3 {
+                    c += jac[3 * r + p][at[a]] * cov[p][q] * jac[3 * r + q][at[b]];
+                }
+            }
+        }
+        c
+    })
+}
+
 /// The joint covariance over the springs of each of a1b0, a2 and a3 (Eq.
 /// 20), by first-order propagation: the springs share the no-specimen run,
 /// so their values are correlated. None without the runs' covariances.
@@ -369,18 +404,8 @@ fn spring_covariances(
     let jac = jacobian(theta, no_spec, springs, p_ref);
     let n = springs.len();
     Some([2, 3, 4].map(|i| {
-        let out = |j: usize| HEAD + PER_SPRING * j + i;
-        nalgebra::DMatrix::from_fn(n, n, |a, b| {
-            let mut c = 0.0;
-            for (r, cov) in covs.iter().enumerate() {
-                for p in 0..3 {
-                    for q in 0..3 {
-                        c += jac[3 * r + p][out(a)] * cov[p][q] * jac[3 * r + q][out(b)];
-                    }
-                }
-            }
-            c
-        })
+        let at: Vec<usize> = (0..n).map(|j| HEAD + PER_SPRING * j + i).collect();
+        propagated(&jac, &covs, &at)
     }))
 }
 
@@ -478,6 +503,36 @@ mod tests {
         for s in &rig.per_spring {
             assert_relative_eq!(s.a3.value, 25.0, max_relative = 1e-9);
         }
+    }
+
+    #[test]
+    fn the_rig_covariance_holds_the_stated_stds() {
+        let (no_spec, springs) = paper_inputs();
+        let with_cov = |e: &TfEstimate| TfEstimate {
+            cov: Some([
+                [1e-6 * e.tf.n0 * e.tf.n0, 0.0, 0.0],
+                [0.0, 4e-6 * e.tf.d1 * e.tf.d1, 1e-7 * e.tf.d1 * e.tf.d0],
+                [0.0, 1e-7 * e.tf.d1 * e.tf.d0, 9e-6 * e.tf.d0 * e.tf.d0],
+            ]),
+            ..e.clone()
+        };
+        let no_spec: Vec<TfEstimate> = no_spec.iter().map(with_cov).collect();
+        let springs: Vec<SpringRun> = springs
+            .iter()
+            .map(|s| SpringRun {
+                estimate: with_cov(&s.estimate),
+                ..s.clone()
+            })
+            .collect();
+        let rig = identify_rig(&no_spec, &springs).unwrap();
+        let c = rig.covariance.unwrap();
+        for (i, e) in [rig.beta1, rig.a1b0, rig.a2, rig.a3].iter().enumerate() {
+            assert_relative_eq!(c[i][i].sqrt(), e.std.unwrap(), max_relative = 1e-12);
+        }
+        // Symmetric, and beta1 (from the no-specimen run alone) correlates
+        // with a3 through R2 = beta1 k / (d0/n0 - 1).
+        assert_relative_eq!(c[0][3], c[3][0], max_relative = 1e-12);
+        assert!(c[0][3] != 0.0);
     }
 
     #[test]

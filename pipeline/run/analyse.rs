@@ -144,7 +144,10 @@ pub(super) fn analyse_with(
     let rig = rig::establish(campaign, first.iter().map(|f| &f.rig_input), &mut warnings)
         .map_err(Arc::new);
     let rig_params = rig.as_ref().ok().map(|(p, _)| *p);
-    let rig_for_runs = rig.as_ref().map(|(p, _)| *p).map_err(Arc::clone);
+    let rig_for_runs = rig
+        .as_ref()
+        .map(|(p, r)| (*p, r.covariance))
+        .map_err(Arc::clone);
 
     let second: Vec<Done> = campaign
         .runs
@@ -349,6 +352,9 @@ struct FirstPass {
     cached: bool,
 }
 
+/// Covariance of (beta1, a1b0, a2, a3).
+type Cov4 = [[f64; 4]; 4];
+
 /// A run done.
 struct Done {
     result: RunResult,
@@ -487,7 +493,7 @@ fn first_pass(
                 }
                 if draw.enabled() {
                     let (specs, overlay) =
-                        figures::log_figures(&out, st, time.as_ref(), draw.intersample);
+                        figures::log_figures(&out, st, time.as_ref(), draw.intersample, None);
                     (pass.figures, pass.figure_warnings) = draw.write(&specs)?;
                     pass.overlay = overlay;
                 }
@@ -527,11 +533,11 @@ fn second_pass(
     campaign: &Campaign,
     plan: &RunPlan,
     first: FirstPass,
-    rig: &Result<RigParams, Arc<RigError>>,
+    rig: &Result<(RigParams, Option<Cov4>), Arc<RigError>>,
     draw: &Drawer<'_>,
     observer: &dyn Observer,
 ) -> Result<Done, WriteError> {
-    let rig_at_p = rig.as_ref().ok().map(|r| r.at_p_gain(plan.p_gain));
+    let rig_at_p = rig.as_ref().ok().map(|(r, _)| r.at_p_gain(plan.p_gain));
     let Some(mut out) = first.result else {
         return validation_run(campaign, plan, rig, draw, observer);
     };
@@ -586,7 +592,7 @@ fn force_model(rig_at_p: &Option<RigParams>, specimen: &SpecimenModel) -> Option
 fn validation_run(
     campaign: &Campaign,
     plan: &RunPlan,
-    rig: &Result<RigParams, Arc<RigError>>,
+    rig: &Result<(RigParams, Option<Cov4>), Arc<RigError>>,
     draw: &Drawer<'_>,
     observer: &dyn Observer,
 ) -> Result<Done, WriteError> {
@@ -594,7 +600,7 @@ fn validation_run(
     let start = Instant::now();
     // The key holds the rig at this run's P gain: a new rig redoes the run.
     let (stored, key, file) = match rig {
-        Ok(r) => probe(
+        Ok((r, cov)) => probe(
             draw,
             campaign,
             plan,
@@ -602,6 +608,7 @@ fn validation_run(
                 &"validation",
                 &campaign.identification,
                 &r.at_p_gain(plan.p_gain),
+                cov,
             ],
         ),
         Err(_) => (None, None, None),
@@ -632,21 +639,21 @@ fn validation_run(
             out.a1b0 = rig
                 .as_ref()
                 .ok()
-                .map(|r| r.at_p_gain(plan.p_gain).a1b0_n_per_m_s2);
+                .map(|(r, _)| r.at_p_gain(plan.p_gain).a1b0_n_per_m_s2);
             out = failed(out, Arc::new(e).into());
             return Ok(finish(plan, out, figures, start, observer));
         }
     };
     out.warnings = acq.warnings.clone();
     out.log = log_info(plan, acq.stage.as_deref());
-    let rig_at_p = match rig {
-        Ok(r) => r.at_p_gain(plan.p_gain),
+    let (rig_at_p, rig_cov) = match rig {
+        Ok((r, cov)) => (r.at_p_gain(plan.p_gain), *cov),
         Err(e) => {
             // The measured FRF is still worth seeing.
             out = failed(out, e.clone().into());
             let figures = match (&acq.stage, draw.enabled()) {
                 (Some(st), true) => {
-                    draw.write(&figures::log_figures(&out, st, None, draw.intersample).0)?
+                    draw.write(&figures::log_figures(&out, st, None, draw.intersample, None).0)?
                 }
                 _ => figures,
             };
@@ -682,7 +689,31 @@ fn validation_run(
         )
     });
     let figures = if draw.enabled() {
-        let (mut specs, _) = figures::log_figures(&out, st, time.as_ref(), draw.intersample);
+        // The prediction's band: the rig's covariance at this run's P gain
+        // (a1b0 scales with P).
+        let prediction = match (rig_cov, linear) {
+            (Some(cov), Some(specimen)) => {
+                let f = [
+                    1.0,
+                    rig_at_p.a1b0_n_per_m_s2 / rig.as_ref().map_or(1.0, |(r, _)| r.a1b0_n_per_m_s2),
+                    1.0,
+                    1.0,
+                ];
+                Some(figures::Prediction {
+                    rig: rig_at_p,
+                    cov: std::array::from_fn(|i| std::array::from_fn(|j| cov[i][j] * f[i] * f[j])),
+                    specimen,
+                })
+            }
+            _ => None,
+        };
+        let (mut specs, _) = figures::log_figures(
+            &out,
+            st,
+            time.as_ref(),
+            draw.intersample,
+            prediction.as_ref(),
+        );
         if let (Some(bins), Some(model)) = (&bins, &out.force_tf) {
             specs.insert(
                 1,

@@ -17,6 +17,7 @@ use crate::fit::{Intersample, hold_response};
 use crate::frf::Estimator;
 use crate::lti::TransferFunction;
 use crate::manifest::Role;
+use crate::model::{LinearSpecimen, RigParams, x1_u_std};
 use crate::report::FigureSpec;
 use crate::report::figures::{
     BodeBand, BodeFigure, BodeSeries, Figure, LinesFigure, PanelsFigure, TimePanel, TimeSeries,
@@ -38,8 +39,9 @@ pub(super) fn log_figures(
     stage: &LogStage,
     time: Option<&TimeStage>,
     intersample: Intersample,
+    prediction: Option<&Prediction>,
 ) -> (Vec<FigureSpec>, Option<OverlayRun>) {
-    let frf = RunFrf::new(run, stage, intersample);
+    let frf = RunFrf::new(run, stage, intersample, prediction);
     let mut out = vec![frf_figure(run, stage, &frf)];
     let overlay = match (&frf.model, run.role) {
         (Some((model, _)), Role::NoSpecimen | Role::Spring) => Some(OverlayRun {
@@ -142,6 +144,15 @@ fn tf_of(t: &TfResult, delay_s: f64) -> TransferFunction {
     }
 }
 
+/// A validation run's prediction with the rig's uncertainty: the rig and
+/// the covariance of (beta1, a1b0, a2, a3) at the run's P gain, and its
+/// specimen.
+pub(super) struct Prediction {
+    pub rig: RigParams,
+    pub cov: [[f64; 4]; 4],
+    pub specimen: LinearSpecimen,
+}
+
 /// A run's command-to-displacement FRF as drawn, with the model beside it:
 /// the fitted model for identification runs, the rig's prediction for
 /// validation runs.
@@ -156,7 +167,12 @@ struct RunFrf {
 }
 
 impl RunFrf {
-    fn new(run: &RunResult, stage: &LogStage, intersample: Intersample) -> Self {
+    fn new(
+        run: &RunResult,
+        stage: &LogStage,
+        intersample: Intersample,
+        prediction: Option<&Prediction>,
+    ) -> Self {
         let fs = stage.log.sample_rate_hz;
         let f_max = FRF_MAX_HZ.max(run.fit.as_ref().map_or(0.0, |f| f.band_hz[1]));
         let (freq_hz, h, coherence) = measured_bins(
@@ -178,14 +194,25 @@ impl RunFrf {
             }),
             _ => None,
         };
-        // The fitted model's uncertainty, propagated from its covariance.
-        let band = stage.fit.as_ref().map(|fit| {
-            let sd = response_std(fit, &freq_hz);
-            BodeBand {
-                magnitude_db: sd.magnitude_db,
-                phase_rad: sd.phase_rad,
+        // The fitted model's uncertainty, propagated from its covariance;
+        // for a prediction, the rig's through Eq. 17.
+        let band = match (&stage.fit, prediction) {
+            (Some(fit), _) => {
+                let sd = response_std(fit, &freq_hz);
+                Some(BodeBand {
+                    magnitude_db: sd.magnitude_db,
+                    phase_rad: sd.phase_rad,
+                })
             }
-        });
+            (None, Some(p)) if run.role == Role::Validation => {
+                let (magnitude_db, phase_rad) = x1_u_std(&p.rig, &p.cov, &p.specimen, &freq_hz);
+                Some(BodeBand {
+                    magnitude_db,
+                    phase_rad,
+                })
+            }
+            _ => None,
+        };
         Self {
             f_max,
             freq_hz,

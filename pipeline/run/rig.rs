@@ -164,6 +164,7 @@ pub(super) fn establish<'a>(
         per_spring: ident.per_spring,
         spread,
         consistency: Some(ident.consistency),
+        covariance: ident.covariance,
     };
     Ok((params, result))
 }
@@ -190,5 +191,6 @@ fn given_result(p: &RigParams) -> RigResult {
         per_spring: Vec::new(),
         spread: None,
         consistency: None,
+        covariance: None,
     }
 }
