@@ -10,6 +10,7 @@ mod cache;
 mod compare;
 pub mod figures;
 mod history;
+pub mod montecarlo;
 mod rig;
 mod shard;
 pub mod simulate;
