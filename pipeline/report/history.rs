@@ -5,9 +5,9 @@
 
 use std::path::Path;
 
-use polars::prelude::{Column, DataFrame, ParquetCompression, ParquetWriter};
+use polars::prelude::Column;
 
-use super::logs::LogWriteError;
+use super::logs::{LogWriteError, frame_bytes};
 use super::write_atomic;
 use crate::drift::Entry;
 
@@ -56,19 +56,6 @@ pub fn write(path: &Path, entries: &[Entry]) -> Result<(), LogWriteError> {
         Column::new("a3_std".into(), opt(|e| e.a3_std)),
         Column::new("servoid_version".into(), text(|e| &e.servoid_version)),
     ];
-    let parquet = |source| LogWriteError::Parquet {
-        path: path.to_path_buf(),
-        source,
-    };
-    let mut df = DataFrame::new(n, cols).map_err(parquet)?;
-    let mut buf = Vec::new();
-    // Off the caller's rayon pool: see `ingest::off_pool`.
-    crate::ingest::off_pool(|| {
-        ParquetWriter::new(&mut buf)
-            .with_compression(ParquetCompression::Snappy)
-            .finish(&mut df)
-    })
-    .map_err(parquet)?;
-    write_atomic(path, &buf)?;
+    write_atomic(path, &frame_bytes(path, n, cols)?)?;
     Ok(())
 }

@@ -90,15 +90,26 @@ pub fn write_parquet(path: &Path, columns: &[(&str, &[f64])]) -> Result<(), LogW
 /// The bytes [`write_parquet`] writes (`path` only names the file in errors).
 pub fn parquet_bytes(path: &Path, columns: &[(&str, &[f64])]) -> Result<Vec<u8>, LogWriteError> {
     let n = check(path, columns)?;
-    let parquet = |source| LogWriteError::Parquet {
-        path: path.to_path_buf(),
-        source,
-    };
     let cols: Vec<Column> = columns
         .iter()
         .map(|(name, values)| Column::new((*name).into(), *values))
         .collect();
-    let mut df = DataFrame::new(n, cols).map_err(parquet)?;
+    frame_bytes(path, n, cols)
+}
+
+/// `rows` rows of `cols` as Parquet bytes (Snappy pages, no time or host
+/// stamped in): the one writer of the logs, the run tables and the history
+/// (`path` only names the file in errors).
+pub(super) fn frame_bytes(
+    path: &Path,
+    rows: usize,
+    cols: Vec<Column>,
+) -> Result<Vec<u8>, LogWriteError> {
+    let parquet = |source| LogWriteError::Parquet {
+        path: path.to_path_buf(),
+        source,
+    };
+    let mut df = DataFrame::new(rows, cols).map_err(parquet)?;
     let mut buf = Vec::new();
     // Off the caller's rayon pool: see `ingest::off_pool`.
     crate::ingest::off_pool(|| {

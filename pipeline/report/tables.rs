@@ -7,9 +7,9 @@
 use std::path::Path;
 
 use nalgebra::Complex;
-use polars::prelude::{Column, DataFrame, ParquetCompression, ParquetWriter};
+use polars::prelude::Column;
 
-use super::logs::LogWriteError;
+use super::logs::{LogWriteError, frame_bytes};
 use super::write_artifact;
 
 /// A run's measured FRF with what the fit and the model make of it.
@@ -71,19 +71,6 @@ pub fn write_model(path: &Path, t: &ModelTable) -> Result<(), LogWriteError> {
 }
 
 fn write(path: &Path, rows: usize, cols: Vec<Column>) -> Result<(), LogWriteError> {
-    let parquet = |source| LogWriteError::Parquet {
-        path: path.to_path_buf(),
-        source,
-    };
-    let mut df = DataFrame::new(rows, cols).map_err(parquet)?;
-    let mut buf = Vec::new();
-    // Off the caller's rayon pool: see `ingest::off_pool`.
-    crate::ingest::off_pool(|| {
-        ParquetWriter::new(&mut buf)
-            .with_compression(ParquetCompression::Snappy)
-            .finish(&mut df)
-    })
-    .map_err(parquet)?;
-    write_artifact(path, &buf)?;
+    write_artifact(path, &frame_bytes(path, rows, cols)?)?;
     Ok(())
 }
