@@ -251,7 +251,14 @@ pub fn identify_rig(
         }
     }
 
-    let stds = propagate(&theta, no_spec, springs, p_ref, &values);
+    // The algebra's Jacobian and the runs' covariances, once: every std and
+    // covariance below is first-order propagation through them (None when
+    // a run has no covariance).
+    let propagation = run_covariances(no_spec, springs)
+        .map(|covs| (jacobian(&theta, no_spec, springs, p_ref), covs));
+    let stds = propagation
+        .as_ref()
+        .map(|(jac, covs)| propagate(jac, covs, values.len()));
     let consistency = consistency::check(
         &(springs.iter().enumerate())
             .map(|(j, s)| consistency::PerSpringValues {
@@ -259,10 +266,15 @@ pub fn identify_rig(
                 values: [2, 3, 4].map(|i| values[HEAD + PER_SPRING * j + i]),
             })
             .collect::<Vec<_>>(),
-        spring_covariances(&theta, no_spec, springs, p_ref).as_ref(),
+        propagation
+            .as_ref()
+            .map(|(jac, covs)| spring_covariances(jac, covs, springs.len()))
+            .as_ref(),
     );
-    let covariance = output_covariance(&theta, no_spec, springs, p_ref, &[0, 2, 3, 4])
-        .map(|c| std::array::from_fn(|i| std::array::from_fn(|j| c[(i, j)])));
+    let covariance = propagation.as_ref().map(|(jac, covs)| {
+        let c = propagated(jac, covs, &[0, 2, 3, 4]);
+        std::array::from_fn(|i| std::array::from_fn(|j| c[(i, j)]))
+    });
     let est = |i: usize| Estimate {
         value: values[i],
         std: stds.as_ref().map(|s| s[i]),
@@ -296,19 +308,9 @@ pub fn identify_rig(
     })
 }
 
-/// Standard deviations of every output by first-order propagation, with the
-/// Jacobian from central differences of [`compute`]; None when any run lacks a
-/// covariance.
-fn propagate(
-    theta: &[f64],
-    no_spec: &[TfEstimate],
-    springs: &[SpringRun],
-    p_ref: f64,
-    values: &[f64],
-) -> Option<Vec<f64>> {
-    let covs = run_covariances(no_spec, springs)?;
-    let m = values.len();
-    let jac = jacobian(theta, no_spec, springs, p_ref);
+/// Standard deviations of the `m` outputs of [`compute`] by first-order
+/// propagation through its Jacobian `jac` of the runs' covariances `covs`.
+fn propagate(jac: &[Vec<f64>], covs: &[[[f64; 3]; 3]], m: usize) -> Vec<f64> {
     let mut var = vec![0.0; m];
     for (b, cov) in covs.iter().enumerate() {
         for p in 0..3 {
@@ -323,7 +325,7 @@ fn propagate(
             }
         }
     }
-    Some(var.into_iter().map(|v| v.max(0.0).sqrt()).collect())
+    var.into_iter().map(|v| v.max(0.0).sqrt()).collect()
 }
 
 /// The runs' coefficient covariances in theta's order; None when any run
@@ -362,20 +364,6 @@ fn jacobian(
     jac
 }
 
-/// The covariance of the outputs `at` of [`compute`], by first-order
-/// propagation; None without the runs' covariances.
-fn output_covariance(
-    theta: &[f64],
-    no_spec: &[TfEstimate],
-    springs: &[SpringRun],
-    p_ref: f64,
-    at: &[usize],
-) -> Option<nalgebra::DMatrix<f64>> {
-    let covs = run_covariances(no_spec, springs)?;
-    let jac = jacobian(theta, no_spec, springs, p_ref);
-    Some(propagated(&jac, &covs, at))
-}
-
 /// J C J' restricted to the outputs `at`, C block-diagonal by run.
 fn propagated(jac: &[Vec<f64>], covs: &[[[f64; 3]; 3]], at: &[usize]) -> nalgebra::DMatrix<f64> {
     nalgebra::DMatrix::from_fn(at.len(), at.len(), |a, b| {
@@ -392,21 +380,17 @@ fn propagated(jac: &[Vec<f64>], covs: &[[[f64; 3]; 3]], at: &[usize]) -> nalgebr
 }
 
 /// The joint covariance over the springs of each of a1b0, a2 and a3 (Eq.
-/// 20), by first-order propagation: the springs share the no-specimen run,
-/// so their values are correlated. None without the runs' covariances.
+/// 20) for `n` springs, by first-order propagation: the springs share the
+/// no-specimen run, so their values are correlated.
 fn spring_covariances(
-    theta: &[f64],
-    no_spec: &[TfEstimate],
-    springs: &[SpringRun],
-    p_ref: f64,
-) -> Option<[nalgebra::DMatrix<f64>; 3]> {
-    let covs = run_covariances(no_spec, springs)?;
-    let jac = jacobian(theta, no_spec, springs, p_ref);
-    let n = springs.len();
-    Some([2, 3, 4].map(|i| {
+    jac: &[Vec<f64>],
+    covs: &[[[f64; 3]; 3]],
+    n: usize,
+) -> [nalgebra::DMatrix<f64>; 3] {
+    [2, 3, 4].map(|i| {
         let at: Vec<usize> = (0..n).map(|j| HEAD + PER_SPRING * j + i).collect();
-        propagated(&jac, &covs, &at)
-    }))
+        propagated(jac, covs, &at)
+    })
 }
 
 #[cfg(test)]
