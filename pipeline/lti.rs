@@ -238,6 +238,24 @@ impl StateSpace {
     }
 }
 
+/// First-order standard deviations of a response's magnitude, 20 log10 |G|
+/// (dB), and phase, arg G (rad), from the gradient of ln G with respect to
+/// parameters of covariance `cov(i, j)`: Re and Im of d ln G are the
+/// gradients of ln |G| and arg G, so each variance is g' C g.
+pub fn log_response_std(grad: &[Complex<f64>], cov: impl Fn(usize, usize) -> f64) -> (f64, f64) {
+    let db = 20.0 / std::f64::consts::LN_10;
+    let var = |part: &dyn Fn(Complex<f64>) -> f64| {
+        let mut v = 0.0;
+        for (i, gi) in grad.iter().enumerate() {
+            for (j, gj) in grad.iter().enumerate() {
+                v += part(*gi) * cov(i, j) * part(*gj);
+            }
+        }
+        v.max(0.0).sqrt()
+    };
+    (var(&|z| db * z.re), var(&|z| z.im))
+}
+
 /// Parlett-Reinsch balancing: a diagonal similarity D^-1 A D with powers of
 /// two (exact in floating point) that makes each row and column norm alike,
 /// which keeps eigenvalues of badly scaled matrices accurate.

@@ -250,27 +250,16 @@ pub fn x1_u_std(
     let steps: [f64; 4] = std::array::from_fn(|i| 1e-6 * theta[i].abs().max(1e-12));
     let plus: Vec<TransferFunction> = (0..4).map(|i| with(i, steps[i])).collect();
     let minus: Vec<TransferFunction> = (0..4).map(|i| with(i, -steps[i])).collect();
-    let db = 20.0 / std::f64::consts::LN_10;
-    let mut mag = Vec::with_capacity(freq_hz.len());
-    let mut phase = Vec::with_capacity(freq_hz.len());
-    for &f in freq_hz {
-        // d ln G / d theta_i; ln of a ratio keeps the phase unwrapped.
-        let g: [nalgebra::Complex<f64>; 4] = std::array::from_fn(|i| {
-            (plus[i].freq_response(f) / minus[i].freq_response(f)).ln() / (2.0 * steps[i])
-        });
-        let var = |part: &dyn Fn(nalgebra::Complex<f64>) -> f64| {
-            let mut v = 0.0;
-            for i in 0..4 {
-                for j in 0..4 {
-                    v += part(g[i]) * cov[i][j] * part(g[j]);
-                }
-            }
-            v.max(0.0).sqrt()
-        };
-        mag.push(var(&|z| db * z.re));
-        phase.push(var(&|z| z.im));
-    }
-    (mag, phase)
+    freq_hz
+        .iter()
+        .map(|&f| {
+            // d ln G / d theta_i; ln of a ratio keeps the phase unwrapped.
+            let g: [Complex<f64>; 4] = std::array::from_fn(|i| {
+                (plus[i].freq_response(f) / minus[i].freq_response(f)).ln() / (2.0 * steps[i])
+            });
+            crate::lti::log_response_std(&g, |i, j| cov[i][j])
+        })
+        .unzip()
 }
 
 /// A specimen in the generalised form of Eq. 9: x1'' = h(x1, x2) + f/m.

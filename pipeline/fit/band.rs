@@ -9,7 +9,9 @@
 //! phase is Im ln G; each is a linear function g of the parameters to first
 //! order, with variance g' C g.
 
-use nalgebra::{Complex, DVector};
+use nalgebra::Complex;
+
+use crate::lti::log_response_std;
 
 use super::TfFit;
 
@@ -24,7 +26,6 @@ pub struct ResponseStd {
 /// (the command's hold has no parameter and changes neither).
 pub fn response_std(fit: &TfFit, freq_hz: &[f64]) -> ResponseStd {
     let (m, n) = (fit.shape.numerator_order, fit.shape.denominator_order);
-    let db = 20.0 / std::f64::consts::LN_10;
     let mut out = ResponseStd {
         magnitude_db: Vec::with_capacity(freq_hz.len()),
         phase_rad: Vec::with_capacity(freq_hz.len()),
@@ -46,11 +47,9 @@ pub fn response_std(fit: &TfFit, freq_hz: &[f64]) -> ResponseStd {
         if fit.shape.fit_delay {
             grad.push(-s);
         }
-        let re = DVector::from_iterator(p, grad.iter().map(|g| db * g.re));
-        let im = DVector::from_iterator(p, grad.iter().map(|g| g.im));
-        let var = |g: &DVector<f64>| (g.transpose() * &fit.covariance * g)[(0, 0)].max(0.0);
-        out.magnitude_db.push(var(&re).sqrt());
-        out.phase_rad.push(var(&im).sqrt());
+        let (mag, phase) = log_response_std(&grad, |i, j| fit.covariance[(i, j)]);
+        out.magnitude_db.push(mag);
+        out.phase_rad.push(phase);
     }
     out
 }
@@ -66,7 +65,7 @@ mod tests {
     use super::*;
     use crate::fit::ModelShape;
     use crate::lti::TransferFunction;
-    use nalgebra::DMatrix;
+    use nalgebra::{DMatrix, DVector};
     use rand::SeedableRng;
     use rand_distr::{Distribution, StandardNormal};
 
