@@ -14,7 +14,7 @@ use rand_distr::{Distribution, Normal};
 use rayon::prelude::*;
 
 use super::acquire::{FitData, fit_options};
-use crate::fit::{FitInput, fit};
+use crate::fit::fit;
 use crate::frf;
 use crate::identify::{SecondOrder, SpringRun, TfEstimate, identify_rig};
 use crate::manifest::IdentificationPlan;
@@ -102,15 +102,7 @@ fn identify_once(input: &McInput<'_>, k: f64, i: usize, seed: u64) -> Option<[f6
         let h = frf::estimate(input.command_m, &y, fs, &input.ident.frf).ok()?;
         let mask = frf::band_mask(&h, input.ident.band_hz, input.ident.coherence_min);
         let data = FitData::of(&h, &mask);
-        let f = fit(
-            &FitInput {
-                freq_hz: &data.freq_hz,
-                h: &data.h,
-                variance: &data.variance,
-            },
-            &fit_options(input.ident, fs),
-        )
-        .ok()?;
+        let f = fit(&data.input(), &fit_options(input.ident, fs)).ok()?;
         Some(TfEstimate {
             run: label.to_string(),
             p_gain: input.rig.p_gain,
