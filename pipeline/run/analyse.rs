@@ -646,8 +646,16 @@ fn validation_run(
     };
     out.warnings = acq.warnings.clone();
     out.log = log_info(plan, acq.stage.as_deref());
+    // The rig and its covariance at this run's P gain: a1b0 scales with P,
+    // and its row and column of the covariance with it.
     let (rig_at_p, rig_cov) = match rig {
-        Ok((r, cov)) => (r.at_p_gain(plan.p_gain), *cov),
+        Ok((r, cov)) => {
+            let f = [1.0, plan.p_gain / r.p_gain, 1.0, 1.0];
+            let at_p = cov.map(|c| -> Cov4 {
+                std::array::from_fn(|i| std::array::from_fn(|j| c[i][j] * f[i] * f[j]))
+            });
+            (r.at_p_gain(plan.p_gain), at_p)
+        }
         Err(e) => {
             // The measured FRF is still worth seeing.
             out = failed(out, e.clone().into());
@@ -689,22 +697,13 @@ fn validation_run(
         )
     });
     let figures = if draw.enabled() {
-        // The prediction's band: the rig's covariance at this run's P gain
-        // (a1b0 scales with P).
+        // The prediction's band, from the rig's covariance.
         let prediction = match (rig_cov, linear) {
-            (Some(cov), Some(specimen)) => {
-                let f = [
-                    1.0,
-                    rig_at_p.a1b0_n_per_m_s2 / rig.as_ref().map_or(1.0, |(r, _)| r.a1b0_n_per_m_s2),
-                    1.0,
-                    1.0,
-                ];
-                Some(figures::Prediction {
-                    rig: rig_at_p,
-                    cov: std::array::from_fn(|i| std::array::from_fn(|j| cov[i][j] * f[i] * f[j])),
-                    specimen,
-                })
-            }
+            (Some(cov), Some(specimen)) => Some(figures::Prediction {
+                rig: rig_at_p,
+                cov,
+                specimen,
+            }),
             _ => None,
         };
         let (mut specs, _) = figures::log_figures(
