@@ -121,17 +121,31 @@ pub struct RigResult {
     pub covariance: Option<[[f64; 4]; 4]>,
 }
 
-/// The stiffness sensitivity analysis, with where the campaign's springs sit.
+/// The stiffness sensitivity analysis (paper Sec. 2.3), with where the
+/// campaign's springs sit.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 pub struct SensitivityResult {
-    /// Where the assumed coefficient precision comes from.
-    pub basis: String,
-    pub sweep: crate::sensitivity::StiffnessSensitivity,
+    /// The campaign's spring stiffnesses (N/m).
+    pub springs_n_per_m: Vec<f64>,
+    /// The first-order prediction against k.
+    pub analytic: AnalyticSensitivity,
+    /// Simulated identifications against k, when the manifest asks for them
+    /// (`sensitivity.monte_carlo`) and a no-specimen log allows them.
+    pub monte_carlo: Option<crate::sensitivity::montecarlo::MonteCarlo>,
+    /// Why there is no Monte Carlo although the manifest asked for one.
+    pub monte_carlo_note: Option<String>,
     /// Where each parameter is within the manifest's target, and the spring
     /// tests a +-2 % a2 and a3 need.
     pub recommendation: crate::sensitivity::Recommendation,
-    /// The campaign's spring stiffnesses (N/m).
-    pub springs_n_per_m: Vec<f64>,
+}
+
+/// The analytic sweep and where its coefficient precision comes from.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+pub struct AnalyticSensitivity {
+    /// Where the coefficient precision comes from.
+    pub basis: String,
+    #[serde(flatten)]
+    pub sweep: crate::sensitivity::StiffnessSensitivity,
 }
 
 /// The rig checked against its history (see `servoid::drift` for the rule).

@@ -10,6 +10,8 @@
 //! paper, Sec. 3.1), which this analysis cannot show: it only bounds the soft
 //! end.
 
+pub mod montecarlo;
+
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
@@ -31,6 +33,30 @@ pub struct StiffnessSensitivity {
     pub rel_std_a3: Vec<f64>,
 }
 
+impl StiffnessSensitivity {
+    /// No stiffnesses.
+    pub fn empty() -> Self {
+        Self {
+            coefficient_rel_std: None,
+            stiffness_n_per_m: Vec::new(),
+            rel_std_beta1: Vec::new(),
+            rel_std_a1b0: Vec::new(),
+            rel_std_a2: Vec::new(),
+            rel_std_a3: Vec::new(),
+        }
+    }
+}
+
+/// `points` (at least 2) stiffnesses log-spaced over `range_n_per_m`, both
+/// ends included: the grid of the sweep and of the Monte Carlo.
+pub fn log_grid(range_n_per_m: (f64, f64), points: usize) -> Vec<f64> {
+    let (lo, hi) = range_n_per_m;
+    let points = points.max(2);
+    (0..points)
+        .map(|i| lo * (hi / lo).powf(i as f64 / (points - 1) as f64))
+        .collect()
+}
+
 /// What a campaign's logs say of their noise, for runs not yet made: the
 /// no-specimen run's fitted bins (band and coherence), the variance of its
 /// FRF at each, its sample rate and delay. A spring run recorded with the
@@ -45,6 +71,15 @@ pub struct NoiseProfile {
     pub sample_rate_hz: f64,
     /// The fitted (or fixed) delay of the no-specimen model (s).
     pub delay_s: f64,
+    /// The white displacement noise (m rms) that variance implies, and its
+    /// whiteness (see [`montecarlo::white_noise`]); None when too few bins
+    /// tell.
+    pub white_noise: Option<(f64, f64)>,
+    /// The displacement channel's quantisation step (m), when its samples
+    /// sit on a grid.
+    pub displacement_step_m: Option<f64>,
+    /// SHA-256 of the log, whose command the Monte Carlo replays.
+    pub log_sha256: String,
 }
 
 /// How the fitted coefficients of a planned run would scatter.
@@ -106,7 +141,6 @@ pub fn stiffness_sweep(
     if !rig.is_physical() {
         return Err(SensitivityError::Rig(*rig));
     }
-    let points = points.max(2);
     let estimate = |run: &str, spec: &LinearSpecimen, k: f64| {
         let tf = SecondOrder::from_tf(&model::tf_x1_u(rig, spec))
             .expect("Eqs. 12 and 14 are second order");
@@ -125,14 +159,9 @@ pub fn stiffness_sweep(
             CoefficientNoise::Relative(eps) => Some(eps),
             CoefficientNoise::Measured { .. } => None,
         },
-        stiffness_n_per_m: Vec::with_capacity(points),
-        rel_std_beta1: Vec::with_capacity(points),
-        rel_std_a1b0: Vec::with_capacity(points),
-        rel_std_a2: Vec::with_capacity(points),
-        rel_std_a3: Vec::with_capacity(points),
+        ..StiffnessSensitivity::empty()
     };
-    for i in 0..points {
-        let k = lo * (hi / lo).powf(i as f64 / (points - 1) as f64);
+    for k in log_grid(range_n_per_m, points) {
         let spring = SpringRun {
             stiffness_n_per_m: k,
             estimate: estimate(

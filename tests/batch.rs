@@ -138,8 +138,8 @@ struct Night {
 impl Night {
     fn new() -> Self {
         let dir = scratch();
-        let sim = std::fs::read_to_string(root().join("experiments/maghareh2018/simulation.toml"))
-            .unwrap();
+        let sim =
+            std::fs::read_to_string(crate::util::bundled_simulation(dir.path(), false)).unwrap();
         for (name, seed) in [("a", "2018"), ("b", "7")] {
             let text = sim.replace("seed = 2018", &format!("seed = {seed}"));
             let manifest = crate::util::write(dir.path(), &format!("{name}.toml"), &text);

@@ -320,6 +320,11 @@ fn the_bundled_default_pages_are_light_and_complete() {
     // alike.
     let read = |p: &Path| std::fs::read_to_string(p).unwrap().replace("&#x2f;", "/");
     let html = read(&page);
+    // The Monte Carlo's figures and table (on in the bundled default).
+    for id in ["sensitivity-monte-carlo", "sensitivity-bias"] {
+        assert!(html.contains(&format!("figures/{id}.png")), "{id}");
+    }
+    assert!(html.contains("id=\"monte-carlo-table\""));
     let svgs = figure_files(&out, "svg");
     let pngs = figure_files(&out, "png");
     assert!(svgs.len() >= 20, "{} SVG figures", svgs.len());

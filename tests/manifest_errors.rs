@@ -426,3 +426,61 @@ fn a_bad_sensitivity_range_too_few_points_and_a_target_not_positive() {
     ));
     assert_eq!(c.code, 0, "{}", c.stderr);
 }
+
+/// The Monte Carlo's zero seeds and one stiffness, each named by its key;
+/// an unknown key in its table is named with the ones it takes.
+#[test]
+fn a_monte_carlo_with_zero_seeds_or_one_point() {
+    let c = check(&format!(
+        "{BASE}\n[sensitivity]\nmonte_carlo = {{ points = 1, seeds = 0 }}\n"
+    ));
+    assert_eq!(c.code, 2);
+    for f in [
+        "sensitivity.monte_carlo.points: must be at least 2 (the Monte Carlo needs two stiffnesses; got 1)",
+        "sensitivity.monte_carlo.seeds: must be at least 1",
+        "2 problems",
+    ] {
+        assert!(c.stderr.contains(f), "missing {f:?} in:\n{}", c.stderr);
+    }
+    assert!(!c.wrote_output);
+    let c = check(&format!(
+        "{BASE}\n[sensitivity]\nmonte_carlo = {{ seeds = 5, seedz = 3 }}\n"
+    ));
+    assert_eq!(c.code, 2);
+    assert!(
+        c.stderr.contains("sensitivity.monte_carlo.seedz"),
+        "{}",
+        c.stderr
+    );
+    let c = check(&format!(
+        "{BASE}\n[sensitivity]\nmonte_carlo = {{ points = 4, seeds = 3, seed = 7 }}\n"
+    ));
+    assert_eq!(c.code, 0, "{}", c.stderr);
+}
+
+/// A simulation manifest checks the sensitivity it passes on, naming the
+/// key, before it simulates anything.
+#[test]
+fn a_simulation_checks_the_sensitivity_it_passes_on() {
+    let dir = scratch();
+    let text = std::fs::read_to_string(
+        crate::util::root().join("experiments/maghareh2018/simulation.toml"),
+    )
+    .unwrap()
+    .replace(
+        "monte_carlo = { points = 20, seeds = 50 }",
+        "monte_carlo = { points = 20, seeds = 0 }\ntarget_rel_std = 0.0",
+    );
+    assert!(text.contains("seeds = 0"));
+    let sim = write(dir.path(), "simulation.toml", &text);
+    let out = dir.path().join("out");
+    let o = crate::util::servoid_into(dir.path(), "simulate", &sim, &out, &[]);
+    assert_eq!(o.code, 2, "{}", o.stderr);
+    for f in [
+        "sensitivity.monte_carlo.seeds: must be at least 1",
+        "sensitivity.target_rel_std: must be a positive fraction",
+    ] {
+        assert!(o.stderr.contains(f), "missing {f:?} in:\n{}", o.stderr);
+    }
+    assert!(!out.exists(), "nothing written");
+}

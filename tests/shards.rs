@@ -5,14 +5,25 @@
 
 use std::path::{Path, PathBuf};
 
-use crate::util::{outputs, root, scratch, servoid, servoid_into};
+use crate::util::{bundled_simulation, outputs, root, scratch, servoid, servoid_into};
 
-/// The bundled default simulated into `dir/sim`; its analysis manifest.
+/// The bundled default simulated into `dir/sim`, without its Monte Carlo
+/// (see `util::bundled_simulation`); its analysis manifest.
 pub fn campaign(dir: &Path) -> PathBuf {
+    simulated(dir, false)
+}
+
+/// The bundled default simulated into `dir/sim` as it is bundled, Monte
+/// Carlo and all; its analysis manifest.
+pub fn bundled_campaign(dir: &Path) -> PathBuf {
+    simulated(dir, true)
+}
+
+fn simulated(dir: &Path, monte_carlo: bool) -> PathBuf {
     let o = servoid_into(
         dir,
         "simulate",
-        &root().join("experiments/maghareh2018/simulation.toml"),
+        &bundled_simulation(dir, monte_carlo),
         &dir.join("sim"),
         &["--quiet"],
     );
@@ -44,7 +55,9 @@ fn merge(dir: &Path, shards: &[&Path], out: &str) -> crate::util::Output {
 #[test]
 fn three_shards_merge_into_the_bytes_of_one_run() {
     let dir = scratch();
-    let manifest = campaign(dir.path());
+    // With its Monte Carlo, which the first shard alone runs and the merge
+    // finds in that shard's cache.
+    let manifest = bundled_campaign(dir.path());
     let single = dir.path().join("single");
     let o = servoid_into(dir.path(), "run", &manifest, &single, &["--quiet"]);
     assert_eq!(o.code, 0);
@@ -56,6 +69,20 @@ fn three_shards_merge_into_the_bytes_of_one_run() {
     assert_eq!(
         info["runs"],
         serde_json::json!(["no-specimen", "spring-k1", "spring-k2", "exp2"])
+    );
+    // The Monte Carlo is the first shard's alone: its cache holds it.
+    let mc = |d: &Path| -> bool {
+        std::fs::read_dir(d.join(".cache/runs"))
+            .unwrap()
+            .flatten()
+            .any(|e| {
+                let text = std::fs::read_to_string(e.path()).unwrap();
+                text.contains("\"excitation_run\"") && text.contains("\"agreement\"")
+            })
+    };
+    assert_eq!(
+        shards.iter().map(|d| mc(d)).collect::<Vec<_>>(),
+        [true, false, false]
     );
     // Given in any order.
     let o = merge(dir.path(), &[&shards[2], &shards[0], &shards[1]], "merged");

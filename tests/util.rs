@@ -47,6 +47,27 @@ pub fn root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
 }
 
+/// The bundled default's simulation manifest, copied into `dir`; without
+/// its Monte Carlo unless `monte_carlo` (tests/sensitivity.rs checks the
+/// Monte Carlo, the shards test that it merges and the browser test its
+/// page; it costs about 15 s of two cores, which the other tests of the
+/// bundled campaign, about other things, do not spend).
+pub fn bundled_simulation(dir: &Path, monte_carlo: bool) -> PathBuf {
+    let text = std::fs::read_to_string(root().join("experiments/maghareh2018/simulation.toml"))
+        .expect("the bundled default");
+    let line = "monte_carlo = { points = 20, seeds = 50 }\n";
+    assert!(
+        text.contains(line),
+        "the bundled default runs its Monte Carlo"
+    );
+    let text = if monte_carlo {
+        text
+    } else {
+        text.replace(line, "")
+    };
+    write(dir, "simulation.toml", &text)
+}
+
 /// A scratch folder, removed when dropped.
 pub fn scratch() -> tempfile::TempDir {
     tempfile::tempdir().expect("a temporary folder")

@@ -21,6 +21,7 @@ mod daq;
 mod mat;
 mod parquet;
 mod plan;
+mod quantum;
 mod table;
 #[cfg(test)]
 mod tests;
@@ -32,6 +33,7 @@ use polars::prelude::{DataType, PolarsError};
 use sha2::{Digest, Sha256};
 
 pub use plan::{ChannelPlan, Channels, Column, CsvOptions, LogFormat, LogPlan, TimePlan};
+pub use quantum::quantum_step;
 pub use table::{Table, TableError, TableFormat, TableProblem, read_table};
 
 /// A log read and converted to SI.

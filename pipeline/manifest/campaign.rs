@@ -17,8 +17,8 @@ use super::keypath::KeyPath;
 use super::problem::{ManifestError, Problem, TablePlace};
 use super::raw::{
     CampaignInfo, Channel, Channels as RawChannels, CompareMode, History, Identification, Manifest,
-    Reference, Rig, Role, Run, RunData, RunTable, SCHEMA_VERSION, SensitivitySettings,
-    manifest_schema,
+    MonteCarloSettings, Reference, Rig, Role, Run, RunData, RunTable, SCHEMA_VERSION,
+    SensitivitySettings, manifest_schema,
 };
 use super::table::{CheckedTable, RowKey, RunTableInfo, TableRun, check_table};
 use crate::drift::{MIN_HISTORY, Rule};
@@ -65,6 +65,8 @@ pub struct SensitivityPlan {
     pub range_n_per_m: Option<(f64, f64)>,
     pub points: usize,
     pub target_rel_std: f64,
+    /// None: no Monte Carlo.
+    pub monte_carlo: Option<MonteCarloSettings>,
 }
 
 /// The rig history's checked settings.
@@ -320,7 +322,7 @@ fn validate(
 
 /// The sensitivity's settings: a range 0 < low < high, at least two
 /// points, a positive target.
-fn check_sensitivity(
+pub(super) fn check_sensitivity(
     s: Option<&SensitivitySettings>,
     bad: &mut impl FnMut(KeyPath, String),
 ) -> SensitivityPlan {
@@ -352,10 +354,29 @@ fn check_sensitivity(
             ),
         );
     }
+    if let Some(mc) = &s.monte_carlo {
+        let path = path.key("monte_carlo");
+        if mc.points < 2 {
+            bad(
+                path.key("points"),
+                format!(
+                    "must be at least 2 (the Monte Carlo needs two stiffnesses; got {})",
+                    mc.points
+                ),
+            );
+        }
+        if mc.seeds == 0 {
+            bad(
+                path.key("seeds"),
+                "must be at least 1 (the identifications per stiffness; 50 gives each std to about 10 %); got 0".into(),
+            );
+        }
+    }
     SensitivityPlan {
         range_n_per_m: s.stiffness_range_n_per_m.map(|[lo, hi]| (lo, hi)),
         points: s.points,
         target_rel_std: s.target_rel_std,
+        monte_carlo: s.monte_carlo,
     }
 }
 

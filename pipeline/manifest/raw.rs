@@ -79,6 +79,12 @@ pub struct SensitivitySettings {
     /// finds springs for; 0.01 is 1 %.
     #[serde(default = "default_target_rel_std")]
     pub target_rel_std: f64,
+    /// The Monte Carlo beside the analytic sweep, over the same range: the
+    /// no-specimen log's command replayed through the identified rig with
+    /// the campaign's measured noise, identified as the campaign is. Off
+    /// when absent; `monte_carlo = {}` turns it on with its defaults.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub monte_carlo: Option<MonteCarloSettings>,
 }
 
 impl Default for SensitivitySettings {
@@ -87,8 +93,43 @@ impl Default for SensitivitySettings {
             stiffness_range_n_per_m: None,
             points: default_points(),
             target_rel_std: default_target_rel_std(),
+            monte_carlo: None,
         }
     }
+}
+
+/// The stiffness sensitivity's Monte Carlo.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[schemars(deny_unknown_fields)]
+pub struct MonteCarloSettings {
+    /// Stiffnesses, log-spaced over the sweep's range (at least 2).
+    #[serde(default = "default_mc_points")]
+    pub points: usize,
+    /// Simulated identifications per stiffness (at least 1; 50 gives each
+    /// std to about 10 %).
+    #[serde(default = "default_mc_seeds")]
+    pub seeds: u64,
+    /// The base seed of the noise; the same seed gives the same numbers.
+    #[serde(default)]
+    pub seed: u64,
+}
+
+impl Default for MonteCarloSettings {
+    fn default() -> Self {
+        Self {
+            points: default_mc_points(),
+            seeds: default_mc_seeds(),
+            seed: 0,
+        }
+    }
+}
+
+fn default_mc_points() -> usize {
+    20
+}
+
+fn default_mc_seeds() -> u64 {
+    50
 }
 
 fn default_points() -> usize {

@@ -11,11 +11,12 @@ use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 use serde_json::Value;
 
+use super::campaign::check_sensitivity;
 use super::checks::{check_identification, check_slug, check_specimen, positive};
 use super::document::{Document, read};
 use super::keypath::KeyPath;
 use super::problem::{ManifestError, Problem};
-use super::raw::{Identification, Reference, Role, SCHEMA_VERSION, Specimen};
+use super::raw::{Identification, Reference, Role, SCHEMA_VERSION, SensitivitySettings, Specimen};
 use crate::ingest::sha256_hex;
 use crate::model::RigParams;
 use crate::simulate::excitation::{ChirpLaw, Excitation, Padding};
@@ -43,6 +44,10 @@ pub struct SimulationManifest {
     /// Published values copied into the generated analysis manifest.
     #[serde(default)]
     pub references: Vec<Reference>,
+    /// The stiffness sensitivity's settings, written into the generated
+    /// analysis manifest (checked here as it will check them).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sensitivity: Option<SensitivitySettings>,
 }
 
 /// Global settings of a simulation.
@@ -299,6 +304,7 @@ struct Sections {
     runs: Vec<Option<SimRun>>,
     raw_ids: Vec<Option<String>>,
     references: Vec<Option<Reference>>,
+    sensitivity: Option<SensitivitySettings>,
 }
 
 /// Check simulation-manifest text as if read from `path`.
@@ -315,6 +321,7 @@ pub fn load_simulation_str(text: &str, path: &Path) -> Result<SimulationPlan, Ma
         runs: doc.array("runs"),
         raw_ids: doc.raw("runs", "id"),
         references: doc.array("references"),
+        sensitivity: doc.section("sensitivity"),
     };
     let problems = &mut doc.problems;
     let mut bad = |path: KeyPath, msg: String| problems.push(Problem::new(path, msg));
@@ -331,6 +338,9 @@ pub fn load_simulation_str(text: &str, path: &Path) -> Result<SimulationPlan, Ma
     }
     let ident = s.identification.clone().unwrap_or_default();
     check_simulated_identification(&ident, fs, &mut bad);
+    if let Some(sens) = &s.sensitivity {
+        check_sensitivity(Some(sens), &mut bad);
+    }
     let runs = check_runs(&s, &mut bad);
     for (i, r) in s.references.iter().enumerate() {
         if let Some(r) = r
@@ -380,6 +390,7 @@ fn assemble(
             identification,
             runs: s.runs.into_iter().collect::<Option<Vec<_>>>()?,
             references: s.references.into_iter().collect::<Option<Vec<_>>>()?,
+            sensitivity: s.sensitivity,
         },
         runs,
     })

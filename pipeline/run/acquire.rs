@@ -91,6 +91,9 @@ pub struct FitData {
     pub freq_hz: Vec<f64>,
     pub h: Vec<nalgebra::Complex<f64>>,
     pub variance: Vec<f64>,
+    /// The input's one-sided auto-spectral density at those bins
+    /// (unit^2/Hz), which turns the variance into a noise level.
+    pub suu: Vec<f64>,
 }
 
 impl FitData {
@@ -109,6 +112,7 @@ impl FitData {
             freq_hz: bins.iter().map(|&i| h.freq_hz[i]).collect(),
             h: bins.iter().map(|&i| h.h[i]).collect(),
             variance,
+            suu: bins.iter().map(|&i| h.suu[i]).collect(),
         }
     }
 
@@ -119,6 +123,16 @@ impl FitData {
             variance: &self.variance,
         }
     }
+}
+
+/// The fewest band bins a fit may use: one per parameter, at least three
+/// (each bin gives two real equations, a margin over the bare minimum).
+pub fn bins_needed(ident: &IdentificationPlan) -> usize {
+    let n_params = ident.numerator_order
+        + 1
+        + ident.denominator_order
+        + usize::from(matches!(ident.delay, DelayPlan::Fit { .. }));
+    n_params.max(3)
 }
 
 /// The fit options of a campaign's identification settings for a log
@@ -197,6 +211,31 @@ pub fn log_stage(
     log_stage_from(run, plan, ident, LogFile::read(&plan.path)?)
 }
 
+/// The command of run `plan`'s log as its fit saw it (trimmed when the
+/// identification trims), for the Monte Carlo to replay; errors when the
+/// log is no longer the one `sha256` names.
+pub fn replayed_command(
+    plan: &LogPlan,
+    ident: &IdentificationPlan,
+    sha256: &str,
+) -> Result<Vec<f64>, IngestError> {
+    let mut log = ingest::read_log(plan)?;
+    if log.sha256 != sha256 {
+        return Err(IngestError::Changed {
+            path: plan.path.clone(),
+            before: format!("SHA-256 {sha256} when its run was analysed"),
+            after: format!(
+                "SHA-256 {} when the Monte Carlo read its command",
+                log.sha256
+            ),
+        });
+    }
+    if ident.trim_to_excitation {
+        log = ingest::trim_to_excitation(&log, 0.01);
+    }
+    Ok(log.command_m)
+}
+
 /// The log stage of one run whose log file is already read.
 pub fn log_stage_from(
     run: &RunPlan,
@@ -261,13 +300,8 @@ pub fn log_stage_from(
     let mask = frf::band_mask(&h, run.band_hz, ident.coherence_min);
 
     let fit = if matches!(run.role, Role::NoSpecimen | Role::Spring | Role::Fit) {
-        let n_params = ident.numerator_order
-            + 1
-            + ident.denominator_order
-            + usize::from(matches!(ident.delay, DelayPlan::Fit { .. }));
         let used = mask.iter().filter(|m| **m).count();
-        // Each bin gives two real equations; ask for a margin over the bare minimum.
-        let need = n_params.max(3);
+        let need = bins_needed(ident);
         if used < need {
             return Err(AcquireError::TooFewBins {
                 path,

@@ -24,7 +24,7 @@ use std::time::Instant;
 
 use rayon::prelude::*;
 
-use super::acquire::{self, AcquireError, Acquired, FitData, LogStage, acquire_with};
+use super::acquire::{AcquireError, Acquired, FitData, LogStage, acquire_with};
 use super::cache::{self, Cache, Probe};
 use super::compare::compare;
 use super::figures::{self, ForceBins, OverlayRun};
@@ -38,9 +38,9 @@ use crate::model::{self, CnTerm, LinearSdof, LinearSpecimen, RigParams};
 use crate::report::{FigureFiles, FigureFormats, FigureSpec, PageFigure, WriteError};
 use crate::results::{
     CampaignSummary, CcfResult, ComplexValue, FitSummary, LogInfo, RESULTS_SCHEMA_VERSION, Results,
-    RunResult, SensitivityResult, Status, TfResult, TfSource,
+    RunResult, Status, TfResult, TfSource,
 };
-use crate::sensitivity::{CoefficientNoise, NoiseProfile};
+use crate::sensitivity::NoiseProfile;
 use crate::simulate::specimen::SpecimenModel;
 use crate::validate::csi::Csi;
 use crate::validate::{self, Record, ValidateError, ValidationMetrics};
@@ -206,8 +206,21 @@ pub(super) fn analyse_with(
         warnings,
         manifest: campaign.manifest.clone(),
     };
-    results.sensitivity =
-        rig_params.and_then(|rig| sensitivity(campaign, &rig, &results, noise.as_ref()));
+    results.sensitivity = match rig_params {
+        Some(rig) => {
+            super::sensitivity::sensitivity(campaign, &rig, &results, noise.as_ref(), draw.cache)?
+        }
+        None => None,
+    };
+    if let Some(note) = results
+        .sensitivity
+        .as_ref()
+        .and_then(|s| s.monte_carlo_note.as_ref())
+    {
+        results
+            .warnings
+            .push(format!("sensitivity.monte_carlo: not run: {note}"));
+    }
     results.comparisons = compare(campaign, &results);
     let specs = figures::campaign_figures(&overlay, results.sensitivity.as_ref());
     let (campaign_figures, figure_warnings) = draw.write(&specs)?;
@@ -567,16 +580,22 @@ fn second_pass(
 }
 
 /// What run `plan`'s log says of its FRF noise: the bins its fit used and
-/// their variance.
+/// their variance, the white noise level that implies, the displacement's
+/// quantisation step and the log's hash (for the Monte Carlo, which
+/// replays its command).
 fn noise_profile(plan: &RunPlan, st: &LogStage) -> Option<NoiseProfile> {
     let fit = st.fit.as_ref()?;
     let data = FitData::of(&st.frf, &st.mask);
+    let fs = st.log.sample_rate_hz;
     (!data.freq_hz.is_empty()).then(|| NoiseProfile {
         run: plan.id.clone(),
+        white_noise: crate::sensitivity::montecarlo::white_noise(&data.variance, &data.suu, fs),
         freq_hz: data.freq_hz,
         variance: data.variance,
-        sample_rate_hz: st.log.sample_rate_hz,
+        sample_rate_hz: fs,
         delay_s: fit.tf.delay_s,
+        displacement_step_m: crate::ingest::quantum_step(&st.log.displacement_m),
+        log_sha256: st.log.sha256.clone(),
     })
 }
 
@@ -919,91 +938,5 @@ fn ccf_result(rig: &RigParams, plan: &RunPlan) -> Option<CcfResult> {
         C5: c.C5,
         poles_with_cn: poles(CnTerm::Kept),
         poles_without_cn,
-    })
-}
-
-/// The stiffness sweep over 0.01 a2 .. 10 a2 (the paper's springs sit near
-/// 0.1 a2), assuming each coefficient is as precise as the campaign's
-/// median fitted one, or 0.1 % when the campaign's models carry no
-/// uncertainty (published transfer functions).
-fn sensitivity(
-    campaign: &Campaign,
-    rig: &RigParams,
-    results: &Results,
-    noise: Option<&NoiseProfile>,
-) -> Option<SensitivityResult> {
-    let springs: Vec<f64> = campaign
-        .runs
-        .iter()
-        .filter_map(|r| match (r.role, r.specimen) {
-            (Role::Spring, SpecimenModel::Spring { stiffness_n_per_m }) => Some(stiffness_n_per_m),
-            _ => None,
-        })
-        .collect();
-    let plan = &campaign.sensitivity;
-    let a2 = rig.a2_n_per_m;
-    let range = plan.range_n_per_m.unwrap_or((0.01 * a2, 10.0 * a2));
-    let points = plan.points;
-    // The scatter between springs, relative, when there are two or more.
-    let scatter = results.rig.as_ref().and_then(|r| {
-        let s = r.spread.as_ref()?;
-        Some([s.a2 / r.a2.value.abs(), s.a3 / r.a3.value.abs()])
-    });
-    let recommend = |sweep: &crate::sensitivity::StiffnessSensitivity| {
-        crate::sensitivity::recommend(sweep, plan.target_rel_std, &springs, scatter)
-    };
-    // The campaign's own noise when a no-specimen log measured it: its
-    // FRF variance through the fit's Jacobian (Sec. 2.3's analysis with
-    // the lab's noise, not an assumed one).
-    if let Some(profile) = noise {
-        let opts = acquire::fit_options(&campaign.identification, profile.sample_rate_hz);
-        let measured = CoefficientNoise::Measured {
-            profile,
-            opts: &opts,
-        };
-        if let Ok(sweep) = crate::sensitivity::stiffness_sweep(rig, range, points, measured) {
-            let (f0, f1) = (
-                profile.freq_hz.first().copied().unwrap_or(f64::NAN),
-                profile.freq_hz.last().copied().unwrap_or(f64::NAN),
-            );
-            return Some(SensitivityResult {
-                basis: format!(
-                    "the FRF noise run {} measured ({} bins, {f0:.3}-{f1:.2} Hz) through the fit's Jacobian, for runs with the same excitation and sensors",
-                    profile.run,
-                    profile.freq_hz.len()
-                ),
-                recommendation: recommend(&sweep),
-                sweep,
-                springs_n_per_m: springs,
-            });
-        }
-    }
-    let mut rel: Vec<f64> = results
-        .runs
-        .iter()
-        .filter(|r| matches!(r.role, Role::NoSpecimen | Role::Spring))
-        .filter_map(|r| r.tf.as_ref())
-        .flat_map(|tf| tf.rel_std.clone().unwrap_or_default())
-        .filter(|v| v.is_finite() && *v > 0.0)
-        .collect();
-    rel.sort_by(f64::total_cmp);
-    let (eps, basis) = match rel.get(rel.len() / 2) {
-        Some(&m) if !rel.is_empty() => (
-            m,
-            format!("median relative std of the campaign's fitted coefficients ({m:.2e}), each assumed independent"),
-        ),
-        _ => (
-            1e-3,
-            "assumed 0.1 % relative std per coefficient (the campaign's models carry no uncertainty)".to_string(),
-        ),
-    };
-    let sweep =
-        crate::sensitivity::stiffness_sweep(rig, range, points, CoefficientNoise::Relative(eps))
-            .ok()?;
-    Some(SensitivityResult {
-        basis,
-        recommendation: recommend(&sweep),
-        sweep,
-        springs_n_per_m: springs,
     })
 }

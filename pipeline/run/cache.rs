@@ -119,6 +119,12 @@ impl Cache {
         }
     }
 
+    /// A stored outcome under `key` that is not a log's (the campaign's
+    /// Monte Carlo).
+    pub(super) fn lookup<T: DeserializeOwned>(&self, key: &str) -> Option<T> {
+        self.load(key, &|_: &T| true)
+    }
+
     fn load<T: DeserializeOwned>(&self, key: &str, usable: &impl Fn(&T) -> bool) -> Option<T> {
         if self.fresh {
             return None;

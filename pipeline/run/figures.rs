@@ -24,6 +24,7 @@ use crate::report::figures::{
     Trace, XySeries, decimate_minmax,
 };
 use crate::results::{RunResult, SensitivityResult, TfResult};
+use crate::sensitivity::montecarlo::{MonteCarlo, MonteCarloPoint, PerParameter};
 use crate::validate::TimeStage;
 use crate::validate::csi::Csi;
 
@@ -72,6 +73,9 @@ pub(super) fn campaign_figures(
     }
     if let Some(s) = sensitivity {
         out.push(sensitivity_figure(s));
+        if let Some(mc) = &s.monte_carlo {
+            out.extend(monte_carlo_figures(mc, &s.springs_n_per_m));
+        }
     }
     out
 }
@@ -602,12 +606,12 @@ fn overlay_figure(runs: &[OverlayRun]) -> FigureSpec {
 /// The stiffness sensitivity (paper Sec. 2.3), with the campaign's springs
 /// marked.
 fn sensitivity_figure(s: &SensitivityResult) -> FigureSpec {
-    let k = &s.sweep.stiffness_n_per_m;
+    let k = &s.analytic.sweep.stiffness_n_per_m;
     let pct = |v: &[f64]| v.iter().map(|x| 100.0 * x).collect::<Vec<_>>();
     let mut series: Vec<XySeries> = [
-        ("a1b0", &s.sweep.rel_std_a1b0),
-        ("a2", &s.sweep.rel_std_a2),
-        ("a3", &s.sweep.rel_std_a3),
+        ("a1b0", &s.analytic.sweep.rel_std_a1b0),
+        ("a2", &s.analytic.sweep.rel_std_a2),
+        ("a3", &s.analytic.sweep.rel_std_a3),
     ]
     .into_iter()
     .enumerate()
@@ -641,7 +645,7 @@ fn sensitivity_figure(s: &SensitivityResult) -> FigureSpec {
         title: "Sensitivity to the spring stiffness".into(),
         caption: format!(
             "Relative standard deviation of the identified a1b0, a2 and a3 from one no-specimen run and one spring of stiffness k ({}).",
-            s.basis
+            s.analytic.basis
         ),
         figure: Figure::Lines(LinesFigure {
             title: "Identified parameters against spring stiffness".into(),
@@ -719,4 +723,130 @@ pub(super) fn history_figure(entries: &[crate::drift::Entry]) -> Option<FigureSp
         size: fig.recommended_size(),
         figure: Figure::Panels(fig),
     })
+}
+
+/// The Monte Carlo (issue 13): each parameter's spread against k, solid,
+/// beside the analytic prediction at the same stiffnesses, dashed, in the
+/// same colour; and each parameter's bias against k.
+fn monte_carlo_figures(mc: &MonteCarlo, springs: &[f64]) -> Vec<FigureSpec> {
+    let pts: Vec<&MonteCarloPoint> = mc.points.iter().filter(|p| p.rel_std.is_some()).collect();
+    let k: Vec<f64> = pts.iter().map(|p| p.stiffness_n_per_m).collect();
+    let column = |get: &dyn Fn(&MonteCarloPoint) -> Option<[f64; 4]>, j: usize| -> Vec<f64> {
+        pts.iter()
+            .map(|p| get(p).map_or(f64::NAN, |v| 100.0 * v[j]))
+            .collect()
+    };
+    let mut spread = Vec::new();
+    let mut bias = Vec::new();
+    for (j, name) in PerParameter::NAMES.iter().enumerate() {
+        spread.push(XySeries {
+            label: format!("{name}, Monte Carlo"),
+            x: k.clone(),
+            y: column(&|p| p.rel_std.map(PerParameter::to_array), j),
+            trace: Trace::Measured,
+            palette_index: Some(j),
+        });
+        spread.push(XySeries {
+            label: format!("{name}, analytic"),
+            x: k.clone(),
+            y: column(&|p| p.analytic_rel_std.map(PerParameter::to_array), j),
+            trace: Trace::Model,
+            palette_index: Some(j),
+        });
+        bias.push(XySeries {
+            label: (*name).into(),
+            x: k.clone(),
+            y: column(&|p| p.rel_bias.map(PerParameter::to_array), j),
+            trace: Trace::Measured,
+            palette_index: Some(j),
+        });
+    }
+    let span = |series: &[XySeries]| {
+        series
+            .iter()
+            .flat_map(|s| &s.y)
+            .filter(|v| v.is_finite())
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
+                (a.min(*v), b.max(*v))
+            })
+    };
+    let mark = |series: &mut Vec<XySeries>, (lo, hi): (f64, f64)| {
+        for (j, ks) in springs.iter().enumerate() {
+            series.push(XySeries {
+                label: if j == 0 {
+                    "campaign's springs".into()
+                } else {
+                    String::new()
+                },
+                x: vec![*ks, *ks],
+                y: vec![lo, hi],
+                trace: Trace::Reference,
+                palette_index: None,
+            });
+        }
+    };
+    // The mean's own sampling error, so a bias can be told from noise:
+    // +-2 std / sqrt(n) of a2 (a1b0 and a3 are alike).
+    for (sign, label) in [(1.0, "a2 +-2 standard errors"), (-1.0, "")] {
+        bias.push(XySeries {
+            label: label.into(),
+            x: k.clone(),
+            y: pts
+                .iter()
+                .map(|p| {
+                    p.rel_std.map_or(f64::NAN, |s| {
+                        sign * 200.0 * s.a2 / (p.identified as f64).sqrt()
+                    })
+                })
+                .collect(),
+            trace: Trace::Reference,
+            palette_index: None,
+        });
+    }
+    let s = span(&spread);
+    mark(&mut spread, s);
+    let b = span(&bias);
+    mark(&mut bias, b);
+    vec![
+        FigureSpec {
+            id: "sensitivity-monte-carlo".into(),
+            title: "Monte Carlo against the analytic prediction".into(),
+            caption: format!(
+                "Relative std of beta1, a1b0, a2 and a3 over {} simulated identifications per stiffness (solid) and the first-order prediction (dashed). {}",
+                mc.seeds, mc.agreement.summary
+            ),
+            figure: Figure::Lines(LinesFigure {
+                title: "Spread of the identified parameters against spring stiffness".into(),
+                x_label: "Spring stiffness k (N/m)".into(),
+                y_label: "Relative std (%)".into(),
+                series: spread,
+                x_range: None,
+                y_range: None,
+                log_x: true,
+                log_y: true,
+                zero_line: false,
+            }),
+            size: (1200, 600),
+        },
+        FigureSpec {
+            id: "sensitivity-bias".into(),
+            title: "Monte Carlo bias".into(),
+            caption: format!(
+                "Mean of {} simulated identifications per stiffness over the true value, minus 1, with the mean's own sampling error (dotted).",
+                mc.seeds
+            ),
+            figure: Figure::Lines(LinesFigure {
+                title: "Bias of the identified parameters against spring stiffness".into(),
+                x_label: "Spring stiffness k (N/m)".into(),
+                y_label: "Relative bias (%)".into(),
+                series: bias,
+                x_range: None,
+                y_range: None,
+                log_x: true,
+                log_y: false,
+                zero_line: true,
+            }),
+            size: (1200, 600),
+        },
+    ]
 }

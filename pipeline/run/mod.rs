@@ -12,6 +12,7 @@ pub mod figures;
 mod history;
 pub mod montecarlo;
 mod rig;
+mod sensitivity;
 mod shard;
 pub mod simulate;
 mod tables;

@@ -1,24 +1,30 @@
-//! The stiffness sensitivity by Monte Carlo (paper Sec. 2.3, issue 13 part
-//! 2; work in progress, not yet wired into the campaign): at each
-//! stiffness, a no-specimen run and a spring run simulated from the
-//! identified rig, driven by a measured command with its hold, their
-//! displacement read with white noise of the campaign's level; each pair
-//! identified with the campaign's own FRF and fit settings and Eqs. 18-20.
-//! The bias and spread of beta1, a1b0, a2 and a3 against k.
+//! The stiffness sensitivity by Monte Carlo (paper Sec. 2.3, issue 13
+//! part 2): at each stiffness, a no-specimen run and a spring run simulated
+//! from the identified rig (Eq. 10, exactly: zero-order hold and the
+//! campaign's delay, `simulate::discrete`), driven by the campaign's own
+//! measured command, their displacement read with white noise of the level
+//! the campaign's FRF variance implies and rounded to its converter's grid;
+//! each pair identified with the campaign's own FRF and fit settings,
+//! refused as `servoid run` refuses a run (too few bins, unstable, not
+//! converged), and Eqs. 18-20. The bias and spread of beta1, a1b0, a2 and
+//! a3 against k.
 //!
 //! Deterministic whatever the thread count: each (stiffness, seed) draws
 //! its noise from its own ChaCha stream, and the results are gathered in
-//! grid order.
+//! grid order. The noiseless responses are simulated once per stiffness
+//! (and once for the no-specimen run) and shared by the seeds: the noise is
+//! all that differs between draws.
 
 use rand_distr::{Distribution, Normal};
 use rayon::prelude::*;
 
-use super::acquire::{FitData, fit_options};
+use super::acquire::{FitData, bins_needed, fit_options};
 use crate::fit::fit;
 use crate::frf;
 use crate::identify::{SecondOrder, SpringRun, TfEstimate, identify_rig};
 use crate::manifest::IdentificationPlan;
 use crate::model::{LinearSpecimen, RigParams, tf_x1_u};
+use crate::sensitivity::montecarlo::{MonteCarloPoint, point};
 use crate::simulate::{discrete::simulate_linear, seeded_rng};
 
 /// What the simulated runs are made of.
@@ -29,94 +35,113 @@ pub struct McInput<'a> {
     pub sample_rate_hz: f64,
     /// Std of the displacement noise (m), white.
     pub noise_rms_m: f64,
+    /// The displacement converter's step (m): each simulated reading,
+    /// noise included, is rounded to a multiple of it. None: not rounded.
+    pub step_m: Option<f64>,
+    /// Pure delay from command to displacement (s), as the campaign's
+    /// no-specimen fit found it.
+    pub delay_s: f64,
     /// The campaign's FRF and fit settings, band and coherence limit.
     pub ident: &'a IdentificationPlan,
-}
-
-/// One stiffness's outcome over the seeds: relative bias (mean / true - 1)
-/// and relative std of beta1, a1b0, a2, a3; `failed` identifications are
-/// left out of both.
-#[derive(Debug, Clone, PartialEq)]
-pub struct McPoint {
-    pub stiffness_n_per_m: f64,
-    pub rel_bias: [f64; 4],
-    pub rel_std: [f64; 4],
-    pub failed: usize,
+    /// Base seed of every draw.
+    pub seed: u64,
 }
 
 /// The Monte Carlo over `stiffnesses` with `seeds` seeds each.
-pub fn monte_carlo(input: &McInput<'_>, stiffnesses: &[f64], seeds: u64) -> Vec<McPoint> {
-    let jobs: Vec<(usize, u64)> = (0..stiffnesses.len())
-        .flat_map(|i| (0..seeds).map(move |s| (i, s)))
-        .collect();
-    let outcomes: Vec<Option<[f64; 4]>> = jobs
-        .par_iter()
-        .map(|&(i, s)| identify_once(input, stiffnesses[i], i, s))
-        .collect();
+pub fn monte_carlo(input: &McInput<'_>, stiffnesses: &[f64], seeds: u64) -> Vec<MonteCarloPoint> {
     let truth = [
         input.rig.beta1_per_s,
         input.rig.a1b0_n_per_m_s2,
         input.rig.a2_n_per_m,
         input.rig.a3_per_s,
     ];
+    let clean_none = clean(input, &LinearSpecimen::None);
     stiffnesses
         .iter()
         .enumerate()
         .map(|(i, &k)| {
-            let got: Vec<[f64; 4]> = outcomes[i * seeds as usize..(i + 1) * seeds as usize]
-                .iter()
-                .flatten()
-                .copied()
+            let clean_k = clean(
+                input,
+                &LinearSpecimen::Spring {
+                    stiffness_n_per_m: k,
+                },
+            );
+            let outcomes: Vec<Result<[f64; 4], String>> = (0..seeds)
+                .into_par_iter()
+                .map(|s| match (&clean_none, &clean_k) {
+                    (Ok(none), Ok(spring)) => identify_once(input, none, spring, k, i, s),
+                    (Err(e), _) | (_, Err(e)) => Err(e.clone()),
+                })
                 .collect();
-            let n = got.len() as f64;
-            let stat = |p: usize| {
-                let mean = got.iter().map(|g| g[p]).sum::<f64>() / n;
-                let var = got.iter().map(|g| (g[p] - mean).powi(2)).sum::<f64>() / (n - 1.0);
-                (mean / truth[p] - 1.0, var.sqrt() / truth[p])
-            };
-            let s: [(f64, f64); 4] = std::array::from_fn(stat);
-            McPoint {
-                stiffness_n_per_m: k,
-                rel_bias: s.map(|x| x.0),
-                rel_std: s.map(|x| x.1),
-                failed: seeds as usize - got.len(),
-            }
+            point(k, &outcomes, truth)
         })
         .collect()
 }
 
-/// One identification: the no-specimen and spring runs simulated with
-/// noise from stream (i, seed), fitted, and Eqs. 18-20.
-fn identify_once(input: &McInput<'_>, k: f64, i: usize, seed: u64) -> Option<[f64; 4]> {
+/// The noiseless displacement of the rig with `spec`.
+fn clean(input: &McInput<'_>, spec: &LinearSpecimen) -> Result<Vec<f64>, String> {
+    let ss = tf_x1_u(&input.rig, spec).to_state_space();
+    simulate_linear(
+        &ss,
+        input.command_m,
+        1.0 / input.sample_rate_hz,
+        &[input.delay_s.max(0.0)],
+    )
+    .map(|mut y| y.remove(0))
+    .map_err(|e| format!("the simulation failed: {e}"))
+}
+
+/// One identification: the two noiseless responses read with noise from
+/// stream (i, seed), fitted, and Eqs. 18-20.
+fn identify_once(
+    input: &McInput<'_>,
+    clean_none: &[f64],
+    clean_spring: &[f64],
+    k: f64,
+    i: usize,
+    seed: u64,
+) -> Result<[f64; 4], String> {
     let fs = input.sample_rate_hz;
-    let run = |spec: &LinearSpecimen, label: &str| -> Option<TfEstimate> {
-        let ss = tf_x1_u(&input.rig, spec).to_state_space();
-        let mut y = simulate_linear(&ss, input.command_m, 1.0 / fs, &[0.0])
-            .ok()?
-            .remove(0);
-        let mut rng = seeded_rng(seed, &format!("mc/{i}/{label}"));
-        let noise = Normal::new(0.0, input.noise_rms_m).ok()?;
-        for v in &mut y {
-            *v += noise.sample(&mut rng);
-        }
-        let h = frf::estimate(input.command_m, &y, fs, &input.ident.frf).ok()?;
-        let mask = frf::band_mask(&h, input.ident.band_hz, input.ident.coherence_min);
+    let ident = input.ident;
+    let run = |clean: &[f64], label: &str| -> Result<TfEstimate, String> {
+        let mut rng = seeded_rng(input.seed, &format!("mc/{i}/{seed}/{label}"));
+        let noise =
+            Normal::new(0.0, input.noise_rms_m).map_err(|e| format!("the noise level: {e}"))?;
+        let y: Vec<f64> = clean
+            .iter()
+            .map(|v| {
+                let read = v + noise.sample(&mut rng);
+                match input.step_m {
+                    Some(q) => (read / q).round() * q,
+                    None => read,
+                }
+            })
+            .collect();
+        let h = frf::estimate(input.command_m, &y, fs, &ident.frf)
+            .map_err(|e| format!("the FRF failed: {e}"))?;
+        let mask = frf::band_mask(&h, ident.band_hz, ident.coherence_min);
         let data = FitData::of(&h, &mask);
-        let f = fit(&data.input(), &fit_options(input.ident, fs)).ok()?;
-        Some(TfEstimate {
+        let opts = fit_options(ident, fs);
+        // As acquire refuses a run: too few bins for the model.
+        if mask.iter().filter(|m| **m).count() < bins_needed(ident) {
+            return Err("too few bins pass the coherence limit".into());
+        }
+        let f = fit(&data.input(), &opts).map_err(|_| "the fit failed".to_string())?;
+        if !f.stable {
+            return Err("an unstable fit".into());
+        }
+        if !f.converged {
+            return Err("a fit that did not converge".into());
+        }
+        Ok(TfEstimate {
             run: label.to_string(),
             p_gain: input.rig.p_gain,
-            tf: SecondOrder::from_tf(&f.tf).ok()?,
+            tf: SecondOrder::from_tf(&f.tf).map_err(|_| "a fit that is not second order")?,
             cov: f.second_order_cov(),
         })
     };
-    let no_spec = run(&LinearSpecimen::None, "no-specimen")?;
-    let spring = run(
-        &LinearSpecimen::Spring {
-            stiffness_n_per_m: k,
-        },
-        "spring",
-    )?;
+    let no_spec = run(clean_none, "no-specimen")?;
+    let spring = run(clean_spring, "spring")?;
     let id = identify_rig(
         &[no_spec],
         &[SpringRun {
@@ -124,8 +149,8 @@ fn identify_once(input: &McInput<'_>, k: f64, i: usize, seed: u64) -> Option<[f6
             estimate: spring,
         }],
     )
-    .ok()?;
-    Some([id.beta1.value, id.a1b0.value, id.a2.value, id.a3.value])
+    .map_err(|_| "Eqs. 18-20 have no physical solution".to_string())?;
+    Ok([id.beta1.value, id.a1b0.value, id.a2.value, id.a3.value])
 }
 
 #[cfg(test)]
@@ -186,7 +211,10 @@ mod tests {
             command_m: &u,
             sample_rate_hz: 1000.0,
             noise_rms_m: 2e-6,
+            step_m: None,
+            delay_s: 0.0,
             ident: &ident,
+            seed: 0,
         };
         let ks = [5e4, 1.2e5, 5e5];
         let mc = monte_carlo(&input, &ks, 400);
@@ -207,6 +235,9 @@ mod tests {
             variance: data.variance,
             sample_rate_hz: 1000.0,
             delay_s: 0.0,
+            white_noise: None,
+            displacement_step_m: None,
+            log_sha256: String::new(),
         };
         let opts = fit_options(&ident, 1000.0);
         for p in &mc {
@@ -230,7 +261,10 @@ mod tests {
             assert_eq!(p.failed, 0);
             let names = ["beta1", "a1b0", "a2", "a3"];
             for (j, (name, an)) in names.iter().zip(analytic).enumerate() {
-                let (std, bias) = (p.rel_std[j], p.rel_bias[j]);
+                let (std, bias) = (
+                    p.rel_std.unwrap().to_array()[j],
+                    p.rel_bias.unwrap().to_array()[j],
+                );
                 assert!(
                     (std / an - 1.0).abs() < 0.10,
                     "k = {k}, {name}: MC {std:.3e} vs analytic {an:.3e}"
@@ -253,7 +287,10 @@ mod tests {
             command_m: &u,
             sample_rate_hz: 1000.0,
             noise_rms_m: 2e-6,
+            step_m: None,
+            delay_s: 0.0,
             ident: &ident,
+            seed: 0,
         };
         let run = |threads| {
             rayon::ThreadPoolBuilder::new()

@@ -5,7 +5,8 @@
 //!
 //! A shard does every identification run (no-specimen and springs: few, and
 //! each shard needs the rig they give) and every n-th of the others (fit
-//! and validation runs, counted in manifest order, starting at the i-th).
+//! and validation runs, counted in manifest order, starting at the i-th);
+//! the first shard also does the campaign's Monte Carlo.
 //! It writes what it did as the run cache holds it (`.cache/`), its figures
 //! and tables, and `shard.json`, which says which campaign, servoid and share
 //! it is. The merge checks the shards belong together (same campaign
@@ -65,6 +66,11 @@ impl Shard {
             k += 1;
             (k - 1) % self.count == self.index
         });
+        // The campaign's Monte Carlo is the first shard's alone: the others
+        // would repeat it, and the merge finds it in that shard's cache.
+        if self.index > 0 {
+            share.sensitivity.monte_carlo = None;
+        }
         share
     }
 }

@@ -337,6 +337,6 @@ fn analysis_manifest(plan: &SimulationPlan, truth: &Truth) -> Manifest {
         references,
         run_table: None,
         history: None,
-        sensitivity: None,
+        sensitivity: m.sensitivity.clone(),
     }
 }

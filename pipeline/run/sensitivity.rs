@@ -1,0 +1,240 @@
+//! The campaign's stiffness sensitivity (paper Sec. 2.3): the analytic
+//! sweep from the campaign's own noise (or an assumed precision without a
+//! log), the recommendation, and, when the manifest asks, the Monte Carlo
+//! (`montecarlo`) compared with the sweep. The Monte Carlo is cached under
+//! a key of everything that decides it (the rig to the last bit, the noise
+//! profile, the no-specimen log's hash, the identification and Monte Carlo
+//! settings), so a rerun with the same rig does not repeat it.
+
+use super::acquire::{self, replayed_command};
+use super::cache::{self, Cache};
+use super::montecarlo::{McInput, monte_carlo};
+use crate::manifest::{Campaign, MonteCarloSettings, Role, RunSource};
+use crate::model::RigParams;
+use crate::report::WriteError;
+use crate::results::{AnalyticSensitivity, Results, SensitivityResult};
+use crate::sensitivity::montecarlo::{MonteCarlo, compare};
+use crate::sensitivity::{
+    CoefficientNoise, NoiseProfile, StiffnessSensitivity, log_grid, recommend, stiffness_sweep,
+};
+use crate::simulate::specimen::SpecimenModel;
+
+/// The sensitivity of a campaign whose rig is `rig`; `noise` the first
+/// no-specimen run's FRF noise. None when the rig allows no sweep.
+pub(super) fn sensitivity(
+    campaign: &Campaign,
+    rig: &RigParams,
+    results: &Results,
+    noise: Option<&NoiseProfile>,
+    cache: Option<&Cache>,
+) -> Result<Option<SensitivityResult>, WriteError> {
+    let springs: Vec<f64> = campaign
+        .runs
+        .iter()
+        .filter_map(|r| match (r.role, r.specimen) {
+            (Role::Spring, SpecimenModel::Spring { stiffness_n_per_m }) => Some(stiffness_n_per_m),
+            _ => None,
+        })
+        .collect();
+    let plan = &campaign.sensitivity;
+    // 0.01 a2 .. 10 a2 by default: the paper's springs sit near 0.1 a2.
+    let a2 = rig.a2_n_per_m;
+    let range = plan.range_n_per_m.unwrap_or((0.01 * a2, 10.0 * a2));
+    let Some(analytic) = analytic(campaign, rig, results, noise, range) else {
+        return Ok(None);
+    };
+    // The scatter between springs, relative, when there are two or more.
+    let scatter = results.rig.as_ref().and_then(|r| {
+        let s = r.spread.as_ref()?;
+        Some([s.a2 / r.a2.value.abs(), s.a3 / r.a3.value.abs()])
+    });
+    let recommendation = recommend(&analytic.sweep, plan.target_rel_std, &springs, scatter);
+    let (monte_carlo, monte_carlo_note) = match &plan.monte_carlo {
+        None => (None, None),
+        Some(mc) => match noise {
+            None => (
+                None,
+                Some("the Monte Carlo replays a no-specimen run's logged command with its measured noise, and this campaign has no no-specimen log that was fitted".to_string()),
+            ),
+            Some(profile) => match cached_monte_carlo(campaign, rig, profile, range, mc, cache)? {
+                Ok(m) => (Some(m), None),
+                Err(why) => (None, Some(why)),
+            },
+        },
+    };
+    Ok(Some(SensitivityResult {
+        springs_n_per_m: springs,
+        analytic,
+        monte_carlo,
+        monte_carlo_note,
+        recommendation,
+    }))
+}
+
+/// The analytic sweep over `range`: from the campaign's measured FRF
+/// noise when a no-specimen log gave it, else assuming each coefficient is
+/// as precise as the campaign's median fitted one, or 0.1 % when its models
+/// carry no uncertainty (published transfer functions).
+fn analytic(
+    campaign: &Campaign,
+    rig: &RigParams,
+    results: &Results,
+    noise: Option<&NoiseProfile>,
+    range: (f64, f64),
+) -> Option<AnalyticSensitivity> {
+    let points = campaign.sensitivity.points;
+    // The campaign's own noise when a no-specimen log measured it: its
+    // FRF variance through the fit's Jacobian (Sec. 2.3's analysis with
+    // the lab's noise, not an assumed one).
+    if let Some(profile) = noise {
+        let opts = acquire::fit_options(&campaign.identification, profile.sample_rate_hz);
+        let measured = CoefficientNoise::Measured {
+            profile,
+            opts: &opts,
+        };
+        if let Ok(sweep) = stiffness_sweep(rig, range, points, measured) {
+            let (f0, f1) = (
+                profile.freq_hz.first().copied().unwrap_or(f64::NAN),
+                profile.freq_hz.last().copied().unwrap_or(f64::NAN),
+            );
+            return Some(AnalyticSensitivity {
+                basis: format!(
+                    "the FRF noise run {} measured ({} bins, {f0:.3}-{f1:.2} Hz) through the fit's Jacobian, for runs with the same excitation and sensors",
+                    profile.run,
+                    profile.freq_hz.len()
+                ),
+                sweep,
+            });
+        }
+    }
+    let mut rel: Vec<f64> = results
+        .runs
+        .iter()
+        .filter(|r| matches!(r.role, Role::NoSpecimen | Role::Spring))
+        .filter_map(|r| r.tf.as_ref())
+        .flat_map(|tf| tf.rel_std.clone().unwrap_or_default())
+        .filter(|v| v.is_finite() && *v > 0.0)
+        .collect();
+    rel.sort_by(f64::total_cmp);
+    let (eps, basis) = match rel.get(rel.len() / 2) {
+        Some(&m) => (
+            m,
+            format!("median relative std of the campaign's fitted coefficients ({m:.2e}), each assumed independent"),
+        ),
+        None => (
+            1e-3,
+            "assumed 0.1 % relative std per coefficient (the campaign's models carry no uncertainty)".to_string(),
+        ),
+    };
+    let sweep = stiffness_sweep(rig, range, points, CoefficientNoise::Relative(eps)).ok()?;
+    Some(AnalyticSensitivity { basis, sweep })
+}
+
+/// The Monte Carlo from the cache, or run and cached; Err says why it
+/// cannot run (recorded in the results, not a failure of the campaign).
+fn cached_monte_carlo(
+    campaign: &Campaign,
+    rig: &RigParams,
+    profile: &NoiseProfile,
+    range: (f64, f64),
+    mc: &MonteCarloSettings,
+    cache: Option<&Cache>,
+) -> Result<Result<MonteCarlo, String>, WriteError> {
+    let key = cache::key(&[
+        &"monte carlo",
+        rig,
+        profile,
+        &campaign.identification,
+        mc,
+        &range,
+    ]);
+    if let Some(hit) = cache.and_then(|c| c.lookup::<MonteCarlo>(&key)) {
+        return Ok(Ok(hit));
+    }
+    let outcome = run_monte_carlo(campaign, rig, profile, range, mc);
+    if let (Some(c), Ok(m)) = (cache, &outcome) {
+        c.store(&key, m)?;
+    }
+    Ok(outcome)
+}
+
+fn run_monte_carlo(
+    campaign: &Campaign,
+    rig: &RigParams,
+    profile: &NoiseProfile,
+    range: (f64, f64),
+    mc: &MonteCarloSettings,
+) -> Result<MonteCarlo, String> {
+    let Some((noise_rms_m, whiteness)) = profile.white_noise else {
+        return Err(format!(
+            "run {}: too few fitted bins to tell its noise level",
+            profile.run
+        ));
+    };
+    let log_plan = campaign
+        .runs
+        .iter()
+        .find(|r| r.id == profile.run)
+        .and_then(|r| match &r.source {
+            RunSource::Log(l) => Some(l),
+            _ => None,
+        })
+        .ok_or_else(|| format!("run {}: no log to replay", profile.run))?;
+    let command = replayed_command(log_plan, &campaign.identification, &profile.log_sha256)
+        .map_err(|e| format!("run {}: {e}", profile.run))?;
+    let fs = profile.sample_rate_hz;
+    let input = McInput {
+        rig: *rig,
+        command_m: &command,
+        sample_rate_hz: fs,
+        noise_rms_m,
+        step_m: profile.displacement_step_m,
+        delay_s: profile.delay_s,
+        ident: &campaign.identification,
+        seed: mc.seed,
+    };
+    let ks = log_grid(range, mc.points);
+    let mut points = monte_carlo(&input, &ks, mc.seeds);
+    // The analytic prediction at exactly these stiffnesses.
+    let opts = acquire::fit_options(&campaign.identification, fs);
+    let at_points = stiffness_sweep(
+        rig,
+        range,
+        mc.points,
+        CoefficientNoise::Measured {
+            profile,
+            opts: &opts,
+        },
+    )
+    .unwrap_or_else(|_| StiffnessSensitivity::empty());
+    let agreement = compare(&mut points, &at_points, mc.seeds, whiteness);
+    Ok(MonteCarlo {
+        basis: format!(
+            "{} identifications per stiffness, each of a no-specimen run and a spring run simulated from the identified rig (Eq. 10 with the zero-order hold{}), driven by run {}'s logged command ({:.1} s at {fs} Hz), read with {:.3} um rms of white displacement noise (the level its FRF variance implies){}, and identified with the campaign's settings",
+            mc.seeds,
+            if profile.delay_s > 0.0 {
+                format!(" and its {:.2} ms delay", 1e3 * profile.delay_s)
+            } else {
+                String::new()
+            },
+            profile.run,
+            command.len() as f64 / fs,
+            1e6 * noise_rms_m,
+            match profile.displacement_step_m {
+                Some(q) => format!(" on its converter's {:.3} um grid", 1e6 * q),
+                None => String::new(),
+            },
+        ),
+        excitation_run: profile.run.clone(),
+        noise_rms_m,
+        noise_whiteness: whiteness,
+        displacement_step_m: profile.displacement_step_m,
+        delay_s: profile.delay_s,
+        sample_rate_hz: fs,
+        record_s: command.len() as f64 / fs,
+        seeds: mc.seeds,
+        seed: mc.seed,
+        points,
+        agreement,
+    })
+}
