@@ -12,6 +12,7 @@
 //! covariance from the Jacobian at the optimum ([`covariance`]).
 
 pub mod band;
+pub mod joint;
 pub mod linear;
 pub mod lm;
 pub mod problem;

@@ -1,0 +1,409 @@
+//! The joint grey-box estimator of the rig (issue 14, part 1; not yet
+//! wired into the campaign): beta1, a1b0 (at a reference P gain), a2 and a3
+//! fitted together and directly to the FRFs of several runs, each run's
+//! model the exact x1/u of its specimen at its P gain, with nuisance
+//! dynamics shared by every run: the command's hold, a pure delay and,
+//! optionally, a second-order servo-valve mode in series with the valve.
+//!
+//! The paper's sequential procedure (Eqs. 18-20) fits each run alone and
+//! combines the coefficients by algebra, so each run's model error enters
+//! the rig separately; here one set of physical parameters has to explain
+//! every run at once, and the parameters' covariance comes from the fit.
+//!
+//! The model (Eq. 10 with the valve mode of `simulate::plant`): with the
+//! specimen's S(s) = m s^2 + c s + k (S = k for a massless spring, 0 for
+//! none), the mechanics give r = Q(s) x1 with Q = (s + a3) S + a2 s, the
+//! valve (s + beta1) r = A V(s) (u - x1) with A = a1b0 P / P_ref and
+//! V = wv^2 / (s^2 + 2 zeta wv s + wv^2) (1 without the mode), so
+//!
+//!   x1/u = A V / D,  D = (s + beta1) Q + A V,
+//!
+//! which is Eqs. 12, 14 and 17 when V = 1. The measured FRF is that times
+//! the hold Z(s) and exp(-s tau).
+//!
+//! Parameters are solved for as logarithms (all positive, and of very
+//! different sizes) and the delay in sample periods; Levenberg-Marquardt
+//! (`fit::lm`) with the analytic Jacobian below, residuals weighted by each
+//! bin's measured variance as the per-run fit weights them.
+
+use argmin::core::{Error as ArgminError, Executor, Jacobian, Operator, State, TerminationReason};
+use nalgebra::{Complex, DMatrix, DVector};
+
+use super::lm::LevenbergMarquardt;
+use super::problem::hold_response;
+use super::settings::Intersample;
+use super::{FitError, covariance};
+use crate::model::{LinearSpecimen, RigParams};
+
+/// One run's measured FRF x1/u and what the manifest says of it.
+#[derive(Debug, Clone, Copy)]
+pub struct JointRun<'a> {
+    pub specimen: LinearSpecimen,
+    pub p_gain: f64,
+    pub freq_hz: &'a [f64],
+    pub h: &'a [Complex<f64>],
+    /// E|dH|^2 at each bin.
+    pub variance: &'a [f64],
+}
+
+/// The nuisance dynamics the fit includes besides the hold.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Structure {
+    /// The paper's model alone.
+    Plain,
+    /// And a pure delay.
+    Delay,
+    /// And a delay and a second-order servo-valve mode.
+    DelayValve,
+}
+
+impl Structure {
+    fn n_params(self) -> usize {
+        match self {
+            Structure::Plain => 4,
+            Structure::Delay => 5,
+            Structure::DelayValve => 7,
+        }
+    }
+
+    /// The parameters' names, in the order of [`JointFit::params`].
+    pub fn names(self) -> &'static [&'static str] {
+        &[
+            "beta1_per_s",
+            "a1b0_n_per_m_s2",
+            "a2_n_per_m",
+            "a3_per_s",
+            "delay_s",
+            "valve_hz",
+            "valve_damping",
+        ][..self.n_params()]
+    }
+}
+
+/// How to fit.
+#[derive(Debug, Clone, Copy)]
+pub struct JointOptions {
+    pub structure: Structure,
+    pub intersample: Intersample,
+    pub sample_rate_hz: f64,
+    /// The P gain a1b0 is stated at.
+    pub p_ref: f64,
+    pub max_iterations: u64,
+    /// Where the valve mode starts (Hz) and its damping.
+    pub valve_start: (f64, f64),
+}
+
+/// The joint estimate.
+#[derive(Debug, Clone, PartialEq)]
+pub struct JointFit {
+    pub structure: Structure,
+    /// The rig, a1b0 at `p_ref`.
+    pub rig: RigParams,
+    pub delay_s: f64,
+    /// Frequency (Hz) and damping ratio of the valve mode.
+    pub valve: Option<(f64, f64)>,
+    /// beta1, a1b0, a2, a3, then delay (s), valve frequency (Hz) and
+    /// damping as the structure has them.
+    pub params: Vec<f64>,
+    /// Their covariance, scaled by the reduced chi-square as the per-run
+    /// fit's is.
+    pub covariance: DMatrix<f64>,
+    pub std: Vec<f64>,
+    /// The weighted cost (sum of squared weighted residuals) and its
+    /// degrees of freedom, 2 bins - parameters.
+    pub cost: f64,
+    pub dof: usize,
+    pub converged: bool,
+    pub iterations: u64,
+}
+
+/// One bin of one run.
+#[derive(Debug, Clone)]
+struct Bin {
+    s: Complex<f64>,
+    h: Complex<f64>,
+    /// The hold's response.
+    hold: Complex<f64>,
+    /// sqrt(2 / E|dH|^2): each of Re and Im then has unit variance.
+    weight: f64,
+    /// Index into `JointProblem::runs`.
+    run: usize,
+}
+
+/// A run's specimen polynomial S(s) = m s^2 + c s + k and its P / P_ref.
+#[derive(Debug, Clone, Copy)]
+struct RunModel {
+    mck: (f64, f64, f64),
+    p_ratio: f64,
+}
+
+/// The least-squares problem over every bin of every run.
+#[derive(Debug, Clone)]
+struct JointProblem {
+    bins: Vec<Bin>,
+    runs: Vec<RunModel>,
+    structure: Structure,
+    /// The sample period (s): the delay's unit in theta.
+    period_s: f64,
+}
+
+/// H and its derivatives with respect to theta at one bin.
+struct BinEval {
+    model: Complex<f64>,
+    grad: [Complex<f64>; 7],
+}
+
+impl JointProblem {
+    fn eval(&self, bin: &Bin, theta: &[f64]) -> BinEval {
+        let (b1, a1b0, a2, a3) = (
+            theta[0].exp(),
+            theta[1].exp(),
+            theta[2].exp(),
+            theta[3].exp(),
+        );
+        let s = bin.s;
+        let run = self.runs[bin.run];
+        let (m, c, k) = run.mck;
+        let sp = s * s * m + s * c + k;
+        let q = (s + a3) * sp + s * a2;
+        let a = a1b0 * run.p_ratio;
+        let (v, dv_wv, dv_zeta) = match self.structure {
+            Structure::DelayValve => {
+                let wv = theta[5].exp();
+                let zeta = theta[6].exp();
+                let den = s * s + s * (2.0 * zeta * wv) + wv * wv;
+                // wv dV/dwv / V and zeta dV/dzeta / V.
+                (
+                    Complex::new(wv * wv, 0.0) / den,
+                    s * (s + zeta * wv) * 2.0 / den,
+                    -s * (2.0 * zeta * wv) / den,
+                )
+            }
+            _ => (
+                Complex::new(1.0, 0.0),
+                Complex::default(),
+                Complex::default(),
+            ),
+        };
+        let sb = s + b1;
+        let d = sb * q + v * a;
+        let tau = match self.structure {
+            Structure::Plain => 0.0,
+            _ => theta[4] * self.period_s,
+        };
+        let delay = if tau == 0.0 {
+            Complex::new(1.0, 0.0)
+        } else {
+            (-s * tau).exp()
+        };
+        let h = a * v / d * bin.hold * delay;
+        // x dH/dx for each log parameter (derived in the module docs'
+        // notation): A and V enter only as A V, whose log-derivative of H
+        // is (s + beta1) Q / D.
+        let av = h * sb * q / d;
+        let mut grad = [Complex::default(); 7];
+        grad[0] = -h * q / d * b1;
+        grad[1] = av;
+        grad[2] = -h * sb * s / d * a2;
+        grad[3] = -h * sb * sp / d * a3;
+        if self.structure != Structure::Plain {
+            grad[4] = -s * self.period_s * h;
+        }
+        if self.structure == Structure::DelayValve {
+            grad[5] = av * dv_wv;
+            grad[6] = av * dv_zeta;
+        }
+        BinEval { model: h, grad }
+    }
+
+    fn residuals(&self, theta: &[f64]) -> DVector<f64> {
+        let n = self.bins.len();
+        let mut r = DVector::zeros(2 * n);
+        for (i, b) in self.bins.iter().enumerate() {
+            let e = (b.h - self.eval(b, theta).model) * b.weight;
+            r[i] = e.re;
+            r[n + i] = e.im;
+        }
+        r
+    }
+
+    fn jacobian_matrix(&self, theta: &[f64]) -> DMatrix<f64> {
+        let n = self.bins.len();
+        let p = self.structure.n_params();
+        let mut jac = DMatrix::zeros(2 * n, p);
+        for (i, b) in self.bins.iter().enumerate() {
+            let g = self.eval(b, theta).grad;
+            for j in 0..p {
+                jac[(i, j)] = -g[j].re * b.weight;
+                jac[(n + i, j)] = -g[j].im * b.weight;
+            }
+        }
+        jac
+    }
+}
+
+impl Operator for JointProblem {
+    type Param = DVector<f64>;
+    type Output = DVector<f64>;
+
+    fn apply(&self, param: &Self::Param) -> Result<Self::Output, ArgminError> {
+        Ok(self.residuals(param.as_slice()))
+    }
+}
+
+impl Jacobian for JointProblem {
+    type Param = DVector<f64>;
+    type Jacobian = DMatrix<f64>;
+
+    fn jacobian(&self, param: &Self::Param) -> Result<Self::Jacobian, ArgminError> {
+        Ok(self.jacobian_matrix(param.as_slice()))
+    }
+}
+
+/// The specimen as m, c, k.
+fn mck(s: &LinearSpecimen) -> (f64, f64, f64) {
+    match *s {
+        LinearSpecimen::None => (0.0, 0.0, 0.0),
+        LinearSpecimen::Spring { stiffness_n_per_m } => (0.0, 0.0, stiffness_n_per_m),
+        LinearSpecimen::Sdof {
+            mass_kg,
+            damping_ns_per_m,
+            stiffness_n_per_m,
+        } => (mass_kg, damping_ns_per_m, stiffness_n_per_m),
+    }
+}
+
+fn problem(runs: &[JointRun<'_>], opts: &JointOptions) -> Result<JointProblem, FitError> {
+    let mut bins = Vec::new();
+    let mut models = Vec::with_capacity(runs.len());
+    for (r, run) in runs.iter().enumerate() {
+        if run.freq_hz.len() != run.h.len() || run.h.len() != run.variance.len() {
+            return Err(FitError::LengthMismatch {
+                freq: run.freq_hz.len(),
+                h: run.h.len(),
+                variance: run.variance.len(),
+            });
+        }
+        models.push(RunModel {
+            mck: mck(&run.specimen),
+            p_ratio: run.p_gain / opts.p_ref,
+        });
+        for i in 0..run.h.len() {
+            let f = run.freq_hz[i];
+            let v = run.variance[i];
+            if !(v.is_finite() && v > 0.0) {
+                continue;
+            }
+            bins.push(Bin {
+                s: Complex::new(0.0, 2.0 * std::f64::consts::PI * f),
+                h: run.h[i],
+                hold: hold_response(opts.intersample, opts.sample_rate_hz, f),
+                weight: (2.0 / v).sqrt(),
+                run: r,
+            });
+        }
+    }
+    Ok(JointProblem {
+        bins,
+        runs: models,
+        structure: opts.structure,
+        period_s: 1.0 / opts.sample_rate_hz,
+    })
+}
+
+/// Fit the rig jointly to `runs`, starting from `start` (the sequential
+/// estimate, a1b0 at `opts.p_ref`) with no delay.
+pub fn joint_fit(
+    runs: &[JointRun<'_>],
+    start: &RigParams,
+    opts: &JointOptions,
+) -> Result<JointFit, FitError> {
+    let problem = problem(runs, opts)?;
+    let p = opts.structure.n_params();
+    let mut theta0 = vec![
+        start.beta1_per_s.ln(),
+        (start.a1b0_n_per_m_s2 * opts.p_ref / start.p_gain).ln(),
+        start.a2_n_per_m.ln(),
+        start.a3_per_s.ln(),
+    ];
+    if opts.structure != Structure::Plain {
+        theta0.push(0.0);
+    }
+    if opts.structure == Structure::DelayValve {
+        theta0.push((2.0 * std::f64::consts::PI * opts.valve_start.0).ln());
+        theta0.push(opts.valve_start.1.ln());
+    }
+    if !theta0.iter().all(|t| t.is_finite()) {
+        return Err(FitError::NoSolution);
+    }
+    if 2 * problem.bins.len() <= p {
+        return Err(FitError::NoSolution);
+    }
+    let result = Executor::new(problem.clone(), LevenbergMarquardt::new())
+        .configure(|s| {
+            s.param(DVector::from_vec(theta0))
+                .max_iters(opts.max_iterations)
+        })
+        .run()?;
+    let state = result.state();
+    let theta: Vec<f64> = state
+        .get_best_param()
+        .ok_or(FitError::NoSolution)?
+        .iter()
+        .copied()
+        .collect();
+    let converged = state.get_termination_reason() == Some(&TerminationReason::SolverConverged);
+    let iterations = state.get_iter();
+    let jac = problem.jacobian_matrix(&theta);
+    let cost = problem.residuals(&theta).norm_squared();
+    let dof = 2 * problem.bins.len() - p;
+    let cov_theta = covariance(&jac, cost / dof as f64).map_err(|e| FitError::NotIdentifiable {
+        parameter: opts.structure.names()[e.column].to_string(),
+        bins: problem.bins.len(),
+        matrix: "the joint fit's Jacobian at the optimum",
+        ratio: e.ratio,
+    })?;
+    // To physical units: x = exp(theta) for the log parameters (dx = x
+    // dtheta), the delay in seconds, the valve frequency in Hz.
+    let mut params: Vec<f64> = theta[..4].iter().map(|t| t.exp()).collect();
+    let mut factors = params.clone();
+    if opts.structure != Structure::Plain {
+        params.push(theta[4] * problem.period_s);
+        factors.push(problem.period_s);
+    }
+    if opts.structure == Structure::DelayValve {
+        let hz = theta[5].exp() / (2.0 * std::f64::consts::PI);
+        params.push(hz);
+        factors.push(hz);
+        params.push(theta[6].exp());
+        factors.push(theta[6].exp());
+    }
+    let covariance = DMatrix::from_fn(p, p, |i, j| cov_theta[(i, j)] * factors[i] * factors[j]);
+    let std = (0..p).map(|i| covariance[(i, i)].sqrt()).collect();
+    Ok(JointFit {
+        structure: opts.structure,
+        rig: RigParams {
+            beta1_per_s: params[0],
+            a1b0_n_per_m_s2: params[1],
+            a2_n_per_m: params[2],
+            a3_per_s: params[3],
+            p_gain: opts.p_ref,
+        },
+        delay_s: if opts.structure == Structure::Plain {
+            0.0
+        } else {
+            params[4]
+        },
+        valve: (opts.structure == Structure::DelayValve).then(|| (params[5], params[6])),
+        params,
+        covariance,
+        std,
+        cost,
+        dof,
+        converged,
+        iterations,
+    })
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,256 @@
+//! The joint estimator against responses computed another way: the
+//! simulator's state space of the rig with its valve mode
+//! (`simulate::plant::linear_state_space`), solved as (sI - A) x = B at
+//! each bin, times the hold and the delay written out here.
+
+use super::*;
+use crate::simulate::plant::{PlantSpec, Unmodelled, ValveMode, linear_state_space};
+use crate::simulate::specimen::SpecimenModel;
+
+const FS: f64 = 1000.0;
+
+fn rig() -> RigParams {
+    crate::model::PAPER_RIG
+}
+
+/// Bins 0.5-30 Hz every 0.05 Hz, as a 20 s ETFE gives.
+fn freqs() -> Vec<f64> {
+    (10..=600).map(|i| i as f64 * 0.05).collect()
+}
+
+/// x1/u of `specimen` on `rig` with the valve mode, hold and `delay_s`,
+/// from the simulator's state space.
+fn truth(
+    rig: &RigParams,
+    specimen: SpecimenModel,
+    valve: Option<ValveMode>,
+    delay_s: f64,
+    f: &[f64],
+) -> Vec<Complex<f64>> {
+    let ss = linear_state_space(&PlantSpec {
+        rig: *rig,
+        specimen,
+        unmodelled: Unmodelled {
+            valve_mode: valve,
+            piston_mass_kg: None,
+        },
+    })
+    .unwrap();
+    f.iter()
+        .map(|&f| {
+            let s = Complex::new(0.0, 2.0 * std::f64::consts::PI * f);
+            ss.eval(0, s) * hold_response(Intersample::SampleAndHold, FS, f) * (-s * delay_s).exp()
+        })
+        .collect()
+}
+
+fn options(structure: Structure) -> JointOptions {
+    JointOptions {
+        structure,
+        intersample: Intersample::SampleAndHold,
+        sample_rate_hz: FS,
+        p_ref: 1.0,
+        max_iterations: 200,
+        valve_start: (150.0, 0.5),
+    }
+}
+
+const K1: f64 = 116_640.0;
+const K2: f64 = 88_540.0;
+
+struct Campaign {
+    f: Vec<f64>,
+    h: Vec<Vec<Complex<f64>>>,
+    var: Vec<f64>,
+    specimens: Vec<LinearSpecimen>,
+}
+
+impl Campaign {
+    fn new(valve: Option<ValveMode>, delay_s: f64) -> Self {
+        let f = freqs();
+        let sims = [
+            SpecimenModel::None,
+            SpecimenModel::Spring {
+                stiffness_n_per_m: K1,
+            },
+            SpecimenModel::Spring {
+                stiffness_n_per_m: K2,
+            },
+        ];
+        let h = sims
+            .iter()
+            .map(|s| truth(&rig(), *s, valve, delay_s, &f))
+            .collect();
+        Self {
+            var: vec![1e-6; f.len()],
+            f,
+            h,
+            specimens: sims.iter().map(|s| s.linear().unwrap()).collect(),
+        }
+    }
+
+    fn runs(&self) -> Vec<JointRun<'_>> {
+        self.h
+            .iter()
+            .zip(&self.specimens)
+            .map(|(h, s)| JointRun {
+                specimen: *s,
+                p_gain: 1.0,
+                freq_hz: &self.f,
+                h,
+                variance: &self.var,
+            })
+            .collect()
+    }
+}
+
+/// The analytic Jacobian is the derivative of the residuals: central
+/// differences agree to 1e-6 of the column's size, for every structure.
+#[test]
+fn the_jacobian_is_the_residuals_derivative() {
+    let valve = ValveMode {
+        natural_frequency_hz: 90.0,
+        damping_ratio: 0.5,
+    };
+    let c = Campaign::new(Some(valve), 0.002);
+    for structure in [Structure::Plain, Structure::Delay, Structure::DelayValve] {
+        let p = problem(&c.runs(), &options(structure)).unwrap();
+        let r = rig();
+        let mut theta = vec![
+            r.beta1_per_s.ln() + 0.1,
+            r.a1b0_n_per_m_s2.ln() - 0.05,
+            r.a2_n_per_m.ln() + 0.03,
+            r.a3_per_s.ln() - 0.2,
+        ];
+        if structure != Structure::Plain {
+            theta.push(1.7);
+        }
+        if structure == Structure::DelayValve {
+            theta.push((2.0 * std::f64::consts::PI * 120.0_f64).ln());
+            theta.push(0.6_f64.ln());
+        }
+        let jac = p.jacobian_matrix(&theta);
+        for j in 0..theta.len() {
+            let hstep = 1e-6;
+            let mut up = theta.clone();
+            let mut down = theta.clone();
+            up[j] += hstep;
+            down[j] -= hstep;
+            let fd = (p.residuals(&up) - p.residuals(&down)) / (2.0 * hstep);
+            let col = jac.column(j);
+            let err = (&fd - col).norm() / col.norm();
+            assert!(err < 1e-6, "{structure:?} column {j}: {err:e}");
+        }
+    }
+}
+
+/// From the paper's rig 10-20 % off, on exact responses of a rig with a
+/// 90 Hz valve mode and a 2.3-sample delay: the structure with both
+/// recovers every parameter to 1e-6, and the cost is round-off.
+#[test]
+fn the_full_structure_recovers_a_rig_with_a_valve_mode_and_a_delay() {
+    let valve = ValveMode {
+        natural_frequency_hz: 90.0,
+        damping_ratio: 0.5,
+    };
+    let delay = 2.3 / FS;
+    let c = Campaign::new(Some(valve), delay);
+    let r = rig();
+    let start = RigParams {
+        beta1_per_s: 1.2 * r.beta1_per_s,
+        a1b0_n_per_m_s2: 0.9 * r.a1b0_n_per_m_s2,
+        a2_n_per_m: 1.1 * r.a2_n_per_m,
+        a3_per_s: 0.85 * r.a3_per_s,
+        p_gain: 1.0,
+    };
+    let fit = joint_fit(&c.runs(), &start, &options(Structure::DelayValve)).unwrap();
+    assert!(fit.converged);
+    let want = [
+        r.beta1_per_s,
+        r.a1b0_n_per_m_s2,
+        r.a2_n_per_m,
+        r.a3_per_s,
+        delay,
+        90.0,
+        0.5,
+    ];
+    for (i, (got, want)) in fit.params.iter().zip(want).enumerate() {
+        assert!(
+            (got / want - 1.0).abs() < 1e-6,
+            "{}: {got} vs {want}",
+            Structure::DelayValve.names()[i]
+        );
+    }
+    assert!(fit.cost < 1e-12, "{}", fit.cost);
+}
+
+/// Without the valve mode a rig that has one (70 Hz, damping 0.3, the
+/// issue's worst) cannot be explained, though a delay absorbs much of it
+/// in a 0.5-30 Hz band: at a per-bin std of 1e-4 (about what an ETFE of
+/// micrometres of noise on millimetres of command gives) the cost is far
+/// above its degrees of freedom, the sign a lab needs. The full structure
+/// fits the same data to round-off.
+#[test]
+fn a_structure_without_the_valve_mode_does_not_fit_it() {
+    let valve = ValveMode {
+        natural_frequency_hz: 70.0,
+        damping_ratio: 0.3,
+    };
+    let mut c = Campaign::new(Some(valve), 2.3 / FS);
+    c.var = vec![1e-8; c.f.len()];
+    let fit = joint_fit(&c.runs(), &rig(), &options(Structure::Delay)).unwrap();
+    assert!(
+        fit.cost > 10.0 * fit.dof as f64,
+        "cost {} over {} dof",
+        fit.cost,
+        fit.dof
+    );
+    let full = joint_fit(&c.runs(), &rig(), &options(Structure::DelayValve)).unwrap();
+    assert!(full.cost < 1e-6, "{}", full.cost);
+}
+
+/// P gains: a run at P = 2 has a1b0 twice the reference's; stated at P_ref
+/// the joint fit finds the reference value (paper Sec. 3.1, Exp2/Exp4).
+/// Exact data of the plain model: the plain structure recovers it.
+#[test]
+fn a_run_at_another_p_gain_scales_a1b0() {
+    let f = freqs();
+    let r = rig();
+    let at2 = r.at_p_gain(2.0);
+    let h0 = truth(&r, SpecimenModel::None, None, 0.0, &f);
+    let h1 = truth(
+        &at2,
+        SpecimenModel::Spring {
+            stiffness_n_per_m: K1,
+        },
+        None,
+        0.0,
+        &f,
+    );
+    let var = vec![1e-6; f.len()];
+    let runs = [
+        JointRun {
+            specimen: LinearSpecimen::None,
+            p_gain: 1.0,
+            freq_hz: &f,
+            h: &h0,
+            variance: &var,
+        },
+        JointRun {
+            specimen: LinearSpecimen::Spring {
+                stiffness_n_per_m: K1,
+            },
+            p_gain: 2.0,
+            freq_hz: &f,
+            h: &h1,
+            variance: &var,
+        },
+    ];
+    let start = RigParams {
+        a1b0_n_per_m_s2: 1.1 * r.a1b0_n_per_m_s2,
+        ..r
+    };
+    let fit = joint_fit(&runs, &start, &options(Structure::Plain)).unwrap();
+    assert!((fit.rig.a1b0_n_per_m_s2 / r.a1b0_n_per_m_s2 - 1.0).abs() < 1e-7);
+    assert!((fit.rig.a3_per_s / r.a3_per_s - 1.0).abs() < 1e-6);
+}
