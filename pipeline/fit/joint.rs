@@ -26,13 +26,13 @@
 //! (`fit::lm`) with the analytic Jacobian below, residuals weighted by each
 //! bin's measured variance as the per-run fit weights them.
 
-use argmin::core::{Error as ArgminError, Executor, Jacobian, Operator, State, TerminationReason};
+use argmin::core::{Error as ArgminError, Jacobian, Operator, TerminationReason};
 use nalgebra::{Complex, DMatrix, DVector};
 
 use super::lm::LevenbergMarquardt;
 use super::problem::hold_response;
 use super::settings::Intersample;
-use super::{FitError, covariance};
+use super::{FitError, Solved, covariance, solve};
 use crate::model::{LinearSpecimen, RigParams};
 
 /// One run's measured FRF x1/u and what the manifest says of it.
@@ -339,21 +339,17 @@ pub fn joint_fit(
     if 2 * problem.bins.len() <= p {
         return Err(FitError::NoSolution);
     }
-    let result = Executor::new(problem.clone(), LevenbergMarquardt::new())
-        .configure(|s| {
-            s.param(DVector::from_vec(theta0))
-                .max_iters(opts.max_iterations)
-        })
-        .run()?;
-    let state = result.state();
-    let theta: Vec<f64> = state
-        .get_best_param()
-        .ok_or(FitError::NoSolution)?
-        .iter()
-        .copied()
-        .collect();
-    let converged = state.get_termination_reason() == Some(&TerminationReason::SolverConverged);
-    let iterations = state.get_iter();
+    let Solved {
+        theta,
+        reason,
+        iterations,
+    } = solve(
+        problem.clone(),
+        LevenbergMarquardt::new(),
+        theta0,
+        opts.max_iterations,
+    )?;
+    let converged = reason == TerminationReason::SolverConverged;
     let jac = problem.jacobian_matrix(&theta);
     let cost = problem.residuals(&theta).norm_squared();
     let dof = 2 * problem.bins.len() - p;

@@ -518,6 +518,43 @@ fn check_param_count(
 }
 
 /// Levenberg-Marquardt from `start` (scaled), then the covariance and report.
+/// Where Levenberg-Marquardt ended: its best parameters, why it stopped and
+/// after how many iterations.
+struct Solved {
+    theta: Vec<f64>,
+    reason: TerminationReason,
+    iterations: u64,
+}
+
+/// Run `solver` on `problem` from `start` in argmin's executor, for the
+/// per-run fit and the joint one alike.
+fn solve<O>(
+    problem: O,
+    solver: LevenbergMarquardt,
+    start: Vec<f64>,
+    max_iterations: u64,
+) -> Result<Solved, FitError>
+where
+    O: argmin::core::Operator<Param = DVector<f64>, Output = DVector<f64>>
+        + argmin::core::Jacobian<Param = DVector<f64>, Jacobian = DMatrix<f64>>,
+{
+    let result = Executor::new(problem, solver)
+        .configure(|s| s.param(DVector::from_vec(start)).max_iters(max_iterations))
+        .run()?;
+    let state = result.state();
+    let theta = state
+        .get_best_param()
+        .ok_or(FitError::NoSolution)?
+        .iter()
+        .copied()
+        .collect();
+    Ok(Solved {
+        theta,
+        reason: state.get_termination_reason().cloned().unwrap_or_default(),
+        iterations: state.get_iter(),
+    })
+}
+
 fn refine(prep: &Prepared, opts: &FitOptions, start: Vec<f64>) -> Result<TfFit, FitError> {
     let problem = &prep.problem;
     let shape = problem.shape;
@@ -531,21 +568,11 @@ fn refine(prep: &Prepared, opts: &FitOptions, start: Vec<f64>) -> Result<TfFit, 
         upper[p - 1] = max_s * w0;
         solver = solver.with_bounds(lower, upper)?;
     }
-    let result = Executor::new(problem.clone(), solver)
-        .configure(|s| {
-            s.param(DVector::from_vec(start))
-                .max_iters(opts.max_iterations)
-        })
-        .run()?;
-    let state = result.state();
-    let theta: Vec<f64> = state
-        .get_best_param()
-        .ok_or(FitError::NoSolution)?
-        .iter()
-        .copied()
-        .collect();
-    let reason = state.get_termination_reason().cloned().unwrap_or_default();
-    let iterations = state.get_iter();
+    let Solved {
+        theta,
+        reason,
+        iterations,
+    } = solve(problem.clone(), solver, start, opts.max_iterations)?;
     let converged = reason == TerminationReason::SolverConverged;
 
     let n = problem.n_bins();

@@ -603,6 +603,31 @@ fn overlay_figure(runs: &[OverlayRun]) -> FigureSpec {
     }
 }
 
+/// The campaign's springs as dotted verticals over the finite span of
+/// `series`, labelled once.
+fn mark_springs(series: &mut Vec<XySeries>, springs: &[f64]) {
+    let (lo, hi) = series
+        .iter()
+        .flat_map(|s| &s.y)
+        .filter(|v| v.is_finite())
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
+            (a.min(*v), b.max(*v))
+        });
+    for (j, ks) in springs.iter().enumerate() {
+        series.push(XySeries {
+            label: if j == 0 {
+                "campaign's springs".into()
+            } else {
+                String::new()
+            },
+            x: vec![*ks, *ks],
+            y: vec![lo, hi],
+            trace: Trace::Reference,
+            palette_index: None,
+        });
+    }
+}
+
 /// The stiffness sensitivity (paper Sec. 2.3), with the campaign's springs
 /// marked.
 fn sensitivity_figure(s: &SensitivityResult) -> FigureSpec {
@@ -623,23 +648,7 @@ fn sensitivity_figure(s: &SensitivityResult) -> FigureSpec {
         palette_index: Some(i),
     })
     .collect();
-    let (lo, hi) = series
-        .iter()
-        .flat_map(|s| &s.y)
-        .fold((f64::INFINITY, 0.0_f64), |(a, b), v| (a.min(*v), b.max(*v)));
-    for (j, ks) in s.springs_n_per_m.iter().enumerate() {
-        series.push(XySeries {
-            label: if j == 0 {
-                "campaign's springs".into()
-            } else {
-                String::new()
-            },
-            x: vec![*ks, *ks],
-            y: vec![lo, hi],
-            trace: Trace::Reference,
-            palette_index: None,
-        });
-    }
+    mark_springs(&mut series, &s.springs_n_per_m);
     FigureSpec {
         id: "sensitivity".into(),
         title: "Sensitivity to the spring stiffness".into(),
@@ -761,30 +770,6 @@ fn monte_carlo_figures(mc: &MonteCarlo, springs: &[f64]) -> Vec<FigureSpec> {
             palette_index: Some(j),
         });
     }
-    let span = |series: &[XySeries]| {
-        series
-            .iter()
-            .flat_map(|s| &s.y)
-            .filter(|v| v.is_finite())
-            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
-                (a.min(*v), b.max(*v))
-            })
-    };
-    let mark = |series: &mut Vec<XySeries>, (lo, hi): (f64, f64)| {
-        for (j, ks) in springs.iter().enumerate() {
-            series.push(XySeries {
-                label: if j == 0 {
-                    "campaign's springs".into()
-                } else {
-                    String::new()
-                },
-                x: vec![*ks, *ks],
-                y: vec![lo, hi],
-                trace: Trace::Reference,
-                palette_index: None,
-            });
-        }
-    };
     // The mean's own sampling error, so a bias can be told from noise:
     // +-2 std / sqrt(n) of a2 (a1b0 and a3 are alike).
     for (sign, label) in [(1.0, "a2 +-2 standard errors"), (-1.0, "")] {
@@ -803,10 +788,8 @@ fn monte_carlo_figures(mc: &MonteCarlo, springs: &[f64]) -> Vec<FigureSpec> {
             palette_index: None,
         });
     }
-    let s = span(&spread);
-    mark(&mut spread, s);
-    let b = span(&bias);
-    mark(&mut bias, b);
+    mark_springs(&mut spread, springs);
+    mark_springs(&mut bias, springs);
     vec![
         FigureSpec {
             id: "sensitivity-monte-carlo".into(),
