@@ -81,6 +81,9 @@ pub struct LogStage {
     /// The bins the fit used (band and coherence).
     pub mask: Vec<bool>,
     pub fit: Option<TfFit>,
+    /// What the fit was given (with `fit`): the noise profile of a
+    /// no-specimen run reads its variance from here.
+    pub fit_data: Option<FitData>,
     pub warnings: Vec<String>,
 }
 
@@ -335,16 +338,18 @@ pub fn log_stage_from(
             });
         }
         warnings.extend(fit.warnings.iter().cloned());
-        Some(fit)
+        Some((fit, data))
     } else {
         None
     };
+    let (fit, fit_data) = fit.unzip();
     Ok(LogStage {
         log,
         frf: h,
         force_frf,
         mask,
         fit,
+        fit_data,
         warnings,
     })
 }

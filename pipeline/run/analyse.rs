@@ -24,7 +24,7 @@ use std::time::Instant;
 
 use rayon::prelude::*;
 
-use super::acquire::{AcquireError, Acquired, FitData, LogStage, acquire_with};
+use super::acquire::{AcquireError, Acquired, LogStage, acquire_with};
 use super::cache::{self, Cache, Probe};
 use super::compare::compare;
 use super::figures::{self, ForceBins, OverlayRun};
@@ -584,14 +584,13 @@ fn second_pass(
 /// quantisation step and the log's hash (for the Monte Carlo, which
 /// replays its command).
 fn noise_profile(plan: &RunPlan, st: &LogStage) -> Option<NoiseProfile> {
-    let fit = st.fit.as_ref()?;
-    let data = FitData::of(&st.frf, &st.mask);
+    let (fit, data) = (st.fit.as_ref()?, st.fit_data.as_ref()?);
     let fs = st.log.sample_rate_hz;
     (!data.freq_hz.is_empty()).then(|| NoiseProfile {
         run: plan.id.clone(),
         white_noise: crate::sensitivity::montecarlo::white_noise(&data.variance, &data.suu, fs),
-        freq_hz: data.freq_hz,
-        variance: data.variance,
+        freq_hz: data.freq_hz.clone(),
+        variance: data.variance.clone(),
         sample_rate_hz: fs,
         delay_s: fit.tf.delay_s,
         displacement_step_m: crate::ingest::quantum_step(&st.log.displacement_m),
