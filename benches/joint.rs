@@ -86,6 +86,7 @@ fn bench_joint(c: &mut Criterion) {
             freq_hz: &f,
             h,
             variance: &var,
+            bin_hz: f[1] - f[0],
         })
         .collect();
     let start = RigParams {
@@ -102,6 +103,9 @@ fn bench_joint(c: &mut Criterion) {
         p_ref: 1.0,
         max_iterations: 200,
         valve_start: (150.0, 0.5),
+        delay_start_s: 0.0,
+        max_delay_s: 0.05,
+        lag: 1,
     };
     // Fail loudly rather than time a fit that does not work.
     let fit = joint_fit(&runs, &start, &opts).unwrap();

@@ -29,6 +29,7 @@
 use argmin::core::{Error as ArgminError, Jacobian, Operator, TerminationReason};
 use nalgebra::{Complex, DMatrix, DVector};
 
+use super::adequacy::{Adequacy, Residuals, Sums};
 use super::lm::LevenbergMarquardt;
 use super::problem::hold_response;
 use super::settings::Intersample;
@@ -44,6 +45,9 @@ pub struct JointRun<'a> {
     pub h: &'a [Complex<f64>],
     /// E|dH|^2 at each bin.
     pub variance: &'a [f64],
+    /// The FRF's grid spacing (Hz): the residual correlation test pairs
+    /// bins on it.
+    pub bin_hz: f64,
 }
 
 /// The nuisance dynamics the fit includes besides the hold.
@@ -91,6 +95,12 @@ pub struct JointOptions {
     pub max_iterations: u64,
     /// Where the valve mode starts (Hz) and its damping.
     pub valve_start: (f64, f64),
+    /// Where the delay starts (s), and its upper bound (s); it is at least 0.
+    pub delay_start_s: f64,
+    pub max_delay_s: f64,
+    /// The lag (bins) at which the residual correlation test pairs bins:
+    /// the FRF estimator's kernel (`frf::Window::independent_lag`).
+    pub lag: usize,
 }
 
 /// The joint estimate.
@@ -115,6 +125,45 @@ pub struct JointFit {
     pub dof: usize,
     pub converged: bool,
     pub iterations: u64,
+    /// The adequacy tests over every bin, and over each run's bins (in the
+    /// order of the runs given, each with its share of the parameters).
+    pub adequacy: Adequacy,
+    pub per_run: Vec<Adequacy>,
+}
+
+impl JointFit {
+    /// Why the optimum is not a physical rig, if it is not: a rig
+    /// parameter not determined by the data (its std above its value, which
+    /// is how a parameter running off towards 0 or infinity shows in a log
+    /// parametrisation), a delay at its upper bound, or a valve mode with
+    /// damping outside 0.05-5 or far above the band (20 times its top),
+    /// where it is only a delay.
+    pub fn unphysical(&self, band_top_hz: f64, max_delay_s: f64) -> Option<String> {
+        for (i, name) in self.structure.names().iter().enumerate().take(4) {
+            let (v, sd) = (self.params[i], self.std[i]);
+            if !(v.is_finite() && v > 0.0 && sd.is_finite() && sd < v) {
+                return Some(format!(
+                    "{name} = {v:.4e} with std {sd:.3e}: not determined by the data"
+                ));
+            }
+        }
+        if self.structure != Structure::Plain && self.delay_s >= max_delay_s * (1.0 - 1e-9) {
+            return Some(format!(
+                "the delay sits at its bound identification.delay.max_s = {max_delay_s} s"
+            ));
+        }
+        if let Some((hz, zeta)) = self.valve {
+            if !(0.05..=5.0).contains(&zeta) {
+                return Some(format!("valve mode damping {zeta:.3} outside 0.05-5"));
+            }
+            if hz > 20.0 * band_top_hz {
+                return Some(format!(
+                    "valve mode at {hz:.0} Hz, over 20 times the band's top ({band_top_hz} Hz): only a delay there"
+                ));
+            }
+        }
+        None
+    }
 }
 
 /// One bin of one run.
@@ -140,8 +189,11 @@ struct RunModel {
 /// The least-squares problem over every bin of every run.
 #[derive(Debug, Clone)]
 struct JointProblem {
+    /// Run by run, each run's bins together.
     bins: Vec<Bin>,
     runs: Vec<RunModel>,
+    /// Each run's FRF grid spacing (Hz).
+    bin_hz: Vec<f64>,
     structure: Structure,
     /// The sample period (s): the delay's unit in theta.
     period_s: f64,
@@ -242,6 +294,45 @@ impl JointProblem {
     }
 }
 
+impl JointProblem {
+    /// The adequacy tests at `theta`: over every bin, and per run with the
+    /// run's share of the parameters.
+    fn adequacy(&self, theta: &[f64], lag: usize) -> (Adequacy, Vec<Adequacy>) {
+        let p = self.structure.n_params();
+        let total = self.bins.len().max(1);
+        let mut pooled = Sums::default();
+        let mut per_run = Vec::with_capacity(self.runs.len());
+        let mut start = 0;
+        for (r, &bin_hz) in self.bin_hz.iter().enumerate() {
+            let end = start + self.bins[start..].iter().take_while(|b| b.run == r).count();
+            let bins = &self.bins[start..end];
+            let freq: Vec<f64> = bins
+                .iter()
+                .map(|b| b.s.im / (2.0 * std::f64::consts::PI))
+                .collect();
+            let h: Vec<Complex<f64>> = bins.iter().map(|b| b.h).collect();
+            let model: Vec<Complex<f64>> = bins.iter().map(|b| self.eval(b, theta).model).collect();
+            let variance: Vec<f64> = bins.iter().map(|b| 2.0 / (b.weight * b.weight)).collect();
+            let mut sums = Sums::default();
+            sums.add(
+                &Residuals {
+                    freq_hz: &freq,
+                    h: &h,
+                    model: &model,
+                    variance: &variance,
+                },
+                bin_hz,
+                lag,
+            );
+            let share = (p * bins.len()).div_ceil(total);
+            per_run.push(sums.finish(share, lag));
+            pooled += sums;
+            start = end;
+        }
+        (pooled.finish(p, lag), per_run)
+    }
+}
+
 impl Operator for JointProblem {
     type Param = DVector<f64>;
     type Output = DVector<f64>;
@@ -276,6 +367,7 @@ fn mck(s: &LinearSpecimen) -> (f64, f64, f64) {
 fn problem(runs: &[JointRun<'_>], opts: &JointOptions) -> Result<JointProblem, FitError> {
     let mut bins = Vec::new();
     let mut models = Vec::with_capacity(runs.len());
+    let bin_hz = runs.iter().map(|r| r.bin_hz).collect();
     for (r, run) in runs.iter().enumerate() {
         if run.freq_hz.len() != run.h.len() || run.h.len() != run.variance.len() {
             return Err(FitError::LengthMismatch {
@@ -306,6 +398,7 @@ fn problem(runs: &[JointRun<'_>], opts: &JointOptions) -> Result<JointProblem, F
     Ok(JointProblem {
         bins,
         runs: models,
+        bin_hz,
         structure: opts.structure,
         period_s: 1.0 / opts.sample_rate_hz,
     })
@@ -326,8 +419,9 @@ pub fn joint_fit(
         start.a2_n_per_m.ln(),
         start.a3_per_s.ln(),
     ];
+    let fs = opts.sample_rate_hz;
     if opts.structure != Structure::Plain {
-        theta0.push(0.0);
+        theta0.push((opts.delay_start_s * fs).clamp(0.0, opts.max_delay_s * fs));
     }
     if opts.structure == Structure::DelayValve {
         theta0.push((2.0 * std::f64::consts::PI * opts.valve_start.0).ln());
@@ -343,12 +437,7 @@ pub fn joint_fit(
         theta,
         reason,
         iterations,
-    } = solve(
-        problem.clone(),
-        LevenbergMarquardt::new(),
-        theta0,
-        opts.max_iterations,
-    )?;
+    } = solve(problem.clone(), solver(opts)?, theta0, opts.max_iterations)?;
     let converged = reason == TerminationReason::SolverConverged;
     let jac = problem.jacobian_matrix(&theta);
     let cost = problem.residuals(&theta).norm_squared();
@@ -376,6 +465,7 @@ pub fn joint_fit(
     }
     let covariance = DMatrix::from_fn(p, p, |i, j| cov_theta[(i, j)] * factors[i] * factors[j]);
     let std = (0..p).map(|i| covariance[(i, i)].sqrt()).collect();
+    let (adequacy, per_run) = problem.adequacy(&theta, opts.lag);
     Ok(JointFit {
         structure: opts.structure,
         rig: RigParams {
@@ -398,8 +488,28 @@ pub fn joint_fit(
         dof,
         converged,
         iterations,
+        adequacy,
+        per_run,
     })
 }
+
+/// Levenberg-Marquardt with the delay (in samples) held within 0 and its
+/// bound: a negative delay is acausal.
+fn solver(opts: &JointOptions) -> Result<LevenbergMarquardt, FitError> {
+    let p = opts.structure.n_params();
+    let solver = LevenbergMarquardt::new();
+    if opts.structure == Structure::Plain {
+        return Ok(solver);
+    }
+    let mut lower = DVector::from_element(p, f64::NEG_INFINITY);
+    let mut upper = DVector::from_element(p, f64::INFINITY);
+    lower[4] = 0.0;
+    upper[4] = opts.max_delay_s * opts.sample_rate_hz;
+    Ok(solver.with_bounds(lower, upper)?)
+}
+
+mod select;
+pub use select::{Candidate, Choice, FTest, P_SIGNIFICANT, Selection, select};
 
 #[cfg(test)]
 mod tests;

@@ -11,6 +11,7 @@
 //! weighted complex error with an analytic Jacobian ([`FrfProblem`]); then the
 //! covariance from the Jacobian at the optimum ([`covariance`]).
 
+pub mod adequacy;
 pub mod band;
 pub mod joint;
 pub mod linear;

@@ -39,6 +39,21 @@ pub enum Window {
     Rectangular,
 }
 
+impl Window {
+    /// The lag in bins beyond which a segment's noise is uncorrelated
+    /// between bins (the width of the window's spectral kernel): 1 for a
+    /// rectangular window, 3 for Hann and Hamming (3-bin kernels), 7 for the
+    /// 4-term Blackman-Harris (a 7-bin kernel). The fits' residual
+    /// correlation test pairs bins this far apart.
+    pub fn independent_lag(self) -> usize {
+        match self {
+            Window::Rectangular => 1,
+            Window::Hann | Window::Hamming => 3,
+            Window::BlackmanHarris => 7,
+        }
+    }
+}
+
 /// Trend removed from each segment.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
 #[serde(rename_all = "snake_case")]

@@ -1,0 +1,262 @@
+//! The model structure chosen by the data (issue 14, item 2).
+//!
+//! The three candidates are nested: the paper's model (4 parameters), with a
+//! delay (5), with a delay and a valve mode (7). Between nested weighted
+//! least-squares fits the classical test is the extra-sum-of-squares F test:
+//! with cost_a of the smaller and cost_b of the larger structure,
+//!
+//!   F = ((cost_a - cost_b) / (p_b - p_a)) / (cost_b / dof_b),
+//!
+//! is F(p_b - p_a, dof_b)-distributed when the extra parameters are not
+//! needed. Dividing by the larger fit's reduced chi-square rather than
+//! trusting the variances to be exact keeps the test honest when the noise
+//! level is off or model error remains: the extra parameters must explain
+//! more than the residual scatter, not merely more than the nominal noise.
+//! A structure is taken over the one chosen so far when its p-value is
+//! below [`P_SIGNIFICANT`]. Beside it the table gives the cost test (the
+//! weighted cost against its chi-square expectation) and BIC, for reading.
+//!
+//! The starts: every structure from the sequential estimate (Eqs. 18-20);
+//! the delay from 0; the valve mode from the best of a grid of frequencies
+//! (1.5 to 12 times the band's top) and dampings (0.3, 0.55, 0.8) scored by
+//! the cost alone at the delay fit's rig, then Levenberg-Marquardt from the
+//! best two, keeping the lower cost.
+
+use statrs::distribution::{ContinuousCDF, FisherSnedecor};
+
+use super::{FitError, JointFit, JointOptions, JointRun, Structure, joint_fit, problem};
+use crate::model::RigParams;
+
+/// The p-value below which a larger structure is taken.
+pub const P_SIGNIFICANT: f64 = 1e-3;
+
+/// How the structure is chosen.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Choice {
+    /// By the F tests above.
+    Auto,
+    /// As the manifest fixes it; flagged when the data would choose another
+    /// or reject it.
+    Fixed(Structure),
+}
+
+/// The F test of a structure against the one chosen before it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FTest {
+    pub against: Structure,
+    pub f: f64,
+    pub p_value: f64,
+}
+
+/// A structure's fit, or why there is none to use.
+#[derive(Debug)]
+pub struct Candidate {
+    pub structure: Structure,
+    pub fit: Result<JointFit, FitError>,
+    /// Why the fit is not usable although it ran: not converged, or not a
+    /// physical rig.
+    pub unusable: Option<String>,
+    pub f_test: Option<FTest>,
+}
+
+impl Candidate {
+    /// The fit when it is usable.
+    pub fn usable(&self) -> Option<&JointFit> {
+        self.fit.as_ref().ok().filter(|_| self.unusable.is_none())
+    }
+
+    /// Bayesian information criterion of the Gaussian likelihood with the
+    /// noise known: cost + p ln(2 N).
+    pub fn bic(&self) -> Option<f64> {
+        let fit = self.fit.as_ref().ok()?;
+        let n = (fit.dof + fit.params.len()) as f64;
+        Some(fit.cost + fit.params.len() as f64 * n.ln())
+    }
+}
+
+/// The candidates and the choice among them.
+#[derive(Debug)]
+pub struct Selection {
+    pub candidates: Vec<Candidate>,
+    /// What the data choose (None when no candidate is usable).
+    pub auto: Option<Structure>,
+    /// What is used: `auto`, or the manifest's structure.
+    pub chosen: Option<Structure>,
+    pub choice: Choice,
+}
+
+impl Selection {
+    /// The chosen structure's fit.
+    pub fn fit(&self) -> Option<&JointFit> {
+        let chosen = self.chosen?;
+        self.candidates
+            .iter()
+            .find(|c| c.structure == chosen)
+            .and_then(|c| c.fit.as_ref().ok())
+    }
+
+    pub fn candidate(&self, s: Structure) -> Option<&Candidate> {
+        self.candidates.iter().find(|c| c.structure == s)
+    }
+}
+
+/// Fit the three structures to `runs` from the sequential estimate `start`
+/// and choose among them. `opts` gives everything but the structure and the
+/// starts; `band_top_hz` bounds a physical valve mode.
+pub fn select(
+    runs: &[JointRun<'_>],
+    start: &RigParams,
+    opts: &JointOptions,
+    choice: Choice,
+    band_top_hz: f64,
+) -> Selection {
+    let assess = |structure: Structure, fit: Result<JointFit, FitError>| {
+        let unusable = match &fit {
+            Err(_) => None,
+            Ok(f) if !f.converged => Some(format!(
+                "Levenberg-Marquardt did not converge in {} iterations",
+                f.iterations
+            )),
+            Ok(f) => f.unphysical(band_top_hz, opts.max_delay_s),
+        };
+        Candidate {
+            structure,
+            fit,
+            unusable,
+            f_test: None,
+        }
+    };
+    let with = |structure: Structure| JointOptions {
+        structure,
+        delay_start_s: 0.0,
+        ..*opts
+    };
+    let plain = assess(
+        Structure::Plain,
+        joint_fit(runs, start, &with(Structure::Plain)),
+    );
+    let delay = assess(
+        Structure::Delay,
+        joint_fit(runs, start, &with(Structure::Delay)),
+    );
+    let valve = assess(
+        Structure::DelayValve,
+        fit_valve(runs, start, delay.usable(), opts, band_top_hz),
+    );
+    let mut candidates = vec![plain, delay, valve];
+    // Forward through the nested chain.
+    let mut auto: Option<usize> = None;
+    for i in 0..candidates.len() {
+        if candidates[i].usable().is_none() {
+            continue;
+        }
+        let Some(a) = auto else {
+            auto = Some(i);
+            continue;
+        };
+        let (small, big) = (
+            candidates[a].usable().expect("usable"),
+            candidates[i].usable().expect("usable"),
+        );
+        let test = f_test(small, big);
+        candidates[i].f_test = Some(test);
+        if test.p_value < P_SIGNIFICANT {
+            auto = Some(i);
+        }
+    }
+    let auto = auto.map(|i| candidates[i].structure);
+    let chosen = match choice {
+        Choice::Auto => auto,
+        Choice::Fixed(s) => candidates
+            .iter()
+            .find(|c| c.structure == s && c.fit.is_ok())
+            .map(|c| c.structure),
+    };
+    Selection {
+        candidates,
+        auto,
+        chosen,
+        choice,
+    }
+}
+
+/// The extra-sum-of-squares F test of `big` against the nested `small`.
+fn f_test(small: &JointFit, big: &JointFit) -> FTest {
+    let dp = (big.params.len() - small.params.len()) as f64;
+    let scale = big.cost / big.dof as f64;
+    let f = ((small.cost - big.cost) / dp / scale).max(0.0);
+    let p_value = FisherSnedecor::new(dp, big.dof as f64)
+        .map(|d| d.sf(f))
+        .unwrap_or(f64::NAN);
+    FTest {
+        against: small.structure,
+        f,
+        p_value,
+    }
+}
+
+/// The delay-and-valve fit from the best starts of a grid (module docs).
+fn fit_valve(
+    runs: &[JointRun<'_>],
+    start: &RigParams,
+    delay_fit: Option<&JointFit>,
+    opts: &JointOptions,
+    band_top_hz: f64,
+) -> Result<JointFit, FitError> {
+    let base = JointOptions {
+        structure: Structure::DelayValve,
+        ..*opts
+    };
+    let (rig, delay_s) = match delay_fit {
+        Some(f) => (f.rig, f.delay_s),
+        None => (*start, 0.0),
+    };
+    let prob = problem(runs, &base)?;
+    let fs = opts.sample_rate_hz;
+    let rig_theta = [
+        rig.beta1_per_s.ln(),
+        (rig.a1b0_n_per_m_s2 * opts.p_ref / rig.p_gain).ln(),
+        rig.a2_n_per_m.ln(),
+        rig.a3_per_s.ln(),
+    ];
+    let mut scored: Vec<(f64, f64, f64, f64)> = Vec::new();
+    for i in 0..6 {
+        let hz = 1.5 * band_top_hz * 8f64.powf(i as f64 / 5.0);
+        for zeta in [0.3, 0.55, 0.8] {
+            let w = 2.0 * std::f64::consts::PI * hz;
+            // The mode's low-frequency lag, 2 zeta / w, comes out of the delay.
+            let d = (delay_s - 2.0 * zeta / w).clamp(0.0, opts.max_delay_s);
+            let mut theta = rig_theta.to_vec();
+            theta.extend([d * fs, w.ln(), zeta.ln()]);
+            let cost = prob.residuals(&theta).norm_squared();
+            if cost.is_finite() {
+                scored.push((cost, hz, zeta, d));
+            }
+        }
+    }
+    scored.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let start_rig = RigParams {
+        p_gain: opts.p_ref,
+        a1b0_n_per_m_s2: rig.a1b0_n_per_m_s2 * opts.p_ref / rig.p_gain,
+        ..rig
+    };
+    let mut best: Option<Result<JointFit, FitError>> = None;
+    for &(_, hz, zeta, d) in scored.iter().take(2) {
+        let o = JointOptions {
+            valve_start: (hz, zeta),
+            delay_start_s: d,
+            ..base
+        };
+        let fit = joint_fit(runs, &start_rig, &o);
+        let better = match (&best, &fit) {
+            (None, _) => true,
+            (Some(Err(_)), Ok(_)) => true,
+            (Some(Ok(b)), Ok(f)) => f.converged && (f.cost < b.cost || !b.converged),
+            _ => false,
+        };
+        if better {
+            best = Some(fit);
+        }
+    }
+    best.unwrap_or(Err(FitError::NoSolution))
+}
