@@ -314,8 +314,8 @@ fn the_data_choose_the_structure_they_were_made_with() {
         let fit = sel.fit().unwrap();
         assert!(fit.adequacy.passed(), "{want:?}: {:?}", fit.adequacy);
         let truth = [r.beta1_per_s, r.a1b0_n_per_m_s2, r.a2_n_per_m, r.a3_per_s];
-        for i in 0..4 {
-            let z = (fit.params[i] - truth[i]) / fit.std[i];
+        for (i, t) in truth.iter().enumerate() {
+            let z = (fit.params[i] - t) / fit.std[i];
             assert!(
                 z.abs() < 4.0,
                 "{want:?} {}: z = {z}",
