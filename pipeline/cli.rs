@@ -15,7 +15,7 @@ use clap::{Parser, Subcommand, ValueEnum};
 use indicatif::{ProgressBar, ProgressStyle};
 
 use crate::identify::Estimate;
-use crate::results::{Results, Status};
+use crate::results::{Results, RigSource, Status};
 use crate::run::{self, CampaignOutcome, Event, FigureFormats, JobError, Observer, Settings};
 
 /// Identify servo-hydraulic actuators from lab logs (Maghareh, Silva & Dyke 2018).
@@ -524,14 +524,29 @@ fn print_summary(r: &Results) {
                 Some(s) => format!("{:.5e} +/- {:.2e}", e.value, s),
                 None => format!("{:.5e}", e.value),
             };
-            say(&format!(
-                "  rig ({:?}, a1b0 at P = {}):",
-                rig.source, rig.p_gain
-            ));
-            say(&format!("    beta1 = {} 1/s", pm(&rig.beta1)));
-            say(&format!("    a1b0  = {} N/(m s^2)", pm(&rig.a1b0)));
-            say(&format!("    a2    = {} N/m", pm(&rig.a2)));
-            say(&format!("    a3    = {} 1/s", pm(&rig.a3)));
+            let source = match (rig.source, &rig.joint) {
+                (RigSource::Joint, Some(j)) => format!(
+                    "joint grey-box fit, structure {}",
+                    j.structure.map_or("none", |s| s.as_str())
+                ),
+                (RigSource::Joint, None) => "joint grey-box fit".into(),
+                (RigSource::Identified, _) => "sequential, Eqs. 18-20".into(),
+                (RigSource::Given, _) => "given".into(),
+            };
+            say(&format!("  rig ({source}; a1b0 at P = {}):", rig.p_gain));
+            // The sequential estimate beside the joint one when that is used.
+            let seq = rig
+                .sequential
+                .as_ref()
+                .filter(|_| rig.source == RigSource::Joint);
+            let line = |name: &str, e: &Estimate, s: Option<&Estimate>, unit: &str| {
+                let side = s.map_or(String::new(), |s| format!("   (sequential {})", pm(s)));
+                format!("    {name} = {} {unit}{side}", pm(e))
+            };
+            say(&line("beta1", &rig.beta1, seq.map(|s| &s.beta1), "1/s"));
+            say(&line("a1b0 ", &rig.a1b0, seq.map(|s| &s.a1b0), "N/(m s^2)"));
+            say(&line("a2   ", &rig.a2, seq.map(|s| &s.a2), "N/m"));
+            say(&line("a3   ", &rig.a3, seq.map(|s| &s.a3), "1/s"));
         }
         None => {
             if let Some(e) = &r.rig_error {

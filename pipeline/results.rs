@@ -86,8 +86,11 @@ pub struct CampaignSummary {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
 #[serde(rename_all = "snake_case")]
 pub enum RigSource {
-    /// Identified by this campaign (Eqs. 18-20).
+    /// Identified by this campaign by the paper's sequential procedure
+    /// (Eqs. 18-20).
     Identified,
+    /// Identified by this campaign's joint grey-box fit across its runs.
+    Joint,
     /// Given in the manifest's [rig.parameters].
     Given,
 }
@@ -119,6 +122,141 @@ pub struct RigResult {
     /// propagated from the fits; null when given or without the fits'
     /// covariances.
     pub covariance: Option<[[f64; 4]; 4]>,
+    /// The sequential estimate (Eqs. 18-20) when the campaign identifies the
+    /// rig, whichever estimate `source` says is used; `per_spring`,
+    /// `spread` and `consistency` above are its.
+    #[serde(default)]
+    pub sequential: Option<RigEstimates>,
+    /// The joint grey-box fit, when the campaign identifies the rig.
+    #[serde(default)]
+    pub joint: Option<JointResult>,
+}
+
+/// The four rig parameters and R1 with their stds and covariance.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[allow(non_snake_case)]
+pub struct RigEstimates {
+    pub beta1: Estimate,
+    pub a1b0: Estimate,
+    pub a2: Estimate,
+    pub a3: Estimate,
+    pub R1: Estimate,
+    /// Covariance of (beta1, a1b0, a2, a3).
+    pub covariance: Option<[[f64; 4]; 4]>,
+}
+
+/// The joint grey-box fit of the rig across the identification runs
+/// (issue 14): the structures tried, the one chosen and why, its rig with
+/// the sequential one beside it, and the adequacy tests.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+pub struct JointResult {
+    /// The structure whose estimate is reported (null when none could be
+    /// fitted).
+    pub structure: Option<JointStructureName>,
+    /// "data" (the F tests) or "manifest" (identification.joint.structure).
+    pub chosen_by: String,
+    /// What the data choose, with or without the manifest.
+    pub data_choose: Option<JointStructureName>,
+    /// Why this structure, in a sentence.
+    pub explanation: String,
+    /// Every structure tried, smallest first.
+    pub candidates: Vec<JointCandidate>,
+    /// The reported structure's parameters: the four rig parameters
+    /// (a1b0 at `p_gain` of the rig), then the delay, valve frequency and
+    /// damping as it has them, each beside the sequential estimate.
+    pub parameters: Vec<JointParameter>,
+    /// R1 = a1b0 / a2 at the rig's P gain, with its std.
+    #[serde(rename = "R1")]
+    pub r1: Option<Estimate>,
+    /// Covariance of (beta1, a1b0, a2, a3), from the fit.
+    pub covariance: Option<[[f64; 4]; 4]>,
+    /// The adequacy tests over every run's bins, and per run.
+    pub adequacy: Option<crate::fit::adequacy::Adequacy>,
+    pub per_run: Vec<RunAdequacy>,
+    /// Whether CCF, validation and the sensitivity use this estimate.
+    pub used: bool,
+    /// Why they do or do not.
+    pub use_note: String,
+}
+
+/// A structure of the joint fit.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
+#[serde(rename_all = "snake_case")]
+pub enum JointStructureName {
+    None,
+    Delay,
+    DelayValve,
+}
+
+impl JointStructureName {
+    /// As the manifest and results.json spell it.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            JointStructureName::None => "none",
+            JointStructureName::Delay => "delay",
+            JointStructureName::DelayValve => "delay_valve",
+        }
+    }
+}
+
+/// One row of the structure table.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+pub struct JointCandidate {
+    pub structure: JointStructureName,
+    pub parameters: usize,
+    /// Null with `error` when the fit failed outright.
+    pub cost: Option<f64>,
+    pub dof: Option<usize>,
+    pub reduced_chi2: Option<f64>,
+    /// (cost - dof) / sqrt(2 dof).
+    pub cost_z: Option<f64>,
+    /// cost + p ln(2 N).
+    pub bic: Option<f64>,
+    /// The F test against the structure chosen before it.
+    pub f_test: Option<FTestResult>,
+    pub converged: Option<bool>,
+    /// Why the fit cannot be used although it ran.
+    pub unusable: Option<String>,
+    pub error: Option<String>,
+    pub chosen: bool,
+}
+
+/// An extra-sum-of-squares F test.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+pub struct FTestResult {
+    pub against: JointStructureName,
+    pub f: f64,
+    pub p_value: f64,
+    /// p below 0.001.
+    pub significant: bool,
+}
+
+/// A joint parameter beside the sequential estimate.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+pub struct JointParameter {
+    /// beta1, a1b0, a2, a3, delay_s, valve_hz, valve_damping.
+    pub name: String,
+    pub value: f64,
+    /// Statistical std, from the fit.
+    pub std: f64,
+    /// The sequential estimate and its std (rig parameters only).
+    pub sequential: Option<Estimate>,
+    /// (joint - sequential) / sqrt(std_joint^2 + std_sequential^2).
+    pub difference_std: Option<f64>,
+    /// The model-error term: |joint - sequential|, the spread between two
+    /// estimators of the same parameter that weigh the model's errors
+    /// differently.
+    pub model_error: Option<f64>,
+    /// "model error" when the two differ by more than 2 combined stds,
+    /// else "statistical".
+    pub dominant: Option<String>,
+}
+
+/// A run's adequacy tests under a fit.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+pub struct RunAdequacy {
+    pub run: String,
+    pub adequacy: crate::fit::adequacy::Adequacy,
 }
 
 /// The stiffness sensitivity analysis (paper Sec. 2.3), with where the
@@ -302,6 +440,9 @@ pub struct FitSummary {
     /// Welch segments averaged, and the bin spacing (Hz).
     pub frf_averages: usize,
     pub frf_resolution_hz: f64,
+    /// The adequacy tests of this run's own fit (`fit::adequacy`).
+    #[serde(default)]
+    pub adequacy: Option<crate::fit::adequacy::Adequacy>,
 }
 
 /// The controllable canonical form of one run (Eqs. 34-35, signs of MODEL.md).

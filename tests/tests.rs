@@ -12,6 +12,7 @@ mod csi;
 mod disk_full;
 mod drift;
 mod figure_formats;
+mod joint;
 mod layering;
 mod manifest_errors;
 mod mts;

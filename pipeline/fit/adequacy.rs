@@ -113,9 +113,9 @@ impl Adequacy {
     }
 
     /// What the failures say, in one line, naming the manifest keys that
-    /// would address them; None when every test passed. `delay_fitted`
-    /// says whether the model had a delay of its own.
-    pub fn diagnosis(&self, delay_fitted: bool) -> Option<String> {
+    /// would address them; None when every test passed. `add_delay` is
+    /// what would add a delay to the model (None when it has one).
+    pub fn diagnosis(&self, add_delay: Option<&str>) -> Option<String> {
         let failures = self.failures();
         if failures.is_empty() {
             return None;
@@ -145,15 +145,14 @@ impl Adequacy {
             ));
         }
         let cause = if failures.contains(&Failure::LinearPhase) {
-            if delay_fitted {
-                "likely cause: a delay beyond the fitted one's bound; widen identification.delay.max_s"
-            } else {
-                "likely cause: a delay the model lacks; set identification.delay = \"fit\" (or identification.joint.structure = \"auto\")"
+            match add_delay {
+                None => "likely cause: a delay beyond the fitted one's bound; widen identification.delay.max_s".to_string(),
+                Some(key) => format!("likely cause: a delay the model lacks; {key}"),
             }
         } else if failures.contains(&Failure::Correlation) {
-            "likely cause: dynamics the model lacks (a servo-valve mode, a resonance) within the band; set identification.joint.structure = \"delay_valve\" (or \"auto\"), or narrow identification.band_hz"
+            "likely cause: dynamics the model lacks (a servo-valve mode, a resonance) within the band; the joint fit's identification.joint.structure = \"delay_valve\" (or \"auto\") models a valve mode, or narrow identification.band_hz".to_string()
         } else {
-            "likely cause: noise the variances understate (a sweep analysed with H1/H2, whose coherence is biased); set identification.frf.estimator = \"etfe\" for a sweep"
+            "likely cause: noise the variances understate (a sweep analysed with H1/H2, whose coherence is biased); set identification.frf.estimator = \"etfe\" for a sweep".to_string()
         };
         Some(format!("{}; {cause}", parts.join("; ")))
     }
@@ -341,8 +340,13 @@ mod tests {
         assert!(a.failures().contains(&Failure::LinearPhase), "{a:?}");
         let p = a.phase_slope.as_ref().unwrap();
         assert!((p.delay_s / tau - 1.0).abs() < 0.02, "{p:?}");
-        let d = a.diagnosis(false).unwrap();
-        assert!(d.contains("identification.delay"), "{d}");
+        let d = a
+            .diagnosis(Some("set identification.delay = \"fit\""))
+            .unwrap();
+        assert!(
+            d.contains("a delay the model lacks; set identification.delay"),
+            "{d}"
+        );
     }
 
     #[test]
@@ -358,7 +362,7 @@ mod tests {
         assert!(failures.contains(&Failure::Cost), "{a:?}");
         assert!(failures.contains(&Failure::Correlation), "{a:?}");
         assert!(!failures.contains(&Failure::LinearPhase), "{a:?}");
-        assert!(a.diagnosis(true).unwrap().contains("delay_valve"));
+        assert!(a.diagnosis(None).unwrap().contains("delay_valve"));
     }
 
     #[test]
@@ -386,7 +390,7 @@ mod tests {
         );
         assert_eq!(a.failures(), vec![Failure::Cost]);
         assert!((a.reduced_chi2() / 2.25 - 1.0).abs() < 0.1, "{a:?}");
-        assert!(a.diagnosis(false).unwrap().contains("estimator"));
+        assert!(a.diagnosis(None).unwrap().contains("estimator"));
     }
 
     #[test]

@@ -16,9 +16,9 @@ use super::document::{Document, read};
 use super::keypath::KeyPath;
 use super::problem::{ManifestError, Problem, TablePlace};
 use super::raw::{
-    CampaignInfo, Channel, Channels as RawChannels, CompareMode, History, Identification, Manifest,
-    MonteCarloSettings, Reference, Rig, Role, Run, RunData, RunTable, SCHEMA_VERSION,
-    SensitivitySettings, manifest_schema,
+    CampaignInfo, Channel, Channels as RawChannels, CompareMode, History, Identification,
+    JointSettings, Manifest, MonteCarloSettings, Reference, Rig, Role, Run, RunData, RunTable,
+    SCHEMA_VERSION, SensitivitySettings, manifest_schema,
 };
 use super::table::{CheckedTable, RowKey, RunTableInfo, TableRun, check_table};
 use crate::drift::{MIN_HISTORY, Rule};
@@ -56,6 +56,10 @@ pub struct Campaign {
     pub history: HistoryPlan,
     /// The stiffness sensitivity's sweep and target.
     pub sensitivity: SensitivityPlan,
+    /// The joint grey-box fit's settings (`[identification.joint]`): kept
+    /// apart from `identification` so that changing them does not redo the
+    /// runs' own fits.
+    pub joint: JointSettings,
 }
 
 /// The stiffness sensitivity's checked settings.
@@ -294,7 +298,7 @@ fn validate(
         campaign: campaign.clone(),
         rig: rig.clone(),
         channels: default_channels,
-        identification: ident,
+        identification: ident.clone(),
         runs: partial.runs.into_iter().flatten().collect(),
         references: partial.references.into_iter().flatten().collect(),
         run_table: partial.run_table,
@@ -317,6 +321,7 @@ fn validate(
         warnings: table.warnings,
         history,
         sensitivity,
+        joint: ident.joint,
     })
 }
 

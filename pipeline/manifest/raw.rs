@@ -306,6 +306,48 @@ pub struct Identification {
     /// Trim each log to where the command has energy before estimating.
     #[serde(default)]
     pub trim_to_excitation: bool,
+    /// The joint grey-box fit of the rig across the identification runs.
+    #[serde(default)]
+    pub joint: JointSettings,
+}
+
+/// The joint grey-box fit: which nuisance dynamics it includes, and
+/// whether its rig is the one the campaign uses downstream.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
+#[schemars(deny_unknown_fields)]
+pub struct JointSettings {
+    #[serde(default)]
+    pub structure: JointStructure,
+    #[serde(default)]
+    pub rig: JointRig,
+}
+
+/// The joint fit's nuisance dynamics besides the command's hold.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
+#[serde(rename_all = "snake_case")]
+pub enum JointStructure {
+    /// Chosen by the data among the three below (nested F tests).
+    #[default]
+    Auto,
+    /// The paper's model alone.
+    None,
+    /// And a pure delay.
+    Delay,
+    /// And a delay and a second-order servo-valve mode.
+    DelayValve,
+}
+
+/// Which rig CCF, validation and the sensitivity use.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
+#[serde(rename_all = "snake_case")]
+pub enum JointRig {
+    /// The joint estimate when it is adequate, else the sequential one.
+    #[default]
+    Auto,
+    /// The paper's sequential estimate (Eqs. 18-20) always.
+    Sequential,
+    /// The joint estimate whenever it converged to a physical rig.
+    Joint,
 }
 
 impl Default for Identification {
@@ -318,6 +360,7 @@ impl Default for Identification {
             delay: DelaySettings::default(),
             model: ModelOrders::default(),
             trim_to_excitation: false,
+            joint: JointSettings::default(),
         }
     }
 }

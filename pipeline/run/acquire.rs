@@ -89,14 +89,17 @@ pub struct LogStage {
 
 /// What the fit is given from an FRF: the bins of `mask` whose variance is
 /// defined, their frequencies, estimates and E|dH|^2.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct FitData {
     pub freq_hz: Vec<f64>,
+    #[serde(with = "super::figures::complex_vec")]
     pub h: Vec<nalgebra::Complex<f64>>,
     pub variance: Vec<f64>,
     /// The input's one-sided auto-spectral density at those bins
     /// (unit^2/Hz), which turns the variance into a noise level.
     pub suu: Vec<f64>,
+    /// The FRF's grid spacing (Hz).
+    pub bin_hz: f64,
 }
 
 impl FitData {
@@ -116,6 +119,7 @@ impl FitData {
             h: bins.iter().map(|&i| h.h[i]).collect(),
             variance,
             suu: bins.iter().map(|&i| h.suu[i]).collect(),
+            bin_hz: h.resolution_hz,
         }
     }
 

@@ -28,12 +28,12 @@ use super::acquire::{AcquireError, Acquired, LogStage, acquire_with};
 use super::cache::{self, Cache, Probe};
 use super::compare::compare;
 use super::figures::{self, ForceBins, OverlayRun};
-use super::rig::{self, RigError, RigInput};
+use super::rig::{self, Evidence, RigError, RigInput};
 use super::tables;
 use crate::fit::TfFit;
+use crate::fit::adequacy::{self, Adequacy, Residuals};
 use crate::ingest::Log;
-use crate::lti::TransferFunction;
-use crate::manifest::{Campaign, Role, RunPlan, RunSource};
+use crate::manifest::{Campaign, IdentificationPlan, Role, RunPlan, RunSource};
 use crate::model::{self, CnTerm, LinearSdof, LinearSpecimen, RigParams};
 use crate::report::{FigureFiles, FigureFormats, FigureSpec, PageFigure, WriteError};
 use crate::results::{
@@ -329,9 +329,8 @@ impl Drawer<'_> {
 #[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
 struct Stored {
     result: RunResult,
-    /// The transfer function the rig is identified from, with the
-    /// covariance of (n0, d1, d0) when fitted.
-    estimate: Option<(TransferFunction, Option<[[f64; 3]; 3]>)>,
+    /// What the rig is identified from.
+    estimate: Option<Evidence>,
     force: Option<ForceBins>,
     overlay: Option<OverlayRun>,
     /// A validation run's control-structure interaction.
@@ -470,7 +469,7 @@ fn first_pass(
             seconds: pass.seconds,
         });
         pass.rig_input = match s.estimate {
-            Some((tf, cov)) => RigInput::Estimate { tf, cov },
+            Some(e) => RigInput::Estimate(Box::new(e)),
             None => RigInput::Nothing,
         };
         pass.result = Some(s.result);
@@ -489,16 +488,22 @@ fn first_pass(
         }
         Ok(acq) => {
             pass.acquired = true;
-            let estimate = acq.tf.clone().map(|tf| (tf, acq.cov));
+            let (tf, cov) = (acq.tf.clone(), acq.cov);
+            let (result, stage, time) = fitted(&campaign.identification, plan, out, acq);
+            out = result;
+            // What the rig's identification needs of the run: its model,
+            // and for the joint fit the bins its fit was given.
+            let estimate = tf.map(|tf| Evidence {
+                tf,
+                cov,
+                data: stage.as_ref().and_then(|st| st.fit_data.clone()),
+                adequacy: out.fit.as_ref().and_then(|f| f.adequacy.clone()),
+                sample_rate_hz: stage.as_ref().map(|st| st.log.sample_rate_hz),
+            });
             pass.rig_input = match &estimate {
-                Some((tf, cov)) => RigInput::Estimate {
-                    tf: tf.clone(),
-                    cov: *cov,
-                },
+                Some(e) => RigInput::Estimate(Box::new(e.clone())),
                 None => RigInput::Nothing,
             };
-            let (result, stage, time) = fitted(plan, out, acq);
-            out = result;
             if let Some(st) = &stage {
                 pass.force = ForceBins::of(st);
                 if plan.role == Role::NoSpecimen {
@@ -830,6 +835,7 @@ fn failed(mut out: RunResult, e: RunError) -> RunResult {
 /// stands on its own. Returns the result, the log stage and the
 /// time-domain check for the figures.
 fn fitted(
+    ident: &IdentificationPlan,
     plan: &RunPlan,
     mut out: RunResult,
     acq: Acquired,
@@ -860,7 +866,13 @@ fn fitted(
     if let Some(st) = &stage
         && let Some(fit) = &st.fit
     {
-        out.fit = Some(fit_summary(plan, st, fit));
+        let summary = fit_summary(ident, plan, st, fit);
+        if let Some(d) = summary.adequacy.as_ref().and_then(|a| {
+            a.diagnosis((!fit.shape.fit_delay).then_some("set identification.delay = \"fit\""))
+        }) {
+            out.warnings.push(format!("the run's own fit: {d}"));
+        }
+        out.fit = Some(summary);
         match validate::fitted_run(&fit.tf, &record(&st.log)) {
             Ok(t) => {
                 out.validation = Some(t.metrics.clone());
@@ -874,7 +886,35 @@ fn fitted(
     (out, stage, time)
 }
 
-fn fit_summary(plan: &RunPlan, st: &LogStage, fit: &TfFit) -> FitSummary {
+/// The adequacy tests of a run's own fit on the bins it was given, its
+/// model with the hold and delay.
+fn fit_adequacy(ident: &IdentificationPlan, st: &LogStage, fit: &TfFit) -> Option<Adequacy> {
+    let data = st.fit_data.as_ref()?;
+    let fs = st.log.sample_rate_hz;
+    let model: Vec<_> = data
+        .freq_hz
+        .iter()
+        .map(|&f| fit.tf.freq_response(f) * crate::fit::hold_response(ident.intersample, fs, f))
+        .collect();
+    Some(adequacy::assess(
+        &Residuals {
+            freq_hz: &data.freq_hz,
+            h: &data.h,
+            model: &model,
+            variance: &data.variance,
+        },
+        fit.params.len(),
+        st.frf.resolution_hz,
+        ident.frf.window.independent_lag(),
+    ))
+}
+
+fn fit_summary(
+    ident: &IdentificationPlan,
+    plan: &RunPlan,
+    st: &LogStage,
+    fit: &TfFit,
+) -> FitSummary {
     let used: Vec<f64> = st
         .frf
         .coherence
@@ -899,6 +939,7 @@ fn fit_summary(plan: &RunPlan, st: &LogStage, fit: &TfFit) -> FitSummary {
         std: fit.std.clone(),
         frf_averages: st.frf.n_averages,
         frf_resolution_hz: st.frf.resolution_hz,
+        adequacy: fit_adequacy(ident, st, fit),
     }
 }
 

@@ -544,7 +544,7 @@ pub(super) struct OverlayRun {
 }
 
 /// Complex numbers as [re, im] pairs, for the run cache.
-mod complex_vec {
+pub(super) mod complex_vec {
     use nalgebra::Complex;
     use serde::{Deserialize, Deserializer, Serializer};
 

@@ -10,6 +10,7 @@ mod cache;
 mod compare;
 pub mod figures;
 mod history;
+mod joint;
 pub mod montecarlo;
 mod rig;
 mod sensitivity;

@@ -5,12 +5,14 @@
 use std::fmt;
 use std::sync::Arc;
 
-use super::acquire::AcquireError;
+use super::acquire::{AcquireError, FitData};
+use crate::fit::adequacy::Adequacy;
+use crate::fit::joint::JointFit;
 use crate::identify::{self, Estimate, IdentifyError, SecondOrder, SpringRun, TfEstimate};
 use crate::lti::TransferFunction;
 use crate::manifest::{Campaign, Role};
 use crate::model::RigParams;
-use crate::results::{RigResult, RigSource, Spread};
+use crate::results::{RigEstimates, RigResult, RigSource, Spread};
 use crate::simulate::specimen::SpecimenModel;
 
 /// Why the campaign has no rig parameters.
@@ -58,16 +60,26 @@ fn join(failed: &[FailedRun]) -> String {
 /// What a run gives the rig's identification.
 #[derive(Debug, Clone)]
 pub(super) enum RigInput {
-    /// Its transfer function, with the covariance of (n0, d1, d0) when
-    /// fitted.
-    Estimate {
-        tf: TransferFunction,
-        cov: Option<[[f64; 3]; 3]>,
-    },
+    /// Its model and what its fit was given.
+    Estimate(Box<Evidence>),
     /// Its first stage failed.
     Failed(Arc<AcquireError>),
     /// Nothing (a run without a model of its own).
     Nothing,
+}
+
+/// A run's model, and what the joint fit needs of it.
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
+pub(super) struct Evidence {
+    /// Its transfer function, with the covariance of (n0, d1, d0) when
+    /// fitted.
+    pub tf: TransferFunction,
+    pub cov: Option<[[f64; 3]; 3]>,
+    /// The bins its fit was given (None for a published model).
+    pub data: Option<FitData>,
+    /// Its own fit's adequacy tests.
+    pub adequacy: Option<Adequacy>,
+    pub sample_rate_hz: Option<f64>,
 }
 
 /// The rig: identified when the campaign can (Fig. 6), else given. A given
@@ -87,18 +99,22 @@ pub(super) fn establish<'a>(
     let mut no_spec = Vec::new();
     let mut springs = Vec::new();
     let mut failed = Vec::new();
+    let mut evidence = Vec::new();
     for (plan, input) in campaign.runs.iter().zip(inputs) {
         if !matches!(plan.role, Role::NoSpecimen | Role::Spring) {
             continue;
         }
+        if let RigInput::Estimate(e) = input {
+            evidence.push((plan, e.as_ref()));
+        }
         let run = plan.id.clone();
         let estimate = match input {
-            RigInput::Estimate { tf, cov } => match SecondOrder::from_tf(tf) {
+            RigInput::Estimate(e) => match SecondOrder::from_tf(&e.tf) {
                 Ok(so) => TfEstimate {
                     run,
                     p_gain: plan.p_gain,
                     tf: so,
-                    cov: *cov,
+                    cov: e.cov,
                 },
                 Err(error) => {
                     failed.push(FailedRun::NotSecondOrder { run, error });
@@ -151,22 +167,75 @@ pub(super) fn establish<'a>(
             ident.consistency.likely_causes.join("; ")
         ));
     }
-    let params = ident.params();
-    let result = RigResult {
-        source: RigSource::Identified,
-        p_gain: ident.p_gain,
+    let sequential = RigEstimates {
         beta1: ident.beta1,
         a1b0: ident.a1b0,
         a2: ident.a2,
         a3: ident.a3,
         R1: ident.r1,
-        valve_time_constant_ms: time_constant(&ident.beta1),
+        covariance: ident.covariance,
+    };
+    let joint = super::joint::joint(campaign, &evidence, &ident.params(), &sequential, warnings);
+    let used = match &joint {
+        Some((_, Some(fit))) => Some((RigSource::Joint, joint_estimates(fit))),
+        _ => None,
+    };
+    let (source, chosen) = used.unwrap_or((RigSource::Identified, sequential.clone()));
+    let params = RigParams {
+        beta1_per_s: chosen.beta1.value,
+        a1b0_n_per_m_s2: chosen.a1b0.value,
+        a2_n_per_m: chosen.a2.value,
+        a3_per_s: chosen.a3.value,
+        p_gain: ident.p_gain,
+    };
+    let result = RigResult {
+        source,
+        p_gain: ident.p_gain,
+        beta1: chosen.beta1,
+        a1b0: chosen.a1b0,
+        a2: chosen.a2,
+        a3: chosen.a3,
+        R1: chosen.R1,
+        valve_time_constant_ms: time_constant(&chosen.beta1),
         per_spring: ident.per_spring,
         spread,
         consistency: Some(ident.consistency),
-        covariance: ident.covariance,
+        covariance: chosen.covariance,
+        sequential: Some(sequential),
+        joint: joint.map(|(r, _)| r),
     };
     Ok((params, result))
+}
+
+/// The joint fit's rig as estimates, a1b0 at the reference P gain.
+fn joint_estimates(fit: &JointFit) -> RigEstimates {
+    let est = |i: usize| Estimate {
+        value: fit.params[i],
+        std: Some(fit.std[i]),
+    };
+    let cov: [[f64; 4]; 4] =
+        std::array::from_fn(|i| std::array::from_fn(|j| fit.covariance[(i, j)]));
+    RigEstimates {
+        beta1: est(0),
+        a1b0: est(1),
+        a2: est(2),
+        a3: est(3),
+        R1: r1(&fit.rig, &cov),
+        covariance: Some(cov),
+    }
+}
+
+/// R1 = a1b0 / a2 with its first-order std.
+pub(super) fn r1(rig: &RigParams, cov: &[[f64; 4]; 4]) -> Estimate {
+    let r1 = rig.r1();
+    let (a, b) = (rig.a1b0_n_per_m_s2, rig.a2_n_per_m);
+    // Gradient (1 / a2, -a1b0 / a2^2) over (a1b0, a2).
+    let g = [1.0 / b, -a / (b * b)];
+    let var = g[0] * g[0] * cov[1][1] + 2.0 * g[0] * g[1] * cov[1][2] + g[1] * g[1] * cov[2][2];
+    Estimate {
+        value: r1,
+        std: Some(var.max(0.0).sqrt()),
+    }
 }
 
 /// 1/beta1 in ms, with its propagated std.
@@ -192,5 +261,7 @@ fn given_result(p: &RigParams) -> RigResult {
         spread: None,
         consistency: None,
         covariance: None,
+        sequential: None,
+        joint: None,
     }
 }

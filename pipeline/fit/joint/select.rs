@@ -114,7 +114,7 @@ pub fn select(
         let unusable = match &fit {
             Err(_) => None,
             Ok(f) if !f.converged => Some(format!(
-                "Levenberg-Marquardt did not converge in {} iterations",
+                "Levenberg-Marquardt stopped after {} iterations without converging",
                 f.iterations
             )),
             Ok(f) => f.unphysical(band_top_hz, opts.max_delay_s),

@@ -1,0 +1,368 @@
+//! The joint grey-box fit in the campaign (issue 14): the identification
+//! runs' FRFs to `fit::joint::select`, its outcome beside the sequential
+//! estimate, and the decision which of the two the campaign uses.
+//!
+//! The joint estimate is used (with `identification.joint.rig = "auto"`)
+//! when the chosen structure converged to a physical rig and is adequate:
+//! it passes the cost test, or it explains the data about as well as the
+//! sequential per-run fits do (a reduced chi-square within 10 % of theirs
+//! pooled). The per-run fits have three free coefficients per run against
+//! the joint fit's 4-7 shared parameters, so a joint fit that does as well
+//! shows that the physical model is not what limits the fit: the noise
+//! estimate or something neither model has is.
+
+use super::acquire::FitData;
+use super::rig::{Evidence, r1};
+use crate::fit::DelayPlan;
+use crate::fit::adequacy::Adequacy;
+use crate::fit::joint::{
+    self, Candidate, Choice, JointFit, JointOptions, JointRun, P_SIGNIFICANT, Selection, Structure,
+};
+use crate::identify::Estimate;
+use crate::manifest::{Campaign, JointRig, JointStructure, RunPlan};
+use crate::model::RigParams;
+use crate::results::{
+    FTestResult, JointCandidate, JointParameter, JointResult, JointStructureName, RigEstimates,
+    RunAdequacy,
+};
+
+/// A delay bound when the manifest fits none (s): 20 ms, the default of
+/// `identification.delay.max_s`.
+const DEFAULT_MAX_DELAY_S: f64 = 0.02;
+
+/// How much worse than the sequential fits' pooled reduced chi-square the
+/// joint fit's may be and still count as adequate.
+const AS_GOOD_AS_SEQUENTIAL: f64 = 1.1;
+
+fn name(s: Structure) -> JointStructureName {
+    match s {
+        Structure::Plain => JointStructureName::None,
+        Structure::Delay => JointStructureName::Delay,
+        Structure::DelayValve => JointStructureName::DelayValve,
+    }
+}
+
+fn key_value(s: Structure) -> &'static str {
+    match s {
+        Structure::Plain => "none",
+        Structure::Delay => "delay",
+        Structure::DelayValve => "delay_valve",
+    }
+}
+
+/// The joint fit of the identification runs in `evidence`, from the
+/// sequential rig `start`; what it found, and its fit when the campaign
+/// uses it.
+/// Warnings (a failed or inadequate fit, a manifest structure the data
+/// reject) go to `warnings`. None when no run has bins to fit (published
+/// models only).
+pub(super) fn joint(
+    campaign: &Campaign,
+    evidence: &[(&RunPlan, &Evidence)],
+    start: &RigParams,
+    sequential: &RigEstimates,
+    warnings: &mut Vec<String>,
+) -> Option<(JointResult, Option<JointFit>)> {
+    let with_data: Vec<(&RunPlan, &FitData, f64)> = evidence
+        .iter()
+        .filter_map(|(p, e)| Some((*p, e.data.as_ref()?, e.sample_rate_hz?)))
+        .filter(|(p, _, _)| p.specimen.linear().is_some())
+        .collect();
+    if with_data.is_empty() {
+        return None;
+    }
+    let fs = with_data[0].2;
+    if with_data.iter().any(|(_, _, r)| *r != fs) {
+        warnings.push(
+            "rig: no joint fit: the identification runs were logged at different sample rates; the sequential estimate is used".into(),
+        );
+        return None;
+    }
+    let runs: Vec<JointRun<'_>> = with_data
+        .iter()
+        .map(|(p, d, _)| JointRun {
+            specimen: p.specimen.linear().expect("filtered"),
+            p_gain: p.p_gain,
+            freq_hz: &d.freq_hz,
+            h: &d.h,
+            variance: &d.variance,
+            bin_hz: d.bin_hz,
+        })
+        .collect();
+    let ident = &campaign.identification;
+    let opts = JointOptions {
+        structure: Structure::Plain,
+        intersample: ident.intersample,
+        sample_rate_hz: fs,
+        p_ref: start.p_gain,
+        max_iterations: 200,
+        valve_start: (0.0, 0.0),
+        delay_start_s: 0.0,
+        max_delay_s: match ident.delay {
+            DelayPlan::Fit { max_s } => max_s,
+            _ => DEFAULT_MAX_DELAY_S,
+        },
+        lag: ident.frf.window.independent_lag(),
+    };
+    let choice = match campaign.joint.structure {
+        JointStructure::Auto => Choice::Auto,
+        JointStructure::None => Choice::Fixed(Structure::Plain),
+        JointStructure::Delay => Choice::Fixed(Structure::Delay),
+        JointStructure::DelayValve => Choice::Fixed(Structure::DelayValve),
+    };
+    let band_top = with_data
+        .iter()
+        .map(|(p, _, _)| p.band_hz.1)
+        .fold(0.0, f64::max);
+    let sel = joint::select(&runs, start, &opts, choice, band_top);
+    let ids: Vec<&str> = with_data.iter().map(|(p, _, _)| p.id.as_str()).collect();
+    let seq_adequacy: Vec<&Adequacy> = evidence
+        .iter()
+        .filter_map(|(_, e)| e.adequacy.as_ref())
+        .collect();
+    let seq_chi2 = (!seq_adequacy.is_empty()).then(|| {
+        seq_adequacy.iter().map(|a| a.cost).sum::<f64>()
+            / seq_adequacy.iter().map(|a| a.dof).sum::<usize>() as f64
+    });
+    Some(describe(
+        &sel,
+        &ids,
+        campaign.joint.rig,
+        sequential,
+        seq_chi2,
+        opts.max_delay_s,
+        band_top,
+        warnings,
+    ))
+}
+
+/// The table row of one candidate.
+fn row(c: &Candidate, chosen: Option<Structure>) -> JointCandidate {
+    let fit = c.fit.as_ref().ok();
+    JointCandidate {
+        structure: name(c.structure),
+        parameters: c.structure.names().len(),
+        cost: fit.map(|f| f.cost),
+        dof: fit.map(|f| f.dof),
+        reduced_chi2: fit.map(|f| f.cost / f.dof as f64),
+        cost_z: fit.map(|f| f.adequacy.cost_z),
+        bic: c.bic(),
+        f_test: c.f_test.map(|t| FTestResult {
+            against: name(t.against),
+            f: t.f,
+            p_value: t.p_value,
+            significant: t.p_value < P_SIGNIFICANT,
+        }),
+        converged: fit.map(|f| f.converged),
+        unusable: c.unusable.clone(),
+        error: c.fit.as_ref().err().map(ToString::to_string),
+        chosen: chosen == Some(c.structure),
+    }
+}
+
+/// Why the data choose what they choose, in a sentence.
+fn explain(sel: &Selection) -> String {
+    let Some(auto) = sel.auto else {
+        return "no structure gave a usable fit".into();
+    };
+    let mut parts = Vec::new();
+    for c in &sel.candidates {
+        let Some(t) = c.f_test else { continue };
+        parts.push(format!(
+            "{} against {}: F = {:.3e}, p = {:.2e} ({})",
+            key_value(c.structure),
+            key_value(t.against),
+            t.f,
+            t.p_value,
+            if t.p_value < P_SIGNIFICANT {
+                "its extra parameters explain more than the residual scatter"
+            } else {
+                "not significant at p < 0.001"
+            }
+        ));
+    }
+    let tests = if parts.is_empty() {
+        String::from("the only usable structure")
+    } else {
+        parts.join("; ")
+    };
+    format!(
+        "the data choose \"{}\" by extra-sum-of-squares F tests between nested structures: {tests}",
+        key_value(auto)
+    )
+}
+
+/// The result table and the use decision; the chosen fit when usable.
+#[allow(clippy::too_many_arguments)]
+fn describe(
+    sel: &Selection,
+    ids: &[&str],
+    rig_mode: JointRig,
+    sequential: &RigEstimates,
+    seq_chi2: Option<f64>,
+    max_delay_s: f64,
+    band_top: f64,
+    warnings: &mut Vec<String>,
+) -> (JointResult, Option<JointFit>) {
+    let candidates: Vec<JointCandidate> =
+        sel.candidates.iter().map(|c| row(c, sel.chosen)).collect();
+    let mut explanation = explain(sel);
+    if let Choice::Fixed(s) = sel.choice {
+        explanation = format!(
+            "identification.joint.structure = \"{}\" fixes it; {explanation}",
+            key_value(s)
+        );
+        if let Some(auto) = sel.auto.filter(|a| *a != s) {
+            warnings.push(format!(
+                "rig: identification.joint.structure = \"{}\" is kept, but the data reject it: they choose \"{}\" (F tests in the report); remove the key to let the data choose",
+                key_value(s),
+                key_value(auto)
+            ));
+        }
+    }
+    let chosen = sel.chosen.and_then(|s| sel.candidate(s));
+    let fit = chosen.and_then(|c| c.fit.as_ref().ok());
+    let mut result = JointResult {
+        structure: fit.map(|f| name(f.structure)),
+        chosen_by: match sel.choice {
+            Choice::Auto => "data".into(),
+            Choice::Fixed(_) => "manifest".into(),
+        },
+        data_choose: sel.auto.map(name),
+        explanation,
+        candidates,
+        parameters: Vec::new(),
+        r1: None,
+        covariance: None,
+        adequacy: None,
+        per_run: Vec::new(),
+        used: false,
+        use_note: String::new(),
+    };
+    let Some(fit) = fit else {
+        let why = match chosen.map(|c| &c.fit) {
+            Some(Err(e)) => e.to_string(),
+            _ => "no structure could be fitted".into(),
+        };
+        result.use_note = format!("the sequential estimate is used: the joint fit failed ({why})");
+        warnings.push(format!(
+            "rig: the joint fit failed ({why}); the sequential estimate is used; check identification.band_hz and the runs' coherence"
+        ));
+        return (result, None);
+    };
+    let cov: [[f64; 4]; 4] =
+        std::array::from_fn(|i| std::array::from_fn(|j| fit.covariance[(i, j)]));
+    result.parameters = parameters(fit, sequential);
+    result.r1 = Some(r1(&fit.rig, &cov));
+    result.covariance = Some(cov);
+    result.adequacy = Some(fit.adequacy.clone());
+    result.per_run = ids
+        .iter()
+        .zip(&fit.per_run)
+        .map(|(id, a)| RunAdequacy {
+            run: id.to_string(),
+            adequacy: a.clone(),
+        })
+        .collect();
+    let structure = key_value(fit.structure);
+    if let Some(d) = fit.adequacy.diagnosis(
+        (fit.structure == Structure::Plain)
+            .then_some("set identification.joint.structure = \"auto\" (or \"delay\")"),
+    ) {
+        warnings.push(format!(
+            "rig: the joint fit (structure \"{structure}\"): {d}"
+        ));
+    }
+    let unusable = chosen
+        .and_then(|c| c.unusable.clone())
+        .or_else(|| fit.unphysical(band_top, max_delay_s));
+    let reduced = fit.cost / fit.dof as f64;
+    let as_good = seq_chi2.is_some_and(|s| reduced <= AS_GOOD_AS_SEQUENTIAL * s);
+    let (used, note) = match (rig_mode, &unusable) {
+        (JointRig::Sequential, _) => (
+            false,
+            "the sequential estimate is used: identification.joint.rig = \"sequential\""
+                .to_string(),
+        ),
+        (_, Some(why)) => {
+            warnings.push(format!(
+                "rig: the joint fit (structure \"{structure}\") is not used: {why}; the sequential estimate is used (identification.joint)"
+            ));
+            (
+                false,
+                format!("the sequential estimate is used: the joint fit {why}"),
+            )
+        }
+        (JointRig::Joint, None) => (
+            true,
+            "the joint estimate is used: identification.joint.rig = \"joint\"".to_string(),
+        ),
+        (JointRig::Auto, None) if fit.adequacy.passed() => (
+            true,
+            "the joint estimate is used: it passes its adequacy tests".to_string(),
+        ),
+        (JointRig::Auto, None) if as_good => (
+            true,
+            format!(
+                "the joint estimate is used: it explains the data as well as the per-run fits do (reduced chi-square {reduced:.3} against their {:.3})",
+                seq_chi2.expect("as_good")
+            ),
+        ),
+        (JointRig::Auto, None) => {
+            warnings.push(format!(
+                "rig: the joint fit (structure \"{structure}\") is not adequate (reduced chi-square {reduced:.3}, the per-run fits' {}); the sequential estimate is used; identification.joint.rig = \"joint\" would use it anyway",
+                seq_chi2.map_or("unknown".into(), |s| format!("{s:.3}"))
+            ));
+            (
+                false,
+                "the sequential estimate is used: the joint fit is not adequate".to_string(),
+            )
+        }
+    };
+    result.used = used;
+    result.use_note = note;
+    let fit = used.then(|| fit.clone());
+    (result, fit)
+}
+
+/// The chosen fit's parameters beside the sequential estimate.
+fn parameters(fit: &JointFit, seq: &RigEstimates) -> Vec<JointParameter> {
+    let seq_est = [seq.beta1, seq.a1b0, seq.a2, seq.a3];
+    let names = [
+        "beta1",
+        "a1b0",
+        "a2",
+        "a3",
+        "delay_s",
+        "valve_hz",
+        "valve_damping",
+    ];
+    fit.params
+        .iter()
+        .zip(&fit.std)
+        .enumerate()
+        .map(|(i, (&value, &std))| {
+            let sequential: Option<Estimate> = seq_est.get(i).copied();
+            let diff = sequential.map(|s| value - s.value);
+            let combined = sequential
+                .and_then(|s| s.std)
+                .map(|s| (s * s + std * std).sqrt());
+            let difference_std = diff.zip(combined).map(|(d, c)| d / c);
+            JointParameter {
+                name: names[i].into(),
+                value,
+                std,
+                sequential,
+                difference_std,
+                model_error: diff.map(f64::abs),
+                dominant: difference_std.map(|z| {
+                    if z.abs() > 2.0 {
+                        "model error".into()
+                    } else {
+                        "statistical".into()
+                    }
+                }),
+            }
+        })
+        .collect()
+}

@@ -1,0 +1,294 @@
+//! The joint grey-box fit in the campaign against known truth (issue 14):
+//! campaigns simulated with what real rigs have and the paper's model
+//! lacks (a servo-valve mode, a sensor delay, LVDT offset and drift),
+//! identified with default settings (no delay and no structure named in
+//! the manifest), compared with the parameters they were simulated from.
+//! The simulator shares only the model's equations with the fit (MODEL.md;
+//! the valve mode's state space is checked against the transfer function
+//! in the unit tests of `fit::joint`).
+
+use servoid::manifest::load;
+use servoid::manifest::simulation::load_simulation_str;
+use servoid::results::{JointStructureName, Results, RigSource};
+use servoid::run::analyse;
+use servoid::run::simulate::simulate_campaign;
+
+use crate::util::scratch;
+
+/// A rig and its springs.
+struct Rig {
+    beta1: f64,
+    a1b0: f64,
+    a2: f64,
+    a3: f64,
+    springs: &'static [f64],
+}
+
+const PAPER: Rig = Rig {
+    beta1: 267.0,
+    a1b0: 2.412e9,
+    a2: 7.881e5,
+    a3: 16.118,
+    springs: &[116_640.0, 88_540.0],
+};
+
+const OTHER: Rig = Rig {
+    beta1: 180.0,
+    a1b0: 3.1e9,
+    a2: 9.5e5,
+    a3: 22.0,
+    springs: &[150_000.0, 105_000.0, 60_000.0],
+};
+
+/// What the rig has besides the paper's model.
+struct Extras {
+    fs: f64,
+    /// (Hz, damping), or none.
+    valve: Option<(f64, f64)>,
+    delay_samples: f64,
+    /// LVDT offset (mm) and drift (mm/s).
+    offset_mm: f64,
+    drift_mm_per_s: f64,
+}
+
+/// A 120 s campaign: a quadratic chirp 0.1-35 Hz of 4 mm, 18-bit
+/// converters, 2 um of LVDT noise, a no-specimen run and the rig's
+/// springs. `[identification]` names neither a delay nor a structure.
+fn manifest(seed: u64, rig: &Rig, x: &Extras) -> String {
+    let valve = match x.valve {
+        Some((hz, zeta)) => format!(
+            "[rig.unmodelled]\nvalve_mode = {{ natural_frequency_hz = {hz}, damping_ratio = {zeta} }}\n"
+        ),
+        None => String::new(),
+    };
+    let mut runs = String::from("[[runs]]\nid = \"bare\"\nrole = \"no_specimen\"\np_gain = 1.0\n");
+    for (i, k) in rig.springs.iter().enumerate() {
+        runs += &format!(
+            "\n[[runs]]\nid = \"k{}\"\nrole = \"spring\"\np_gain = 1.0\nspecimen = {{ stiffness_n_per_m = {k} }}\n",
+            i + 1
+        );
+    }
+    format!(
+        r#"
+schema_version = 1
+
+[simulation]
+name = "joint"
+sample_rate_hz = {fs}
+seed = {seed}
+log_format = "parquet"
+
+[rig]
+name = "a simulated rig"
+
+[rig.parameters]
+beta1_per_s = {beta1}
+a1b0_n_per_m_s2 = {a1b0}
+a2_n_per_m = {a2}
+a3_per_s = {a3}
+
+{valve}
+[excitation]
+kind = "chirp"
+law = "quadratic"
+f0_hz = 0.1
+f1_hz = 35.0
+duration_s = 120.0
+amplitude_m = 0.004
+lead_in_s = 1.0
+lead_out_s = 1.0
+
+[instrument.command]
+unit = "mm"
+quantization = {{ bits = 18, full_scale = 50.0 }}
+
+[instrument.displacement]
+unit = "mm"
+noise_rms = 0.002
+delay_s = {delay_s}
+offset = {offset}
+drift_per_s = {drift}
+quantization = {{ bits = 18, full_scale = 50.0 }}
+
+[instrument.force]
+unit = "N"
+noise_rms = 2.0
+quantization = {{ bits = 18, full_scale = 5000.0 }}
+
+[identification]
+band_hz = [0.5, 30.0]
+coherence_min = 0.8
+command_intersample = "sample_and_hold"
+frf = {{ estimator = "etfe", segment_length = 8192, overlap = 0.5, window = "rectangular", detrend = "mean" }}
+
+{runs}
+"#,
+        fs = x.fs,
+        beta1 = rig.beta1,
+        a1b0 = rig.a1b0,
+        a2 = rig.a2,
+        a3 = rig.a3,
+        delay_s = x.delay_samples / x.fs,
+        offset = x.offset_mm,
+        drift = x.drift_mm_per_s,
+    )
+}
+
+fn identify(text: &str) -> Results {
+    let dir = scratch();
+    let plan = load_simulation_str(text, &dir.path().join("sim.toml")).expect("a valid simulation");
+    let sim = simulate_campaign(&plan, dir.path()).expect("simulates");
+    let campaign = load(&sim.manifest).expect("the generated manifest loads");
+    let results = analyse(&campaign);
+    for r in &results.runs {
+        assert!(r.error.is_none(), "run {} failed: {:?}", r.id, r.error);
+    }
+    results
+}
+
+/// Relative errors of the rig the campaign uses, against `rig`.
+fn errors(results: &Results, rig: &Rig) -> [f64; 4] {
+    let r = results.rig.as_ref().expect("the rig is identified");
+    [
+        r.beta1.value / rig.beta1 - 1.0,
+        r.a1b0.value / rig.a1b0 - 1.0,
+        r.a2.value / rig.a2 - 1.0,
+        r.a3.value / rig.a3 - 1.0,
+    ]
+}
+
+/// Six rich campaigns over the issue's range: valve modes 70-200 Hz with
+/// damping 0.3-0.8, sensor delays 0-3 samples, offsets and drift, 1 and
+/// 2 kHz, two rigs with two and three springs. With default settings the
+/// campaign uses the joint estimate and all four parameters are within 1 %
+/// of the truth; the sequential estimate beside it is not (the issue's
+/// 2-50 %), which is what makes the case.
+#[test]
+fn rich_campaigns_give_the_rig_within_one_percent() {
+    let cases = [
+        (&PAPER, 1000.0, Some((70.0, 0.3)), 2.0),
+        (&PAPER, 2000.0, Some((200.0, 0.8)), 3.0),
+        (&OTHER, 1000.0, Some((100.0, 0.5)), 0.0),
+        (&OTHER, 2000.0, Some((130.0, 0.6)), 1.0),
+        (&PAPER, 1000.0, Some((200.0, 0.3)), 3.0),
+        (&OTHER, 2000.0, Some((70.0, 0.8)), 0.0),
+    ];
+    let mut worst_sequential: f64 = 0.0;
+    for (i, (rig, fs, valve, delay)) in cases.into_iter().enumerate() {
+        let x = Extras {
+            fs,
+            valve,
+            delay_samples: delay,
+            offset_mm: 0.15,
+            drift_mm_per_s: 4e-4,
+        };
+        let results = identify(&manifest(100 + i as u64, rig, &x));
+        let r = results.rig.as_ref().unwrap();
+        let joint = r.joint.as_ref().expect("a joint fit");
+        let err = errors(&results, rig);
+        eprintln!(
+            "case {i}: {fs} Hz, valve {valve:?}, delay {delay} samples: structure {:?}, used {}, errors {:+.3?} %; {}",
+            joint.structure,
+            joint.used,
+            err.map(|e| 100.0 * e),
+            joint.explanation
+        );
+        assert_eq!(r.source, RigSource::Joint, "case {i}: {}", joint.use_note);
+        for (name, e) in ["beta1", "a1b0", "a2", "a3"].iter().zip(err) {
+            assert!(e.abs() < 0.01, "case {i}: {name} {:.3} % off", 100.0 * e);
+        }
+        let seq = r.sequential.as_ref().unwrap();
+        let seq_err = (seq.a1b0.value / rig.a1b0 - 1.0)
+            .abs()
+            .max((seq.beta1.value / rig.beta1 - 1.0).abs());
+        worst_sequential = worst_sequential.max(seq_err);
+        // The model-error term says the two estimates differ by more than
+        // statistics where the sequential one is off by more than 1 %.
+        if seq_err > 0.01 {
+            assert!(
+                joint
+                    .parameters
+                    .iter()
+                    .any(|p| p.dominant.as_deref() == Some("model error")),
+                "case {i}"
+            );
+        }
+    }
+    assert!(
+        worst_sequential > 0.02,
+        "the sequential estimate was within {worst_sequential}: the cases do not test the joint fit"
+    );
+}
+
+/// A clean campaign (the paper's model exactly, no delay, no offsets) at
+/// 2 kHz: the joint estimate within 0.1 % and the data choose the plain
+/// structure, which passes its adequacy tests; no warning about the rig.
+#[test]
+fn a_clean_campaign_gives_the_rig_within_a_tenth_of_a_percent() {
+    let x = Extras {
+        fs: 2000.0,
+        valve: None,
+        delay_samples: 0.0,
+        offset_mm: 0.0,
+        drift_mm_per_s: 0.0,
+    };
+    let results = identify(&manifest(7, &PAPER, &x));
+    let r = results.rig.as_ref().unwrap();
+    let joint = r.joint.as_ref().unwrap();
+    assert_eq!(
+        joint.structure,
+        Some(JointStructureName::None),
+        "{}",
+        joint.explanation
+    );
+    assert!(joint.adequacy.as_ref().unwrap().passed());
+    assert_eq!(r.source, RigSource::Joint);
+    for (name, e) in ["beta1", "a1b0", "a2", "a3"]
+        .iter()
+        .zip(errors(&results, &PAPER))
+    {
+        assert!(e.abs() < 0.001, "{name} {:.4} % off", 100.0 * e);
+    }
+    assert!(
+        !results.warnings.iter().any(|w| w.starts_with("rig:")),
+        "{:?}",
+        results.warnings
+    );
+}
+
+/// A structure fixed in the manifest that the data reject is kept and
+/// flagged: "none" on a rig with a 3-sample delay and a valve mode. The
+/// warnings name the key, and the adequacy tests say what is missing.
+#[test]
+fn a_fixed_structure_the_data_reject_is_kept_and_flagged() {
+    let x = Extras {
+        fs: 1000.0,
+        valve: Some((100.0, 0.5)),
+        delay_samples: 3.0,
+        offset_mm: 0.0,
+        drift_mm_per_s: 0.0,
+    };
+    let text = manifest(3, &PAPER, &x).replace(
+        "[identification]\n",
+        "[identification]\njoint = { structure = \"none\" }\n",
+    );
+    let results = identify(&text);
+    let r = results.rig.as_ref().unwrap();
+    let joint = r.joint.as_ref().unwrap();
+    assert_eq!(joint.structure, Some(JointStructureName::None));
+    assert_eq!(joint.chosen_by, "manifest");
+    assert_eq!(joint.data_choose, Some(JointStructureName::DelayValve));
+    eprintln!("{:#?}", results.warnings);
+    let flagged = |needle: &str| results.warnings.iter().any(|w| w.contains(needle));
+    assert!(
+        flagged("identification.joint.structure = \"none\" is kept, but the data reject it"),
+        "{:?}",
+        results.warnings
+    );
+    // The adequacy tests say what is missing.
+    assert!(
+        flagged("phase residual grows linearly"),
+        "{:?}",
+        results.warnings
+    );
+}
