@@ -292,3 +292,84 @@ fn a_fixed_structure_the_data_reject_is_kept_and_flagged() {
         results.warnings
     );
 }
+
+/// Coverage (issue 14, item 4): over 300 seeds of a short clean campaign
+/// (30 s sweeps at 1 kHz, 10 um of LVDT noise, so that noise dominates
+/// every other error), the fraction of the joint estimate's four rig
+/// parameters within 1 and 2 of their stds of the truth, and the same for
+/// the sequential estimate.
+///
+/// Measured with 800 seeds (`SEEDS=800`, 3,200 checks each): joint 67.3 %
+/// within 1 std and 94.2 % within 2 (beta1 94.1, a1b0 93.8, a2 94.1, a3
+/// 94.6); sequential 68.0 % and 95.2 %. So the joint estimate is inside the
+/// issue's 95 +- 1 %, but about 3 of its binomial stds (0.4 %) below a
+/// Gaussian's 95.4 %: its stds are some 5 % optimistic, not yet explained
+/// (the FRF variances match the scatter over seeds, tests/accuracy.rs). The
+/// bands below, for 300 seeds (1,200 checks, correlated within a campaign:
+/// about 0.7 % binomial std), fail an std off by 15 % either way.
+#[test]
+fn the_joint_stds_are_honest_across_seeds() {
+    use rayon::prelude::*;
+    let seeds: u64 = std::env::var("SEEDS")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(300);
+    let x = Extras {
+        fs: 1000.0,
+        valve: None,
+        delay_samples: 0.0,
+        offset_mm: 0.0,
+        drift_mm_per_s: 0.0,
+    };
+    let z: Vec<([f64; 4], [f64; 4])> = (0..seeds)
+        .into_par_iter()
+        .map(|seed| {
+            let text = manifest(5000 + seed, &OTHER, &x)
+                .replace("duration_s = 120.0", "duration_s = 30.0")
+                .replace("f0_hz = 0.1", "f0_hz = 0.5")
+                .replace("noise_rms = 0.002", "noise_rms = 0.01");
+            let results = identify(&text);
+            let r = results.rig.as_ref().unwrap();
+            let truth = [OTHER.beta1, OTHER.a1b0, OTHER.a2, OTHER.a3];
+            let j = &r.joint.as_ref().unwrap().parameters;
+            let s = r.sequential.as_ref().unwrap();
+            let seq = [s.beta1, s.a1b0, s.a2, s.a3];
+            (
+                std::array::from_fn(|i| ((j[i].value - truth[i]) / j[i].std).abs()),
+                std::array::from_fn(|i| ((seq[i].value - truth[i]) / seq[i].std.unwrap()).abs()),
+            )
+        })
+        .collect();
+    // Fractions within k stds: of the joint (false) or sequential (true) z.
+    let within = |sequential: bool, k: f64| {
+        let all: Vec<f64> = z
+            .iter()
+            .flat_map(|p| if sequential { p.1 } else { p.0 })
+            .collect();
+        all.iter().filter(|v| **v <= k).count() as f64 / all.len() as f64
+    };
+    let (j1, j2) = (within(false, 1.0), within(false, 2.0));
+    let (s1, s2) = (within(true, 1.0), within(true, 2.0));
+    for (i, name) in ["beta1", "a1b0", "a2", "a3"].iter().enumerate() {
+        let f = |k: f64| z.iter().filter(|p| p.0[i] <= k).count() as f64 / z.len() as f64;
+        eprintln!(
+            "  joint {name}: {:.1} % within 1 std, {:.1} % within 2",
+            100.0 * f(1.0),
+            100.0 * f(2.0)
+        );
+    }
+    eprintln!(
+        "coverage over {seeds} seeds: joint {:.1} % within 1 std, {:.1} % within 2; sequential {:.1} %, {:.1} %",
+        100.0 * j1,
+        100.0 * j2,
+        100.0 * s1,
+        100.0 * s2
+    );
+    assert!((0.925..=0.975).contains(&j2), "joint within 2 std: {j2}");
+    assert!((0.62..=0.74).contains(&j1), "joint within 1 std: {j1}");
+    assert!(
+        (0.925..=0.975).contains(&s2),
+        "sequential within 2 std: {s2}"
+    );
+    assert!((0.62..=0.74).contains(&s1), "sequential within 1 std: {s1}");
+}

@@ -131,13 +131,21 @@ pub fn select(
         delay_start_s: 0.0,
         ..*opts
     };
-    let plain = assess(
-        Structure::Plain,
-        joint_fit(runs, start, &with(Structure::Plain)),
-    );
-    let delay = assess(
-        Structure::Delay,
-        joint_fit(runs, start, &with(Structure::Delay)),
+    // The two smaller structures are independent fits: side by side (each
+    // is the same computation on any thread count).
+    let (plain, delay) = rayon::join(
+        || {
+            assess(
+                Structure::Plain,
+                joint_fit(runs, start, &with(Structure::Plain)),
+            )
+        },
+        || {
+            assess(
+                Structure::Delay,
+                joint_fit(runs, start, &with(Structure::Delay)),
+            )
+        },
     );
     let valve = assess(
         Structure::DelayValve,
@@ -240,14 +248,25 @@ fn fit_valve(
         a1b0_n_per_m_s2: rig.a1b0_n_per_m_s2 * opts.p_ref / rig.p_gain,
         ..rig
     };
-    let mut best: Option<Result<JointFit, FitError>> = None;
-    for &(_, hz, zeta, d) in scored.iter().take(2) {
+    let fit_from = |&(_, hz, zeta, d): &(f64, f64, f64, f64)| {
         let o = JointOptions {
             valve_start: (hz, zeta),
             delay_start_s: d,
             ..base
         };
-        let fit = joint_fit(runs, &start_rig, &o);
+        joint_fit(runs, &start_rig, &o)
+    };
+    // The two best starts side by side; kept in the grid's order.
+    let fits: Vec<Result<JointFit, FitError>> = match scored.as_slice() {
+        [] => Vec::new(),
+        [one] => vec![fit_from(one)],
+        [a, b, ..] => {
+            let (x, y) = rayon::join(|| fit_from(a), || fit_from(b));
+            vec![x, y]
+        }
+    };
+    let mut best: Option<Result<JointFit, FitError>> = None;
+    for fit in fits {
         let better = match (&best, &fit) {
             (None, _) => true,
             (Some(Err(_)), Ok(_)) => true,
