@@ -92,6 +92,20 @@ pub enum LinearSpecimen {
 }
 
 impl LinearSpecimen {
+    /// (m, c, k) of the specimen polynomial m s^2 + c s + k: zero mass and
+    /// damping for a massless spring, all zero without a specimen.
+    pub fn mck(&self) -> (f64, f64, f64) {
+        match *self {
+            LinearSpecimen::None => (0.0, 0.0, 0.0),
+            LinearSpecimen::Spring { stiffness_n_per_m } => (0.0, 0.0, stiffness_n_per_m),
+            LinearSpecimen::Sdof {
+                mass_kg,
+                damping_ns_per_m,
+                stiffness_n_per_m,
+            } => (mass_kg, damping_ns_per_m, stiffness_n_per_m),
+        }
+    }
+
     /// Undamped natural frequency sqrt(k/m)/(2 pi) (Hz) of an SDOF specimen.
     pub fn natural_frequency_hz(&self) -> Option<f64> {
         match *self {
@@ -203,15 +217,7 @@ pub fn tf_x1_u(rig: &RigParams, specimen: &LinearSpecimen) -> TransferFunction {
 /// massless spring f = k x1, and without a specimen f = 0.
 pub fn tf_f_u(rig: &RigParams, specimen: &LinearSpecimen) -> TransferFunction {
     let x = tf_x1_u(rig, specimen);
-    let (m, c, k) = match *specimen {
-        LinearSpecimen::None => (0.0, 0.0, 0.0),
-        LinearSpecimen::Spring { stiffness_n_per_m } => (0.0, 0.0, stiffness_n_per_m),
-        LinearSpecimen::Sdof {
-            mass_kg,
-            damping_ns_per_m,
-            stiffness_n_per_m,
-        } => (mass_kg, damping_ns_per_m, stiffness_n_per_m),
-    };
+    let (m, c, k) = specimen.mck();
     let num = crate::poly::mul(&x.num, &[m, c, k]);
     TransferFunction::new(&num, &x.den).expect("finite, proper model")
 }

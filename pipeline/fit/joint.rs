@@ -351,19 +351,6 @@ impl Jacobian for JointProblem {
     }
 }
 
-/// The specimen as m, c, k.
-fn mck(s: &LinearSpecimen) -> (f64, f64, f64) {
-    match *s {
-        LinearSpecimen::None => (0.0, 0.0, 0.0),
-        LinearSpecimen::Spring { stiffness_n_per_m } => (0.0, 0.0, stiffness_n_per_m),
-        LinearSpecimen::Sdof {
-            mass_kg,
-            damping_ns_per_m,
-            stiffness_n_per_m,
-        } => (mass_kg, damping_ns_per_m, stiffness_n_per_m),
-    }
-}
-
 fn problem(runs: &[JointRun<'_>], opts: &JointOptions) -> Result<JointProblem, FitError> {
     let mut bins = Vec::new();
     let mut models = Vec::with_capacity(runs.len());
@@ -377,7 +364,7 @@ fn problem(runs: &[JointRun<'_>], opts: &JointOptions) -> Result<JointProblem, F
             });
         }
         models.push(RunModel {
-            mck: mck(&run.specimen),
+            mck: run.specimen.mck(),
             p_ratio: run.p_gain / opts.p_ref,
         });
         for i in 0..run.h.len() {
@@ -413,12 +400,7 @@ pub fn joint_fit(
 ) -> Result<JointFit, FitError> {
     let problem = problem(runs, opts)?;
     let p = opts.structure.n_params();
-    let mut theta0 = vec![
-        start.beta1_per_s.ln(),
-        (start.a1b0_n_per_m_s2 * opts.p_ref / start.p_gain).ln(),
-        start.a2_n_per_m.ln(),
-        start.a3_per_s.ln(),
-    ];
+    let mut theta0 = rig_theta(start, opts.p_ref).to_vec();
     let fs = opts.sample_rate_hz;
     if opts.structure != Structure::Plain {
         theta0.push((opts.delay_start_s * fs).clamp(0.0, opts.max_delay_s * fs));
@@ -491,6 +473,16 @@ pub fn joint_fit(
         adequacy,
         per_run,
     })
+}
+
+/// The rig's log parameters, a1b0 referred to `p_ref`.
+fn rig_theta(rig: &RigParams, p_ref: f64) -> [f64; 4] {
+    [
+        rig.beta1_per_s.ln(),
+        (rig.a1b0_n_per_m_s2 * p_ref / rig.p_gain).ln(),
+        rig.a2_n_per_m.ln(),
+        rig.a3_per_s.ln(),
+    ]
 }
 
 /// Levenberg-Marquardt with the delay (in samples) held within 0 and its

@@ -12,7 +12,7 @@
 //! estimate or something neither model has is.
 
 use super::acquire::FitData;
-use super::rig::{Evidence, r1};
+use super::rig::Evidence;
 use crate::fit::DelayPlan;
 use crate::fit::adequacy::Adequacy;
 use crate::fit::joint::{
@@ -51,8 +51,7 @@ fn key_value(s: Structure) -> &'static str {
 }
 
 /// The joint fit of the identification runs in `evidence`, from the
-/// sequential rig `start`; what it found, and its fit when the campaign
-/// uses it.
+/// sequential rig `start`: what it found, and whether the campaign uses it.
 /// Warnings (a failed or inadequate fit, a manifest structure the data
 /// reject) go to `warnings`. None when no run has bins to fit (published
 /// models only).
@@ -62,7 +61,7 @@ pub(super) fn joint(
     start: &RigParams,
     sequential: &RigEstimates,
     warnings: &mut Vec<String>,
-) -> Option<(JointResult, Option<JointFit>)> {
+) -> Option<JointResult> {
     let with_data: Vec<(&RunPlan, &FitData, f64)> = evidence
         .iter()
         .filter_map(|(p, e)| Some((*p, e.data.as_ref()?, e.sample_rate_hz?)))
@@ -130,8 +129,6 @@ pub(super) fn joint(
         campaign.joint.rig,
         sequential,
         seq_chi2,
-        opts.max_delay_s,
-        band_top,
         warnings,
     ))
 }
@@ -192,18 +189,15 @@ fn explain(sel: &Selection) -> String {
     )
 }
 
-/// The result table and the use decision; the chosen fit when usable.
-#[allow(clippy::too_many_arguments)]
+/// The result table and the use decision.
 fn describe(
     sel: &Selection,
     ids: &[&str],
     rig_mode: JointRig,
     sequential: &RigEstimates,
     seq_chi2: Option<f64>,
-    max_delay_s: f64,
-    band_top: f64,
     warnings: &mut Vec<String>,
-) -> (JointResult, Option<JointFit>) {
+) -> JointResult {
     let candidates: Vec<JointCandidate> =
         sel.candidates.iter().map(|c| row(c, sel.chosen)).collect();
     let mut explanation = explain(sel);
@@ -248,7 +242,7 @@ fn describe(
         warnings.push(format!(
             "rig: the joint fit failed ({why}); the sequential estimate is used; check identification.band_hz and the runs' coherence"
         ));
-        return (result, None);
+        return result;
     };
     let cov: [[f64; 4]; 4] =
         std::array::from_fn(|i| std::array::from_fn(|j| fit.covariance[(i, j)]));
@@ -273,9 +267,8 @@ fn describe(
             "rig: the joint fit (structure \"{structure}\"): {d}"
         ));
     }
-    let unusable = chosen
-        .and_then(|c| c.unusable.clone())
-        .or_else(|| fit.unphysical(band_top, max_delay_s));
+    // `select` has judged convergence and physical sense already.
+    let unusable = chosen.and_then(|c| c.unusable.clone());
     let reduced = fit.cost / fit.dof as f64;
     let as_good = seq_chi2.is_some_and(|s| reduced <= AS_GOOD_AS_SEQUENTIAL * s);
     let (used, note) = match (rig_mode, &unusable) {
@@ -321,8 +314,7 @@ fn describe(
     };
     result.used = used;
     result.use_note = note;
-    let fit = used.then(|| fit.clone());
-    (result, fit)
+    result
 }
 
 /// The chosen fit's parameters beside the sequential estimate.
@@ -365,4 +357,39 @@ fn parameters(fit: &JointFit, seq: &RigEstimates) -> Vec<JointParameter> {
             }
         })
         .collect()
+}
+
+/// R1 = a1b0 / a2 with its first-order std.
+fn r1(rig: &RigParams, cov: &[[f64; 4]; 4]) -> Estimate {
+    let r1 = rig.r1();
+    let (a, b) = (rig.a1b0_n_per_m_s2, rig.a2_n_per_m);
+    // Gradient (1 / a2, -a1b0 / a2^2) over (a1b0, a2).
+    let g = [1.0 / b, -a / (b * b)];
+    let var = g[0] * g[0] * cov[1][1] + 2.0 * g[0] * g[1] * cov[1][2] + g[1] * g[1] * cov[2][2];
+    Estimate {
+        value: r1,
+        std: Some(var.max(0.0).sqrt()),
+    }
+}
+
+/// The joint estimate as the rig's estimates (a1b0 at the reference P
+/// gain), when the campaign uses it.
+pub(super) fn used_estimates(r: &JointResult) -> Option<RigEstimates> {
+    if !r.used {
+        return None;
+    }
+    let est = |i: usize| {
+        r.parameters.get(i).map(|p| Estimate {
+            value: p.value,
+            std: Some(p.std),
+        })
+    };
+    Some(RigEstimates {
+        beta1: est(0)?,
+        a1b0: est(1)?,
+        a2: est(2)?,
+        a3: est(3)?,
+        R1: r.r1?,
+        covariance: r.covariance,
+    })
 }

@@ -178,6 +178,20 @@ mod tests {
             .collect()
     }
 
+    /// The paper's rig driven by `u` at 1 kHz with 2 um of noise.
+    fn paper_input<'a>(u: &'a [f64], ident: &'a IdentificationPlan) -> McInput<'a> {
+        McInput {
+            rig: crate::model::PAPER_RIG,
+            command_m: u,
+            sample_rate_hz: 1000.0,
+            noise_rms_m: 2e-6,
+            step_m: None,
+            delay_s: 0.0,
+            ident,
+            seed: 0,
+        }
+    }
+
     fn ident() -> IdentificationPlan {
         IdentificationPlan {
             band_hz: (0.5, 30.0),
@@ -205,17 +219,8 @@ mod tests {
     fn the_spread_is_the_analytic_prediction_where_noise_is_small() {
         let u = chirp();
         let ident = ident();
-        let rig = crate::model::PAPER_RIG;
-        let input = McInput {
-            rig,
-            command_m: &u,
-            sample_rate_hz: 1000.0,
-            noise_rms_m: 2e-6,
-            step_m: None,
-            delay_s: 0.0,
-            ident: &ident,
-            seed: 0,
-        };
+        let input = paper_input(&u, &ident);
+        let rig = input.rig;
         let ks = [5e4, 1.2e5, 5e5];
         let mc = monte_carlo(&input, &ks, 400);
 
@@ -282,16 +287,7 @@ mod tests {
     fn the_thread_count_changes_nothing() {
         let u = chirp();
         let ident = ident();
-        let input = McInput {
-            rig: crate::model::PAPER_RIG,
-            command_m: &u,
-            sample_rate_hz: 1000.0,
-            noise_rms_m: 2e-6,
-            step_m: None,
-            delay_s: 0.0,
-            ident: &ident,
-            seed: 0,
-        };
+        let input = paper_input(&u, &ident);
         let run = |threads| {
             rayon::ThreadPoolBuilder::new()
                 .num_threads(threads)

@@ -7,7 +7,6 @@ use std::sync::Arc;
 
 use super::acquire::{AcquireError, FitData};
 use crate::fit::adequacy::Adequacy;
-use crate::fit::joint::JointFit;
 use crate::identify::{self, Estimate, IdentifyError, SecondOrder, SpringRun, TfEstimate};
 use crate::lti::TransferFunction;
 use crate::manifest::{Campaign, Role};
@@ -176,11 +175,10 @@ pub(super) fn establish<'a>(
         covariance: ident.covariance,
     };
     let joint = super::joint::joint(campaign, &evidence, &ident.params(), &sequential, warnings);
-    let used = match &joint {
-        Some((_, Some(fit))) => Some((RigSource::Joint, joint_estimates(fit))),
-        _ => None,
+    let (source, chosen) = match joint.as_ref().and_then(super::joint::used_estimates) {
+        Some(e) => (RigSource::Joint, e),
+        None => (RigSource::Identified, sequential.clone()),
     };
-    let (source, chosen) = used.unwrap_or((RigSource::Identified, sequential.clone()));
     let params = RigParams {
         beta1_per_s: chosen.beta1.value,
         a1b0_n_per_m_s2: chosen.a1b0.value,
@@ -202,40 +200,9 @@ pub(super) fn establish<'a>(
         consistency: Some(ident.consistency),
         covariance: chosen.covariance,
         sequential: Some(sequential),
-        joint: joint.map(|(r, _)| r),
+        joint,
     };
     Ok((params, result))
-}
-
-/// The joint fit's rig as estimates, a1b0 at the reference P gain.
-fn joint_estimates(fit: &JointFit) -> RigEstimates {
-    let est = |i: usize| Estimate {
-        value: fit.params[i],
-        std: Some(fit.std[i]),
-    };
-    let cov: [[f64; 4]; 4] =
-        std::array::from_fn(|i| std::array::from_fn(|j| fit.covariance[(i, j)]));
-    RigEstimates {
-        beta1: est(0),
-        a1b0: est(1),
-        a2: est(2),
-        a3: est(3),
-        R1: r1(&fit.rig, &cov),
-        covariance: Some(cov),
-    }
-}
-
-/// R1 = a1b0 / a2 with its first-order std.
-pub(super) fn r1(rig: &RigParams, cov: &[[f64; 4]; 4]) -> Estimate {
-    let r1 = rig.r1();
-    let (a, b) = (rig.a1b0_n_per_m_s2, rig.a2_n_per_m);
-    // Gradient (1 / a2, -a1b0 / a2^2) over (a1b0, a2).
-    let g = [1.0 / b, -a / (b * b)];
-    let var = g[0] * g[0] * cov[1][1] + 2.0 * g[0] * g[1] * cov[1][2] + g[1] * g[1] * cov[2][2];
-    Estimate {
-        value: r1,
-        std: Some(var.max(0.0).sqrt()),
-    }
 }
 
 /// 1/beta1 in ms, with its propagated std.

@@ -24,7 +24,7 @@
 
 use statrs::distribution::{ContinuousCDF, FisherSnedecor};
 
-use super::{FitError, JointFit, JointOptions, JointRun, Structure, joint_fit, problem};
+use super::{FitError, JointFit, JointOptions, JointRun, Structure, joint_fit, problem, rig_theta};
 use crate::model::RigParams;
 
 /// The p-value below which a larger structure is taken.
@@ -221,12 +221,7 @@ fn fit_valve(
     };
     let prob = problem(runs, &base)?;
     let fs = opts.sample_rate_hz;
-    let rig_theta = [
-        rig.beta1_per_s.ln(),
-        (rig.a1b0_n_per_m_s2 * opts.p_ref / rig.p_gain).ln(),
-        rig.a2_n_per_m.ln(),
-        rig.a3_per_s.ln(),
-    ];
+    let rig_theta = rig_theta(&rig, opts.p_ref);
     let mut scored: Vec<(f64, f64, f64, f64)> = Vec::new();
     for i in 0..6 {
         let hz = 1.5 * band_top_hz * 8f64.powf(i as f64 / 5.0);
@@ -243,18 +238,13 @@ fn fit_valve(
         }
     }
     scored.sort_by(|a, b| a.0.total_cmp(&b.0));
-    let start_rig = RigParams {
-        p_gain: opts.p_ref,
-        a1b0_n_per_m_s2: rig.a1b0_n_per_m_s2 * opts.p_ref / rig.p_gain,
-        ..rig
-    };
     let fit_from = |&(_, hz, zeta, d): &(f64, f64, f64, f64)| {
         let o = JointOptions {
             valve_start: (hz, zeta),
             delay_start_s: d,
             ..base
         };
-        joint_fit(runs, &start_rig, &o)
+        joint_fit(runs, &rig, &o)
     };
     // The two best starts side by side; kept in the grid's order.
     let fits: Vec<Result<JointFit, FitError>> = match scored.as_slice() {
