@@ -195,53 +195,73 @@ fn the_rich_campaign_gives_the_rig_within_three_percent() {
     assert!((0.0006..0.0026).contains(&delay), "fitted delay {delay} s");
 }
 
-/// Coverage: 100 seeds of a short campaign (30 s sweeps, 10 um LVDT noise,
-/// so that noise dominates every other error). For each seed, each run's
-/// three fitted coefficients against the run's true transfer function
-/// (truth.json) and the four rig parameters against the truth: the fraction
-/// within two standard deviations must be near 95 % (a Gaussian's 95.4 %),
-/// and within one near 68 %. Too low means the stds are optimistic, too high
-/// that they are padded. Measured with 200 seeds: coefficients 93.3 % within
-/// 2 std and 65.9 % within 1; rig 95.6 % and 63.7 %.
+/// Coverage (issues 4 and 14, item 4): 2,000 seeds of a short campaign
+/// (30 s sweeps, 10 um LVDT noise, so that noise dominates every other
+/// error). For each seed, each run's three fitted coefficients against the
+/// run's true transfer function (truth.json) and the four rig parameters
+/// against the truth: the fraction within two standard deviations must be
+/// 95 +- 1 % (a Gaussian's 95.4 %), and within one near 68 %. Too low means
+/// the stds are optimistic, too high that they are padded.
+///
+/// Why so many seeds: a campaign's checks are correlated (a run's three
+/// coefficients share its noise, the rig shares every run's), so a few
+/// hundred seeds leave the fraction a percent or more from its expectation.
+/// The first 300 seeds alone give 93.1 % (coefficients) and 93.8 % (rig),
+/// the first 200 gave 93.3 %; over 2,000 seeds the stds of the signed
+/// errors (estimate - truth) / std are 1.01-1.04 per coefficient, their
+/// means within 0.06 of 0. Measured (`SEEDS=2000`, the default, seeds from
+/// 1000): coefficients 95.1 % within 2 std and 67.5 % within 1; rig 94.8 %
+/// and 67.5 %. A separate 2,000 seeds from 100,000 gave 95.1 % for the
+/// coefficients as well.
 #[test]
 fn the_standard_deviations_are_honest_across_seeds() {
-    let seeds = 100;
-    let (mut coef, mut rig_checks) = (Vec::new(), Vec::new());
-    for seed in 0..seeds {
-        let dir = scratch();
-        let (results, truth) =
-            simulate_and_identify(&campaign(1000 + seed, 30.0, 0.5, 0.01), dir.path());
-        for run in &results.runs {
-            let tf = run.tf.as_ref().expect("a fitted model");
-            let std = tf.std.as_ref().expect("fitted coefficients have stds");
-            let t = run_by_id(&truth, &run.id);
-            let num: Vec<f64> = t["plant_tf_x1_u"]["num"]
-                .as_array()
-                .unwrap()
-                .iter()
-                .map(|v| v.as_f64().unwrap())
-                .collect();
-            let den: Vec<f64> = t["plant_tf_x1_u"]["den"]
-                .as_array()
-                .unwrap()
-                .iter()
-                .map(|v| v.as_f64().unwrap())
-                .collect();
-            // num then den after the leading 1: n0, d1, d0.
-            let fitted = [tf.num[0], tf.den[1], tf.den[2]];
-            let true_ = [
-                num[num.len() - 1] / den[0],
-                den[1] / den[0],
-                den[2] / den[0],
-            ];
-            for k in 0..3 {
-                coef.push((fitted[k] - true_[k]).abs() / std[k]);
+    use rayon::prelude::*;
+    let seeds: u64 = std::env::var("SEEDS")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(2000);
+    let checks: Vec<(Vec<f64>, Vec<f64>)> = (0..seeds)
+        .into_par_iter()
+        .map(|seed| {
+            let (mut coef, mut rig_checks) = (Vec::new(), Vec::new());
+            let dir = scratch();
+            let (results, truth) =
+                simulate_and_identify(&campaign(1000 + seed, 30.0, 0.5, 0.01), dir.path());
+            for run in &results.runs {
+                let tf = run.tf.as_ref().expect("a fitted model");
+                let std = tf.std.as_ref().expect("fitted coefficients have stds");
+                let t = run_by_id(&truth, &run.id);
+                let num: Vec<f64> = t["plant_tf_x1_u"]["num"]
+                    .as_array()
+                    .unwrap()
+                    .iter()
+                    .map(|v| v.as_f64().unwrap())
+                    .collect();
+                let den: Vec<f64> = t["plant_tf_x1_u"]["den"]
+                    .as_array()
+                    .unwrap()
+                    .iter()
+                    .map(|v| v.as_f64().unwrap())
+                    .collect();
+                // num then den after the leading 1: n0, d1, d0.
+                let fitted = [tf.num[0], tf.den[1], tf.den[2]];
+                let true_ = [
+                    num[num.len() - 1] / den[0],
+                    den[1] / den[0],
+                    den[2] / den[0],
+                ];
+                for k in 0..3 {
+                    coef.push((fitted[k] - true_[k]).abs() / std[k]);
+                }
             }
-        }
-        for ((_, value, std), (_, truth)) in rig(&results).into_iter().zip(TRUTH) {
-            rig_checks.push((value - truth).abs() / std);
-        }
-    }
+            for ((_, value, std), (_, truth)) in rig(&results).into_iter().zip(TRUTH) {
+                rig_checks.push((value - truth).abs() / std);
+            }
+            (coef, rig_checks)
+        })
+        .collect();
+    let coef: Vec<f64> = checks.iter().flat_map(|c| c.0.iter().copied()).collect();
+    let rig_checks: Vec<f64> = checks.iter().flat_map(|c| c.1.iter().copied()).collect();
     let within = |z: &[f64], k: f64| z.iter().filter(|v| **v <= k).count() as f64 / z.len() as f64;
     let (c1, c2) = (within(&coef, 1.0), within(&coef, 2.0));
     let (r1, r2) = (within(&rig_checks, 1.0), within(&rig_checks, 2.0));
@@ -254,21 +274,19 @@ fn the_standard_deviations_are_honest_across_seeds() {
         100.0 * r1,
         100.0 * r2
     );
-    // 900 coefficient checks from 300 fits: the binomial std of a 95 %
-    // fraction over 300 independent fits is 1.3 %. The bands fail an std
-    // off by 25 % either way (which gives about 89 % or 99 % within 2 std,
-    // 55 % or 79 % within 1).
+    // The issue's band, 95 +- 1 % within 2 std; within 1 std a Gaussian's
+    // 68.3 % within about the same relative margin. An std 6 % optimistic
+    // gives 94 % within 2 (the band's edge), 10 % optimistic 92.4 %.
     assert!(
-        (0.91..=0.985).contains(&c2),
+        (0.94..=0.96).contains(&c2),
         "coefficients within 2 std: {c2}"
     );
     assert!(
-        (0.59..=0.76).contains(&c1),
+        (0.655..=0.71).contains(&c1),
         "coefficients within 1 std: {c1}"
     );
-    // 400 rig checks from 100 campaigns (correlated within one): wider.
-    assert!((0.90..=0.99).contains(&r2), "rig within 2 std: {r2}");
-    assert!((0.55..=0.80).contains(&r1), "rig within 1 std: {r1}");
+    assert!((0.94..=0.96).contains(&r2), "rig within 2 std: {r2}");
+    assert!((0.655..=0.71).contains(&r1), "rig within 1 std: {r1}");
 }
 
 /// The fit's weights on the campaign's own sweep: across 100 seeds of the

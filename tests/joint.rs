@@ -293,27 +293,29 @@ fn a_fixed_structure_the_data_reject_is_kept_and_flagged() {
     );
 }
 
-/// Coverage (issue 14, item 4): over 300 seeds of a short clean campaign
+/// Coverage (issue 14, item 4): over 2,000 seeds of a short clean campaign
 /// (30 s sweeps at 1 kHz, 10 um of LVDT noise, so that noise dominates
 /// every other error), the fraction of the joint estimate's four rig
 /// parameters within 1 and 2 of their stds of the truth, and the same for
-/// the sequential estimate.
+/// the sequential estimate; the issue's band is 95 +- 1 % within 2 std.
 ///
-/// Measured with 800 seeds (`SEEDS=800`, 3,200 checks each): joint 67.3 %
-/// within 1 std and 94.2 % within 2 (beta1 94.1, a1b0 93.8, a2 94.1, a3
-/// 94.6); sequential 68.0 % and 95.2 %. So the joint estimate is inside the
-/// issue's 95 +- 1 %, but about 3 of its binomial stds (0.4 %) below a
-/// Gaussian's 95.4 %: its stds are some 5 % optimistic, not yet explained
-/// (the FRF variances match the scatter over seeds, tests/accuracy.rs). The
-/// bands below, for 300 seeds (1,200 checks, correlated within a campaign:
-/// about 0.7 % binomial std), fail an std off by 15 % either way.
+/// Measured (`SEEDS=2000`, the default, seeds from 5000; 8,000 checks
+/// each): joint 67.1 % within 1 std and 94.3 % within 2, sequential 67.8 %
+/// and 94.7 %. A separate 2,000 seeds from 200,000 gave joint 66.8 % and
+/// 94.9 %, sequential 68.5 % and 95.5 %. So both are inside 95 +- 1 %; the
+/// joint estimate's stds are some 4 % optimistic against a Gaussian's
+/// 95.4 %, which is not explained yet (the FRF variances match the scatter
+/// over seeds and the per-run coefficients cover 95.1 %, tests/accuracy.rs).
+/// Fewer seeds are not enough: a campaign's four parameters share its
+/// noise, and 300 seeds leave the fraction about a percent from its
+/// expectation.
 #[test]
 fn the_joint_stds_are_honest_across_seeds() {
     use rayon::prelude::*;
     let seeds: u64 = std::env::var("SEEDS")
         .ok()
         .and_then(|s| s.parse().ok())
-        .unwrap_or(300);
+        .unwrap_or(2000);
     let x = Extras {
         fs: 1000.0,
         valve: None,
@@ -365,11 +367,13 @@ fn the_joint_stds_are_honest_across_seeds() {
         100.0 * s1,
         100.0 * s2
     );
-    assert!((0.925..=0.975).contains(&j2), "joint within 2 std: {j2}");
-    assert!((0.62..=0.74).contains(&j1), "joint within 1 std: {j1}");
+    // The issue's band; within 1 std a Gaussian's 68.3 % with about the
+    // same relative margin.
+    assert!((0.94..=0.96).contains(&j2), "joint within 2 std: {j2}");
+    assert!((0.655..=0.71).contains(&j1), "joint within 1 std: {j1}");
+    assert!((0.94..=0.96).contains(&s2), "sequential within 2 std: {s2}");
     assert!(
-        (0.925..=0.975).contains(&s2),
-        "sequential within 2 std: {s2}"
+        (0.655..=0.71).contains(&s1),
+        "sequential within 1 std: {s1}"
     );
-    assert!((0.62..=0.74).contains(&s1), "sequential within 1 std: {s1}");
 }

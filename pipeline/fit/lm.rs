@@ -263,6 +263,123 @@ impl LevenbergMarquardt {
     }
 }
 
+/// What a problem that forms its normal equations itself gives the solver:
+/// J^T J and J^T r at a point, without J. A problem with many residuals and
+/// few parameters (the joint fit's tens of thousands of bins against seven
+/// parameters) accumulates them residual by residual in the pass that
+/// computes the model, instead of storing a tall J and multiplying it out.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Normal {
+    /// J^T J.
+    pub a: DMatrix<f64>,
+    /// J^T r.
+    pub g: DVector<f64>,
+}
+
+/// The state when the problem gives its normal equations (as its
+/// "Jacobian") and its cost r^T r (as its output).
+pub type LmNormalState = IterState<DVector<f64>, (), Normal, (), (), f64>;
+
+/// An accepted step: the new point, its cost and what the problem gave with
+/// it (the residuals, or nothing).
+struct Accepted<X> {
+    theta: DVector<f64>,
+    cost: f64,
+    extra: X,
+}
+
+impl LevenbergMarquardt {
+    /// An error unless the starting point's cost is finite.
+    fn check_start(cost: f64) -> Result<(), Error> {
+        if cost.is_finite() {
+            return Ok(());
+        }
+        Err(ArgminError::ConditionViolated {
+            text: format!("Levenberg-Marquardt: the cost at the starting point is {cost}"),
+        }
+        .into())
+    }
+
+    /// Sets the damping up from the normal equations at the start.
+    fn start(&mut self, cost: f64, a: DMatrix<f64>, g: DVector<f64>, theta: &DVector<f64>) {
+        self.diag = DVector::zeros(0);
+        self.update_diag(&a);
+        self.lambda = self.lambda0;
+        self.status = if self.is_converged(&a, &g, cost, theta) {
+            TerminationStatus::Terminated(TerminationReason::SolverConverged)
+        } else {
+            TerminationStatus::NotTerminated
+        };
+        self.normal = Some((a, g));
+    }
+
+    fn check_bounds(&self, theta: &DVector<f64>) -> Result<(), Error> {
+        if let Some(lo) = &self.lower
+            && lo.len() != theta.len()
+        {
+            return Err(invalid(format!(
+                "Levenberg-Marquardt: {} bounds for {} parameters",
+                lo.len(),
+                theta.len()
+            )));
+        }
+        Ok(())
+    }
+
+    /// One iteration from `theta` (cost `cost`, normal equations `a`, `g`):
+    /// damped steps until one lowers the cost (`trial` gives a point's cost
+    /// and whatever else the problem computes with it), or `None` when
+    /// lambda passes its maximum. Counts the rejected steps.
+    fn advance<X>(
+        &mut self,
+        theta: &DVector<f64>,
+        cost: f64,
+        a: &DMatrix<f64>,
+        g: &DVector<f64>,
+        rejected: &mut u64,
+        mut trial: impl FnMut(&DVector<f64>) -> Result<(f64, X), Error>,
+    ) -> Result<Option<Accepted<X>>, Error> {
+        self.update_diag(a);
+        while self.lambda <= self.lambda_max {
+            if let Some(delta) = self.step(a, g, self.lambda, theta) {
+                let point = self.clamp(theta + &delta);
+                let (c_new, extra) = trial(&point)?;
+                if c_new.is_finite() && c_new < cost {
+                    self.lambda = (self.lambda / self.factor).max(1e-15);
+                    return Ok(Some(Accepted {
+                        theta: point,
+                        cost: c_new,
+                        extra,
+                    }));
+                }
+            }
+            *rejected += 1;
+            self.lambda *= self.factor;
+        }
+        self.status = TerminationStatus::Terminated(TerminationReason::SolverExit(format!(
+            "Levenberg-Marquardt: no step lowers the cost (lambda reached {:.1e}); the tolerances may be tighter than the data allow",
+            self.lambda
+        )));
+        Ok(None)
+    }
+
+    /// Judges convergence at an accepted point and keeps its normal
+    /// equations for the next iteration.
+    fn accept(&mut self, a: DMatrix<f64>, g: DVector<f64>, cost: f64, theta: &DVector<f64>) {
+        if self.is_converged(&a, &g, cost, theta) {
+            self.status = TerminationStatus::Terminated(TerminationReason::SolverConverged);
+        }
+        self.normal = Some((a, g));
+    }
+
+    fn missing(what: &str) -> Error {
+        ArgminError::PotentialBug {
+            text: format!("Levenberg-Marquardt: {what} not set"),
+        }
+        .into()
+    }
+}
+
 impl<O> Solver<O, LmState> for LevenbergMarquardt
 where
     O: Operator<Param = DVector<f64>, Output = DVector<f64>>
@@ -283,35 +400,14 @@ where
             }
             .into()
         })?;
-        if let Some(lo) = &self.lower
-            && lo.len() != theta.len()
-        {
-            return Err(invalid(format!(
-                "Levenberg-Marquardt: {} bounds for {} parameters",
-                lo.len(),
-                theta.len()
-            )));
-        }
+        self.check_bounds(&theta)?;
         let theta = self.clamp(theta);
         let r = problem.apply(&theta)?;
         let cost = r.norm_squared();
-        if !cost.is_finite() {
-            return Err(ArgminError::ConditionViolated {
-                text: format!("Levenberg-Marquardt: the cost at the starting point is {cost}"),
-            }
-            .into());
-        }
+        Self::check_start(cost)?;
         let j = problem.jacobian(&theta)?;
         let (a, g) = normal_equations(&j, &r);
-        self.diag = DVector::zeros(0);
-        self.update_diag(&a);
-        self.lambda = self.lambda0;
-        self.status = if self.is_converged(&a, &g, cost, &theta) {
-            TerminationStatus::Terminated(TerminationReason::SolverConverged)
-        } else {
-            TerminationStatus::NotTerminated
-        };
-        self.normal = Some((a, g));
+        self.start(cost, a, g, &theta);
         Ok((state.param(theta).residuals(r).jacobian(j).cost(cost), None))
     }
 
@@ -320,63 +416,131 @@ where
         problem: &mut Problem<O>,
         mut state: LmState,
     ) -> Result<(LmState, Option<KV>), Error> {
-        let missing = |what: &str| -> Error {
-            ArgminError::PotentialBug {
-                text: format!("Levenberg-Marquardt: {what} not set"),
-            }
-            .into()
-        };
-        let theta = state.take_param().ok_or_else(|| missing("param"))?;
-        let r = state.take_residuals().ok_or_else(|| missing("residuals"))?;
-        let j = state.take_jacobian().ok_or_else(|| missing("jacobian"))?;
+        let theta = state.take_param().ok_or_else(|| Self::missing("param"))?;
+        let r = state
+            .take_residuals()
+            .ok_or_else(|| Self::missing("residuals"))?;
+        let j = state
+            .take_jacobian()
+            .ok_or_else(|| Self::missing("jacobian"))?;
         let cost = state.get_cost();
         let (a, g) = match self.normal.take() {
             Some(normal) => normal,
             None => normal_equations(&j, &r),
         };
-        self.update_diag(&a);
         let mut rejected = 0_u64;
-        while self.lambda <= self.lambda_max {
-            if let Some(delta) = self.step(&a, &g, self.lambda, &theta) {
-                let trial = self.clamp(&theta + &delta);
-                let r_new = problem.apply(&trial)?;
-                let c_new = r_new.norm_squared();
-                if c_new.is_finite() && c_new < cost {
-                    self.lambda = (self.lambda / self.factor).max(1e-15);
-                    let j_new = problem.jacobian(&trial)?;
-                    let (a_new, g_new) = normal_equations(&j_new, &r_new);
-                    if self.is_converged(&a_new, &g_new, c_new, &trial) {
-                        self.status =
-                            TerminationStatus::Terminated(TerminationReason::SolverConverged);
-                    }
-                    self.normal = Some((a_new, g_new));
-                    let kv = kv!("lambda" => self.lambda; "rejected" => rejected;);
-                    return Ok((
-                        state
-                            .param(trial)
-                            .residuals(r_new)
-                            .jacobian(j_new)
-                            .cost(c_new),
-                        Some(kv),
-                    ));
-                }
+        let accepted = self.advance(&theta, cost, &a, &g, &mut rejected, |point| {
+            let r = problem.apply(point)?;
+            Ok((r.norm_squared(), r))
+        })?;
+        let kv = |lm: &Self| kv!("lambda" => lm.lambda; "rejected" => rejected;);
+        match accepted {
+            Some(Accepted {
+                theta: trial,
+                cost: c_new,
+                extra: r_new,
+            }) => {
+                let j_new = problem.jacobian(&trial)?;
+                let (a_new, g_new) = normal_equations(&j_new, &r_new);
+                self.accept(a_new, g_new, c_new, &trial);
+                Ok((
+                    state
+                        .param(trial)
+                        .residuals(r_new)
+                        .jacobian(j_new)
+                        .cost(c_new),
+                    Some(kv(self)),
+                ))
             }
-            rejected += 1;
-            self.lambda *= self.factor;
+            None => {
+                self.normal = Some((a, g));
+                Ok((
+                    state.param(theta).residuals(r).jacobian(j).cost(cost),
+                    Some(kv(self)),
+                ))
+            }
         }
-        self.normal = Some((a, g));
-        self.status = TerminationStatus::Terminated(TerminationReason::SolverExit(format!(
-            "Levenberg-Marquardt: no step lowers the cost (lambda reached {:.1e}); the tolerances may be tighter than the data allow",
-            self.lambda
-        )));
-        let kv = kv!("lambda" => self.lambda; "rejected" => rejected;);
-        Ok((
-            state.param(theta).residuals(r).jacobian(j).cost(cost),
-            Some(kv),
-        ))
     }
 
     fn terminate(&mut self, _state: &LmState) -> TerminationStatus {
+        self.status.clone()
+    }
+}
+
+/// The same iterations for a problem whose output is its cost r^T r and
+/// whose "Jacobian" is its normal equations ([`Normal`]).
+impl<O> Solver<O, LmNormalState> for LevenbergMarquardt
+where
+    O: Operator<Param = DVector<f64>, Output = f64>
+        + Jacobian<Param = DVector<f64>, Jacobian = Normal>,
+{
+    fn name(&self) -> &str {
+        "Levenberg-Marquardt"
+    }
+
+    fn init(
+        &mut self,
+        problem: &mut Problem<O>,
+        mut state: LmNormalState,
+    ) -> Result<(LmNormalState, Option<KV>), Error> {
+        let theta = state.take_param().ok_or_else(|| -> Error {
+            ArgminError::NotInitialized {
+                text: "Levenberg-Marquardt needs a starting point (Executor::configure)".into(),
+            }
+            .into()
+        })?;
+        self.check_bounds(&theta)?;
+        let theta = self.clamp(theta);
+        let cost = problem.apply(&theta)?;
+        Self::check_start(cost)?;
+        let normal = problem.jacobian(&theta)?;
+        self.start(cost, normal.a.clone(), normal.g.clone(), &theta);
+        Ok((state.param(theta).jacobian(normal).cost(cost), None))
+    }
+
+    fn next_iter(
+        &mut self,
+        problem: &mut Problem<O>,
+        mut state: LmNormalState,
+    ) -> Result<(LmNormalState, Option<KV>), Error> {
+        let theta = state.take_param().ok_or_else(|| Self::missing("param"))?;
+        let normal = state
+            .take_jacobian()
+            .ok_or_else(|| Self::missing("normal equations"))?;
+        let cost = state.get_cost();
+        let (a, g) = self
+            .normal
+            .take()
+            .unwrap_or_else(|| (normal.a.clone(), normal.g.clone()));
+        let mut rejected = 0_u64;
+        let accepted = self.advance(&theta, cost, &a, &g, &mut rejected, |point| {
+            Ok((problem.apply(point)?, ()))
+        })?;
+        let kv = |lm: &Self| kv!("lambda" => lm.lambda; "rejected" => rejected;);
+        match accepted {
+            Some(Accepted {
+                theta: trial,
+                cost: c_new,
+                ..
+            }) => {
+                let n_new = problem.jacobian(&trial)?;
+                self.accept(n_new.a.clone(), n_new.g.clone(), c_new, &trial);
+                Ok((
+                    state.param(trial).jacobian(n_new).cost(c_new),
+                    Some(kv(self)),
+                ))
+            }
+            None => {
+                self.normal = Some((a, g));
+                Ok((
+                    state.param(theta).jacobian(normal).cost(cost),
+                    Some(kv(self)),
+                ))
+            }
+        }
+    }
+
+    fn terminate(&mut self, _state: &LmNormalState) -> TerminationStatus {
         self.status.clone()
     }
 }

@@ -529,15 +529,19 @@ struct Solved {
 
 /// Run `solver` on `problem` from `start` in argmin's executor, for the
 /// per-run fit and the joint one alike.
-fn solve<O>(
+/// The state is [`lm::LmState`] for a problem giving residuals and J, and
+/// [`lm::LmNormalState`] for one giving its cost and normal equations.
+fn solve<O, J, R>(
     problem: O,
     solver: LevenbergMarquardt,
     start: Vec<f64>,
     max_iterations: u64,
 ) -> Result<Solved, FitError>
 where
-    O: argmin::core::Operator<Param = DVector<f64>, Output = DVector<f64>>
-        + argmin::core::Jacobian<Param = DVector<f64>, Jacobian = DMatrix<f64>>,
+    LevenbergMarquardt:
+        argmin::core::Solver<O, argmin::core::IterState<DVector<f64>, (), J, (), R, f64>>,
+    J: Clone,
+    R: Clone,
 {
     let result = Executor::new(problem, solver)
         .configure(|s| s.param(DVector::from_vec(start)).max_iters(max_iterations))

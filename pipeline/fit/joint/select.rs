@@ -24,7 +24,10 @@
 
 use statrs::distribution::{ContinuousCDF, FisherSnedecor};
 
-use super::{FitError, JointFit, JointOptions, JointRun, Structure, joint_fit, problem, rig_theta};
+use super::{
+    FitError, JointFit, JointOptions, JointRun, Optimum, Structure, finish, joint_fit, optimise,
+    problem, rig_theta,
+};
 use crate::model::RigParams;
 
 /// The p-value below which a larger structure is taken.
@@ -203,6 +206,14 @@ fn f_test(small: &JointFit, big: &JointFit) -> FTest {
     }
 }
 
+/// A point of the valve mode's grid of starts and the cost there.
+struct ValveStart {
+    cost: f64,
+    hz: f64,
+    zeta: f64,
+    delay_s: f64,
+}
+
 /// The delay-and-valve fit from the best starts of a grid (module docs).
 fn fit_valve(
     runs: &[JointRun<'_>],
@@ -222,7 +233,7 @@ fn fit_valve(
     let prob = problem(runs, &base)?;
     let fs = opts.sample_rate_hz;
     let rig_theta = rig_theta(&rig, opts.p_ref);
-    let mut scored: Vec<(f64, f64, f64, f64)> = Vec::new();
+    let mut scored: Vec<ValveStart> = Vec::new();
     for i in 0..6 {
         let hz = 1.5 * band_top_hz * 8f64.powf(i as f64 / 5.0);
         for zeta in [0.3, 0.55, 0.8] {
@@ -231,41 +242,47 @@ fn fit_valve(
             let d = (delay_s - 2.0 * zeta / w).clamp(0.0, opts.max_delay_s);
             let mut theta = rig_theta.to_vec();
             theta.extend([d * fs, w.ln(), zeta.ln()]);
-            let cost = prob.residuals(&theta).norm_squared();
+            let cost = prob.cost(&theta);
             if cost.is_finite() {
-                scored.push((cost, hz, zeta, d));
+                scored.push(ValveStart {
+                    cost,
+                    hz,
+                    zeta,
+                    delay_s: d,
+                });
             }
         }
     }
-    scored.sort_by(|a, b| a.0.total_cmp(&b.0));
-    let fit_from = |&(_, hz, zeta, d): &(f64, f64, f64, f64)| {
-        let o = JointOptions {
-            valve_start: (hz, zeta),
-            delay_start_s: d,
-            ..base
-        };
-        joint_fit(runs, &rig, &o)
+    scored.sort_by(|a, b| a.cost.total_cmp(&b.cost));
+    let options = |v: &ValveStart| JointOptions {
+        valve_start: (v.hz, v.zeta),
+        delay_start_s: v.delay_s,
+        ..base
     };
-    // The two best starts side by side; kept in the grid's order.
-    let fits: Vec<Result<JointFit, FitError>> = match scored.as_slice() {
-        [] => Vec::new(),
-        [one] => vec![fit_from(one)],
+    // Levenberg-Marquardt from the two best starts side by side, on the one
+    // problem; the lower converged cost is kept (the first on a tie), and
+    // only it is finished (covariance, adequacy).
+    let runs_from = |v: &ValveStart| optimise(&prob, &rig, &options(v));
+    let optima = match scored.as_slice() {
+        [] => return Err(FitError::NoSolution),
+        [one] => vec![(one, runs_from(one))],
         [a, b, ..] => {
-            let (x, y) = rayon::join(|| fit_from(a), || fit_from(b));
-            vec![x, y]
+            let (x, y) = rayon::join(|| runs_from(a), || runs_from(b));
+            vec![(a, x), (b, y)]
         }
     };
-    let mut best: Option<Result<JointFit, FitError>> = None;
-    for fit in fits {
-        let better = match (&best, &fit) {
+    let mut best: Option<(&ValveStart, Result<Optimum, FitError>)> = None;
+    for (start, optimum) in optima {
+        let better = match (&best, &optimum) {
             (None, _) => true,
-            (Some(Err(_)), Ok(_)) => true,
-            (Some(Ok(b)), Ok(f)) => f.converged && (f.cost < b.cost || !b.converged),
+            (Some((_, Err(_))), Ok(_)) => true,
+            (Some((_, Ok(b))), Ok(o)) => o.converged && (o.cost < b.cost || !b.converged),
             _ => false,
         };
         if better {
-            best = Some(fit);
+            best = Some((start, optimum));
         }
     }
-    best.unwrap_or(Err(FitError::NoSolution))
+    let (start, optimum) = best.expect("at least one start");
+    finish(&prob, optimum?, &options(start))
 }
