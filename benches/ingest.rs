@@ -38,6 +38,7 @@ fn plan(path: &Path, format: LogFormat, time: TimePlan, chans: [ChannelPlan; 3])
             displacement,
             force: Some(force),
         },
+        max_bytes: servoid::ingest::DEFAULT_MAX_LOG_MIB << 20,
     }
 }
 

@@ -32,9 +32,10 @@ pub struct RunArgs {
     /// Output folder (default: `reports/<name>`).
     #[arg(long)]
     out: Option<PathBuf>,
-    /// Worker threads (default: two per core); the output does not depend on it.
-    #[arg(long, short)]
-    jobs: Option<usize>,
+    /// Worker threads (default: two per core, at most four per core); the
+    /// output does not depend on it.
+    #[arg(long, short, value_parser = clap::value_parser!(u64).range(1..))]
+    jobs: Option<u64>,
     /// Which figure files to draw.
     #[arg(long, value_enum, default_value_t = Figures::All)]
     figures: Figures,
@@ -92,9 +93,9 @@ pub enum Command {
         /// The manifest, when it is no longer where results.json says.
         #[arg(long)]
         manifest: Option<PathBuf>,
-        /// Worker threads (default: two per core).
-        #[arg(long, short)]
-        jobs: Option<usize>,
+        /// Worker threads (default: two per core, at most four per core).
+        #[arg(long, short, value_parser = clap::value_parser!(u64).range(1..))]
+        jobs: Option<u64>,
     },
     /// Check a manifest (campaign or simulation) and report every problem, without running it.
     Check {
@@ -207,10 +208,16 @@ fn dispatch(command: Command) -> u8 {
             results,
             manifest,
             jobs,
-        } => cmd_verify(&results, manifest.as_deref(), jobs),
+        } => cmd_verify(&results, manifest.as_deref(), capped(jobs)),
         Command::Check { manifest } => match run::check(&manifest) {
             Ok(checked) => {
                 say(&format!("{}: ok ({checked})", manifest.display()));
+                for (run, log) in &checked.missing_logs {
+                    warn(&format!(
+                        "warning: run {run}: log file not found: {}; the run will fail alone when the campaign runs",
+                        log.display()
+                    ));
+                }
                 EXIT_OK
             }
             Err(e) => {
@@ -267,10 +274,29 @@ fn cmd_verify(results: &Path, manifest: Option<&Path>, jobs: Option<usize>) -> u
 fn settings(args: &RunArgs) -> Settings {
     Settings {
         out: args.out.clone(),
-        jobs: args.jobs,
+        jobs: capped(args.jobs),
         figures: args.figures.into(),
         force: args.force,
     }
+}
+
+/// Workers beyond four per core only cost memory and switching (`--jobs
+/// 1000` ran six times slower than the default on two cores, and `--jobs
+/// 100000` stalled the machine starting threads): a larger `--jobs` is
+/// lowered to that, with a warning.
+pub const MAX_JOBS_PER_CORE: usize = 4;
+
+fn capped(jobs: Option<u64>) -> Option<usize> {
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let max = MAX_JOBS_PER_CORE * cores;
+    let jobs = jobs?;
+    if jobs > max as u64 {
+        warn(&format!(
+            "warning: --jobs {jobs} is more than {MAX_JOBS_PER_CORE} per core ({cores} cores): using {max}"
+        ));
+        return Some(max);
+    }
+    Some(jobs as usize)
 }
 
 /// Report a job that wrote nothing (or could not finish writing).
@@ -517,6 +543,9 @@ fn print_summary(r: &Results) {
             run.role.as_str(),
             status
         ));
+        for w in &run.warnings {
+            say(&format!("      warning: {w}"));
+        }
     }
     match &r.rig {
         Some(rig) => {

@@ -434,7 +434,7 @@ v1,validation,1.5,4,10,120000,
         let r = run_by_id(&results, id);
         assert_eq!(r["status"], "failed", "{id}");
         let error = r["error"].as_str().unwrap();
-        let expected = format!("{}: cannot read: ", path.display());
+        let expected = format!("{}: log file not found", path.display());
         assert!(error.starts_with(&expected), "{id}: {error:?}");
         assert!(
             stderr.contains(&format!("run {id}: {expected}")),

@@ -383,7 +383,7 @@ fn a_seed_that_is_not_an_integer_is_refused() {
         refused(
             &BASE.replace("seed = 7", &format!("seed = {seed}")),
             "simulation.seed",
-            "expected u64",
+            "must be a whole number, 0 or more, not the ",
         );
     }
 }

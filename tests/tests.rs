@@ -8,6 +8,7 @@ mod bad_logs;
 mod batch;
 mod browser;
 mod consistency;
+mod corpus;
 mod csi;
 mod disk_full;
 mod drift;

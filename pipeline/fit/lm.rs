@@ -313,7 +313,15 @@ impl LevenbergMarquardt {
         self.normal = Some((a, g));
     }
 
-    fn check_bounds(&self, theta: &DVector<f64>) -> Result<(), Error> {
+    /// The starting point the executor was configured with, checked
+    /// against the bounds and clamped into them.
+    fn starting_point(&self, theta: Option<DVector<f64>>) -> Result<DVector<f64>, Error> {
+        let theta = theta.ok_or_else(|| -> Error {
+            ArgminError::NotInitialized {
+                text: "Levenberg-Marquardt needs a starting point (Executor::configure)".into(),
+            }
+            .into()
+        })?;
         if let Some(lo) = &self.lower
             && lo.len() != theta.len()
         {
@@ -323,7 +331,7 @@ impl LevenbergMarquardt {
                 theta.len()
             )));
         }
-        Ok(())
+        Ok(self.clamp(theta))
     }
 
     /// One iteration from `theta` (cost `cost`, normal equations `a`, `g`):
@@ -394,14 +402,7 @@ where
         problem: &mut Problem<O>,
         mut state: LmState,
     ) -> Result<(LmState, Option<KV>), Error> {
-        let theta = state.take_param().ok_or_else(|| -> Error {
-            ArgminError::NotInitialized {
-                text: "Levenberg-Marquardt needs a starting point (Executor::configure)".into(),
-            }
-            .into()
-        })?;
-        self.check_bounds(&theta)?;
-        let theta = self.clamp(theta);
+        let theta = self.starting_point(state.take_param())?;
         let r = problem.apply(&theta)?;
         let cost = r.norm_squared();
         Self::check_start(cost)?;
@@ -483,14 +484,7 @@ where
         problem: &mut Problem<O>,
         mut state: LmNormalState,
     ) -> Result<(LmNormalState, Option<KV>), Error> {
-        let theta = state.take_param().ok_or_else(|| -> Error {
-            ArgminError::NotInitialized {
-                text: "Levenberg-Marquardt needs a starting point (Executor::configure)".into(),
-            }
-            .into()
-        })?;
-        self.check_bounds(&theta)?;
-        let theta = self.clamp(theta);
+        let theta = self.starting_point(state.take_param())?;
         let cost = problem.apply(&theta)?;
         Self::check_start(cost)?;
         let normal = problem.jacobian(&theta)?;

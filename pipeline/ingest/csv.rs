@@ -92,7 +92,9 @@ fn by_polars(
         .iter()
         .map(|&i| Field::new(polars_name(i).into(), DataType::Float64))
         .collect();
-    let mut parse = CsvParseOptions::default().with_separator(opts.sep);
+    let mut parse = CsvParseOptions::default()
+        .with_separator(opts.sep)
+        .with_decimal_comma(opts.decimal_comma);
     if let Some(p) = opts.comment {
         parse = parse.with_comment_prefix(Some(p));
     }
@@ -174,6 +176,8 @@ fn without_blank_lines(bytes: &[u8], skip_lines: usize) -> Option<Vec<u8>> {
 /// How lines are told apart: the options polars gets, for the rescans.
 struct Layout<'p> {
     sep: u8,
+    /// Whether numbers are written with a decimal comma.
+    decimal_comma: bool,
     skip_lines: usize,
     comment: Option<&'p str>,
 }
@@ -191,6 +195,7 @@ impl<'p> Layout<'p> {
         }
         Ok(Layout {
             sep: d[0],
+            decimal_comma: plan.csv.decimal == ",",
             skip_lines: plan.csv.skip_lines,
             comment: plan.csv.comment_prefix.as_deref().filter(|p| !p.is_empty()),
         })
@@ -214,6 +219,16 @@ impl<'p> Layout<'p> {
 fn split(line: &[u8], sep: u8) -> impl Iterator<Item = &str> {
     line.split(move |&b| b == sep)
         .map(|f| std::str::from_utf8(f).unwrap_or("\u{fffd}"))
+}
+
+/// When the header reads as one field holding `;` or a tab, the file is
+/// delimited by that instead: say how to read it.
+fn delimiter_hint(names: &[&str]) -> String {
+    match names {
+        [one] if one.contains(';') => "; the header is one field with `;` in it: for a semicolon-delimited export give data.csv = { delimiter = \";\" }, and decimal = \",\" if its numbers use decimal commas".into(),
+        [one] if one.contains('\t') => "; the header is one field with tabs in it: give data.csv = { delimiter = \"\\t\" }".into(),
+        _ => String::new(),
+    }
 }
 
 /// A field without one pair of surrounding double quotes.
@@ -244,8 +259,9 @@ fn resolve(
             match hits.as_slice() {
                 [i] => Ok(*i),
                 [] => Err(missing(format!(
-                    "columns: {}",
-                    list(names.iter().map(|n| format!("`{n}`")))
+                    "columns: {}{}",
+                    list(names.iter().map(|n| format!("`{n}`"))),
+                    delimiter_hint(names)
                 ))),
                 _ => Err(IngestError::format(
                     path,
@@ -310,7 +326,12 @@ fn by_hand(
             if value.is_empty() {
                 return Err(missing(format!("field {i} is empty")));
             }
-            col.push(value.parse::<f64>().map_err(|_| IngestError::BadValue {
+            let parsed = if opts.decimal_comma {
+                value.replacen(',', ".", 1).parse::<f64>()
+            } else {
+                value.parse::<f64>()
+            };
+            col.push(parsed.map_err(|_| IngestError::BadValue {
                 path: path.to_path_buf(),
                 at: At::Line(line_no),
                 channel: w.channel,

@@ -32,7 +32,9 @@ use std::path::{Path, PathBuf};
 use polars::prelude::{DataType, PolarsError};
 use sha2::{Digest, Sha256};
 
-pub use plan::{ChannelPlan, Channels, Column, CsvOptions, LogFormat, LogPlan, TimePlan};
+pub use plan::{
+    ChannelPlan, Channels, Column, CsvOptions, DEFAULT_MAX_LOG_MIB, LogFormat, LogPlan, TimePlan,
+};
 pub use quantum::quantum_step;
 pub use table::{Table, TableError, TableFormat, TableProblem, read_table};
 
@@ -123,10 +125,28 @@ pub struct Needs {
     pub clip_fraction: f64,
 }
 
+/// A read error as a lab engineer would say it: a log that is not there is
+/// "not found" (it may not have been copied yet), anything else verbatim.
+fn io_message(e: &std::io::Error) -> String {
+    match e.kind() {
+        std::io::ErrorKind::NotFound => "log file not found".into(),
+        _ => format!("cannot read: {e}"),
+    }
+}
+
 /// Why a log cannot be used. Every message names the file.
 #[derive(Debug, thiserror::Error)]
 pub enum IngestError {
-    #[error("{}: cannot read: {source}", path.display())]
+    #[error(
+        "{}: the log is {:.1} MiB, over the limit of {} MiB: raise [limits] max_log_mib if this machine has some {:.0} MiB of memory to spare, or split the log",
+        path.display(), *bytes as f64 / 1048576.0, max_bytes >> 20, 5.0 * *bytes as f64 / 1048576.0
+    )]
+    TooLarge {
+        path: PathBuf,
+        bytes: u64,
+        max_bytes: u64,
+    },
+    #[error("{}: {}", path.display(), io_message(source))]
     Io {
         path: PathBuf,
         #[source]
@@ -237,8 +257,25 @@ pub enum IngestError {
         fraction: f64,
         tolerance: f64,
     },
-    #[error("{}: {n} samples, but the FRF settings need at least {min}", path.display())]
-    TooShort { path: PathBuf, n: usize, min: usize },
+    #[error("{}: {n} samples, but {need} needs at least {min}: {advice}", path.display())]
+    TooShort {
+        path: PathBuf,
+        n: usize,
+        min: usize,
+        /// What asks for them, and what to do.
+        need: &'static str,
+        advice: &'static str,
+    },
+    #[error(
+        "{}: the {channel} channel is constant ({level} {unit} in every sample): it carries no signal; check that the channel maps the right column and the log the right run",
+        path.display()
+    )]
+    Constant {
+        path: PathBuf,
+        channel: &'static str,
+        level: f64,
+        unit: &'static str,
+    },
     #[error("{}: sampling rate {hz} Hz ({from}) must be finite and positive", path.display())]
     BadRate {
         path: PathBuf,
@@ -451,7 +488,7 @@ impl fmt::Display for MatVariable {
 /// depend on the analysis (length, jitter, clipping) are left to
 /// [`check_log`].
 pub fn read_log(plan: &LogPlan) -> Result<Log, IngestError> {
-    read_log_from(plan, LogFile::read(&plan.path)?)
+    read_log_from(plan, LogFile::read(&plan.path, plan.max_bytes)?)
 }
 
 /// A log file's bytes and their SHA-256, read once: a cache can look a run
@@ -474,7 +511,9 @@ impl LogFile {
     /// the read, and the size what was read: a log still being written (a
     /// DAQ appending to it, a copy in progress) is refused, not analysed
     /// half-written.
-    pub fn read(path: &Path) -> Result<Self, IngestError> {
+    ///
+    /// A log over `max_bytes` is refused before it is read.
+    pub fn read(path: &Path, max_bytes: u64) -> Result<Self, IngestError> {
         let io = |source| IngestError::Io {
             path: path.to_path_buf(),
             source,
@@ -484,6 +523,13 @@ impl LogFile {
             return Err(IngestError::NotAFile {
                 path: path.to_path_buf(),
                 what: kind_of(&meta.file_type()),
+            });
+        }
+        if meta.len() > max_bytes {
+            return Err(IngestError::TooLarge {
+                path: path.to_path_buf(),
+                bytes: meta.len(),
+                max_bytes,
             });
         }
         let before = FileStamp::from_meta(&meta);
@@ -820,6 +866,8 @@ fn measure_timing(
             path: path.to_path_buf(),
             n: t.len(),
             min: 2,
+            need: "a time base",
+            advice: "the log has too few rows",
         });
     }
     if let Some(k) = t.windows(2).position(|w| w[1] <= w[0]) {
@@ -872,6 +920,8 @@ pub fn check_log(log: &Log, needs: &Needs) -> Result<Vec<String>, IngestError> {
             path: path.clone(),
             n: log.n_rows,
             min: needs.min_samples,
+            need: "identification.frf.segment_length",
+            advice: "lower segment_length or give a longer log",
         });
     }
     if let Timing::Measured {
@@ -909,6 +959,19 @@ pub fn check_log(log: &Log, needs: &Needs) -> Result<Vec<String>, IngestError> {
         channels.push(("force", "N", f));
     }
     for (channel, unit, x) in channels {
+        // A constant channel sits at both extremes: "clipped at 0 m" for an
+        // all-zero command misled; it is a missing signal.
+        if let Some(&first) = x.first()
+            && x.len() > 1
+            && x.iter().all(|&v| v == first)
+        {
+            return Err(IngestError::Constant {
+                path: path.clone(),
+                channel,
+                level: first,
+                unit,
+            });
+        }
         if let Some((which, level, fraction)) = clipping(x)
             && fraction > needs.clip_fraction
         {

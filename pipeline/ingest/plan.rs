@@ -18,7 +18,15 @@ pub struct LogPlan {
     pub csv: CsvOptions,
     pub sha256: Option<String>,
     pub channels: Channels,
+    /// The largest log read (bytes): `[limits] max_log_mib`.
+    pub max_bytes: u64,
 }
+
+/// The default of `[limits] max_log_mib`: 4 GiB. A log is read whole, and
+/// parsing takes a few times its size in memory (a 1 GB CSV took 4.5 GB),
+/// so a larger one would exhaust a lab workstation's memory rather than be
+/// analysed.
+pub const DEFAULT_MAX_LOG_MIB: u64 = 4096;
 
 /// A run's channels, defaults and overrides merged, with SI conversion.
 #[derive(Debug, Clone, PartialEq)]
@@ -118,6 +126,10 @@ pub struct CsvOptions {
     /// Whether the first line (after skipped lines) names the columns.
     #[serde(default = "yes")]
     pub header: bool,
+    /// The decimal mark: "." or "," (European exports, which then delimit
+    /// fields with ";").
+    #[serde(default = "point")]
+    pub decimal: String,
 }
 
 impl Default for CsvOptions {
@@ -127,8 +139,13 @@ impl Default for CsvOptions {
             skip_lines: 0,
             comment_prefix: None,
             header: yes(),
+            decimal: point(),
         }
     }
+}
+
+fn point() -> String {
+    ".".into()
 }
 
 fn comma() -> String {

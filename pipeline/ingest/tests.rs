@@ -49,6 +49,7 @@ fn plan(
             displacement,
             force,
         },
+        max_bytes: crate::ingest::DEFAULT_MAX_LOG_MIB << 20,
     }
 }
 
@@ -368,6 +369,7 @@ time_ms;u_in;x_cm;f_lbf;f_kn
         skip_lines: 2,
         comment_prefix: Some("%".into()),
         header: true,
+        decimal: ".".into(),
     };
     let log = read_log(&p).unwrap();
     assert_eq!(log.n_rows, 4);
@@ -422,6 +424,7 @@ fn csv_without_header_is_addressed_by_index() {
         skip_lines: 0,
         comment_prefix: Some("#".into()),
         header: false,
+        decimal: ".".into(),
     };
     let log = read_log(&p).unwrap();
     assert_eq!(log.n_rows, 3);
@@ -433,6 +436,47 @@ fn csv_without_header_is_addressed_by_index() {
     p.channels.command.column = name("u");
     let msg = err(&p);
     assert_contains(&msg, &["log.csv", "`u`", "no header", "index 0 to 2"]);
+}
+
+/// A European export: fields delimited by `;`, numbers with a decimal
+/// comma, read with `decimal = ","`: the same values as written with
+/// points. Both readers: polars (clean fields) and the line parser (a field
+/// with spaces around it sends the file there).
+#[test]
+fn csv_with_decimal_commas() {
+    let dir = tempfile::tempdir().unwrap();
+    for (file, text) in [
+        (
+            "clean.csv",
+            "t;u;x\n0;1,5;-2,25\n0,5;-0,125;3\n1;1e-3;4,5E2\n",
+        ),
+        (
+            "spaced.csv",
+            "t;u;x\n0; 1,5 ;-2,25\n0,5;-0,125;3\n1;1e-3;4,5E2\n",
+        ),
+    ] {
+        let path = write_file(dir.path(), file, text.as_bytes());
+        let mut p = plan(
+            &path,
+            LogFormat::Csv,
+            TimePlan::Column {
+                column: name("t"),
+                to_s: 1.0,
+            },
+            ch(name("u"), Unit::Meter, 1.0),
+            ch(name("x"), Unit::Meter, 1.0),
+            None,
+        );
+        p.csv = CsvOptions {
+            delimiter: ";".into(),
+            decimal: ",".into(),
+            ..CsvOptions::default()
+        };
+        let log = read_log(&p).unwrap_or_else(|e| panic!("{file}: {e}"));
+        assert_eq!(log.command_m, vec![1.5, -0.125, 1e-3], "{file}");
+        assert_eq!(log.displacement_m, vec![-2.25, 3.0, 450.0], "{file}");
+        assert_relative_eq!(log.sample_rate_hz, 2.0, max_relative = 1e-15);
+    }
 }
 
 #[test]
@@ -1467,7 +1511,7 @@ fn a_folder_or_a_named_pipe_is_not_read_as_a_log() {
     let dir = tempfile::tempdir().unwrap();
     let folder = dir.path().join("exp1.csv");
     std::fs::create_dir(&folder).unwrap();
-    let e = LogFile::read(&folder).unwrap_err();
+    let e = LogFile::read(&folder, u64::MAX).unwrap_err();
     assert!(
         matches!(
             e,
@@ -1484,7 +1528,7 @@ fn a_folder_or_a_named_pipe_is_not_read_as_a_log() {
     let fifo = dir.path().join("exp2.csv");
     let made = std::process::Command::new("mkfifo").arg(&fifo).status();
     if made.is_ok_and(|s| s.success()) {
-        let e = LogFile::read(&fifo).unwrap_err();
+        let e = LogFile::read(&fifo, u64::MAX).unwrap_err();
         assert!(
             matches!(
                 e,
@@ -1500,7 +1544,7 @@ fn a_folder_or_a_named_pipe_is_not_read_as_a_log() {
     // A regular file is read, and its stamp kept for the cache.
     let file = dir.path().join("exp3.csv");
     std::fs::write(&file, b"t,u,y\n0,0,0\n").unwrap();
-    let read = LogFile::read(&file).unwrap();
+    let read = LogFile::read(&file, u64::MAX).unwrap();
     assert_eq!(read.stamp.map(|s| s.size), Some(12));
     assert_eq!(read.stamp, FileStamp::of(&file));
 }

@@ -17,8 +17,8 @@ use super::keypath::KeyPath;
 use super::problem::{ManifestError, Problem, TablePlace};
 use super::raw::{
     CampaignInfo, Channel, Channels as RawChannels, CompareMode, History, Identification,
-    JointSettings, Manifest, MonteCarloSettings, Reference, Rig, Role, Run, RunData, RunTable,
-    SCHEMA_VERSION, SensitivitySettings, manifest_schema,
+    JointSettings, Limits, Manifest, MonteCarloSettings, Reference, Rig, Role, Run, RunData,
+    RunTable, SCHEMA_VERSION, SensitivitySettings, manifest_schema,
 };
 use super::table::{CheckedTable, RowKey, RunTableInfo, TableRun, check_table};
 use crate::drift::{MIN_HISTORY, Rule};
@@ -186,7 +186,9 @@ pub fn load_str(text: &str, path: &Path) -> Result<Campaign, ManifestError> {
         run_table_given: doc.has("run_table"),
         history: doc.section::<History>("history"),
         sensitivity: doc.section::<SensitivitySettings>("sensitivity"),
+        limits: doc.section::<Limits>("limits"),
     };
+    doc.begin_checks();
     let base_dir = path.parent().unwrap_or(Path::new(""));
     let campaign = validate(partial, path, text.as_bytes(), base_dir, &mut doc.problems);
     doc.finish(campaign)
@@ -212,6 +214,7 @@ struct Partial {
     run_table_given: bool,
     history: Option<History>,
     sensitivity: Option<SensitivitySettings>,
+    limits: Option<Limits>,
 }
 
 /// What every run's checks share.
@@ -219,6 +222,8 @@ struct RunContext<'a> {
     default_channels: &'a RawChannels,
     ident: &'a IdentificationPlan,
     base_dir: &'a Path,
+    /// `[limits] max_log_mib` in bytes.
+    max_log_bytes: u64,
 }
 
 fn validate(
@@ -254,10 +259,18 @@ fn validate(
         &mut bad,
         &mut table_problems,
     );
+    let limits = partial.limits.clone().unwrap_or_default();
+    if limits.max_log_mib == 0 {
+        bad(
+            root.key("limits").key("max_log_mib"),
+            "must be at least 1 (MiB)".into(),
+        );
+    }
     let ctx = RunContext {
         default_channels: &default_channels,
         ident: &ident_plan,
         base_dir,
+        max_log_bytes: limits.max_log_mib.saturating_mul(1 << 20),
     };
     let mut runs: Vec<RunPlan> = partial
         .runs
@@ -304,6 +317,7 @@ fn validate(
         run_table: partial.run_table,
         history: partial.history,
         sensitivity: partial.sensitivity,
+        limits: partial.limits,
     };
     Some(Campaign {
         file: file.to_path_buf(),
@@ -460,6 +474,7 @@ fn table_run_plan(
                 csv: Default::default(),
                 sha256: None,
                 channels,
+                max_bytes: ctx.max_log_bytes,
             }))
         }
     };
@@ -742,15 +757,24 @@ fn check_log(
     let dpath = base.key("data");
     let path = ctx.base_dir.join(log);
     let mut ok = true;
-    if !path.is_file() {
-        bad(
-            dpath.key("log"),
-            format!("log file not found: {}", path.display()),
-        );
+    // A log that is not there (yet) fails its run alone when the run reads
+    // it, as a run table's rows do: one missing log must not refuse a
+    // night's campaign. A folder, device or pipe in its place is a mistake
+    // in the manifest.
+    if let Ok(m) = std::fs::metadata(&path)
+        && !m.is_file()
+    {
+        let what = if m.is_dir() {
+            "the log is a folder, not a file"
+        } else {
+            "the log is not a regular file (a device, pipe or socket)"
+        };
+        bad(dpath.key("log"), format!("{what}: {}", path.display()));
         ok = false;
     }
     let format = data.format.or_else(|| LogFormat::from_path(&path));
-    if format.is_none() {
+    // A log that is not there has no format to tell yet: one problem, not two.
+    if format.is_none() && ok {
         bad(
             dpath.key("format"),
             format!(
@@ -764,6 +788,19 @@ fn check_log(
         bad(
             dpath.key("csv").key("delimiter"),
             format!("must be one character (got {:?})", csv.delimiter),
+        );
+        ok = false;
+    }
+    if csv.decimal != "." && csv.decimal != "," {
+        bad(
+            dpath.key("csv").key("decimal"),
+            format!("must be \".\" or \",\" (got {:?})", csv.decimal),
+        );
+        ok = false;
+    } else if csv.decimal == "," && csv.delimiter == "," {
+        bad(
+            dpath.key("csv").key("decimal"),
+            "a decimal comma needs another field delimiter: give delimiter = \";\" (or the export's own)".into(),
         );
         ok = false;
     }
@@ -783,6 +820,7 @@ fn check_log(
             csv,
             sha256: data.sha256.as_ref().map(|s| s.to_ascii_lowercase()),
             channels,
+            max_bytes: ctx.max_log_bytes,
         }))
     })
 }

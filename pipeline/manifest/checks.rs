@@ -26,9 +26,24 @@ pub struct IdentificationPlan {
     pub trim_to_excitation: bool,
 }
 
+/// The longest name that becomes part of a file name (a run id, a
+/// campaign's name), in bytes: a run's files are named after it
+/// (`figures/frf-<id>.svg`, `tables/model-<id>.parquet`, its page), and
+/// file systems refuse names over 255 bytes; this leaves room for the
+/// longest prefix and suffix.
+pub const MAX_SLUG_BYTES: usize = 200;
+
 pub(super) fn check_slug(s: &str, path: &KeyPath, bad: &mut impl FnMut(KeyPath, String)) {
     if s.is_empty() {
         bad(path.clone(), "must not be empty".into());
+    } else if s.len() > MAX_SLUG_BYTES {
+        bad(
+            path.clone(),
+            format!(
+                "is {} bytes long; at most {MAX_SLUG_BYTES} (it names files and folders, and file systems refuse names over 255 bytes)",
+                s.len()
+            ),
+        );
     } else if !s
         .chars()
         .all(|c| c.is_ascii_alphanumeric() || matches!(c, '.' | '_' | '-'))
@@ -37,7 +52,7 @@ pub(super) fn check_slug(s: &str, path: &KeyPath, bad: &mut impl FnMut(KeyPath, 
         bad(
             path.clone(),
             format!(
-                "`{s}` may hold only letters, digits, `.`, `_` and `-` (it names files and folders)"
+                "`{s}` may hold only letters, digits, `.`, `_` and `-`, and may not start with `.` (it names files and folders)"
             ),
         );
     }

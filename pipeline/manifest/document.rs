@@ -10,13 +10,34 @@ use serde::de::DeserializeOwned;
 use serde_json::Value;
 
 use super::keypath::{KeyPath, Seg};
-use super::problem::{ManifestError, Problem};
+use super::problem::{MAX_MANIFEST_BYTES, ManifestError, Problem};
 
-/// Read a manifest's text, naming the file when it cannot be read.
+/// Read a manifest's text, naming the file when it cannot be read; at most
+/// [`MAX_MANIFEST_BYTES`] of it.
 pub(super) fn read(path: &Path) -> Result<String, ManifestError> {
-    std::fs::read_to_string(path).map_err(|source| ManifestError::Read {
+    use std::io::Read;
+    let failed = |source| ManifestError::Read {
         file: path.to_path_buf(),
         source,
+    };
+    let file = std::fs::File::open(path).map_err(failed)?;
+    let mut bytes = Vec::new();
+    file.take(MAX_MANIFEST_BYTES + 1)
+        .read_to_end(&mut bytes)
+        .map_err(failed)?;
+    if bytes.len() as u64 > MAX_MANIFEST_BYTES {
+        return Err(ManifestError::TooLarge {
+            file: path.to_path_buf(),
+        });
+    }
+    String::from_utf8(bytes).map_err(|e| {
+        failed(std::io::Error::new(
+            std::io::ErrorKind::InvalidData,
+            format!(
+                "not UTF-8 text (first bad byte at offset {})",
+                e.utf8_error().valid_up_to()
+            ),
+        ))
     })
 }
 
@@ -50,6 +71,11 @@ pub(super) struct Document<'a> {
     spans: Option<toml_edit::Document<&'a str>>,
     schema: Value,
     pub problems: Vec<Problem>,
+    /// Whether a number was nan or infinite (replaced by 1 so that its
+    /// section still reads; see [`Document::begin_checks`]).
+    non_finite: bool,
+    /// How many problems there were when the cross-key checks began.
+    structural: Option<usize>,
 }
 
 impl<'a> Document<'a> {
@@ -63,13 +89,21 @@ impl<'a> Document<'a> {
             message,
         };
         let (value, spans) = if is_json(path) {
-            let v: Value = serde_json::from_str(text)
-                .map_err(|e| syntax("JSON", (e.line(), e.column()), e.to_string()))?;
+            let v: Value = serde_json::from_str(text).map_err(|e| {
+                let at = (e.line(), e.column());
+                syntax("JSON", at, json_message(&e, text, at))
+            })?;
             (v, None)
         } else {
+            // JSON text under another extension reads as broken TOML: say so.
+            let hint = if text.trim_start().starts_with('{') {
+                " (the file looks like JSON: a manifest is read as JSON only when its name ends in .json)"
+            } else {
+                ""
+            };
             let doc = toml_edit::Document::parse(text).map_err(|e| {
                 let at = e.span().map(|s| line_col(text, s.start)).unwrap_or((1, 1));
-                syntax("TOML", at, e.message().to_string())
+                syntax("TOML", at, format!("{}{hint}", e.message().trim_end()))
             })?;
             let mut v: Value = toml::from_str(text).map_err(|e| {
                 let at = e.span().map(|s| line_col(text, s.start)).unwrap_or((1, 1));
@@ -78,14 +112,81 @@ impl<'a> Document<'a> {
             datetimes_as_text(&mut v);
             (v, Some(doc))
         };
-        Ok(Self {
+        let mut doc = Self {
             path,
             text,
             value,
             spans,
             schema,
             problems: Vec::new(),
-        })
+            non_finite: false,
+            structural: None,
+        };
+        doc.non_finite_numbers();
+        Ok(doc)
+    }
+
+    /// TOML allows nan and inf (JSON does not: its parser refuses them as
+    /// syntax); converted for reading they become nulls, which would give
+    /// "invalid type: null" or a missing key, and a whole section failing
+    /// for one number (one bad channel `scale` then brought a false
+    /// "needs a time base" for every run). Each is a problem naming the key
+    /// and its text, and the value is read as 1 so that the rest of its
+    /// section is still checked.
+    fn non_finite_numbers(&mut self) {
+        fn walk(v: &mut Value, path: KeyPath, found: &mut Vec<KeyPath>) {
+            match v {
+                Value::Null => {
+                    *v = Value::from(1.0);
+                    found.push(path);
+                }
+                Value::Object(map) => {
+                    for (k, x) in map.iter_mut() {
+                        walk(x, path.key(k), found);
+                    }
+                }
+                Value::Array(items) => {
+                    for (i, x) in items.iter_mut().enumerate() {
+                        walk(x, path.index(i), found);
+                    }
+                }
+                _ => {}
+            }
+        }
+        if self.spans.is_none() {
+            // JSON: a null is the manifest's own, judged by its key's type.
+            return;
+        }
+        let mut found = Vec::new();
+        walk(&mut self.value, KeyPath::root(), &mut found);
+        // The number as written, from the TOML itself.
+        let toml: Option<toml::Value> = toml::from_str(self.text).ok();
+        for path in found {
+            let raw = toml
+                .as_ref()
+                .and_then(|t| toml_at(t, &path))
+                .and_then(toml::Value::as_float)
+                .map_or("nan or inf".to_string(), |x| {
+                    if x.is_nan() {
+                        "nan".to_string()
+                    } else {
+                        x.to_string()
+                    }
+                });
+            self.problems.push(Problem::new(
+                path,
+                format!("{raw} is not a finite number: give a finite value"),
+            ));
+            self.non_finite = true;
+        }
+    }
+
+    /// Marks where the checks across keys begin (ranges, one key against
+    /// another, logs on disk). When a number was nan or inf, the problems
+    /// those checks find are dropped: they would judge the stand-in value,
+    /// not the manifest's. They run again once the numbers are finite.
+    pub fn begin_checks(&mut self) {
+        self.structural = Some(self.problems.len());
     }
 
     /// Required top-level keys are present and no unknown ones are.
@@ -100,8 +201,12 @@ impl<'a> Document<'a> {
         };
         for key in required_keys(&self.schema) {
             if !obj.contains_key(&key) {
-                self.problems
-                    .push(Problem::new(root.key(&key), "required key is missing"));
+                let what = match key.as_str() {
+                    "schema_version" => "required key is missing: add schema_version = 1".into(),
+                    "runs" => "required runs are missing: add [[runs]] tables".into(),
+                    _ => format!("required section is missing: add a [{key}] table"),
+                };
+                self.problems.push(Problem::new(root.key(&key), what));
             }
         }
         let known = known_keys(&self.schema, &root);
@@ -172,6 +277,26 @@ impl<'a> Document<'a> {
         if let (true, Some(r)) = (self.problems.is_empty(), result) {
             return Ok(r);
         }
+        if let (true, Some(n)) = (self.non_finite, self.structural) {
+            self.problems.truncate(n);
+        }
+        // A misspelt key also leaves the key it meant missing: the
+        // unknown key's suggestion says it all, so the missing key's own
+        // problem (required, or needed by the run's role) is dropped.
+        let meant: Vec<KeyPath> = self
+            .problems
+            .iter()
+            .filter_map(|p| {
+                let name = p
+                    .message
+                    .split_once("; did you mean `")?
+                    .1
+                    .strip_suffix("`?")?;
+                Some(p.path.parent().key(name))
+            })
+            .collect();
+        self.problems
+            .retain(|p| !meant.contains(&p.path) || p.message.starts_with("unknown key"));
         for p in self.problems.iter_mut() {
             if p.run.is_none()
                 && let Some(i) = p.path.run_index()
@@ -207,6 +332,34 @@ impl<'a> Document<'a> {
             problems,
         })
     }
+}
+
+/// serde_json's message without its own "at line L column C" (the place
+/// is given once, before it), and what to do where the text is a number
+/// JSON does not have.
+fn json_message(e: &serde_json::Error, text: &str, (line, column): (usize, usize)) -> String {
+    let full = e.to_string();
+    let suffix = format!(" at line {line} column {column}");
+    let message = full.strip_suffix(&suffix).unwrap_or(&full).to_string();
+    let here = text
+        .lines()
+        .nth(line.saturating_sub(1))
+        .and_then(|l| l.get(column.saturating_sub(1)..))
+        .unwrap_or("");
+    for word in ["NaN", "Infinity", "-Infinity", "nan", "inf", "-inf"] {
+        if here.starts_with(word) {
+            return format!("{message}: {word} is not a JSON number; give a finite value");
+        }
+    }
+    message
+}
+
+/// The TOML value at `path`.
+fn toml_at<'t>(root: &'t toml::Value, path: &KeyPath) -> Option<&'t toml::Value> {
+    path.0.iter().try_fold(root, |v, seg| match seg {
+        Seg::Key(k) => v.get(k.as_str()),
+        Seg::Index(i) => v.get(*i),
+    })
 }
 
 /// How the toml crate hands a TOML date or time to serde: a map with this
@@ -267,12 +420,31 @@ fn section<T: DeserializeOwned>(
             } else if raw.contains("untagged enum Column") {
                 "expected a column name (string) or a 0-based column index (integer)".to_string()
             } else {
-                raw
+                plain_type_error(&raw).unwrap_or(raw)
             };
             problems.push(Problem::new(path, message));
             None
         }
     }
+}
+
+/// serde's "invalid type: string \"one\", expected f64" said as a lab
+/// engineer would: "must be a number, not the string \"one\"".
+fn plain_type_error(raw: &str) -> Option<String> {
+    let rest = raw
+        .strip_prefix("invalid type: ")
+        .or_else(|| raw.strip_prefix("invalid value: "))?;
+    let (got, expected) = rest.split_once(", expected ")?;
+    let wanted = match expected {
+        "f64" | "f32" => "a number",
+        "u8" | "u16" | "u32" | "u64" | "usize" => "a whole number, 0 or more",
+        "i8" | "i16" | "i32" | "i64" | "isize" => "a whole number",
+        "a boolean" => "true or false",
+        "a string" => "text in quotes",
+        "a sequence" => "an array [...]",
+        _ => return None,
+    };
+    Some(format!("must be {wanted}, not the {got}"))
 }
 
 fn unknown_key(schema: &Value, parent: &KeyPath, name: &str) -> Problem {

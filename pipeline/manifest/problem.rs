@@ -58,6 +58,11 @@ impl Problem {
     }
 }
 
+/// The largest manifest servoid reads (16 MiB: some 100,000 runs written
+/// out in full). Anything larger is not a manifest (`/dev/zero` was read
+/// until memory ran out).
+pub const MAX_MANIFEST_BYTES: u64 = 16 << 20;
+
 /// Why a manifest cannot be used.
 #[derive(Debug, thiserror::Error)]
 pub enum ManifestError {
@@ -67,6 +72,12 @@ pub enum ManifestError {
         #[source]
         source: std::io::Error,
     },
+    #[error(
+        "{}: the manifest is larger than {} MiB; reading stopped there. A manifest describes runs, not their data: give long run lists as a run table (`run_table`) and data as log files",
+        file.display(),
+        MAX_MANIFEST_BYTES >> 20
+    )]
+    TooLarge { file: PathBuf },
     #[error("{}:{line}:{column}: {format} syntax error: {message}", file.display())]
     Syntax {
         file: PathBuf,

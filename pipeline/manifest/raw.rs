@@ -61,6 +61,31 @@ pub struct Manifest {
     /// springs for (defaults apply when the table is absent).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub sensitivity: Option<SensitivitySettings>,
+    /// Resource limits (defaults apply when the table is absent).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub limits: Option<Limits>,
+}
+
+/// Resource limits of a job.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[schemars(deny_unknown_fields)]
+pub struct Limits {
+    /// The largest log read, in MiB (a log is read whole; parsing a CSV
+    /// takes a few times its size in memory). Larger ones fail their run.
+    #[serde(default = "default_max_log_mib")]
+    pub max_log_mib: u64,
+}
+
+impl Default for Limits {
+    fn default() -> Self {
+        Self {
+            max_log_mib: default_max_log_mib(),
+        }
+    }
+}
+
+fn default_max_log_mib() -> u64 {
+    crate::ingest::DEFAULT_MAX_LOG_MIB
 }
 
 /// The stiffness sensitivity (paper Sec. 2.3): which stiffnesses to sweep

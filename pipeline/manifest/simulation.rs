@@ -323,6 +323,7 @@ pub fn load_simulation_str(text: &str, path: &Path) -> Result<SimulationPlan, Ma
         references: doc.array("references"),
         sensitivity: doc.section("sensitivity"),
     };
+    doc.begin_checks();
     let problems = &mut doc.problems;
     let mut bad = |path: KeyPath, msg: String| problems.push(Problem::new(path, msg));
     let fs = s.info.as_ref().map(|i| i.sample_rate_hz);
@@ -800,7 +801,7 @@ mod tests {
     fn a_seed_that_is_not_an_integer() {
         let e = problems(&BUNDLED.replace("seed = 2018", "seed = 20.18"));
         assert!(e.contains("simulation.seed"), "{e}");
-        assert!(e.contains("expected u64"), "{e}");
+        assert!(e.contains("must be a whole number, 0 or more"), "{e}");
         let e = problems(&BUNDLED.replace("seed = 2018", "seed = \"abc\""));
         assert!(e.contains("simulation.seed"), "{e}");
     }

@@ -33,6 +33,9 @@ pub enum WriteError {
         #[source]
         source: std::io::Error,
     },
+    /// The output folder cannot take the outputs; found before computing.
+    #[error("{}: {why}", path.display())]
+    OutFolder { path: PathBuf, why: String },
     /// What a run was writing (a figure, a table, its cache entry) when
     /// the write failed.
     #[error("run {run}: {source}")]
@@ -204,6 +207,35 @@ fn replace(path: &Path, bytes: &[u8], sync: bool) -> Result<(), WriteError> {
         let _ = std::fs::remove_file(&tmp);
     }
     result.map_err(io)
+}
+
+/// Make sure `dir` can take the outputs before anything is computed: it is
+/// a folder (created if absent) and a file can be created and removed in
+/// it. A file in its place, a read-only folder or a missing parent
+/// otherwise surfaced only after all the computing.
+pub fn prepare_out(dir: &Path) -> Result<(), WriteError> {
+    let bad = |why: String| WriteError::OutFolder {
+        path: dir.to_path_buf(),
+        why,
+    };
+    if let Ok(m) = std::fs::metadata(dir)
+        && !m.is_dir()
+    {
+        return Err(bad(
+            "the output folder (--out) is a file; give a folder, or remove the file".into(),
+        ));
+    }
+    std::fs::create_dir_all(dir)
+        .map_err(|e| bad(format!("cannot create the output folder (--out): {e}")))?;
+    let probe = dir.join(format!(".servoid-probe-{}", std::process::id()));
+    std::fs::OpenOptions::new()
+        .write(true)
+        .create(true)
+        .truncate(true)
+        .open(&probe)
+        .map_err(|e| bad(format!("cannot write in the output folder (--out): {e}")))?;
+    let _ = std::fs::remove_file(&probe);
+    Ok(())
 }
 
 /// Put every artifact written so far under `dir` on disk: one syncfs(2) of

@@ -55,7 +55,7 @@ pub fn acquire_with(
         RunSource::Log(plan) => {
             let file = match file {
                 Some(f) => f,
-                None => LogFile::read(&plan.path)?,
+                None => LogFile::read(&plan.path, plan.max_bytes)?,
             };
             let stage = log_stage_from(run, plan, &campaign.identification, file)?;
             let fit = stage.fit.as_ref();
@@ -197,7 +197,7 @@ pub enum AcquireError {
     },
     #[error("{}: the fit did not converge ({termination}); refusing a model that is not an optimum", path.display())]
     NotConverged { path: PathBuf, termination: String },
-    #[error("{}: the fitted model is unstable (poles {poles}); refusing it", path.display())]
+    #[error("{}: the fitted model is unstable (poles {poles}); refusing it. Swapped command and displacement columns give this: check the channels' columns", path.display())]
     Unstable { path: PathBuf, poles: String },
 }
 
@@ -215,7 +215,7 @@ pub fn log_stage(
     plan: &LogPlan,
     ident: &IdentificationPlan,
 ) -> Result<LogStage, AcquireError> {
-    log_stage_from(run, plan, ident, LogFile::read(&plan.path)?)
+    log_stage_from(run, plan, ident, LogFile::read(&plan.path, plan.max_bytes)?)
 }
 
 /// The command of run `plan`'s log as its fit saw it (trimmed when the

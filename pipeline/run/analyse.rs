@@ -45,6 +45,10 @@ use crate::simulate::specimen::SpecimenModel;
 use crate::validate::csi::Csi;
 use crate::validate::{self, Record, ValidateError, ValidationMetrics};
 
+/// Below this fit percent (MATLAB tfest's FitPercent, [`crate::fit::TfFit`])
+/// a run's model gets a warning naming the log's mapping.
+const POOR_FIT_PERCENT: f64 = 50.0;
+
 /// Why one run failed; recorded in that run's result.
 #[derive(Debug, thiserror::Error)]
 pub enum RunError {
@@ -426,7 +430,9 @@ fn probe(
         all.extend([&keyed as &dyn std::fmt::Debug, &draw.choice, &sha]);
         cache::key(&all)
     };
-    match cache.probe(&lp.path, key, |s: &Stored| draw.still_there(s)) {
+    match cache.probe(&lp.path, lp.max_bytes, key, |s: &Stored| {
+        draw.still_there(s)
+    }) {
         Probe::Hit(stored) => (Some(stored), None, None),
         Probe::Miss { key, file } => (None, Some(key), file),
     }
@@ -871,6 +877,15 @@ fn fitted(
             a.diagnosis((!fit.shape.fit_delay).then_some("set identification.delay = \"fit\""))
         }) {
             out.warnings.push(format!("the run's own fit: {d}"));
+        }
+        // A model that explains under half of the measured response is not
+        // a rig's: the likely causes are in the log's mapping, not in the
+        // model (swapped command and displacement columns measured 31 %).
+        if summary.fit_percent < POOR_FIT_PERCENT {
+            out.warnings.push(format!(
+                "the model explains only {:.0} % of the measured response (fit percent below {POOR_FIT_PERCENT:.0}); likely cause: the channels' columns (command and displacement swapped, or another run's log)",
+                summary.fit_percent
+            ));
         }
         out.fit = Some(summary);
         match validate::fitted_run(&fit.tf, &record(&st.log)) {

@@ -71,6 +71,7 @@ impl Cache {
     pub(super) fn probe<T: DeserializeOwned>(
         &self,
         log: &Path,
+        max_bytes: u64,
         key: impl Fn(&str) -> String,
         usable: impl Fn(&T) -> bool,
     ) -> Probe<T> {
@@ -92,7 +93,7 @@ impl Cache {
         {
             return Probe::Hit(hit);
         }
-        let Ok(file) = LogFile::read(log) else {
+        let Ok(file) = LogFile::read(log, max_bytes) else {
             // The run reads it again and reports why it cannot.
             return Probe::Miss {
                 key: String::new(),

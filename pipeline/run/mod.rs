@@ -78,6 +78,7 @@ impl JobError {
             self,
             JobError::Manifest(_)
                 | JobError::WrongKind { .. }
+                | JobError::Write(WriteError::OutFolder { .. })
                 | JobError::Verify(_)
                 | JobError::Merge(_)
         )
@@ -126,6 +127,8 @@ pub struct Checked {
     pub kind: &'static str,
     pub name: String,
     pub runs: usize,
+    /// Runs whose log is not there (yet): each will fail alone when run.
+    pub missing_logs: Vec<(String, PathBuf)>,
 }
 
 impl std::fmt::Display for Checked {
@@ -141,11 +144,22 @@ pub fn check(path: &Path) -> Result<Checked, ManifestError> {
             kind: "campaign",
             name: c.name.clone(),
             runs: c.runs.len(),
+            missing_logs: c
+                .runs
+                .iter()
+                .filter_map(|r| match &r.source {
+                    manifest::RunSource::Log(plan) if !plan.path.exists() => {
+                        Some((r.id.clone(), plan.path.clone()))
+                    }
+                    _ => None,
+                })
+                .collect(),
         },
         Loaded::Simulation(p) => Checked {
             kind: "simulation",
             name: p.manifest.simulation.name.clone(),
             runs: p.runs.len(),
+            missing_logs: Vec::new(),
         },
     })
 }
@@ -162,6 +176,7 @@ pub fn run_campaign(
         .out
         .clone()
         .unwrap_or_else(|| PathBuf::from("reports").join(&campaign.name));
+    report::prepare_out(&out_dir)?;
     let workers = pool(settings.jobs)?;
     workers.install(|| write_campaign(&campaign, &out_dir, settings, observer))
 }
@@ -192,6 +207,7 @@ pub fn run_simulation(
         .out
         .clone()
         .unwrap_or_else(|| PathBuf::from("reports").join(&plan.manifest.simulation.name));
+    report::prepare_out(&out_dir)?;
     let workers = pool(settings.jobs)?;
     let simulated = workers.install(|| simulate::simulate_campaign(&plan, &out_dir))?;
     let campaign = then_run.then(|| {
@@ -235,6 +251,7 @@ pub fn run_shard(
             campaign.name, shard.index, shard.count
         ))
     });
+    report::prepare_out(&out_dir)?;
     let share = shard.of(&campaign);
     let clock = std::time::Instant::now();
     let workers = pool(settings.jobs)?;

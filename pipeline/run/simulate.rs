@@ -338,5 +338,6 @@ fn analysis_manifest(plan: &SimulationPlan, truth: &Truth) -> Manifest {
         run_table: None,
         history: None,
         sensitivity: m.sensitivity.clone(),
+        limits: None,
     }
 }
