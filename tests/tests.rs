@@ -13,6 +13,7 @@ mod csi;
 mod disk_full;
 mod drift;
 mod figure_formats;
+mod fuzz_replay;
 mod joint;
 mod layering;
 mod manifest_errors;

@@ -102,16 +102,21 @@ fn by_polars(
     // here, as in the other text format, by handing polars a copy without
     // them (only when there are any).
     let cleaned = without_blank_lines(bytes, plan.csv.skip_lines);
-    let df = CsvReadOptions::default()
-        .with_has_header(plan.csv.header)
-        .with_skip_lines(plan.csv.skip_lines)
-        .with_projection(Some(projection.into()))
-        .with_schema_overwrite(Some(SchemaRef::new(schema)))
-        .with_raise_if_empty(false)
-        .with_parse_options(parse)
-        .into_reader_with_file_handle(Cursor::new(cleaned.as_deref().unwrap_or(bytes)))
-        .finish()
-        .ok()?;
+    // A panic inside polars (damaged input) is a refusal like its errors:
+    // the line parser then reads the file or names what is wrong with it.
+    let df = super::guard_polars(|| {
+        CsvReadOptions::default()
+            .with_has_header(plan.csv.header)
+            .with_skip_lines(plan.csv.skip_lines)
+            .with_projection(Some(projection.into()))
+            .with_schema_overwrite(Some(SchemaRef::new(schema)))
+            .with_raise_if_empty(false)
+            .with_parse_options(parse)
+            .into_reader_with_file_handle(Cursor::new(cleaned.as_deref().unwrap_or(bytes)))
+            .finish()
+    })
+    .ok()?
+    .ok()?;
 
     let mut columns = Vec::with_capacity(want.len());
     for (w, &i) in want.iter().zip(index) {

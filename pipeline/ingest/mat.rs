@@ -236,7 +236,7 @@ fn real_f64(path: &Path, a: &Array, channel: &'static str) -> Result<Vec<f64>, I
             },
         )
     };
-    Ok(match a.data() {
+    let values = match a.data() {
         NumericData::Double { real, imag: None } => real.clone(),
         NumericData::Single { real, imag: None } => widen(real),
         NumericData::Int8 { real, imag: None } => widen(real),
@@ -250,7 +250,22 @@ fn real_f64(path: &Path, a: &Array, channel: &'static str) -> Result<Vec<f64>, I
         NumericData::Int64 { real, imag: None } => real.iter().map(|&x| x as f64).collect(),
         NumericData::UInt64 { real, imag: None } => real.iter().map(|&x| x as f64).collect(),
         _ => return Err(complex()),
-    })
+    };
+    // A damaged file can declare more elements than it holds (found by the
+    // MAT fuzz target): indexing by the declared size would run off the end.
+    let declared: usize = a.size().iter().product();
+    if values.len() != declared {
+        return Err(IngestError::format(
+            path,
+            FormatProblem::SizeMismatch {
+                variable: a.name().to_string(),
+                channel,
+                size: a.size().clone(),
+                held: values.len(),
+            },
+        ));
+    }
+    Ok(values)
 }
 
 /// A vector variable's values.

@@ -36,7 +36,7 @@ pub use plan::{
     ChannelPlan, Channels, Column, CsvOptions, DEFAULT_MAX_LOG_MIB, LogFormat, LogPlan, TimePlan,
 };
 pub use quantum::quantum_step;
-pub use table::{Table, TableError, TableFormat, TableProblem, read_table};
+pub use table::{Table, TableError, TableFormat, TableProblem, read_table, table_from_bytes};
 
 /// A log read and converted to SI.
 #[derive(Debug, Clone, PartialEq)]
@@ -429,6 +429,17 @@ pub enum FormatProblem {
         channel: &'static str,
         size: Vec<usize>,
     },
+    /// The declared size and the elements held disagree (a damaged file).
+    #[error(
+        "variable `{variable}` ({channel} channel) is declared {} but holds {held} values: the file is damaged",
+        dims(size)
+    )]
+    SizeMismatch {
+        variable: String,
+        channel: &'static str,
+        size: Vec<usize>,
+        held: usize,
+    },
 
     // Parquet.
     /// The footer (schema) cannot be read.
@@ -437,6 +448,9 @@ pub enum FormatProblem {
         #[source]
         source: PolarsError,
     },
+    /// polars failed (panicked) on damaged bytes.
+    #[error("a damaged Parquet file: polars failed reading it ({message})")]
+    ParquetDamaged { message: String },
     /// The schema reads, the wanted columns do not.
     #[error("polars cannot read it as Parquet: {source}")]
     ParquetRead {
@@ -544,6 +558,19 @@ impl LogFile {
             bytes,
             stamp: after,
         })
+    }
+}
+
+impl LogFile {
+    /// A log's bytes as if read from `path` (no stamp): for input that is
+    /// not a file, such as a fuzzer's.
+    pub fn from_bytes(path: &Path, bytes: Vec<u8>) -> Self {
+        Self {
+            path: path.to_path_buf(),
+            sha256: sha256_hex(&bytes),
+            bytes,
+            stamp: None,
+        }
     }
 }
 
@@ -659,6 +686,34 @@ pub fn off_pool<R: Send>(f: impl FnOnce() -> R + Send) -> R {
         Ok(r) => r,
         Err(panic) => std::panic::resume_unwind(panic),
     })
+}
+
+/// Calls into polars running now under [`guard_polars`].
+static GUARDED: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
+
+/// A call into polars that may panic on damaged input (the fuzz targets
+/// found index panics in its CSV and Parquet readers): the panic becomes
+/// `Err` with its message, and the reader reports the file as unreadable.
+pub(crate) fn guard_polars<R>(f: impl FnOnce() -> R) -> Result<R, String> {
+    use std::sync::atomic::Ordering;
+    GUARDED.fetch_add(1, Ordering::SeqCst);
+    let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(f));
+    GUARDED.fetch_sub(1, Ordering::SeqCst);
+    result.map_err(|payload| {
+        payload
+            .downcast_ref::<&str>()
+            .map(|s| s.to_string())
+            .or_else(|| payload.downcast_ref::<String>().cloned())
+            .unwrap_or_else(|| "a panic without a message".into())
+    })
+}
+
+/// Whether a panic is one `guard_polars` catches: raised in polars code
+/// while a guarded call runs. A panic hook that skips these keeps a damaged
+/// file's report to the reader's own error (the CLI's, the fuzz targets').
+pub fn caught_polars_panic(info: &std::panic::PanicHookInfo<'_>) -> bool {
+    GUARDED.load(std::sync::atomic::Ordering::SeqCst) > 0
+        && info.location().is_some_and(|l| l.file().contains("polars"))
 }
 
 /// SHA-256 of `bytes` as lowercase hexadecimal.

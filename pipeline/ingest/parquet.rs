@@ -18,8 +18,11 @@ pub(super) fn read<'a>(
 ) -> Result<Raw<'a>, IngestError> {
     let format = |problem| IngestError::format(path, problem);
     let mut reader = ParquetReader::new(Cursor::new(bytes));
-    let schema = reader
-        .schema()
+    // A panic inside polars on damaged bytes (found by the Parquet fuzz
+    // target) is reported as such, not a crash.
+    let damaged = |message| format(FormatProblem::ParquetDamaged { message });
+    let schema = super::guard_polars(|| reader.schema())
+        .map_err(damaged)?
         .map_err(|source| format(FormatProblem::ParquetUnreadable { source }))?;
     let names: Vec<String> = schema.iter_names().map(|n| n.to_string()).collect();
 
@@ -45,9 +48,8 @@ pub(super) fn read<'a>(
     let mut projection = index.clone();
     projection.sort_unstable();
     projection.dedup();
-    let df = reader
-        .with_projection(Some(projection))
-        .finish()
+    let df = super::guard_polars(|| reader.with_projection(Some(projection)).finish())
+        .map_err(damaged)?
         .map_err(|source| format(FormatProblem::ParquetRead { source }))?;
     if df.height() == 0 {
         return Err(IngestError::HeaderOnly {

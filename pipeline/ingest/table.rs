@@ -85,6 +85,12 @@ pub enum TableProblem {
         #[source]
         source: PolarsError,
     },
+    /// The reader failed inside polars on damaged bytes.
+    #[error("a damaged {format} table: polars failed reading it ({message})")]
+    Damaged {
+        format: &'static str,
+        message: String,
+    },
     /// A Parquet column of a type that has no text form (a list, a struct).
     #[error("column `{column}` holds {dtype}, which cannot be read as text")]
     NotText {
@@ -100,12 +106,24 @@ pub enum TableProblem {
 /// `007` stays `007`); Parquet numbers are printed in the shortest form that
 /// reads back to the same value, integers in full.
 pub fn read_table(path: &Path, format: TableFormat) -> Result<Table, TableError> {
+    let bytes = std::fs::read(path).map_err(|source| TableError {
+        path: path.to_path_buf(),
+        problem: TableProblem::Io { source },
+    })?;
+    table_from_bytes(path, bytes, format)
+}
+
+/// [`read_table`] of bytes already read (`path` names them in errors).
+pub fn table_from_bytes(
+    path: &Path,
+    bytes: Vec<u8>,
+    format: TableFormat,
+) -> Result<Table, TableError> {
     let fail = |problem| TableError {
         path: path.to_path_buf(),
         problem,
     };
-    let bytes = std::fs::read(path).map_err(|source| fail(TableProblem::Io { source }))?;
-    let df = super::off_pool(|| match format {
+    let read = || match format {
         TableFormat::Csv => {
             // A UTF-8 byte-order mark is not part of the first column's name.
             let text = bytes.strip_prefix(b"\xEF\xBB\xBF").unwrap_or(&bytes);
@@ -121,7 +139,18 @@ pub fn read_table(path: &Path, format: TableFormat) -> Result<Table, TableError>
         TableFormat::Parquet => ParquetReader::new(Cursor::new(bytes.as_slice()))
             .finish()
             .map_err(|source| fail(TableProblem::Parquet { source })),
-    })?;
+    };
+    // A panic inside polars on damaged bytes is the table's problem, not a
+    // crash (found by the run-table fuzz target).
+    let df = super::off_pool(|| super::guard_polars(read)).map_err(|message| {
+        fail(TableProblem::Damaged {
+            format: match format {
+                TableFormat::Csv => "CSV",
+                TableFormat::Parquet => "Parquet",
+            },
+            message,
+        })
+    })??;
     let (columns, rows) = text_cells(&df).map_err(fail)?;
     Ok(Table {
         path: path.to_path_buf(),

@@ -5,7 +5,7 @@
 //! collected, with its key path, run and line. The runs of a `[run_table]`
 //! (checked in `table`) follow those of `[[runs]]`.
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 
 use super::checks::{
@@ -294,8 +294,17 @@ fn validate(
         .chain(table.keys.iter().map(|k| k.role))
         .collect();
     check_rig_source(&roles, given_rig.is_some(), &mut bad);
+    // Runs listed but unread (a type error in them, already a problem):
+    // a reference to one is not also "a run the campaign does not have".
+    let listed: BTreeSet<&str> = partial
+        .raw_run_ids
+        .iter()
+        .flatten()
+        .map(String::as_str)
+        .collect();
     let references = check_references(
         &run_roles(&partial.runs, &table.keys),
+        &listed,
         &partial.references,
         &mut bad,
     );
@@ -918,6 +927,7 @@ fn plan_channel(c: &Channel) -> ChannelPlan {
 /// each run's role and whether it has a specimen mass.
 fn check_references(
     run_roles: &BTreeMap<&str, (Role, bool)>,
+    listed: &BTreeSet<&str>,
     references: &[Option<Reference>],
     bad: &mut impl FnMut(KeyPath, String),
 ) -> Vec<ReferencePlan> {
@@ -926,7 +936,7 @@ fn check_references(
         .enumerate()
         .filter_map(|(i, r)| {
             let base = KeyPath::root().key("references").index(i);
-            check_reference(r.as_ref()?, &base, run_roles, bad)
+            check_reference(r.as_ref()?, &base, run_roles, listed, bad)
         })
         .collect()
 }
@@ -935,6 +945,7 @@ fn check_reference(
     r: &Reference,
     base: &KeyPath,
     runs: &BTreeMap<&str, (Role, bool)>,
+    listed: &BTreeSet<&str>,
     bad: &mut impl FnMut(KeyPath, String),
 ) -> Option<ReferencePlan> {
     let qpath = base.key("quantity");
@@ -954,7 +965,7 @@ fn check_reference(
     let pick = |list: &[&str], name: &str| list.contains(&name);
     let run_must = |run: &str, bad: &mut dyn FnMut(KeyPath, String)| -> Option<(Role, bool)> {
         let found = runs.get(run).copied();
-        if found.is_none() {
+        if found.is_none() && !listed.contains(run) {
             bad(
                 qpath.clone(),
                 format!(

@@ -101,13 +101,17 @@ impl<'a> Document<'a> {
             } else {
                 ""
             };
-            let doc = toml_edit::Document::parse(text).map_err(|e| {
+            // The toml crate first: toml_edit 0.23 panics on some documents
+            // the toml crate refuses ("all items have spans", found by the
+            // manifest fuzz target; fuzz/regressions/manifest_toml/), and
+            // the spans are only wanted for a document that parses.
+            let mut v: Value = toml::from_str(text).map_err(|e| {
                 let at = e.span().map(|s| line_col(text, s.start)).unwrap_or((1, 1));
                 syntax("TOML", at, format!("{}{hint}", e.message().trim_end()))
             })?;
-            let mut v: Value = toml::from_str(text).map_err(|e| {
+            let doc = toml_edit::Document::parse(text).map_err(|e| {
                 let at = e.span().map(|s| line_col(text, s.start)).unwrap_or((1, 1));
-                syntax("TOML", at, e.message().to_string())
+                syntax("TOML", at, format!("{}{hint}", e.message().trim_end()))
             })?;
             datetimes_as_text(&mut v);
             (v, Some(doc))
