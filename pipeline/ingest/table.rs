@@ -142,6 +142,14 @@ pub fn table_from_bytes(
     };
     // A panic inside polars on damaged bytes is the table's problem, not a
     // crash (found by the run-table fuzz target).
+    if format == TableFormat::Parquet {
+        super::parquet::check_footer(&bytes).map_err(|message| {
+            fail(TableProblem::Damaged {
+                format: "Parquet",
+                message,
+            })
+        })?;
+    }
     let df = super::off_pool(|| super::guard_polars(read)).map_err(|message| {
         fail(TableProblem::Damaged {
             format: match format {

@@ -1548,3 +1548,43 @@ fn a_folder_or_a_named_pipe_is_not_read_as_a_log() {
     assert_eq!(read.stamp.map(|s| s.size), Some(12));
     assert_eq!(read.stamp, FileStamp::of(&file));
 }
+
+/// The Parquet footer check against footers built by hand from the thrift
+/// compact protocol's definition: a list declaring 2^40 elements in a
+/// footer with no bytes left, and metadata longer than the file, are
+/// refused with what they declare; a struct with a short list of strings,
+/// and bytes without the Parquet magic, pass (polars judges the latter).
+#[test]
+fn parquet_footers_that_declare_more_than_they_hold_are_refused() {
+    fn file(meta: &[u8], declared_len: u32) -> Vec<u8> {
+        let mut b = b"PAR1".to_vec();
+        b.extend_from_slice(meta);
+        b.extend_from_slice(&declared_len.to_le_bytes());
+        b.extend_from_slice(b"PAR1");
+        b
+    }
+    // Field 1 (delta 1), type 9 (list); list header 0xF8: size 15 (a
+    // varint follows), element type 8 (binary); then 2^40 as a varint.
+    let mut huge = vec![0x19, 0xF8];
+    let mut v: u64 = 1 << 40;
+    while v >= 0x80 {
+        huge.push((v as u8 & 0x7f) | 0x80);
+        v >>= 7;
+    }
+    huge.push(v as u8);
+    assert_eq!(
+        super::parquet::check_footer(&file(&huge, huge.len() as u32)),
+        Err("its footer declares a list of 1099511627776 elements where 0 bytes remain".into())
+    );
+    assert_eq!(
+        super::parquet::check_footer(&file(&[0x00], 1000)),
+        Err("its footer declares 1000 bytes of metadata in a file of 13 bytes".into())
+    );
+    // Field 1: a list of two strings "ab", "c"; field 2 (delta 1): i32 5; stop.
+    let good = [0x19, 0x28, 0x02, b'a', b'b', 0x01, b'c', 0x15, 0x0a, 0x00];
+    assert_eq!(
+        super::parquet::check_footer(&file(&good, good.len() as u32)),
+        Ok(())
+    );
+    assert_eq!(super::parquet::check_footer(b"not parquet at all"), Ok(()));
+}
