@@ -48,9 +48,10 @@ pub struct LevenbergMarquardt {
     upper: Option<DVector<f64>>,
     lambda: f64,
     diag: DVector<f64>,
-    /// J^T J and J^T r at the current point: formed once when the point is
-    /// accepted (its convergence test needs them) and used by the next
-    /// iteration's steps.
+    /// For a problem that gives residuals and J: J^T J and J^T r at the
+    /// current point, formed once when the point is accepted (its
+    /// convergence test needs them) and used by the next iteration's steps.
+    /// A problem that gives its normal equations keeps them in the state.
     normal: Option<(DMatrix<f64>, DVector<f64>)>,
     status: TerminationStatus,
 }
@@ -301,16 +302,15 @@ impl LevenbergMarquardt {
     }
 
     /// Sets the damping up from the normal equations at the start.
-    fn start(&mut self, cost: f64, a: DMatrix<f64>, g: DVector<f64>, theta: &DVector<f64>) {
+    fn start(&mut self, cost: f64, a: &DMatrix<f64>, g: &DVector<f64>, theta: &DVector<f64>) {
         self.diag = DVector::zeros(0);
-        self.update_diag(&a);
+        self.update_diag(a);
         self.lambda = self.lambda0;
-        self.status = if self.is_converged(&a, &g, cost, theta) {
+        self.status = if self.is_converged(a, g, cost, theta) {
             TerminationStatus::Terminated(TerminationReason::SolverConverged)
         } else {
             TerminationStatus::NotTerminated
         };
-        self.normal = Some((a, g));
     }
 
     /// The starting point the executor was configured with, checked
@@ -371,13 +371,11 @@ impl LevenbergMarquardt {
         Ok(None)
     }
 
-    /// Judges convergence at an accepted point and keeps its normal
-    /// equations for the next iteration.
-    fn accept(&mut self, a: DMatrix<f64>, g: DVector<f64>, cost: f64, theta: &DVector<f64>) {
-        if self.is_converged(&a, &g, cost, theta) {
+    /// Judges convergence at an accepted point.
+    fn accept(&mut self, a: &DMatrix<f64>, g: &DVector<f64>, cost: f64, theta: &DVector<f64>) {
+        if self.is_converged(a, g, cost, theta) {
             self.status = TerminationStatus::Terminated(TerminationReason::SolverConverged);
         }
-        self.normal = Some((a, g));
     }
 
     fn missing(what: &str) -> Error {
@@ -408,7 +406,8 @@ where
         Self::check_start(cost)?;
         let j = problem.jacobian(&theta)?;
         let (a, g) = normal_equations(&j, &r);
-        self.start(cost, a, g, &theta);
+        self.start(cost, &a, &g, &theta);
+        self.normal = Some((a, g));
         Ok((state.param(theta).residuals(r).jacobian(j).cost(cost), None))
     }
 
@@ -443,7 +442,8 @@ where
             }) => {
                 let j_new = problem.jacobian(&trial)?;
                 let (a_new, g_new) = normal_equations(&j_new, &r_new);
-                self.accept(a_new, g_new, c_new, &trial);
+                self.accept(&a_new, &g_new, c_new, &trial);
+                self.normal = Some((a_new, g_new));
                 Ok((
                     state
                         .param(trial)
@@ -488,7 +488,7 @@ where
         let cost = problem.apply(&theta)?;
         Self::check_start(cost)?;
         let normal = problem.jacobian(&theta)?;
-        self.start(cost, normal.a.clone(), normal.g.clone(), &theta);
+        self.start(cost, &normal.a, &normal.g, &theta);
         Ok((state.param(theta).jacobian(normal).cost(cost), None))
     }
 
@@ -502,14 +502,11 @@ where
             .take_jacobian()
             .ok_or_else(|| Self::missing("normal equations"))?;
         let cost = state.get_cost();
-        let (a, g) = self
-            .normal
-            .take()
-            .unwrap_or_else(|| (normal.a.clone(), normal.g.clone()));
         let mut rejected = 0_u64;
-        let accepted = self.advance(&theta, cost, &a, &g, &mut rejected, |point| {
-            Ok((problem.apply(point)?, ()))
-        })?;
+        let accepted =
+            self.advance(&theta, cost, &normal.a, &normal.g, &mut rejected, |point| {
+                Ok((problem.apply(point)?, ()))
+            })?;
         let kv = |lm: &Self| kv!("lambda" => lm.lambda; "rejected" => rejected;);
         match accepted {
             Some(Accepted {
@@ -518,19 +515,16 @@ where
                 ..
             }) => {
                 let n_new = problem.jacobian(&trial)?;
-                self.accept(n_new.a.clone(), n_new.g.clone(), c_new, &trial);
+                self.accept(&n_new.a, &n_new.g, c_new, &trial);
                 Ok((
                     state.param(trial).jacobian(n_new).cost(c_new),
                     Some(kv(self)),
                 ))
             }
-            None => {
-                self.normal = Some((a, g));
-                Ok((
-                    state.param(theta).jacobian(normal).cost(cost),
-                    Some(kv(self)),
-                ))
-            }
+            None => Ok((
+                state.param(theta).jacobian(normal).cost(cost),
+                Some(kv(self)),
+            )),
         }
     }
 
