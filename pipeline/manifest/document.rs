@@ -290,17 +290,9 @@ impl<'a> Document<'a> {
         let meant: Vec<KeyPath> = self
             .problems
             .iter()
-            .filter_map(|p| {
-                let name = p
-                    .message
-                    .split_once("; did you mean `")?
-                    .1
-                    .strip_suffix("`?")?;
-                Some(p.path.parent().key(name))
-            })
+            .filter_map(|p| p.meant.clone())
             .collect();
-        self.problems
-            .retain(|p| !meant.contains(&p.path) || p.message.starts_with("unknown key"));
+        self.problems.retain(|p| !meant.contains(&p.path));
         for p in self.problems.iter_mut() {
             if p.run.is_none()
                 && let Some(i) = p.path.run_index()
@@ -454,19 +446,26 @@ fn plain_type_error(raw: &str) -> Option<String> {
 fn unknown_key(schema: &Value, parent: &KeyPath, name: &str) -> Problem {
     let known = known_keys(schema, parent);
     let hint = suggest(&known, name);
-    Problem::new(parent.key(name), format!("unknown key `{name}`{hint}"))
+    let mut p = Problem::new(parent.key(name), format!("unknown key `{name}`{hint}"));
+    p.meant = closest(&known, name).map(|k| parent.key(k));
+    p
+}
+
+/// The one of `known` closest to `name`, if any is close.
+fn closest<'k>(known: &'k [impl AsRef<str>], name: &str) -> Option<&'k str> {
+    known
+        .iter()
+        .map(|k| (strsim::jaro_winkler(k.as_ref(), name), k.as_ref()))
+        .filter(|(score, _)| *score > 0.85)
+        .max_by(|a, b| a.0.total_cmp(&b.0))
+        .map(|(_, k)| k)
 }
 
 /// What to say after an unknown `name`: the closest of `known`
 /// (`; did you mean `x`?`), else the list of them, else nothing.
 pub(super) fn suggest(known: &[impl AsRef<str>], name: &str) -> String {
-    let best = known
-        .iter()
-        .map(|k| (strsim::jaro_winkler(k.as_ref(), name), k.as_ref()))
-        .filter(|(score, _)| *score > 0.85)
-        .max_by(|a, b| a.0.total_cmp(&b.0));
-    match best {
-        Some((_, k)) => format!("; did you mean `{k}`?"),
+    match closest(known, name) {
+        Some(k) => format!("; did you mean `{k}`?"),
         None if !known.is_empty() => {
             let names: Vec<&str> = known.iter().map(AsRef::as_ref).collect();
             format!("; expected one of: {}", names.join(", "))

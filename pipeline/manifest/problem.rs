@@ -20,6 +20,9 @@ pub struct Problem {
     /// this instead of by `path` and `line_col`.
     pub table: Option<TablePlace>,
     pub message: String,
+    /// For an unknown key, the known key its suggestion names: that key's
+    /// own "missing" problem is then left out (it says the same thing).
+    pub meant: Option<KeyPath>,
 }
 
 /// A place in a run table.
@@ -42,6 +45,7 @@ impl Problem {
             line_col: None,
             table: None,
             message: message.into(),
+            meant: None,
         }
     }
 
@@ -54,6 +58,7 @@ impl Problem {
             line_col: None,
             table: Some(place),
             message: message.into(),
+            meant: None,
         }
     }
 }
