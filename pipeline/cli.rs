@@ -339,8 +339,7 @@ fn cmd_simulate(manifest: &Path, then_run: bool, args: &RunArgs) -> u8 {
     }
     let code = match &outcome.campaign {
         None => EXIT_OK,
-        Some(Ok(c)) => watch.campaign(c),
-        Some(Err(e)) => job_failed(e),
+        Some(c) => watch.campaign(c),
     };
     watch.done();
     code

@@ -18,6 +18,7 @@ mod joint;
 mod layering;
 mod manifest_errors;
 mod mts;
+mod output_set;
 mod paper;
 mod run_table;
 mod schemas;

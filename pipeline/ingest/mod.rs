@@ -451,6 +451,10 @@ pub enum FormatProblem {
     /// polars failed (panicked) on damaged bytes.
     #[error("a damaged Parquet file: polars failed reading it ({message})")]
     ParquetDamaged { message: String },
+    /// Its metadata or page headers declare what the file cannot hold
+    /// (servoid's check before polars reads them).
+    #[error("a damaged Parquet file: {message}")]
+    ParquetMetadata { message: String },
     /// The schema reads, the wanted columns do not.
     #[error("polars cannot read it as Parquet: {source}")]
     ParquetRead {

@@ -85,6 +85,10 @@ pub enum TableProblem {
         #[source]
         source: PolarsError,
     },
+    /// Its Parquet metadata or page headers declare what the file cannot
+    /// hold (servoid's check before polars reads them).
+    #[error("a damaged Parquet table: {message}")]
+    Metadata { message: String },
     /// The reader failed inside polars on damaged bytes.
     #[error("a damaged {format} table: polars failed reading it ({message})")]
     Damaged {
@@ -143,12 +147,8 @@ pub fn table_from_bytes(
     // A panic inside polars on damaged bytes is the table's problem, not a
     // crash (found by the run-table fuzz target).
     if format == TableFormat::Parquet {
-        super::parquet::check_footer(&bytes).map_err(|message| {
-            fail(TableProblem::Damaged {
-                format: "Parquet",
-                message,
-            })
-        })?;
+        super::parquet::check_footer(&bytes)
+            .map_err(|message| fail(TableProblem::Metadata { message }))?;
     }
     let df = super::off_pool(|| super::guard_polars(read)).map_err(|message| {
         fail(TableProblem::Damaged {

@@ -35,6 +35,37 @@ pub enum LogWriteError {
     },
 }
 
+impl LogWriteError {
+    /// This error with every path it names passed through `f`.
+    pub fn map_paths(self, f: &dyn Fn(&Path) -> PathBuf) -> Self {
+        match self {
+            Self::Write(e) => Self::Write(e.map_paths(f)),
+            Self::NoColumns { path } => Self::NoColumns { path: f(&path) },
+            Self::Ragged {
+                path,
+                name,
+                len,
+                first,
+                first_len,
+            } => Self::Ragged {
+                path: f(&path),
+                name,
+                len,
+                first,
+                first_len,
+            },
+            Self::BadName { path, name } => Self::BadName {
+                path: f(&path),
+                name,
+            },
+            Self::Parquet { path, source } => Self::Parquet {
+                path: f(&path),
+                source,
+            },
+        }
+    }
+}
+
 /// Write `columns` as CSV: a header line of the names, then one line per
 /// row, fields separated by `,`, lines ended by `\n`. Each value is printed
 /// in the shortest form that reads back to the same f64 (plain decimals for

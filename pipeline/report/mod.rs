@@ -1,7 +1,10 @@
 //! Writing outputs: results.json, the figures, the campaign's page
 //! (`html`) and, for the simulator, logs (`logs`). Every file is written to a
 //! temporary sibling and renamed into place, so a reader never sees a
-//! half-written file and a failure never destroys the previous output.
+//! half-written file; the files of one job are written as a set into a work
+//! folder that replaces the output folder at the end ([`OutSet`]), so a
+//! reader never sees a mix of two jobs' files and a failure never destroys
+//! the previous output.
 
 pub mod html;
 
@@ -13,7 +16,10 @@ pub mod tables;
 
 pub mod history;
 
+pub mod outset;
+
 pub use html::PageFigure;
+pub use outset::OutSet;
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -52,6 +58,27 @@ impl WriteError {
         Self::Run {
             run: id.to_string(),
             source: Box::new(self),
+        }
+    }
+
+    /// This error with every path it names passed through `f` (a work
+    /// folder's paths named as the output folder's, see [`OutSet`]).
+    pub fn map_paths(self, f: &dyn Fn(&Path) -> PathBuf) -> Self {
+        match self {
+            Self::Io { path, source } => Self::Io {
+                path: f(&path),
+                source,
+            },
+            Self::OutFolder { path, why } => Self::OutFolder {
+                path: f(&path),
+                why,
+            },
+            Self::Run { run, source } => Self::Run {
+                run,
+                source: Box::new(source.map_paths(f)),
+            },
+            Self::Table(e) => Self::Table(Box::new(e.map_paths(f))),
+            e @ Self::Html(_) => e,
         }
     }
 }
@@ -207,35 +234,6 @@ fn replace(path: &Path, bytes: &[u8], sync: bool) -> Result<(), WriteError> {
         let _ = std::fs::remove_file(&tmp);
     }
     result.map_err(io)
-}
-
-/// Make sure `dir` can take the outputs before anything is computed: it is
-/// a folder (created if absent) and a file can be created and removed in
-/// it. A file in its place, a read-only folder or a missing parent
-/// otherwise surfaced only after all the computing.
-pub fn prepare_out(dir: &Path) -> Result<(), WriteError> {
-    let bad = |why: String| WriteError::OutFolder {
-        path: dir.to_path_buf(),
-        why,
-    };
-    if let Ok(m) = std::fs::metadata(dir)
-        && !m.is_dir()
-    {
-        return Err(bad(
-            "the output folder (--out) is a file; give a folder, or remove the file".into(),
-        ));
-    }
-    std::fs::create_dir_all(dir)
-        .map_err(|e| bad(format!("cannot create the output folder (--out): {e}")))?;
-    let probe = dir.join(format!(".servoid-probe-{}", std::process::id()));
-    std::fs::OpenOptions::new()
-        .write(true)
-        .create(true)
-        .truncate(true)
-        .open(&probe)
-        .map_err(|e| bad(format!("cannot write in the output folder (--out): {e}")))?;
-    let _ = std::fs::remove_file(&probe);
-    Ok(())
 }
 
 /// Put every artifact written so far under `dir` on disk: one syncfs(2) of

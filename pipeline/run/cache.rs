@@ -39,6 +39,9 @@ pub(super) struct Cache {
     fresh: bool,
     stamps: Mutex<BTreeMap<String, Stamped>>,
     used: Mutex<BTreeSet<String>>,
+    /// (work folder, output folder): a log inside the work folder is named
+    /// by where it will be once the set is in place.
+    names: (PathBuf, PathBuf),
 }
 
 /// What a probe found: the stored outcome, or the key to store one under
@@ -50,8 +53,9 @@ pub(super) enum Probe<T> {
 
 impl Cache {
     /// The cache in `out_dir/.cache`, empty when there is none; `fresh`
-    /// ignores what it holds.
-    pub(super) fn open(out_dir: &Path, fresh: bool) -> Self {
+    /// ignores what it holds. `names` is (work folder, output folder), both
+    /// absolute (see `report::OutSet`).
+    pub(super) fn open(out_dir: &Path, fresh: bool, names: (PathBuf, PathBuf)) -> Self {
         let dir = out_dir.join(".cache");
         let stamps = if fresh {
             BTreeMap::new()
@@ -63,6 +67,7 @@ impl Cache {
             fresh,
             stamps: Mutex::new(stamps),
             used: Mutex::new(BTreeSet::new()),
+            names,
         }
     }
 
@@ -76,10 +81,14 @@ impl Cache {
         usable: impl Fn(&T) -> bool,
     ) -> Probe<T> {
         // By absolute path: the same log whichever folder the job ran from.
-        let name = std::path::absolute(log)
-            .unwrap_or_else(|_| log.to_path_buf())
-            .to_string_lossy()
-            .into_owned();
+        let abs = std::path::absolute(log).unwrap_or_else(|_| log.to_path_buf());
+        let (work, target) = &self.names;
+        let name = match abs.strip_prefix(work) {
+            Ok(rest) => target.join(rest),
+            Err(_) => abs,
+        }
+        .to_string_lossy()
+        .into_owned();
         let stamp = FileStamp::of(log);
         let known = {
             let stamps = self.stamps.lock().expect("the stamps' lock");

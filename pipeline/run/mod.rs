@@ -28,7 +28,7 @@ pub use verify::{Difference, Verification, VerifyError};
 
 use crate::manifest::{self, Campaign, Loaded, ManifestError};
 pub use crate::report::FigureFormats;
-use crate::report::{self, FigureFiles, WriteError};
+use crate::report::{self, FigureFiles, OutSet, WriteError};
 use crate::results::{self, Results, Status};
 use analyse::Drawer;
 use cache::Cache;
@@ -71,6 +71,16 @@ pub enum JobError {
 }
 
 impl JobError {
+    /// This error with every path an output error names passed through
+    /// `f` (see [`OutSet::relocate`]).
+    pub fn map_paths(self, f: &dyn Fn(&Path) -> PathBuf) -> Self {
+        match self {
+            JobError::Write(e) => JobError::Write(e.map_paths(f)),
+            JobError::Simulate(e) => JobError::Simulate(e.map_paths(f)),
+            e => e,
+        }
+    }
+
     /// Whether the job was asked for wrongly (a bad manifest or the wrong
     /// kind of one), as opposed to failing while it ran.
     pub fn is_usage(&self) -> bool {
@@ -117,7 +127,9 @@ pub struct SimulationOutcome {
     pub name: String,
     pub seed: u64,
     pub simulated: Simulated,
-    pub campaign: Option<Result<CampaignOutcome, JobError>>,
+    /// The campaign run on the logs (`--run`); a campaign that fails to
+    /// write fails the whole job, which then replaces nothing.
+    pub campaign: Option<CampaignOutcome>,
 }
 
 /// A manifest checked without running it.
@@ -176,9 +188,13 @@ pub fn run_campaign(
         .out
         .clone()
         .unwrap_or_else(|| PathBuf::from("reports").join(&campaign.name));
-    report::prepare_out(&out_dir)?;
+    let set = OutSet::begin(&out_dir)?;
     let workers = pool(settings.jobs)?;
-    workers.install(|| write_campaign(&campaign, &out_dir, settings, observer))
+    let outcome = workers
+        .install(|| write_campaign(&campaign, &set, settings, observer))
+        .map_err(|e| e.map_paths(&|p| set.final_path(p)))?;
+    set.commit()?;
+    Ok(outcome)
 }
 
 /// Simulate a campaign from a simulation manifest (logs, truth.json and an
@@ -207,16 +223,31 @@ pub fn run_simulation(
         .out
         .clone()
         .unwrap_or_else(|| PathBuf::from("reports").join(&plan.manifest.simulation.name));
-    report::prepare_out(&out_dir)?;
+    // The logs and the campaign run on them are one set: a rerun never
+    // leaves new logs beside the previous campaign's results.
+    let set = OutSet::begin(&out_dir)?;
     let workers = pool(settings.jobs)?;
-    let simulated = workers.install(|| simulate::simulate_campaign(&plan, &out_dir))?;
-    let campaign = then_run.then(|| {
-        let settings = Settings {
-            out: Some(out_dir),
-            ..settings.clone()
-        };
-        run_campaign(&simulated.manifest, &settings, observer)
-    });
+    let relocate = |e: JobError| e.map_paths(&|p| set.final_path(p));
+    let simulated = workers
+        .install(|| simulate::simulate_campaign(&plan, set.dir()))
+        .map_err(|e| relocate(e.into()))?;
+    let campaign = if then_run {
+        let campaign = load_campaign(&simulated.manifest).map_err(relocate)?;
+        Some(
+            workers
+                .install(|| write_campaign(&campaign, &set, settings, observer))
+                .map_err(relocate)?,
+        )
+    } else {
+        None
+    };
+    let simulated = Simulated {
+        out_dir: set.final_path(&simulated.out_dir),
+        manifest: set.final_path(&simulated.manifest),
+        truth: set.final_path(&simulated.truth),
+        logs: simulated.logs.iter().map(|l| set.final_path(l)).collect(),
+    };
+    set.commit()?;
     Ok(SimulationOutcome {
         name: plan.manifest.simulation.name.clone(),
         seed: plan.manifest.simulation.seed,
@@ -251,20 +282,24 @@ pub fn run_shard(
             campaign.name, shard.index, shard.count
         ))
     });
-    report::prepare_out(&out_dir)?;
+    let set = OutSet::begin(&out_dir)?;
     let share = shard.of(&campaign);
     let clock = std::time::Instant::now();
     let workers = pool(settings.jobs)?;
-    let files = FigureFiles::new(&out_dir, settings.figures);
-    let cache = Cache::open(&out_dir, settings.force);
+    let work = set.dir();
+    let files = FigureFiles::new(work, settings.figures);
+    let cache = Cache::open(work, settings.force, cache_names(&set));
     let draw = Drawer {
-        out_dir: Some(&out_dir),
+        out_dir: Some(work),
         files: files.as_ref(),
         choice: settings.figures,
         intersample: share.identification.intersample,
         cache: Some(&cache),
     };
-    let analysed = workers.install(|| analyse::analyse_with(&share, &draw, observer))?;
+    let relocate = |e: JobError| e.map_paths(&|p| set.final_path(p));
+    let analysed = workers
+        .install(|| analyse::analyse_with(&share, &draw, observer))
+        .map_err(|e| relocate(e.into()))?;
     let info = ShardInfo {
         servoid_version: env!("CARGO_PKG_VERSION").to_string(),
         campaign: campaign.name.clone(),
@@ -273,8 +308,8 @@ pub fn run_shard(
         shard,
         runs: share.runs.iter().map(|r| r.id.clone()).collect(),
     };
-    report::settle(&out_dir)?;
-    shard::write_info(&out_dir, &info)?;
+    shard::write_info(work, &info).map_err(|e| relocate(e.into()))?;
+    let out_dir = set.commit()?;
     Ok(ShardOutcome {
         failed: (analysed.results.runs.iter())
             .filter(|r| r.status == Status::Failed)
@@ -300,11 +335,16 @@ pub fn merge(
         .out
         .clone()
         .unwrap_or_else(|| PathBuf::from("reports").join(&first.campaign));
-    for (dir, _) in &shards {
-        shard::gather(dir, &out_dir)?;
-    }
+    let set = OutSet::begin(&out_dir)?;
+    let relocate = |e: JobError| e.map_paths(&|p| set.final_path(p));
     let shard_dirs: Vec<PathBuf> = shards.iter().map(|(d, _)| d.clone()).collect();
-    cache::merge_stamps(&out_dir, &shard_dirs)?;
+    let gathered = (|| {
+        for dir in &shard_dirs {
+            shard::gather(dir, set.dir())?;
+        }
+        cache::merge_stamps(set.dir(), &shard_dirs)
+    })();
+    gathered.map_err(|e| relocate(e.into()))?;
     let campaign = load_campaign(&first.manifest)?;
     if campaign.manifest_sha256 != first.manifest_sha256 {
         return Err(MergeError::ManifestChanged {
@@ -314,12 +354,12 @@ pub fn merge(
         }
         .into());
     }
-    let settings = Settings {
-        out: Some(out_dir.clone()),
-        ..settings.clone()
-    };
     let workers = pool(settings.jobs)?;
-    workers.install(|| write_campaign(&campaign, &out_dir, &settings, observer))
+    let outcome = workers
+        .install(|| write_campaign(&campaign, &set, settings, observer))
+        .map_err(relocate)?;
+    set.commit()?;
+    Ok(outcome)
 }
 
 /// A campaign manifest, refusing a simulation manifest with a hint.
@@ -389,14 +429,15 @@ fn default_jobs() -> usize {
 /// results.json), then results.json, the pages and run.jsonl.
 fn write_campaign(
     campaign: &Campaign,
-    out_dir: &Path,
+    set: &OutSet,
     settings: &Settings,
     observer: &dyn Observer,
 ) -> Result<CampaignOutcome, JobError> {
     let started = std::time::SystemTime::now();
     let clock = std::time::Instant::now();
+    let out_dir = set.dir();
     let files = FigureFiles::new(out_dir, settings.figures);
-    let cache = Cache::open(out_dir, settings.force);
+    let cache = Cache::open(out_dir, settings.force, cache_names(set));
     let draw = Drawer {
         out_dir: Some(out_dir),
         files: files.as_ref(),
@@ -406,7 +447,9 @@ fn write_campaign(
     };
     let analysed = analyse::analyse_with(campaign, &draw, observer)?;
     let mut results = analysed.results;
-    results.campaign.manifest_path = relative_to(&campaign.file, out_dir);
+    // Where the manifest is from where results.json will be, once the set
+    // is in place (a simulated campaign's manifest is inside the set).
+    results.campaign.manifest_path = relative_to(&set.final_path(&campaign.file), set.target());
     let history = history::check(campaign, out_dir, &mut results);
     let mut campaign_figures = analysed.campaign_figures;
     if let (Some(h), Some(files)) = (&history, &files)
@@ -420,6 +463,7 @@ fn write_campaign(
     let results_path = out_dir.join("results.json");
     report::settle(out_dir)?;
     report::write_atomic(&results_path, &json)?;
+    report::outset::fault("results");
     if let Some(h) = history {
         h.write(&json)?;
     }
@@ -444,11 +488,17 @@ fn write_campaign(
     Ok(CampaignOutcome {
         cached: analysed.cached.iter().filter(|c| **c).count(),
         results,
-        results_path,
-        page_path,
-        log_path,
+        results_path: set.final_path(&results_path),
+        page_path: set.final_path(&page_path),
+        log_path: set.final_path(&log_path),
         seconds,
     })
+}
+
+/// How the cache names a log inside the work folder (a simulated
+/// campaign's): by where it will be, so a rerun finds its stamp.
+fn cache_names(set: &OutSet) -> (PathBuf, PathBuf) {
+    (set.dir().to_path_buf(), set.resolved().to_path_buf())
 }
 
 /// run.jsonl: when the campaign ran and how long each run's log took. Wall

@@ -50,6 +50,17 @@ pub enum SimulateError {
     Write(#[from] WriteError),
 }
 
+impl SimulateError {
+    /// This error with every path an output error names passed through `f`.
+    pub fn map_paths(self, f: &dyn Fn(&Path) -> PathBuf) -> Self {
+        match self {
+            SimulateError::Log(e) => SimulateError::Log(e.map_paths(f)),
+            SimulateError::Write(e) => SimulateError::Write(e.map_paths(f)),
+            e => e,
+        }
+    }
+}
+
 /// What `servoid simulate` wrote.
 #[derive(Debug, Clone)]
 pub struct Simulated {

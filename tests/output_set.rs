@@ -1,0 +1,211 @@
+//! Outputs as a set (issue 15): a rerun killed with SIGKILL at any point
+//! leaves the output folder holding the previous run's files, byte for
+//! byte, or the new run's, never a mix; the next run completes and removes
+//! what the killed one left behind.
+//!
+//! The kills are real SIGKILLs: at named points where a mix was most
+//! likely before (`SERVOID_KILL_AT`, see `report/outset.rs`: after the work
+//! folder is filled, after results.json, just before and just after the
+//! exchange), and from outside at fractions of the rerun's own duration.
+
+use std::collections::BTreeMap;
+use std::os::unix::process::ExitStatusExt;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::time::Instant;
+
+use crate::shards::campaign;
+use crate::util::{scratch, servoid_into};
+
+type Tree = BTreeMap<String, Vec<u8>>;
+
+/// Every file under `dir` with its bytes, by path relative to `dir`.
+fn tree(dir: &Path) -> Tree {
+    let mut out = Tree::new();
+    let mut stack = vec![dir.to_path_buf()];
+    while let Some(d) = stack.pop() {
+        for e in std::fs::read_dir(&d).unwrap().flatten() {
+            let p = e.path();
+            if e.file_type().unwrap().is_dir() {
+                stack.push(p);
+            } else {
+                let rel = p.strip_prefix(dir).unwrap().display().to_string();
+                out.insert(rel, std::fs::read(&p).unwrap());
+            }
+        }
+    }
+    out
+}
+
+/// A tree without run.jsonl, the one file whose bytes hold wall-clock
+/// times.
+fn timeless(mut t: Tree) -> Tree {
+    t.remove("run.jsonl");
+    t
+}
+
+/// What a job left that is not an output: work folders beside `out` and
+/// per-file temporaries inside it.
+fn leftovers(out: &Path) -> Vec<String> {
+    let name = out.file_name().unwrap().to_string_lossy().into_owned();
+    let beside = std::fs::read_dir(out.parent().unwrap())
+        .unwrap()
+        .flatten()
+        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .filter(|n| n.starts_with(&format!(".{name}.")));
+    let inside = tree(out)
+        .into_keys()
+        .filter(|p| p.contains(".tmp-") || p.contains(".servoid-probe-"));
+    beside.chain(inside).collect()
+}
+
+fn copy_tree(from: &Path, to: &Path) {
+    let _ = std::fs::remove_dir_all(to);
+    let o = Command::new("cp")
+        .arg("-a")
+        .arg(from)
+        .arg(to)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+}
+
+/// The rerun: manifest B into `out`, killed at `point` when given.
+fn rerun(dir: &Path, manifest: &Path, out: &Path, point: Option<&str>) -> Command {
+    let mut c = Command::new(env!("CARGO_BIN_EXE_servoid"));
+    c.arg("run")
+        .arg(manifest)
+        .arg("--out")
+        .arg(out)
+        .args(["--figures", "png", "--quiet"])
+        .current_dir(dir);
+    match point {
+        Some(p) => c.env("SERVOID_KILL_AT", p),
+        None => c.env_remove("SERVOID_KILL_AT"),
+    };
+    c
+}
+
+#[test]
+fn a_rerun_killed_at_any_point_leaves_the_previous_set_or_the_new_one() {
+    let dir = scratch();
+    let manifest_a = campaign(dir.path());
+    // The same campaign under a changed manifest: its SHA-256 is in
+    // results.json and on the page, so the two sets differ in what a
+    // reader opens first, while the cache (keyed by run) is shared.
+    let manifest_b: PathBuf = dir.path().join("sim/campaign-b.toml");
+    let text = std::fs::read_to_string(&manifest_a).unwrap();
+    std::fs::write(&manifest_b, format!("{text}\n# the rerun's manifest\n")).unwrap();
+
+    let out = dir.path().join("out");
+    let o = servoid_into(
+        dir.path(),
+        "run",
+        &manifest_a,
+        &out,
+        &["--figures", "png", "--quiet"],
+    );
+    assert_eq!(o.code, 0, "{}", o.stderr);
+    let pristine = dir.path().join("pristine");
+    copy_tree(&out, &pristine);
+    let old = tree(&out);
+    assert!(old.contains_key("results.json") && old.contains_key("report.html"));
+
+    // The new set, from an uninterrupted rerun over a copy of the old.
+    let reference = dir.path().join("reference");
+    copy_tree(&pristine, &reference);
+    let clock = Instant::now();
+    let status = rerun(dir.path(), &manifest_b, &reference, None)
+        .status()
+        .unwrap();
+    let took = clock.elapsed();
+    assert!(status.success());
+    let new = timeless(tree(&reference));
+    assert_ne!(old["results.json"], new["results.json"]);
+    assert_ne!(old["report.html"], new["report.html"]);
+
+    let is_old = |t: &Tree| *t == old;
+    let is_new = |t: &Tree| timeless(t.clone()) == new;
+
+    // At the named points: before the exchange the folder is the old set
+    // to the byte; after it, the new one.
+    for (point, expect_new) in [
+        ("carried", false),
+        ("results", false),
+        ("exchange", false),
+        ("exchanged", true),
+    ] {
+        copy_tree(&pristine, &out);
+        let status = rerun(dir.path(), &manifest_b, &out, Some(point))
+            .status()
+            .unwrap();
+        assert_eq!(status.signal(), Some(9), "killed at {point}");
+        let now = tree(&out);
+        if expect_new {
+            assert!(is_new(&now), "killed at {point}: not the new set");
+        } else {
+            assert!(is_old(&now), "killed at {point}: the old set changed");
+        }
+    }
+
+    // From outside, at fractions of the rerun's duration. A kill that
+    // comes after the job ended finds the new set, which is as good.
+    let mut outcomes = Vec::new();
+    for k in 1..=5u32 {
+        copy_tree(&pristine, &out);
+        let mut child = rerun(dir.path(), &manifest_b, &out, None).spawn().unwrap();
+        std::thread::sleep(took * k / 6);
+        let _ = child.kill();
+        let status = child.wait().unwrap();
+        let now = tree(&out);
+        let (o, n) = (is_old(&now), is_new(&now));
+        assert!(o || n, "killed at {k}/6 of the run: a mix of the two sets");
+        outcomes.push((status.signal(), if o { "old" } else { "new" }));
+    }
+    eprintln!("kills from outside (signal, set found): {outcomes:?}");
+    assert!(
+        outcomes.iter().any(|(s, _)| *s == Some(9)),
+        "no kill landed while the rerun ran: {outcomes:?} in {took:?}"
+    );
+
+    // A temporary an older job left inside the folder, and the folder a
+    // job killed after its exchange left beside it, are gone after the
+    // next run, which completes with the new set.
+    std::fs::write(out.join("figures/.exp1.png.tmp-77"), b"half").unwrap();
+    assert!(!leftovers(&out).is_empty());
+    let status = rerun(dir.path(), &manifest_b, &out, None).status().unwrap();
+    assert!(status.success());
+    assert!(is_new(&tree(&out)), "the next run's set");
+    assert_eq!(leftovers(&out), Vec::<String>::new());
+}
+
+#[test]
+fn a_failed_rerun_replaces_nothing_and_says_where_it_could_not_write() {
+    let dir = scratch();
+    let manifest = campaign(dir.path());
+    let out = dir.path().join("out");
+    let o = servoid_into(
+        dir.path(),
+        "run",
+        &manifest,
+        &out,
+        &["--figures", "none", "--quiet"],
+    );
+    assert_eq!(o.code, 0, "{}", o.stderr);
+    // A folder where a figure must go: the write fails mid-run. (It
+    // holds a file, so that the tree below sees it.)
+    let blocker = out.join("figures/frf-no-specimen.png");
+    std::fs::create_dir_all(&blocker).unwrap();
+    std::fs::write(blocker.join("keep"), b"").unwrap();
+    let before = tree(&out);
+    let o = servoid_into(dir.path(), "run", &manifest, &out, &["--force", "--quiet"]);
+    assert_eq!(o.code, 1, "{}", o.stderr);
+    assert!(
+        o.stderr.contains(&format!("{}/figures/", out.display())),
+        "the error names the output folder, not a work folder: {}",
+        o.stderr
+    );
+    assert!(!o.stderr.contains(".servoid-"), "{}", o.stderr);
+    assert_eq!(tree(&out), before, "the previous set is untouched");
+    assert_eq!(leftovers(&out), Vec::<String>::new());
+}
