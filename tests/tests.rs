@@ -17,6 +17,7 @@ mod fuzz_replay;
 mod joint;
 mod layering;
 mod manifest_errors;
+mod memory;
 mod mts;
 mod output_set;
 mod paper;

@@ -306,6 +306,36 @@ pub fn detrend(x: &[f64], kind: Detrend) -> Vec<f64> {
     out
 }
 
+/// Bins [`h_variance_at`] reads beyond the last bin it is asked for: the
+/// moving average's S and the local polynomial's R (ETFE), plus one.
+pub const VARIANCE_REACH_BINS: usize = ETFE_NOISE_SMOOTH_HALF_WIDTH + ETFE_LOCAL_HALF_WIDTH + 1;
+
+impl Frf {
+    /// Drop the bins above `f_hz` but `extra` (see [`VARIANCE_REACH_BINS`]),
+    /// and free their memory. An ETFE of a long record has a bin per
+    /// 1/duration Hz up to Nyquist (7 M bins, 64 bytes each, for 7,000 s at
+    /// 2,048 Hz) while an analysis reads a few per cent of them; what it
+    /// reads, up to `f_hz` with `extra` bins of reach, is unchanged to the
+    /// bit.
+    pub fn keep_up_to(&mut self, f_hz: f64, extra: usize) {
+        let keep = self
+            .freq_hz
+            .partition_point(|f| *f <= f_hz)
+            .saturating_add(extra)
+            .min(self.freq_hz.len());
+        fn cut<T>(v: &mut Vec<T>, keep: usize) {
+            v.truncate(keep);
+            v.shrink_to_fit();
+        }
+        cut(&mut self.freq_hz, keep);
+        cut(&mut self.h, keep);
+        cut(&mut self.coherence, keep);
+        cut(&mut self.suu, keep);
+        cut(&mut self.syy, keep);
+        cut(&mut self.suy, keep);
+    }
+}
+
 /// Bins to fit: inside `band_hz` (inclusive), coherence at least
 /// `coherence_min`, and a finite, non-zero estimate.
 pub fn band_mask(frf: &Frf, band_hz: (f64, f64), coherence_min: f64) -> Vec<bool> {

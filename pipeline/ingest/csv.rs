@@ -118,9 +118,16 @@ fn by_polars(
     .ok()?
     .ok()?;
 
+    let mut df = df;
     let mut columns = Vec::with_capacity(want.len());
-    for (w, &i) in want.iter().zip(index) {
-        let col = df.column(&polars_name(i)).ok()?;
+    for (k, (w, &i)) in want.iter().zip(index).enumerate() {
+        // A column no later channel reads is taken out of the frame, and
+        // freed once copied, rather than kept to the end.
+        let col = if index[k + 1..].contains(&i) {
+            df.column(&polars_name(i)).ok()?.clone()
+        } else {
+            df.drop_in_place(&polars_name(i)).ok()?
+        };
         let col = col.cast(&DataType::Float64).ok()?;
         let ca = col.f64().ok()?;
         if ca.null_count() > 0 {

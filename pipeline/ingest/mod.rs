@@ -844,39 +844,42 @@ fn assemble(plan: &LogPlan, sha256: String, raw: Raw<'_>) -> Result<Log, IngestE
         });
     }
     let locate = &raw.locate;
+    // Each column is converted to SI where it lies: a copy of a 14 M-row
+    // log's columns was a third of its reading's peak memory. A zero offset
+    // is not added, so that -0 stays -0 and a log written in SI reads back
+    // bit for bit.
+    let to_si = |channel: &'static str,
+                 column: &str,
+                 mut v: Vec<f64>,
+                 si: &dyn Fn(f64) -> f64|
+     -> Result<Vec<f64>, IngestError> {
+        for (i, x) in v.iter_mut().enumerate() {
+            let raw = *x;
+            *x = si(raw);
+            if !x.is_finite() {
+                return Err(IngestError::NonFinite {
+                    path: path.clone(),
+                    at: locate(i),
+                    channel,
+                    column: column.to_string(),
+                    raw,
+                    si: *x,
+                });
+            }
+        }
+        Ok(v)
+    };
     let scale = |channel: &'static str, plan: &ChannelPlan, v: Vec<f64>| {
-        // A zero offset is not added, so that -0 stays -0 and a log written
-        // in SI reads back bit for bit.
-        let si: Vec<f64> = if plan.offset == 0.0 {
-            v.iter().map(|&r| r * plan.gain).collect()
+        let column = plan.column.to_string();
+        if plan.offset == 0.0 {
+            to_si(channel, &column, v, &|r| r * plan.gain)
         } else {
-            v.iter().map(|&r| r * plan.gain + plan.offset).collect()
-        };
-        match si.iter().position(|x| !x.is_finite()) {
-            Some(i) => Err(IngestError::NonFinite {
-                path: path.clone(),
-                at: locate(i),
-                channel,
-                column: plan.column.to_string(),
-                raw: v[i],
-                si: si[i],
-            }),
-            None => Ok(si),
+            to_si(channel, &column, v, &|r| r * plan.gain + plan.offset)
         }
     };
     let (timing, sample_rate_hz, t0_s) = match raw.time {
         RawTime::Column { raw, to_s, column } => {
-            let t: Vec<f64> = raw.iter().map(|&r| r * to_s).collect();
-            if let Some(i) = t.iter().position(|x| !x.is_finite()) {
-                return Err(IngestError::NonFinite {
-                    path: path.clone(),
-                    at: locate(i),
-                    channel: "time",
-                    column,
-                    raw: raw[i],
-                    si: t[i],
-                });
-            }
+            let t = to_si("time", &column, raw, &|r| r * to_s)?;
             let timing = measure_timing(path, &t, locate)?;
             (timing, 1.0 / timing.dt_s(), t[0])
         }

@@ -279,12 +279,8 @@ pub fn log_stage_from(
         path: path.clone(),
         source,
     };
-    let h = frf::estimate(&log.command_m, &log.displacement_m, fs, &ident.frf).map_err(frf_err)?;
-    let force_frf = match &log.force_n {
-        Some(f) => Some(frf::estimate(&log.command_m, f, fs, &ident.frf).map_err(frf_err)?),
-        None => None,
-    };
-
+    let mut h =
+        frf::estimate(&log.command_m, &log.displacement_m, fs, &ident.frf).map_err(frf_err)?;
     // Excitation in the band: the command's power there against its total.
     let (lo, hi) = run.band_hz;
     let total: f64 = h.suu.iter().skip(1).sum();
@@ -295,6 +291,23 @@ pub fn log_stage_from(
         .filter(|(f, _)| **f >= lo && **f <= hi)
         .map(|(_, s)| s)
         .sum();
+    // Past that total, nothing reads a bin above the band, the tables or
+    // the figures (and the noise estimate's reach beyond them): those are
+    // freed before the force path's FRF is estimated (a long ETFE's bins up
+    // to Nyquist took half the memory of a 1 GB log's analysis).
+    let keep_hz = hi
+        .max(super::tables::TABLE_MAX_HZ)
+        .max(super::figures::FRF_MAX_HZ)
+        .max(super::figures::FORCE_FRF_MAX_HZ);
+    h.keep_up_to(keep_hz, frf::VARIANCE_REACH_BINS);
+    let force_frf = match &log.force_n {
+        Some(f) => {
+            let mut ff = frf::estimate(&log.command_m, f, fs, &ident.frf).map_err(frf_err)?;
+            ff.keep_up_to(keep_hz, frf::VARIANCE_REACH_BINS);
+            Some(ff)
+        }
+        None => None,
+    };
     let fraction = if total > 0.0 { in_band / total } else { 0.0 };
     if fraction < MIN_BAND_POWER_FRACTION {
         return Err(AcquireError::NoExcitation {

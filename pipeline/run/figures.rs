@@ -21,7 +21,7 @@ use crate::model::{LinearSpecimen, RigParams, x1_u_std};
 use crate::report::FigureSpec;
 use crate::report::figures::{
     BodeBand, BodeFigure, BodeSeries, Figure, LinesFigure, PanelsFigure, TimePanel, TimeSeries,
-    Trace, XySeries, decimate_minmax,
+    Trace, XySeries, decimate_minmax_by,
 };
 use crate::results::{RunResult, SensitivityResult, TfResult};
 use crate::sensitivity::montecarlo::{MonteCarlo, MonteCarloPoint, PerParameter};
@@ -29,7 +29,10 @@ use crate::validate::TimeStage;
 use crate::validate::csi::Csi;
 
 /// Frequency (Hz) where the paper's FRF figures stop.
-const FRF_MAX_HZ: f64 = 30.0;
+pub(super) const FRF_MAX_HZ: f64 = 30.0;
+
+/// Frequency (Hz) where the force path's bins (Figs. 16-17, Eq. 45) stop.
+pub(super) const FORCE_FRF_MAX_HZ: f64 = 35.0;
 
 /// A run's figures that do not depend on the rig, drawn as soon as its log
 /// is analysed: the FRF (for a validation run the caller passes the
@@ -99,7 +102,8 @@ impl ForceBins {
 
     pub(super) fn of(stage: &LogStage) -> Option<Self> {
         let ff = stage.force_frf.as_ref()?;
-        let (freq_hz, h, coherence) = measured_bins(&ff.freq_hz, &ff.h, &ff.coherence, 35.0);
+        let (freq_hz, h, coherence) =
+            measured_bins(&ff.freq_hz, &ff.h, &ff.coherence, FORCE_FRF_MAX_HZ);
         Some(Self {
             sample_rate_hz: stage.log.sample_rate_hz,
             freq_hz,
@@ -410,16 +414,34 @@ pub(super) fn force_figure(
 /// window.
 fn time_figure(run: &RunResult, time: &TimeStage, fs: f64) -> Option<FigureSpec> {
     let n = time.x1_measured.len().min(time.x1_simulated.len());
-    let t: Arc<[f64]> = (0..n).map(|k| k as f64 / fs).collect::<Vec<_>>().into();
-    let cm =
-        |x: &[f64]| -> Arc<[f64]> { x[..n].iter().map(|v| v * 100.0).collect::<Vec<_>>().into() };
-    let measured = cm(&time.x1_measured);
-    let simulated = cm(&time.x1_simulated);
-    let simplified = time
-        .x1_simplified
-        .as_ref()
-        .filter(|x| x.len() >= n)
-        .map(|x| cm(x));
+    // Each panel holds its window's samples only (two beyond each edge, more
+    // than the renderer's one for lines entering the panel), not the whole
+    // record: four copies of a 14 M-sample record were 460 MB.
+    let first_from = |s: f64| {
+        let (mut lo, mut hi) = (0, n);
+        while lo < hi {
+            let mid = lo + (hi - lo) / 2;
+            if (mid as f64 / fs) < s {
+                lo = mid + 1;
+            } else {
+                hi = mid;
+            }
+        }
+        lo
+    };
+    let first_after = |s: f64| {
+        let (mut lo, mut hi) = (0, n);
+        while lo < hi {
+            let mid = lo + (hi - lo) / 2;
+            if (mid as f64 / fs) <= s {
+                lo = mid + 1;
+            } else {
+                hi = mid;
+            }
+        }
+        lo
+    };
+    let simplified = time.x1_simplified.as_ref().filter(|x| x.len() >= n);
     let simulated_label = if run.role == Role::Validation {
         "Simulated"
     } else {
@@ -431,24 +453,34 @@ fn time_figure(run: &RunResult, time: &TimeStage, fs: f64) -> Option<FigureSpec>
         .iter()
         .enumerate()
         .map(|(k, w)| {
+            let i0 = first_from(w.start_s).saturating_sub(2);
+            let i1 = (first_after(w.end_s) + 2).min(n).max(i0);
+            let t: Arc<[f64]> = (i0..i1).map(|k| k as f64 / fs).collect::<Vec<_>>().into();
+            let cm = |x: &[f64]| -> Arc<[f64]> {
+                x[i0..i1]
+                    .iter()
+                    .map(|v| v * 100.0)
+                    .collect::<Vec<_>>()
+                    .into()
+            };
             let mut series = vec![
                 TimeSeries {
                     label: "Experimental".into(),
-                    y: measured.clone(),
+                    y: cm(&time.x1_measured),
                     trace: Trace::Measured,
                     palette_index: Some(0),
                 },
                 TimeSeries {
                     label: simulated_label.into(),
-                    y: simulated.clone(),
+                    y: cm(&time.x1_simulated),
                     trace: Trace::Model,
                     palette_index: Some(1),
                 },
             ];
-            if let Some(y) = &simplified {
+            if let Some(y) = simplified {
                 series.push(TimeSeries {
                     label: "Simplified CCF (Cn dropped)".into(),
-                    y: y.clone(),
+                    y: cm(y),
                     trace: Trace::Model,
                     palette_index: Some(3),
                 });
@@ -461,7 +493,7 @@ fn time_figure(run: &RunResult, time: &TimeStage, fs: f64) -> Option<FigureSpec>
                     w.start_s,
                     w.end_s
                 ),
-                t_s: t.clone(),
+                t_s: t,
                 series,
                 t_range_s: (w.start_s, w.end_s),
                 y_label: "Disp (cm)".into(),
@@ -502,11 +534,14 @@ fn time_figure(run: &RunResult, time: &TimeStage, fs: f64) -> Option<FigureSpec>
 /// decimated so no peak is lost.
 fn residual_figure(run: &RunResult, time: &TimeStage, fs: f64) -> FigureSpec {
     let n = time.x1_measured.len().min(time.x1_simulated.len());
-    let t: Vec<f64> = (0..n).map(|k| k as f64 / fs).collect();
-    let r: Vec<f64> = (0..n)
-        .map(|k| (time.x1_measured[k] - time.x1_simulated[k]) * 1e3)
-        .collect();
-    let (x, y) = decimate_minmax(&t, &r, 1500);
+    // Computed as decimated: a long record's time axis and residual are
+    // never held whole.
+    let (x, y) = decimate_minmax_by(
+        n,
+        |k| k as f64 / fs,
+        |k| (time.x1_measured[k] - time.x1_simulated[k]) * 1e3,
+        1500,
+    );
     FigureSpec {
         id: format!("residual-{}", run.id),
         title: format!("{}: displacement residual", run.id),

@@ -15,7 +15,7 @@ use crate::report::{WriteError, logs::LogWriteError};
 use crate::results::RunResult;
 
 /// Highest frequency a table holds, unless the fit band reaches higher.
-const TABLE_MAX_HZ: f64 = 35.0;
+pub(super) const TABLE_MAX_HZ: f64 = 35.0;
 
 /// The files of one run's tables, relative to the output folder.
 pub(super) fn names(id: &str) -> [String; 2] {

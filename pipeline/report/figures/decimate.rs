@@ -14,29 +14,45 @@
 /// Only the shorter length of `x` and `y` is used.
 pub fn decimate_minmax(x: &[f64], y: &[f64], buckets: usize) -> (Vec<f64>, Vec<f64>) {
     let n = x.len().min(y.len());
-    let finite: Vec<usize> = (0..n)
-        .filter(|&i| x[i].is_finite() && y[i].is_finite())
-        .collect();
-    let pick = |idx: &[usize]| -> (Vec<f64>, Vec<f64>) {
-        (
-            idx.iter().map(|&i| x[i]).collect(),
-            idx.iter().map(|&i| y[i]).collect(),
-        )
+    decimate_minmax_by(n, |i| x[i], |i| y[i], buckets)
+}
+
+/// [`decimate_minmax`] of the `n` points `(x(i), y(i))`, computed as they
+/// are read: a record of 14 M samples is decimated without a copy of it
+/// (nor of its time axis, where `x` computes it), and without a list of its
+/// finite points. `x` and `y` are called more than once per point and must
+/// give the same value each time.
+pub fn decimate_minmax_by(
+    n: usize,
+    x: impl Fn(usize) -> f64,
+    y: impl Fn(usize) -> f64,
+    buckets: usize,
+) -> (Vec<f64>, Vec<f64>) {
+    let finite = |i: &usize| x(*i).is_finite() && y(*i).is_finite();
+    let pick = |idx: &mut dyn Iterator<Item = usize>| -> (Vec<f64>, Vec<f64>) {
+        idx.map(|i| (x(i), y(i))).unzip()
     };
     let limit = buckets.saturating_mul(2).saturating_add(2);
-    if finite.len() <= limit {
-        return pick(&finite);
+    // One pass: how many points are finite, the first and last, and the x
+    // span.
+    let (mut count, mut first, mut last) = (0usize, 0usize, 0usize);
+    let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+    for i in (0..n).filter(finite) {
+        if count == 0 {
+            first = i;
+        }
+        count += 1;
+        last = i;
+        lo = lo.min(x(i));
+        hi = hi.max(x(i));
     }
-    let (first, last) = (finite[0], finite[finite.len() - 1]);
+    if count <= limit {
+        return pick(&mut (0..n).filter(finite));
+    }
     if buckets == 0 {
-        return pick(&[first, last]);
+        return pick(&mut [first, last].into_iter());
     }
 
-    let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
-    for &i in &finite {
-        lo = lo.min(x[i]);
-        hi = hi.max(x[i]);
-    }
     let span = hi - lo;
     let column = |v: f64| -> usize {
         if span > 0.0 {
@@ -48,12 +64,13 @@ pub fn decimate_minmax(x: &[f64], y: &[f64], buckets: usize) -> (Vec<f64>, Vec<f
 
     let mut min_at: Vec<Option<usize>> = vec![None; buckets];
     let mut max_at: Vec<Option<usize>> = vec![None; buckets];
-    for &i in &finite {
-        let b = column(x[i]);
-        if min_at[b].is_none_or(|j| y[i] < y[j]) {
+    for i in (0..n).filter(finite) {
+        let b = column(x(i));
+        let yi = y(i);
+        if min_at[b].is_none_or(|j| yi < y(j)) {
             min_at[b] = Some(i);
         }
-        if max_at[b].is_none_or(|j| y[i] > y[j]) {
+        if max_at[b].is_none_or(|j| yi > y(j)) {
             max_at[b] = Some(i);
         }
     }
@@ -64,7 +81,7 @@ pub fn decimate_minmax(x: &[f64], y: &[f64], buckets: usize) -> (Vec<f64>, Vec<f
     keep.extend(max_at.into_iter().flatten());
     keep.sort_unstable();
     keep.dedup();
-    pick(&keep)
+    pick(&mut keep.into_iter())
 }
 
 #[cfg(test)]
@@ -160,5 +177,21 @@ mod tests {
         let (dx, _) = decimate_minmax(&(0..50).map(f64::from).collect::<Vec<_>>(), &y[..50], 0);
         assert_eq!(dx.len(), 2);
         assert_relative_eq!(dx[1], 49.0);
+    }
+
+    #[test]
+    fn computed_points_decimate_as_the_same_points_materialised() {
+        let fs = 2048.0;
+        let n = 50_000;
+        let y = |k: usize| ((k as f64 / fs) * 7.3).sin() + if k == 31_337 { 5.0 } else { 0.0 };
+        let xs: Vec<f64> = (0..n).map(|k| k as f64 / fs).collect();
+        let ys: Vec<f64> = (0..n).map(y).collect();
+        for buckets in [0, 1, 700, 30_000] {
+            let by = decimate_minmax_by(n, |k| k as f64 / fs, y, buckets);
+            assert_eq!(by, decimate_minmax(&xs, &ys, buckets), "{buckets} buckets");
+        }
+        // The spike survives.
+        let (_, dy) = decimate_minmax_by(n, |k| k as f64 / fs, y, 700);
+        assert!(dy.iter().any(|v| *v > 4.0));
     }
 }

@@ -34,7 +34,7 @@ use rayon::prelude::*;
 use canvas::Recorder;
 use chart::{Arrangement, Axis, Dash, Metrics, PALETTE, Panel, RawBand, RawCurve, Sheet, Style};
 
-pub use decimate::decimate_minmax;
+pub use decimate::{decimate_minmax, decimate_minmax_by};
 
 /// A full-width figure: 1200 x 700 px. Shown 90 mm wide, the smallest text
 /// (tick labels) is 6 pt to the em.
