@@ -550,6 +550,16 @@ fn print_summary(r: &Results) {
             run.role.as_str(),
             status
         ));
+        // Why a run is an outlier, under its line: "OUTLIER" alone does
+        // not say what to look at.
+        if let Some(note) = run
+            .validation
+            .as_ref()
+            .filter(|v| v.outlier)
+            .and_then(|v| v.note.as_ref())
+        {
+            say(&format!("      outlier: {note}"));
+        }
         for w in &run.warnings {
             say(&format!("      warning: {w}"));
         }

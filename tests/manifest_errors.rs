@@ -474,3 +474,55 @@ fn a_simulation_checks_the_sensitivity_it_passes_on() {
     }
     assert!(!out.exists(), "nothing written");
 }
+
+/// A validation run whose log is another run's (exp1 given exp3's log, its
+/// SHA-256 pin moved with it): the run completes, but its error is many
+/// times the other runs', and the command line says so on its own line,
+/// with why, rather than a bare "ok".
+#[test]
+fn an_outlier_validation_run_is_flagged_on_the_command_line() {
+    let dir = scratch();
+    let manifest = crate::shards::campaign(dir.path());
+    let text = std::fs::read_to_string(&manifest).unwrap();
+    let sha_of = |log: &str| {
+        let at = text.find(&format!("log = \"{log}\"\nsha256 = \"")).unwrap();
+        text[at..].lines().nth(1).unwrap().to_string()
+    };
+    let (exp1, exp3) = (sha_of("logs/exp1.csv"), sha_of("logs/exp3.csv"));
+    let text = text.replace(
+        &format!("log = \"logs/exp1.csv\"\n{exp1}"),
+        &format!("log = \"logs/exp3.csv\"\n{exp3}"),
+    );
+    let swapped = write(manifest.parent().unwrap(), "swapped.toml", &text);
+    let out = dir.path().join("out");
+    let o = crate::util::servoid_into(dir.path(), "run", &swapped, &out, &["--figures", "none"]);
+    let line = o
+        .stdout
+        .lines()
+        .find(|l| l.trim_start().starts_with("run exp1 "))
+        .unwrap_or_else(|| panic!("no line for exp1:\n{}", o.stdout));
+    assert!(
+        line.ends_with("ok (OUTLIER)"),
+        "{line}\n{}\n{}",
+        o.stdout,
+        o.stderr
+    );
+    for other in ["exp2", "exp3", "exp4"] {
+        let l = o
+            .stdout
+            .lines()
+            .find(|l| l.trim_start().starts_with(&format!("run {other} ")))
+            .unwrap();
+        assert!(l.ends_with(" ok"), "{l}");
+    }
+    assert!(
+        o.stdout.contains("      outlier: NRMSE ")
+            && o.stdout.contains("the log belongs to another run"),
+        "{}",
+        o.stdout
+    );
+    let r: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("results.json")).unwrap()).unwrap();
+    let v = &crate::util::run_by_id(&r, "exp1")["validation"];
+    assert_eq!(v["outlier"], true);
+}
