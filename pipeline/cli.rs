@@ -295,7 +295,7 @@ fn settings(args: &RunArgs) -> Settings {
 pub const MAX_JOBS_PER_CORE: usize = 4;
 
 fn capped(jobs: Option<u64>) -> Option<usize> {
-    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let cores = run::cores();
     let max = MAX_JOBS_PER_CORE * cores;
     let jobs = jobs?;
     if jobs > max as u64 {

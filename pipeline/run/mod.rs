@@ -421,7 +421,13 @@ fn pool(jobs: Option<usize>) -> Result<rayon::ThreadPool, JobError> {
 /// in `cargo bench --bench night`: 6.4 s and 6.2 s). Each worker still
 /// holds one log at a time.
 fn default_jobs() -> usize {
-    2 * std::thread::available_parallelism().map_or(1, |n| n.get())
+    2 * cores()
+}
+
+/// The cores this process may use, as the default worker count and the
+/// cap on `--jobs` count them.
+pub fn cores() -> usize {
+    std::thread::available_parallelism().map_or(1, |n| n.get())
 }
 
 /// Analyse a checked campaign and write its outputs: each run's figures as
