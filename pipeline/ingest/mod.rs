@@ -20,6 +20,7 @@ mod csv;
 mod daq;
 mod mat;
 mod parquet;
+mod parquet_footer;
 mod plan;
 mod quantum;
 mod table;

@@ -25,6 +25,8 @@ pub(super) fn read<'a>(
     let schema = super::guard_polars(|| reader.schema())
         .map_err(damaged)?
         .map_err(|source| format(FormatProblem::ParquetUnreadable { source }))?;
+    check_pages(bytes, &mut reader)
+        .map_err(|message| format(FormatProblem::ParquetMetadata { message }))?;
     let names: Vec<String> = schema.iter_names().map(|n| n.to_string()).collect();
 
     let want = wanted(plan);
@@ -102,25 +104,18 @@ pub(super) fn read<'a>(
     raw_from_table(path, plan, columns, Box::new(|i| At::Row(i + 1)))
 }
 
-/// Checks a Parquet file's footer, and the page headers it points to,
-/// before polars reads them.
+/// Checks a Parquet file's footer before polars reads it: every length its
+/// thrift metadata declares (of a string, of a list) must fit in the bytes
+/// left, and the metadata in the file. polars 0.55 reserves what a list
+/// declares before reading it, so a damaged footer declaring 10^11
+/// elements aborted the process on a failed allocation (found by the
+/// Parquet fuzz target; `fuzz/regressions/log_parquet/`), which no error
+/// handling can catch. A file without the Parquet magic is left to polars
+/// to refuse. [`check_pages`] checks what the footer points to, once polars
+/// has parsed it.
 ///
-/// - Every length the footer's thrift metadata declares (of a string, of a
-///   list) must fit in the bytes left, and the metadata in the file. polars
-///   0.55 reserves what a list declares before reading it, so a damaged
-///   footer declaring 10^11 elements aborted the process on a failed
-///   allocation (found by the Parquet fuzz target;
-///   `fuzz/regressions/log_parquet/`), which no error handling can catch.
-/// - Each column chunk's pages must lie in the file, and each page header
-///   must declare sizes and value counts between 0 and what its chunk
-///   holds. A page declaring a negative count reached polars as about
-///   2^64 values, for which it reserved a validity bitmap of 2^61 bytes
-///   (`fuzz/regressions/*/page-validity-count-alloc.parquet`).
-///
-/// A file without the Parquet magic is left to polars to refuse. The
-/// footer is `metadata | u32 length (little-endian) | "PAR1"`, the metadata
-/// a thrift struct (`FileMetaData`, `PageHeader`: parquet-format's
-/// `parquet.thrift`) in the compact protocol (Apache Thrift,
+/// The footer is `metadata | u32 length (little-endian) | "PAR1"`, the
+/// metadata a thrift struct in the compact protocol (Apache Thrift,
 /// `doc/specs/thrift-compact-protocol.md`).
 pub(super) fn check_footer(bytes: &[u8]) -> Result<(), String> {
     let n = bytes.len();
@@ -133,152 +128,163 @@ pub(super) fn check_footer(bytes: &[u8]) -> Result<(), String> {
             "its footer declares {len} bytes of metadata in a file of {n} bytes"
         ));
     }
+    let meta = &bytes[n - 8 - len..n - 8];
     let mut r = Thrift {
-        bytes: &bytes[n - 8 - len..n - 8],
+        bytes: meta,
         pos: 0,
-        what: "its footer",
     };
-    let meta = r.fields(0)?;
-    let int = |fields: &[(i16, Tv)], id| match field(fields, id) {
-        Some(Tv::Int(v)) => *v,
-        _ => 0,
+    r.skip_struct(0)?;
+    // The footer as polars' own decoder reads it, which a walk by wire
+    // types does not always follow (see `parquet_footer`).
+    super::parquet_footer::check(meta)
+}
+
+/// Checks, on the metadata as polars parsed it (`reader` over `bytes`),
+/// what it declares before polars decodes any page:
+/// - each column chunk lies in the file and holds a count of values >= 0;
+///   a row group has no more rows than its fullest column has values
+///   (equal for flat columns), the file no more than its groups;
+/// - each page header, read by the parser polars uses
+///   (`polars_parquet_format`) in the order polars reads them, declares
+///   sizes and counts between 0 and what its chunk holds.
+///
+/// A page declaring a negative count reached polars' decoder as about
+/// 2^64 values, for which it reserved a validity bitmap of 2^61 bytes and
+/// aborted (`fuzz/regressions/*/page-*.parquet`). The checks read polars'
+/// own parse of the footer, not a parse of ours beside it: the fuzzer found
+/// footers that two thrift readers read differently (a field of the wrong
+/// wire type is skipped by a generic reader and read as its declared type
+/// by polars').
+pub(super) fn check_pages(
+    bytes: &[u8],
+    reader: &mut ParquetReader<Cursor<&[u8]>>,
+) -> Result<(), String> {
+    let meta = match super::guard_polars(|| reader.get_metadata().cloned()) {
+        Ok(Ok(meta)) => meta,
+        // polars refuses the footer: the read that follows says why.
+        Ok(Err(_)) => return Ok(()),
+        Err(panic) => return Err(format!("polars failed reading its footer ({panic})")),
     };
-    // FileMetaData: 3 num_rows, 4 row_groups; RowGroup: 1 columns, 3
-    // num_rows; ColumnChunk: 3 meta_data (ColumnMetaData: 5 num_values).
-    // A row group has no more rows than its fullest column has values
-    // (equal for flat columns), and the file no more than its groups.
-    let mut rows = 0i64;
-    for (g, group) in structs(field(&meta, 4)).enumerate() {
+    let mut rows = 0u64;
+    for (g, group) in meta.row_groups.iter().enumerate() {
         let mut most = 0i64;
-        for (c, chunk) in structs(field(group, 1)).enumerate() {
-            if let Some(Tv::Struct(cm)) = field(chunk, 3) {
-                check_pages(bytes, n - 8 - len, cm)
-                    .map_err(|e| format!("row group {g}, column {c}: {e}"))?;
-                most = most.max(int(cm, 5));
+        for (c, column) in group.parquet_columns().iter().enumerate() {
+            let at = |e: String| format!("row group {g}, column {c}: {e}");
+            let values = column.num_values();
+            let range = column.byte_range();
+            if values < 0 || range.start > range.end || range.end > bytes.len() as u64 {
+                return Err(at(format!(
+                    "its metadata puts {values} values in bytes {} to {} of a file of {} bytes",
+                    range.start,
+                    range.end,
+                    bytes.len()
+                )));
             }
+            chunk_pages(&bytes[range.start as usize..range.end as usize], values).map_err(at)?;
+            most = most.max(values);
         }
-        let declared = int(group, 3);
-        if !(0..=most).contains(&declared) {
+        let declared = group.num_rows() as u64;
+        if declared > most as u64 {
             return Err(format!(
                 "row group {g} declares {declared} rows where its columns hold at most {most} values"
             ));
         }
-        rows = rows.saturating_add(declared);
+        rows += declared;
     }
-    let declared = int(&meta, 3);
-    if !(0..=rows).contains(&declared) {
+    if meta.num_rows as u64 > rows {
         return Err(format!(
-            "its footer declares {declared} rows where its row groups hold {rows}"
+            "its footer declares {} rows where its row groups hold {rows}",
+            meta.num_rows
         ));
     }
     Ok(())
 }
 
-/// The page headers of one column chunk (`ColumnMetaData` `cm`: 5
-/// num_values, 7 total_compressed_size, 9 data_page_offset, 11
-/// dictionary_page_offset), in the file's first `end` bytes.
-fn check_pages(bytes: &[u8], end: usize, cm: &[(i16, Tv)]) -> Result<(), String> {
-    let int = |id| match field(cm, id) {
-        Some(Tv::Int(v)) => Some(*v),
-        _ => None,
-    };
-    let (Some(values), Some(size), Some(data)) = (int(5), int(7), int(9)) else {
-        return Ok(());
-    };
-    // Some writers put 0 for "no dictionary page": a page starts after the
-    // leading magic or not at all.
-    let start = int(11).filter(|d| (4..data).contains(d)).unwrap_or(data);
-    if values < 0 || size < 0 || start < 0 || start.saturating_add(size) > end as i64 {
-        return Err(format!(
-            "its metadata puts {values} values in bytes {start} to {} of a file of {end} bytes of data",
-            start.saturating_add(size)
-        ));
-    }
-    let (mut pos, stop) = (start as usize, (start + size) as usize);
+/// The page headers of one column chunk of `values` values, as polars'
+/// page reader walks them: from the chunk's start, header after header,
+/// until the data pages' counts reach `values`.
+pub(super) fn chunk_pages(chunk: &[u8], values: i64) -> Result<(), String> {
+    use polars_parquet_format::thrift::protocol::TCompactInputProtocol;
+    use polars_parquet_format::{PageHeader, PageType};
+
+    let mut pos = 0usize;
     let mut seen = 0i64;
-    while pos < stop && seen < values {
-        let mut r = Thrift {
-            bytes: &bytes[pos..stop],
-            pos: 0,
-            what: "a page header",
-        };
-        let page = r.fields(0)?;
-        let at = |id| match field(&page, id) {
-            Some(Tv::Int(v)) => *v,
-            _ => 0,
-        };
-        let compressed = at(3);
-        if at(2) < 0 || !(0..=(stop - pos - r.pos) as i64).contains(&compressed) {
+    while seen < values {
+        let left = chunk.len() - pos;
+        let mut cursor = std::io::Cursor::new(&chunk[pos..]);
+        // The same generated parser polars runs, bounded by the bytes left
+        // (polars runs it unbounded): what reads here reads there, and
+        // allocates no more than the chunk holds.
+        let mut prot = TCompactInputProtocol::new(&mut cursor, left);
+        let page = PageHeader::read_from_in_protocol(&mut prot).map_err(|e| {
+            format!("the page header at byte {pos} of its chunk does not read: {e}")
+        })?;
+        let header_len = cursor.position() as usize;
+        let compressed = i64::from(page.compressed_page_size);
+        let room = (left - header_len) as i64;
+        if page.uncompressed_page_size < 0 || !(0..=room).contains(&compressed) {
             return Err(format!(
-                "a page at byte {pos} declares {compressed} bytes (uncompressed {}) where {} remain in its column",
-                at(2),
-                stop - pos - r.pos
+                "a page at byte {pos} of its chunk declares {compressed} bytes (uncompressed {}) where {room} remain",
+                page.uncompressed_page_size
             ));
         }
-        // DataPageHeader (5), DictionaryPageHeader (7) and DataPageHeaderV2
-        // (8) each start with num_values; v2 adds num_nulls (2), num_rows
-        // (3) and its levels' byte lengths (5, 6).
-        for (kind, counts) in [(5, &[1][..]), (7, &[1]), (8, &[1, 2, 3, 5, 6])] {
-            let Some(Tv::Struct(h)) = field(&page, kind) else {
-                continue;
-            };
-            for id in counts {
-                let v = match field(h, *id) {
-                    Some(Tv::Int(v)) => *v,
-                    _ => 0,
-                };
-                let most = if *id >= 5 { compressed } else { values };
-                if !(0..=most).contains(&v) {
-                    return Err(format!(
-                        "a page at byte {pos} declares a count of {v} where its column has {values} values in {size} bytes"
-                    ));
-                }
-            }
-            if kind != 7 {
-                seen = seen.saturating_add(match field(h, 1) {
-                    Some(Tv::Int(v)) => *v,
-                    _ => 0,
-                });
-            }
+        let bad = |what: &str, v: i32, most: i64| {
+            (!(0..=most).contains(&i64::from(v))).then(|| {
+                format!(
+                    "a page at byte {pos} of its chunk declares {what} {v} where its chunk has {values} values in {} bytes",
+                    chunk.len()
+                )
+            })
+        };
+        let mut problems = Vec::new();
+        if let Some(h) = &page.data_page_header {
+            problems.extend(bad("a count of", h.num_values, values));
         }
-        pos += r.pos + compressed as usize;
+        if let Some(h) = &page.dictionary_page_header {
+            problems.extend(bad("a dictionary of", h.num_values, values));
+        }
+        if let Some(h) = &page.data_page_header_v2 {
+            problems.extend(bad("a count of", h.num_values, values));
+            problems.extend(bad("a null count of", h.num_nulls, values));
+            problems.extend(bad("a row count of", h.num_rows, values));
+            problems.extend(bad(
+                "levels of",
+                h.definition_levels_byte_length,
+                compressed,
+            ));
+            problems.extend(bad(
+                "levels of",
+                h.repetition_levels_byte_length,
+                compressed,
+            ));
+        }
+        if let Some(p) = problems.into_iter().next() {
+            return Err(p);
+        }
+        // What polars counts towards the chunk's values (its
+        // `get_page_num_values`).
+        seen += i64::from(match page.type_ {
+            PageType::DATA_PAGE => page.data_page_header.as_ref().map_or(0, |h| h.num_values),
+            PageType::DATA_PAGE_V2 => page
+                .data_page_header_v2
+                .as_ref()
+                .map_or(0, |h| h.num_values),
+            _ => 0,
+        });
+        pos += header_len + compressed as usize;
+        if pos >= chunk.len() && seen < values {
+            return Err(format!(
+                "its chunk ends after pages of {seen} of its {values} values"
+            ));
+        }
     }
     Ok(())
 }
 
-/// A thrift value as far as the checks need it.
-enum Tv {
-    Int(i64),
-    Struct(Vec<(i16, Tv)>),
-    List(Vec<Tv>),
-    /// Strings, doubles, booleans and maps: checked and skipped.
-    Other,
-}
-
-/// The value of field `id` in a struct's fields, if present.
-fn field(fields: &[(i16, Tv)], id: i16) -> Option<&Tv> {
-    fields.iter().find(|(i, _)| *i == id).map(|(_, v)| v)
-}
-
-/// The structs of a list value (none when it is not one).
-fn structs(v: Option<&Tv>) -> impl Iterator<Item = &[(i16, Tv)]> {
-    let items: &[Tv] = match v {
-        Some(Tv::List(items)) => items,
-        _ => &[],
-    };
-    items.iter().filter_map(|t| match t {
-        Tv::Struct(f) => Some(f.as_slice()),
-        _ => None,
-    })
-}
-
-/// A reader of the thrift compact protocol that checks every declared
-/// length against the bytes left.
+/// A reader of the thrift compact protocol that only checks and skips.
 struct Thrift<'a> {
     bytes: &'a [u8],
     pos: usize,
-    /// What is read, for messages: "its footer", "a page header".
-    what: &'static str,
 }
 
 /// Deeper nesting than Parquet's metadata has is damage (and would exhaust
@@ -294,7 +300,7 @@ impl Thrift<'_> {
         let b = *self
             .bytes
             .get(self.pos)
-            .ok_or_else(|| format!("{}'s metadata ends early", self.what))?;
+            .ok_or("its footer's metadata ends early")?;
         self.pos += 1;
         Ok(b)
     }
@@ -308,20 +314,13 @@ impl Thrift<'_> {
                 return Ok(value);
             }
         }
-        Err(format!("{} holds a varint longer than 64 bits", self.what))
-    }
-
-    /// A zigzag-encoded integer (i16, i32, i64).
-    fn int(&mut self) -> Result<i64, String> {
-        let v = self.varint()?;
-        Ok((v >> 1) as i64 ^ -((v & 1) as i64))
+        Err("its footer holds a varint longer than 64 bits".into())
     }
 
     fn advance(&mut self, n: u64, what: &str) -> Result<(), String> {
         if n > self.left() as u64 {
             return Err(format!(
-                "{} declares {what} of {n} bytes where {} remain",
-                self.what,
+                "its footer declares {what} of {n} bytes where {} remain",
                 self.left()
             ));
         }
@@ -329,48 +328,35 @@ impl Thrift<'_> {
         Ok(())
     }
 
-    /// A struct's fields, up to its stop byte.
-    fn fields(&mut self, depth: usize) -> Result<Vec<(i16, Tv)>, String> {
+    fn skip_struct(&mut self, depth: usize) -> Result<(), String> {
         if depth > MAX_THRIFT_DEPTH {
-            return Err(format!("{}'s metadata is nested too deep", self.what));
+            return Err("its footer's metadata is nested too deep".into());
         }
-        let mut fields = Vec::new();
-        let mut id: i16 = 0;
         loop {
             let header = self.byte()?;
             if header == 0 {
-                return Ok(fields);
+                return Ok(());
             }
-            id = match header >> 4 {
+            if header >> 4 == 0 {
                 // A long-form field id (zigzag i16) follows.
-                0 => self.int()? as i16,
-                delta => id.wrapping_add(i16::from(delta)),
-            };
+                self.varint()?;
+            }
             // A field's booleans are in its header (types 1 and 2).
-            let value = match header & 0x0f {
-                1 | 2 => Tv::Other,
-                ty => self.value(ty, depth)?,
-            };
-            fields.push((id, value));
+            if !matches!(header & 0x0f, 1 | 2) {
+                self.skip(header & 0x0f, depth)?;
+            }
         }
     }
 
     /// A value of compact type `ty` (booleans as a byte, as in lists).
-    fn value(&mut self, ty: u8, depth: usize) -> Result<Tv, String> {
-        Ok(match ty {
-            1..=3 => {
-                self.byte()?;
-                Tv::Other
-            }
-            4..=6 => Tv::Int(self.int()?),
-            7 => {
-                self.advance(8, "a double")?;
-                Tv::Other
-            }
+    fn skip(&mut self, ty: u8, depth: usize) -> Result<(), String> {
+        match ty {
+            1..=3 => self.byte().map(|_| ()),
+            4..=6 => self.varint().map(|_| ()),
+            7 => self.advance(8, "a double"),
             8 => {
                 let len = self.varint()?;
-                self.advance(len, "a string")?;
-                Tv::Other
+                self.advance(len, "a string")
             }
             9 | 10 => {
                 let header = self.byte()?;
@@ -381,42 +367,37 @@ impl Thrift<'_> {
                 // Every element takes at least a byte.
                 if size > self.left() as u64 {
                     return Err(format!(
-                        "{} declares a list of {size} elements where {} bytes remain",
-                        self.what,
-                        self.left()
-                    ));
-                }
-                let items = (0..size)
-                    .map(|_| self.value(header & 0x0f, depth + 1))
-                    .collect::<Result<_, _>>()?;
-                Tv::List(items)
-            }
-            11 => {
-                let size = self.varint()?;
-                if size == 0 {
-                    return Ok(Tv::Other);
-                }
-                let types = self.byte()?;
-                if size > self.left() as u64 {
-                    return Err(format!(
-                        "{} declares a map of {size} entries where {} bytes remain",
-                        self.what,
+                        "its footer declares a list of {size} elements where {} bytes remain",
                         self.left()
                     ));
                 }
                 for _ in 0..size {
-                    self.value(types >> 4, depth + 1)?;
-                    self.value(types & 0x0f, depth + 1)?;
+                    self.skip(header & 0x0f, depth + 1)?;
                 }
-                Tv::Other
+                Ok(())
             }
-            12 => Tv::Struct(self.fields(depth + 1)?),
-            other => {
-                return Err(format!(
-                    "{}'s metadata has an unknown thrift type {other}",
-                    self.what
-                ));
+            11 => {
+                let size = self.varint()?;
+                if size == 0 {
+                    return Ok(());
+                }
+                let types = self.byte()?;
+                if size > self.left() as u64 {
+                    return Err(format!(
+                        "its footer declares a map of {size} entries where {} bytes remain",
+                        self.left()
+                    ));
+                }
+                for _ in 0..size {
+                    self.skip(types >> 4, depth + 1)?;
+                    self.skip(types & 0x0f, depth + 1)?;
+                }
+                Ok(())
             }
-        })
+            12 => self.skip_struct(depth + 1),
+            other => Err(format!(
+                "its footer's metadata has an unknown thrift type {other}"
+            )),
+        }
     }
 }

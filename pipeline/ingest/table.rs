@@ -140,9 +140,14 @@ pub fn table_from_bytes(
                 .finish()
                 .map_err(|source| fail(TableProblem::Csv { source }))
         }
-        TableFormat::Parquet => ParquetReader::new(Cursor::new(bytes.as_slice()))
-            .finish()
-            .map_err(|source| fail(TableProblem::Parquet { source })),
+        TableFormat::Parquet => {
+            let mut reader = ParquetReader::new(Cursor::new(bytes.as_slice()));
+            super::parquet::check_pages(&bytes, &mut reader)
+                .map_err(|message| fail(TableProblem::Metadata { message }))?;
+            reader
+                .finish()
+                .map_err(|source| fail(TableProblem::Parquet { source }))
+        }
     };
     // A panic inside polars on damaged bytes is the table's problem, not a
     // crash (found by the run-table fuzz target).

@@ -1411,7 +1411,7 @@ fn parquet_format_errors_word_for_word() {
     std::fs::write(&path, &bytes).unwrap();
     assert_refused(
         &plan_by_name(&path, LogFormat::Parquet),
-        "a damaged Parquet file: row group 0, column 0: a page header's metadata has an unknown thrift type 15",
+        "a damaged Parquet file: row group 0, column 0: the page header at byte 0 of its chunk does not read: bad data",
     );
 
     let cols = vec![
@@ -1586,11 +1586,11 @@ fn parquet_footers_that_declare_more_than_they_hold_are_refused() {
     assert_eq!(super::parquet::check_footer(b"not parquet at all"), Ok(()));
 }
 
-/// The page check against a file built by hand from parquet.thrift: one
-/// row group, one column chunk of 4 values whose one data page (at byte 4,
-/// a 17-byte header and 8 bytes of data) declares `page_values`; the row
-/// group declares `rows`. A negative count (polars read it as about 2^64
-/// and reserved 2^61 bytes) and rows beyond the values are refused.
+/// The page check against a column chunk built by hand from parquet.thrift:
+/// one data page of `page_values` values (a 17-byte header and 8 bytes of
+/// data) in a chunk of 4 values. A negative count (polars read it as about
+/// 2^64 and reserved 2^61 bytes), a count beyond the chunk's, a page longer
+/// than the chunk and a chunk whose pages stop short are refused.
 #[test]
 fn parquet_pages_that_declare_impossible_counts_are_refused() {
     fn zigzag(v: i64) -> u8 {
@@ -1598,63 +1598,33 @@ fn parquet_pages_that_declare_impossible_counts_are_refused() {
         assert!(z < 0x80, "one varint byte");
         z as u8
     }
-    fn file(page_values: i64, rows: i64) -> Vec<u8> {
-        let mut b = b"PAR1".to_vec();
-        // PageHeader: 1 type = 0 (DATA_PAGE), 2 uncompressed = 8,
-        // 3 compressed = 8, 5 data_page_header { 1 num_values, 2-4
-        // encodings = 0 }.
-        b.extend_from_slice(&[0x15, 0x00, 0x15, 0x10, 0x15, 0x10, 0x2C, 0x15]);
+    // PageHeader: 1 type = 0 (DATA_PAGE), 2 uncompressed = 8, 3 compressed
+    // = `size`, 5 data_page_header { 1 num_values, 2-4 encodings = 0 }.
+    fn chunk(page_values: i64, size: i64) -> Vec<u8> {
+        let mut b = vec![0x15, 0x00, 0x15, 0x10, 0x15, zigzag(size), 0x2C, 0x15];
         b.push(zigzag(page_values));
         b.extend_from_slice(&[0x15, 0x00, 0x15, 0x00, 0x15, 0x00, 0x00, 0x00]);
         b.extend_from_slice(&[0; 8]);
-        // FileMetaData: 1 version = 1, 2 schema = [], 3 num_rows, 4
-        // row_groups = [RowGroup { 1 columns = [ColumnChunk { 2
-        // file_offset = 4, 3 meta_data { 5 num_values = 4, 7
-        // total_compressed_size = 25, 9 data_page_offset = 4 } }], 3
-        // num_rows }].
-        let meta = [
-            0x15,
-            0x02,
-            0x19,
-            0x0C,
-            0x16,
-            zigzag(rows),
-            0x19,
-            0x1C,
-            0x19,
-            0x1C,
-            0x26,
-            0x08,
-            0x1C,
-            0x56,
-            0x08,
-            0x26,
-            0x32,
-            0x26,
-            0x08,
-            0x00,
-            0x00,
-            0x26,
-            zigzag(rows),
-            0x00,
-            0x00,
-        ];
-        b.extend_from_slice(&meta);
-        b.extend_from_slice(&(meta.len() as u32).to_le_bytes());
-        b.extend_from_slice(b"PAR1");
         b
     }
-    assert_eq!(super::parquet::check_footer(&file(4, 4)), Ok(()));
+    let pages = super::parquet::chunk_pages;
+    assert_eq!(pages(&chunk(4, 8), 4), Ok(()));
     assert_eq!(
-        super::parquet::check_footer(&file(-1, 4)),
-        Err("row group 0, column 0: a page at byte 4 declares a count of -1 where its column has 4 values in 25 bytes".into())
+        pages(&chunk(-1, 8), 4),
+        Err("a page at byte 0 of its chunk declares a count of -1 where its chunk has 4 values in 25 bytes".into())
     );
     assert_eq!(
-        super::parquet::check_footer(&file(5, 4)),
-        Err("row group 0, column 0: a page at byte 4 declares a count of 5 where its column has 4 values in 25 bytes".into())
+        pages(&chunk(5, 8), 4),
+        Err("a page at byte 0 of its chunk declares a count of 5 where its chunk has 4 values in 25 bytes".into())
     );
     assert_eq!(
-        super::parquet::check_footer(&file(4, 40)),
-        Err("row group 0 declares 40 rows where its columns hold at most 4 values".into())
+        pages(&chunk(4, 9), 4),
+        Err(
+            "a page at byte 0 of its chunk declares 9 bytes (uncompressed 8) where 8 remain".into()
+        )
+    );
+    assert_eq!(
+        pages(&chunk(3, 8), 4),
+        Err("its chunk ends after pages of 3 of its 4 values".into())
     );
 }
