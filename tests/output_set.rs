@@ -15,27 +15,9 @@ use std::process::Command;
 use std::time::Instant;
 
 use crate::shards::campaign;
-use crate::util::{scratch, servoid_into};
+use crate::util::{scratch, servoid_into, tree};
 
 type Tree = BTreeMap<String, Vec<u8>>;
-
-/// Every file under `dir` with its bytes, by path relative to `dir`.
-fn tree(dir: &Path) -> Tree {
-    let mut out = Tree::new();
-    let mut stack = vec![dir.to_path_buf()];
-    while let Some(d) = stack.pop() {
-        for e in std::fs::read_dir(&d).unwrap().flatten() {
-            let p = e.path();
-            if e.file_type().unwrap().is_dir() {
-                stack.push(p);
-            } else {
-                let rel = p.strip_prefix(dir).unwrap().display().to_string();
-                out.insert(rel, std::fs::read(&p).unwrap());
-            }
-        }
-    }
-    out
-}
 
 /// A tree without run.jsonl, the one file whose bytes hold wall-clock
 /// times.

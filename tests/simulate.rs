@@ -5,7 +5,7 @@
 
 use std::path::Path;
 
-use crate::util::{root, run_by_id, scratch, servoid, servoid_into, write};
+use crate::util::{root, run_by_id, scratch, servoid, servoid_into, tree, write};
 
 /// A short campaign (20 s linear chirp at 1 kHz) on a rig that is not the
 /// paper's, so nothing here can lean on the bundled numbers.
@@ -113,25 +113,6 @@ fn csv_column(path: &Path, name: &str) -> Vec<f64> {
         .collect()
 }
 
-/// Every file under `dir`, relative path and bytes, sorted.
-fn tree(dir: &Path) -> Vec<(String, Vec<u8>)> {
-    fn walk(base: &Path, dir: &Path, out: &mut Vec<(String, Vec<u8>)>) {
-        for e in std::fs::read_dir(dir).unwrap() {
-            let p = e.unwrap().path();
-            if p.is_dir() {
-                walk(base, &p, out);
-            } else {
-                let rel = p.strip_prefix(base).unwrap().to_string_lossy().into_owned();
-                out.push((rel, std::fs::read(&p).unwrap()));
-            }
-        }
-    }
-    let mut out = Vec::new();
-    walk(dir, dir, &mut out);
-    out.sort_by(|a, b| a.0.cmp(&b.0));
-    out
-}
-
 /// simulate then run: truth.json holds the transfer functions of MODEL.md's
 /// table (Eqs. 11-17, computed here from the four parameters), the generated
 /// manifest runs, and the identified rig comes back close to the truth.
@@ -231,9 +212,10 @@ fn the_same_seed_gives_the_same_bytes_whatever_the_thread_count() {
     // The cache (.cache/) is the orchestrator's state, keyed by the logs'
     // paths, not an output.
     for t in &mut trees {
-        t.retain(|(n, _)| !n.starts_with(".cache/"));
+        t.retain(|n, _| !n.starts_with(".cache/"));
     }
-    let names = |t: &[(String, Vec<u8>)]| t.iter().map(|(n, _)| n.clone()).collect::<Vec<_>>();
+    let names =
+        |t: &std::collections::BTreeMap<String, Vec<u8>>| t.keys().cloned().collect::<Vec<_>>();
     assert_eq!(names(&trees[0]), names(&trees[1]));
     assert!(trees[0].len() > 10, "logs, truth, results, figures");
     for ((name, a), (_, b)) in trees[0].iter().zip(&trees[1]) {

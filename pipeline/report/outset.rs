@@ -258,8 +258,7 @@ fn sweep(parent: &Path, name: &str) {
         // (see `exchange`): a job killed before its own set went in leaves
         // no output folder, and the previous set is put back.
         if let Some(pid) = pid.strip_suffix("-old")
-            && !pid.is_empty()
-            && pid.bytes().all(|b| b.is_ascii_digit())
+            && is_pid(pid)
         {
             let target = parent.join(name);
             if std::fs::symlink_metadata(&target).is_err() {
@@ -269,7 +268,7 @@ fn sweep(parent: &Path, name: &str) {
             }
             continue;
         }
-        if pid.is_empty() || !pid.bytes().all(|b| b.is_ascii_digit()) {
+        if !is_pid(pid) {
             continue;
         }
         let unlocked = File::open(&path).is_ok_and(|f| f.try_lock().is_ok());
@@ -282,13 +281,16 @@ fn sweep(parent: &Path, name: &str) {
 /// Whether `name` is a temporary that a killed writer left: a per-file
 /// temporary (`.<file>.tmp-<pid>`) or a writability probe.
 fn stale(name: &str) -> bool {
-    let digits_after = |marker: &str| {
-        name.starts_with('.')
-            && name
-                .rsplit_once(marker)
-                .is_some_and(|(_, pid)| !pid.is_empty() && pid.bytes().all(|b| b.is_ascii_digit()))
+    let pid_after = |marker: &str| {
+        name.starts_with('.') && name.rsplit_once(marker).is_some_and(|(_, pid)| is_pid(pid))
     };
-    digits_after(".tmp-") || digits_after(".servoid-probe-")
+    pid_after(".tmp-") || pid_after(".servoid-probe-")
+}
+
+/// Whether `s` is a process id as servoid writes it into a name: decimal
+/// digits, at least one.
+fn is_pid(s: &str) -> bool {
+    !s.is_empty() && s.bytes().all(|b| b.is_ascii_digit())
 }
 
 /// Rebuild the tree `from` under `to` with hard links (a copy where the

@@ -417,23 +417,13 @@ fn time_figure(run: &RunResult, time: &TimeStage, fs: f64) -> Option<FigureSpec>
     // Each panel holds its window's samples only (two beyond each edge, more
     // than the renderer's one for lines entering the panel), not the whole
     // record: four copies of a 14 M-sample record were 460 MB.
-    let first_from = |s: f64| {
+    // The first sample k (of n, at k / fs) whose time is not `before` the
+    // edge: partition_point over times computed, not stored.
+    let first_not = |before: &dyn Fn(f64) -> bool| {
         let (mut lo, mut hi) = (0, n);
         while lo < hi {
             let mid = lo + (hi - lo) / 2;
-            if (mid as f64 / fs) < s {
-                lo = mid + 1;
-            } else {
-                hi = mid;
-            }
-        }
-        lo
-    };
-    let first_after = |s: f64| {
-        let (mut lo, mut hi) = (0, n);
-        while lo < hi {
-            let mid = lo + (hi - lo) / 2;
-            if (mid as f64 / fs) <= s {
+            if before(mid as f64 / fs) {
                 lo = mid + 1;
             } else {
                 hi = mid;
@@ -453,8 +443,8 @@ fn time_figure(run: &RunResult, time: &TimeStage, fs: f64) -> Option<FigureSpec>
         .iter()
         .enumerate()
         .map(|(k, w)| {
-            let i0 = first_from(w.start_s).saturating_sub(2);
-            let i1 = (first_after(w.end_s) + 2).min(n).max(i0);
+            let i0 = first_not(&|t| t < w.start_s).saturating_sub(2);
+            let i1 = (first_not(&|t| t <= w.end_s) + 2).min(n).max(i0);
             let t: Arc<[f64]> = (i0..i1).map(|k| k as f64 / fs).collect::<Vec<_>>().into();
             let cm = |x: &[f64]| -> Arc<[f64]> {
                 x[i0..i1]

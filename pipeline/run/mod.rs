@@ -71,12 +71,14 @@ pub enum JobError {
 }
 
 impl JobError {
-    /// This error with every path an output error names passed through
-    /// `f` (see [`OutSet::relocate`]).
-    pub fn map_paths(self, f: &dyn Fn(&Path) -> PathBuf) -> Self {
+    /// This error as the user should read it: an output error's paths under
+    /// the output folder, not under `set`'s work folder (see
+    /// [`OutSet::relocate`]).
+    pub fn relocated(self, set: &OutSet) -> Self {
+        let f = |p: &Path| set.final_path(p);
         match self {
-            JobError::Write(e) => JobError::Write(e.map_paths(f)),
-            JobError::Simulate(e) => JobError::Simulate(e.map_paths(f)),
+            JobError::Write(e) => JobError::Write(e.map_paths(&f)),
+            JobError::Simulate(e) => JobError::Simulate(e.map_paths(&f)),
             e => e,
         }
     }
@@ -192,7 +194,7 @@ pub fn run_campaign(
     let workers = pool(settings.jobs)?;
     let outcome = workers
         .install(|| write_campaign(&campaign, &set, settings, observer))
-        .map_err(|e| e.map_paths(&|p| set.final_path(p)))?;
+        .map_err(|e| e.relocated(&set))?;
     set.commit()?;
     Ok(outcome)
 }
@@ -227,7 +229,7 @@ pub fn run_simulation(
     // leaves new logs beside the previous campaign's results.
     let set = OutSet::begin(&out_dir)?;
     let workers = pool(settings.jobs)?;
-    let relocate = |e: JobError| e.map_paths(&|p| set.final_path(p));
+    let relocate = |e: JobError| e.relocated(&set);
     let simulated = workers
         .install(|| simulate::simulate_campaign(&plan, set.dir()))
         .map_err(|e| relocate(e.into()))?;
@@ -296,7 +298,7 @@ pub fn run_shard(
         intersample: share.identification.intersample,
         cache: Some(&cache),
     };
-    let relocate = |e: JobError| e.map_paths(&|p| set.final_path(p));
+    let relocate = |e: JobError| e.relocated(&set);
     let analysed = workers
         .install(|| analyse::analyse_with(&share, &draw, observer))
         .map_err(|e| relocate(e.into()))?;
@@ -336,7 +338,7 @@ pub fn merge(
         .clone()
         .unwrap_or_else(|| PathBuf::from("reports").join(&first.campaign));
     let set = OutSet::begin(&out_dir)?;
-    let relocate = |e: JobError| e.map_paths(&|p| set.final_path(p));
+    let relocate = |e: JobError| e.relocated(&set);
     let shard_dirs: Vec<PathBuf> = shards.iter().map(|(d, _)| d.clone()).collect();
     let gathered = (|| {
         for dir in &shard_dirs {
