@@ -5,13 +5,14 @@
 //! the hold, a 2-sample delay and a 120 Hz valve mode, and 0.1 % noise.
 //! From the paper's rig 10 % off, with the delay and valve mode fitted.
 //! Target: under 50 ms beyond the per-run FRFs. Measured on two cores: one
-//! delay-and-valve fit 28 ms (35,525 bins, 1.26 M bins/s; 78 ms when the
-//! solver was given the tall Jacobian); what the campaign runs (`select`:
-//! three structures, the valve mode's grid of starts, two fits from it, F
-//! tests) 89 ms (305 ms before). So one structure's fit meets the target and
-//! the whole selection does not: it is some 45 Levenberg-Marquardt
-//! iterations, each a pass over the bins for J^T J and J^T r (2.4 ms on one
-//! core) and one or more for the cost (0.85 ms).
+//! delay-and-valve fit 10.7 ms (35,525 bins, 3.3 M bins/s; 22 ms before the
+//! solver was given the cost with the normal equations in one pass and the
+//! covariance from them, 78 ms when it was given the tall Jacobian); what
+//! the campaign runs (`select`: three structures, the valve mode's grid of
+//! starts, a three-iteration race of the best two and the winner on to
+//! convergence, F tests) 36.5 ms (76 ms before those changes and the race,
+//! 305 ms at first). Each Levenberg-Marquardt trial is one pass over the
+//! bins for r^T r, J^T J and J^T r (about 1.5 ms on one core).
 //!
 //! `cargo bench --bench joint`
 
@@ -20,7 +21,7 @@ use std::hint::black_box;
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use nalgebra::Complex;
 use servoid::fit::Intersample;
-use servoid::fit::joint::{Choice, JointOptions, JointRun, Structure, joint_fit, select};
+use servoid::fit::joint::{Choice, JointOptions, JointRun, Output, Structure, joint_fit, select};
 use servoid::model::{LinearSpecimen, PAPER_RIG, RigParams};
 use servoid::simulate::plant::{PlantSpec, Unmodelled, ValveMode, linear_state_space};
 use servoid::simulate::{SpecimenModel, seeded_rng};
@@ -89,6 +90,7 @@ fn bench_joint(c: &mut Criterion) {
         .map(|(s, p, h)| JointRun {
             specimen: *s,
             p_gain: *p,
+            output: Output::Displacement,
             freq_hz: &f,
             h,
             variance: &var,
@@ -111,6 +113,7 @@ fn bench_joint(c: &mut Criterion) {
         valve_start: (150.0, 0.5),
         delay_start_s: 0.0,
         max_delay_s: 0.05,
+        force_delay_start_s: 0.0,
         lag: 1,
     };
     // Fail loudly rather than time a fit that does not work.

@@ -18,7 +18,11 @@
 //!   x1/u = A V / D,  D = (s + beta1) Q + A V,
 //!
 //! which is Eqs. 12, 14 and 17 when V = 1. The measured FRF is that times
-//! the hold Z(s) and exp(-s tau).
+//! the hold Z(s) and exp(-s tau). A run's force over command is S(s) times
+//! its x1/u (Eq. 45: the specimen's poles are the force path's zeros), so a
+//! validation run, whose m, c and k the manifest gives, adds two FRFs that
+//! the same parameters must explain; S(s) is known, so every log-derivative
+//! below holds for it unchanged.
 //!
 //! Parameters are solved for as logarithms (all positive, and of very
 //! different sizes) and the delay in sample periods; Levenberg-Marquardt
@@ -30,22 +34,32 @@
 //! optimum, for the covariance (through its QR factor, which keeps the
 //! rank test's precision).
 
-use argmin::core::{Error as ArgminError, Jacobian, Operator, TerminationReason};
+use argmin::core::{Error as ArgminError, Executor, Jacobian, State, TerminationReason};
 use nalgebra::{Complex, DMatrix, DVector};
 
 use super::adequacy::{Adequacy, Residuals, Sums};
 use super::lm::{LevenbergMarquardt, Normal};
 use super::problem::hold_response;
 use super::settings::Intersample;
-use super::{FitError, Solved, covariance, solve};
+use super::{FitError, covariance, covariance_from_normal};
 use crate::model::{LinearSpecimen, RigParams};
 use rayon::prelude::*;
 
-/// One run's measured FRF x1/u and what the manifest says of it.
+/// What a run's FRF measures over the command.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Output {
+    /// The displacement x1 (Eqs. 12, 14, 17).
+    Displacement,
+    /// The force f on the specimen, S(s) x1 (Eq. 45).
+    Force,
+}
+
+/// One run's measured FRF, x1/u or f/u, and what the manifest says of it.
 #[derive(Debug, Clone, Copy)]
 pub struct JointRun<'a> {
     pub specimen: LinearSpecimen,
     pub p_gain: f64,
+    pub output: Output,
     pub freq_hz: &'a [f64],
     pub h: &'a [Complex<f64>],
     /// E|dH|^2 at each bin.
@@ -75,7 +89,8 @@ impl Structure {
         }
     }
 
-    /// The parameters' names, in the order of [`JointFit::params`].
+    /// The parameters' names, in the order of [`JointFit::params`] (which
+    /// adds [`FORCE_DELAY`] last when force FRFs are fitted).
     pub fn names(self) -> &'static [&'static str] {
         &[
             "beta1_per_s",
@@ -88,6 +103,12 @@ impl Structure {
         ][..self.n_params()]
     }
 }
+
+/// The name of the force FRFs' own delay, the last parameter of a
+/// structure with a delay when any run's force over command is fitted: the
+/// load cell's delay is its own, not the LVDT's (a sensor delay belongs to
+/// its sensor; a delay in the command path shows as the two alike).
+pub const FORCE_DELAY: &str = "force_delay_s";
 
 /// How to fit.
 #[derive(Debug, Clone, Copy)]
@@ -103,6 +124,9 @@ pub struct JointOptions {
     /// Where the delay starts (s), and its upper bound (s); it is at least 0.
     pub delay_start_s: f64,
     pub max_delay_s: f64,
+    /// Where the force FRFs' delay starts (s), when there is one; its bound
+    /// is the delay's.
+    pub force_delay_start_s: f64,
     /// The lag (bins) at which the residual correlation test pairs bins:
     /// the FRF estimator's kernel (`frf::Window::independent_lag`).
     pub lag: usize,
@@ -117,9 +141,14 @@ pub struct JointFit {
     pub delay_s: f64,
     /// Frequency (Hz) and damping ratio of the valve mode.
     pub valve: Option<(f64, f64)>,
+    /// The force FRFs' own delay (s), when force FRFs were fitted with a
+    /// structure that has a delay.
+    pub force_delay_s: Option<f64>,
     /// beta1, a1b0, a2, a3, then delay (s), valve frequency (Hz) and
-    /// damping as the structure has them.
+    /// damping as the structure has them, then the force FRFs' delay.
     pub params: Vec<f64>,
+    /// Their names.
+    pub names: Vec<&'static str>,
     /// Their covariance, scaled by the reduced chi-square as the per-run
     /// fit's is.
     pub covariance: DMatrix<f64>,
@@ -152,9 +181,15 @@ impl JointFit {
                 ));
             }
         }
-        if self.structure != Structure::Plain && self.delay_s >= max_delay_s * (1.0 - 1e-9) {
+        let at_bound = |d: f64| d >= max_delay_s * (1.0 - 1e-9);
+        if self.structure != Structure::Plain && at_bound(self.delay_s) {
             return Some(format!(
                 "the delay sits at its bound identification.delay.max_s = {max_delay_s} s"
+            ));
+        }
+        if self.force_delay_s.is_some_and(at_bound) {
+            return Some(format!(
+                "the force FRFs' delay sits at its bound identification.delay.max_s = {max_delay_s} s"
             ));
         }
         if let Some((hz, zeta)) = self.valve {
@@ -178,8 +213,10 @@ struct Bin {
     /// The run's specimen polynomial S(s) at `s`.
     sp: Complex<f64>,
     h: Complex<f64>,
-    /// The hold's response.
-    hold: Complex<f64>,
+    /// The known factors: the hold's response, times S(s) for a force.
+    known: Complex<f64>,
+    /// Whether the bin is of a force FRF (its delay is the force's).
+    force: bool,
     /// sqrt(2 / E|dH|^2): each of Re and Im then has unit variance.
     weight: f64,
     /// Index into `JointProblem::runs`.
@@ -202,6 +239,8 @@ struct JointProblem {
     /// Each run's FRF grid spacing (Hz).
     bin_hz: Vec<f64>,
     structure: Structure,
+    /// Where the force FRFs' delay is in theta, when it is fitted.
+    force_delay: Option<usize>,
     /// The sample period (s): the delay's unit in theta.
     period_s: f64,
 }
@@ -209,8 +248,12 @@ struct JointProblem {
 /// H and its derivatives with respect to theta at one bin.
 struct BinEval {
     model: Complex<f64>,
-    grad: [Complex<f64>; 7],
+    grad: [Complex<f64>; MAX_PARAMS],
 }
+
+/// The most parameters a fit has: the valve structure's seven and the
+/// force FRFs' delay.
+const MAX_PARAMS: usize = 8;
 
 /// The physical values at a point theta, computed once per pass over the
 /// bins.
@@ -222,6 +265,8 @@ struct Point {
     a3: f64,
     /// The delay (s), 0 for the plain structure.
     tau: f64,
+    /// The force FRFs' delay (s).
+    tau_force: f64,
     /// The valve mode's natural frequency (rad/s) and damping, if fitted.
     valve: Option<(f64, f64)>,
 }
@@ -232,23 +277,60 @@ struct Point {
 const CHUNK: usize = 2048;
 
 impl JointProblem {
+    fn n_params(&self) -> usize {
+        self.structure.n_params() + usize::from(self.force_delay.is_some())
+    }
+
+    fn names(&self) -> Vec<&'static str> {
+        let mut names = self.structure.names().to_vec();
+        if self.force_delay.is_some() {
+            names.push(FORCE_DELAY);
+        }
+        names
+    }
+
+    /// The problem over every `stride`-th bin of each run.
+    fn every(&self, stride: usize) -> JointProblem {
+        let mut bins = Vec::with_capacity(self.bins.len() / stride.max(1) + self.runs.len());
+        for r in 0..self.runs.len() {
+            bins.extend(
+                self.bins
+                    .iter()
+                    .filter(|b| b.run == r)
+                    .step_by(stride.max(1))
+                    .cloned(),
+            );
+        }
+        JointProblem {
+            bins,
+            runs: self.runs.clone(),
+            bin_hz: self.bin_hz.iter().map(|h| h * stride as f64).collect(),
+            structure: self.structure,
+            force_delay: self.force_delay,
+            period_s: self.period_s,
+        }
+    }
+
     fn point(&self, theta: &[f64]) -> Point {
+        let tau = match self.structure {
+            Structure::Plain => 0.0,
+            _ => theta[4] * self.period_s,
+        };
         Point {
             b1: theta[0].exp(),
             a1b0: theta[1].exp(),
             a2: theta[2].exp(),
             a3: theta[3].exp(),
-            tau: match self.structure {
-                Structure::Plain => 0.0,
-                _ => theta[4] * self.period_s,
-            },
+            tau,
+            tau_force: self.force_delay.map_or(tau, |k| theta[k] * self.period_s),
             valve: (self.structure == Structure::DelayValve)
                 .then(|| (theta[5].exp(), theta[6].exp())),
         }
     }
 
-    /// The model at one bin, and with `GRAD` its log-derivatives.
-    #[inline]
+    /// The model at one bin, and with `GRAD` its log-derivatives (inlined
+    /// into the passes over the bins, where it is nearly all the work).
+    #[inline(always)]
     fn eval_at<const GRAD: bool>(&self, bin: &Bin, x: &Point) -> BinEval {
         let s = bin.s;
         let run = self.runs[bin.run];
@@ -267,15 +349,16 @@ impl JointProblem {
         let sb = s + x.b1;
         let d = sb * q + v * a;
         // exp(-s tau) on the imaginary axis: a rotation by -w tau.
-        let delay = if x.tau == 0.0 {
+        let tau = if bin.force { x.tau_force } else { x.tau };
+        let delay = if tau == 0.0 {
             one
         } else {
-            let (sin, cos) = (-s.im * x.tau).sin_cos();
+            let (sin, cos) = (-s.im * tau).sin_cos();
             Complex::new(cos, sin)
         };
         let inv_d = one / d;
-        let h = a * v * inv_d * bin.hold * delay;
-        let mut grad = [Complex::default(); 7];
+        let h = a * v * inv_d * bin.known * delay;
+        let mut grad = [Complex::default(); MAX_PARAMS];
         if GRAD {
             // x dH/dx for each log parameter (derived in the module docs'
             // notation): A and V enter only as A V, whose log-derivative of
@@ -287,7 +370,11 @@ impl JointProblem {
             grad[2] = -h_d * sb * s * x.a2;
             grad[3] = -h_d * sb * sp * x.a3;
             if self.structure != Structure::Plain {
-                grad[4] = -s * self.period_s * h;
+                let k = match (bin.force, self.force_delay) {
+                    (true, Some(k)) => k,
+                    _ => 4,
+                };
+                grad[k] = -s * self.period_s * h;
             }
             if let Some((wv, zeta)) = x.valve {
                 // wv dV/dwv / V and zeta dV/dzeta / V.
@@ -316,7 +403,7 @@ impl JointProblem {
     fn jacobian_matrix(&self, theta: &[f64]) -> DMatrix<f64> {
         let x = self.point(theta);
         let n = self.bins.len();
-        let p = self.structure.n_params();
+        let p = self.n_params();
         let mut jac = DMatrix::zeros(2 * n, p);
         for (i, b) in self.bins.iter().enumerate() {
             let g = self.eval_at::<true>(b, &x).grad;
@@ -328,68 +415,96 @@ impl JointProblem {
         jac
     }
 
-    /// The weighted cost r^T r, in one parallel pass.
+    /// The weighted cost r^T r, in one parallel pass (bin by bin and chunk
+    /// by chunk in the order [`Self::normal`] adds it).
     fn cost(&self, theta: &[f64]) -> f64 {
         let x = self.point(theta);
         let partial: Vec<f64> = self
             .bins
             .par_chunks(CHUNK)
             .map(|chunk| {
-                chunk
-                    .iter()
-                    .map(|b| ((b.h - self.eval_at::<false>(b, &x).model) * b.weight).norm_sqr())
-                    .sum()
+                let mut cost = 0.0;
+                for b in chunk {
+                    cost += ((b.h - self.eval_at::<false>(b, &x).model) * b.weight).norm_sqr();
+                }
+                cost
             })
             .collect();
-        partial.iter().sum()
+        let mut cost = 0.0;
+        for c in &partial {
+            cost += c;
+        }
+        cost
     }
 
-    /// J^T J and J^T r, in one parallel pass without forming J: per bin the
-    /// residual's and the gradient's real and imaginary parts, each weighted,
-    /// added into the p x p and p sums.
+    /// r^T r, J^T J and J^T r, in one parallel pass without forming J: per
+    /// bin the residual's and the gradient's real and imaginary parts, each
+    /// weighted, added into the cost and the p x p and p sums.
     fn normal(&self, theta: &[f64]) -> Normal {
+        match self.n_params() {
+            4 => self.normal_p::<4>(theta),
+            5 => self.normal_p::<5>(theta),
+            6 => self.normal_p::<6>(theta),
+            7 => self.normal_p::<7>(theta),
+            8 => self.normal_p::<8>(theta),
+            p => unreachable!("{p} parameters"),
+        }
+    }
+
+    /// [`Self::normal`] with the parameter count fixed at compile time, so
+    /// the sums unroll and vectorise; only the upper triangle of J^T J is
+    /// summed (each element the same products in the same order as the
+    /// full square would add, so the bits are those of the full sum).
+    fn normal_p<const P: usize>(&self, theta: &[f64]) -> Normal {
+        debug_assert_eq!(P, self.n_params());
         let x = self.point(theta);
-        let p = self.structure.n_params();
-        // Over all seven slots whatever the structure (the unused
-        // gradients are zero): fixed bounds let the compiler unroll and
-        // vectorise the sums.
-        let partial: Vec<([f64; 49], [f64; 7])> = self
+        let partial: Vec<(f64, [[f64; P]; P], [f64; P])> = self
             .bins
             .par_chunks(CHUNK)
             .map(|chunk| {
-                let mut a = [0.0; 49];
-                let mut g = [0.0; 7];
+                let mut cost = 0.0;
+                let mut a = [[0.0; P]; P];
+                let mut g = [0.0; P];
                 for b in chunk {
                     let e = self.eval_at::<true>(b, &x);
                     let r = (b.h - e.model) * b.weight;
+                    // As [`Self::cost`] adds it, to the bit.
+                    cost += r.norm_sqr();
                     // The bin's two rows of J (Re and Im) are -grad * weight.
-                    let mut re = [0.0; 7];
-                    let mut im = [0.0; 7];
-                    for k in 0..7 {
+                    let mut re = [0.0; P];
+                    let mut im = [0.0; P];
+                    for k in 0..P {
                         re[k] = e.grad[k].re * b.weight;
                         im[k] = e.grad[k].im * b.weight;
                     }
-                    for i in 0..7 {
+                    for i in 0..P {
                         g[i] -= re[i] * r.re + im[i] * r.im;
-                        for j in 0..7 {
-                            a[i * 7 + j] += re[i] * re[j] + im[i] * im[j];
+                        for j in i..P {
+                            a[i][j] += re[i] * re[j] + im[i] * im[j];
                         }
                     }
                 }
-                (a, g)
+                (cost, a, g)
             })
             .collect();
-        let mut a = DMatrix::zeros(p, p);
-        let mut g = DVector::zeros(p);
-        for (pa, pg) in &partial {
-            for i in 0..p {
+        let mut cost = 0.0;
+        let mut a = DMatrix::zeros(P, P);
+        let mut g = DVector::zeros(P);
+        for (pc, pa, pg) in &partial {
+            cost += pc;
+            for i in 0..P {
                 g[i] += pg[i];
-                for j in 0..p {
-                    a[(i, j)] += pa[i * 7 + j];
+                for j in i..P {
+                    a[(i, j)] += pa[i][j];
                 }
             }
         }
-        Normal { a, g }
+        for i in 0..P {
+            for j in 0..i {
+                a[(i, j)] = a[(j, i)];
+            }
+        }
+        Normal { cost, a, g }
     }
 }
 
@@ -398,7 +513,7 @@ impl JointProblem {
     /// run's share of the parameters.
     fn adequacy(&self, theta: &[f64], lag: usize) -> (Adequacy, Vec<Adequacy>) {
         let x = self.point(theta);
-        let p = self.structure.n_params();
+        let p = self.n_params();
         let total = self.bins.len().max(1);
         let mut pooled = Sums::default();
         let mut per_run = Vec::with_capacity(self.runs.len());
@@ -460,21 +575,30 @@ fn problem(runs: &[JointRun<'_>], opts: &JointOptions) -> Result<JointProblem, F
             }
             let s = Complex::new(0.0, 2.0 * std::f64::consts::PI * f);
             let (m, c, k) = models[r].mck;
+            let sp = s * s * m + s * c + k;
+            let hold = hold_response(opts.intersample, opts.sample_rate_hz, f);
             bins.push(Bin {
                 s,
-                sp: s * s * m + s * c + k,
+                sp,
                 h: run.h[i],
-                hold: hold_response(opts.intersample, opts.sample_rate_hz, f),
+                known: match run.output {
+                    Output::Displacement => hold,
+                    Output::Force => hold * sp,
+                },
+                force: run.output == Output::Force,
                 weight: (2.0 / v).sqrt(),
                 run: r,
             });
         }
     }
+    let has_force = runs.iter().any(|r| r.output == Output::Force);
     Ok(JointProblem {
         bins,
         runs: models,
         bin_hz,
         structure: opts.structure,
+        force_delay: (has_force && opts.structure != Structure::Plain)
+            .then(|| opts.structure.n_params()),
         period_s: 1.0 / opts.sample_rate_hz,
     })
 }
@@ -499,23 +623,17 @@ struct Optimum {
     cost: f64,
     converged: bool,
     iterations: u64,
+    /// The cost and normal equations at `theta`, from the solver's last
+    /// pass.
+    normal: Normal,
 }
 
 /// The solver's view of a problem borrowed rather than copied (the valve
 /// mode's two starts share one).
 struct Borrowed<'a>(&'a JointProblem);
 
-/// The solver sees the cost and the normal equations ([`Normal`]): the
-/// bins far outnumber the parameters.
-impl Operator for Borrowed<'_> {
-    type Param = DVector<f64>;
-    type Output = f64;
-
-    fn apply(&self, param: &Self::Param) -> Result<Self::Output, ArgminError> {
-        Ok(self.0.cost(param.as_slice()))
-    }
-}
-
+/// The solver sees the cost and the normal equations together
+/// ([`Normal`]): the bins far outnumber the parameters.
 impl Jacobian for Borrowed<'_> {
     type Param = DVector<f64>;
     type Jacobian = Normal;
@@ -531,38 +649,103 @@ fn optimise(
     start: &RigParams,
     opts: &JointOptions,
 ) -> Result<Optimum, FitError> {
-    let p = opts.structure.n_params();
-    let mut theta0 = rig_theta(start, opts.p_ref).to_vec();
-    let fs = opts.sample_rate_hz;
-    if opts.structure != Structure::Plain {
-        theta0.push((opts.delay_start_s * fs).clamp(0.0, opts.max_delay_s * fs));
+    Ok(Leg::from(problem, start, opts, opts.max_iterations)?.optimum)
+}
+
+/// Levenberg-Marquardt run for a number of iterations: where it stopped,
+/// and what it takes to go on from there as one longer run would.
+struct Leg {
+    optimum: Optimum,
+    solver: LevenbergMarquardt,
+}
+
+impl Leg {
+    /// At most `max_iterations` from the start `opts` and `start` give.
+    fn from(
+        problem: &JointProblem,
+        start: &RigParams,
+        opts: &JointOptions,
+        max_iterations: u64,
+    ) -> Result<Leg, FitError> {
+        let p = problem.n_params();
+        let mut theta0 = rig_theta(start, opts.p_ref).to_vec();
+        let fs = opts.sample_rate_hz;
+        let delay = |d: f64| (d * fs).clamp(0.0, opts.max_delay_s * fs);
+        if opts.structure != Structure::Plain {
+            theta0.push(delay(opts.delay_start_s));
+        }
+        if opts.structure == Structure::DelayValve {
+            theta0.push((2.0 * std::f64::consts::PI * opts.valve_start.0).ln());
+            theta0.push(opts.valve_start.1.ln());
+        }
+        if problem.force_delay.is_some() {
+            theta0.push(delay(opts.force_delay_start_s));
+        }
+        if !theta0.iter().all(|t| t.is_finite()) {
+            return Err(FitError::NoSolution);
+        }
+        if 2 * problem.bins.len() <= p {
+            return Err(FitError::NoSolution);
+        }
+        Self::run(
+            problem,
+            solver(problem, opts)?,
+            theta0,
+            None,
+            max_iterations,
+            0,
+        )
     }
-    if opts.structure == Structure::DelayValve {
-        theta0.push((2.0 * std::f64::consts::PI * opts.valve_start.0).ln());
-        theta0.push(opts.valve_start.1.ln());
+
+    /// Up to `more` iterations further, unless it has converged.
+    fn go_on(self, problem: &JointProblem, more: u64) -> Result<Leg, FitError> {
+        if self.optimum.converged || more == 0 {
+            return Ok(self);
+        }
+        let Leg { optimum, solver } = self;
+        Self::run(
+            problem,
+            solver.resumed(),
+            optimum.theta,
+            Some(optimum.normal),
+            more,
+            optimum.iterations,
+        )
     }
-    if !theta0.iter().all(|t| t.is_finite()) {
-        return Err(FitError::NoSolution);
+
+    fn run(
+        problem: &JointProblem,
+        solver: LevenbergMarquardt,
+        theta0: Vec<f64>,
+        normal: Option<Normal>,
+        max_iterations: u64,
+        iterations_before: u64,
+    ) -> Result<Leg, FitError> {
+        let mut result = Executor::new(Borrowed(problem), solver)
+            .configure(|s| {
+                let s = s.param(DVector::from_vec(theta0)).max_iters(max_iterations);
+                match normal {
+                    Some(n) => s.jacobian(n),
+                    None => s,
+                }
+            })
+            .run()?;
+        let state = &mut result.state;
+        let converged = state.get_termination_reason() == Some(&TerminationReason::SolverConverged);
+        let iterations = iterations_before + state.get_iter();
+        let theta = state.take_param().ok_or(FitError::NoSolution)?;
+        let normal = state.take_jacobian().ok_or(FitError::NoSolution)?;
+        Ok(Leg {
+            optimum: Optimum {
+                theta: theta.iter().copied().collect(),
+                cost: normal.cost,
+                converged,
+                iterations,
+                normal,
+            },
+            solver: result.solver,
+        })
     }
-    if 2 * problem.bins.len() <= p {
-        return Err(FitError::NoSolution);
-    }
-    let Solved {
-        theta,
-        reason,
-        iterations,
-    } = solve(
-        Borrowed(problem),
-        solver(opts)?,
-        theta0,
-        opts.max_iterations,
-    )?;
-    Ok(Optimum {
-        cost: problem.cost(&theta),
-        theta,
-        converged: reason == TerminationReason::SolverConverged,
-        iterations,
-    })
 }
 
 /// The fit at an optimum: the covariance from the Jacobian there, the
@@ -577,17 +760,25 @@ fn finish(
         cost,
         converged,
         iterations,
+        normal,
     } = optimum;
-    let p = opts.structure.n_params();
-    let jac = problem.jacobian_matrix(&theta);
+    let p = problem.n_params();
+    let names = problem.names();
     let dof = 2 * problem.bins.len() - p;
-    let cov_theta = covariance(&jac, cost / dof as f64).map_err(|e| FitError::NotIdentifiable {
-        parameter: opts.structure.names()[e.column].to_string(),
-        bins: problem.bins.len(),
-        matrix: "the joint fit's Jacobian at the optimum",
-        ratio: e.ratio,
-    })?;
-    drop(jac);
+    let scale = cost / dof as f64;
+    // From the normal equations the solver formed at the optimum when they
+    // are well conditioned enough; otherwise from J itself, formed here.
+    let cov_theta = match covariance_from_normal(&normal.a, scale) {
+        Some(cov) => cov,
+        None => covariance(&problem.jacobian_matrix(&theta), scale).map_err(|e| {
+            FitError::NotIdentifiable {
+                parameter: names[e.column].to_string(),
+                bins: problem.bins.len(),
+                matrix: "the joint fit's Jacobian at the optimum",
+                ratio: e.ratio,
+            }
+        })?,
+    };
     // To physical units: x = exp(theta) for the log parameters (dx = x
     // dtheta), the delay in seconds, the valve frequency in Hz.
     let mut params: Vec<f64> = theta[..4].iter().map(|t| t.exp()).collect();
@@ -602,6 +793,10 @@ fn finish(
         factors.push(hz);
         params.push(theta[6].exp());
         factors.push(theta[6].exp());
+    }
+    if let Some(k) = problem.force_delay {
+        params.push(theta[k] * problem.period_s);
+        factors.push(problem.period_s);
     }
     let covariance = DMatrix::from_fn(p, p, |i, j| cov_theta[(i, j)] * factors[i] * factors[j]);
     let std = (0..p).map(|i| covariance[(i, i)].sqrt()).collect();
@@ -621,7 +816,9 @@ fn finish(
             params[4]
         },
         valve: (opts.structure == Structure::DelayValve).then(|| (params[5], params[6])),
+        force_delay_s: problem.force_delay.map(|k| params[k]),
         params,
+        names,
         covariance,
         std,
         cost,
@@ -645,8 +842,8 @@ fn rig_theta(rig: &RigParams, p_ref: f64) -> [f64; 4] {
 
 /// Levenberg-Marquardt with the delay (in samples) held within 0 and its
 /// bound: a negative delay is acausal.
-fn solver(opts: &JointOptions) -> Result<LevenbergMarquardt, FitError> {
-    let p = opts.structure.n_params();
+fn solver(problem: &JointProblem, opts: &JointOptions) -> Result<LevenbergMarquardt, FitError> {
+    let p = problem.n_params();
     // Damping moved by 3 rather than 10: measured on the seven-run bench,
     // the structure selection takes about a fifth fewer passes over the bins.
     let solver = LevenbergMarquardt::new().with_lambda(1e-3, 3.0)?;
@@ -655,8 +852,10 @@ fn solver(opts: &JointOptions) -> Result<LevenbergMarquardt, FitError> {
     }
     let mut lower = DVector::from_element(p, f64::NEG_INFINITY);
     let mut upper = DVector::from_element(p, f64::INFINITY);
-    lower[4] = 0.0;
-    upper[4] = opts.max_delay_s * opts.sample_rate_hz;
+    for k in std::iter::once(4).chain(problem.force_delay) {
+        lower[k] = 0.0;
+        upper[k] = opts.max_delay_s * opts.sample_rate_hz;
+    }
     Ok(solver.with_bounds(lower, upper)?)
 }
 

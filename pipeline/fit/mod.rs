@@ -472,6 +472,53 @@ pub fn covariance(jac: &DMatrix<f64>, scale: f64) -> Result<DMatrix<f64>, RankDe
     Ok(cov)
 }
 
+/// The largest condition number of the column-scaled normal matrix for
+/// which [`covariance_from_normal`] answers. Inverting it loses about
+/// log10 of that many digits of the 16 a double holds: at 1e8 the
+/// covariance still has some eight right, far more than a standard
+/// deviation is quoted with.
+pub const NORMAL_CONDITION_MAX: f64 = 1e8;
+
+/// [`covariance`] from the normal matrix A = J^T J alone, for a problem
+/// that forms A without J (the joint fit's solver does, at every point it
+/// visits). The columns are scaled to unit norm as [`covariance`] scales
+/// J's, so that the scaled A is J_s^T J_s, whose eigenvalues are the
+/// squares of J_s's singular values. `None` when the scaled A's condition
+/// number is above [`NORMAL_CONDITION_MAX`] or A is not positive definite:
+/// the caller then forms J and calls [`covariance`], whose rank test works
+/// at J's own precision (its ratio of 1e-12 would be 1e-24 here, beyond
+/// what squared numbers can resolve).
+pub fn covariance_from_normal(a: &DMatrix<f64>, scale: f64) -> Option<DMatrix<f64>> {
+    let p = a.nrows();
+    let norms: Vec<f64> = (0..p).map(|i| a[(i, i)].sqrt()).collect();
+    if !norms.iter().all(|n| n.is_finite() && *n > 0.0) {
+        return None;
+    }
+    let scaled = DMatrix::from_fn(p, p, |i, j| a[(i, j)] / (norms[i] * norms[j]));
+    let eig = scaled.symmetric_eigen();
+    let lo = eig.eigenvalues.min();
+    let hi = eig.eigenvalues.max();
+    if !(lo > 0.0 && hi.is_finite() && hi <= NORMAL_CONDITION_MAX * lo) {
+        return None;
+    }
+    let v = &eig.eigenvectors;
+    let mut cov = DMatrix::zeros(p, p);
+    for k in 0..p {
+        let inv = 1.0 / eig.eigenvalues[k];
+        for i in 0..p {
+            for j in 0..p {
+                cov[(i, j)] += v[(i, k)] * v[(j, k)] * inv;
+            }
+        }
+    }
+    for i in 0..p {
+        for j in 0..p {
+            cov[(i, j)] *= scale / (norms[i] * norms[j]);
+        }
+    }
+    Some(cov)
+}
+
 /// The covariance a fit of `input`'s bins would state for a model whose
 /// parameters are `params` (laid out as [`TfFit::params`]), were the data
 /// that model plus noise of `input.variance`: (J' W J)^-1 at `params`, the
@@ -527,8 +574,7 @@ struct Solved {
     iterations: u64,
 }
 
-/// Run `solver` on `problem` from `start` in argmin's executor, for the
-/// per-run fit and the joint one alike.
+/// Run `solver` on `problem` from `start` in argmin's executor.
 /// The state is [`lm::LmState`] for a problem giving residuals and J, and
 /// [`lm::LmNormalState`] for one giving its cost and normal equations.
 fn solve<O, J, R>(

@@ -639,6 +639,39 @@ fn covariance_is_the_scaled_inverse_normal_matrix() {
 }
 
 #[test]
+fn covariance_from_the_normal_matrix_is_that_of_j_where_it_answers() {
+    // The same 1e6-spread columns: J^T J alone gives the covariance QR of J
+    // gives, to 1e-10 of the stds' scale.
+    let mut rng = SplitMix64(7);
+    let jac = DMatrix::from_fn(40, 3, |_, j| rng.normal() * 1e3_f64.powi(j as i32));
+    let a = jac.transpose() * &jac;
+    let from_normal = covariance_from_normal(&a, 2.5).unwrap();
+    let from_j = covariance(&jac, 2.5).unwrap();
+    for i in 0..3 {
+        for j in 0..3 {
+            let scale = (from_j[(i, i)] * from_j[(j, j)]).sqrt();
+            assert!((from_normal[(i, j)] - from_j[(i, j)]).abs() < 1e-10 * scale);
+        }
+    }
+    // Column 1 replaced by column 0 turned 1e-5 towards a fresh random
+    // direction: the scaled J's condition number is some 1e5, which QR of
+    // J still resolves, but J^T J's is some 1e10, past
+    // NORMAL_CONDITION_MAX: the normal matrix declines, so the caller
+    // forms J.
+    let mut close = jac.clone();
+    let c0 = close.column(0).clone_owned();
+    let fresh = DVector::from_fn(40, |_, _| rng.normal());
+    close.set_column(1, &(&c0 + &fresh * (1e-5 * c0.norm() / fresh.norm())));
+    assert!(covariance(&close, 1.0).is_ok());
+    assert!(covariance_from_normal(&(close.transpose() * &close), 1.0).is_none());
+    // A column the residuals do not depend on: not positive definite.
+    let mut singular = a.clone();
+    singular.row_mut(1).fill(0.0);
+    singular.column_mut(1).fill(0.0);
+    assert!(covariance_from_normal(&singular, 1.0).is_none());
+}
+
+#[test]
 fn unidentifiable_parameter_at_the_optimum_is_named() {
     // fit_from skips Levy, so three bins at one frequency reach the
     // Jacobian check: damped steps still run, but J^T W J is singular there.

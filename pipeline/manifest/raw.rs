@@ -345,6 +345,11 @@ pub struct JointSettings {
     pub structure: JointStructure,
     #[serde(default)]
     pub rig: JointRig,
+    /// Also fit the validation runs, whose m, c and k the manifest gives:
+    /// their x1/u (Eq. 17) and, with a force channel, f/u (Eq. 45). Their
+    /// logs are then read twice, once for the rig and once to validate it.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub include_validation: bool,
 }
 
 /// The joint fit's nuisance dynamics besides the command's hold.

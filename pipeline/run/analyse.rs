@@ -24,15 +24,16 @@ use std::time::Instant;
 
 use rayon::prelude::*;
 
-use super::acquire::{AcquireError, Acquired, LogStage, acquire_with};
+use super::acquire::{AcquireError, Acquired, FitData, LogStage, acquire_with};
 use super::cache::{self, Cache, Probe};
 use super::compare::compare;
 use super::figures::{self, ForceBins, OverlayRun};
-use super::rig::{self, Evidence, RigError, RigInput};
+use super::rig::{self, Evidence, RigError, RigInput, ValidationEvidence};
 use super::tables;
 use crate::fit::TfFit;
 use crate::fit::adequacy::{self, Adequacy, Residuals};
-use crate::ingest::Log;
+use crate::frf::{self, Frf};
+use crate::ingest::{IngestError, Log};
 use crate::manifest::{Campaign, IdentificationPlan, Role, RunPlan, RunSource};
 use crate::model::{self, CnTerm, LinearSdof, LinearSpecimen, RigParams};
 use crate::report::{FigureFiles, FigureFormats, FigureSpec, PageFigure, WriteError};
@@ -458,6 +459,9 @@ fn first_pass(
         cached: false,
     };
     if plan.role == Role::Validation {
+        if campaign.joint.include_validation && campaign.identifies_rig() {
+            pass.rig_input = validation_evidence(campaign, plan);
+        }
         return Ok(pass);
     }
     observer.event(&Event::RunStarted { id: &plan.id });
@@ -551,6 +555,27 @@ fn first_pass(
     Ok(pass)
 }
 
+/// A validation run's FRFs for the joint fit, read ahead of the rig
+/// (`identification.joint.include_validation`): the band's bins with the
+/// coherence the identification runs need. Nothing when the run has no log
+/// or its log fails here: the second pass reads it again and reports why.
+fn validation_evidence(campaign: &Campaign, plan: &RunPlan) -> RigInput {
+    if !matches!(plan.source, RunSource::Log(_)) {
+        return RigInput::Nothing;
+    }
+    let Ok(Some(st)) = acquire_with(campaign, plan, None).map(|a| a.stage) else {
+        return RigInput::Nothing;
+    };
+    let coherence_min = campaign.identification.coherence_min;
+    let data = |h: &Frf| FitData::of(h, &frf::band_mask(h, plan.band_hz, coherence_min));
+    RigInput::Validation(Box::new(ValidationEvidence {
+        displacement: data(&st.frf),
+        force: st.force_frf.as_ref().map(data),
+        sample_rate_hz: st.log.sample_rate_hz,
+        sha256: st.log.sha256.clone(),
+    }))
+}
+
 /// The second pass of one run: a validation run's whole work, and for the
 /// others what depends on the rig.
 fn second_pass(
@@ -563,7 +588,11 @@ fn second_pass(
 ) -> Result<Done, WriteError> {
     let rig_at_p = rig.as_ref().ok().map(|(r, _)| r.at_p_gain(plan.p_gain));
     let Some(mut out) = first.result else {
-        return validation_run(campaign, plan, rig, draw, observer);
+        let fitted = match &first.rig_input {
+            RigInput::Validation(e) => Some(e.sha256.as_str()),
+            _ => None,
+        };
+        return validation_run(campaign, plan, rig, fitted, draw, observer);
     };
     out.a1b0 = rig_at_p.map(|r| r.a1b0_n_per_m_s2);
     let mut figures = first.figures;
@@ -618,10 +647,12 @@ fn force_model(rig_at_p: &Option<RigParams>, specimen: &SpecimenModel) -> Option
 
 /// A validation run: the identified rig with its specimen, driven by its
 /// measured command (Sec. 4), or the model's prediction alone without a log.
+/// `fitted` is the SHA-256 of the log as the joint fit read it, when it did.
 fn validation_run(
     campaign: &Campaign,
     plan: &RunPlan,
     rig: &Result<(RigParams, Option<Cov4>), Arc<RigError>>,
+    fitted: Option<&str>,
     draw: &Drawer<'_>,
     observer: &dyn Observer,
 ) -> Result<Done, WriteError> {
@@ -662,7 +693,19 @@ fn validation_run(
     let figures = (Vec::new(), Vec::new());
     // The log's own failure comes first; a good log without a rig still
     // records what it is.
-    let acq = match acquire_with(campaign, plan, file) {
+    let acq = acquire_with(campaign, plan, file).and_then(|a| match (fitted, &a.stage) {
+        // The rig was fitted to the log's bytes as they were: a log that
+        // has changed since is not what the rig says it validates.
+        (Some(before), Some(st)) if st.log.sha256 != before => {
+            Err(AcquireError::Ingest(IngestError::Changed {
+                path: st.log.path.clone(),
+                before: format!("SHA-256 {before} when the joint fit read it"),
+                after: format!("SHA-256 {} when its run was validated", st.log.sha256),
+            }))
+        }
+        _ => Ok(a),
+    });
+    let acq = match acq {
         Ok(a) => a,
         Err(e) => {
             out.a1b0 = rig

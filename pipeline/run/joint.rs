@@ -12,14 +12,15 @@
 //! estimate or something neither model has is.
 
 use super::acquire::FitData;
-use super::rig::Evidence;
+use super::rig::{Evidence, ValidationEvidence};
 use crate::fit::DelayPlan;
 use crate::fit::adequacy::Adequacy;
 use crate::fit::joint::{
-    self, Candidate, Choice, JointFit, JointOptions, JointRun, P_SIGNIFICANT, Selection, Structure,
+    self, Candidate, Choice, JointFit, JointOptions, JointRun, Output, P_SIGNIFICANT, Selection,
+    Structure,
 };
 use crate::identify::Estimate;
-use crate::manifest::{Campaign, JointRig, JointStructure, RunPlan};
+use crate::manifest::{Campaign, JointRig, JointStructure, Role, RunPlan};
 use crate::model::RigParams;
 use crate::results::{
     FTestResult, JointCandidate, JointParameter, JointResult, JointStructureName, RigEstimates,
@@ -50,38 +51,60 @@ fn key_value(s: Structure) -> &'static str {
     }
 }
 
-/// The joint fit of the identification runs in `evidence`, from the
-/// sequential rig `start`: what it found, and whether the campaign uses it.
-/// Warnings (a failed or inadequate fit, a manifest structure the data
-/// reject) go to `warnings`. None when no run has bins to fit (published
-/// models only).
+/// The joint fit of the identification runs in `evidence` (and the
+/// validation runs' FRFs in `validation`, when the manifest includes them),
+/// from the sequential rig `start`: what it found, and whether the campaign
+/// uses it. Warnings (a failed or inadequate fit, a manifest structure the
+/// data reject) go to `warnings`. None when no run has bins to fit
+/// (published models only).
 pub(super) fn joint(
     campaign: &Campaign,
     evidence: &[(&RunPlan, &Evidence)],
+    validation: &[(&RunPlan, &ValidationEvidence)],
     start: &RigParams,
     sequential: &RigEstimates,
     warnings: &mut Vec<String>,
 ) -> Option<JointResult> {
-    let with_data: Vec<(&RunPlan, &FitData, f64)> = evidence
+    // Each FRF the fit is given: its run, what it measures, its bins and
+    // the rate they were logged at.
+    let mut fitted: Vec<(&RunPlan, Output, &FitData, f64)> = evidence
         .iter()
-        .filter_map(|(p, e)| Some((*p, e.data.as_ref()?, e.sample_rate_hz?)))
-        .filter(|(p, _, _)| p.specimen.linear().is_some())
+        .filter_map(|(p, e)| {
+            Some((
+                *p,
+                Output::Displacement,
+                e.data.as_ref()?,
+                e.sample_rate_hz?,
+            ))
+        })
+        .filter(|(p, ..)| p.specimen.linear().is_some())
         .collect();
-    if with_data.is_empty() {
+    if fitted.is_empty() {
         return None;
     }
-    let fs = with_data[0].2;
-    if with_data.iter().any(|(_, _, r)| *r != fs) {
+    let identification_frfs = fitted.len();
+    for (p, v) in validation {
+        if p.specimen.linear().is_none() {
+            continue;
+        }
+        fitted.push((p, Output::Displacement, &v.displacement, v.sample_rate_hz));
+        if let Some(force) = &v.force {
+            fitted.push((p, Output::Force, force, v.sample_rate_hz));
+        }
+    }
+    let fs = fitted[0].3;
+    if fitted.iter().any(|f| f.3 != fs) {
         warnings.push(
-            "rig: no joint fit: the identification runs were logged at different sample rates; the sequential estimate is used".into(),
+            "rig: no joint fit: the runs it would fit were logged at different sample rates; the sequential estimate is used".into(),
         );
         return None;
     }
-    let runs: Vec<JointRun<'_>> = with_data
+    let runs: Vec<JointRun<'_>> = fitted
         .iter()
-        .map(|(p, d, _)| JointRun {
+        .map(|(p, output, d, _)| JointRun {
             specimen: p.specimen.linear().expect("filtered"),
             p_gain: p.p_gain,
+            output: *output,
             freq_hz: &d.freq_hz,
             h: &d.h,
             variance: &d.variance,
@@ -97,6 +120,7 @@ pub(super) fn joint(
         max_iterations: 200,
         valve_start: (0.0, 0.0),
         delay_start_s: 0.0,
+        force_delay_start_s: 0.0,
         max_delay_s: match ident.delay {
             DelayPlan::Fit { max_s } => max_s,
             _ => DEFAULT_MAX_DELAY_S,
@@ -109,12 +133,18 @@ pub(super) fn joint(
         JointStructure::Delay => Choice::Fixed(Structure::Delay),
         JointStructure::DelayValve => Choice::Fixed(Structure::DelayValve),
     };
-    let band_top = with_data
-        .iter()
-        .map(|(p, _, _)| p.band_hz.1)
-        .fold(0.0, f64::max);
+    let band_top = fitted.iter().map(|(p, ..)| p.band_hz.1).fold(0.0, f64::max);
     let sel = joint::select(&runs, start, &opts, choice, band_top);
-    let ids: Vec<&str> = with_data.iter().map(|(p, _, _)| p.id.as_str()).collect();
+    // An identification run is named by its id; a validation run's two
+    // FRFs by what each measures.
+    let ids: Vec<String> = fitted
+        .iter()
+        .map(|(p, output, ..)| match (p.role, output) {
+            (Role::Validation, Output::Displacement) => format!("{} x1/u", p.id),
+            (Role::Validation, Output::Force) => format!("{} f/u", p.id),
+            _ => p.id.clone(),
+        })
+        .collect();
     let seq_adequacy: Vec<&Adequacy> = evidence
         .iter()
         .filter_map(|(_, e)| e.adequacy.as_ref())
@@ -123,14 +153,21 @@ pub(super) fn joint(
         seq_adequacy.iter().map(|a| a.cost).sum::<f64>()
             / seq_adequacy.iter().map(|a| a.dof).sum::<usize>() as f64
     });
-    Some(describe(
+    let mut result = describe(
         &sel,
         &ids,
         campaign.joint.rig,
         sequential,
         seq_chi2,
         warnings,
-    ))
+    );
+    if ids.len() > identification_frfs {
+        result.explanation.push_str(&format!(
+            "; the validation runs' FRFs are in the fit (identification.joint.include_validation: {}), so their validation is not independent of the rig",
+            ids[identification_frfs..].join(", ")
+        ));
+    }
+    Some(result)
 }
 
 /// The table row of one candidate.
@@ -138,7 +175,7 @@ fn row(c: &Candidate, chosen: Option<Structure>) -> JointCandidate {
     let fit = c.fit.as_ref().ok();
     JointCandidate {
         structure: name(c.structure),
-        parameters: c.structure.names().len(),
+        parameters: fit.map_or(c.structure.names().len(), |f| f.params.len()),
         cost: fit.map(|f| f.cost),
         dof: fit.map(|f| f.dof),
         reduced_chi2: fit.map(|f| f.cost / f.dof as f64),
@@ -192,7 +229,7 @@ fn explain(sel: &Selection) -> String {
 /// The result table and the use decision.
 fn describe(
     sel: &Selection,
-    ids: &[&str],
+    ids: &[String],
     rig_mode: JointRig,
     sequential: &RigEstimates,
     seq_chi2: Option<f64>,
@@ -320,15 +357,14 @@ fn describe(
 /// The chosen fit's parameters beside the sequential estimate.
 fn parameters(fit: &JointFit, seq: &RigEstimates) -> Vec<JointParameter> {
     let seq_est = [seq.beta1, seq.a1b0, seq.a2, seq.a3];
-    let names = [
-        "beta1",
-        "a1b0",
-        "a2",
-        "a3",
-        "delay_s",
-        "valve_hz",
-        "valve_damping",
-    ];
+    // The rig's four by the names the rest of results.json gives them.
+    let short = |name: &'static str| match name {
+        "beta1_per_s" => "beta1",
+        "a1b0_n_per_m_s2" => "a1b0",
+        "a2_n_per_m" => "a2",
+        "a3_per_s" => "a3",
+        other => other,
+    };
     fit.params
         .iter()
         .zip(&fit.std)
@@ -341,7 +377,7 @@ fn parameters(fit: &JointFit, seq: &RigEstimates) -> Vec<JointParameter> {
                 .map(|s| (s * s + std * std).sqrt());
             let difference_std = diff.zip(combined).map(|(d, c)| d / c);
             JointParameter {
-                name: names[i].into(),
+                name: short(fit.names[i]).into(),
                 value,
                 std,
                 sequential,

@@ -63,6 +63,9 @@ pub(super) enum RigInput {
     Estimate(Box<Evidence>),
     /// Its first stage failed.
     Failed(Arc<AcquireError>),
+    /// A validation run's FRFs, for the joint fit
+    /// (`identification.joint.include_validation`).
+    Validation(Box<ValidationEvidence>),
     /// Nothing (a run without a model of its own).
     Nothing,
 }
@@ -79,6 +82,19 @@ pub(super) struct Evidence {
     /// Its own fit's adequacy tests.
     pub adequacy: Option<Adequacy>,
     pub sample_rate_hz: Option<f64>,
+}
+
+/// What a validation run gives the joint fit: the band's bins of its x1/u
+/// and, with a force channel, of its f/u (each with the coherence test the
+/// identification runs pass).
+#[derive(Debug, Clone)]
+pub(super) struct ValidationEvidence {
+    pub displacement: FitData,
+    pub force: Option<FitData>,
+    pub sample_rate_hz: f64,
+    /// The log's SHA-256, which the second pass's own read of the log must
+    /// find again (the rig was fitted to these bytes).
+    pub sha256: String,
 }
 
 /// The rig: identified when the campaign can (Fig. 6), else given. A given
@@ -99,7 +115,11 @@ pub(super) fn establish<'a>(
     let mut springs = Vec::new();
     let mut failed = Vec::new();
     let mut evidence = Vec::new();
+    let mut validation = Vec::new();
     for (plan, input) in campaign.runs.iter().zip(inputs) {
+        if let RigInput::Validation(e) = input {
+            validation.push((plan, e.as_ref()));
+        }
         if !matches!(plan.role, Role::NoSpecimen | Role::Spring) {
             continue;
         }
@@ -120,7 +140,7 @@ pub(super) fn establish<'a>(
                     continue;
                 }
             },
-            RigInput::Nothing => continue,
+            RigInput::Nothing | RigInput::Validation(_) => continue,
             RigInput::Failed(error) => {
                 failed.push(FailedRun::Failed {
                     run,
@@ -174,7 +194,14 @@ pub(super) fn establish<'a>(
         R1: ident.r1,
         covariance: ident.covariance,
     };
-    let joint = super::joint::joint(campaign, &evidence, &ident.params(), &sequential, warnings);
+    let joint = super::joint::joint(
+        campaign,
+        &evidence,
+        &validation,
+        &ident.params(),
+        &sequential,
+        warnings,
+    );
     let (source, chosen) = match joint.as_ref().and_then(super::joint::used_estimates) {
         Some(e) => (RigSource::Joint, e),
         None => (RigSource::Identified, sequential.clone()),
