@@ -443,6 +443,26 @@ pub struct FitSummary {
     /// The adequacy tests of this run's own fit (`fit::adequacy`).
     #[serde(default)]
     pub adequacy: Option<crate::fit::adequacy::Adequacy>,
+    /// For a fit made without a delay: whether the data support one
+    /// (`fit::delay_test`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub delay_test: Option<DelayTestResult>,
+}
+
+/// The run's fit made again with a delay, and the extra-sum-of-squares F
+/// test of the delay against the fit without it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+pub struct DelayTestResult {
+    /// The fitted delay (s) and the reduced chi-square with it, when that
+    /// fit converged to a stable model.
+    pub delay_s: Option<f64>,
+    pub reduced_chi2: Option<f64>,
+    pub f: Option<f64>,
+    pub p_value: Option<f64>,
+    /// p below 0.001: the data support the delay.
+    pub supported: bool,
+    /// What became of the fit with the delay, in a sentence.
+    pub note: String,
 }
 
 /// The controllable canonical form of one run (Eqs. 34-35, signs of MODEL.md).

@@ -283,6 +283,39 @@ fn the_mts_logs_fit_as_an_independent_computation_does() {
             windows.iter().all(|w| w["start_s"].as_f64().unwrap() > 1.0),
             "{id}: {windows:?}"
         );
+
+        // Which structure the data support (issue 14): the fit made again
+        // with a delay. On 1A the delay is supported: the F statistic is
+        // the one the two reduced chi-squares and the bin count give
+        // (recomputed here), far past p = 0.001, and the delay lowers the
+        // chi-square, as a nested fit must. On 0A the fit with a delay does
+        // not converge (the delay trades off against the fast pole in
+        // 0.5-20 Hz), and nothing is claimed.
+        let t = &fit["delay_test"];
+        let note = t["note"].as_str().unwrap();
+        match id {
+            "1A" => {
+                assert_eq!(t["supported"], true, "{id}: {t}");
+                let n = fit["n_bins"].as_f64().unwrap();
+                let (c0, c1) = (
+                    fit["reduced_chi2"].as_f64().unwrap() * (2.0 * n - 3.0),
+                    t["reduced_chi2"].as_f64().unwrap() * (2.0 * n - 4.0),
+                );
+                assert!(c1 < c0, "{id}: {t}");
+                let f = (c0 - c1) / (c1 / (2.0 * n - 4.0));
+                assert!(
+                    (t["f"].as_f64().unwrap() / f - 1.0).abs() < 1e-9,
+                    "{id}: {t}"
+                );
+                assert!(f > 1000.0 && t["p_value"].as_f64().unwrap() < 1e-3);
+                let delay_ms = 1e3 * t["delay_s"].as_f64().unwrap();
+                assert!(delay_ms > 0.0 && delay_ms < 20.0, "{id}: {delay_ms} ms");
+            }
+            _ => {
+                assert_eq!(t["supported"], false, "{id}: {t}");
+                assert!(note.contains("did not converge"), "{id}: {note}");
+            }
+        }
     }
 }
 

@@ -13,6 +13,7 @@
 
 pub mod adequacy;
 pub mod band;
+pub mod delay_test;
 pub mod joint;
 pub mod linear;
 pub mod lm;

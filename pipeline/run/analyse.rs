@@ -24,22 +24,24 @@ use std::time::Instant;
 
 use rayon::prelude::*;
 
+use super::acquire::fit_options;
 use super::acquire::{AcquireError, Acquired, FitData, LogStage, acquire_with};
 use super::cache::{self, Cache, Probe};
 use super::compare::compare;
 use super::figures::{self, ForceBins, OverlayRun};
+use super::joint::DEFAULT_MAX_DELAY_S;
 use super::rig::{self, Evidence, RigError, RigInput, ValidationEvidence};
 use super::tables;
-use crate::fit::TfFit;
 use crate::fit::adequacy::{self, Adequacy, Residuals};
+use crate::fit::{self, DelayPlan, TfFit};
 use crate::frf::{self, Frf};
 use crate::ingest::{IngestError, Log};
 use crate::manifest::{Campaign, IdentificationPlan, Role, RunPlan, RunSource};
 use crate::model::{self, CnTerm, LinearSdof, LinearSpecimen, RigParams};
 use crate::report::{FigureFiles, FigureFormats, FigureSpec, PageFigure, WriteError};
 use crate::results::{
-    CampaignSummary, CcfResult, ComplexValue, FitSummary, LogInfo, RESULTS_SCHEMA_VERSION, Results,
-    RunResult, Status, TfResult, TfSource,
+    CampaignSummary, CcfResult, ComplexValue, DelayTestResult, FitSummary, LogInfo,
+    RESULTS_SCHEMA_VERSION, Results, RunResult, Status, TfResult, TfSource,
 };
 use crate::sensitivity::NoiseProfile;
 use crate::simulate::specimen::SpecimenModel;
@@ -916,6 +918,15 @@ fn fitted(
         && let Some(fit) = &st.fit
     {
         let summary = fit_summary(ident, plan, st, fit);
+        if let Some(t) = summary.delay_test.as_ref().filter(|t| t.supported) {
+            out.warnings.push(format!(
+                "the run's own fit: {}; with a delay of {:.3} ms its reduced chi-square is {:.3} (without, {:.3}); set identification.delay = {{ mode = \"fit\" }}",
+                t.note,
+                1e3 * t.delay_s.unwrap_or(f64::NAN),
+                t.reduced_chi2.unwrap_or(f64::NAN),
+                summary.reduced_chi2
+            ));
+        }
         if let Some(d) = summary.adequacy.as_ref().and_then(|a| {
             a.diagnosis((!fit.shape.fit_delay).then_some("set identification.delay = \"fit\""))
         }) {
@@ -998,7 +1009,43 @@ fn fit_summary(
         frf_averages: st.frf.n_averages,
         frf_resolution_hz: st.frf.resolution_hz,
         adequacy: fit_adequacy(ident, st, fit),
+        delay_test: delay_test(ident, st, fit),
     }
+}
+
+/// For a fit made without a delay (`identification.delay` none): the same
+/// fit with one, up to the default bound, and whether the data support it.
+fn delay_test(ident: &IdentificationPlan, st: &LogStage, fit: &TfFit) -> Option<DelayTestResult> {
+    if ident.delay != DelayPlan::None {
+        return None;
+    }
+    let data = st.fit_data.as_ref()?;
+    let opts = fit_options(ident, st.log.sample_rate_hz);
+    let t = fit::delay_test::delay_test(&data.input(), &opts, fit, DEFAULT_MAX_DELAY_S);
+    let with = t.with_delay.as_ref().ok();
+    let converged = with.filter(|w| w.converged && w.stable);
+    let note = match (&t.with_delay, t.f_test) {
+        (Err(e), _) => format!("the fit with a delay failed: {e}"),
+        (Ok(w), None) if !w.converged => format!(
+            "the fit with a delay did not converge ({}); likely cause: the delay trades off against the model's poles in this band",
+            w.termination
+        ),
+        (Ok(_), None) => "the fit with a delay is unstable".into(),
+        (Ok(_), Some((f, p))) if t.supported() => {
+            format!("the data support a delay: F = {f:.4e}, p = {p:.2e} (p < 0.001)")
+        }
+        (Ok(_), Some((f, p))) => {
+            format!("the data do not support a delay: F = {f:.4e}, p = {p:.2e}")
+        }
+    };
+    Some(DelayTestResult {
+        delay_s: converged.and_then(|w| w.params.last().copied()),
+        reduced_chi2: converged.map(|w| w.reduced_chi2),
+        f: t.f_test.map(|(f, _)| f),
+        p_value: t.f_test.map(|(_, p)| p),
+        supported: t.supported(),
+        note,
+    })
 }
 
 fn ccf_result(rig: &RigParams, plan: &RunPlan) -> Option<CcfResult> {

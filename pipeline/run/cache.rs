@@ -1,5 +1,5 @@
 //! Incremental reruns: each run's outcome kept under a key made of what
-//! decides it (the servoid version, the run's checked plan, the campaign's
+//! decides it (the servoid version and its outcome format, the run's checked plan, the campaign's
 //! identification settings, the figure formats, the SHA-256 of its log and,
 //! for a run that needs the rig, the rig's parameters to the last bit), so
 //! a rerun with nothing changed does no per-log work, and a changed log
@@ -198,12 +198,21 @@ pub(super) fn merge_stamps(out_dir: &Path, dirs: &[PathBuf]) -> Result<(), Write
     report::write_atomic(&path, &report::json_bytes(&stamps))
 }
 
+/// What a run's outcome holds, counted up whenever a change between
+/// releases adds to it or computes it differently: the version alone
+/// would let an older build's entries stand in for outcomes this build
+/// computes otherwise. 2: the per-run fit's delay test.
+const OUTCOME_FORMAT: u32 = 2;
+
 /// A key from the text of what decides a run's outcome. The plan's Debug
 /// text holds every setting with its floats to the last bit; a rebuild that
 /// printed them differently could only change the key (a miss), never make
 /// two different plans share one.
 pub(super) fn key(parts: &[&dyn std::fmt::Debug]) -> String {
-    let mut text = format!("servoid {}\n", env!("CARGO_PKG_VERSION"));
+    let mut text = format!(
+        "servoid {} outcome {OUTCOME_FORMAT}\n",
+        env!("CARGO_PKG_VERSION")
+    );
     for p in parts {
         text.push_str(&format!("{p:?}\n"));
     }

@@ -29,7 +29,7 @@ use crate::results::{
 
 /// A delay bound when the manifest fits none (s): 20 ms, the default of
 /// `identification.delay.max_s`.
-const DEFAULT_MAX_DELAY_S: f64 = 0.02;
+pub(super) const DEFAULT_MAX_DELAY_S: f64 = 0.02;
 
 /// How much worse than the sequential fits' pooled reduced chi-square the
 /// joint fit's may be and still count as adequate.
