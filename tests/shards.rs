@@ -137,3 +137,40 @@ fn shards_that_do_not_belong_together_are_refused() {
     std::fs::write(&info, text.replace(env!("CARGO_PKG_VERSION"), "0.0.1")).unwrap();
     refused(&[&s0, &s1], "a shard of another servoid version (0.0.1;");
 }
+
+/// With the validation runs in the joint fit the rig needs every
+/// validation log, which a shard reading only its share cannot give: the
+/// shard is refused as a usage error naming the key, before it writes
+/// anything.
+#[test]
+fn a_campaign_fitting_its_validation_runs_into_the_rig_is_not_sharded() {
+    let dir = scratch();
+    let paper =
+        std::fs::read_to_string(root().join("experiments/maghareh2018/paper.toml")).unwrap();
+    let manifest = dir.path().join("paper.toml");
+    std::fs::write(
+        &manifest,
+        format!("{paper}\n[identification.joint]\ninclude_validation = true\n"),
+    )
+    .unwrap();
+    let out = dir.path().join("shard");
+    let o = servoid_into(
+        dir.path(),
+        "run",
+        &manifest,
+        &out,
+        &["--shard", "0/2", "--quiet"],
+    );
+    assert_eq!(o.code, 2, "{}", o.stderr);
+    for want in [
+        manifest.display().to_string(),
+        "identification.joint.include_validation".to_string(),
+        "without --shard".to_string(),
+    ] {
+        assert!(o.stderr.contains(&want), "missing {want:?} in {}", o.stderr);
+    }
+    assert!(!out.exists(), "nothing written");
+    // Without --shard the same manifest runs.
+    let o = servoid_into(dir.path(), "run", &manifest, &out, &["--quiet"]);
+    assert_eq!(o.code, 0, "{}", o.stderr);
+}

@@ -68,6 +68,11 @@ pub enum JobError {
     Verify(#[from] VerifyError),
     #[error(transparent)]
     Merge(#[from] MergeError),
+    /// A share of the campaign cannot give the rig the whole campaign
+    /// gives: with the validation runs in the joint fit, every shard would
+    /// need every validation log.
+    #[error("{}: identification.joint.include_validation fits every validation run's log into the rig, which a shard reading only its share cannot give; run the campaign without --shard, or set the key to false to share it out", file.display())]
+    NotShardable { file: PathBuf },
 }
 
 impl JobError {
@@ -93,6 +98,7 @@ impl JobError {
                 | JobError::Write(WriteError::OutFolder { .. })
                 | JobError::Verify(_)
                 | JobError::Merge(_)
+                | JobError::NotShardable { .. }
         )
     }
 }
@@ -278,6 +284,11 @@ pub fn run_shard(
     observer: &dyn Observer,
 ) -> Result<ShardOutcome, JobError> {
     let campaign = load_campaign(path)?;
+    if campaign.joint.include_validation {
+        return Err(JobError::NotShardable {
+            file: path.to_path_buf(),
+        });
+    }
     let out_dir = settings.out.clone().unwrap_or_else(|| {
         PathBuf::from("reports").join(format!(
             "{}-shard-{}-of-{}",
