@@ -5,12 +5,12 @@
 //! the hold, a 2-sample delay and a 120 Hz valve mode, and 0.1 % noise.
 //! From the paper's rig 10 % off, with the delay and valve mode fitted.
 //! Target: under 50 ms beyond the per-run FRFs. Measured on two cores: one
-//! delay-and-valve fit 10.7 ms (35,525 bins, 3.3 M bins/s; 22 ms before the
+//! delay-and-valve fit 10.9 ms (35,525 bins, 3.25 M bins/s; 22 ms before the
 //! solver was given the cost with the normal equations in one pass and the
 //! covariance from them, 78 ms when it was given the tall Jacobian); what
 //! the campaign runs (`select`: three structures, the valve mode's grid of
 //! starts, a three-iteration race of the best two and the winner on to
-//! convergence, F tests) 36.5 ms (76 ms before those changes and the race,
+//! convergence, F tests) 37.5 ms (76 ms before those changes and the race,
 //! 305 ms at first). Each Levenberg-Marquardt trial is one pass over the
 //! bins for r^T r, J^T J and J^T r (about 1.5 ms on one core).
 //!
