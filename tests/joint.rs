@@ -398,8 +398,9 @@ fn a_fixed_structure_the_data_reject_is_kept_and_flagged() {
 /// and 94.7 %. A separate 2,000 seeds from 200,000 gave joint 66.8 % and
 /// 94.9 %, sequential 68.5 % and 95.5 %. So both are inside 95 +- 1 %; the
 /// joint estimate's stds are some 4 % optimistic against a Gaussian's
-/// 95.4 %, which is not explained yet (the FRF variances match the scatter
-/// over seeds and the per-run coefficients cover 95.1 %, tests/accuracy.rs).
+/// 95.4 %: the ETFE's noise estimate averages windows that hold the bin's
+/// own noise (README, "Accuracy against known truth"; leaving them out
+/// and averaging more brings the coverage to 95.0 %).
 /// Fewer seeds are not enough: a campaign's four parameters share its
 /// noise, and 300 seeds leave the fraction about a percent from its
 /// expectation.
