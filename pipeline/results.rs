@@ -165,11 +165,23 @@ pub struct JointResult {
     /// (a1b0 at `p_gain` of the rig), then the delay, valve frequency and
     /// damping as it has them, each beside the sequential estimate.
     pub parameters: Vec<JointParameter>,
-    /// R1 = a1b0 / a2 at the rig's P gain, with its std.
+    /// R1 = a1b0 / a2 at the rig's P gain, with its total std.
     #[serde(rename = "R1")]
     pub r1: Option<Estimate>,
-    /// Covariance of (beta1, a1b0, a2, a3), from the fit.
+    /// Total covariance of (beta1, a1b0, a2, a3): the fit's plus the
+    /// structure covariance.
     pub covariance: Option<[[f64; 4]; 4]>,
+    /// The structure covariance alone: the candidates' Akaike-weighted
+    /// spread about the reported rig.
+    pub structure_covariance: Option<[[f64; 4]; 4]>,
+    /// When structures the data cannot tell apart put the rig in different
+    /// places: which, what they move, and the experiment that would settle
+    /// it (also among the warnings).
+    pub ambiguity: Option<String>,
+    /// When the chosen structure fails its adequacy tests and the runs
+    /// pull the rig apart: by how much, and that the stds include it (also
+    /// among the warnings).
+    pub misfit: Option<String>,
     /// The adequacy tests over every run's bins, and per run.
     pub adequacy: Option<crate::fit::adequacy::Adequacy>,
     pub per_run: Vec<RunAdequacy>,
@@ -185,7 +197,14 @@ pub struct JointResult {
 pub enum JointStructureName {
     None,
     Delay,
+    /// A delay and a mode in the position loop.
     DelayValve,
+    /// A delay and a mode in the command path.
+    DelayCommand,
+    /// A delay and a mode in the displacement's measurement path.
+    DelayMeasurement,
+    /// A delay and the piston's mass.
+    DelayPiston,
 }
 
 impl JointStructureName {
@@ -195,6 +214,9 @@ impl JointStructureName {
             JointStructureName::None => "none",
             JointStructureName::Delay => "delay",
             JointStructureName::DelayValve => "delay_valve",
+            JointStructureName::DelayCommand => "delay_command",
+            JointStructureName::DelayMeasurement => "delay_measurement",
+            JointStructureName::DelayPiston => "delay_piston",
         }
     }
 }
@@ -203,6 +225,11 @@ impl JointStructureName {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 pub struct JointCandidate {
     pub structure: JointStructureName,
+    /// Where its second-order mode sits: "loop", "command path",
+    /// "measurement path", or "in series" (command or measurement path,
+    /// which only force FRFs tell apart); "actuator (piston mass)" for the
+    /// piston's; null without a mode.
+    pub place: Option<String>,
     pub parameters: usize,
     /// Null with `error` when the fit failed outright.
     pub cost: Option<f64>,
@@ -212,8 +239,11 @@ pub struct JointCandidate {
     pub cost_z: Option<f64>,
     /// cost + p ln(2 N).
     pub bic: Option<f64>,
-    /// The F test against the structure chosen before it.
+    /// The F test against the nested structure chosen before it.
     pub f_test: Option<FTestResult>,
+    /// Its Akaike weight (QAIC) among the usable candidates: its share of
+    /// the structure std.
+    pub weight: Option<f64>,
     pub converged: Option<bool>,
     /// Why the fit cannot be used although it ran.
     pub unusable: Option<String>,
@@ -234,11 +264,22 @@ pub struct FTestResult {
 /// A joint parameter beside the sequential estimate.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 pub struct JointParameter {
-    /// beta1, a1b0, a2, a3, delay_s, valve_hz, valve_damping.
+    /// beta1, a1b0, a2, a3, delay_s, then valve_hz and valve_damping (a
+    /// mode in the loop) or mode_hz and mode_damping (outside it), then
+    /// force_delay_s.
     pub name: String,
     pub value: f64,
     /// Statistical std, from the fit.
     pub std: f64,
+    /// The structure std: the candidate structures' spread about this
+    /// value, weighted by their Akaike weights (rig parameters only).
+    pub structure_std: Option<f64>,
+    /// The model-error std from the runs' jackknife, when the chosen
+    /// structure fails its adequacy tests (rig parameters only).
+    pub misfit_std: Option<f64>,
+    /// sqrt(std^2 + structure_std^2 + misfit_std^2): what the rig's std is
+    /// when the joint estimate is used.
+    pub total_std: f64,
     /// The sequential estimate and its std (rig parameters only).
     pub sequential: Option<Estimate>,
     /// (joint - sequential) / sqrt(std_joint^2 + std_sequential^2).

@@ -41,10 +41,14 @@ const OTHER: Rig = Rig {
 };
 
 /// What the rig has besides the paper's model.
+#[derive(Default)]
 struct Extras {
     fs: f64,
-    /// (Hz, damping), or none.
+    /// A mode in the loop (Hz, damping), or none.
     valve: Option<(f64, f64)>,
+    /// A mode in the command path, and one on the logged displacement.
+    command: Option<(f64, f64)>,
+    measurement: Option<(f64, f64)>,
     delay_samples: f64,
     /// LVDT offset (mm) and drift (mm/s).
     offset_mm: f64,
@@ -55,12 +59,20 @@ struct Extras {
 /// converters, 2 um of LVDT noise, a no-specimen run and the rig's
 /// springs. `[identification]` names neither a delay nor a structure.
 fn manifest(seed: u64, rig: &Rig, x: &Extras) -> String {
-    let valve = match x.valve {
-        Some((hz, zeta)) => format!(
-            "[rig.unmodelled]\nvalve_mode = {{ natural_frequency_hz = {hz}, damping_ratio = {zeta} }}\n"
-        ),
-        None => String::new(),
-    };
+    let mut valve = String::new();
+    for (key, mode) in [
+        ("valve_mode", x.valve),
+        ("command_mode", x.command),
+        ("measurement_mode", x.measurement),
+    ] {
+        if let Some((hz, zeta)) = mode {
+            valve +=
+                &format!("{key} = {{ natural_frequency_hz = {hz}, damping_ratio = {zeta} }}\n");
+        }
+    }
+    if !valve.is_empty() {
+        valve = format!("[rig.unmodelled]\n{valve}");
+    }
     let mut runs = String::from("[[runs]]\nid = \"bare\"\nrole = \"no_specimen\"\np_gain = 1.0\n");
     for (i, k) in rig.springs.iter().enumerate() {
         runs += &format!(
@@ -181,6 +193,7 @@ fn rich_campaigns_give_the_rig_within_one_percent() {
             delay_samples: delay,
             offset_mm: 0.15,
             drift_mm_per_s: 4e-4,
+            ..Extras::default()
         };
         let results = identify(&manifest(100 + i as u64, rig, &x));
         let r = results.rig.as_ref().unwrap();
@@ -231,6 +244,7 @@ fn a_clean_campaign_gives_the_rig_within_a_tenth_of_a_percent() {
         delay_samples: 0.0,
         offset_mm: 0.0,
         drift_mm_per_s: 0.0,
+        ..Extras::default()
     };
     let results = identify(&manifest(7, &PAPER, &x));
     let r = results.rig.as_ref().unwrap();
@@ -275,6 +289,7 @@ fn validation_runs_join_the_fit_when_the_manifest_says() {
         delay_samples: 2.0,
         offset_mm: 0.15,
         drift_mm_per_s: 4e-4,
+        ..Extras::default()
     };
     let with_exps = manifest(21, &PAPER, &x)
         + r#"
@@ -361,6 +376,7 @@ fn a_fixed_structure_the_data_reject_is_kept_and_flagged() {
         delay_samples: 3.0,
         offset_mm: 0.0,
         drift_mm_per_s: 0.0,
+        ..Extras::default()
     };
     let text = manifest(3, &PAPER, &x).replace(
         "[identification]\n",
@@ -417,6 +433,7 @@ fn the_joint_stds_are_honest_across_seeds() {
         delay_samples: 0.0,
         offset_mm: 0.0,
         drift_mm_per_s: 0.0,
+        ..Extras::default()
     };
     let z: Vec<([f64; 4], [f64; 4])> = (0..seeds)
         .into_par_iter()
@@ -471,4 +488,439 @@ fn the_joint_stds_are_honest_across_seeds() {
         (0.655..=0.71).contains(&s1),
         "sequential within 1 std: {s1}"
     );
+}
+
+/// Three SDOF validation runs (the paper's Exp1 specimen and two others)
+/// at the given P gains, as `[[runs]]` tables.
+fn sdof_validation_runs(p_gains: [f64; 3]) -> String {
+    let specimens = [
+        (3.8, 5.0, 129_400.0),
+        (6.0, 12.0, 80_000.0),
+        (2.5, 8.0, 180_000.0),
+    ];
+    let mut runs = String::new();
+    for (i, ((m, c, k), p)) in specimens.iter().zip(p_gains).enumerate() {
+        runs += &format!(
+            "\n[[runs]]\nid = \"sdof{}\"\nrole = \"validation\"\np_gain = {p}\nspecimen = {{ mass_kg = {m}, damping_ns_per_m = {c}, stiffness_n_per_m = {k} }}\n",
+            i + 1
+        );
+    }
+    runs
+}
+
+/// Where the extra dynamics sit (issue 23): the issue's rig, a 110 Hz mode
+/// of damping 0.6 with a 2-sample sensor delay, offset and drift, three
+/// springs and three SDOF validation runs, default settings, with the mode
+/// in the loop and outside it (command path; on x1/u the measurement path
+/// is the same product). Before the structures named their place the
+/// command-path rig came out beta1 +2.6 %, a1b0 +2.5 % with stds of 0.09 %,
+/// unwarned. Now each rig parameter must be within 0.5 % (in the loop, as
+/// before) or, outside the loop, within 1 % or within 2 total stds with a
+/// warning that names the structures the data cannot tell apart.
+#[test]
+fn a_mode_outside_the_loop_is_placed_there_or_warned() {
+    for (i, (valve, command)) in [(Some((110.0, 0.6)), None), (None, Some((110.0, 0.6)))]
+        .into_iter()
+        .enumerate()
+    {
+        let x = Extras {
+            fs: 1000.0,
+            valve,
+            command,
+            delay_samples: 2.0,
+            offset_mm: 0.15,
+            drift_mm_per_s: 4e-4,
+            ..Extras::default()
+        };
+        let text = manifest(230 + i as u64, &OTHER, &x) + &sdof_validation_runs([1.0; 3]);
+        let results = identify(&text);
+        let r = results.rig.as_ref().unwrap();
+        let joint = r.joint.as_ref().unwrap();
+        let err = errors(&results, &OTHER);
+        let stds = [&r.beta1, &r.a1b0, &r.a2, &r.a3].map(|e| e.std.unwrap());
+        let truth = [OTHER.beta1, OTHER.a1b0, OTHER.a2, OTHER.a3];
+        let z: [f64; 4] = std::array::from_fn(|k| err[k] * truth[k] / stds[k]);
+        eprintln!(
+            "mode {}: structure {:?}, errors {:+.3?} %, in total stds {:+.2?}; candidates {:?}; ambiguity {:?}",
+            if valve.is_some() {
+                "in the loop"
+            } else {
+                "in the command path"
+            },
+            joint.structure,
+            err.map(|e| 100.0 * e),
+            z,
+            joint
+                .candidates
+                .iter()
+                .map(|c| (c.structure, c.place.clone(), c.reduced_chi2, c.weight))
+                .collect::<Vec<_>>(),
+            joint.ambiguity
+        );
+        assert_eq!(r.source, RigSource::Joint, "{}", joint.use_note);
+        if valve.is_some() {
+            assert_eq!(joint.structure, Some(JointStructureName::DelayValve));
+            for (name, e) in ["beta1", "a1b0", "a2", "a3"].iter().zip(err) {
+                assert!(
+                    e.abs() < 0.005,
+                    "in the loop: {name} {:.3} % off",
+                    100.0 * e
+                );
+            }
+            continue;
+        }
+        let warned = joint.ambiguity.is_some()
+            && results
+                .warnings
+                .iter()
+                .any(|w| w.contains("the data cannot tell"));
+        for (k, name) in ["beta1", "a1b0", "a2", "a3"].iter().enumerate() {
+            assert!(
+                err[k].abs() < 0.01 || (z[k].abs() < 2.0 && warned),
+                "command path: {name} {:.3} % off, {:.2} total stds, warned {warned}",
+                100.0 * err[k],
+                z[k]
+            );
+        }
+        let place = joint
+            .candidates
+            .iter()
+            .find(|c| c.chosen)
+            .and_then(|c| c.place.clone());
+        assert_eq!(place.as_deref(), Some("in series"), "{}", joint.explanation);
+    }
+}
+
+/// A rig of the mismatch suite: its name and what the simulation manifest
+/// gives it besides the paper's model.
+struct Mismatch {
+    name: &'static str,
+    extras: Extras,
+    /// Lines for `[rig.unmodelled]` beyond the modes `extras` gives.
+    unmodelled: &'static str,
+    /// The validation runs' x1/u and f/u join the fit.
+    include_validation: bool,
+}
+
+/// What one campaign of a rig gave: its README row, the rig's errors in
+/// total stds, and whether a structure warning was given.
+struct Outcome {
+    row: String,
+    err: [f64; 4],
+    z: [f64; 4],
+    warned: bool,
+}
+
+fn run_mismatch(rig: &Mismatch, seed: u64) -> Outcome {
+    let mut text = manifest(seed, &OTHER, &rig.extras) + &sdof_validation_runs([1.0; 3]);
+    if !rig.unmodelled.is_empty() {
+        text = if text.contains("[rig.unmodelled]\n") {
+            text.replace(
+                "[rig.unmodelled]\n",
+                &format!("[rig.unmodelled]\n{}", rig.unmodelled),
+            )
+        } else {
+            text.replace(
+                "\n[excitation]",
+                &format!("[rig.unmodelled]\n{}\n[excitation]", rig.unmodelled),
+            )
+        };
+    }
+    if rig.include_validation {
+        text = text.replace(
+            "[identification]\n",
+            "[identification]\njoint = { include_validation = true }\n",
+        );
+    }
+    let results = identify(&text);
+    let r = results.rig.as_ref().unwrap();
+    let err = errors(&results, &OTHER);
+    let truth = [OTHER.beta1, OTHER.a1b0, OTHER.a2, OTHER.a3];
+    let std = [&r.beta1, &r.a1b0, &r.a2, &r.a3].map(|e| e.std.unwrap());
+    let z: [f64; 4] = std::array::from_fn(|k| err[k] * truth[k] / std[k]);
+    let joint = r.joint.as_ref();
+    let warned = joint.is_some_and(|j| j.ambiguity.is_some() || j.misfit.is_some());
+    let structure = joint
+        .and_then(|j| j.candidates.iter().find(|c| c.chosen))
+        .map_or("none".to_string(), |c| {
+            format!(
+                "{}{}",
+                c.structure.as_str(),
+                c.place
+                    .as_ref()
+                    .map_or(String::new(), |p| format!(" ({p})"))
+            )
+        });
+    let row = format!(
+        "| {} | {} | {}{} | {} | {} | {} |",
+        rig.name,
+        seed,
+        structure,
+        if r.source == RigSource::Joint {
+            ""
+        } else {
+            " (sequential used)"
+        },
+        err.map(|e| format!("{:+.3}", 100.0 * e)).join(", "),
+        z.map(|v| format!("{v:+.2}")).join(", "),
+        if warned { "yes" } else { "no" }
+    );
+    eprintln!("{row}");
+    if let Some(j) = joint {
+        for note in j.ambiguity.iter().chain(&j.misfit) {
+            eprintln!("    {note}");
+        }
+    }
+    Outcome {
+        row,
+        err,
+        z,
+        warned,
+    }
+}
+
+fn base(
+    valve: Option<(f64, f64)>,
+    command: Option<(f64, f64)>,
+    measurement: Option<(f64, f64)>,
+    delay_samples: f64,
+    offset_mm: f64,
+    drift_mm_per_s: f64,
+) -> Extras {
+    Extras {
+        fs: 1000.0,
+        valve,
+        command,
+        measurement,
+        delay_samples,
+        offset_mm,
+        drift_mm_per_s,
+    }
+}
+
+/// The mismatch suite (issue 23, item 4): rigs with what the paper's model
+/// lacks, at the places a lab's rig has it, two seeds each, default
+/// settings, the issue's campaign (no-specimen run, three springs, three
+/// SDOF validation runs; 120 s chirps at 1 kHz). For every rig parameter
+/// the campaign reports: within 1 % of the truth, or within 2 total stds
+/// of it with a structure warning. Across the suite at least 90 % of the
+/// parameters lie within 2 total stds. The table it prints is the README's.
+#[test]
+fn the_mismatch_suite_is_right_or_warned() {
+    let rig = |name, extras, unmodelled, include_validation| Mismatch {
+        name,
+        extras,
+        unmodelled,
+        include_validation,
+    };
+    let suite = [
+        rig(
+            "mode in the loop, 110 Hz, 0.6",
+            base(Some((110.0, 0.6)), None, None, 2.0, 0.15, 4e-4),
+            "",
+            false,
+        ),
+        rig(
+            "mode in the loop, 70 Hz, 0.3",
+            base(Some((70.0, 0.3)), None, None, 3.0, 0.0, 0.0),
+            "",
+            false,
+        ),
+        rig(
+            "mode in the command path, 110 Hz, 0.6",
+            base(None, Some((110.0, 0.6)), None, 2.0, 0.15, 4e-4),
+            "",
+            false,
+        ),
+        rig(
+            "mode in the command path, 60 Hz, 0.4",
+            base(None, Some((60.0, 0.4)), None, 1.0, 0.0, 0.0),
+            "",
+            false,
+        ),
+        rig(
+            "filter on the logged displacement, 80 Hz, 0.7",
+            base(None, None, Some((80.0, 0.7)), 0.0, 0.15, 4e-4),
+            "",
+            false,
+        ),
+        rig(
+            "the same, validation runs' force in the fit",
+            base(None, None, Some((80.0, 0.7)), 0.0, 0.15, 4e-4),
+            "",
+            true,
+        ),
+        rig(
+            "piston mass 3 kg",
+            base(None, None, None, 1.0, 0.0, 0.0),
+            "piston_mass_kg = 3.0\n",
+            false,
+        ),
+        rig(
+            "LVDT drift 2 um/s, offset 0.5 mm, loop mode 130 Hz",
+            base(Some((130.0, 0.5)), None, None, 2.0, 0.5, 2e-3),
+            "",
+            false,
+        ),
+    ];
+    let mut rows = Vec::new();
+    let (mut covered, mut total) = (0, 0);
+    let mut misses = Vec::new();
+    for (i, rig) in suite.iter().enumerate() {
+        for seed in 0..2u64 {
+            let o = run_mismatch(rig, 300 + 10 * i as u64 + seed);
+            for k in 0..4 {
+                total += 1;
+                covered += usize::from(o.z[k].abs() <= 2.0);
+                if !(o.err[k].abs() < 0.01 || (o.z[k].abs() < 2.0 && o.warned)) {
+                    misses.push(format!(
+                        "{} seed {seed}: {} {:+.3} % ({:+.2} total stds), warned {}",
+                        rig.name,
+                        ["beta1", "a1b0", "a2", "a3"][k],
+                        100.0 * o.err[k],
+                        o.z[k],
+                        o.warned
+                    ));
+                }
+            }
+            rows.push(o.row);
+        }
+    }
+    eprintln!(
+        "| rig | seed | structure chosen | error % (beta1, a1b0, a2, a3) | error in total stds | warning |"
+    );
+    for row in &rows {
+        eprintln!("{row}");
+    }
+    let coverage = covered as f64 / total as f64;
+    eprintln!(
+        "suite coverage: {covered} of {total} within 2 total stds ({:.1} %)",
+        100.0 * coverage
+    );
+    assert!(misses.is_empty(), "{misses:#?}");
+    assert!(coverage >= 0.9, "coverage {coverage}");
+}
+
+/// Beyond the candidates: rigs with what no structure holds, Coulomb
+/// friction on the piston and two modes at once (in the loop and in the
+/// command path). Their errors are not covered by the stated stds (the
+/// README's table says by how much); what the test asserts is that the
+/// campaign says so: the chosen structure fails its adequacy tests and the
+/// misfit warning names it.
+#[test]
+fn beyond_the_candidates_the_campaign_says_so() {
+    let beyond = [
+        Mismatch {
+            name: "piston 2 kg with 20 N Coulomb friction",
+            extras: base(None, None, None, 0.0, 0.0, 0.0),
+            unmodelled: "piston_mass_kg = 2.0\nactuator_friction = { coulomb_force_n = 20.0, smoothing_velocity_m_per_s = 0.001 }\n",
+            include_validation: false,
+        },
+        Mismatch {
+            name: "modes in the loop (150 Hz) and the command path (90 Hz)",
+            extras: base(Some((150.0, 0.5)), Some((90.0, 0.6)), None, 1.0, 0.0, 0.0),
+            unmodelled: "",
+            include_validation: false,
+        },
+    ];
+    for (i, rig) in beyond.iter().enumerate() {
+        for seed in 0..2u64 {
+            let o = run_mismatch(rig, 400 + 10 * i as u64 + seed);
+            let worst = o.err.iter().fold(0.0f64, |m, e| m.max(e.abs()));
+            assert!(
+                worst < 0.01 || o.warned,
+                "{}: {:.2} % off, unwarned",
+                rig.name,
+                100.0 * worst
+            );
+        }
+    }
+}
+
+/// The experiment the ambiguity warning proposes settles it (issue 23,
+/// item 2). A thin campaign (the no-specimen run and one spring, 10 s, 30
+/// um of LVDT noise) on a rig with a 250 Hz mode (damping 0.5) in the loop,
+/// eight times the band's top, cannot tell a delay, the piston, the loop
+/// and the command path apart: none of the extensions passes the F test
+/// against the delay, their Akaike weights are 0.07-0.56, and they move
+/// beta1, a1b0 and a2 by 1.2-1.7 %. The campaign says so, names the
+/// structures and proposes a run at another P gain in the fit. The same
+/// campaign with its validation run at P = 2 in the fit
+/// (`include_validation`, as the warning says): the loop is chosen with
+/// all the weight, no ambiguity, the rig within 0.5 % and 2 total stds.
+/// (Without the run a2 is 1.15 % off at 2.2 total stds: the warning, not
+/// the std, is what tells the lab.)
+#[test]
+fn a_run_at_another_p_gain_settles_the_place() {
+    let x = Extras {
+        fs: 1000.0,
+        valve: Some((250.0, 0.5)),
+        delay_samples: 1.0,
+        ..Extras::default()
+    };
+    let thin = Rig {
+        springs: &[150_000.0],
+        ..OTHER
+    };
+    let text = manifest(77, &thin, &x)
+        .replace("duration_s = 120.0", "duration_s = 10.0")
+        .replace("noise_rms = 0.002", "noise_rms = 0.03")
+        + "\n[[runs]]\nid = \"sdof\"\nrole = \"validation\"\np_gain = 2.0\nspecimen = { mass_kg = 3.8, damping_ns_per_m = 5.0, stiffness_n_per_m = 129400.0 }\n";
+    let settled = text.replace(
+        "[identification]\n",
+        "[identification]\njoint = { include_validation = true }\n",
+    );
+    for (name, text) in [("default", &text), ("with the P = 2 run", &settled)] {
+        let results = identify(text);
+        let r = results.rig.as_ref().unwrap();
+        let joint = r.joint.as_ref().unwrap();
+        let err = errors(&results, &thin);
+        let truth = [thin.beta1, thin.a1b0, thin.a2, thin.a3];
+        let std = [&r.beta1, &r.a1b0, &r.a2, &r.a3].map(|e| e.std.unwrap());
+        let z: [f64; 4] = std::array::from_fn(|k| err[k] * truth[k] / std[k]);
+        eprintln!(
+            "{name}: {:?}, errors {:+.3?} %, {:+.2?} total stds; weights {:?}; ambiguity {:?}",
+            joint.structure,
+            err.map(|e| 100.0 * e),
+            z,
+            joint
+                .candidates
+                .iter()
+                .map(|c| (c.structure.as_str(), c.weight))
+                .collect::<Vec<_>>(),
+            joint.ambiguity
+        );
+        if name == "default" {
+            let a = joint.ambiguity.as_deref().expect("an ambiguity");
+            for needle in ["\"delay_valve\"", "\"delay_command\"", "another P gain"] {
+                assert!(a.contains(needle), "{needle} not in {a}");
+            }
+            assert!(
+                results
+                    .warnings
+                    .iter()
+                    .any(|w| w.starts_with("rig: the data cannot tell")),
+                "{:?}",
+                results.warnings
+            );
+            let moved = joint
+                .parameters
+                .iter()
+                .take(4)
+                .filter(|p| p.structure_std.is_some_and(|s| s > 0.5 * p.std))
+                .count();
+            assert!(moved >= 2, "{:?}", joint.parameters);
+        } else {
+            assert_eq!(joint.ambiguity, None);
+            assert_eq!(joint.structure, Some(JointStructureName::DelayValve));
+            for k in 0..4 {
+                assert!(
+                    err[k].abs() < 0.005 && z[k].abs() < 2.0,
+                    "{k}: {} %, {} total stds",
+                    100.0 * err[k],
+                    z[k]
+                );
+            }
+        }
+    }
 }

@@ -2,7 +2,9 @@
 //! fitted together and directly to the FRFs of several runs, each run's
 //! model the exact x1/u of its specimen at its P gain, with nuisance
 //! dynamics shared by every run: the command's hold, a pure delay and,
-//! optionally, a second-order servo-valve mode in series with the valve.
+//! optionally, a second-order mode at one of three places (issue 23): in
+//! the position loop (the servo-valve spool's), in the command path ahead
+//! of the loop, or in the measurement path of the logged displacement.
 //!
 //! The paper's sequential procedure (Eqs. 18-20) fits each run alone and
 //! combines the coefficients by algebra, so each run's model error enters
@@ -17,8 +19,14 @@
 //!
 //!   x1/u = A V / D,  D = (s + beta1) Q + A V,
 //!
-//! which is Eqs. 12, 14 and 17 when V = 1. The measured FRF is that times
-//! the hold Z(s) and exp(-s tau). A run's force over command is S(s) times
+//! which is Eqs. 12, 14 and 17 when V = 1. That is the mode in the loop.
+//! Outside it the loop is the paper's and the mode multiplies what comes
+//! out: x1/u = V A / D0 with D0 = (s + beta1) Q + A, the same for a mode in
+//! the command path (the loop follows a shaped command) and in the
+//! measurement path (the logged x1 is filtered). The force tells the two
+//! apart: it follows a shaped command (f/u = S V A / D0) but not a filter
+//! on the displacement channel (f/u = S A / D0). The measured FRF is the
+//! model times the hold Z(s) and exp(-s tau). A run's force over command is S(s) times
 //! its x1/u (Eq. 45: the specimen's poles are the force path's zeros), so a
 //! validation run, whose m, c and k the manifest gives, adds two FRFs that
 //! the same parameters must explain; S(s) is known, so every log-derivative
@@ -76,8 +84,30 @@ pub enum Structure {
     Plain,
     /// And a pure delay.
     Delay,
-    /// And a delay and a second-order servo-valve mode.
+    /// And a delay and a second-order mode in the loop (the servo-valve's).
     DelayValve,
+    /// And a delay and a second-order mode in the command path, outside the
+    /// loop: on x1/u and f/u alike.
+    DelayCommand,
+    /// And a delay and a second-order mode in the measurement path of the
+    /// displacement: on x1/u, not on f/u.
+    DelayMeasurement,
+    /// And a delay and the piston's mass (with the oil column's stiffness
+    /// a2, the actuator's own mode): Q = (s + a3)(S + m_p s^2) + a2 s.
+    DelayPiston,
+}
+
+/// Where a structure's second-order mode sits.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Place {
+    /// Inside the position loop: its effect on x1/u changes with the loop
+    /// gain, hence with the P gain and the specimen.
+    Loop,
+    /// In the command path: a factor on x1/u and f/u alike, whatever the
+    /// loop does.
+    Command,
+    /// In the displacement's measurement path: a factor on x1/u only.
+    Measurement,
 }
 
 impl Structure {
@@ -85,22 +115,67 @@ impl Structure {
         match self {
             Structure::Plain => 4,
             Structure::Delay => 5,
-            Structure::DelayValve => 7,
+            Structure::DelayPiston => 6,
+            _ => 7,
+        }
+    }
+
+    /// Whether it fits the piston's mass.
+    pub fn piston(self) -> bool {
+        self == Structure::DelayPiston
+    }
+
+    /// Where its mode sits, when it has one.
+    pub fn place(self) -> Option<Place> {
+        match self {
+            Structure::Plain | Structure::Delay | Structure::DelayPiston => None,
+            Structure::DelayValve => Some(Place::Loop),
+            Structure::DelayCommand => Some(Place::Command),
+            Structure::DelayMeasurement => Some(Place::Measurement),
         }
     }
 
     /// The parameters' names, in the order of [`JointFit::params`] (which
-    /// adds [`FORCE_DELAY`] last when force FRFs are fitted).
+    /// adds [`FORCE_DELAY`] last when force FRFs are fitted): the mode in
+    /// the loop is the servo-valve's; outside it the mode's own.
     pub fn names(self) -> &'static [&'static str] {
-        &[
+        const RIG: [&str; 5] = [
             "beta1_per_s",
             "a1b0_n_per_m_s2",
             "a2_n_per_m",
             "a3_per_s",
             "delay_s",
-            "valve_hz",
-            "valve_damping",
-        ][..self.n_params()]
+        ];
+        match self {
+            Structure::Plain => &RIG[..4],
+            Structure::Delay => &RIG,
+            Structure::DelayPiston => &[
+                "beta1_per_s",
+                "a1b0_n_per_m_s2",
+                "a2_n_per_m",
+                "a3_per_s",
+                "delay_s",
+                "piston_mass_kg",
+            ],
+            Structure::DelayValve => &[
+                "beta1_per_s",
+                "a1b0_n_per_m_s2",
+                "a2_n_per_m",
+                "a3_per_s",
+                "delay_s",
+                "valve_hz",
+                "valve_damping",
+            ],
+            Structure::DelayCommand | Structure::DelayMeasurement => &[
+                "beta1_per_s",
+                "a1b0_n_per_m_s2",
+                "a2_n_per_m",
+                "a3_per_s",
+                "delay_s",
+                "mode_hz",
+                "mode_damping",
+            ],
+        }
     }
 }
 
@@ -119,8 +194,10 @@ pub struct JointOptions {
     /// The P gain a1b0 is stated at.
     pub p_ref: f64,
     pub max_iterations: u64,
-    /// Where the valve mode starts (Hz) and its damping.
+    /// Where the mode starts (Hz) and its damping.
     pub valve_start: (f64, f64),
+    /// Where the piston's mass starts (kg).
+    pub piston_start_kg: f64,
     /// Where the delay starts (s), and its upper bound (s); it is at least 0.
     pub delay_start_s: f64,
     pub max_delay_s: f64,
@@ -139,8 +216,11 @@ pub struct JointFit {
     /// The rig, a1b0 at `p_ref`.
     pub rig: RigParams,
     pub delay_s: f64,
-    /// Frequency (Hz) and damping ratio of the valve mode.
-    pub valve: Option<(f64, f64)>,
+    /// Frequency (Hz) and damping ratio of the second-order mode, at the
+    /// structure's place.
+    pub mode: Option<(f64, f64)>,
+    /// The piston's mass (kg), when the structure fits it.
+    pub piston_mass_kg: Option<f64>,
     /// The force FRFs' own delay (s), when force FRFs were fitted with a
     /// structure that has a delay.
     pub force_delay_s: Option<f64>,
@@ -169,7 +249,7 @@ impl JointFit {
     /// Why the optimum is not a physical rig, if it is not: a rig
     /// parameter not determined by the data (its std above its value, which
     /// is how a parameter running off towards 0 or infinity shows in a log
-    /// parametrisation), a delay at its upper bound, or a valve mode with
+    /// parametrisation), a delay at its upper bound, or a mode with
     /// damping outside 0.05-5 or far above the band (20 times its top),
     /// where it is only a delay.
     pub fn unphysical(&self, band_top_hz: f64, max_delay_s: f64) -> Option<String> {
@@ -192,13 +272,27 @@ impl JointFit {
                 "the force FRFs' delay sits at its bound identification.delay.max_s = {max_delay_s} s"
             ));
         }
-        if let Some((hz, zeta)) = self.valve {
+        if let Some(mp) = self.piston_mass_kg {
+            let sd = self.std[5];
+            if !(mp.is_finite() && mp > 0.0 && sd.is_finite() && sd < mp) {
+                return Some(format!(
+                    "piston_mass_kg = {mp:.4e} with std {sd:.3e}: not determined by the data"
+                ));
+            }
+            let hz = (self.rig.a2_n_per_m / mp).sqrt() / (2.0 * std::f64::consts::PI);
+            if hz > 20.0 * band_top_hz {
+                return Some(format!(
+                    "the piston's mode at {hz:.0} Hz, over 20 times the band's top ({band_top_hz} Hz): only a delay there"
+                ));
+            }
+        }
+        if let Some((hz, zeta)) = self.mode {
             if !(0.05..=5.0).contains(&zeta) {
-                return Some(format!("valve mode damping {zeta:.3} outside 0.05-5"));
+                return Some(format!("mode damping {zeta:.3} outside 0.05-5"));
             }
             if hz > 20.0 * band_top_hz {
                 return Some(format!(
-                    "valve mode at {hz:.0} Hz, over 20 times the band's top ({band_top_hz} Hz): only a delay there"
+                    "mode at {hz:.0} Hz, over 20 times the band's top ({band_top_hz} Hz): only a delay there"
                 ));
             }
         }
@@ -267,8 +361,10 @@ struct Point {
     tau: f64,
     /// The force FRFs' delay (s).
     tau_force: f64,
-    /// The valve mode's natural frequency (rad/s) and damping, if fitted.
-    valve: Option<(f64, f64)>,
+    /// The mode's natural frequency (rad/s) and damping, if fitted.
+    mode: Option<(f64, f64)>,
+    /// The piston's mass (kg), 0 when not fitted.
+    mp: f64,
 }
 
 /// Bins per chunk of a parallel pass: each chunk's sums are formed on one
@@ -323,8 +419,15 @@ impl JointProblem {
             a3: theta[3].exp(),
             tau,
             tau_force: self.force_delay.map_or(tau, |k| theta[k] * self.period_s),
-            valve: (self.structure == Structure::DelayValve)
-                .then(|| (theta[5].exp(), theta[6].exp())),
+            mode: self
+                .structure
+                .place()
+                .map(|_| (theta[5].exp(), theta[6].exp())),
+            mp: if self.structure.piston() {
+                theta[5].exp()
+            } else {
+                0.0
+            },
         }
     }
 
@@ -334,37 +437,55 @@ impl JointProblem {
     fn eval_at<const GRAD: bool>(&self, bin: &Bin, x: &Point) -> BinEval {
         let s = bin.s;
         let run = self.runs[bin.run];
-        let sp = bin.sp;
+        // The moving mass on the piston: the specimen's S(s) plus m_p s^2.
+        let sp = if x.mp == 0.0 {
+            bin.sp
+        } else {
+            bin.sp + s * s * x.mp
+        };
         let q = (s + x.a3) * sp + s * x.a2;
         let a = x.a1b0 * run.p_ratio;
         let one = Complex::new(1.0, 0.0);
-        // V and 1 / its denominator.
-        let (v, inv_vden) = match x.valve {
-            Some((wv, zeta)) => {
-                let inv = one / (s * s + s * (2.0 * zeta * wv) + wv * wv);
-                (inv * (wv * wv), inv)
-            }
-            None => (one, one),
-        };
         let sb = s + x.b1;
-        let d = sb * q + v * a;
+        let sbq = sb * q;
+        // Where the bin has the mode: every bin but a force's under a
+        // measurement-path mode. In the loop V multiplies the valve's gain
+        // (D = (s + beta1) Q + A V, numerator A V); outside it the output
+        // (D = (s + beta1) Q + A, numerator A V). Each branch is the same
+        // for every bin of a pass, so it costs no prediction misses.
+        let place = match (self.structure.place(), bin.force) {
+            (Some(Place::Measurement), true) => None,
+            (place, _) => place,
+        };
+        let (d, num, inv_vden) = match (x.mode, place) {
+            (Some((wv, zeta)), Some(place)) => {
+                let inv = one / (s * s + s * (2.0 * zeta * wv) + wv * wv);
+                let av = inv * (a * wv * wv);
+                if place == Place::Loop {
+                    (sbq + av, av, inv)
+                } else {
+                    (sbq + a, av, inv)
+                }
+            }
+            _ => (sbq + a, Complex::new(a, 0.0), one),
+        };
         // exp(-s tau) on the imaginary axis: a rotation by -w tau.
         let tau = if bin.force { x.tau_force } else { x.tau };
-        let delay = if tau == 0.0 {
-            one
+        let known = if tau == 0.0 {
+            bin.known
         } else {
             let (sin, cos) = (-s.im * tau).sin_cos();
-            Complex::new(cos, sin)
+            bin.known * Complex::new(cos, sin)
         };
         let inv_d = one / d;
-        let h = a * v * inv_d * bin.known * delay;
+        let h = num * inv_d * known;
         let mut grad = [Complex::default(); MAX_PARAMS];
         if GRAD {
             // x dH/dx for each log parameter (derived in the module docs'
-            // notation): A and V enter only as A V, whose log-derivative of
-            // H is (s + beta1) Q / D.
+            // notation): A enters as A V_loop, whose log-derivative of H is
+            // (s + beta1) Q / D; V_out is a plain factor (log-derivative 1).
             let h_d = h * inv_d;
-            let av = h_d * sb * q;
+            let av = h_d * sbq;
             grad[0] = -h_d * q * x.b1;
             grad[1] = av;
             grad[2] = -h_d * sb * s * x.a2;
@@ -376,10 +497,15 @@ impl JointProblem {
                 };
                 grad[k] = -s * self.period_s * h;
             }
-            if let Some((wv, zeta)) = x.valve {
-                // wv dV/dwv / V and zeta dV/dzeta / V.
-                grad[5] = av * s * (s + zeta * wv) * 2.0 * inv_vden;
-                grad[6] = -av * s * (2.0 * zeta * wv) * inv_vden;
+            if self.structure.piston() {
+                grad[5] = -h_d * sb * (s + x.a3) * s * s * x.mp;
+            }
+            if let (Some((wv, zeta)), Some(place)) = (x.mode, place) {
+                // wv dV/dwv / V and zeta dV/dzeta / V, times the
+                // log-derivative of H with respect to V.
+                let by_v = if place == Place::Loop { av } else { h };
+                grad[5] = by_v * s * (s + zeta * wv) * 2.0 * inv_vden;
+                grad[6] = -by_v * s * (2.0 * zeta * wv) * inv_vden;
             }
         }
         BinEval { model: h, grad }
@@ -616,6 +742,36 @@ pub fn joint_fit(
     finish(&problem, optimum, opts)
 }
 
+/// As [`joint_fit`], by way of the optimum on every `stride`-th bin: from
+/// there the fit on every bin takes a few iterations where a start from the
+/// sequential estimate takes a dozen, each a pass over all the bins. The
+/// optimum is the same (the last leg runs to convergence on every bin); a
+/// failure on the fewer bins falls back to the plain fit.
+pub(super) fn joint_fit_staged(
+    runs: &[JointRun<'_>],
+    start: &RigParams,
+    opts: &JointOptions,
+    stride: usize,
+) -> Result<JointFit, FitError> {
+    let problem = problem(runs, opts)?;
+    let coarse = problem.every(stride);
+    let optimum = match Leg::from(&coarse, start, opts, opts.max_iterations) {
+        Ok(leg) => {
+            Leg::run(
+                &problem,
+                solver(&problem, opts)?,
+                leg.optimum.theta,
+                None,
+                opts.max_iterations,
+                0,
+            )?
+            .optimum
+        }
+        Err(_) => optimise(&problem, start, opts)?,
+    };
+    finish(&problem, optimum, opts)
+}
+
 /// Where Levenberg-Marquardt stopped.
 #[derive(Debug, Clone)]
 struct Optimum {
@@ -674,9 +830,12 @@ impl Leg {
         if opts.structure != Structure::Plain {
             theta0.push(delay(opts.delay_start_s));
         }
-        if opts.structure == Structure::DelayValve {
+        if opts.structure.place().is_some() {
             theta0.push((2.0 * std::f64::consts::PI * opts.valve_start.0).ln());
             theta0.push(opts.valve_start.1.ln());
+        }
+        if opts.structure.piston() {
+            theta0.push(opts.piston_start_kg.ln());
         }
         if problem.force_delay.is_some() {
             theta0.push(delay(opts.force_delay_start_s));
@@ -787,12 +946,16 @@ fn finish(
         params.push(theta[4] * problem.period_s);
         factors.push(problem.period_s);
     }
-    if opts.structure == Structure::DelayValve {
+    if opts.structure.place().is_some() {
         let hz = theta[5].exp() / (2.0 * std::f64::consts::PI);
         params.push(hz);
         factors.push(hz);
         params.push(theta[6].exp());
         factors.push(theta[6].exp());
+    }
+    if opts.structure.piston() {
+        params.push(theta[5].exp());
+        factors.push(theta[5].exp());
     }
     if let Some(k) = problem.force_delay {
         params.push(theta[k] * problem.period_s);
@@ -815,7 +978,8 @@ fn finish(
         } else {
             params[4]
         },
-        valve: (opts.structure == Structure::DelayValve).then(|| (params[5], params[6])),
+        mode: opts.structure.place().map(|_| (params[5], params[6])),
+        piston_mass_kg: opts.structure.piston().then(|| params[5]),
         force_delay_s: problem.force_delay.map(|k| params[k]),
         params,
         names,
@@ -860,7 +1024,10 @@ fn solver(problem: &JointProblem, opts: &JointOptions) -> Result<LevenbergMarqua
 }
 
 mod select;
-pub use select::{Candidate, Choice, FTest, P_SIGNIFICANT, Selection, select};
+pub use select::{
+    Candidate, Choice, FTest, P_SIGNIFICANT, RunSpread, Selection, StructureSpread, WEIGHT_FLOOR,
+    run_spread, select,
+};
 
 #[cfg(test)]
 mod tests;

@@ -356,15 +356,28 @@ pub struct JointSettings {
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
 #[serde(rename_all = "snake_case")]
 pub enum JointStructure {
-    /// Chosen by the data among the three below (nested F tests).
+    /// Chosen by the data among those below (nested F tests; among the
+    /// modes at different places, the lowest cost).
     #[default]
     Auto,
     /// The paper's model alone.
     None,
     /// And a pure delay.
     Delay,
-    /// And a delay and a second-order servo-valve mode.
+    /// And a delay and a second-order mode in the position loop (the
+    /// servo-valve spool's).
     DelayValve,
+    /// And a delay and a second-order mode in the command path, ahead of
+    /// the loop (a command filter or valve driver): displacement and force
+    /// follow it.
+    DelayCommand,
+    /// And a delay and a second-order mode in the displacement's
+    /// measurement path (a sensor or logging filter outside the loop): the
+    /// force does not follow it.
+    DelayMeasurement,
+    /// And a delay and the piston's mass on the oil column (the actuator's
+    /// own mode).
+    DelayPiston,
 }
 
 /// Which rig CCF, validation and the sensitivity use.

@@ -22,7 +22,7 @@ use crate::model::RigParams;
 use crate::simulate::excitation::{ChirpLaw, Excitation, Padding};
 use crate::simulate::instrument::Sensor;
 use crate::simulate::ode::Integrator;
-use crate::simulate::plant::{self, PlantSpec, Unmodelled, ValveMode};
+use crate::simulate::plant::{self, ActuatorFriction, PlantSpec, Unmodelled, ValveMode};
 use crate::simulate::specimen::SpecimenModel;
 use crate::units::UnitKind;
 
@@ -137,12 +137,32 @@ pub struct SimRig {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[schemars(deny_unknown_fields)]
 pub struct UnmodelledSpec {
-    /// A second-order servo-valve mode in series with the first-order valve.
+    /// A second-order servo-valve mode in series with the first-order valve,
+    /// inside the position loop.
     #[serde(default)]
     pub valve_mode: Option<ValveModeSpec>,
     /// Piston (and load-cell) mass moving with the actuator (kg).
     #[serde(default)]
     pub piston_mass_kg: Option<f64>,
+    /// A second-order mode in the command path, ahead of the loop (a
+    /// command filter or valve driver): x1 and the force both follow it.
+    #[serde(default)]
+    pub command_mode: Option<ValveModeSpec>,
+    /// A second-order mode on the logged displacement only (a sensor or
+    /// logging filter outside the loop): the force does not follow it.
+    #[serde(default)]
+    pub measurement_mode: Option<ValveModeSpec>,
+    /// Coulomb friction on the piston, which the load cell does not read.
+    #[serde(default)]
+    pub actuator_friction: Option<ActuatorFrictionSpec>,
+}
+
+/// Coulomb friction on the piston: coulomb_force_n * tanh(x2 / smoothing_velocity_m_per_s).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[schemars(deny_unknown_fields)]
+pub struct ActuatorFrictionSpec {
+    pub coulomb_force_n: f64,
+    pub smoothing_velocity_m_per_s: f64,
 }
 
 /// A second-order servo-valve mode.
@@ -445,18 +465,32 @@ fn check_rig(r: &SimRig, bad: &mut impl FnMut(KeyPath, String)) {
     }
     let Some(u) = &r.unmodelled else { return };
     let up = root.key("rig").key("unmodelled");
-    if let Some(v) = &u.valve_mode {
-        let vp = up.key("valve_mode");
+    for (key, mode) in [
+        ("valve_mode", &u.valve_mode),
+        ("command_mode", &u.command_mode),
+        ("measurement_mode", &u.measurement_mode),
+    ] {
+        let Some(v) = mode else { continue };
+        let vp = up.key(key);
         positive(v.natural_frequency_hz, &vp.key("natural_frequency_hz"), bad);
         if !(v.damping_ratio.is_finite() && v.damping_ratio > 0.0) {
             bad(
                 vp.key("damping_ratio"),
                 format!(
-                    "must be positive (got {}); an undamped or negatively damped valve mode is unstable",
+                    "must be positive (got {}); an undamped or negatively damped mode is unstable",
                     v.damping_ratio
                 ),
             );
         }
+    }
+    if let Some(fr) = &u.actuator_friction {
+        let fp = up.key("actuator_friction");
+        positive(fr.coulomb_force_n, &fp.key("coulomb_force_n"), bad);
+        positive(
+            fr.smoothing_velocity_m_per_s,
+            &fp.key("smoothing_velocity_m_per_s"),
+            bad,
+        );
     }
     if let Some(m) = u.piston_mass_kg {
         positive(m, &up.key("piston_mass_kg"), bad);
@@ -571,12 +605,21 @@ fn unmodelled(u: Option<&UnmodelledSpec>) -> Unmodelled {
     let Some(u) = u else {
         return Unmodelled::default();
     };
-    Unmodelled {
-        valve_mode: u.valve_mode.as_ref().map(|v| ValveMode {
+    let mode = |m: &Option<ValveModeSpec>| {
+        m.as_ref().map(|v| ValveMode {
             natural_frequency_hz: v.natural_frequency_hz,
             damping_ratio: v.damping_ratio,
-        }),
+        })
+    };
+    Unmodelled {
+        valve_mode: mode(&u.valve_mode),
         piston_mass_kg: u.piston_mass_kg,
+        command_mode: mode(&u.command_mode),
+        measurement_mode: mode(&u.measurement_mode),
+        actuator_friction: u.actuator_friction.as_ref().map(|f| ActuatorFriction {
+            coulomb_force_n: f.coulomb_force_n,
+            smoothing_velocity_m_per_s: f.smoothing_velocity_m_per_s,
+        }),
     }
 }
 

@@ -16,8 +16,8 @@ use super::rig::{Evidence, ValidationEvidence};
 use crate::fit::DelayPlan;
 use crate::fit::adequacy::Adequacy;
 use crate::fit::joint::{
-    self, Candidate, Choice, JointFit, JointOptions, JointRun, Output, P_SIGNIFICANT, Selection,
-    Structure,
+    self, Candidate, Choice, JointFit, JointOptions, JointRun, Output, P_SIGNIFICANT, Place,
+    RunSpread, Selection, Structure, StructureSpread,
 };
 use crate::identify::Estimate;
 use crate::manifest::{Campaign, JointRig, JointStructure, Role, RunPlan};
@@ -40,6 +40,9 @@ fn name(s: Structure) -> JointStructureName {
         Structure::Plain => JointStructureName::None,
         Structure::Delay => JointStructureName::Delay,
         Structure::DelayValve => JointStructureName::DelayValve,
+        Structure::DelayCommand => JointStructureName::DelayCommand,
+        Structure::DelayMeasurement => JointStructureName::DelayMeasurement,
+        Structure::DelayPiston => JointStructureName::DelayPiston,
     }
 }
 
@@ -48,6 +51,41 @@ fn key_value(s: Structure) -> &'static str {
         Structure::Plain => "none",
         Structure::Delay => "delay",
         Structure::DelayValve => "delay_valve",
+        Structure::DelayCommand => "delay_command",
+        Structure::DelayMeasurement => "delay_measurement",
+        Structure::DelayPiston => "delay_piston",
+    }
+}
+
+/// Where a structure's mode sits, in words; `split` when the force FRFs
+/// tell the command path from the measurement path (without them the
+/// command-path fit stands for both).
+fn place(s: Structure, split: bool) -> Option<&'static str> {
+    if s.piston() {
+        return Some("actuator (piston mass)");
+    }
+    Some(match s.place()? {
+        Place::Loop => "loop",
+        Place::Command if split => "command path",
+        Place::Command => "in series",
+        Place::Measurement => "measurement path",
+    })
+}
+
+/// A structure as the ambiguity warning names it.
+fn described(s: Structure, split: bool) -> String {
+    match place(s, split) {
+        Some("loop") => format!("\"{}\" (a mode in the loop)", key_value(s)),
+        Some("in series") => format!(
+            "\"{}\" (a mode in series, in the command or the measurement path)",
+            key_value(s)
+        ),
+        Some(_) if s.piston() => {
+            format!("\"{}\" (the piston's mass on the oil column)", key_value(s))
+        }
+        Some(p) => format!("\"{}\" (a mode in the {p})", key_value(s)),
+        None if s == Structure::Delay => "\"delay\" (a delay alone)".into(),
+        None => format!("\"{}\" (the paper's model alone)", key_value(s)),
     }
 }
 
@@ -119,6 +157,7 @@ pub(super) fn joint(
         p_ref: start.p_gain,
         max_iterations: 200,
         valve_start: (0.0, 0.0),
+        piston_start_kg: 1.0,
         delay_start_s: 0.0,
         force_delay_start_s: 0.0,
         max_delay_s: match ident.delay {
@@ -132,9 +171,13 @@ pub(super) fn joint(
         JointStructure::None => Choice::Fixed(Structure::Plain),
         JointStructure::Delay => Choice::Fixed(Structure::Delay),
         JointStructure::DelayValve => Choice::Fixed(Structure::DelayValve),
+        JointStructure::DelayCommand => Choice::Fixed(Structure::DelayCommand),
+        JointStructure::DelayMeasurement => Choice::Fixed(Structure::DelayMeasurement),
+        JointStructure::DelayPiston => Choice::Fixed(Structure::DelayPiston),
     };
     let band_top = fitted.iter().map(|(p, ..)| p.band_hz.1).fold(0.0, f64::max);
     let sel = joint::select(&runs, start, &opts, choice, band_top);
+    let misfit = joint::run_spread(&runs, &sel, &opts);
     // An identification run is named by its id; a validation run's two
     // FRFs by what each measures.
     let ids: Vec<String> = fitted
@@ -155,6 +198,7 @@ pub(super) fn joint(
     });
     let mut result = describe(
         &sel,
+        misfit.as_ref(),
         &ids,
         campaign.joint.rig,
         sequential,
@@ -170,11 +214,17 @@ pub(super) fn joint(
     Some(result)
 }
 
-/// The table row of one candidate.
-fn row(c: &Candidate, chosen: Option<Structure>) -> JointCandidate {
+/// The table row of one candidate, with its Akaike weight.
+fn row(
+    c: &Candidate,
+    chosen: Option<Structure>,
+    split: bool,
+    weight: Option<f64>,
+) -> JointCandidate {
     let fit = c.fit.as_ref().ok();
     JointCandidate {
         structure: name(c.structure),
+        place: place(c.structure, split).map(String::from),
         parameters: fit.map_or(c.structure.names().len(), |f| f.params.len()),
         cost: fit.map(|f| f.cost),
         dof: fit.map(|f| f.dof),
@@ -187,6 +237,7 @@ fn row(c: &Candidate, chosen: Option<Structure>) -> JointCandidate {
             p_value: t.p_value,
             significant: t.p_value < P_SIGNIFICANT,
         }),
+        weight,
         converged: fit.map(|f| f.converged),
         unusable: c.unusable.clone(),
         error: c.fit.as_ref().err().map(ToString::to_string),
@@ -221,7 +272,7 @@ fn explain(sel: &Selection) -> String {
         parts.join("; ")
     };
     format!(
-        "the data choose \"{}\" by extra-sum-of-squares F tests between nested structures: {tests}",
+        "the data choose \"{}\" by extra-sum-of-squares F tests between nested structures and, among the modes the tests take at different places (the same parameter count), the lowest weighted cost: {tests}",
         key_value(auto)
     )
 }
@@ -229,14 +280,27 @@ fn explain(sel: &Selection) -> String {
 /// The result table and the use decision.
 fn describe(
     sel: &Selection,
+    misfit: Option<&RunSpread>,
     ids: &[String],
     rig_mode: JointRig,
     sequential: &RigEstimates,
     seq_chi2: Option<f64>,
     warnings: &mut Vec<String>,
 ) -> JointResult {
-    let candidates: Vec<JointCandidate> =
-        sel.candidates.iter().map(|c| row(c, sel.chosen)).collect();
+    let split = sel.candidate(Structure::DelayMeasurement).is_some();
+    let spread = sel.spread();
+    let candidates: Vec<JointCandidate> = sel
+        .candidates
+        .iter()
+        .enumerate()
+        .map(|(i, c)| {
+            let weight = spread
+                .as_ref()
+                .map(|s| s.weights[i])
+                .filter(|_| c.usable().is_some());
+            row(c, sel.chosen, split, weight)
+        })
+        .collect();
     let mut explanation = explain(sel);
     if let Choice::Fixed(s) = sel.choice {
         explanation = format!(
@@ -265,6 +329,9 @@ fn describe(
         parameters: Vec::new(),
         r1: None,
         covariance: None,
+        structure_covariance: None,
+        ambiguity: None,
+        misfit: None,
         adequacy: None,
         per_run: Vec::new(),
         used: false,
@@ -281,11 +348,31 @@ fn describe(
         ));
         return result;
     };
-    let cov: [[f64; 4]; 4] =
-        std::array::from_fn(|i| std::array::from_fn(|j| fit.covariance[(i, j)]));
-    result.parameters = parameters(fit, sequential);
+    let structure_cov = spread.as_ref().map_or([[0.0; 4]; 4], |s| s.covariance);
+    // The runs' model-error spread adds on the diagonal (the jackknife's
+    // correlations are too few refits to trust).
+    let misfit_var: [f64; 4] = misfit.map_or([0.0; 4], |m| m.std.map(|s| s * s));
+    let cov: [[f64; 4]; 4] = std::array::from_fn(|i| {
+        std::array::from_fn(|j| {
+            fit.covariance[(i, j)] + structure_cov[i][j] + if i == j { misfit_var[i] } else { 0.0 }
+        })
+    });
+    result.parameters = parameters(fit, sequential, spread.as_ref(), misfit);
+    if let Some(m) = misfit {
+        let text = misfit_note(fit, m);
+        warnings.push(format!("rig: {text}"));
+        result.misfit = Some(text);
+    }
     result.r1 = Some(r1(&fit.rig, &cov));
     result.covariance = Some(cov);
+    result.structure_covariance = spread.as_ref().map(|s| s.covariance);
+    if let Some(text) = spread
+        .as_ref()
+        .and_then(|s| ambiguity(fit, s, &sel.candidates, split))
+    {
+        warnings.push(format!("rig: {text}"));
+        result.ambiguity = Some(text);
+    }
     result.adequacy = Some(fit.adequacy.clone());
     result.per_run = ids
         .iter()
@@ -354,8 +441,125 @@ fn describe(
     result
 }
 
-/// The chosen fit's parameters beside the sequential estimate.
-fn parameters(fit: &JointFit, seq: &RigEstimates) -> Vec<JointParameter> {
+/// The warning when structures the data cannot tell apart move the rig:
+/// which, by how much, and what would settle it.
+fn ambiguity(
+    fit: &JointFit,
+    spread: &StructureSpread,
+    candidates: &[Candidate],
+    split: bool,
+) -> Option<String> {
+    if spread.rivals.is_empty() {
+        return None;
+    }
+    const NAMES: [&str; 4] = ["beta1", "a1b0", "a2", "a3"];
+    let weight = |s: Structure| {
+        candidates
+            .iter()
+            .position(|c| c.structure == s)
+            .map_or(0.0, |i| spread.weights[i])
+    };
+    let mut text = format!(
+        "the data cannot tell {} (Akaike weight {:.2}) from ",
+        described(fit.structure, split),
+        weight(fit.structure)
+    );
+    let rivals: Vec<String> = spread
+        .rivals
+        .iter()
+        .map(|r| {
+            let moved: Vec<String> = r
+                .moved
+                .iter()
+                .map(|m| {
+                    format!(
+                        "{} by {:+.2} % ({:+.1} combined stds)",
+                        NAMES[m.parameter],
+                        100.0 * m.relative,
+                        m.z
+                    )
+                })
+                .collect();
+            format!(
+                "{} (weight {:.2}), which moves {}",
+                described(r.structure, split),
+                r.weight,
+                moved.join(", ")
+            )
+        })
+        .collect();
+    text.push_str(&rivals.join("; and from "));
+    text.push_str(
+        "; the rig's stds include that spread (the structure std; results.json keeps the statistical, structure and total stds). To settle it: ",
+    );
+    let mut settle: Vec<&str> = Vec::new();
+    let places: Vec<Option<Place>> = std::iter::once(fit.structure)
+        .chain(spread.rivals.iter().map(|r| r.structure))
+        .map(Structure::place)
+        .collect();
+    let has = |p: Option<Place>| places.contains(&p);
+    if has(Some(Place::Loop)) && places.iter().any(|p| *p != Some(Place::Loop)) {
+        settle.push(
+            "add a run at another P gain to the fit (a validation run at a P gain the identification runs lack, with identification.joint.include_validation = true): a mode in the loop changes x1/u with the P gain, one outside the loop does not",
+        );
+    }
+    let delay_only = std::iter::once(fit.structure)
+        .chain(spread.rivals.iter().map(|r| r.structure))
+        .any(|s| matches!(s, Structure::Plain | Structure::Delay));
+    if delay_only && places.iter().any(Option::is_some) {
+        settle.push(
+            "sweep to higher frequencies (the excitation and identification.band_hz): a delay's phase lag grows in proportion to frequency, a mode's gain falls off",
+        );
+    }
+    let piston = std::iter::once(fit.structure)
+        .chain(spread.rivals.iter().map(|r| r.structure))
+        .any(Structure::piston);
+    if piston {
+        settle.push(
+            "add runs of other stiffness or mass (springs, identification.joint.include_validation with SDOF specimens): the piston's mode moves with the specimen, a mode in the valve or the command path does not",
+        );
+    }
+    if has(Some(Place::Command)) && has(Some(Place::Measurement)) {
+        settle.push(
+            "add a run with a load cell to the fit (identification.joint.include_validation): a mode in the command path reaches the force, one on the displacement channel does not",
+        );
+    }
+    if settle.is_empty() {
+        settle.push("a longer or stronger excitation over the band, which narrows every fit's std");
+    }
+    text.push_str(&settle.join("; or "));
+    Some(text)
+}
+
+/// The warning when the chosen structure fails its adequacy tests and the
+/// runs pull the rig apart.
+fn misfit_note(fit: &JointFit, m: &RunSpread) -> String {
+    const NAMES: [&str; 4] = ["beta1", "a1b0", "a2", "a3"];
+    let spread: Vec<String> = (0..4)
+        .map(|k| {
+            format!(
+                "{} {:.2} %",
+                NAMES[k],
+                100.0 * m.jackknife_std[k] / fit.params[k].abs()
+            )
+        })
+        .collect();
+    format!(
+        "no candidate structure explains the data: the chosen \"{}\" fails its adequacy tests, so the rig has something none of the structures holds (friction, a nonlinear specimen, two modes at once) and its parameters carry an error no std here bounds. Refitted without each of the {} FRFs in turn the rig moves by (jackknife std) {}; the stds include what of that spread statistics do not explain (misfit_std in results.json), but not an error every run shares, which on simulated rigs with piston friction or two modes was 5 to 18 times larger (README). Use the rig as approximate: the difference from the sequential estimate (the model-error term) shows its scale, and the per-run adequacy table shows which runs the misfit weighs on",
+        key_value(fit.structure),
+        m.refits,
+        spread.join(", ")
+    )
+}
+
+/// The chosen fit's parameters beside the sequential estimate, with the
+/// structure std of the rig's four.
+fn parameters(
+    fit: &JointFit,
+    seq: &RigEstimates,
+    spread: Option<&StructureSpread>,
+    misfit: Option<&RunSpread>,
+) -> Vec<JointParameter> {
     let seq_est = [seq.beta1, seq.a1b0, seq.a2, seq.a3];
     // The rig's four by the names the rest of results.json gives them.
     let short = |name: &'static str| match name {
@@ -376,10 +580,18 @@ fn parameters(fit: &JointFit, seq: &RigEstimates) -> Vec<JointParameter> {
                 .and_then(|s| s.std)
                 .map(|s| (s * s + std * std).sqrt());
             let difference_std = diff.zip(combined).map(|(d, c)| d / c);
+            let structure_std = spread.and_then(|s| s.std.get(i).copied());
+            let misfit_std = misfit.and_then(|m| m.std.get(i).copied());
             JointParameter {
                 name: short(fit.names[i]).into(),
                 value,
                 std,
+                structure_std,
+                misfit_std,
+                total_std: (std * std
+                    + structure_std.unwrap_or(0.0).powi(2)
+                    + misfit_std.unwrap_or(0.0).powi(2))
+                .sqrt(),
                 sequential,
                 difference_std,
                 model_error: diff.map(f64::abs),
@@ -417,7 +629,7 @@ pub(super) fn used_estimates(r: &JointResult) -> Option<RigEstimates> {
     let est = |i: usize| {
         r.parameters.get(i).map(|p| Estimate {
             value: p.value,
-            std: Some(p.std),
+            std: Some(p.total_std),
         })
     };
     Some(RigEstimates {

@@ -32,8 +32,8 @@ pub use excitation::{
 pub use instrument::{InstrumentError, Quantization, Sensor, apply, channel_rng};
 pub use ode::{Integrator, OdeError, OdeSystem, simulate_held};
 pub use plant::{
-    NonlinearPlant, PlantResponse, PlantSpec, Unmodelled, ValveMode, linear_state_space, simulate,
-    validate,
+    ActuatorFriction, NonlinearPlant, PlantResponse, PlantSpec, Unmodelled, ValveMode,
+    linear_state_space, simulate, validate,
 };
 pub use specimen::{BoucWen, Duffing, ForcedSpecimen, Friction, SpecimenModel};
 

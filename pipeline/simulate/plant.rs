@@ -8,6 +8,8 @@
 //!   massless rig (no specimen or a spring, no piston mass): x1, r, with
 //!   f = k x1 and x1' = (r - a3 k x1) / (k + a2) (MODEL.md);
 //! - a servo-valve mode: v, w (v' = w);
+//! - a command-path mode: p, p' (the command shaped ahead of the loop);
+//! - a measurement-path mode: q, q' (the logged displacement filtered);
 //! - a Bouc-Wen specimen: z.
 //!
 //! Equations (f the hydraulic force on the piston, g the specimen's restoring
@@ -15,11 +17,18 @@
 //!
 //!   M x2' = f - g(x1, x2, z)
 //!   f'    = -a2 x2 - a3 f + r
-//!   r'    = -beta1 r + a1b0 e,  e = u - x1, or e = v with a valve mode:
-//!   v'' + 2 zeta wv v' + wv^2 v = wv^2 (u - x1)
+//!   r'    = -beta1 r + a1b0 e,  e = u' - x1, or e = v with a valve mode:
+//!   v'' + 2 zeta wv v' + wv^2 v = wv^2 (u' - x1)
 //!
 //! so the valve's transfer a1b0 / (s + beta1) is multiplied by
-//! wv^2 / (s^2 + 2 zeta wv s + wv^2). The load cell sits between piston and
+//! wv^2 / (s^2 + 2 zeta wv s + wv^2): a mode inside the position loop. The
+//! loop's reference u' is the command u itself, or with a command-path mode
+//! p'' + 2 zeta wp p' + wp^2 p = wp^2 u the shaped command p (a valve driver
+//! or command filter ahead of the loop: x1/u gains the factor outside the
+//! loop, and so does the force). A measurement-path mode
+//! q'' + 2 zeta wq q' + wq^2 q = wq^2 x1 filters only the logged
+//! displacement (the feedback sees x1): x1/u gains the same factor as from
+//! the command path, the force does not. The load cell sits between piston and
 //! specimen and reads the force on the specimen side, f - m_p x2' =
 //! (m f + m_p g) / M: the actuator force f itself when m_p = 0 (the paper's
 //! assumption), and zero with nothing attached.
@@ -43,14 +52,46 @@ pub struct ValveMode {
     pub damping_ratio: f64,
 }
 
-/// Dynamics the identified model leaves out (the paper assumes neither).
+/// Dynamics the identified model leaves out (the paper assumes none).
 #[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[schemars(deny_unknown_fields)]
 pub struct Unmodelled {
+    /// A mode inside the position loop (the servo-valve spool's).
     #[serde(default)]
     pub valve_mode: Option<ValveMode>,
     #[serde(default)]
     pub piston_mass_kg: Option<f64>,
+    /// A mode in the command path, ahead of the loop.
+    #[serde(default)]
+    pub command_mode: Option<ValveMode>,
+    /// A mode on the logged displacement only (a sensor or logging filter
+    /// outside the loop).
+    #[serde(default)]
+    pub measurement_mode: Option<ValveMode>,
+    /// Coulomb friction on the piston (seals), which the load cell does not
+    /// read: it makes the plant nonlinear.
+    #[serde(default)]
+    pub actuator_friction: Option<ActuatorFriction>,
+}
+
+/// Coulomb friction on the piston, F tanh(x2 / v0) (the tanh keeps the ODE
+/// smooth, as the friction specimen's does).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[schemars(deny_unknown_fields)]
+pub struct ActuatorFriction {
+    pub coulomb_force_n: f64,
+    pub smoothing_velocity_m_per_s: f64,
+}
+
+impl Unmodelled {
+    /// The second-order modes and their state counts, in state order:
+    /// valve, command path, measurement path.
+    fn mode_states(&self) -> usize {
+        2 * [self.valve_mode, self.command_mode, self.measurement_mode]
+            .iter()
+            .filter(|m| m.is_some())
+            .count()
+    }
 }
 
 /// What to simulate: the rig (already at the run's P gain), the specimen and
@@ -86,18 +127,30 @@ pub fn validate(spec: &PlantSpec) -> Result<(), SimError> {
     require_positive("rig", "a2_n_per_m", rig.a2_n_per_m)?;
     require_finite("rig", "a3_per_s", rig.a3_per_s)?;
     spec.specimen.validate()?;
-    if let Some(vm) = spec.unmodelled.valve_mode {
-        require_positive(
-            "valve mode",
-            "natural_frequency_hz",
-            vm.natural_frequency_hz,
-        )?;
-        require_positive("valve mode", "damping_ratio", vm.damping_ratio)?;
+    for (owner, mode) in [
+        ("valve mode", spec.unmodelled.valve_mode),
+        ("command-path mode", spec.unmodelled.command_mode),
+        ("measurement-path mode", spec.unmodelled.measurement_mode),
+    ] {
+        if let Some(vm) = mode {
+            require_positive(owner, "natural_frequency_hz", vm.natural_frequency_hz)?;
+            require_positive(owner, "damping_ratio", vm.damping_ratio)?;
+        }
     }
     if let Some(mp) = spec.unmodelled.piston_mass_kg {
         require_positive("unmodelled dynamics", "piston_mass_kg", mp)?;
     }
-    let (m, c, k) = spec.specimen.linearised_at_rest();
+    let (m, mut c, k) = spec.specimen.linearised_at_rest();
+    if let Some(fr) = spec.unmodelled.actuator_friction {
+        require_positive("actuator friction", "coulomb_force_n", fr.coulomb_force_n)?;
+        require_positive(
+            "actuator friction",
+            "smoothing_velocity_m_per_s",
+            fr.smoothing_velocity_m_per_s,
+        )?;
+        // At rest the tanh is a viscous damper of slope F / v0.
+        c += fr.coulomb_force_n / fr.smoothing_velocity_m_per_s;
+    }
     if m + spec.unmodelled.piston_mass_kg.unwrap_or(0.0) == 0.0 && k + rig.a2_n_per_m <= 0.0 {
         // The massless model x1' = (r - a3 k x1) / (k + a2) is the limit of
         // a piston mass M -> 0, whose quartic has d4 = M and d2 ~ k + a2: with
@@ -139,6 +192,9 @@ pub fn validate(spec: &PlantSpec) -> Result<(), SimError> {
 /// Without unmodelled dynamics it is `model::state_space` (Eq. 10). The
 /// parameters are not checked here; see [`validate`].
 pub fn linear_state_space(spec: &PlantSpec) -> Option<StateSpace> {
+    if spec.unmodelled.actuator_friction.is_some() {
+        return None;
+    }
     let (m, c, k) = spec.specimen.linear_mck()?;
     Some(build_linear(&spec.rig, m, c, k, &spec.unmodelled))
 }
@@ -152,7 +208,7 @@ fn build_linear(rig: &RigParams, m: f64, c: f64, k: f64, un: &Unmodelled) -> Sta
         rig.a3_per_s,
     );
     let mp = un.piston_mass_kg.unwrap_or(0.0);
-    if un.valve_mode.is_none() && mp == 0.0 {
+    if un.mode_states() == 0 && mp == 0.0 {
         let specimen = if m > 0.0 {
             LinearSpecimen::Sdof {
                 mass_kg: m,
@@ -170,7 +226,7 @@ fn build_linear(rig: &RigParams, m: f64, c: f64, k: f64, un: &Unmodelled) -> Sta
     }
     let total = m + mp;
     let mech = if total > 0.0 { 4 } else { 2 };
-    let n = mech + if un.valve_mode.is_some() { 2 } else { 0 };
+    let n = mech + un.mode_states();
     let mut a = DMatrix::<f64>::zeros(n, n);
     let mut b = DVector::<f64>::zeros(n);
     let mut cm = DMatrix::<f64>::zeros(2, n);
@@ -193,23 +249,53 @@ fn build_linear(rig: &RigParams, m: f64, c: f64, k: f64, un: &Unmodelled) -> Sta
         a[(ix1, ir)] = 1.0 / (k + a2);
         cm[(1, ix1)] = k;
     }
-    cm[(0, ix1)] = 1.0;
     a[(ir, ir)] = -b1;
-    match un.valve_mode {
-        None => {
-            a[(ir, ix1)] = -a1b0;
-            b[ir] = a1b0;
-        }
-        Some(vm) => {
-            let (iv, iw) = (mech, mech + 1);
-            let wv = 2.0 * std::f64::consts::PI * vm.natural_frequency_hz;
+    // A mode's two states (y, y'), driven by wm^2 (input), start at `at`.
+    let mode = |a: &mut DMatrix<f64>, at: usize, vm: ValveMode| {
+        let wm = 2.0 * std::f64::consts::PI * vm.natural_frequency_hz;
+        a[(at, at + 1)] = 1.0;
+        a[(at + 1, at)] = -wm * wm;
+        a[(at + 1, at + 1)] = -2.0 * vm.damping_ratio * wm;
+        wm * wm
+    };
+    let mut next = mech;
+    let iv = un.valve_mode.map(|_| {
+        next += 2;
+        next - 2
+    });
+    let ip = un.command_mode.map(|_| {
+        next += 2;
+        next - 2
+    });
+    let iq = un.measurement_mode.map(|_| {
+        next += 2;
+        next - 2
+    });
+    // The loop's error u' - x1 drives the valve mode, or the valve directly;
+    // u' is the command, or the command-path mode's output.
+    let (drive, gain) = match (un.valve_mode, iv) {
+        (Some(vm), Some(iv)) => {
             a[(ir, iv)] = a1b0;
-            a[(iv, iw)] = 1.0;
-            a[(iw, iv)] = -wv * wv;
-            a[(iw, iw)] = -2.0 * vm.damping_ratio * wv;
-            a[(iw, ix1)] = -wv * wv;
-            b[iw] = wv * wv;
+            (iv + 1, mode(&mut a, iv, vm))
         }
+        _ => (ir, a1b0),
+    };
+    a[(drive, ix1)] -= gain;
+    match (un.command_mode, ip) {
+        (Some(pm), Some(ip)) => {
+            let wp2 = mode(&mut a, ip, pm);
+            b[ip + 1] = wp2;
+            a[(drive, ip)] += gain;
+        }
+        _ => b[drive] = gain,
+    }
+    match (un.measurement_mode, iq) {
+        (Some(qm), Some(iq)) => {
+            let wq2 = mode(&mut a, iq, qm);
+            a[(iq + 1, ix1)] = wq2;
+            cm[(0, iq)] = 1.0;
+        }
+        _ => cm[(0, ix1)] = 1.0,
     }
     StateSpace {
         a,
@@ -220,12 +306,17 @@ fn build_linear(rig: &RigParams, m: f64, c: f64, k: f64, un: &Unmodelled) -> Sta
 }
 
 /// A plant with a specimen that has a mass (every nonlinear one), as an ODE
-/// with states [x1, x2, f, r, (v, w), (z)] and the command as input.
+/// with states [x1, x2, f, r, (v, w), (p, p'), (q, q'), (z)] and the command
+/// as input.
 #[derive(Debug, Clone, Copy)]
 pub struct NonlinearPlant<'a> {
     spec: &'a PlantSpec,
     total_mass_kg: f64,
-    valve_wv: Option<(f64, f64)>,
+    /// Each mode's (wm rad/s, damping) and first state: in the loop, in the
+    /// command path, in the measurement path.
+    valve: Option<((f64, f64), usize)>,
+    command: Option<((f64, f64), usize)>,
+    measurement: Option<((f64, f64), usize)>,
     /// Index of the first specimen-internal state.
     internal: usize,
 }
@@ -240,31 +331,69 @@ impl<'a> NonlinearPlant<'a> {
             "mass_kg (with the piston mass)",
             total,
         )?;
-        let valve_wv = spec.unmodelled.valve_mode.map(|vm| {
-            let wv = 2.0 * std::f64::consts::PI * vm.natural_frequency_hz;
-            (wv, vm.damping_ratio)
-        });
+        let mut next = 4;
+        let mut place = |m: Option<ValveMode>| {
+            m.map(|vm| {
+                next += 2;
+                let wm = 2.0 * std::f64::consts::PI * vm.natural_frequency_hz;
+                ((wm, vm.damping_ratio), next - 2)
+            })
+        };
+        let un = &spec.unmodelled;
+        let (valve, command, measurement) = (
+            place(un.valve_mode),
+            place(un.command_mode),
+            place(un.measurement_mode),
+        );
         Ok(Self {
             spec,
             total_mass_kg: total,
-            valve_wv,
-            internal: 4 + if valve_wv.is_some() { 2 } else { 0 },
+            valve,
+            command,
+            measurement,
+            internal: next,
         })
     }
 
-    /// The load-cell reading (N) at state x: (m f + m_p g) / M.
+    /// The load-cell reading (N) at state x: (m f' + m_p g) / M, with
+    /// f' = f less the piston's friction (the seals sit on the oil side of
+    /// the load cell).
     pub fn load_cell_force_n(&self, x: &[f64]) -> f64 {
         let m = self.spec.specimen.mass_kg();
         let mp = self.total_mass_kg - m;
+        let f = x[2] - self.actuator_friction_n(x[1]);
         if mp == 0.0 {
-            return x[2];
+            return f;
         }
         let g = self
             .spec
             .specimen
             .restoring_force_n(x[0], x[1], &x[self.internal..]);
-        (m * x[2] + mp * g) / self.total_mass_kg
+        (m * f + mp * g) / self.total_mass_kg
     }
+
+    /// The piston's friction force (N) at velocity x2.
+    fn actuator_friction_n(&self, x2: f64) -> f64 {
+        self.spec.unmodelled.actuator_friction.map_or(0.0, |fr| {
+            fr.coulomb_force_n * (x2 / fr.smoothing_velocity_m_per_s).tanh()
+        })
+    }
+
+    /// The logged displacement (m) at state x: x1, or the measurement-path
+    /// mode's output.
+    pub fn logged_x1_m(&self, x: &[f64]) -> f64 {
+        match self.measurement {
+            Some((_, i)) => x[i],
+            None => x[0],
+        }
+    }
+}
+
+/// A second-order mode y'' + 2 zeta wm y' + wm^2 y = wm^2 input, its states
+/// (y, y') at `at`.
+fn mode_rates(x: &[f64], dx: &mut [f64], ((wm, zeta), at): ((f64, f64), usize), input: f64) {
+    dx[at] = x[at + 1];
+    dx[at + 1] = wm * wm * (input - x[at]) - 2.0 * zeta * wm * x[at + 1];
 }
 
 impl OdeSystem for NonlinearPlant<'_> {
@@ -277,18 +406,27 @@ impl OdeSystem for NonlinearPlant<'_> {
         let (x1, x2, f, r) = (x[0], x[1], x[2], x[3]);
         let z = &x[self.internal..];
         let g = self.spec.specimen.restoring_force_n(x1, x2, z);
+        let friction = self.actuator_friction_n(x2);
         dx[0] = x2;
-        dx[1] = (f - g) / self.total_mass_kg;
+        dx[1] = (f - g - friction) / self.total_mass_kg;
         dx[2] = -rig.a2_n_per_m * x2 - rig.a3_per_s * f + r;
-        let e = match self.valve_wv {
-            None => u - x1,
-            Some((wv, zeta)) => {
-                let (v, w) = (x[4], x[5]);
-                dx[4] = w;
-                dx[5] = wv * wv * (u - x1 - v) - 2.0 * zeta * wv * w;
-                v
+        let reference = match self.command {
+            None => u,
+            Some(m) => {
+                mode_rates(x, dx, m, u);
+                x[m.1]
             }
         };
+        let e = match self.valve {
+            None => reference - x1,
+            Some(m) => {
+                mode_rates(x, dx, m, reference - x1);
+                x[m.1]
+            }
+        };
+        if let Some(m) = self.measurement {
+            mode_rates(x, dx, m, x1);
+        }
         dx[3] = -rig.beta1_per_s * r + rig.a1b0_n_per_m_s2 * e;
         self.spec
             .specimen
@@ -363,7 +501,7 @@ pub fn simulate(
             };
             if at < len {
                 if i == 0 {
-                    x1_m[at] = x[0];
+                    x1_m[at] = plant.logged_x1_m(x);
                 } else {
                     force_n[at] = plant.load_cell_force_n(x);
                 }
@@ -484,6 +622,7 @@ mod tests {
                 Unmodelled {
                     valve_mode: Some(vm),
                     piston_mass_kg: None,
+                    ..Default::default()
                 },
             ))
             .unwrap();
@@ -494,8 +633,9 @@ mod tests {
             };
             // Open loop from the valve's input e to x1: H / (1 - H) with H = x1/u of
             // Eq. 12/14/17 (H = G / (1 + G), unity feedback).
+            let paper = tf.clone();
             let open = move |s: Complex<f64>| {
-                let h = tf.eval(s);
+                let h = paper.eval(s);
                 h / (Complex::new(1.0, 0.0) - h)
             };
             let with_mode = move |s: Complex<f64>| {
@@ -506,6 +646,49 @@ mod tests {
             // Force: the specimen relation f = (m s^2 + c s + k) x1 is unchanged.
             freq_response_matches(&ss, 1, &|s| with_mode(s) * (m * s * s + c * s + k));
 
+            // Outside the loop: a command-path mode multiplies x1/u and the
+            // force by its V; a measurement-path mode (on the logged x1 only)
+            // multiplies x1/u by its V and leaves the force the paper's.
+            let (pm, qm) = (
+                ValveMode {
+                    natural_frequency_hz: 110.0,
+                    damping_ratio: 0.6,
+                },
+                ValveMode {
+                    natural_frequency_hz: 65.0,
+                    damping_ratio: 0.4,
+                },
+            );
+            let mode_tf = |vm: ValveMode| {
+                let w = 2.0 * std::f64::consts::PI * vm.natural_frequency_hz;
+                move |s: Complex<f64>| w * w / (s * s + 2.0 * vm.damping_ratio * w * s + w * w)
+            };
+            let (vp, vq) = (mode_tf(pm), mode_tf(qm));
+            let ss = linear_state_space(&spec(
+                sm,
+                Unmodelled {
+                    command_mode: Some(pm),
+                    measurement_mode: Some(qm),
+                    ..Default::default()
+                },
+            ))
+            .unwrap();
+            freq_response_matches(&ss, 0, &|s| tf.eval(s) * vp(s) * vq(s));
+            freq_response_matches(&ss, 1, &|s| tf.eval(s) * vp(s) * (m * s * s + c * s + k));
+            // All three places at once: the valve mode's loop, shaped command.
+            let ss = linear_state_space(&spec(
+                sm,
+                Unmodelled {
+                    valve_mode: Some(vm),
+                    command_mode: Some(pm),
+                    measurement_mode: Some(qm),
+                    ..Default::default()
+                },
+            ))
+            .unwrap();
+            freq_response_matches(&ss, 0, &|s| with_mode(s) * vp(s) * vq(s));
+            freq_response_matches(&ss, 1, &|s| with_mode(s) * vp(s) * (m * s * s + c * s + k));
+
             // Piston mass: the plant of Eq. 17 with m + m_p; the load cell reads
             // the specimen side, (m s^2 + c s + k) x1.
             let mp = 1.7;
@@ -514,6 +697,7 @@ mod tests {
                 Unmodelled {
                     valve_mode: None,
                     piston_mass_kg: Some(mp),
+                    ..Default::default()
                 },
             ))
             .unwrap();
@@ -611,6 +795,15 @@ mod tests {
                 damping_ratio: 0.6,
             }),
             piston_mass_kg: Some(1.2),
+            command_mode: Some(ValveMode {
+                natural_frequency_hz: 110.0,
+                damping_ratio: 0.6,
+            }),
+            measurement_mode: Some(ValveMode {
+                natural_frequency_hz: 70.0,
+                damping_ratio: 0.5,
+            }),
+            ..Default::default()
         };
         let delays = [1.37 * dt, 3.0 * dt];
         let exact = simulate(&spec(exp1(), un), &u, fs, delays, Integrator::default()).unwrap();
@@ -648,6 +841,77 @@ mod tests {
                 epsilon = 1e-12
             );
         }
+    }
+
+    #[test]
+    fn actuator_friction_in_its_linear_range_is_a_damper_the_load_cell_does_not_read() {
+        // F tanh(x2 / v0) with v0 far above the velocities is the damper
+        // F / v0 on the piston (tanh x = x - x^3/3: relative error < 1e-5
+        // here): x1 is the linear plant's with the specimen damping c + F/v0,
+        // while the load cell, on the specimen side of the seals, reads
+        // (m s^2 + c s + k) x1, i.e. the heavier damper's plant less the
+        // friction force.
+        let fs = 2048.0;
+        let u = command(fs, 1.0);
+        let (m, c, k) = (3.8, 5.0, 129_400.0);
+        let (coulomb, v0) = (50_000.0, 100.0);
+        let un = Unmodelled {
+            actuator_friction: Some(ActuatorFriction {
+                coulomb_force_n: coulomb,
+                smoothing_velocity_m_per_s: v0,
+            }),
+            ..Default::default()
+        };
+        let got = simulate(
+            &spec(exp1(), un),
+            &u,
+            fs,
+            [0.0, 0.0],
+            Integrator::DormandPrince {
+                rtol: 1e-11,
+                atol: 1e-15,
+            },
+        )
+        .unwrap();
+        let damped = SpecimenModel::LinearSdof {
+            mass_kg: m,
+            damping_ns_per_m: c + coulomb / v0,
+            stiffness_n_per_m: k,
+        };
+        let want = simulate(
+            &spec(damped, Unmodelled::default()),
+            &u,
+            fs,
+            [0.0, 0.0],
+            Integrator::default(),
+        )
+        .unwrap();
+        assert_close(&got.x1_m, &want.x1_m, 1e-4, "x1");
+        // The heavier damper's plant reads f = (m s^2 + (c + F/v0) s + k) x1;
+        // the load cell reads f less the friction (F/v0) x2, x2 here by
+        // central differences (an error ~ (w dt)^2 / 6, well inside 2e-3 of
+        // the peak at 40 Hz and 2048 Hz). The friction force itself is over
+        // 1 % of the peak, five times that, so reading f would fail.
+        let x2: Vec<f64> = (0..u.len())
+            .map(|i| {
+                let (a, b) = (i.saturating_sub(1), (i + 1).min(u.len() - 1));
+                (want.x1_m[b] - want.x1_m[a]) * fs / (b - a) as f64
+            })
+            .collect();
+        let read: Vec<f64> = want
+            .force_n
+            .iter()
+            .zip(&x2)
+            .map(|(f, v)| f - coulomb / v0 * v)
+            .collect();
+        assert_close(&got.force_n, &read, 2e-3, "load cell");
+        let gap = want
+            .force_n
+            .iter()
+            .zip(&got.force_n)
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0, f64::max);
+        assert!(gap > 1e-2 * peak(&want.force_n), "friction unread: {gap}");
     }
 
     #[test]
@@ -786,7 +1050,8 @@ mod tests {
                         natural_frequency_hz: 0.0,
                         damping_ratio: 0.5
                     }),
-                    piston_mass_kg: None
+                    piston_mass_kg: None,
+                    ..Default::default()
                 }
             )),
             "valve mode: natural_frequency_hz must be positive and finite (got 0)"
@@ -796,7 +1061,8 @@ mod tests {
                 exp1(),
                 Unmodelled {
                     valve_mode: None,
-                    piston_mass_kg: Some(-1.0)
+                    piston_mass_kg: Some(-1.0),
+                    ..Default::default()
                 }
             )),
             "unmodelled dynamics: piston_mass_kg must be positive and finite (got -1)"

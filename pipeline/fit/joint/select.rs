@@ -1,9 +1,17 @@
-//! The model structure chosen by the data (issue 14, item 2).
+//! The model structure chosen by the data (issue 14, item 2; issue 23).
 //!
-//! The three candidates are nested: the paper's model (4 parameters), with a
-//! delay (5), with a delay and a valve mode (7). Between nested weighted
-//! least-squares fits the classical test is the extra-sum-of-squares F test:
-//! with cost_a of the smaller and cost_b of the larger structure,
+//! The candidates: the paper's model (4 parameters), with a delay (5), with
+//! a delay and the piston's mass (6: the actuator's own mode, the piston on
+//! the oil column's stiffness a2), and with a delay and a second-order mode
+//! (7) at each place it can sit: in the loop, in the command path, and
+//! (when force FRFs are fitted, which alone can tell it from the command
+//! path) in the displacement's measurement path. Each of these holds the
+//! delay structure (a mode at an infinite frequency, a piston of no mass),
+//! which holds the paper's.
+//!
+//! Between nested weighted least-squares fits the classical test is the
+//! extra-sum-of-squares F test: with cost_a of the smaller and cost_b of
+//! the larger structure,
 //!
 //!   F = ((cost_a - cost_b) / (p_b - p_a)) / (cost_b / dof_b),
 //!
@@ -12,22 +20,57 @@
 //! trusting the variances to be exact keeps the test honest when the noise
 //! level is off or model error remains: the extra parameters must explain
 //! more than the residual scatter, not merely more than the nominal noise.
-//! A structure is taken over the one chosen so far when its p-value is
-//! below [`P_SIGNIFICANT`]. Beside it the table gives the cost test (the
-//! weighted cost against its chi-square expectation) and BIC, for reading.
+//! The delay is taken over the paper's model, and a mode over the delay,
+//! when its p-value is below [`P_SIGNIFICANT`].
 //!
-//! The starts: every structure from the sequential estimate (Eqs. 18-20);
-//! the delay from 0; the valve mode from the best of a grid of frequencies
-//! (1.5 to 12 times the band's top) and dampings (0.3, 0.55, 0.8) scored by
-//! the cost alone at the delay fit's rig (on a quarter of the bins), then
-//! Levenberg-Marquardt from the best two for three iterations each, and
-//! only the one with the lower cost on to convergence.
+//! The piston and the three places are not nested in one another, so no F
+//! test orders them: among those the F test takes over the delay, the one
+//! with the lowest AIC (cost + 2 p, the noise known) is chosen; between the
+//! places, with equal counts, that is the lowest cost.
+//!
+//! Choosing one structure does not make the others wrong. Where two explain
+//! the data about equally well and put the rig in different places, the
+//! difference is uncertainty the chosen fit's own covariance does not hold.
+//! [`StructureSpread`] weighs every usable candidate by its Akaike weight
+//! and adds the weighted spread of their rig parameters about the chosen
+//! estimate to the chosen fit's covariance (Burnham & Anderson 2002, Model
+//! Selection and Multimodel Inference, Sect. 4.3: the unconditional
+//! variance, var_i + (theta_i - theta_avg)^2 weighted; taken here about the
+//! chosen estimate rather than the average, because the rig the campaign
+//! uses must be one model's, its state space and validation with it, so the
+//! spread that matters is about that one). The weights use the
+//! quasi-likelihood form QAIC = cost / c + 2 p, with c the best reduced
+//! chi-square floored at 1 (Burnham & Anderson Sect. 6.2): when model
+//! error leaves every fit above its noise, cost differences count for less.
+//!
+//! Two fits of one data set differ by noise too: where both structures hold
+//! the truth (a delay fitted on a rig without one), the larger fit's
+//! estimate is the smaller's plus a difference of variance var_big -
+//! var_small (Hausman 1978, Specification tests in econometrics,
+//! Econometrica 46(6)), which the statistical std already counts. Each
+//! difference enters the structure variance with that share taken out,
+//! d^2 - |var_i - var_chosen| floored at 0: what remains is what statistics
+//! do not explain. Without it a clean rig's stds would count its noise
+//! twice and cover more than they say.
+//!
+//! The starts: the paper's model and the delay from the sequential
+//! estimate (Eqs. 18-20), the delay from 0; each mode from the best of a
+//! grid of frequencies (1.5 to 12 times the band's top) and dampings (0.3,
+//! 0.55, 0.8), the piston from masses putting its mode over the same range,
+//! scored by the cost alone at the delay fit's rig (on a quarter of the
+//! bins), then Levenberg-Marquardt from the best two for three iterations
+//! each, and only the one with the lower cost on to convergence. Every fit
+//! first converges on that quarter of the bins and then on all of them
+//! from there: the same optimum, in a third of the passes over every bin
+//! (the whole selection of six structures takes 71-79 ms on the seven-run
+//! bench where three took 57 ms; `cargo bench --bench joint`).
 
+use rayon::prelude::*;
 use statrs::distribution::{ContinuousCDF, FisherSnedecor};
 
 use super::{
-    FitError, JointFit, JointOptions, JointRun, Leg, Structure, finish, joint_fit, problem,
-    rig_theta,
+    FitError, JointFit, JointOptions, JointRun, Leg, Output, Structure, finish, joint_fit,
+    joint_fit_staged, problem, rig_theta, solver,
 };
 use crate::model::RigParams;
 
@@ -90,6 +133,86 @@ pub struct Selection {
 }
 
 impl Selection {
+    /// The spread of the rig among the candidates about the chosen fit's
+    /// (module docs), when a structure is chosen.
+    pub fn spread(&self) -> Option<StructureSpread> {
+        let chosen = self.fit()?;
+        let usable: Vec<(usize, &JointFit)> = self
+            .candidates
+            .iter()
+            .enumerate()
+            .filter_map(|(i, c)| Some((i, c.usable()?)))
+            .collect();
+        let c_hat = usable
+            .iter()
+            .map(|(_, f)| f.cost / f.dof as f64)
+            .fold(f64::INFINITY, f64::min)
+            .max(1.0);
+        let qaic = |f: &JointFit| f.cost / c_hat + 2.0 * f.params.len() as f64;
+        let best = usable
+            .iter()
+            .map(|(_, f)| qaic(f))
+            .fold(f64::INFINITY, f64::min);
+        let mut weights = vec![0.0; self.candidates.len()];
+        for (i, f) in &usable {
+            weights[*i] = (-0.5 * (qaic(f) - best)).exp();
+        }
+        let total: f64 = weights.iter().sum();
+        if total > 0.0 {
+            weights.iter_mut().for_each(|w| *w /= total);
+        }
+        let mut covariance = [[0.0; 4]; 4];
+        let mut rivals = Vec::new();
+        for (i, f) in &usable {
+            let w = weights[*i];
+            let d: [f64; 4] = std::array::from_fn(|k| f.params[k] - chosen.params[k]);
+            // Only what statistics do not explain (module docs): each
+            // difference shrunk so its square loses |var_i - var_chosen|.
+            let excess: [f64; 4] = std::array::from_fn(|k| {
+                let noise = (f.std[k].powi(2) - chosen.std[k].powi(2)).abs();
+                if d[k] == 0.0 {
+                    0.0
+                } else {
+                    d[k] * (1.0 - noise / (d[k] * d[k])).max(0.0).sqrt()
+                }
+            });
+            for (a, row) in covariance.iter_mut().enumerate() {
+                for (b, cell) in row.iter_mut().enumerate() {
+                    *cell += w * excess[a] * excess[b];
+                }
+            }
+            if f.structure == chosen.structure || w < WEIGHT_FLOOR {
+                continue;
+            }
+            let moved: Vec<Moved> = (0..4)
+                .filter_map(|k| {
+                    let combined = (f.std[k].powi(2) + chosen.std[k].powi(2)).sqrt();
+                    let z = d[k] / combined;
+                    (z.abs() > 1.0).then(|| Moved {
+                        parameter: k,
+                        relative: d[k] / chosen.params[k],
+                        z,
+                    })
+                })
+                .collect();
+            if !moved.is_empty() {
+                rivals.push(Rival {
+                    structure: f.structure,
+                    weight: w,
+                    moved,
+                });
+            }
+        }
+        let std = std::array::from_fn(|k| covariance[k][k].sqrt());
+        Some(StructureSpread {
+            weights,
+            c_hat,
+            std,
+            covariance,
+            rivals,
+        })
+    }
+
     /// The chosen structure's fit.
     pub fn fit(&self) -> Option<&JointFit> {
         let chosen = self.chosen?;
@@ -104,9 +227,51 @@ impl Selection {
     }
 }
 
-/// Fit the three structures to `runs` from the sequential estimate `start`
-/// and choose among them. `opts` gives everything but the structure and the
-/// starts; `band_top_hz` bounds a physical valve mode.
+/// The Akaike weight under which a structure is not named as a rival
+/// (its share of the spread still counts).
+pub const WEIGHT_FLOOR: f64 = 0.01;
+
+/// The rig's spread among the structures (module docs).
+#[derive(Debug, Clone, PartialEq)]
+pub struct StructureSpread {
+    /// Each candidate's Akaike weight (QAIC), in the candidates' order: 0
+    /// for an unusable one.
+    pub weights: Vec<f64>,
+    /// The variance inflation the QAIC divides the costs by.
+    pub c_hat: f64,
+    /// The structure std of beta1, a1b0, a2 and a3: sqrt of the weighted
+    /// mean square of the candidates' differences from the chosen fit, less
+    /// their statistical share (module docs).
+    pub std: [f64; 4],
+    /// The structure covariance they come from.
+    pub covariance: [[f64; 4]; 4],
+    /// The structures of weight at least [`WEIGHT_FLOOR`] whose rig differs
+    /// from the chosen one by more than the two fits' combined stds.
+    pub rivals: Vec<Rival>,
+}
+
+/// A structure the data cannot tell from the chosen one.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Rival {
+    pub structure: Structure,
+    pub weight: f64,
+    pub moved: Vec<Moved>,
+}
+
+/// A rig parameter a rival puts elsewhere.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Moved {
+    /// 0-3: beta1, a1b0, a2, a3.
+    pub parameter: usize,
+    /// (rival - chosen) / chosen.
+    pub relative: f64,
+    /// (rival - chosen) over the two fits' combined std.
+    pub z: f64,
+}
+
+/// Fit the structures to `runs` from the sequential estimate `start` and
+/// choose among them. `opts` gives everything but the structure and the
+/// starts; `band_top_hz` bounds a physical mode.
 pub fn select(
     runs: &[JointRun<'_>],
     start: &RigParams,
@@ -142,24 +307,49 @@ pub fn select(
         || {
             assess(
                 Structure::Plain,
-                joint_fit(runs, start, &with(Structure::Plain)),
+                joint_fit_staged(runs, start, &with(Structure::Plain), GRID_STRIDE),
             )
         },
         || {
             assess(
                 Structure::Delay,
-                joint_fit(runs, start, &with(Structure::Delay)),
+                joint_fit_staged(runs, start, &with(Structure::Delay), GRID_STRIDE),
             )
         },
     );
-    let valve = assess(
+    // The measurement path differs from the command path only on force
+    // FRFs: without them the two are one model, fitted once.
+    let has_force = runs.iter().any(|r| r.output == Output::Force);
+    let mut places = vec![
+        Structure::DelayPiston,
         Structure::DelayValve,
-        fit_valve(runs, start, delay.usable(), opts, band_top_hz),
-    );
-    let mut candidates = vec![plain, delay, valve];
-    // Forward through the nested chain.
+        Structure::DelayCommand,
+    ];
+    if has_force || choice == Choice::Fixed(Structure::DelayMeasurement) {
+        places.push(Structure::DelayMeasurement);
+    }
+    // The extensions are independent fits from the delay fit: side by side
+    // (each the same computation on any thread count, collected in order),
+    // so one's sequential stretches (the solver's steps, the adequacy
+    // pass) overlap another's parallel passes.
+    let extensions: Vec<Candidate> = {
+        let delay_fit = delay.usable();
+        places
+            .par_iter()
+            .map(|&place| {
+                assess(
+                    place,
+                    fit_mode(runs, start, delay_fit, opts, band_top_hz, place),
+                )
+            })
+            .collect()
+    };
+    let mut candidates = vec![plain, delay];
+    candidates.extend(extensions);
+    // Forward through the nested chain: the delay against the paper's
+    // model, then each mode against what that chose.
     let mut auto: Option<usize> = None;
-    for i in 0..candidates.len() {
+    for i in 0..2 {
         if candidates[i].usable().is_none() {
             continue;
         }
@@ -167,15 +357,46 @@ pub fn select(
             auto = Some(i);
             continue;
         };
-        let (small, big) = (
+        let test = f_test(
             candidates[a].usable().expect("usable"),
             candidates[i].usable().expect("usable"),
         );
-        let test = f_test(small, big);
         candidates[i].f_test = Some(test);
         if test.p_value < P_SIGNIFICANT {
             auto = Some(i);
         }
+    }
+    let base = auto;
+    let mut best_mode: Option<usize> = None;
+    for i in 2..candidates.len() {
+        // Akaike's criterion with the noise known: the cost plus twice the
+        // parameter count (with equal counts, the lower cost).
+        let Some(aic) = candidates[i]
+            .usable()
+            .map(|f| f.cost + 2.0 * f.params.len() as f64)
+        else {
+            continue;
+        };
+        let taken = match base {
+            Some(a) => {
+                let test = f_test(
+                    candidates[a].usable().expect("usable"),
+                    candidates[i].usable().expect("usable"),
+                );
+                candidates[i].f_test = Some(test);
+                test.p_value < P_SIGNIFICANT
+            }
+            None => true,
+        };
+        let lower = best_mode
+            .and_then(|b| candidates[b].usable())
+            .is_none_or(|b| aic < b.cost + 2.0 * b.params.len() as f64);
+        if taken && lower {
+            best_mode = Some(i);
+        }
+    }
+    if best_mode.is_some() {
+        auto = best_mode;
     }
     let auto = auto.map(|i| candidates[i].structure);
     let chosen = match choice {
@@ -216,7 +437,9 @@ fn f_test(small: &JointFit, big: &JointFit) -> FTest {
 /// makes (rich and clean campaigns, the coverage seeds): wherever the two
 /// starts, each run to the end, reach optima that differ, the race picked
 /// the start of the lower one, but once, where neither converged (a clean
-/// campaign, whose data have no valve mode to find).
+/// campaign, whose data have no valve mode to find). Since issue 23 the
+/// race and the leg after it run on the grid's quarter of the bins, and
+/// only the last leg on every bin; the rule is the same for each place.
 const RACE_ITERATIONS: u64 = 3;
 
 /// The valve-mode grid is scored on every this many bins of each run: the
@@ -225,27 +448,28 @@ const RACE_ITERATIONS: u64 = 3;
 /// `tests/joint.rs`).
 const GRID_STRIDE: usize = 4;
 
-/// A point of the valve mode's grid of starts and the cost there.
+/// A point of the mode's (or the piston's) grid of starts and the cost
+/// there.
 struct ValveStart {
     cost: f64,
     hz: f64,
     zeta: f64,
+    piston_kg: f64,
     delay_s: f64,
     force_delay_s: f64,
 }
 
-/// The delay-and-valve fit from the best starts of a grid (module docs).
-fn fit_valve(
+/// The delay-and-mode (or delay-and-piston) fit of `structure` from the
+/// best starts of a grid (module docs).
+fn fit_mode(
     runs: &[JointRun<'_>],
     start: &RigParams,
     delay_fit: Option<&JointFit>,
     opts: &JointOptions,
     band_top_hz: f64,
+    structure: Structure,
 ) -> Result<JointFit, FitError> {
-    let base = JointOptions {
-        structure: Structure::DelayValve,
-        ..*opts
-    };
+    let base = JointOptions { structure, ..*opts };
     let (rig, delay_s, force_delay_s) = match delay_fit {
         Some(f) => (f.rig, f.delay_s, f.force_delay_s.unwrap_or(f.delay_s)),
         None => (*start, 0.0, 0.0),
@@ -255,44 +479,88 @@ fn fit_valve(
     let fs = opts.sample_rate_hz;
     let rig_theta = rig_theta(&rig, opts.p_ref);
     let mut scored: Vec<ValveStart> = Vec::new();
+    let mut score = |theta: Vec<f64>, start: ValveStart| {
+        let cost = coarse.cost(&theta);
+        if cost.is_finite() {
+            scored.push(ValveStart { cost, ..start });
+        }
+    };
+    if structure.piston() {
+        // The piston's mode over the same range, sqrt(a2 / m_p) from 1.5
+        // to 12 times the band's top; the delays as the delay fit has them.
+        for i in 0..6 {
+            let w = 2.0 * std::f64::consts::PI * 1.5 * band_top_hz * 8f64.powf(i as f64 / 5.0);
+            let mp = rig.a2_n_per_m / (w * w);
+            let mut theta = rig_theta.to_vec();
+            theta.extend([delay_s * fs, mp.ln()]);
+            if coarse.force_delay.is_some() {
+                theta.push(force_delay_s * fs);
+            }
+            score(
+                theta,
+                ValveStart {
+                    cost: 0.0,
+                    hz: 0.0,
+                    zeta: 0.0,
+                    piston_kg: mp,
+                    delay_s,
+                    force_delay_s,
+                },
+            );
+        }
+    }
     for i in 0..6 {
+        if structure.place().is_none() {
+            break;
+        }
         let hz = 1.5 * band_top_hz * 8f64.powf(i as f64 / 5.0);
         for zeta in [0.3, 0.55, 0.8] {
             let w = 2.0 * std::f64::consts::PI * hz;
             // The mode's low-frequency lag, 2 zeta / w, comes out of the
             // delays (the force's too: it is downstream of the valve).
             let lag = |d: f64| (d - 2.0 * zeta / w).clamp(0.0, opts.max_delay_s);
-            let (d, d_force) = (lag(delay_s), lag(force_delay_s));
+            // (A mode on the displacement channel leaves the force's.)
+            let d_force = if structure == Structure::DelayMeasurement {
+                force_delay_s
+            } else {
+                lag(force_delay_s)
+            };
+            let d = lag(delay_s);
             let mut theta = rig_theta.to_vec();
             theta.extend([d * fs, w.ln(), zeta.ln()]);
             if coarse.force_delay.is_some() {
                 theta.push(d_force * fs);
             }
-            let cost = coarse.cost(&theta);
-            if cost.is_finite() {
-                scored.push(ValveStart {
-                    cost,
+            score(
+                theta,
+                ValveStart {
+                    cost: 0.0,
                     hz,
                     zeta,
+                    piston_kg: 0.0,
                     delay_s: d,
                     force_delay_s: d_force,
-                });
-            }
+                },
+            );
         }
     }
     scored.sort_by(|a, b| a.cost.total_cmp(&b.cost));
     let options = |v: &ValveStart| JointOptions {
         valve_start: (v.hz, v.zeta),
+        piston_start_kg: v.piston_kg,
         delay_start_s: v.delay_s,
         force_delay_start_s: v.force_delay_s,
         ..base
     };
-    // Levenberg-Marquardt from the two best starts side by side, on the one
-    // problem, for a few iterations; then only the one with the lower cost
-    // (the first on a tie) goes on to convergence, with both cores, and only
-    // it is finished (covariance, adequacy).
+    // Levenberg-Marquardt from the two best starts side by side, on the
+    // quarter of the bins the grid was scored on, for a few iterations;
+    // then only the one with the lower cost (the first on a tie) goes on to
+    // that problem's optimum, and from there on every bin to the optimum
+    // of all of them, which alone is finished (covariance, adequacy). The
+    // quarter's optimum is within its noise of the whole's, so the last leg
+    // takes a few iterations where a start from the grid takes a dozen.
     let race = RACE_ITERATIONS.min(opts.max_iterations);
-    let leg = |v: &ValveStart| Leg::from(&prob, &rig, &options(v), race);
+    let leg = |v: &ValveStart| Leg::from(&coarse, &rig, &options(v), race);
     let (start, leg) = match scored.as_slice() {
         [] => return Err(FitError::NoSolution),
         [one] => (one, leg(one)),
@@ -304,6 +572,85 @@ fn fit_valve(
     };
     let leg = leg?;
     let more = opts.max_iterations.saturating_sub(leg.optimum.iterations);
-    let leg = leg.go_on(&prob, more)?;
-    finish(&prob, leg.optimum, &options(start))
+    let near = leg.go_on(&coarse, more)?.optimum.theta;
+    let full = options(start);
+    let leg = Leg::run(
+        &prob,
+        solver(&prob, &full)?,
+        near,
+        None,
+        opts.max_iterations,
+        0,
+    )?;
+    finish(&prob, leg.optimum, &full)
+}
+
+/// The rig's spread over the runs, for a fit its adequacy tests reject.
+///
+/// When no candidate holds what the rig has (friction, two modes at once)
+/// the chosen fit is a compromise, and each run pulls it its own way: a
+/// friction force weighs on the no-specimen run and hardly on a stiff
+/// spring's. The delete-one jackknife over the FRFs (Efron & Tibshirani
+/// 1993, An Introduction to the Bootstrap, Ch. 11) measures that pull:
+/// var_jack = (n - 1)/n sum (theta_(i) - theta_(.))^2, each theta_(i) the
+/// chosen structure refitted without FRF i from the chosen optimum. Under
+/// the right model it estimates the statistical variance; what it holds
+/// beyond that, var_jack - var_stat floored at 0, is the model-error
+/// variance this returns (per rig parameter), with the number of refits.
+/// None for an adequate fit, a single FRF, or when a refit fails (an FRF
+/// alone carries a parameter: the rig cannot be had without it).
+#[derive(Debug, Clone, PartialEq)]
+pub struct RunSpread {
+    /// Model-error std of beta1, a1b0, a2 and a3.
+    pub std: [f64; 4],
+    /// The jackknife's own std of each, statistical share included.
+    pub jackknife_std: [f64; 4],
+    pub refits: usize,
+}
+
+/// [`RunSpread`] of the chosen fit of `sel` over `runs`.
+pub fn run_spread(
+    runs: &[JointRun<'_>],
+    sel: &Selection,
+    opts: &JointOptions,
+) -> Option<RunSpread> {
+    let fit = sel.fit()?;
+    if fit.adequacy.passed() || runs.len() < 2 {
+        return None;
+    }
+    let from = JointOptions {
+        structure: fit.structure,
+        valve_start: fit.mode.unwrap_or(opts.valve_start),
+        piston_start_kg: fit.piston_mass_kg.unwrap_or(opts.piston_start_kg),
+        delay_start_s: fit.delay_s,
+        force_delay_start_s: fit.force_delay_s.unwrap_or(fit.delay_s),
+        ..*opts
+    };
+    let refits: Vec<Option<[f64; 4]>> = (0..runs.len())
+        .map(|i| {
+            let rest: Vec<JointRun<'_>> = runs
+                .iter()
+                .enumerate()
+                .filter(|(j, _)| *j != i)
+                .map(|(_, r)| *r)
+                .collect();
+            let f = joint_fit(&rest, &fit.rig, &from).ok()?;
+            f.converged.then(|| std::array::from_fn(|k| f.params[k]))
+        })
+        .collect();
+    let refits: Vec<[f64; 4]> = refits.into_iter().collect::<Option<_>>()?;
+    let n = refits.len() as f64;
+    let mut jackknife_std = [0.0; 4];
+    let mut std = [0.0; 4];
+    for k in 0..4 {
+        let mean = refits.iter().map(|t| t[k]).sum::<f64>() / n;
+        let var = (n - 1.0) / n * refits.iter().map(|t| (t[k] - mean).powi(2)).sum::<f64>();
+        jackknife_std[k] = var.sqrt();
+        std[k] = (var - fit.std[k].powi(2)).max(0.0).sqrt();
+    }
+    Some(RunSpread {
+        std,
+        jackknife_std,
+        refits: refits.len(),
+    })
 }
