@@ -171,7 +171,7 @@ pub struct JointResult {
     /// Total covariance of (beta1, a1b0, a2, a3): the fit's plus the
     /// structure covariance.
     pub covariance: Option<[[f64; 4]; 4]>,
-    /// The structure covariance alone: the candidates' Akaike-weighted
+    /// The structure covariance alone: the candidates' Schwarz-weighted
     /// spread about the reported rig.
     pub structure_covariance: Option<[[f64; 4]; 4]>,
     /// When structures the data cannot tell apart put the rig in different
@@ -241,7 +241,7 @@ pub struct JointCandidate {
     pub bic: Option<f64>,
     /// The F test against the nested structure chosen before it.
     pub f_test: Option<FTestResult>,
-    /// Its Akaike weight (QAIC) among the usable candidates: its share of
+    /// Its Schwarz (BIC) weight among the usable candidates: its share of
     /// the structure std.
     pub weight: Option<f64>,
     pub converged: Option<bool>,
@@ -272,7 +272,7 @@ pub struct JointParameter {
     /// Statistical std, from the fit.
     pub std: f64,
     /// The structure std: the candidate structures' spread about this
-    /// value, weighted by their Akaike weights (rig parameters only).
+    /// value, weighted by their Schwarz weights (rig parameters only).
     pub structure_std: Option<f64>,
     /// The model-error std from the runs' jackknife, when the chosen
     /// structure fails its adequacy tests (rig parameters only).

@@ -1025,8 +1025,8 @@ fn solver(problem: &JointProblem, opts: &JointOptions) -> Result<LevenbergMarqua
 
 mod select;
 pub use select::{
-    Candidate, Choice, FTest, P_SIGNIFICANT, RunSpread, Selection, StructureSpread, WEIGHT_FLOOR,
-    run_spread, select,
+    Candidate, Choice, FTest, HAUSMAN_Z, P_SIGNIFICANT, RunSpread, Selection, StructureSpread,
+    WEIGHT_FLOOR, run_spread, select,
 };
 
 #[cfg(test)]

@@ -16,6 +16,7 @@ use std::sync::Arc;
 
 use realfft::{RealFftPlanner, RealToComplex};
 
+mod lpm;
 mod settings;
 
 pub use settings::{Detrend, Estimator, FrfPlan, Window};
@@ -49,6 +50,10 @@ pub struct Frf {
     pub estimator: Estimator,
     /// Bin spacing (Hz): fs / segment_length, or fs / record length for the ETFE.
     pub resolution_hz: f64,
+    /// The per-component variance of `h` at each bin where the estimator
+    /// computes it with the estimate (the LPM; infinite where it cannot),
+    /// else None and [`h_variance_at`] derives it.
+    pub variance: Option<Vec<f64>>,
 }
 
 /// Why an FRF cannot be estimated from the given signals and settings.
@@ -120,15 +125,14 @@ pub fn welch(
     detrend_kind: Detrend,
     estimator: Estimator,
 ) -> Result<Frf, FrfError> {
-    if estimator == Estimator::Etfe {
-        return etfe(
+    if matches!(estimator, Estimator::Etfe | Estimator::Lpm) {
+        return etfe_or_lpm(
             u,
             y,
             sample_rate_hz,
             window_kind,
-            detrend_kind,
-            segment_length,
-            overlap,
+            (detrend_kind, segment_length, overlap),
+            estimator == Estimator::Lpm,
         );
     }
     check_inputs(u, y, sample_rate_hz, segment_length, overlap)?;
@@ -162,6 +166,7 @@ pub fn welch(
         effective_averages: spectra.effective_averages,
         estimator,
         resolution_hz,
+        variance: None,
     })
 }
 
@@ -186,6 +191,26 @@ pub fn etfe(
     detrend_kind: Detrend,
     coherence_segment_length: usize,
     coherence_overlap: f64,
+) -> Result<Frf, FrfError> {
+    etfe_or_lpm(
+        u,
+        y,
+        sample_rate_hz,
+        window_kind,
+        (detrend_kind, coherence_segment_length, coherence_overlap),
+        false,
+    )
+}
+
+/// [`etfe`], and with `lpm` the transient taken out by [`lpm`] from the
+/// whole-record transforms (which the LPM needs with their phases).
+fn etfe_or_lpm(
+    u: &[f64],
+    y: &[f64],
+    sample_rate_hz: f64,
+    window_kind: Window,
+    (detrend_kind, coherence_segment_length, coherence_overlap): (Detrend, usize, f64),
+    lpm: bool,
 ) -> Result<Frf, FrfError> {
     check_inputs(
         u,
@@ -223,6 +248,9 @@ pub fn etfe(
         || rayon::join(|| transform_of(u), || transform_of(y)),
         || welch_spectra(u, y, sample_rate_hz, &segments),
     );
+    // The LPM works on the transforms themselves: kept before they become
+    // H and Suy in place.
+    let transforms = lpm.then(|| (h.clone(), suy.clone()));
 
     // Per bin, in place: the transforms U and Y become H = Y/U and
     // Suy = conj(U) Y; Suu and Syy are new. Each bin is computed on its own,
@@ -265,6 +293,11 @@ pub fn etfe(
         effective_averages: 1.0,
         estimator: Estimator::Etfe,
         resolution_hz,
+        variance: None,
+    })
+    .map(|frf| match transforms {
+        Some((u_k, y_k)) => lpm::take_out_transient(frf, &u_k, &y_k),
+        None => frf,
     })
 }
 
@@ -333,6 +366,9 @@ impl Frf {
         cut(&mut self.suu, keep);
         cut(&mut self.syy, keep);
         cut(&mut self.suy, keep);
+        if let Some(v) = &mut self.variance {
+            cut(v, keep);
+        }
     }
 }
 
@@ -440,6 +476,12 @@ pub const ETFE_NOISE_SMOOTH_HALF_WIDTH: usize = 20;
 pub fn h_variance_at(frf: &Frf, bins: &[usize]) -> Vec<f64> {
     if frf.estimator == Estimator::Etfe {
         return etfe_variance(frf, bins);
+    }
+    if let Some(v) = &frf.variance {
+        return bins
+            .iter()
+            .map(|&k| v.get(k).copied().unwrap_or(f64::INFINITY))
+            .collect();
     }
     let dof = frf.effective_averages - 1.0;
     bins.iter()

@@ -890,6 +890,7 @@ fn band_mask_keeps_coherent_bins_inside_the_band() {
         effective_averages: 10.0,
         estimator: Estimator::H1,
         resolution_hz: 1.0,
+        variance: None,
     };
     assert_eq!(
         band_mask(&frf, (1.0, 4.0), 0.9),
@@ -988,4 +989,80 @@ fn keeping_the_bins_up_to_a_frequency_changes_no_bit_of_what_is_read_there() {
         as_bits(h_variance_at(&short, &bins)),
         as_bits(h_variance_at(&full, &bins))
     );
+}
+
+/// Scaled errors (error / std per component) of an FRF's estimate against
+/// the test system at bins within `band_hz`: their RMS (1 when the variance
+/// is honest) and mean.
+fn scaled_errors(frf: &Frf, band_hz: (f64, f64)) -> (f64, f64) {
+    let bins: Vec<usize> = (0..frf.freq_hz.len())
+        .filter(|&k| frf.freq_hz[k] >= band_hz.0 && frf.freq_hz[k] <= band_hz.1)
+        .collect();
+    let var = h_variance_at(frf, &bins);
+    let mut z = Vec::new();
+    for (i, &k) in bins.iter().enumerate() {
+        let e = frf.h[k] - analytic_h(frf.freq_hz[k]);
+        let sd = var[i].sqrt();
+        z.push(e.re / sd);
+        z.push(e.im / sd);
+    }
+    let n = z.len() as f64;
+    let mean = z.iter().sum::<f64>() / n;
+    let rms = (z.iter().map(|v| v * v).sum::<f64>() / n).sqrt();
+    (rms, mean)
+}
+
+/// A record that does not start or end at rest, with a drifting sensor:
+/// a linear sweep 2-300 Hz through the test system, entered mid-cycle
+/// (the command jumps at the first sample) and cut mid-response, plus a
+/// ramp of 30 noise stds over the record and white output noise. Below 20
+/// Hz, where the leakage (falling as 1/f) dominates, the ETFE's scaled
+/// errors' RMS is off 1 by more than half (3.4 at 3-20 Hz: the leakage is
+/// in its estimate, and its local fit of H takes it for smooth). The LPM
+/// takes the transient out of the estimate and of its variance: its
+/// scaled errors have RMS 1 within 6 % and mean 0 within 0.05 in every band
+/// (measured 0.968, 0.998 and 1.005). Near the sweep's start U's phase
+/// turns slowly and the transient can hardly be told from G U: there the
+/// LPM's stated variance is large (up to 600 times the ETFE's at 20 Hz),
+/// and honest.
+#[test]
+fn the_lpm_takes_a_transient_and_a_drift_out_of_estimate_and_variance() {
+    let (b, a) = test_system();
+    let n = 40_000;
+    let t_end = n as f64 / FS_HZ;
+    let (f0, f1) = (2.0, 300.0);
+    let u: Vec<f64> = (0..n)
+        .map(|i| {
+            let t = i as f64 / FS_HZ;
+            (2.0 * PI * (f0 * t + (f1 - f0) * t * t / (2.0 * t_end)) + 1.0).sin()
+        })
+        .collect();
+    let response = lfilter(&b, &a, &u);
+    let noise = white(12, n, 0.05);
+    let y: Vec<f64> = (0..n)
+        .map(|i| response[i] + noise[i] + 1.5 * i as f64 / n as f64)
+        .collect();
+    let etfe = etfe(&u, &y, FS_HZ, Window::Rectangular, Detrend::Mean, 4096, 0.5).unwrap();
+    let lpm = welch(
+        &u,
+        &y,
+        FS_HZ,
+        4096,
+        0.5,
+        Window::Rectangular,
+        Detrend::Mean,
+        Estimator::Lpm,
+    )
+    .unwrap();
+    assert_eq!(lpm.estimator, Estimator::Lpm);
+    for band in [(1.0, 3.0), (3.0, 20.0), (20.0, 280.0)] {
+        let (rms_e, _) = scaled_errors(&etfe, band);
+        let (rms, mean) = scaled_errors(&lpm, band);
+        eprintln!("{band:?}: ETFE scaled RMS {rms_e:.3}; LPM {rms:.3}, mean {mean:+.3}");
+        assert!((rms - 1.0).abs() < 0.06, "LPM {band:?}: RMS {rms}");
+        assert!(mean.abs() < 0.05, "LPM {band:?}: mean {mean}");
+        if band.1 <= 20.0 {
+            assert!((rms_e - 1.0).abs() > 0.5, "ETFE {band:?}: RMS {rms_e}");
+        }
+    }
 }

@@ -974,7 +974,7 @@ fn fit_adequacy(ident: &IdentificationPlan, st: &LogStage, fit: &TfFit) -> Optio
         },
         fit.params.len(),
         st.frf.resolution_hz,
-        ident.frf.window.independent_lag(),
+        ident.frf.independent_lag(),
     ))
 }
 

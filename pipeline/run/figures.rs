@@ -282,6 +282,7 @@ fn frf_figure(run: &RunResult, stage: &LogStage, frf: &RunFrf) -> FigureSpec {
         Estimator::H1 => "H1",
         Estimator::H2 => "H2",
         Estimator::Etfe => "ETFE",
+        Estimator::Lpm => "ETFE, LPM transient out",
     };
     FigureSpec {
         id: format!("frf-{}", run.id),

@@ -164,7 +164,7 @@ pub(super) fn joint(
             DelayPlan::Fit { max_s } => max_s,
             _ => DEFAULT_MAX_DELAY_S,
         },
-        lag: ident.frf.window.independent_lag(),
+        lag: ident.frf.independent_lag(),
     };
     let choice = match campaign.joint.structure {
         JointStructure::Auto => Choice::Auto,
@@ -214,7 +214,7 @@ pub(super) fn joint(
     Some(result)
 }
 
-/// The table row of one candidate, with its Akaike weight.
+/// The table row of one candidate, with its Schwarz weight.
 fn row(
     c: &Candidate,
     chosen: Option<Structure>,
@@ -460,7 +460,7 @@ fn ambiguity(
             .map_or(0.0, |i| spread.weights[i])
     };
     let mut text = format!(
-        "the data cannot tell {} (Akaike weight {:.2}) from ",
+        "the data cannot tell {} (Schwarz weight {:.2}) from ",
         described(fit.structure, split),
         weight(fit.structure)
     );

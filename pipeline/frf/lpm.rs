@@ -1,0 +1,166 @@
+//! The local polynomial method with its transient term (Pintelon,
+//! Schoukens, Vandersteen & Barbe 2010, "Estimation of nonparametric noise
+//! and FRF models for multivariable systems, Part I: Theory", MSSP 24(3),
+//! 573-595), for the ETFE of one record.
+//!
+//! A record that does not start and end at rest, or whose sensor drifts,
+//! has DFT Y(k) = G(k) U(k) + T(k) + E(k), where the transient T (the
+//! initial and final conditions' leakage, a drift's ramp) is a smooth
+//! function of k like G, and E the noise. The plain ETFE Y/U counts T/U as
+//! noise: with a sweep, U's phase turns fast from bin to bin, so T/U looks
+//! white to the local fit of H that `etfe_variance` makes, and the variance
+//! comes out too large (a drift of 0.4 um/s made the joint fit's reduced
+//! chi-square 0.92 with neighbouring residuals correlated at r = -0.16).
+//!
+//! Here, around each bin k, over 2R + 1 bins j with x = (j - k)/R, the
+//! local model Y(j) = sum_p g_p x^p U(j) + sum_p t_p x^p (p <= 2) is fitted
+//! by complex least squares: T(k) = t_0. The bin's estimate is
+//! H(k) = (Y(k) - t_0) / U(k): the transient out, the bin's own noise kept,
+//! so neighbouring bins stay nearly independent for the fits that weigh
+//! them so. t_0 = sum_j c_j Y(j) shares the bin's noise through c, so the
+//! estimate's noise E(k) - sum_j c_j E(j) has variance
+//! sigma^2 (1 - 2 Re c_k + sum_j |c_j|^2), each bin's own factor. The noise
+//! level sigma^2 is the local residuals' sum of squares over their 2R + 1 -
+//! 6 complex degrees of freedom, averaged over the 2S + 1 bins around k
+//! less the windows that hold bin k itself (their residuals hold E(k), and
+//! a bin with a large error would be weighted down by its own noise).
+
+use nalgebra::{Complex, SMatrix, SVector};
+use rayon::prelude::*;
+
+use super::{Estimator, Frf};
+
+/// The polynomials' degree: quadratic, as the ETFE's noise estimate.
+const DEGREE: usize = 2;
+const P: usize = DEGREE + 1;
+/// Unknowns per window: G's and T's coefficients.
+const UNKNOWNS: usize = 2 * P;
+/// Half width R of the local window (2R + 1 = 15 bins, 9 complex dof).
+pub const HALF_WIDTH: usize = 7;
+const WIDTH: usize = 2 * HALF_WIDTH + 1;
+/// Half width S of the noise level's average.
+pub const SMOOTH_HALF_WIDTH: usize = 60;
+/// Local fits per rayon task.
+const PAR_MIN_FITS: usize = 256;
+
+/// One bin's local fit.
+#[derive(Debug, Clone, Copy)]
+struct Local {
+    /// The transient at the bin, t_0.
+    transient: Complex<f64>,
+    /// The residuals' mean square per complex degree of freedom: the noise
+    /// level of Y there.
+    sigma2: f64,
+    /// 1 - 2 Re c_k + sum |c_j|^2: the estimate's noise over E(k)'s.
+    share: f64,
+    /// The window's first bin.
+    first: usize,
+}
+
+/// The window of 2R + 1 bins around `k`, shifted (not shortened) at the
+/// ends of the spectrum, DC left out; None when the spectrum is too short.
+fn window(k: usize, nb: usize) -> Option<usize> {
+    let width = 2 * HALF_WIDTH + 1;
+    (nb > width && k > 0).then(|| k.saturating_sub(HALF_WIDTH).clamp(1, nb - width))
+}
+
+fn local_fit(u: &[Complex<f64>], y: &[Complex<f64>], k: usize) -> Option<Local> {
+    let first = window(k, u.len())?;
+    let width = 2 * HALF_WIDTH + 1;
+    // U's columns scaled by the window's RMS |U|, so both halves of the
+    // normal matrix are of a size.
+    let scale = (u[first..first + width]
+        .iter()
+        .map(|v| v.norm_sqr())
+        .sum::<f64>()
+        / width as f64)
+        .sqrt();
+    if !(scale > 0.0 && scale.is_finite()) {
+        return None;
+    }
+    // The local design K (2R + 1 rows: U(j) x^p / scale, then x^p) solved
+    // through its QR factor rather than the normal equations, which would
+    // square its condition: near a sweep's ends U's phase turns slowly and
+    // the U and T columns come close to collinear.
+    let mut k_mat = SMatrix::<Complex<f64>, WIDTH, UNKNOWNS>::zeros();
+    for (row, j) in (first..first + width).enumerate() {
+        let x = (j as f64 - k as f64) / HALF_WIDTH as f64;
+        let mut power = 1.0;
+        for p in 0..P {
+            k_mat[(row, p)] = u[j] * (power / scale);
+            k_mat[(row, P + p)] = Complex::new(power, 0.0);
+            power *= x;
+        }
+    }
+    let y_w =
+        SVector::<Complex<f64>, WIDTH>::from_iterator(y[first..first + width].iter().copied());
+    let qr = k_mat.qr();
+    let (q, r) = (qr.q(), qr.r());
+    let r_inv = r.try_inverse()?;
+    // theta = R^-1 Q^H y; t_0 = sum_j c_j Y(j) with c = row P of R^-1 Q^H.
+    let qh_y = q.adjoint() * y_w;
+    let theta = r_inv * qh_y;
+    let fitted = k_mat * theta;
+    let rss: f64 = (0..WIDTH).map(|i| (y_w[i] - fitted[i]).norm_sqr()).sum();
+    let (mut own, mut sum_c2) = (Complex::new(0.0, 0.0), 0.0);
+    for i in 0..WIDTH {
+        let c: Complex<f64> = (0..UNKNOWNS)
+            .map(|m| r_inv[(P, m)] * q[(i, m)].conj())
+            .sum();
+        sum_c2 += c.norm_sqr();
+        if first + i == k {
+            own = c;
+        }
+    }
+    let sigma2 = rss / (width - UNKNOWNS) as f64;
+    sigma2.is_finite().then_some(Local {
+        transient: theta[P],
+        sigma2,
+        share: 1.0 - 2.0 * own.re + sum_c2,
+        first,
+    })
+}
+
+/// `frf` (an ETFE) with its estimate and variance from the transforms `u`
+/// and `y` by the local polynomial method (module docs).
+pub(super) fn take_out_transient(mut frf: Frf, u: &[Complex<f64>], y: &[Complex<f64>]) -> Frf {
+    let nb = frf.h.len().min(u.len()).min(y.len());
+    let local: Vec<Option<Local>> = (0..nb)
+        .into_par_iter()
+        .with_min_len(PAR_MIN_FITS)
+        .map(|k| local_fit(u, y, k))
+        .collect();
+    let width = 2 * HALF_WIDTH + 1;
+    let (h, variance): (Vec<Complex<f64>>, Vec<f64>) = (0..nb)
+        .into_par_iter()
+        .with_min_len(PAR_MIN_FITS)
+        .map(|k| {
+            let (Some(own), true) = (local[k], u[k].norm_sqr() > 0.0) else {
+                return (frf.h[k], f64::INFINITY);
+            };
+            // The noise level around k, less the windows that hold k.
+            let (mut sum, mut n) = (0.0, 0usize);
+            let lo = k.saturating_sub(SMOOTH_HALF_WIDTH);
+            let hi = (k + SMOOTH_HALF_WIDTH + 1).min(nb);
+            for l in local[lo..hi].iter().flatten() {
+                if !(l.first..l.first + width).contains(&k) {
+                    sum += l.sigma2;
+                    n += 1;
+                }
+            }
+            if n == 0 {
+                return (frf.h[k], f64::INFINITY);
+            }
+            let sigma2 = sum / n as f64;
+            let h = (y[k] - own.transient) / u[k];
+            // Per component, half the complex variance.
+            (h, 0.5 * sigma2 * own.share / u[k].norm_sqr())
+        })
+        .unzip();
+    frf.h[..nb].copy_from_slice(&h);
+    let mut v = vec![f64::INFINITY; frf.h.len()];
+    v[..nb].copy_from_slice(&variance);
+    frf.variance = Some(v);
+    frf.estimator = Estimator::Lpm;
+    frf
+}
