@@ -409,9 +409,12 @@ fn a_fixed_structure_the_data_reject_is_kept_and_flagged() {
 /// parameters within 1 and 2 of their stds of the truth, and the same for
 /// the sequential estimate; the issue's band is 95 +- 1 % within 2 std.
 ///
-/// Measured (`SEEDS=2000`, the default, seeds from 5000; 8,000 checks
-/// each): joint 67.1 % within 1 std and 94.3 % within 2, sequential 67.8 %
-/// and 94.7 %. A separate 2,000 seeds from 200,000 gave joint 66.8 % and
+/// The joint estimate is checked against its stated (total) std: the
+/// statistical std and the structure std (issue 23), which on clean
+/// campaigns adds little. Measured (`SEEDS=2000`, the default, seeds from
+/// 5000; 8,000 checks each): joint 67.3 % within 1 total std and 94.5 %
+/// within 2 (67.1 % and 94.3 % with the statistical std alone), sequential
+/// 67.8 % and 94.7 %. A separate 2,000 seeds from 200,000 gave joint 66.8 % and
 /// 94.9 %, sequential 68.5 % and 95.5 %. So both are inside 95 +- 1 %; the
 /// joint estimate's stds are some 4 % optimistic against a Gaussian's
 /// 95.4 %: the ETFE's noise estimate averages windows that hold the bin's
@@ -449,7 +452,7 @@ fn the_joint_stds_are_honest_across_seeds() {
             let s = r.sequential.as_ref().unwrap();
             let seq = [s.beta1, s.a1b0, s.a2, s.a3];
             (
-                std::array::from_fn(|i| ((j[i].value - truth[i]) / j[i].std).abs()),
+                std::array::from_fn(|i| ((j[i].value - truth[i]) / j[i].total_std).abs()),
                 std::array::from_fn(|i| ((seq[i].value - truth[i]) / seq[i].std.unwrap()).abs()),
             )
         })
