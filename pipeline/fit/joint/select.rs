@@ -264,7 +264,7 @@ pub struct StructureSpread {
     /// Each candidate's Schwarz (BIC) weight, in the candidates' order: 0
     /// for an unusable one.
     pub weights: Vec<f64>,
-    /// The variance inflation the QAIC divides the costs by.
+    /// The variance inflation the weights divide the costs by (module docs).
     pub c_hat: f64,
     /// The structure std of beta1, a1b0, a2 and a3: sqrt of the weighted
     /// mean square of the candidates' differences from the chosen fit, less
