@@ -186,14 +186,13 @@ impl Selection {
             // Only what statistics do not explain (module docs): a
             // difference within HAUSMAN_Z of its statistical std adds
             // nothing, a larger one its square less |var_i - var_chosen|.
-            let beyond: [bool; 4] = std::array::from_fn(|k| {
-                let noise = (f.std[k].powi(2) - chosen.std[k].powi(2)).abs();
-                d[k] * d[k] > HAUSMAN_Z * HAUSMAN_Z * noise
-            });
+            let noise: [f64; 4] =
+                std::array::from_fn(|k| (f.std[k].powi(2) - chosen.std[k].powi(2)).abs());
+            let beyond: [bool; 4] =
+                std::array::from_fn(|k| d[k] * d[k] > HAUSMAN_Z * HAUSMAN_Z * noise[k]);
             let excess: [f64; 4] = std::array::from_fn(|k| {
-                let noise = (f.std[k].powi(2) - chosen.std[k].powi(2)).abs();
                 if beyond[k] {
-                    d[k] * (1.0 - noise / (d[k] * d[k])).max(0.0).sqrt()
+                    d[k] * (1.0 - noise[k] / (d[k] * d[k])).max(0.0).sqrt()
                 } else {
                     0.0
                 }
@@ -558,10 +557,7 @@ fn fit_mode(
             );
         }
     }
-    for i in 0..6 {
-        if structure.place().is_none() {
-            break;
-        }
+    for i in (0..6).filter(|_| structure.place().is_some()) {
         let hz = 1.5 * band_top_hz * 8f64.powf(i as f64 / 5.0);
         for zeta in [0.3, 0.55, 0.8] {
             let w = 2.0 * std::f64::consts::PI * hz;

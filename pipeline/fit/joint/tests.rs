@@ -668,24 +668,10 @@ impl WithForce {
     }
 }
 
-fn mode(hz: f64, zeta: f64) -> Option<ValveMode> {
-    Some(ValveMode {
-        natural_frequency_hz: hz,
-        damping_ratio: zeta,
-    })
-}
-
-/// The model at each place against the simulator's state space: with the
-/// mode in the command path the force follows it, in the measurement path
-/// it does not, the piston's mass moves with the piston and the load cell
-/// reads the specimen side; each structure's analytic Jacobian (force rows
-/// and the force delay included) is its residuals' derivative; from a rig
-/// 5-10 % off, each structure recovers a rig with its mode at its place (or
-/// its piston mass) to 1e-6, the mode and both delays with it.
-#[test]
-fn each_place_has_its_model_and_recovers_its_rig() {
-    let delay = 1.6 / FS;
-    for (structure, unmodelled) in [
+/// Each structure with a place (or the piston) and a rig that has its
+/// dynamics there: a 110 Hz mode of damping 0.6, or a 3 kg piston.
+fn places() -> [(Structure, Unmodelled); 4] {
+    [
         (
             Structure::DelayCommand,
             Unmodelled {
@@ -708,7 +694,27 @@ fn each_place_has_its_model_and_recovers_its_rig() {
                 ..Default::default()
             },
         ),
-    ] {
+    ]
+}
+
+fn mode(hz: f64, zeta: f64) -> Option<ValveMode> {
+    Some(ValveMode {
+        natural_frequency_hz: hz,
+        damping_ratio: zeta,
+    })
+}
+
+/// The model at each place against the simulator's state space: with the
+/// mode in the command path the force follows it, in the measurement path
+/// it does not, the piston's mass moves with the piston and the load cell
+/// reads the specimen side; each structure's analytic Jacobian (force rows
+/// and the force delay included) is its residuals' derivative; from a rig
+/// 5-10 % off, each structure recovers a rig with its mode at its place (or
+/// its piston mass) to 1e-6, the mode and both delays with it.
+#[test]
+fn each_place_has_its_model_and_recovers_its_rig() {
+    let delay = 1.6 / FS;
+    for (structure, unmodelled) in places() {
         let exact = WithForce::new(unmodelled, delay, 0.0, 0);
         let runs = exact.runs();
         let opts = options(structure);
@@ -774,33 +780,7 @@ fn each_place_has_its_model_and_recovers_its_rig() {
 #[test]
 fn the_data_choose_the_place_the_mode_was_made_at() {
     let delay = 1.0 / FS;
-    for (seed, (want, unmodelled)) in [
-        (
-            Structure::DelayCommand,
-            Unmodelled {
-                command_mode: mode(110.0, 0.6),
-                ..Default::default()
-            },
-        ),
-        (
-            Structure::DelayMeasurement,
-            Unmodelled {
-                measurement_mode: mode(110.0, 0.6),
-                ..Default::default()
-            },
-        ),
-        (Structure::DelayValve, in_loop(mode(110.0, 0.6))),
-        (
-            Structure::DelayPiston,
-            Unmodelled {
-                piston_mass_kg: Some(3.0),
-                ..Default::default()
-            },
-        ),
-    ]
-    .into_iter()
-    .enumerate()
-    {
+    for (seed, (want, unmodelled)) in places().into_iter().enumerate() {
         let w = WithForce::new(unmodelled, delay, 1e-8, 40 + seed as u64);
         let r = rig();
         let sel = select(&w.runs(), &off(&r), &options(want), Choice::Auto, 30.0);
