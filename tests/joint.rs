@@ -53,6 +53,11 @@ struct Extras {
     /// LVDT offset (mm) and drift (mm/s).
     offset_mm: f64,
     drift_mm_per_s: f64,
+    /// The springs' cubic stiffening: each spring k is simulated as the
+    /// Duffing spring k x1 + k3 x1^3 with k3 = this * k / (4 mm)^2 (its
+    /// secant stiffness that much higher at the chirp's 4 mm), and analysed
+    /// as the linear k.
+    spring_cubic: f64,
 }
 
 /// A 120 s campaign: a quadratic chirp 0.1-35 Hz of 4 mm, 18-bit
@@ -75,8 +80,16 @@ fn manifest(seed: u64, rig: &Rig, x: &Extras) -> String {
     }
     let mut runs = String::from("[[runs]]\nid = \"bare\"\nrole = \"no_specimen\"\np_gain = 1.0\n");
     for (i, k) in rig.springs.iter().enumerate() {
+        let spring = if x.spring_cubic == 0.0 {
+            format!("{{ stiffness_n_per_m = {k} }}")
+        } else {
+            let k3 = x.spring_cubic * k / (0.004f64 * 0.004);
+            format!(
+                "{{ model = \"duffing\", stiffness_n_per_m = {k}, cubic_stiffness_n_per_m3 = {k3:e} }}"
+            )
+        };
         runs += &format!(
-            "\n[[runs]]\nid = \"k{}\"\nrole = \"spring\"\np_gain = 1.0\nspecimen = {{ stiffness_n_per_m = {k} }}\n",
+            "\n[[runs]]\nid = \"k{}\"\nrole = \"spring\"\np_gain = 1.0\nspecimen = {spring}\n",
             i + 1
         );
     }
@@ -698,6 +711,7 @@ fn base(
         delay_samples,
         offset_mm,
         drift_mm_per_s,
+        spring_cubic: 0.0,
     }
 }
 
@@ -825,6 +839,26 @@ fn beyond_the_candidates_the_campaign_says_so() {
             unmodelled: "",
             include_validation: false,
         },
+        // The springs analysed as linear (Eqs. 18-19 take each k as exact)
+        // while each is a Duffing spring: no structure holds that.
+        Mismatch {
+            name: "springs 2 % stiffer at 4 mm (Duffing), loop mode 110 Hz",
+            extras: Extras {
+                spring_cubic: 0.02,
+                ..base(Some((110.0, 0.6)), None, None, 1.0, 0.0, 0.0)
+            },
+            unmodelled: "",
+            include_validation: false,
+        },
+        Mismatch {
+            name: "springs 5 % stiffer at 4 mm (Duffing), loop mode 110 Hz",
+            extras: Extras {
+                spring_cubic: 0.05,
+                ..base(Some((110.0, 0.6)), None, None, 1.0, 0.0, 0.0)
+            },
+            unmodelled: "",
+            include_validation: false,
+        },
     ];
     for (i, rig) in beyond.iter().enumerate() {
         for seed in 0..2u64 {
@@ -934,31 +968,35 @@ fn a_run_at_another_p_gain_settles_the_place() {
 /// estimator: the ETFE, and the ETFE with the local polynomial method's
 /// transient taken out (`estimator = "lpm"`). Per rig parameter the scaled
 /// errors (error / stated total std of the rig the campaign uses) over the
-/// seeds. Measured over 96 campaigns: the ETFE's spreads 0.26, 0.20,
-/// 0.19, 0.15 for beta1, a1b0, a2, a3 (its stds 4 to 7 times too large:
-/// the transient's leakage counted as noise), beta1's mean -0.69; the
-/// LPM's 0.96, 1.12, 1.13, 1.17, means +0.21, -0.14, -0.18, -0.45. The
-/// LPM's stds are some 13 % optimistic and a3 a little biased: its
-/// neighbouring bins share the transient's estimates, so their errors
-/// correlate (r = +0.08 one bin apart), which the fits, weighting bins as
-/// independent, do not count; not yet the 0.9-1.1. The test holds
-/// the LPM to 0.85-1.25 and means within 0.5, the ETFE below 0.3 (over 96
-/// seeds a spread's own sampling std is about 0.07). `SEEDS` sets the
-/// number of campaigns (the bands are asserted at 96).
+/// seeds. The ETFE's stds are 4 to 7 times too large (the transient's
+/// leakage counted as noise), and every ETFE campaign's runs say so (the
+/// command is not at rest at the record's end); the LPM's are right: over
+/// 400 campaigns (`SEEDS=400 ONLY=lpm`) 94.8 % of the parameters within 2
+/// stds, spreads 0.957, 1.007, 1.008, 1.035 for beta1, a1b0, a2, a3, means
+/// +0.12, -0.02, -0.05, -0.14. That needs the LPM's window narrow (2R + 1
+/// = 9 bins: a 15-bin one biased beta1 and a3 by +0.27 and -0.39 std) and
+/// the fits' covariance a sandwich over the bins that share a window (the
+/// errors of bins up to 2R apart correlate; weighted as independent the
+/// stds were 4 to 13 % small). Asserted at 96 seeds (a spread's own
+/// sampling std is about 0.07 there, a mean's 0.1): the LPM's spreads
+/// within 0.85-1.15 and means within 0.3, the ETFE's spreads below 0.3.
 #[test]
 fn records_not_at_rest_are_calibrated_with_the_lpm() {
     use rayon::prelude::*;
     let seeds: u64 = std::env::var("SEEDS")
         .ok()
         .and_then(|s| s.parse().ok())
-        .map_or(96, |s: u64| s.min(96));
+        .map_or(96, |s: u64| s.min(960));
     let x = Extras {
         fs: 1000.0,
         ..Extras::default()
     };
     let truth = [OTHER.beta1, OTHER.a1b0, OTHER.a2, OTHER.a3];
     let mut summary = Vec::new();
-    for estimator in ["etfe", "lpm"] {
+    for estimator in ["etfe", "lpm"]
+        .into_iter()
+        .filter(|e| std::env::var("ONLY").map_or(true, |o| o == *e))
+    {
         let z: Vec<[f64; 4]> = (0..seeds)
             .into_par_iter()
             .map(|seed| {
@@ -971,6 +1009,12 @@ fn records_not_at_rest_are_calibrated_with_the_lpm() {
                         &format!("estimator = \"{estimator}\""),
                     );
                 let results = identify(&text);
+                let told = results.runs.iter().all(|run| {
+                    run.warnings
+                        .iter()
+                        .any(|w| w.contains("is not at rest at the record's end"))
+                });
+                assert_eq!(told, estimator == "etfe", "seed {seed}, {estimator}");
                 let r = results.rig.as_ref().unwrap();
                 let est = [&r.beta1, &r.a1b0, &r.a2, &r.a3];
                 std::array::from_fn(|k| (est[k].value - truth[k]) / est[k].std.unwrap())
@@ -982,8 +1026,10 @@ fn records_not_at_rest_are_calibrated_with_the_lpm() {
             let sd = (z.iter().map(|v| (v[k] - mean).powi(2)).sum::<f64>() / (n - 1.0)).sqrt();
             (sd, mean)
         });
+        let within2 = z.iter().flatten().filter(|v| v.abs() <= 2.0).count() as f64 / (4.0 * n);
         eprintln!(
-            "{estimator}, {seeds} campaigns not at rest: scaled errors' spread (mean) beta1 {:.3} ({:+.2}), a1b0 {:.3} ({:+.2}), a2 {:.3} ({:+.2}), a3 {:.3} ({:+.2})",
+            "{estimator}, {seeds} campaigns not at rest: {:.1} % within 2 stds; scaled errors' spread (mean) beta1 {:.3} ({:+.2}), a1b0 {:.3} ({:+.2}), a2 {:.3} ({:+.2}), a3 {:.3} ({:+.2})",
+            100.0 * within2,
             stats[0].0,
             stats[0].1,
             stats[1].0,
@@ -1000,8 +1046,8 @@ fn records_not_at_rest_are_calibrated_with_the_lpm() {
     }
     for (k, name) in ["beta1", "a1b0", "a2", "a3"].iter().enumerate() {
         let (sd, mean) = summary[1][k];
-        assert!((0.85..=1.25).contains(&sd), "lpm {name}: spread {sd}");
-        assert!(mean.abs() < 0.5, "lpm {name}: mean {mean}");
+        assert!((0.85..=1.15).contains(&sd), "lpm {name}: spread {sd}");
+        assert!(mean.abs() < 0.3, "lpm {name}: mean {mean}");
         assert!(
             summary[0][k].0 < 0.3,
             "etfe {name}: spread {}",

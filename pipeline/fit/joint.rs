@@ -635,6 +635,39 @@ impl JointProblem {
 }
 
 impl JointProblem {
+    /// [`super::correlated_covariance`] at `theta`: each bin's score, and
+    /// its place along its run's FRF in bins, paired up to `lag - 1` bins
+    /// apart (`lag` being the first lag at which bins are independent).
+    fn correlated_covariance(
+        &self,
+        theta: &[f64],
+        a_inv: &DMatrix<f64>,
+        lag: usize,
+        dof: usize,
+    ) -> DMatrix<f64> {
+        let x = self.point(theta);
+        let p = self.n_params();
+        let mut scores = DMatrix::zeros(self.bins.len(), p);
+        let mut position = Vec::with_capacity(self.bins.len());
+        for (i, b) in self.bins.iter().enumerate() {
+            let e = self.eval_at::<true>(b, &x);
+            let r = (b.h - e.model) * b.weight;
+            for k in 0..p {
+                scores[(i, k)] = (e.grad[k].re * r.re + e.grad[k].im * r.im) * b.weight;
+            }
+            let f = b.s.im / (2.0 * std::f64::consts::PI);
+            position.push((b.run, f / self.bin_hz[b.run]));
+        }
+        super::correlated_covariance(
+            &scores,
+            &position,
+            (lag - 1) as f64,
+            a_inv,
+            2 * self.bins.len(),
+            dof,
+        )
+    }
+
     /// The adequacy tests at `theta`: over every bin, and per run with the
     /// run's share of the parameters.
     fn adequacy(&self, theta: &[f64], lag: usize) -> (Adequacy, Vec<Adequacy>) {
@@ -937,6 +970,13 @@ fn finish(
                 ratio: e.ratio,
             }
         })?,
+    };
+    // Bins that share data (opts.lag > 1: a window's kernel, the LPM's
+    // transient) have correlated errors: the sandwich over their range.
+    let cov_theta = if opts.lag > 1 && scale > 0.0 {
+        problem.correlated_covariance(&theta, &(&cov_theta / scale), opts.lag, dof)
+    } else {
+        cov_theta
     };
     // To physical units: x = exp(theta) for the log parameters (dx = x
     // dtheta), the delay in seconds, the valve frequency in Hz.

@@ -85,6 +85,7 @@ fn options(tf: &TransferFunction, intersample: Intersample, delay: DelayPlan) ->
         delay,
         max_iterations: 200,
         sk_iterations: 10,
+        independent_lag: 1,
     }
 }
 
@@ -720,4 +721,43 @@ fn a_delay_fitted_at_its_bound_is_reported() {
         "{:?}",
         f.warnings
     );
+}
+
+#[test]
+fn the_sandwich_covers_the_mean_of_correlated_errors() {
+    // y_i = mu + e_i, e_i = a_i + 0.6 a_{i-1} (an MA(1), a_i ~ N(0, 1)),
+    // 400 values in each of 2,000 series. The mean's variance is
+    // (1 + 0.6)^2 / n to O(1/n^2); the plain least-squares variance
+    // (1 + 0.6^2) / n is 1.37 times too small in std. The sandwich over one
+    // lag (reach 1) must state the right std: the scaled errors of the
+    // 2,000 means spread 1 (within 0.05, 2.2 standard errors) and 95 %
+    // (within 1.5 %) fall within 2 stds.
+    use rand::SeedableRng;
+    use rand_distr::{Distribution, Normal};
+    let (n, theta) = (400, 0.6);
+    let normal = Normal::new(0.0, 1.0).unwrap();
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
+    let position: Vec<(usize, f64)> = (0..n).map(|i| (0, i as f64)).collect();
+    let a_inv = DMatrix::from_element(1, 1, 1.0 / n as f64);
+    let (mut z, mut plain) = (Vec::new(), Vec::new());
+    for _ in 0..2000 {
+        let a: Vec<f64> = (0..=n).map(|_| normal.sample(&mut rng)).collect();
+        let y: Vec<f64> = (0..n).map(|i| a[i + 1] + theta * a[i]).collect();
+        let mean = y.iter().sum::<f64>() / n as f64;
+        let scores = DMatrix::from_fn(n, 1, |i, _| y[i] - mean);
+        let cov = correlated_covariance(&scores, &position, 1.0, &a_inv, n, n - 1);
+        let s2 = y.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1) as f64;
+        z.push(mean / cov[(0, 0)].sqrt());
+        plain.push(mean / (s2 / n as f64).sqrt());
+    }
+    let spread = |v: &[f64]| (v.iter().map(|x| x * x).sum::<f64>() / v.len() as f64).sqrt();
+    let within = z.iter().filter(|v| v.abs() <= 2.0).count() as f64 / z.len() as f64;
+    assert!(
+        (spread(&z) - 1.0).abs() < 0.05,
+        "sandwich spread {}",
+        spread(&z)
+    );
+    assert!((within - 0.95).abs() < 0.015, "within 2 stds {within}");
+    let ratio = spread(&plain) / spread(&z);
+    assert!((ratio - 1.6 / 1.36f64.sqrt()).abs() < 0.06, "plain {ratio}");
 }

@@ -372,6 +372,42 @@ impl Frf {
     }
 }
 
+/// The share of a record the rest test reads at each end: 0.1 %, at
+/// least [`REST_MIN_SAMPLES`] samples.
+pub const REST_END_FRACTION: f64 = 1e-3;
+pub const REST_MIN_SAMPLES: usize = 16;
+/// An end whose command RMS is above this share of the record's is in
+/// motion.
+pub const REST_RMS_RATIO: f64 = 0.1;
+
+/// Where a record's command is still moving at its start or end: the end
+/// ("start", "end" or "start and end") and the larger ratio of that end's
+/// RMS (about the record's mean) to the record's, above
+/// [`REST_RMS_RATIO`]; None when both ends are at rest. A sweep cut while
+/// the rig still moves makes the ETFE's DFT hold the transient's leakage
+/// T(k) beside G U (see `lpm`), which the ETFE's variance counts as noise.
+pub fn ends_in_motion(u: &[f64]) -> Option<(&'static str, f64)> {
+    let n = u.len();
+    let w = ((n as f64 * REST_END_FRACTION) as usize).max(REST_MIN_SAMPLES);
+    if n < 4 * w {
+        return None;
+    }
+    let mean = u.iter().sum::<f64>() / n as f64;
+    let rms =
+        |x: &[f64]| (x.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / x.len() as f64).sqrt();
+    let whole = rms(u);
+    if !(whole > 0.0 && whole.is_finite()) {
+        return None;
+    }
+    let (start, end) = (rms(&u[..w]) / whole, rms(&u[n - w..]) / whole);
+    match (start > REST_RMS_RATIO, end > REST_RMS_RATIO) {
+        (true, true) => Some(("start and end", start.max(end))),
+        (true, false) => Some(("start", start)),
+        (false, true) => Some(("end", end)),
+        (false, false) => None,
+    }
+}
+
 /// Bins to fit: inside `band_hz` (inclusive), coherence at least
 /// `coherence_min`, and a finite, non-zero estimate.
 pub fn band_mask(frf: &Frf, band_hz: (f64, f64), coherence_min: f64) -> Vec<bool> {

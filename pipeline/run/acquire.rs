@@ -153,6 +153,7 @@ pub fn fit_options(ident: &IdentificationPlan, sample_rate_hz: f64) -> FitOption
     opts.intersample = ident.intersample;
     opts.delay = ident.delay;
     opts.max_iterations = 200;
+    opts.independent_lag = ident.frf.independent_lag();
     opts
 }
 
@@ -318,6 +319,20 @@ pub fn log_stage_from(
         });
     }
     let mask = frf::band_mask(&h, run.band_hz, ident.coherence_min);
+    if ident.frf.estimator != frf::Estimator::Lpm
+        && let Some((end, ratio)) = frf::ends_in_motion(&log.command_m)
+    {
+        warnings.push(format!(
+            "the command is not at rest at the record's {end} (its RMS over the last or first {:.1} % of the record is {:.0} % of the whole): the {} counts the transient's leakage as noise, and the fits' stds come out too large (1.5 to 7 times on sweeps cut in motion); identification.frf = {{ estimator = \"lpm\" }} takes the transient out",
+            100.0 * frf::REST_END_FRACTION,
+            100.0 * ratio,
+            match ident.frf.estimator {
+                frf::Estimator::H1 => "Welch H1 estimate",
+                frf::Estimator::H2 => "Welch H2 estimate",
+                _ => "ETFE",
+            }
+        ));
+    }
 
     let fit = if matches!(run.role, Role::NoSpecimen | Role::Spring | Role::Fit) {
         let used = mask.iter().filter(|m| **m).count();

@@ -322,15 +322,22 @@ pub struct NonlinearPlant<'a> {
 }
 
 impl<'a> NonlinearPlant<'a> {
-    /// Validates the spec; fails for a massless specimen (use the linear path).
+    /// Validates the spec; fails for a massless rig unless its specimen is a
+    /// spring (a massless Duffing spring: the linear ones take the linear
+    /// path) and it has no piston friction.
     pub fn new(spec: &'a PlantSpec) -> Result<Self, SimError> {
         validate(spec)?;
         let total = spec.specimen.mass_kg() + spec.unmodelled.piston_mass_kg.unwrap_or(0.0);
-        require_positive(
-            spec.specimen.name(),
-            "mass_kg (with the piston mass)",
-            total,
-        )?;
+        let massless_spring = total == 0.0
+            && spec.specimen.spring_slope_n_per_m(0.0).is_some()
+            && spec.unmodelled.actuator_friction.is_none();
+        if !massless_spring {
+            require_positive(
+                spec.specimen.name(),
+                "mass_kg (with the piston mass)",
+                total,
+            )?;
+        }
         let mut next = 4;
         let mut place = |m: Option<ValveMode>| {
             m.map(|vm| {
@@ -406,10 +413,26 @@ impl OdeSystem for NonlinearPlant<'_> {
         let (x1, x2, f, r) = (x[0], x[1], x[2], x[3]);
         let z = &x[self.internal..];
         let g = self.spec.specimen.restoring_force_n(x1, x2, z);
-        let friction = self.actuator_friction_n(x2);
-        dx[0] = x2;
-        dx[1] = (f - g - friction) / self.total_mass_kg;
-        dx[2] = -rig.a2_n_per_m * x2 - rig.a3_per_s * f + r;
+        if self.total_mass_kg == 0.0 {
+            // Massless (MODEL.md's massless rig with a spring g(x1)): f = g
+            // at all times, so f' = g'(x1) x1' = -a2 x1' - a3 f + r gives
+            // x1' = (r - a3 g) / (g'(x1) + a2); x2 is not a state here and
+            // stays at zero, f follows g.
+            let slope = self
+                .spec
+                .specimen
+                .spring_slope_n_per_m(x1)
+                .expect("a massless plant has a spring specimen (checked in new)");
+            let rate = (r - rig.a3_per_s * g) / (slope + rig.a2_n_per_m);
+            dx[0] = rate;
+            dx[1] = 0.0;
+            dx[2] = slope * rate;
+        } else {
+            let friction = self.actuator_friction_n(x2);
+            dx[0] = x2;
+            dx[1] = (f - g - friction) / self.total_mass_kg;
+            dx[2] = -rig.a2_n_per_m * x2 - rig.a3_per_s * f + r;
+        }
         let reference = match self.command {
             None => u,
             Some(m) => {
@@ -841,6 +864,93 @@ mod tests {
                 epsilon = 1e-12
             );
         }
+    }
+
+    #[test]
+    fn a_massless_duffing_spring_is_the_spring_when_linear_and_keeps_f_on_g() {
+        // A spring run's spring with k3 x1^3 added: the massless branch of
+        // the ODE (x1' = (r - a3 g) / (g' + a2)). With k3 = 0 it must be
+        // the exact ZOH of the linear spring's state space (the command and
+        // measurement modes on, so their states run in the massless branch
+        // too); with k3 != 0 the load cell reads g(x1) = k x1 + k3 x1^3 at
+        // every sample, and the departure from the linear response is first
+        // order in k3 (doubling k3 doubles it, to within the second order).
+        let fs = 2048.0;
+        let u = command(fs, 1.0);
+        let k = 2.0e5;
+        let un = Unmodelled {
+            command_mode: Some(ValveMode {
+                natural_frequency_hz: 110.0,
+                damping_ratio: 0.6,
+            }),
+            measurement_mode: Some(ValveMode {
+                natural_frequency_hz: 70.0,
+                damping_ratio: 0.5,
+            }),
+            ..Default::default()
+        };
+        let duffing = |k3: f64| {
+            spec(
+                SpecimenModel::Duffing(Duffing {
+                    mass_kg: 0.0,
+                    damping_ns_per_m: 0.0,
+                    stiffness_n_per_m: k,
+                    cubic_stiffness_n_per_m3: k3,
+                }),
+                Unmodelled::default(),
+            )
+        };
+        let tight = Integrator::DormandPrince {
+            rtol: 1e-11,
+            atol: 1e-15,
+        };
+        let spring = SpecimenModel::Spring {
+            stiffness_n_per_m: k,
+        };
+        let exact = simulate(&spec(spring, un), &u, fs, [0.0; 2], Integrator::default()).unwrap();
+        let got = simulate(
+            &PlantSpec {
+                unmodelled: un,
+                ..duffing(0.0)
+            },
+            &u,
+            fs,
+            [0.0; 2],
+            tight,
+        )
+        .unwrap();
+        assert_close(&got.x1_m, &exact.x1_m, 1e-9, "x1");
+        assert_close(&got.force_n, &exact.force_n, 1e-9, "force");
+
+        // k3 making the stiffness 3 % higher at the command's 2 mm.
+        let k3 = 0.01 * k / (2e-3f64 * 2e-3);
+        let linear = simulate(&duffing(0.0), &u, fs, [0.0; 2], tight).unwrap();
+        let one = simulate(&duffing(k3), &u, fs, [0.0; 2], tight).unwrap();
+        let two = simulate(&duffing(2.0 * k3), &u, fs, [0.0; 2], tight).unwrap();
+        for (x, f) in one.x1_m.iter().zip(&one.force_n) {
+            let g = k * x + k3 * x * x * x;
+            assert!((f - g).abs() <= 1e-8 * peak(&one.force_n), "f {f} vs g {g}");
+        }
+        let dev = |a: &[f64]| {
+            a.iter()
+                .zip(&linear.x1_m)
+                .map(|(a, b)| (a - b).powi(2))
+                .sum::<f64>()
+                .sqrt()
+        };
+        let (d1, d2) = (dev(&one.x1_m), dev(&two.x1_m));
+        assert!(
+            // The oil column (a2) is far stiffer than the spring, so x1
+            // moves little (some 3e-5 of its peak), yet a thousand times
+            // the integrator's tolerance.
+            d1 > 1e-6 * peak(&linear.x1_m) * (u.len() as f64).sqrt(),
+            "no effect: {d1}"
+        );
+        assert!(
+            (d2 / d1 - 2.0).abs() < 0.1,
+            "not first order in k3: {}",
+            d2 / d1
+        );
     }
 
     #[test]

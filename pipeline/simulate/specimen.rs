@@ -126,6 +126,13 @@ impl SpecimenModel {
                 require_non_negative(who, "damping_ns_per_m", damping_ns_per_m)?;
                 require_finite(who, "stiffness_n_per_m", stiffness_n_per_m)?;
             }
+            // A massless Duffing spring (mass and damping zero) is a spring
+            // run's specimen that is not quite linear; with a mass it is an
+            // SDOF specimen.
+            SpecimenModel::Duffing(d) if d.mass_kg == 0.0 && d.damping_ns_per_m == 0.0 => {
+                require_finite(who, "stiffness_n_per_m", d.stiffness_n_per_m)?;
+                require_finite(who, "cubic_stiffness_n_per_m3", d.cubic_stiffness_n_per_m3)?;
+            }
             SpecimenModel::Duffing(d) => {
                 require_positive(who, "mass_kg", d.mass_kg)?;
                 require_non_negative(who, "damping_ns_per_m", d.damping_ns_per_m)?;
@@ -288,6 +295,19 @@ impl SpecimenModel {
                     + b.alpha * b.stiffness_n_per_m * x1
                     + (1.0 - b.alpha) * b.stiffness_n_per_m * z[0]
             }
+        }
+    }
+
+    /// dg/dx1 of a spring whose force depends on x1 alone (a massless
+    /// specimen: none, a spring, a massless Duffing spring); None otherwise.
+    pub fn spring_slope_n_per_m(&self, x1: f64) -> Option<f64> {
+        match *self {
+            SpecimenModel::None => Some(0.0),
+            SpecimenModel::Spring { stiffness_n_per_m } => Some(stiffness_n_per_m),
+            SpecimenModel::Duffing(d) if d.mass_kg == 0.0 && d.damping_ns_per_m == 0.0 => {
+                Some(d.stiffness_n_per_m + 3.0 * d.cubic_stiffness_n_per_m3 * x1 * x1)
+            }
+            _ => None,
         }
     }
 
@@ -677,6 +697,7 @@ mod tests {
         assert_eq!(
             msg(SpecimenModel::Duffing(Duffing {
                 mass_kg: 0.0,
+                damping_ns_per_m: 3.0,
                 ..duffing()
             })),
             "duffing specimen: mass_kg must be positive and finite (got 0)"
