@@ -447,10 +447,13 @@ const ETFE_LOCAL_DEGREE: usize = 2;
 /// one window's estimate has only 12 complex degrees of freedom, and
 /// weights 1/sigma^2 drawn from so few make the fit's covariance about 10 %
 /// optimistic in std (measured: 92 % of 1800 coefficients within 2 std over
-/// 200 seeds); averaging 2 S + 1 = 41 overlapping windows leaves the
-/// weights' scatter negligible. The noise level is assumed smooth over the
-/// 41 bins (0.24 Hz of a 170 s record), as sensor noise is.
-pub const ETFE_NOISE_SMOOTH_HALF_WIDTH: usize = 20;
+/// 200 seeds). Averaging 2 S + 1 = 121 overlapping windows, less the 15
+/// that hold the bin itself, leaves the weights' scatter negligible and
+/// keeps a bin's own noise out of its weight (with S = 20 and the own
+/// windows in, the joint stds were some 4 % optimistic). The noise level
+/// is assumed smooth over the 121 bins (0.7 Hz of a 170 s record), as
+/// sensor noise is.
+pub const ETFE_NOISE_SMOOTH_HALF_WIDTH: usize = 60;
 
 /// [`h_variance`] at the given bins only (the fit asks for its band's).
 ///
@@ -500,7 +503,8 @@ pub const ETFE_NOISE_SMOOTH_HALF_WIDTH: usize = 20;
 /// since Suu(k) H(k) residuals = U(k)* V(k) scaled); the weighted residual
 /// sum over its 2R + 1 - 3 complex degrees of freedom estimates the noise
 /// density, which is averaged over the 2S + 1 bins around k (S =
-/// [`ETFE_NOISE_SMOOTH_HALF_WIDTH`]), and dividing it by Suu(k) gives the
+/// [`ETFE_NOISE_SMOOTH_HALF_WIDTH`]) less those whose windows hold k,
+/// and dividing it by Suu(k) gives the
 /// bin's variance. G is smooth
 /// over 2R + 1 bins of a long record, so what the polynomial leaves is
 /// noise; leakage from a record that does not end at rest is counted as
@@ -565,15 +569,43 @@ fn etfe_variance(frf: &Frf, bins: &[usize]) -> Vec<f64> {
             }
             let a = k.saturating_sub(s_half).max(span.start) - span.start;
             let b = (k + s_half + 1).min(span.end) - span.start;
-            let n = count[b] - count[a];
-            if n == 0 || !density[k - span.start].is_finite() {
+            if !density[k - span.start].is_finite() {
                 return f64::INFINITY;
             }
-            let density = (sum[b] - sum[a]) / n as f64;
+            // Less the windows that hold bin k: their residuals hold V(k),
+            // so a bin with a large error would be weighted down by its own
+            // noise (the stds came out some 4 % optimistic with them in).
+            let (mut own_sum, mut own_n) = (0.0, 0usize);
+            let near = 2 * ETFE_LOCAL_HALF_WIDTH + 1;
+            let lo = a.max((k - span.start).saturating_sub(near));
+            let hi = b.min(k - span.start + near + 1);
+            for (i, &d) in density.iter().enumerate().take(hi).skip(lo) {
+                if d.is_finite() && etfe_window(span.start + i, nb).contains(&k) {
+                    own_sum += d;
+                    own_n += 1;
+                }
+            }
+            let n = count[b] - count[a] - own_n;
+            if n == 0 {
+                return f64::INFINITY;
+            }
+            let density = (sum[b] - sum[a] - own_sum) / n as f64;
             // Complex variance density / Suu(k); half of it per component.
             0.5 * density / frf.suu[k]
         })
         .collect()
+}
+
+/// The bins of bin `k`'s local window: 2R + 1 around it, shifted (not
+/// shortened) at the ends of the spectrum, DC left out. Empty when the
+/// spectrum is too short.
+fn etfe_window(k: usize, nb: usize) -> std::ops::Range<usize> {
+    let width = 2 * ETFE_LOCAL_HALF_WIDTH + 1;
+    if nb < width + 1 {
+        return 0..0;
+    }
+    let first = k.saturating_sub(ETFE_LOCAL_HALF_WIDTH).clamp(1, nb - width);
+    first..first + width
 }
 
 /// The noise density at bin `k` by the local polynomial method (see
@@ -588,8 +620,7 @@ fn etfe_local_noise_density(frf: &Frf, k: usize) -> f64 {
     if nb < width + 1 || frf.suu[k] <= 0.0 || k == 0 {
         return f64::INFINITY;
     }
-    let first = k.saturating_sub(r_half).clamp(1, nb - width);
-    let window = first..first + width;
+    let window = etfe_window(k, nb);
     // Weighted least squares in the scaled offset x = (j - k) / R, which
     // keeps the normal matrix well conditioned.
     let usable = |j: usize| frf.suu[j] > 0.0 && frf.h[j].re.is_finite() && frf.h[j].im.is_finite();

@@ -566,6 +566,9 @@ pub struct Specimen {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub stiffness_n_per_m: Option<f64>,
     /// Duffing: k3 in g = c x2 + k x1 + k3 x1^3 (hardening when positive).
+    /// In a simulation manifest a spring run may name `model = "duffing"`
+    /// with only the stiffness and k3: the simulator's spring hardens, the
+    /// analysis is handed the linear k (a spring the lab takes as linear).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub cubic_stiffness_n_per_m3: Option<f64>,
     /// Friction: the sliding force f_c in g = c x2 + k x1 + f_c tanh(x2 / v_s).

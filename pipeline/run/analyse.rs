@@ -932,6 +932,9 @@ fn fitted(
         }) {
             out.warnings.push(format!("the run's own fit: {d}"));
         }
+        if let Some(o) = summary.adequacy.as_ref().and_then(|a| a.overstated()) {
+            out.warnings.push(format!("the run's own fit: {o}"));
+        }
         // A model that explains under half of the measured response is not
         // a rig's: the likely causes are in the log's mapping, not in the
         // model (swapped command and displacement columns measured 31 %).

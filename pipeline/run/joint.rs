@@ -391,6 +391,11 @@ fn describe(
             "rig: the joint fit (structure \"{structure}\"): {d}"
         ));
     }
+    if let Some(o) = fit.adequacy.overstated() {
+        warnings.push(format!(
+            "rig: the joint fit (structure \"{structure}\"): {o}"
+        ));
+    }
     // `select` has judged convergence and physical sense already.
     let unusable = chosen.and_then(|c| c.unusable.clone());
     let reduced = fit.cost / fit.dof as f64;
