@@ -408,6 +408,22 @@ mod tests {
         assert!(a.diagnosis(None).unwrap().contains("delay_valve"));
     }
 
+    /// The three tests on bins 0.05 Hz apart, each of stated variance
+    /// 1e-4, a model without parameters, pairs one bin apart.
+    fn judge_flat(freq: &[f64], h: &[Complex<f64>], model: &[Complex<f64>]) -> Adequacy {
+        assess(
+            &Residuals {
+                freq_hz: freq,
+                h,
+                model,
+                variance: &vec![1e-4; h.len()],
+            },
+            0,
+            0.05,
+            1,
+        )
+    }
+
     #[test]
     fn understated_noise_fails_the_cost_alone() {
         // Noise 1.5 times what the variance says, white: cost 2.25 dof.
@@ -420,17 +436,7 @@ mod tests {
             .iter()
             .map(|m| m + Complex::new(normal.sample(&mut rng), normal.sample(&mut rng)))
             .collect();
-        let a = assess(
-            &Residuals {
-                freq_hz: &freq,
-                h: &h,
-                model: &model,
-                variance: &vec![1e-4; n],
-            },
-            0,
-            0.05,
-            1,
-        );
+        let a = judge_flat(&freq, &h, &model);
         assert_eq!(a.failures(), vec![Failure::Cost]);
         assert!((a.reduced_chi2() / 2.25 - 1.0).abs() < 0.1, "{a:?}");
         assert!(a.diagnosis(None).unwrap().contains("estimator"));
@@ -452,19 +458,7 @@ mod tests {
         let a: Vec<Complex<f64>> = (0..=n)
             .map(|_| Complex::new(unit.sample(&mut rng), unit.sample(&mut rng)))
             .collect();
-        let judge = |h: Vec<Complex<f64>>| {
-            assess(
-                &Residuals {
-                    freq_hz: &freq,
-                    h: &h,
-                    model: &model,
-                    variance: &vec![1e-4; n],
-                },
-                0,
-                0.05,
-                1,
-            )
-        };
+        let judge = |h: Vec<Complex<f64>>| judge_flat(&freq, &h, &model);
         let low = judge((0..n).map(|k| model[k] + a[k + 1] * 0.9).collect());
         assert!(low.passed(), "{low:?}");
         assert!((low.reduced_chi2() / 0.81 - 1.0).abs() < 0.05, "{low:?}");

@@ -508,13 +508,11 @@ pub fn correlated_covariance(
     let omega = |bartlett: bool| {
         let p = scores.ncols();
         let mut omega = DMatrix::<f64>::zeros(p, p);
-        let n = scores.nrows();
-        for i in 0..n {
+        for i in 0..scores.nrows() {
             let si = scores.row(i);
             omega += si.transpose() * si;
-            for j in i + 1..n {
-                let (gi, fi) = position[i];
-                let (gj, fj) = position[j];
+            let (gi, fi) = position[i];
+            for (j, &(gj, fj)) in position.iter().enumerate().skip(i + 1) {
                 let d = fj - fi;
                 if gj != gi || d > reach + 1e-9 {
                     break;

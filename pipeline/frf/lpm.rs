@@ -64,16 +64,12 @@ struct Local {
     first: usize,
 }
 
-/// The window of 2R + 1 bins around `k`, shifted (not shortened) at the
-/// ends of the spectrum, DC left out; None when the spectrum is too short.
-fn window(k: usize, nb: usize) -> Option<usize> {
-    let width = 2 * HALF_WIDTH + 1;
-    (nb > width && k > 0).then(|| k.saturating_sub(HALF_WIDTH).clamp(1, nb - width))
-}
-
 fn local_fit(u: &[Complex<f64>], y: &[Complex<f64>], k: usize) -> Option<Local> {
-    let first = window(k, u.len())?;
-    let width = 2 * HALF_WIDTH + 1;
+    if k == 0 {
+        return None;
+    }
+    let first = super::local_window(k, u.len(), HALF_WIDTH)?.start;
+    let width = WIDTH;
     // U's columns scaled by the window's RMS |U|, so both halves of the
     // normal matrix are of a size.
     let scale = (u[first..first + width]
@@ -137,7 +133,6 @@ pub(super) fn take_out_transient(mut frf: Frf, u: &[Complex<f64>], y: &[Complex<
         .with_min_len(PAR_MIN_FITS)
         .map(|k| local_fit(u, y, k))
         .collect();
-    let width = 2 * HALF_WIDTH + 1;
     let (h, variance): (Vec<Complex<f64>>, Vec<f64>) = (0..nb)
         .into_par_iter()
         .with_min_len(PAR_MIN_FITS)
@@ -150,7 +145,7 @@ pub(super) fn take_out_transient(mut frf: Frf, u: &[Complex<f64>], y: &[Complex<
             let lo = k.saturating_sub(SMOOTH_HALF_WIDTH);
             let hi = (k + SMOOTH_HALF_WIDTH + 1).min(nb);
             for l in local[lo..hi].iter().flatten() {
-                if !(l.first..l.first + width).contains(&k) {
+                if !(l.first..l.first + WIDTH).contains(&k) {
                     sum += l.sigma2;
                     n += 1;
                 }

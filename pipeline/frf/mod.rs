@@ -580,7 +580,10 @@ fn etfe_variance(frf: &Frf, bins: &[usize]) -> Vec<f64> {
             let lo = a.max((k - span.start).saturating_sub(near));
             let hi = b.min(k - span.start + near + 1);
             for (i, &d) in density.iter().enumerate().take(hi).skip(lo) {
-                if d.is_finite() && etfe_window(span.start + i, nb).contains(&k) {
+                if d.is_finite()
+                    && local_window(span.start + i, nb, ETFE_LOCAL_HALF_WIDTH)
+                        .is_some_and(|w| w.contains(&k))
+                {
                     own_sum += d;
                     own_n += 1;
                 }
@@ -596,16 +599,16 @@ fn etfe_variance(frf: &Frf, bins: &[usize]) -> Vec<f64> {
         .collect()
 }
 
-/// The bins of bin `k`'s local window: 2R + 1 around it, shifted (not
-/// shortened) at the ends of the spectrum, DC left out. Empty when the
-/// spectrum is too short.
-fn etfe_window(k: usize, nb: usize) -> std::ops::Range<usize> {
-    let width = 2 * ETFE_LOCAL_HALF_WIDTH + 1;
-    if nb < width + 1 {
-        return 0..0;
-    }
-    let first = k.saturating_sub(ETFE_LOCAL_HALF_WIDTH).clamp(1, nb - width);
-    first..first + width
+/// The 2 `half` + 1 bins around bin `k` of a spectrum of `nb` bins that
+/// the local polynomial fits use (the ETFE's noise level, the LPM):
+/// shifted, not shortened, at the ends of the spectrum, DC left out. None
+/// when the spectrum has no more bins than the window.
+fn local_window(k: usize, nb: usize, half: usize) -> Option<std::ops::Range<usize>> {
+    let width = 2 * half + 1;
+    (nb > width).then(|| {
+        let first = k.saturating_sub(half).clamp(1, nb - width);
+        first..first + width
+    })
 }
 
 /// The noise density at bin `k` by the local polynomial method (see
@@ -616,11 +619,12 @@ fn etfe_local_noise_density(frf: &Frf, k: usize) -> f64 {
     const P: usize = ETFE_LOCAL_DEGREE + 1;
     let r_half = ETFE_LOCAL_HALF_WIDTH;
     let nb = frf.h.len();
-    let width = 2 * r_half + 1;
-    if nb < width + 1 || frf.suu[k] <= 0.0 || k == 0 {
+    if frf.suu[k] <= 0.0 || k == 0 {
         return f64::INFINITY;
     }
-    let window = etfe_window(k, nb);
+    let Some(window) = local_window(k, nb, r_half) else {
+        return f64::INFINITY;
+    };
     // Weighted least squares in the scaled offset x = (j - k) / R, which
     // keeps the normal matrix well conditioned.
     let usable = |j: usize| frf.suu[j] > 0.0 && frf.h[j].re.is_finite() && frf.h[j].im.is_finite();

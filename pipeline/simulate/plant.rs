@@ -804,6 +804,22 @@ mod tests {
         }
     }
 
+    /// A 110 Hz mode in the command path and a 70 Hz one in the
+    /// measurement path.
+    fn modes_outside_the_loop() -> Unmodelled {
+        Unmodelled {
+            command_mode: Some(ValveMode {
+                natural_frequency_hz: 110.0,
+                damping_ratio: 0.6,
+            }),
+            measurement_mode: Some(ValveMode {
+                natural_frequency_hz: 70.0,
+                damping_ratio: 0.5,
+            }),
+            ..Default::default()
+        }
+    }
+
     #[test]
     fn nonlinear_path_with_unmodelled_dynamics_and_delays_matches_the_linear_path() {
         // Friction with f_c = 0 and every unmodelled state and fractional
@@ -818,15 +834,7 @@ mod tests {
                 damping_ratio: 0.6,
             }),
             piston_mass_kg: Some(1.2),
-            command_mode: Some(ValveMode {
-                natural_frequency_hz: 110.0,
-                damping_ratio: 0.6,
-            }),
-            measurement_mode: Some(ValveMode {
-                natural_frequency_hz: 70.0,
-                damping_ratio: 0.5,
-            }),
-            ..Default::default()
+            ..modes_outside_the_loop()
         };
         let delays = [1.37 * dt, 3.0 * dt];
         let exact = simulate(&spec(exp1(), un), &u, fs, delays, Integrator::default()).unwrap();
@@ -878,17 +886,7 @@ mod tests {
         let fs = 2048.0;
         let u = command(fs, 1.0);
         let k = 2.0e5;
-        let un = Unmodelled {
-            command_mode: Some(ValveMode {
-                natural_frequency_hz: 110.0,
-                damping_ratio: 0.6,
-            }),
-            measurement_mode: Some(ValveMode {
-                natural_frequency_hz: 70.0,
-                damping_ratio: 0.5,
-            }),
-            ..Default::default()
-        };
+        let un = modes_outside_the_loop();
         let duffing = |k3: f64| {
             spec(
                 SpecimenModel::Duffing(Duffing {
