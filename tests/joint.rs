@@ -40,8 +40,9 @@ const OTHER: Rig = Rig {
     springs: &[150_000.0, 105_000.0, 60_000.0],
 };
 
-/// What the rig has besides the paper's model.
-#[derive(Default)]
+/// What the rig has besides the paper's model, and what a test changes
+/// from the 120 s campaign.
+#[derive(Default, Clone, Copy)]
 struct Extras {
     fs: f64,
     /// A mode in the loop (Hz, damping), or none.
@@ -58,6 +59,35 @@ struct Extras {
     /// secant stiffness that much higher at the chirp's 4 mm), and analysed
     /// as the linear k.
     spring_cubic: f64,
+    /// Lines for `[rig.unmodelled]` beyond the modes above.
+    unmodelled: &'static str,
+    /// The inline table `identification.joint` holds, or "" for none.
+    joint: &'static str,
+    record: Record,
+}
+
+/// The record and its analysis, where a test departs from the campaign's.
+#[derive(Clone, Copy)]
+struct Record {
+    duration_s: f64,
+    f0_hz: f64,
+    /// The command at rest this long before and after the chirp.
+    lead_s: f64,
+    /// LVDT noise RMS, mm.
+    noise_mm: f64,
+    estimator: &'static str,
+}
+
+impl Default for Record {
+    fn default() -> Self {
+        Record {
+            duration_s: 120.0,
+            f0_hz: 0.1,
+            lead_s: 1.0,
+            noise_mm: 0.002,
+            estimator: "etfe",
+        }
+    }
 }
 
 /// A 120 s campaign: a quadratic chirp 0.1-35 Hz of 4 mm, 18-bit
@@ -75,9 +105,16 @@ fn manifest(seed: u64, rig: &Rig, x: &Extras) -> String {
                 &format!("{key} = {{ natural_frequency_hz = {hz}, damping_ratio = {zeta} }}\n");
         }
     }
+    valve += x.unmodelled;
     if !valve.is_empty() {
         valve = format!("[rig.unmodelled]\n{valve}");
     }
+    let joint = if x.joint.is_empty() {
+        String::new()
+    } else {
+        format!("joint = {{ {} }}\n", x.joint)
+    };
+    let rec = &x.record;
     let mut runs = String::from("[[runs]]\nid = \"bare\"\nrole = \"no_specimen\"\np_gain = 1.0\n");
     for (i, k) in rig.springs.iter().enumerate() {
         let spring = if x.spring_cubic == 0.0 {
@@ -116,12 +153,12 @@ a3_per_s = {a3}
 [excitation]
 kind = "chirp"
 law = "quadratic"
-f0_hz = 0.1
+f0_hz = {f0:?}
 f1_hz = 35.0
-duration_s = 120.0
+duration_s = {duration:?}
 amplitude_m = 0.004
-lead_in_s = 1.0
-lead_out_s = 1.0
+lead_in_s = {lead:?}
+lead_out_s = {lead:?}
 
 [instrument.command]
 unit = "mm"
@@ -129,7 +166,7 @@ quantization = {{ bits = 18, full_scale = 50.0 }}
 
 [instrument.displacement]
 unit = "mm"
-noise_rms = 0.002
+noise_rms = {noise:?}
 delay_s = {delay_s}
 offset = {offset}
 drift_per_s = {drift}
@@ -141,10 +178,10 @@ noise_rms = 2.0
 quantization = {{ bits = 18, full_scale = 5000.0 }}
 
 [identification]
-band_hz = [0.5, 30.0]
+{joint}band_hz = [0.5, 30.0]
 coherence_min = 0.8
 command_intersample = "sample_and_hold"
-frf = {{ estimator = "etfe", segment_length = 8192, overlap = 0.5, window = "rectangular", detrend = "mean" }}
+frf = {{ estimator = "{estimator}", segment_length = 8192, overlap = 0.5, window = "rectangular", detrend = "mean" }}
 
 {runs}
 "#,
@@ -156,6 +193,11 @@ frf = {{ estimator = "etfe", segment_length = 8192, overlap = 0.5, window = "rec
         delay_s = x.delay_samples / x.fs,
         offset = x.offset_mm,
         drift = x.drift_mm_per_s,
+        f0 = rec.f0_hz,
+        duration = rec.duration_s,
+        lead = rec.lead_s,
+        noise = rec.noise_mm,
+        estimator = rec.estimator,
     )
 }
 
@@ -304,8 +346,7 @@ fn validation_runs_join_the_fit_when_the_manifest_says() {
         drift_mm_per_s: 4e-4,
         ..Extras::default()
     };
-    let with_exps = manifest(21, &PAPER, &x)
-        + r#"
+    let exps = r#"
 [[runs]]
 id = "exp1"
 role = "validation"
@@ -318,11 +359,15 @@ role = "validation"
 p_gain = 2.0
 specimen = { mass_kg = 3.8, damping_ns_per_m = 5.0, stiffness_n_per_m = 129400.0 }
 "#;
-    let included = with_exps.replace(
-        "[identification]\n",
-        "[identification]\njoint = { include_validation = true }\n",
-    );
-    assert_ne!(included, with_exps);
+    let with_exps = manifest(21, &PAPER, &x) + exps;
+    let included = manifest(
+        21,
+        &PAPER,
+        &Extras {
+            joint: "include_validation = true",
+            ..x
+        },
+    ) + exps;
     let without = identify(&with_exps);
     let with = identify(&included);
     let (jw, jo) = (
@@ -391,9 +436,13 @@ fn a_fixed_structure_the_data_reject_is_kept_and_flagged() {
         drift_mm_per_s: 0.0,
         ..Extras::default()
     };
-    let text = manifest(3, &PAPER, &x).replace(
-        "[identification]\n",
-        "[identification]\njoint = { structure = \"none\" }\n",
+    let text = manifest(
+        3,
+        &PAPER,
+        &Extras {
+            joint: "structure = \"none\"",
+            ..x
+        },
     );
     let results = identify(&text);
     let r = results.rig.as_ref().unwrap();
@@ -449,15 +498,18 @@ fn the_joint_stds_are_honest_across_seeds() {
         delay_samples: 0.0,
         offset_mm: 0.0,
         drift_mm_per_s: 0.0,
+        record: Record {
+            duration_s: 30.0,
+            f0_hz: 0.5,
+            noise_mm: 0.01,
+            ..Record::default()
+        },
         ..Extras::default()
     };
     let z: Vec<([f64; 4], [f64; 4])> = (0..seeds)
         .into_par_iter()
         .map(|seed| {
-            let text = manifest(5000 + seed, &OTHER, &x)
-                .replace("duration_s = 120.0", "duration_s = 30.0")
-                .replace("f0_hz = 0.1", "f0_hz = 0.5")
-                .replace("noise_rms = 0.002", "noise_rms = 0.01");
+            let text = manifest(5000 + seed, &OTHER, &x);
             let results = identify(&text);
             let r = results.rig.as_ref().unwrap();
             let truth = [OTHER.beta1, OTHER.a1b0, OTHER.a2, OTHER.a3];
@@ -626,10 +678,6 @@ fn a_mode_outside_the_loop_is_placed_there_or_warned() {
 struct Mismatch {
     name: &'static str,
     extras: Extras,
-    /// Lines for `[rig.unmodelled]` beyond the modes `extras` gives.
-    unmodelled: &'static str,
-    /// The validation runs' x1/u and f/u join the fit.
-    include_validation: bool,
 }
 
 /// What one campaign of a rig gave: its README row, the rig's errors in
@@ -642,26 +690,7 @@ struct Outcome {
 }
 
 fn run_mismatch(rig: &Mismatch, seed: u64) -> Outcome {
-    let mut text = manifest(seed, &OTHER, &rig.extras) + &sdof_validation_runs([1.0; 3]);
-    if !rig.unmodelled.is_empty() {
-        text = if text.contains("[rig.unmodelled]\n") {
-            text.replace(
-                "[rig.unmodelled]\n",
-                &format!("[rig.unmodelled]\n{}", rig.unmodelled),
-            )
-        } else {
-            text.replace(
-                "\n[excitation]",
-                &format!("[rig.unmodelled]\n{}\n[excitation]", rig.unmodelled),
-            )
-        };
-    }
-    if rig.include_validation {
-        text = text.replace(
-            "[identification]\n",
-            "[identification]\njoint = { include_validation = true }\n",
-        );
-    }
+    let text = manifest(seed, &OTHER, &rig.extras) + &sdof_validation_runs([1.0; 3]);
     let results = identify(&text);
     let r = results.rig.as_ref().unwrap();
     let err = errors(&results, &OTHER);
@@ -725,7 +754,7 @@ fn base(
         delay_samples,
         offset_mm,
         drift_mm_per_s,
-        spring_cubic: 0.0,
+        ..Extras::default()
     }
 }
 
@@ -738,11 +767,18 @@ fn base(
 /// parameters lie within 2 total stds. The table it prints is the README's.
 #[test]
 fn the_mismatch_suite_is_right_or_warned() {
-    let rig = |name, extras, unmodelled, include_validation| Mismatch {
+    // The validation runs' x1/u and f/u join the fit where `include` says.
+    let rig = |name, extras, unmodelled, include: bool| Mismatch {
         name,
-        extras,
-        unmodelled,
-        include_validation,
+        extras: Extras {
+            unmodelled,
+            joint: if include {
+                "include_validation = true"
+            } else {
+                ""
+            },
+            ..extras
+        },
     };
     let suite = [
         rig(
@@ -843,15 +879,14 @@ fn beyond_the_candidates_the_campaign_says_so() {
     let beyond = [
         Mismatch {
             name: "piston 2 kg with 20 N Coulomb friction",
-            extras: base(None, None, None, 0.0, 0.0, 0.0),
-            unmodelled: "piston_mass_kg = 2.0\nactuator_friction = { coulomb_force_n = 20.0, smoothing_velocity_m_per_s = 0.001 }\n",
-            include_validation: false,
+            extras: Extras {
+                unmodelled: "piston_mass_kg = 2.0\nactuator_friction = { coulomb_force_n = 20.0, smoothing_velocity_m_per_s = 0.001 }\n",
+                ..base(None, None, None, 0.0, 0.0, 0.0)
+            },
         },
         Mismatch {
             name: "modes in the loop (150 Hz) and the command path (90 Hz)",
             extras: base(Some((150.0, 0.5)), Some((90.0, 0.6)), None, 1.0, 0.0, 0.0),
-            unmodelled: "",
-            include_validation: false,
         },
         // The springs analysed as linear (Eqs. 18-19 take each k as exact)
         // while each is a Duffing spring: no structure holds that.
@@ -861,8 +896,6 @@ fn beyond_the_candidates_the_campaign_says_so() {
                 spring_cubic: 0.02,
                 ..base(Some((110.0, 0.6)), None, None, 1.0, 0.0, 0.0)
             },
-            unmodelled: "",
-            include_validation: false,
         },
         Mismatch {
             name: "springs 5 % stiffer at 4 mm (Duffing), loop mode 110 Hz",
@@ -870,8 +903,6 @@ fn beyond_the_candidates_the_campaign_says_so() {
                 spring_cubic: 0.05,
                 ..base(Some((110.0, 0.6)), None, None, 1.0, 0.0, 0.0)
             },
-            unmodelled: "",
-            include_validation: false,
         },
     ];
     for (i, rig) in beyond.iter().enumerate() {
@@ -906,20 +937,27 @@ fn a_run_at_another_p_gain_settles_the_place() {
         fs: 1000.0,
         valve: Some((250.0, 0.5)),
         delay_samples: 1.0,
+        record: Record {
+            duration_s: 10.0,
+            noise_mm: 0.03,
+            ..Record::default()
+        },
         ..Extras::default()
     };
     let thin = Rig {
         springs: &[150_000.0],
         ..OTHER
     };
-    let text = manifest(77, &thin, &x)
-        .replace("duration_s = 120.0", "duration_s = 10.0")
-        .replace("noise_rms = 0.002", "noise_rms = 0.03")
-        + "\n[[runs]]\nid = \"sdof\"\nrole = \"validation\"\np_gain = 2.0\nspecimen = { mass_kg = 3.8, damping_ns_per_m = 5.0, stiffness_n_per_m = 129400.0 }\n";
-    let settled = text.replace(
-        "[identification]\n",
-        "[identification]\njoint = { include_validation = true }\n",
-    );
+    let sdof = "\n[[runs]]\nid = \"sdof\"\nrole = \"validation\"\np_gain = 2.0\nspecimen = { mass_kg = 3.8, damping_ns_per_m = 5.0, stiffness_n_per_m = 129400.0 }\n";
+    let text = manifest(77, &thin, &x) + sdof;
+    let settled = manifest(
+        77,
+        &thin,
+        &Extras {
+            joint: "include_validation = true",
+            ..x
+        },
+    ) + sdof;
     for (name, text) in [("default", &text), ("with the P = 2 run", &settled)] {
         let results = identify(text);
         let r = results.rig.as_ref().unwrap();
@@ -1014,14 +1052,16 @@ fn records_not_at_rest_are_calibrated_with_the_lpm() {
         let z: Vec<[f64; 4]> = (0..seeds)
             .into_par_iter()
             .map(|seed| {
-                let text = manifest(7000 + seed, &OTHER, &x)
-                    .replace("duration_s = 120.0", "duration_s = 60.0")
-                    .replace("lead_in_s = 1.0", "lead_in_s = 0.0")
-                    .replace("lead_out_s = 1.0", "lead_out_s = 0.0")
-                    .replace(
-                        "estimator = \"etfe\"",
-                        &format!("estimator = \"{estimator}\""),
-                    );
+                let x = Extras {
+                    record: Record {
+                        duration_s: 60.0,
+                        lead_s: 0.0,
+                        estimator,
+                        ..Record::default()
+                    },
+                    ..x
+                };
+                let text = manifest(7000 + seed, &OTHER, &x);
                 let results = identify(&text);
                 let told = results.runs.iter().all(|run| {
                     run.warnings

@@ -123,7 +123,9 @@ impl Adequacy {
     /// otherwise. A finding beside [`Self::diagnosis`], not a failure: the
     /// model may be right, its stds are too wide where the overstatement
     /// sits.
-    pub fn overstated(&self) -> Option<String> {
+    /// `cause` is the likely cause with its remedy, which depends on the
+    /// FRF estimator (`Estimator::overstated_noise` says it per estimator).
+    pub fn overstated(&self, cause: &str) -> Option<String> {
         let mut parts = Vec::new();
         if self.cost_z < -Z_LIMIT {
             parts.push(format!(
@@ -143,7 +145,7 @@ impl Adequacy {
         }
         (!parts.is_empty()).then(|| {
             format!(
-                "{}: the variances overstate the noise, and the stds are wider than the data need; likely cause: a transient or a drift the FRF estimator counts as noise (a record not at rest at its ends, a drifting sensor); identification.frf = {{ estimator = \"lpm\" }} takes them out",
+                "{}: the variances overstate the noise, and the stds are wider than the data need; likely cause: {cause}",
                 parts.join("; ")
             )
         })
@@ -156,8 +158,10 @@ impl Adequacy {
 
     /// What the failures say, in one line, naming the manifest keys that
     /// would address them; None when every test passed. `add_delay` is
-    /// what would add a delay to the model (None when it has one).
-    pub fn diagnosis(&self, add_delay: Option<&str>) -> Option<String> {
+    /// what would add a delay to the model (None when it has one);
+    /// `noise_cause` the likely cause of a noise the variances understate,
+    /// which depends on the FRF estimator (`Estimator::understated_noise`).
+    pub fn diagnosis(&self, add_delay: Option<&str>, noise_cause: &str) -> Option<String> {
         let failures = self.failures();
         if failures.is_empty() {
             return None;
@@ -194,7 +198,7 @@ impl Adequacy {
         } else if failures.contains(&Failure::Correlation) {
             "likely cause: dynamics the model lacks (a servo-valve mode, a resonance) within the band; the joint fit's identification.joint.structure = \"delay_valve\" (or \"auto\") models a valve mode, or narrow identification.band_hz".to_string()
         } else {
-            "likely cause: noise the variances understate (a sweep analysed with H1/H2, whose coherence is biased); set identification.frf.estimator = \"etfe\" for a sweep".to_string()
+            format!("likely cause: {noise_cause}")
         };
         Some(format!("{}; {cause}", parts.join("; ")))
     }
@@ -364,7 +368,7 @@ mod tests {
         for seed in 0..40 {
             let a = case(seed, |_| Complex::new(1.0, 0.0));
             assert!(a.passed(), "seed {seed}: {a:?}");
-            assert_eq!(a.overstated(), None, "seed {seed}: {a:?}");
+            assert_eq!(a.overstated(""), None, "seed {seed}: {a:?}");
             assert_eq!(a.dof, 4000);
             assert_eq!(a.correlation.as_ref().unwrap().pairs, 1999);
             mean_z += a.cost_z / 40.0;
@@ -384,7 +388,7 @@ mod tests {
         let p = a.phase_slope.as_ref().unwrap();
         assert!((p.delay_s / tau - 1.0).abs() < 0.02, "{p:?}");
         let d = a
-            .diagnosis(Some("set identification.delay = \"fit\""))
+            .diagnosis(Some("set identification.delay = \"fit\""), "noise")
             .unwrap();
         assert!(
             d.contains("a delay the model lacks; set identification.delay"),
@@ -405,7 +409,7 @@ mod tests {
         assert!(failures.contains(&Failure::Cost), "{a:?}");
         assert!(failures.contains(&Failure::Correlation), "{a:?}");
         assert!(!failures.contains(&Failure::LinearPhase), "{a:?}");
-        assert!(a.diagnosis(None).unwrap().contains("delay_valve"));
+        assert!(a.diagnosis(None, "noise").unwrap().contains("delay_valve"));
     }
 
     /// The three tests on bins 0.05 Hz apart, each of stated variance
@@ -439,7 +443,9 @@ mod tests {
         let a = judge_flat(&freq, &h, &model);
         assert_eq!(a.failures(), vec![Failure::Cost]);
         assert!((a.reduced_chi2() / 2.25 - 1.0).abs() < 0.1, "{a:?}");
-        assert!(a.diagnosis(None).unwrap().contains("estimator"));
+        // The cause is the one the estimator's variance would miss.
+        let d = a.diagnosis(None, "the cause").unwrap();
+        assert!(d.ends_with("likely cause: the cause"), "{d}");
     }
 
     #[test]
@@ -462,9 +468,9 @@ mod tests {
         let low = judge((0..n).map(|k| model[k] + a[k + 1] * 0.9).collect());
         assert!(low.passed(), "{low:?}");
         assert!((low.reduced_chi2() / 0.81 - 1.0).abs() < 0.05, "{low:?}");
-        let said = low.overstated().expect("a finding");
+        let said = low.overstated("the cause").expect("a finding");
         assert!(
-            said.contains("std below") && said.contains("\"lpm\""),
+            said.contains("std below") && said.ends_with("likely cause: the cause"),
             "{said}"
         );
         let scale = 1.0 / (1.0 + 0.35f64 * 0.35).sqrt();
@@ -476,7 +482,7 @@ mod tests {
         assert!(anti.passed(), "{anti:?}");
         let c = anti.correlation.as_ref().unwrap();
         assert!((c.r + 0.31).abs() < 0.05, "{c:?}");
-        assert!(anti.overstated().unwrap().contains("anticorrelate"));
+        assert!(anti.overstated("").unwrap().contains("anticorrelate"));
     }
 
     #[test]

@@ -47,6 +47,42 @@ pub enum Estimator {
     Lpm,
 }
 
+impl Estimator {
+    /// The likely cause, with its remedy, of a noise this estimator's
+    /// variances understate (a fit's cost above its expectation with no
+    /// structure in the residuals): what a fit's diagnosis says.
+    pub fn understated_noise(self) -> &'static str {
+        match self {
+            // Welch's coherence-based variance is biased low where the
+            // coherence is near 1 and the segments do not hold the same
+            // spectrum (a sweep: each segment sees a different band).
+            Estimator::H1 | Estimator::H2 => {
+                "noise the variances understate (a sweep analysed with H1/H2, whose coherence is biased); set identification.frf.estimator = \"etfe\" (or \"lpm\") for a sweep"
+            }
+            // The ETFE's and the LPM's variances are local averages of the
+            // residual spectrum: what they miss is distortion that is not
+            // noise, or noise that changes faster than the average follows.
+            Estimator::Etfe | Estimator::Lpm => {
+                "noise the variances understate (a nonlinearity's distortion, or noise that changes along the record or across a few bins); check the specimen and the rig for friction or a nonlinear spring"
+            }
+        }
+    }
+
+    /// The likely cause, with its remedy, of a noise this estimator's
+    /// variances overstate (a fit's cost, or its neighbouring residuals'
+    /// correlation, well below expectation).
+    pub fn overstated_noise(self) -> &'static str {
+        match self {
+            Estimator::Lpm => {
+                "noise that changes along the record (the variance is the record's average), or a transient faster than the local polynomials follow"
+            }
+            _ => {
+                "a transient or a drift the FRF estimator counts as noise (a record not at rest at its ends, a drifting sensor); identification.frf = { estimator = \"lpm\" } takes them out"
+            }
+        }
+    }
+}
+
 /// Window applied to each segment.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
 #[serde(rename_all = "snake_case")]

@@ -1112,3 +1112,19 @@ fn a_record_cut_in_motion_is_told_from_one_at_rest() {
     half[..2000].iter_mut().for_each(|v| *v = 0.0);
     assert_eq!(ends_in_motion(&half).map(|e| e.0), Some("end"));
 }
+
+#[test]
+fn the_noise_causes_a_fit_names_follow_its_estimator() {
+    // The LPM already takes the transient out: its findings must not send
+    // the user to it; Welch's coherence bias is Welch's alone.
+    for e in [Estimator::Etfe, Estimator::H1, Estimator::H2] {
+        assert!(e.overstated_noise().contains("\"lpm\""), "{e:?}");
+    }
+    assert!(!Estimator::Lpm.overstated_noise().contains("\"lpm\""));
+    for e in [Estimator::H1, Estimator::H2] {
+        assert!(e.understated_noise().contains("H1/H2"), "{e:?}");
+    }
+    for e in [Estimator::Etfe, Estimator::Lpm] {
+        assert!(!e.understated_noise().contains("H1/H2"), "{e:?}");
+    }
+}

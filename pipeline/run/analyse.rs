@@ -928,11 +928,18 @@ fn fitted(
             ));
         }
         if let Some(d) = summary.adequacy.as_ref().and_then(|a| {
-            a.diagnosis((!fit.shape.fit_delay).then_some("set identification.delay = \"fit\""))
+            a.diagnosis(
+                (!fit.shape.fit_delay).then_some("set identification.delay = \"fit\""),
+                ident.frf.estimator.understated_noise(),
+            )
         }) {
             out.warnings.push(format!("the run's own fit: {d}"));
         }
-        if let Some(o) = summary.adequacy.as_ref().and_then(|a| a.overstated()) {
+        if let Some(o) = summary
+            .adequacy
+            .as_ref()
+            .and_then(|a| a.overstated(ident.frf.estimator.overstated_noise()))
+        {
             out.warnings.push(format!("the run's own fit: {o}"));
         }
         // A model that explains under half of the measured response is not

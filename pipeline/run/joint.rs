@@ -200,7 +200,7 @@ pub(super) fn joint(
         &sel,
         misfit.as_ref(),
         &ids,
-        campaign.joint.rig,
+        campaign,
         sequential,
         seq_chi2,
         warnings,
@@ -282,7 +282,7 @@ fn describe(
     sel: &Selection,
     misfit: Option<&RunSpread>,
     ids: &[String],
-    rig_mode: JointRig,
+    campaign: &Campaign,
     sequential: &RigEstimates,
     seq_chi2: Option<f64>,
     warnings: &mut Vec<String>,
@@ -386,12 +386,16 @@ fn describe(
     if let Some(d) = fit.adequacy.diagnosis(
         (fit.structure == Structure::Plain)
             .then_some("set identification.joint.structure = \"auto\" (or \"delay\")"),
+        campaign.identification.frf.estimator.understated_noise(),
     ) {
         warnings.push(format!(
             "rig: the joint fit (structure \"{structure}\"): {d}"
         ));
     }
-    if let Some(o) = fit.adequacy.overstated() {
+    if let Some(o) = fit
+        .adequacy
+        .overstated(campaign.identification.frf.estimator.overstated_noise())
+    {
         warnings.push(format!(
             "rig: the joint fit (structure \"{structure}\"): {o}"
         ));
@@ -400,7 +404,7 @@ fn describe(
     let unusable = chosen.and_then(|c| c.unusable.clone());
     let reduced = fit.cost / fit.dof as f64;
     let as_good = seq_chi2.is_some_and(|s| reduced <= AS_GOOD_AS_SEQUENTIAL * s);
-    let (used, note) = match (rig_mode, &unusable) {
+    let (used, note) = match (campaign.joint.rig, &unusable) {
         (JointRig::Sequential, _) => (
             false,
             "the sequential estimate is used: identification.joint.rig = \"sequential\""
