@@ -112,7 +112,7 @@ fn campaign() -> Vec<(Figure, (u32, u32))> {
     ];
     let mut overlay = Vec::new();
     for (k, (name, spec)) in id_runs.iter().enumerate() {
-        let model = model_frf(&tf_x1_u(&rig, spec), &f);
+        let model = model_frf(&tf_x1_u(&rig, spec).unwrap(), &f);
         let (meas, coh) = measured_frf(&model, &f, 11 + k as u64);
         let fig = BodeFigure {
             title: format!("Identification, {name}: command to displacement"),
@@ -187,7 +187,7 @@ fn campaign() -> Vec<(Figure, (u32, u32))> {
             damping_ns_per_m: 5.0,
             stiffness_n_per_m: stiffness,
         };
-        let model = model_frf(&tf_f_u(&rig.at_p_gain(p), &spec), &f);
+        let model = model_frf(&tf_f_u(&rig.at_p_gain(p), &spec).unwrap(), &f);
         let (meas, _) = measured_frf(&model, &f, 21 + k as u64);
         figs.push((
             Figure::Bode(BodeFigure {

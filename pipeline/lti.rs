@@ -180,15 +180,12 @@ impl StateSpace {
     /// Eigenvalues of A [rad/s], sorted by real then imaginary part.
     ///
     /// A is balanced first: the plant's A mixes 1/m ~ 0.3 with a1b0 ~ 1e9,
-    /// and an unbalanced Schur decomposition loses five digits on it.
-    pub fn eigenvalues(&self) -> Vec<Complex<f64>> {
-        let mut e: Vec<Complex<f64>> = balance(&self.a)
-            .complex_eigenvalues()
-            .iter()
-            .copied()
-            .collect();
+    /// and an unbalanced Schur decomposition loses five digits on it. None
+    /// as [`eigenvalues`] says (a non-finite entry, or no convergence).
+    pub fn eigenvalues(&self) -> Option<Vec<Complex<f64>>> {
+        let mut e = eigenvalues(&balance(&self.a))?;
         e.sort_by(|a, b| a.re.total_cmp(&b.re).then(a.im.total_cmp(&b.im)));
-        e
+        Some(e)
     }
 
     /// Frequency response of output `output` at complex frequency s, by solving
@@ -256,51 +253,91 @@ pub fn log_response_std(grad: &[Complex<f64>], cov: impl Fn(usize, usize) -> f64
     (var(&|z| db * z.re), var(&|z| z.im))
 }
 
+/// The QR sweeps [`eigenvalues`] allows per eigenvalue: LAPACK's dhseqr
+/// allows 30 per eigenvalue; a matrix of the plant's scale converges in
+/// a handful.
+const SCHUR_SWEEPS_PER_EIGENVALUE: usize = 30;
+
+/// The eigenvalues of a square matrix (real Schur form), or None when an
+/// entry is not finite or the QR iteration does not converge within
+/// [`SCHUR_SWEEPS_PER_EIGENVALUE`] sweeps per eigenvalue, or gives a
+/// non-finite value. nalgebra's `complex_eigenvalues` iterates without a
+/// bound, and on a matrix with an infinite entry (finite but extreme
+/// manifest numbers overflow a model's coefficients) never returned: the
+/// hang of issue 24.
+pub fn eigenvalues(m: &DMatrix<f64>) -> Option<Vec<Complex<f64>>> {
+    if m.iter().any(|v| !v.is_finite()) {
+        return None;
+    }
+    let n = m.nrows();
+    let schur = nalgebra::Schur::try_new(
+        m.clone(),
+        f64::EPSILON,
+        SCHUR_SWEEPS_PER_EIGENVALUE * n.max(1),
+    )?;
+    let e: Vec<Complex<f64>> = schur.complex_eigenvalues().iter().copied().collect();
+    e.iter()
+        .all(|z| z.re.is_finite() && z.im.is_finite())
+        .then_some(e)
+}
+
 /// Parlett-Reinsch balancing: a diagonal similarity D^-1 A D with powers of
 /// two (exact in floating point) that makes each row and column norm alike,
 /// which keeps eigenvalues of badly scaled matrices accurate.
 pub fn balance(a: &DMatrix<f64>) -> DMatrix<f64> {
+    let d = balancing_diagonal(a);
     let n = a.nrows();
-    let mut m = a.clone();
+    DMatrix::from_fn(n, n, |i, j| a[(i, j)] * d[j] / d[i])
+}
+
+/// The diagonal D of [`balance`], powers of two, such that D^-1 A D has
+/// comparable row and column norms (Parlett & Reinsch 1969, as LAPACK's
+/// dgebal). A row or column whose norm is not finite is left alone: an
+/// infinite norm has no balancing power (dividing it by 4 never ends: a
+/// hang on finite but extreme manifest numbers, issue 24).
+pub fn balancing_diagonal(a: &DMatrix<f64>) -> Vec<f64> {
+    let n = a.nrows();
+    let mut b = a.clone();
+    let mut d = vec![1.0; n];
     let radix = 2.0_f64;
-    let mut converged = false;
-    let mut sweeps = 0;
-    while !converged && sweeps < 100 {
-        converged = true;
-        sweeps += 1;
+    for _sweep in 0..100 {
+        let mut converged = true;
         for i in 0..n {
             let (mut c, mut r) = (0.0, 0.0);
             for j in 0..n {
                 if j != i {
-                    c += m[(j, i)].abs();
-                    r += m[(i, j)].abs();
+                    c += b[(j, i)].abs();
+                    r += b[(i, j)].abs();
                 }
             }
-            if c == 0.0 || r == 0.0 {
+            if c == 0.0 || r == 0.0 || !c.is_finite() || !r.is_finite() {
                 continue;
             }
             let s = c + r;
             let mut f = 1.0;
-            let (mut c2, r2) = (c, r);
-            while c2 < r2 / radix {
+            let mut c2 = c;
+            while c2 < r / radix {
                 c2 *= radix * radix;
                 f *= radix;
             }
-            while c2 >= r2 * radix {
+            while c2 >= r * radix {
                 c2 /= radix * radix;
                 f /= radix;
             }
-            let (cf, rf) = (c * f, r / f);
-            if cf + rf < 0.95 * s {
+            if c * f + r / f < 0.95 * s {
                 converged = false;
+                d[i] *= f;
                 for j in 0..n {
-                    m[(i, j)] /= f;
-                    m[(j, i)] *= f;
+                    b[(i, j)] /= f;
+                    b[(j, i)] *= f;
                 }
             }
         }
+        if converged {
+            break;
+        }
     }
-    m
+    d
 }
 
 /// Monic characteristic polynomial det(sI - A), highest power first
@@ -322,6 +359,21 @@ pub fn characteristic_polynomial(a: &DMatrix<f64>) -> Vec<f64> {
 
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn balancing_a_matrix_with_an_infinite_norm_ends_and_leaves_it() {
+        // Row 1's column norm is infinite: the old loop divided it by 4
+        // forever (issue 24's hang). Both rows are left unscaled.
+        let a = DMatrix::from_row_slice(2, 2, &[0.0, f64::INFINITY, 1.0, 0.0]);
+        assert_eq!(balancing_diagonal(&a), vec![1.0, 1.0]);
+        // And a finite, badly scaled one is balanced to within a factor of
+        // two, rows against columns.
+        let b = DMatrix::from_row_slice(2, 2, &[0.0, 1e8, 1.0, 0.0]);
+        let d = balancing_diagonal(&b);
+        let bal = balance(&b);
+        assert!((bal[(0, 1)] / bal[(1, 0)]).abs() < 4.0, "{bal}");
+        assert_eq!(bal[(0, 1)], 1e8 * d[1] / d[0]);
+    }
+
     use super::*;
     use approx::assert_relative_eq;
 

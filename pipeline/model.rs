@@ -10,7 +10,7 @@ use nalgebra::{Complex, DMatrix, DVector};
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
-use crate::lti::{StateSpace, TransferFunction};
+use crate::lti::{LtiError, StateSpace, TransferFunction};
 
 /// The four parameters of the hydraulic transfer system (Eq. 10), with a1b0
 /// stated at the P gain `p_gain` (a1b0 = a1 P c is proportional to P, Eq. 7).
@@ -182,7 +182,12 @@ pub fn state_space(rig: &RigParams, specimen: &LinearSpecimen) -> StateSpace {
 
 /// x1/u from the paper's closed forms: Eq. 12 (no specimen), Eq. 14 (spring),
 /// Eq. 17 (linear SDOF), normalised to `den[0] = 1`.
-pub fn tf_x1_u(rig: &RigParams, specimen: &LinearSpecimen) -> TransferFunction {
+///
+/// An error when a coefficient leaves f64's range: finite but extreme
+/// inputs (a specimen mass of 1e-300 kg, a stiffness of 1e300 N/m, a rig
+/// fitted from such published coefficients) overflow the products of Eqs.
+/// 12-17. The caller names the run and its keys (issue 24).
+pub fn tf_x1_u(rig: &RigParams, specimen: &LinearSpecimen) -> Result<TransferFunction, LtiError> {
     let (b1, a1b0, a2, a3) = (
         rig.beta1_per_s,
         rig.a1b0_n_per_m_s2,
@@ -210,29 +215,30 @@ pub fn tf_x1_u(rig: &RigParams, specimen: &LinearSpecimen) -> TransferFunction {
             b1 * a3 * k + a1b0,
         ],
     };
-    TransferFunction::new(&[n0], &den).expect("rig parameters give a finite, proper model")
+    TransferFunction::new(&[n0], &den)
 }
 
 /// f/u: a1b0 (m s^2 + c s + k) over the x1/u denominator (Eq. 45); for a
 /// massless spring f = k x1, and without a specimen f = 0.
-pub fn tf_f_u(rig: &RigParams, specimen: &LinearSpecimen) -> TransferFunction {
-    let x = tf_x1_u(rig, specimen);
+pub fn tf_f_u(rig: &RigParams, specimen: &LinearSpecimen) -> Result<TransferFunction, LtiError> {
+    let x = tf_x1_u(rig, specimen)?;
     let (m, c, k) = specimen.mck();
     let num = crate::poly::mul(&x.num, &[m, c, k]);
-    TransferFunction::new(&num, &x.den).expect("finite, proper model")
+    TransferFunction::new(&num, &x.den)
 }
 
 /// The standard deviations of x1/u (Eq. 17, with `specimen`) in dB and
 /// rad at `freq_hz` when the rig's (beta1, a1b0, a2, a3) have covariance
 /// `cov` (a1b0 at `rig.p_gain`): first-order propagation, g' C g with g
 /// the gradient of 20 log10 |G| or arg G, by central differences of ln G
-/// (steps of 1e-6 of each parameter).
+/// (steps of 1e-6 of each parameter). None when a perturbed model leaves
+/// f64's range.
 pub fn x1_u_std(
     rig: &RigParams,
     cov: &[[f64; 4]; 4],
     specimen: &LinearSpecimen,
     freq_hz: &[f64],
-) -> (Vec<f64>, Vec<f64>) {
+) -> Option<(Vec<f64>, Vec<f64>)> {
     let theta = [
         rig.beta1_per_s,
         rig.a1b0_n_per_m_s2,
@@ -254,9 +260,15 @@ pub fn x1_u_std(
         )
     };
     let steps: [f64; 4] = std::array::from_fn(|i| 1e-6 * theta[i].abs().max(1e-12));
-    let plus: Vec<TransferFunction> = (0..4).map(|i| with(i, steps[i])).collect();
-    let minus: Vec<TransferFunction> = (0..4).map(|i| with(i, -steps[i])).collect();
-    freq_hz
+    let plus: Vec<TransferFunction> = (0..4)
+        .map(|i| with(i, steps[i]))
+        .collect::<Result<_, _>>()
+        .ok()?;
+    let minus: Vec<TransferFunction> = (0..4)
+        .map(|i| with(i, -steps[i]))
+        .collect::<Result<_, _>>()
+        .ok()?;
+    let bands = freq_hz
         .iter()
         .map(|&f| {
             // d ln G / d theta_i; ln of a ratio keeps the phase unwrapped.
@@ -265,7 +277,8 @@ pub fn x1_u_std(
             });
             crate::lti::log_response_std(&g, |i, j| cov[i][j])
         })
-        .unzip()
+        .unzip();
+    Some(bands)
 }
 
 /// A specimen in the generalised form of Eq. 9: x1'' = h(x1, x2) + f/m.
@@ -424,8 +437,9 @@ pub fn ccf_linear_state_space(rig: &RigParams, sdof: &LinearSdof, cn: CnTerm) ->
     }
 }
 
-/// Poles of a linear plant, from the state space (not the polynomials).
-pub fn poles(rig: &RigParams, specimen: &LinearSpecimen) -> Vec<Complex<f64>> {
+/// Poles of a linear plant, from the state space (not the polynomials);
+/// None as [`crate::lti::eigenvalues`] says.
+pub fn poles(rig: &RigParams, specimen: &LinearSpecimen) -> Option<Vec<Complex<f64>>> {
     state_space(rig, specimen).eigenvalues()
 }
 
@@ -478,8 +492,8 @@ mod tests {
         // Eigenvalues of Eq. 10's A matrix against the roots of Eqs. 12/14/17.
         let rig = PAPER_RIG;
         for spec in specimens() {
-            let eig = state_space(&rig, &spec).eigenvalues();
-            let tf_poles = tf_x1_u(&rig, &spec).poles();
+            let eig = state_space(&rig, &spec).eigenvalues().unwrap();
+            let tf_poles = tf_x1_u(&rig, &spec).unwrap().poles();
             assert_same_roots(&eig, &tf_poles, 1e-9);
         }
     }
@@ -490,8 +504,8 @@ mod tests {
         let rig = PAPER_RIG;
         for spec in specimens() {
             let ss = state_space(&rig, &spec);
-            let x = tf_x1_u(&rig, &spec);
-            let f = tf_f_u(&rig, &spec);
+            let x = tf_x1_u(&rig, &spec).unwrap();
+            let f = tf_f_u(&rig, &spec).unwrap();
             for hz in [0.1, 1.0, 5.0, 23.7, 29.4, 60.0] {
                 let s = Complex::new(0.0, 2.0 * std::f64::consts::PI * hz);
                 let want_x = ss.eval(OUT_X1, s);
@@ -509,7 +523,7 @@ mod tests {
     fn static_gain_is_one_without_specimen_and_below_one_with_a_spring() {
         let rig = PAPER_RIG;
         assert_relative_eq!(
-            tf_x1_u(&rig, &LinearSpecimen::None).dc_gain(),
+            tf_x1_u(&rig, &LinearSpecimen::None).unwrap().dc_gain(),
             1.0,
             max_relative = 1e-14
         );
@@ -520,6 +534,7 @@ mod tests {
                 stiffness_n_per_m: k,
             },
         )
+        .unwrap()
         .dc_gain();
         // a1b0 / (beta1 a3 k + a1b0), from Eq. 14.
         let want = rig.a1b0_n_per_m_s2 / (rig.beta1_per_s * rig.a3_per_s * k + rig.a1b0_n_per_m_s2);
@@ -537,7 +552,7 @@ mod tests {
             damping_ns_per_m: e.damping_ns_per_m,
             stiffness_n_per_m: e.stiffness_n_per_m,
         };
-        let zeros = tf_f_u(&rig, &spec).zeros();
+        let zeros = tf_f_u(&rig, &spec).unwrap().zeros();
         let want = poly::roots(&[e.mass_kg, e.damping_ns_per_m, e.stiffness_n_per_m]);
         assert_same_roots(&zeros, &want, 1e-10);
         assert_relative_eq!(
@@ -562,7 +577,7 @@ mod tests {
                 stiffness_n_per_m: k,
             };
             let ccf = ccf_linear_state_space(&rig, &sdof, CnTerm::Kept);
-            let want = tf_x1_u(&rig, &spec);
+            let want = tf_x1_u(&rig, &spec).unwrap();
             let got = ccf.transfer_function(OUT_X1);
             assert_eq!(got.den.len(), 5);
             for (g, w) in got.den.iter().zip(want.den.iter()) {
@@ -572,11 +587,11 @@ mod tests {
             assert_relative_eq!(got.num[0], want.num[0], max_relative = 1e-11);
             // Force output: Eq. 45.
             let gf = ccf.transfer_function(OUT_FORCE);
-            let wf = tf_f_u(&rig, &spec);
+            let wf = tf_f_u(&rig, &spec).unwrap();
             for (g, w) in gf.num.iter().zip(wf.num.iter()) {
                 assert_relative_eq!(g, w, max_relative = 1e-9);
             }
-            assert_same_roots(&ccf.eigenvalues(), &want.poles(), 1e-9);
+            assert_same_roots(&ccf.eigenvalues().unwrap(), &want.poles(), 1e-9);
         }
     }
 
@@ -586,7 +601,9 @@ mod tests {
         // polynomial lacks the k/m s^2 and c/m s^3 terms of Cn.
         let rig = PAPER_RIG;
         let sdof = exp1();
-        let kept = ccf_linear_state_space(&rig, &sdof, CnTerm::Kept).eigenvalues();
+        let kept = ccf_linear_state_space(&rig, &sdof, CnTerm::Kept)
+            .eigenvalues()
+            .unwrap();
         let dropped = ccf_linear_state_space(&rig, &sdof, CnTerm::Dropped);
         let den_dropped = dropped.transfer_function(OUT_X1).den;
         let den_kept = ccf_linear_state_space(&rig, &sdof, CnTerm::Kept)
@@ -597,7 +614,7 @@ mod tests {
         assert_relative_eq!(den_kept[2] - den_dropped[2], k / m, max_relative = 1e-9);
         let moved = kept
             .iter()
-            .zip(dropped.eigenvalues().iter())
+            .zip(dropped.eigenvalues().unwrap().iter())
             .map(|(a, b)| (a - b).norm())
             .fold(0.0, f64::max);
         assert!(moved > 1.0, "largest pole shift {moved} rad/s");
@@ -673,7 +690,7 @@ mod band_tests {
         let cov: [[f64; 4]; 4] =
             std::array::from_fn(|i| std::array::from_fn(|j| corr[i][j] * sd[i] * sd[j]));
         let freqs = [1.0, 10.0, 25.0, 29.4, 40.0];
-        let (mag, phase) = x1_u_std(&rig, &cov, &spec, &freqs);
+        let (mag, phase) = x1_u_std(&rig, &cov, &spec, &freqs).unwrap();
         let l = DMatrix::from_fn(4, 4, |i, j| cov[i][j])
             .cholesky()
             .unwrap()
@@ -691,7 +708,7 @@ mod band_tests {
                 a3_per_s: th[3] + d[3],
                 p_gain: rig.p_gain,
             };
-            let (tf, tf0) = (tf_x1_u(&r, &spec), tf_x1_u(&rig, &spec));
+            let (tf, tf0) = (tf_x1_u(&r, &spec).unwrap(), tf_x1_u(&rig, &spec).unwrap());
             for (k, &f) in freqs.iter().enumerate() {
                 let (g, g0) = (tf.freq_response(f), tf0.freq_response(f));
                 let (m, p) = (20.0 * g.norm().log10(), (g / g0).arg());

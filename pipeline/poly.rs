@@ -109,7 +109,9 @@ pub fn roots(coeffs: &[f64]) -> Vec<Complex<f64>> {
         for i in 1..n {
             c[(i, i - 1)] = 1.0;
         }
-        c.complex_eigenvalues().iter().copied().collect()
+        // Roots that cannot be found (a coefficient so large the QR
+        // iteration overflows) are NaN: not stable, and not a hang.
+        crate::lti::eigenvalues(&c).unwrap_or_else(|| vec![Complex::new(f64::NAN, f64::NAN); n])
     };
     let dp = derivative(&monic);
     for r in out.iter_mut() {

@@ -117,6 +117,12 @@ pub enum SensitivityError {
         #[source]
         source: FitError,
     },
+    #[error("at k = {k} N/m, the rig's model (Eq. 14) leaves f64's range: {source}")]
+    Model {
+        k: f64,
+        #[source]
+        source: crate::lti::LtiError,
+    },
 }
 
 /// Sweep `points` log-spaced stiffnesses over `range_n_per_m`: the stds of
@@ -142,8 +148,9 @@ pub fn stiffness_sweep(
         return Err(SensitivityError::Rig(*rig));
     }
     let estimate = |run: &str, spec: &LinearSpecimen, k: f64| {
-        let tf = SecondOrder::from_tf(&model::tf_x1_u(rig, spec))
-            .expect("Eqs. 12 and 14 are second order");
+        let tf =
+            model::tf_x1_u(rig, spec).map_err(|source| SensitivityError::Model { k, source })?;
+        let tf = SecondOrder::from_tf(&tf).expect("Eqs. 12 and 14 are second order");
         let cov =
             coefficient_cov(&tf, noise).map_err(|source| SensitivityError::Fit { k, source })?;
         Ok(TfEstimate {

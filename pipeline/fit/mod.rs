@@ -558,7 +558,13 @@ pub fn covariance_from_normal(a: &DMatrix<f64>, scale: f64) -> Option<DMatrix<f6
         return None;
     }
     let scaled = DMatrix::from_fn(p, p, |i, j| a[(i, j)] / (norms[i] * norms[j]));
-    let eig = scaled.symmetric_eigen();
+    // nalgebra's `symmetric_eigen` iterates without a bound: a non-finite
+    // entry would never converge (issue 24). LAPACK's 30 sweeps per
+    // eigenvalue bound it.
+    if scaled.iter().any(|v| !v.is_finite()) {
+        return None;
+    }
+    let eig = nalgebra::SymmetricEigen::try_new(scaled, f64::EPSILON, 30 * p.max(1))?;
     let lo = eig.eigenvalues.min();
     let hi = eig.eigenvalues.max();
     if !(lo > 0.0 && hi.is_finite() && hi <= NORMAL_CONDITION_MAX * lo) {

@@ -73,7 +73,7 @@ fn paper_exp1_fourth_order() -> TransferFunction {
         damping_ns_per_m: 5.0,
         stiffness_n_per_m: 129_400.0,
     };
-    tf_x1_u(&rig, &specimen)
+    tf_x1_u(&rig, &specimen).unwrap()
 }
 
 fn options(tf: &TransferFunction, intersample: Intersample, delay: DelayPlan) -> FitOptions {

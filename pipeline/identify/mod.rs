@@ -456,7 +456,7 @@ mod tests {
             p_gain: 1.0,
         };
         let to_est = |run: &str, spec: &LinearSpecimen, p: f64| {
-            let tf = tf_x1_u(&truth.at_p_gain(p), spec);
+            let tf = tf_x1_u(&truth.at_p_gain(p), spec).unwrap();
             TfEstimate {
                 run: run.into(),
                 p_gain: p,

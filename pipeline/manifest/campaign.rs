@@ -9,8 +9,8 @@ use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 
 use super::checks::{
-    IdentificationPlan, check_band, check_channels, check_date, check_identification, check_slug,
-    check_specimen, positive,
+    IdentificationPlan, P_GAIN_RANGE, check_band, check_channels, check_date, check_identification,
+    check_slug, check_specimen, plausible, positive,
 };
 use super::document::{Document, read};
 use super::keypath::KeyPath;
@@ -626,7 +626,8 @@ fn check_run(
     bad: &mut impl FnMut(KeyPath, String),
 ) -> Option<RunPlan> {
     check_slug(&run.id, &base.key("id"), bad);
-    let p_ok = positive(run.p_gain, &base.key("p_gain"), bad);
+    let p_ok = positive(run.p_gain, &base.key("p_gain"), bad)
+        && plausible(run.p_gain, P_GAIN_RANGE, &base.key("p_gain"), bad);
     let specimen = check_specimen(run.role, run.specimen.as_ref(), &base.key("specimen"), bad);
     if let Some(b) = run.band_hz {
         check_band(b, &base.key("band_hz"), bad);

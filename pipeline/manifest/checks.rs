@@ -135,6 +135,71 @@ pub(super) fn check_date(
         .ok()
 }
 
+/// The range of a physical quantity a servo-hydraulic test can have
+/// (issue 24): wide enough for any lab (a milligram to a 10,000 t mass, a
+/// spring from a rubber band's to a steel block's 1e10 N/m with margin, a P
+/// gain from 1e-6 to 1e6), narrow enough that the model's products (Eqs.
+/// 12-17, with a1b0 ~ 1e9-1e12) stay far inside f64. Beyond it a number is
+/// a typo or a unit slip, refused at check time rather than by the night.
+#[derive(Debug, Clone, Copy)]
+pub struct PhysicalRange {
+    pub lo: f64,
+    pub hi: f64,
+    pub unit: &'static str,
+}
+
+pub const MASS_RANGE: PhysicalRange = PhysicalRange {
+    lo: 1e-6,
+    hi: 1e7,
+    unit: "kg",
+};
+pub const STIFFNESS_RANGE: PhysicalRange = PhysicalRange {
+    lo: 1e-3,
+    hi: 1e13,
+    unit: "N/m",
+};
+pub const DAMPING_RANGE: PhysicalRange = PhysicalRange {
+    lo: 0.0,
+    hi: 1e12,
+    unit: "N s/m",
+};
+pub const P_GAIN_RANGE: PhysicalRange = PhysicalRange {
+    lo: 1e-6,
+    hi: 1e6,
+    unit: "",
+};
+
+/// Whether a finite `v` lies in `range`; a finite value outside it is
+/// named (a non-finite one is the finiteness checks' to name).
+pub(super) fn plausible(
+    v: f64,
+    range: PhysicalRange,
+    path: &KeyPath,
+    bad: &mut impl FnMut(KeyPath, String),
+) -> bool {
+    if !v.is_finite() || (range.lo..=range.hi).contains(&v) {
+        return true;
+    }
+    let unit = if range.unit.is_empty() {
+        String::new()
+    } else {
+        format!(" {}", range.unit)
+    };
+    let lo = if range.lo == 0.0 {
+        "0".to_string()
+    } else {
+        format!("{:e}", range.lo)
+    };
+    bad(
+        path.clone(),
+        format!(
+            "{v:e} is beyond what a servo-hydraulic test can have ({lo} to {:e}{unit}): a typo or a unit slip?",
+            range.hi
+        ),
+    );
+    false
+}
+
 pub(super) fn positive(v: f64, path: &KeyPath, bad: &mut impl FnMut(KeyPath, String)) -> bool {
     if v.is_finite() && v > 0.0 {
         true
@@ -298,22 +363,24 @@ pub(super) fn check_specimen(
 ) -> Option<SpecimenModel> {
     let s = spec.cloned().unwrap_or_default();
     let mut ok = true;
-    for (k, v) in [
-        ("mass_kg", s.mass_kg),
-        ("stiffness_n_per_m", s.stiffness_n_per_m),
+    for (k, v, range) in [
+        ("mass_kg", s.mass_kg, MASS_RANGE),
+        ("stiffness_n_per_m", s.stiffness_n_per_m, STIFFNESS_RANGE),
     ] {
         if let Some(v) = v {
-            ok &= positive(v, &path.key(k), bad);
+            ok &= positive(v, &path.key(k), bad) && plausible(v, range, &path.key(k), bad);
         }
     }
-    if let Some(c) = s.damping_ns_per_m
-        && !(c.is_finite() && c >= 0.0)
-    {
-        bad(
-            path.key("damping_ns_per_m"),
-            format!("must be zero or positive (got {c})"),
-        );
-        ok = false;
+    if let Some(c) = s.damping_ns_per_m {
+        if !(c.is_finite() && c >= 0.0) {
+            bad(
+                path.key("damping_ns_per_m"),
+                format!("must be zero or positive (got {c})"),
+            );
+            ok = false;
+        } else {
+            ok &= plausible(c, DAMPING_RANGE, &path.key("damping_ns_per_m"), bad);
+        }
     }
     // Keys that belong to one nonlinear model only.
     let model_keys: [(&str, bool, SpecimenKind); 4] = [

@@ -12,7 +12,10 @@ use serde::{Deserialize, Serialize};
 use serde_json::Value;
 
 use super::campaign::check_sensitivity;
-use super::checks::{check_identification, check_slug, check_specimen, positive};
+use super::checks::{
+    P_GAIN_RANGE, STIFFNESS_RANGE, check_identification, check_slug, check_specimen, plausible,
+    positive,
+};
 use super::document::{Document, read};
 use super::keypath::KeyPath;
 use super::problem::{ManifestError, Problem};
@@ -564,7 +567,9 @@ fn check_runs(s: &Sections, bad: &mut impl FnMut(KeyPath, String)) -> Vec<SimRun
         let Some(run) = run else { continue };
         let p = root.key("runs").index(i);
         check_slug(&run.id, &p.key("id"), bad);
-        positive(run.p_gain, &p.key("p_gain"), bad);
+        if positive(run.p_gain, &p.key("p_gain"), bad) {
+            plausible(run.p_gain, P_GAIN_RANGE, &p.key("p_gain"), bad);
+        }
         let spec = match run.specimen.as_ref() {
             Some(sp) if run.role == Role::Spring && sp.model == SpecimenKind::Duffing => {
                 check_duffing_spring(sp, &p.key("specimen"), bad)
@@ -648,7 +653,10 @@ fn check_duffing_spring(
     };
     let k = need("stiffness_n_per_m", s.stiffness_n_per_m);
     let k3 = need("cubic_stiffness_n_per_m3", s.cubic_stiffness_n_per_m3);
-    if ok && !positive(k, &path.key("stiffness_n_per_m"), bad) {
+    if ok
+        && !(positive(k, &path.key("stiffness_n_per_m"), bad)
+            && plausible(k, STIFFNESS_RANGE, &path.key("stiffness_n_per_m"), bad))
+    {
         return None;
     }
     ok.then_some(SpecimenModel::Duffing(crate::simulate::specimen::Duffing {

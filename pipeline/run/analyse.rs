@@ -61,6 +61,40 @@ pub enum RunError {
     NoRig(Arc<RigError>),
     #[error("time-domain validation: {0}")]
     Validation(#[from] ValidateError),
+    /// The rig with the run's specimen and P gain gives a model beyond
+    /// f64's range (finite but extreme manifest numbers, issue 24).
+    #[error(
+        "the model of the rig (beta1 {beta1:.4e} 1/s, a1b0 {a1b0:.4e} N/(m s^2) at p_gain = {p_gain}, a2 {a2:.4e} N/m, a3 {a3:.4e} 1/s) with the specimen (mass_kg = {m}, damping_ns_per_m = {c}, stiffness_n_per_m = {k}) leaves f64's range ({source}): check this run's specimen and p_gain, and the identification runs' published or measured data"
+    )]
+    Model {
+        beta1: f64,
+        a1b0: f64,
+        a2: f64,
+        a3: f64,
+        p_gain: f64,
+        m: f64,
+        c: f64,
+        k: f64,
+        source: crate::lti::LtiError,
+    },
+}
+
+impl RunError {
+    /// [`RunError::Model`] for `rig` (at the run's P gain) and `specimen`.
+    fn model(rig: &RigParams, specimen: &LinearSpecimen, source: crate::lti::LtiError) -> Self {
+        let (m, c, k) = specimen.mck();
+        RunError::Model {
+            beta1: rig.beta1_per_s,
+            a1b0: rig.a1b0_n_per_m_s2,
+            a2: rig.a2_n_per_m,
+            a3: rig.a3_per_s,
+            p_gain: rig.p_gain,
+            m,
+            c,
+            k,
+            source,
+        }
+    }
 }
 
 impl From<Arc<RigError>> for RunError {
@@ -600,7 +634,16 @@ fn second_pass(
     let mut figures = first.figures;
     let mut figure_warnings = first.figure_warnings;
     if first.acquired {
-        out.force_tf = force_model(&rig_at_p, &plan.specimen);
+        // The run's own fit stands without the force model: its absence is
+        // a warning, not the run's failure.
+        out.force_tf = match rig_at_p.map(|r| models(&r, &plan.specimen)) {
+            Some(Ok((_, f))) => f,
+            Some(Err(e)) => {
+                out.warnings.push(format!("no force model (Eq. 45): {e}"));
+                None
+            }
+            None => None,
+        };
         if let (Some(bins), Some(model)) = (&first.force, &out.force_tf) {
             let spec = figures::force_figure(&out, bins, model, draw.intersample, None);
             let (f, w) = draw.write(std::slice::from_ref(&spec))?;
@@ -640,11 +683,27 @@ fn noise_profile(plan: &RunPlan, st: &LogStage) -> Option<NoiseProfile> {
     })
 }
 
-/// The model's force path f/u (Eq. 45), for a linear specimen.
-fn force_model(rig_at_p: &Option<RigParams>, specimen: &SpecimenModel) -> Option<TfResult> {
-    let (r, lin) = (rig_at_p.as_ref()?, specimen.linear()?);
-    (!matches!(lin, LinearSpecimen::None))
-        .then(|| TfResult::new(&model::tf_f_u(r, &lin), TfSource::Model))
+/// The model's x1/u (Eq. 17) and force path f/u (Eq. 45) for a linear
+/// specimen (f/u None without one), or the error that names why the rig
+/// and the specimen give no model in f64.
+#[allow(clippy::type_complexity)]
+fn models(
+    rig_at_p: &RigParams,
+    specimen: &SpecimenModel,
+) -> Result<(Option<TfResult>, Option<TfResult>), RunError> {
+    let Some(lin) = specimen.linear() else {
+        return Ok((None, None));
+    };
+    let err = |e| RunError::model(rig_at_p, &lin, e);
+    let x = model::tf_x1_u(rig_at_p, &lin).map_err(err)?;
+    let f = match lin {
+        LinearSpecimen::None => None,
+        _ => Some(model::tf_f_u(rig_at_p, &lin).map_err(err)?),
+    };
+    Ok((
+        Some(TfResult::new(&x, TfSource::Model)),
+        f.map(|f| TfResult::new(&f, TfSource::Model)),
+    ))
 }
 
 /// A validation run: the identified rig with its specimen, driven by its
@@ -744,9 +803,20 @@ fn validation_run(
     };
     out.a1b0 = Some(rig_at_p.a1b0_n_per_m_s2);
     let specimen = plan.specimen;
-    out.force_tf = force_model(&Some(rig_at_p), &specimen);
     let linear = specimen.linear();
-    out.tf = linear.map(|lin| TfResult::new(&model::tf_x1_u(&rig_at_p, &lin), TfSource::Model));
+    match models(&rig_at_p, &specimen) {
+        Ok((tf, force_tf)) => (out.tf, out.force_tf) = (tf, force_tf),
+        Err(e) => {
+            out = failed(out, e);
+            let figures = match (&acq.stage, draw.enabled()) {
+                (Some(st), true) => {
+                    draw.write(&figures::log_figures(&out, st, None, draw.intersample, None).0)?
+                }
+                _ => figures,
+            };
+            return Ok(finish(plan, out, figures, start, observer));
+        }
+    }
     let Some(st) = &acq.stage else {
         draw.tables(&out, None)?;
         return Ok(finish(plan, out, figures, start, observer));
@@ -1074,16 +1144,19 @@ fn ccf_result(rig: &RigParams, plan: &RunPlan) -> Option<CcfResult> {
         stiffness_n_per_m,
     };
     let c = model::ccf_coefficients(&rig, &sdof, 0.0, 0.0);
-    let poles = |cn| {
-        model::ccf_linear_state_space(&rig, &sdof, cn)
-            .eigenvalues()
-            .into_iter()
-            .map(ComplexValue::from)
-            .collect()
+    // No poles where the eigenvalues cannot be computed (the run's model
+    // error says why); then the simplified form is not called stable.
+    let poles = |cn| -> Option<Vec<ComplexValue>> {
+        let e = model::ccf_linear_state_space(&rig, &sdof, cn).eigenvalues()?;
+        Some(e.into_iter().map(ComplexValue::from).collect())
     };
-    let poles_without_cn: Vec<ComplexValue> = poles(CnTerm::Dropped);
+    let dropped = poles(CnTerm::Dropped);
+    let stable_without_cn = dropped
+        .as_ref()
+        .is_some_and(|p| p.iter().all(|p| p.re < 0.0));
+    let poles_without_cn: Vec<ComplexValue> = dropped.unwrap_or_default();
     Some(CcfResult {
-        stable_without_cn: poles_without_cn.iter().all(|p| p.re < 0.0),
+        stable_without_cn,
         run: plan.id.clone(),
         p_gain: plan.p_gain,
         C1: c.C1,
@@ -1091,7 +1164,7 @@ fn ccf_result(rig: &RigParams, plan: &RunPlan) -> Option<CcfResult> {
         C3: c.C3,
         C4: c.C4,
         C5: c.C5,
-        poles_with_cn: poles(CnTerm::Kept),
+        poles_with_cn: poles(CnTerm::Kept).unwrap_or_default(),
         poles_without_cn,
     })
 }

@@ -213,10 +213,13 @@ impl RunFrf {
                 })
             }
             (None, Some(p)) if run.role == Role::Validation => {
-                let (magnitude_db, phase_rad) = x1_u_std(&p.rig, &p.cov, &p.specimen, &freq_hz);
-                Some(BodeBand {
-                    magnitude_db,
-                    phase_rad,
+                // No band where a perturbed model leaves f64's range (the
+                // run's error says why its model is missing).
+                x1_u_std(&p.rig, &p.cov, &p.specimen, &freq_hz).map(|(magnitude_db, phase_rad)| {
+                    BodeBand {
+                        magnitude_db,
+                        phase_rad,
+                    }
                 })
             }
             _ => None,

@@ -80,7 +80,9 @@ pub fn monte_carlo(input: &McInput<'_>, stiffnesses: &[f64], seeds: u64) -> Vec<
 
 /// The noiseless displacement of the rig with `spec`.
 fn clean(input: &McInput<'_>, spec: &LinearSpecimen) -> Result<Vec<f64>, String> {
-    let ss = tf_x1_u(&input.rig, spec).to_state_space();
+    let ss = tf_x1_u(&input.rig, spec)
+        .map_err(|e| format!("the rig's model leaves f64's range: {e}"))?
+        .to_state_space();
     simulate_linear(
         &ss,
         input.command_m,
@@ -225,7 +227,9 @@ mod tests {
         let mc = monte_carlo(&input, &ks, 400);
 
         // The analytic side: the FRF variance of one noisy no-specimen run.
-        let ss = tf_x1_u(&rig, &LinearSpecimen::None).to_state_space();
+        let ss = tf_x1_u(&rig, &LinearSpecimen::None)
+            .unwrap()
+            .to_state_space();
         let mut y = simulate_linear(&ss, &u, 1e-3, &[0.0]).unwrap().remove(0);
         let mut rng = seeded_rng(99, "profile");
         let noise = Normal::new(0.0, 2e-6).unwrap();

@@ -44,6 +44,12 @@ pub enum SimulateError {
         #[source]
         source: InstrumentError,
     },
+    #[error("run {run}: the rig's model with its specimen leaves f64's range: {source}")]
+    Model {
+        run: String,
+        #[source]
+        source: crate::lti::LtiError,
+    },
     #[error(transparent)]
     Log(#[from] LogWriteError),
     #[error(transparent)]
@@ -139,7 +145,12 @@ fn simulate_run(plan: &SimulationPlan, run: &SimRunPlan) -> Result<RunSignals, S
             logged("force", &ins.force, &response.force_n)?,
         ),
     ];
-    let model_tf = run.specimen.linear().map(|lin| model::tf_x1_u(&rig, &lin));
+    let model_tf = run
+        .specimen
+        .linear()
+        .map(|lin| model::tf_x1_u(&rig, &lin))
+        .transpose()
+        .map_err(|source| SimulateError::Model { run: id(), source })?;
     let plant_tf = plant::linear_state_space(&spec).map(|ss| ss.transfer_function(model::OUT_X1));
     Ok(RunSignals {
         columns,

@@ -61,61 +61,18 @@ pub(crate) fn phi_gamma(
     (phi, gamma)
 }
 
-/// exp(M) through a power-of-two diagonal similarity.
+/// exp(M) through a power-of-two diagonal similarity; NaN throughout for
+/// an M with a non-finite entry (nalgebra's scaling and squaring would
+/// square u64::MAX times: a hang, issue 24).
 pub(crate) fn expm_balanced(m: &DMatrix<f64>) -> DMatrix<f64> {
-    let d = balancing_diagonal(m);
+    if m.iter().any(|v| !v.is_finite()) {
+        return DMatrix::from_element(m.nrows(), m.ncols(), f64::NAN);
+    }
+    let d = crate::lti::balancing_diagonal(m);
     let n = m.nrows();
     let balanced = DMatrix::from_fn(n, n, |i, j| m[(i, j)] * d[j] / d[i]);
     let e = balanced.exp();
     DMatrix::from_fn(n, n, |i, j| e[(i, j)] * d[i] / d[j])
-}
-
-/// Parlett-Reinsch balancing (as `lti::balance`, which returns only the
-/// balanced matrix): the diagonal d, powers of two, such that
-/// diag(d)^-1 M diag(d) has comparable row and column norms.
-fn balancing_diagonal(m: &DMatrix<f64>) -> Vec<f64> {
-    let n = m.nrows();
-    let mut b = m.clone();
-    let mut d = vec![1.0; n];
-    let radix = 2.0_f64;
-    for _sweep in 0..100 {
-        let mut converged = true;
-        for i in 0..n {
-            let (mut c, mut r) = (0.0, 0.0);
-            for j in 0..n {
-                if j != i {
-                    c += b[(j, i)].abs();
-                    r += b[(i, j)].abs();
-                }
-            }
-            if c == 0.0 || r == 0.0 {
-                continue;
-            }
-            let s = c + r;
-            let mut f = 1.0;
-            let mut c2 = c;
-            while c2 < r / radix {
-                c2 *= radix * radix;
-                f *= radix;
-            }
-            while c2 >= r * radix {
-                c2 /= radix * radix;
-                f /= radix;
-            }
-            if c * f + r / f < 0.95 * s {
-                converged = false;
-                d[i] *= f;
-                for j in 0..n {
-                    b[(i, j)] /= f;
-                    b[(j, i)] *= f;
-                }
-            }
-        }
-        if converged {
-            break;
-        }
-    }
-    d
 }
 
 /// How one output is read: `y[k + shift] = row . x[k] + gain u[k]`.
@@ -182,6 +139,13 @@ pub fn simulate_linear(
             t_s: index as f64 * dt_s,
             value,
         });
+    }
+    if [&ss.a, &ss.c]
+        .iter()
+        .any(|m| m.iter().any(|v| !v.is_finite()))
+        || ss.b.iter().chain(ss.d.iter()).any(|v| !v.is_finite())
+    {
+        return Err(SimError::NonFiniteModel);
     }
     let disc = zoh(ss, dt_s);
     let taps: Vec<Tap> = (0..outputs)
@@ -401,7 +365,10 @@ mod tests {
         // response from the transfer functions' poles: independent of exp().
         let rig = model::PAPER_RIG;
         let ss = model::state_space(&rig, &exp1());
-        let tfs = [model::tf_x1_u(&rig, &exp1()), model::tf_f_u(&rig, &exp1())];
+        let tfs = [
+            model::tf_x1_u(&rig, &exp1()).unwrap(),
+            model::tf_f_u(&rig, &exp1()).unwrap(),
+        ];
         let dt = 1.0 / 2048.0;
         let u = vec![1e-3; 2048];
         let y = simulate_linear(&ss, &u, dt, &[0.0, 0.0]).unwrap();
@@ -471,7 +438,7 @@ mod tests {
             d: DVector::zeros(1),
         };
         let got = zoh(&ss, t).ad;
-        let eig = ss.eigenvalues();
+        let eig = ss.eigenvalues().unwrap();
         let ac = a.map(|v| Complex::new(v, 0.0));
         let eye = DMatrix::<Complex<f64>>::identity(4, 4);
         let mut want = DMatrix::<Complex<f64>>::zeros(4, 4);
@@ -516,10 +483,10 @@ mod tests {
         let dt = 1.0 / fs;
         let ws = 2.0 * PI * fs;
         for (f_hz, out, tf) in [
-            (2.0, 0, model::tf_x1_u(&rig, &spec)),
-            (2.0, 1, model::tf_f_u(&rig, &spec)),
-            (16.0, 0, model::tf_x1_u(&rig, &spec)),
-            (64.0, 1, model::tf_f_u(&rig, &spec)),
+            (2.0, 0, model::tf_x1_u(&rig, &spec).unwrap()),
+            (2.0, 1, model::tf_f_u(&rig, &spec).unwrap()),
+            (16.0, 0, model::tf_x1_u(&rig, &spec).unwrap()),
+            (64.0, 1, model::tf_f_u(&rig, &spec).unwrap()),
         ] {
             let w = 2.0 * PI * f_hz;
             let n = 8 * 2048; // 8 s; the slowest pole (-6.5 rad/s) leaves e^{-39}

@@ -64,6 +64,21 @@ pub enum SimError {
         what: &'static str,
         eigenvalues: String,
     },
+    /// The state matrix has a non-finite entry, or its eigenvalues do not
+    /// converge (finite but extreme parameters, issue 24).
+    #[error(
+        "the {what}'s eigenvalues cannot be computed (its state matrix has an entry beyond f64's range): check the rig parameters, the specimen and the p_gain"
+    )]
+    NoEigenvalues {
+        /// "linear plant" or "simplified canonical form".
+        what: &'static str,
+    },
+    /// The state space handed to the linear simulator has a non-finite
+    /// entry.
+    #[error(
+        "the model's state space has an entry beyond f64's range: check the rig parameters, the specimen and the p_gain"
+    )]
+    NonFiniteModel,
     /// A command sample is NaN or infinite.
     #[error("command sample {index} (t = {t_s} s) is not finite ({value})")]
     NonFiniteCommand { index: usize, t_s: f64, value: f64 },

@@ -166,6 +166,9 @@ pub fn validate(spec: &PlantSpec) -> Result<(), SimError> {
     let ss = build_linear(rig, m, c, k, &spec.unmodelled);
     let unstable: Vec<Complex<f64>> = ss
         .eigenvalues()
+        .ok_or(SimError::NoEigenvalues {
+            what: "linear plant",
+        })?
         .into_iter()
         .filter(|e| e.re >= 0.0)
         .collect();
@@ -649,7 +652,7 @@ mod tests {
                 },
             ))
             .unwrap();
-            let tf = model::tf_x1_u(&rig, &ls);
+            let tf = model::tf_x1_u(&rig, &ls).unwrap();
             let wv = 2.0 * std::f64::consts::PI * vm.natural_frequency_hz;
             let v = move |s: Complex<f64>| {
                 wv * wv / (s * s + 2.0 * vm.damping_ratio * wv * s + wv * wv)
@@ -729,7 +732,7 @@ mod tests {
                 damping_ns_per_m: c,
                 stiffness_n_per_m: k,
             };
-            let tf = model::tf_x1_u(&rig, &heavier);
+            let tf = model::tf_x1_u(&rig, &heavier).unwrap();
             freq_response_matches(&ss, 0, &|s| tf.eval(s));
             freq_response_matches(&ss, 1, &|s| tf.eval(s) * (m * s * s + c * s + k));
         }

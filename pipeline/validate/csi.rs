@@ -65,7 +65,8 @@ pub struct Response {
 }
 
 /// The analysis for an SDOF specimen with mass and stiffness (None for any
-/// other): `measured` is the log's force FRF as (frequency Hz, f/u in N/m)
+/// other, or for one whose model leaves f64's range: the run's error says
+/// so): `measured` is the log's force FRF as (frequency Hz, f/u in N/m)
 /// bins, when it has a force channel.
 pub fn csi(
     run: &str,
@@ -94,7 +95,7 @@ pub fn csi(
     zeros_rad_per_s.sort_by(|a, b| a[1].total_cmp(&b[1]));
 
     let (lo, hi) = (fn_hz / SEARCH_FACTOR, fn_hz * SEARCH_FACTOR);
-    let force = tf_f_u(rig, specimen);
+    let force = tf_f_u(rig, specimen).ok()?;
     let grid: Vec<f64> = (0..MODEL_POINTS)
         .map(|i| lo + (hi - lo) * i as f64 / (MODEL_POINTS - 1) as f64)
         .collect();
@@ -116,7 +117,7 @@ pub fn csi(
         })
     });
 
-    let x = tf_x1_u(rig, specimen).freq_response(fn_hz);
+    let x = tf_x1_u(rig, specimen).ok()?.freq_response(fn_hz);
     Some(Csi {
         run: run.to_string(),
         natural_frequency_hz: fn_hz,
@@ -277,7 +278,7 @@ mod tests {
     /// half-width (zeta fn = 0.32 Hz).
     #[test]
     fn a_noisy_measured_notch_is_found() {
-        let force = tf_f_u(&rig(), &SPECIMEN);
+        let force = tf_f_u(&rig(), &SPECIMEN).unwrap();
         let df = 0.01;
         let freq: Vec<f64> = (1..3500).map(|i| i as f64 * df).collect();
         let mut state = 7u64;

@@ -268,7 +268,9 @@ fn canonical_forms(
         .fold(0.0_f64, |m, (a, b)| m.max((a - b).abs()));
     let consistency = (peak > 0.0).then(|| diff / peak);
     let dropped_ss = model::ccf_linear_state_space(rig_at_p, sdof, CnTerm::Dropped);
-    let poles = dropped_ss.eigenvalues();
+    let poles = dropped_ss.eigenvalues().ok_or(SimError::NoEigenvalues {
+        what: "simplified canonical form",
+    })?;
     let max_re = poles.iter().map(|p| p.re).fold(f64::NEG_INFINITY, f64::max);
     if max_re < 0.0 {
         let dropped = simulate(&dropped_ss, rec, 0.0)?;
