@@ -96,6 +96,74 @@ struct Matched {
     /// Every matched file, sorted, so that nothing depends on the order the
     /// file system lists them in.
     files: Vec<PathBuf>,
+    /// Folder links the walk did not follow, each with the ancestor it
+    /// leads back to (a loop), sorted.
+    loops: Vec<(PathBuf, PathBuf)>,
+}
+
+/// How deep a `**` glob walks below its literal folder: deeper than any
+/// lab's log tree (date/rig/run is three), shallow enough that a walk
+/// through links that fan out without looping still ends.
+pub const GLOB_MAX_DEPTH: usize = 32;
+
+/// The files `spec` (a glob relative to `base_dir`) matches, and the
+/// folder links that loop back to an ancestor (not followed). The walk
+/// starts at the glob's literal folders, follows folder links (labs link
+/// log folders in) unless one leads back to its own ancestor, and goes
+/// [`GLOB_MAX_DEPTH`] deep for a `**`, else as deep as the glob has
+/// components. `*` and `?` do not cross a `/`; a file or folder whose name
+/// starts with `.` matches only a pattern that starts it with a literal dot.
+#[allow(clippy::type_complexity)]
+fn walk_glob(
+    spec: &str,
+    base_dir: &Path,
+) -> Result<(Vec<PathBuf>, Vec<(PathBuf, PathBuf)>), glob::PatternError> {
+    let mut root = base_dir.to_path_buf();
+    let mut rest: Vec<String> = Vec::new();
+    for c in Path::new(spec).components() {
+        let part = c.as_os_str().to_string_lossy().into_owned();
+        if rest.is_empty() && !part.contains(['*', '?', '[']) {
+            root.push(c);
+        } else {
+            rest.push(part);
+        }
+    }
+    let pattern = glob::Pattern::new(&rest.join("/"))?;
+    let options = glob::MatchOptions {
+        require_literal_separator: true,
+        require_literal_leading_dot: true,
+        ..glob::MatchOptions::new()
+    };
+    let depth = if rest.iter().any(|p| p.contains("**")) {
+        GLOB_MAX_DEPTH
+    } else {
+        rest.len()
+    };
+    let (mut files, mut loops) = (Vec::new(), Vec::new());
+    let walk = walkdir::WalkDir::new(&root)
+        .follow_links(true)
+        .min_depth(1)
+        .max_depth(depth);
+    for entry in walk {
+        match entry {
+            Ok(e) if e.file_type().is_file() => {
+                let rel = e.path().strip_prefix(&root).unwrap_or(e.path());
+                if pattern.matches_path_with(rel, options) {
+                    files.push(e.into_path());
+                }
+            }
+            Ok(_) => {}
+            // A loop is named; a folder that cannot be read is skipped, as
+            // the glob crate's walk skipped it.
+            Err(err) => {
+                if let (Some(ancestor), Some(link)) = (err.loop_ancestor(), err.path()) {
+                    loops.push((link.to_path_buf(), ancestor.to_path_buf()));
+                }
+            }
+        }
+    }
+    loops.sort();
+    Ok((files, loops))
 }
 
 /// Where the rows without a `log` cell find theirs.
@@ -440,19 +508,15 @@ fn match_logs(spec: &str, base_dir: &Path, problems: &mut Vec<Problem>) -> Optio
     let key = KeyPath::root().key("run_table").key("logs");
     let target = base_dir.join(spec);
     let glob = spec.contains(['*', '?', '[']);
+    let mut loops = Vec::new();
     let mut files = if glob {
-        // The manifest's folder is literal text, whatever characters it holds.
-        let base = glob::Pattern::escape(&base_dir.to_string_lossy());
-        let pattern = Path::new(&base).join(spec);
-        let options = glob::MatchOptions {
-            require_literal_leading_dot: true,
-            ..glob::MatchOptions::new()
-        };
-        match glob::glob_with(&pattern.to_string_lossy(), options) {
-            Ok(paths) => paths
-                .filter_map(Result::ok)
-                .filter(|p| p.is_file())
-                .collect(),
+        // The manifest's folder is literal text, whatever characters it
+        // holds: the walk starts there and matches only below it.
+        match walk_glob(spec, base_dir) {
+            Ok((files, l)) => {
+                loops = l;
+                files
+            }
             Err(e) => {
                 problems.push(Problem::new(key, format!("not a valid glob: {e}")));
                 return None;
@@ -485,6 +549,7 @@ fn match_logs(spec: &str, base_dir: &Path, problems: &mut Vec<Problem>) -> Optio
         base_dir: base_dir.to_path_buf(),
         glob,
         files,
+        loops,
     })
 }
 
@@ -526,26 +591,54 @@ fn expected_log(m: &Matched, id: &str) -> PathBuf {
     }
 }
 
-/// A warning for each matched log that no run uses, naming it as the
-/// manifest's folder sees it; and one when `logs` matched nothing.
+/// The unused logs a warning names one by one; past them, one line says
+/// how many more (a folder of old logs matched 20,000, issue 24).
+pub const UNUSED_LOGS_LISTED: usize = 10;
+
+/// A warning for each folder link the walk did not follow (a loop); for
+/// each matched log that no run uses, naming it as the manifest's folder
+/// sees it, the first [`UNUSED_LOGS_LISTED`] of them and then their count;
+/// and one when `logs` matched nothing.
 fn unused_logs(m: &Matched, used: &BTreeSet<PathBuf>) -> Vec<String> {
-    if m.files.is_empty() {
-        return vec![format!(
-            "[run_table] logs = {:?} matches no log file",
-            m.spec
-        )];
-    }
-    m.files
+    let mut out: Vec<String> = m
+        .loops
         .iter()
-        .filter(|f| !used.contains(&same_file(f)))
-        .map(|f| {
+        .map(|(link, ancestor)| {
             format!(
-                "{}: matched by [run_table] logs = {:?}, but no run uses it",
-                m.shown(f),
+                "{}: a folder link back to {} (a loop): [run_table] logs = {:?} does not follow it",
+                m.shown(link),
+                m.shown(ancestor),
                 m.spec
             )
         })
-        .collect()
+        .collect();
+    if m.files.is_empty() {
+        out.push(format!(
+            "[run_table] logs = {:?} matches no log file",
+            m.spec
+        ));
+        return out;
+    }
+    let unused: Vec<&PathBuf> = m
+        .files
+        .iter()
+        .filter(|f| !used.contains(&same_file(f)))
+        .collect();
+    out.extend(unused.iter().take(UNUSED_LOGS_LISTED).map(|f| {
+        format!(
+            "{}: matched by [run_table] logs = {:?}, but no run uses it",
+            m.shown(f),
+            m.spec
+        )
+    }));
+    if unused.len() > UNUSED_LOGS_LISTED {
+        out.push(format!(
+            "and {} more logs matched by [run_table] logs = {:?} that no run uses (narrow the glob, or move old logs out)",
+            unused.len() - UNUSED_LOGS_LISTED,
+            m.spec
+        ));
+    }
+    out
 }
 
 /// A path to compare files by: canonical where the file exists (the same
@@ -665,6 +758,55 @@ logs = "LOGS"
         assert_eq!(info.rows, 2);
         assert_eq!(c.runs[3].p_gain, 1.0);
         assert_eq!(c.runs[4].p_gain, 2.0);
+    }
+
+    #[test]
+    fn a_recursive_glob_through_two_folder_loops_ends_and_names_them() {
+        // Issue 24: `logs/**/*.csv` through two links back to ancestors ran
+        // until memory ran out (3 GB in 2 minutes).
+        let dir = tempfile::tempdir().unwrap();
+        let d = dir.path();
+        let files = ["logs/a.csv", "logs/day1/b.csv", "logs/day1/deep/c2.csv"];
+        for f in files {
+            let p = d.join(f);
+            std::fs::create_dir_all(p.parent().unwrap()).unwrap();
+            std::fs::write(&p, "t,u,x\n").unwrap();
+        }
+        std::os::unix::fs::symlink(d.join("logs"), d.join("logs/day1/up")).unwrap();
+        std::os::unix::fs::symlink(d.join("logs/day1"), d.join("logs/day1/deep/back")).unwrap();
+        // A linked-in folder that does not loop is followed.
+        std::fs::create_dir_all(d.join("elsewhere")).unwrap();
+        std::fs::write(d.join("elsewhere/e.csv"), "t,u,x\n").unwrap();
+        std::os::unix::fs::symlink(d.join("elsewhere"), d.join("logs/linked")).unwrap();
+        let table = "id,role,p_gain\na,fit,1\nb,fit,1\n";
+        let c = campaign(d, "logs/**/*.csv", table, &[]);
+        assert_eq!(
+            c.warnings,
+            [
+                "logs/day1/deep/back: a folder link back to logs/day1 (a loop): [run_table] logs = \"logs/**/*.csv\" does not follow it",
+                "logs/day1/up: a folder link back to logs (a loop): [run_table] logs = \"logs/**/*.csv\" does not follow it",
+                "logs/day1/deep/c2.csv: matched by [run_table] logs = \"logs/**/*.csv\", but no run uses it",
+                "logs/linked/e.csv: matched by [run_table] logs = \"logs/**/*.csv\", but no run uses it",
+            ]
+        );
+        // `**` matches no folder too: a.csv sits right under logs/.
+        assert_eq!(log_of(&c, "a"), (d.join("logs/a.csv"), LogFormat::Csv));
+        assert_eq!(log_of(&c, "b"), (d.join("logs/day1/b.csv"), LogFormat::Csv));
+    }
+
+    #[test]
+    fn many_unused_logs_are_listed_up_to_ten_then_counted() {
+        let dir = tempfile::tempdir().unwrap();
+        let d = dir.path();
+        let files: Vec<String> = (0..25).map(|i| format!("logs/old{i:02}.csv")).collect();
+        let files: Vec<&str> = files.iter().map(String::as_str).collect();
+        let c = campaign(d, "logs/*.csv", "id,role,p_gain\nold00,fit,1\n", &files);
+        assert_eq!(c.warnings.len(), super::UNUSED_LOGS_LISTED + 1);
+        assert!(c.warnings[0].starts_with("logs/old01.csv: matched"));
+        assert_eq!(
+            c.warnings[10],
+            "and 14 more logs matched by [run_table] logs = \"logs/*.csv\" that no run uses (narrow the glob, or move old logs out)"
+        );
     }
 
     #[test]
