@@ -384,7 +384,7 @@ impl Watch {
 
     /// Print what a campaign run wrote, with its summary line, and decide
     /// its exit code: 1 when any run failed (its error is in results.json
-    /// too).
+    /// too) or the rig history cannot be read.
     fn campaign(&self, outcome: &CampaignOutcome) -> u8 {
         self.done();
         let results = &outcome.results;
@@ -433,13 +433,19 @@ impl Watch {
                 c.likely_causes.join("; ")
             ));
         }
+        if let Some(h) = &outcome.history_error {
+            if self.json {
+                say(&serde_json::json!({"event": "history_unreadable", "error": h}).to_string());
+            }
+            warn(&format!("error: {h}"));
+        }
         let alarms = results.drift.as_ref().map_or(&[][..], |d| &d.alarms[..]);
         for a in alarms {
             warn(&format!("ALARM: {a}"));
         }
         if !alarms.is_empty() {
             EXIT_ALARM
-        } else if failed > 0 {
+        } else if failed > 0 || outcome.history_error.is_some() {
             EXIT_FAILED
         } else {
             EXIT_OK

@@ -203,3 +203,83 @@ fn a_stable_rig_never_raises_it_and_a_rerun_adds_nothing() {
     assert!(std::fs::read(out.join("results.json")).unwrap() == before);
     assert!(std::fs::read(out.join("history.parquet")).unwrap() == history_before);
 }
+
+/// A history that cannot be read is the night's failure, not a line in
+/// results.json (issue 24, defect 4): before, a truncated table gave exit
+/// 0, nothing on stderr, a warning naming the deleted work folder, and no
+/// update ever again (the drift alarm off for good). Each update keeps the
+/// table it replaces as `history.parquet.prev`, which the message names
+/// as the way back; a lab's own column survives the updates.
+#[test]
+fn an_unreadable_history_fails_the_night_and_says_how_to_recover() {
+    use polars::prelude::{Column, ParquetReader, ParquetWriter, SerReader};
+    let dir = scratch();
+    let out = dir.path().join("out");
+    let history = out.join("history.parquet");
+    let prev = out.join("history.parquet.prev");
+    assert_eq!(night(dir.path(), &out, 0, 267.0).0, 0);
+    assert!(!prev.exists(), "no previous table yet");
+    // The lab adds an operator column by hand.
+    let mut df = ParquetReader::new(std::fs::File::open(&history).unwrap())
+        .finish()
+        .unwrap();
+    df.with_column(Column::new("operator".into(), ["ana"]))
+        .unwrap();
+    ParquetWriter::new(std::fs::File::create(&history).unwrap())
+        .finish(&mut df)
+        .unwrap();
+    let by_hand = std::fs::read(&history).unwrap();
+    assert_eq!(night(dir.path(), &out, 1, 267.0).0, 0);
+    assert_eq!(std::fs::read(&prev).unwrap(), by_hand);
+    let table =
+        servoid::ingest::read_table(&history, servoid::ingest::TableFormat::Parquet).unwrap();
+    let op = table.column("operator").expect("the lab's column is kept");
+    let campaign = table.column("campaign").unwrap();
+    assert_eq!(table.rows.len(), 2);
+    assert_eq!(table.rows[0][op].as_deref(), Some("ana"));
+    assert_eq!(table.rows[1][op], None);
+    assert!(table.rows.iter().all(|r| r[campaign].is_some()));
+
+    // Truncated (a copy cut short): night 2 fails, on stderr and as a JSON
+    // event, naming the file where the user knows it and the copy to
+    // restore; the table is left as it was for someone to look at.
+    let good = std::fs::read(&history).unwrap();
+    std::fs::write(&history, &good[..good.len() / 2]).unwrap();
+    let sim = dir.path().join("night-1/campaign.toml");
+    let o = servoid_into(
+        dir.path(),
+        "run",
+        &sim,
+        &out,
+        &["--figures", "none", "--log-format", "json"],
+    );
+    assert_eq!(o.code, 1, "{}", o.stderr);
+    let shown = history.display().to_string();
+    assert!(
+        o.stderr
+            .contains(&format!("error: the rig history {shown} cannot be read (")),
+        "{}",
+        o.stderr
+    );
+    assert!(
+        o.stderr.contains(&format!(
+            "its previous good copy is {shown}.prev: restore it"
+        )),
+        "{}",
+        o.stderr
+    );
+    assert!(!o.stderr.contains(".servoid-"), "{}", o.stderr);
+    let event = o
+        .stdout
+        .lines()
+        .map(|l| serde_json::from_str::<Value>(l).unwrap())
+        .find(|v| v["event"] == "history_unreadable")
+        .expect("a history_unreadable event");
+    assert!(event["error"].as_str().unwrap().contains("cannot be read"));
+    assert_eq!(std::fs::read(&history).unwrap(), &good[..good.len() / 2]);
+    // Restored as the message says, the next night updates it again.
+    std::fs::copy(&prev, &history).unwrap();
+    let (code, results, stderr) = night(dir.path(), &out, 2, 267.0);
+    assert_eq!(code, 0, "{stderr}");
+    assert_eq!(results["drift"]["earlier_entries"], 1);
+}

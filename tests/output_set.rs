@@ -34,7 +34,10 @@ fn leftovers(out: &Path) -> Vec<String> {
         .unwrap()
         .flatten()
         .map(|e| e.file_name().to_string_lossy().into_owned())
-        .filter(|n| n.starts_with(&format!(".{name}.")));
+        .filter(|n| n.starts_with(&format!(".{name}.")))
+        // The output folder's lock file stays by design (removing it would
+        // let a waiting job lock a file no later job sees).
+        .filter(|n| *n != format!(".{name}.servoid-lock"));
     let inside = tree(out)
         .into_keys()
         .filter(|p| p.contains(".tmp-") || p.contains(".servoid-probe-"));
@@ -190,4 +193,150 @@ fn a_failed_rerun_replaces_nothing_and_says_where_it_could_not_write() {
     assert!(!o.stderr.contains(".servoid-"), "{}", o.stderr);
     assert_eq!(tree(&out), before, "the previous set is untouched");
     assert_eq!(leftovers(&out), Vec::<String>::new());
+}
+
+fn args(v: &[String]) -> Vec<&str> {
+    v.iter().map(String::as_str).collect()
+}
+
+/// The campaigns named in the history table at `out`, in table order.
+fn history_campaigns(out: &Path) -> Vec<String> {
+    let t = servoid::ingest::read_table(
+        &out.join("history.parquet"),
+        servoid::ingest::TableFormat::Parquet,
+    )
+    .unwrap();
+    let c = t.column("campaign").unwrap();
+    t.rows.iter().map(|r| r[c].clone().unwrap()).collect()
+}
+
+/// Job A holds the output folder's lock (paused 4 s just after taking
+/// it); job B starts 1 s later into the same folder. Returns A's pid and
+/// both outputs.
+fn two_jobs(
+    dir: &Path,
+    a: &[&str],
+    b: &[&str],
+) -> (u32, std::process::Output, std::process::Output) {
+    let first = Command::new(env!("CARGO_BIN_EXE_servoid"))
+        .args(a)
+        .current_dir(dir)
+        .env("SERVOID_PAUSE_AT", "locked")
+        .env("SERVOID_PAUSE_MS", "4000")
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let pid = first.id();
+    std::thread::sleep(std::time::Duration::from_secs(1));
+    let second = Command::new(env!("CARGO_BIN_EXE_servoid"))
+        .args(b)
+        .current_dir(dir)
+        .env_remove("SERVOID_PAUSE_AT")
+        .output()
+        .unwrap();
+    (pid, first.wait_with_output().unwrap(), second)
+}
+
+/// Two jobs into one output folder at once (issue 24, defect 3): before,
+/// both carried the same previous set and the later one's exchange dropped
+/// the earlier one's history entry, both exiting 0. Now the second waits
+/// for the first's lock, says so on stderr naming the first's pid, and
+/// starts from the set the first put in place: the history holds both
+/// entries. Run + run, then run + merge. A lock left by a killed job
+/// blocks nothing: the kernel releases it with the process.
+#[test]
+fn two_jobs_into_one_folder_take_turns_and_keep_both_history_entries() {
+    let dir = scratch();
+    let d = dir.path();
+    let manifest = campaign(d);
+    let text = std::fs::read_to_string(&manifest).unwrap();
+    let named = |name: &str| {
+        let path = d.join(format!("sim/{name}.toml"));
+        let key = "[campaign]\nname = \"";
+        let at = text.find(key).expect("a campaign name") + key.len();
+        std::fs::write(&path, format!("{}{name}-{}", &text[..at], &text[at..])).unwrap();
+        path
+    };
+    let (a, b, c) = (named("a"), named("b"), named("c"));
+    let out = d.join("night");
+    let run = |m: &Path| -> Vec<String> {
+        [
+            "run",
+            m.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+            "--quiet",
+        ]
+        .map(String::from)
+        .to_vec()
+    };
+    let (ra, rb) = (run(&a), run(&b));
+
+    let (pid, first, second) = two_jobs(d, &args(&ra), &args(&rb));
+    assert!(
+        first.status.success(),
+        "{}",
+        String::from_utf8_lossy(&first.stderr)
+    );
+    assert!(
+        second.status.success(),
+        "{}",
+        String::from_utf8_lossy(&second.stderr)
+    );
+    let said = String::from_utf8_lossy(&second.stderr);
+    assert!(
+        said.contains(&format!(
+            "is being written by another job (pid {pid}); waiting"
+        )),
+        "{said}"
+    );
+    let names = history_campaigns(&out);
+    assert_eq!(names.len(), 2, "{names:?}");
+    assert!(
+        names[0].starts_with("a-") && names[1].starts_with("b-"),
+        "{names:?}"
+    );
+    assert!(leftovers(&out).is_empty(), "{:?}", leftovers(&out));
+
+    // Run + merge: campaign c's two shards merged into the folder while a
+    // rerun of a holds it.
+    let shards: Vec<PathBuf> = (0..2)
+        .map(|i| {
+            let s = d.join(format!("shard-{i}"));
+            let o = servoid_into(d, "run", &c, &s, &["--shard", &format!("{i}/2"), "--quiet"]);
+            assert_eq!(o.code, 0, "{}", o.stderr);
+            s
+        })
+        .collect();
+    let mut merge = vec!["merge".to_string()];
+    merge.extend(shards.iter().map(|s| s.to_str().unwrap().to_string()));
+    merge.extend(["--out", out.to_str().unwrap(), "--quiet"].map(String::from));
+    let (_, first, second) = two_jobs(d, &args(&ra), &args(&merge));
+    assert!(
+        first.status.success(),
+        "{}",
+        String::from_utf8_lossy(&first.stderr)
+    );
+    assert!(
+        second.status.success(),
+        "{}",
+        String::from_utf8_lossy(&second.stderr)
+    );
+    assert!(String::from_utf8_lossy(&second.stderr).contains("waiting for it to finish"));
+    let names = history_campaigns(&out);
+    assert_eq!(names.len(), 3, "{names:?}");
+    assert!(names[2].starts_with("c-"), "{names:?}");
+
+    // A job killed while it holds the lock leaves the lock file, unlocked.
+    let killed = Command::new(env!("CARGO_BIN_EXE_servoid"))
+        .args(args(&rb))
+        .current_dir(d)
+        .env("SERVOID_KILL_AT", "locked")
+        .output()
+        .unwrap();
+    assert_eq!(killed.status.signal(), Some(9));
+    let o = servoid_into(d, "run", &b, &out, &["--quiet"]);
+    assert_eq!(o.code, 0, "{}", o.stderr);
+    assert!(!o.stderr.contains("waiting"), "{}", o.stderr);
 }

@@ -427,10 +427,14 @@ fn check_history(
         );
     }
     positive(h.threshold, &path.key("threshold"), bad);
-    if let Some(f) = &h.file
-        && f.trim().is_empty()
-    {
-        bad(path.key("file"), "must not be empty".into());
+    if let Some(f) = &h.file {
+        if f.trim().is_empty() {
+            bad(path.key("file"), "must not be empty".into());
+        } else if let Some(why) = not_a_file_path(&base_dir.join(f), f) {
+            // /dev/null, `.` or a folder took every night's entry without
+            // a word, and the drift alarm was off for good (issue 24).
+            bad(path.key("file"), why);
+        }
     }
     HistoryPlan {
         file: h.file.as_ref().map(|f| base_dir.join(f)),
@@ -438,6 +442,38 @@ fn check_history(
             window: h.window,
             threshold: h.threshold,
         },
+    }
+}
+
+/// Why `path` (given as `given`) cannot hold the rig history: a name that
+/// is a folder's (`.`, `..`, a trailing `/`), or something that exists and
+/// is not a regular file (a folder, /dev/null). None when it is, or is yet
+/// to be, a regular file.
+fn not_a_file_path(path: &Path, given: &str) -> Option<String> {
+    use std::path::Component;
+    let names_a_folder = given.ends_with('/')
+        || !matches!(
+            Path::new(given).components().next_back(),
+            Some(Component::Normal(_))
+        );
+    if names_a_folder {
+        return Some(format!(
+            "`{given}` names a folder: give the history's file, such as `{}history.parquet`",
+            if given.ends_with('/') {
+                given.to_string()
+            } else {
+                format!("{given}/")
+            }
+        ));
+    }
+    match std::fs::metadata(path) {
+        Ok(m) if m.is_dir() => Some(format!(
+            "`{given}` is a folder: give the history's file, such as `{given}/history.parquet`"
+        )),
+        Ok(m) if !m.is_file() => Some(format!(
+            "`{given}` is not a regular file (a device or a pipe takes every entry and gives none back): give a file path, such as `history.parquet`"
+        )),
+        _ => None,
     }
 }
 

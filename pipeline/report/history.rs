@@ -31,12 +31,18 @@ pub const COLUMNS: [&str; 15] = [
 ];
 
 /// Write the history atomically: readers see the old table or the new.
-pub fn write(path: &Path, entries: &[Entry]) -> Result<(), LogWriteError> {
+/// `extra` are columns of the lab's own (name, a cell per entry), written
+/// after servoid's as text.
+pub fn write(
+    path: &Path,
+    entries: &[Entry],
+    extra: &[(String, Vec<Option<String>>)],
+) -> Result<(), LogWriteError> {
     let text = |f: fn(&Entry) -> &str| entries.iter().map(f).map(String::from).collect::<Vec<_>>();
     let num = |f: fn(&Entry) -> f64| entries.iter().map(f).collect::<Vec<f64>>();
     let opt = |f: fn(&Entry) -> Option<f64>| entries.iter().map(f).collect::<Vec<Option<f64>>>();
     let n = entries.len();
-    let cols = vec![
+    let mut cols = vec![
         Column::new("rig".into(), text(|e| &e.rig)),
         Column::new("campaign".into(), text(|e| &e.campaign)),
         Column::new(
@@ -56,6 +62,11 @@ pub fn write(path: &Path, entries: &[Entry]) -> Result<(), LogWriteError> {
         Column::new("a3_std".into(), opt(|e| e.a3_std)),
         Column::new("servoid_version".into(), text(|e| &e.servoid_version)),
     ];
+    cols.extend(
+        extra
+            .iter()
+            .map(|(name, cells)| Column::new(name.as_str().into(), cells.clone())),
+    );
     write_atomic(path, &frame_bytes(path, n, cols)?)?;
     Ok(())
 }

@@ -13,13 +13,21 @@
 //! replaces files by rename, never in place, so the previous set's files
 //! are never touched through those links.
 //!
+//! The output folder is locked for the whole job (flock on
+//! `.<name>.servoid-lock` beside it, released by the kernel when the job
+//! ends or dies, so a stale lock never blocks a later night): a second
+//! job into the same folder (two runs, a run and a merge) waits for the
+//! first with a message on stderr, then starts from the set the first put
+//! in place. Without it both carried the same previous set and the later
+//! exchange dropped the earlier job's history entry (issue 24).
+//!
 //! A work folder is locked (flock) while its job lives. One left by a
 //! killed job is unlocked, and the next job beside it removes it, as it
 //! skips the per-file temporaries (`.<file>.tmp-<pid>`) such a job left
 //! inside the previous set.
 //!
 //! Fault injection: with `SERVOID_KILL_AT=<point>` in the environment, the
-//! process sends itself SIGKILL at that point (`carried`, `results`,
+//! process sends itself SIGKILL at that point (`locked`, `carried`, `results`,
 //! `exchange`, `exchanged`); tests/output_set.rs uses it to kill a rerun
 //! where a mix would be most likely.
 
@@ -45,6 +53,9 @@ pub struct OutSet {
     work: PathBuf,
     /// Held for the job's life: an unlocked work folder is a dead job's.
     _lock: File,
+    /// The output folder's lock, held from before the previous set is
+    /// carried until the new one is in place (or the job ends).
+    _target_lock: File,
     committed: bool,
 }
 
@@ -107,9 +118,16 @@ impl OutSet {
                 .map_err(|e| bad(format!("cannot write in the output folder (--out): {e}")))?;
         }
         let name = name.to_string_lossy().into_owned();
+        let target_lock = lock_target(parent, &name, target).map_err(|e| {
+            bad(format!(
+                "cannot lock the output folder (--out) for this job: {e}"
+            ))
+        })?;
         sweep(parent, &name);
         if existing.is_none() && std::fs::symlink_metadata(&resolved).is_ok() {
-            // The sweep put a previous set back: start again from it.
+            // The sweep put a previous set back (or a job this one waited
+            // for put its set in): start again from it.
+            drop(target_lock);
             return Self::begin(target);
         }
         let work = parent.join(format!(".{name}{WORK}{}", std::process::id()));
@@ -139,6 +157,7 @@ impl OutSet {
             target: target.to_path_buf(),
             work,
             _lock: lock,
+            _target_lock: target_lock,
             committed: false,
         };
         if existing.is_some() {
@@ -219,6 +238,15 @@ impl Drop for OutSet {
 /// With `SERVOID_KILL_AT=point` in the environment, kill this process (as
 /// the kernel's OOM killer or an operator's kill -9 would) at `point`.
 pub fn fault(point: &str) {
+    // SERVOID_PAUSE_AT=<point> holds the job there for SERVOID_PAUSE_MS
+    // (tests/output_set.rs starts a second job into a locked folder).
+    if std::env::var_os("SERVOID_PAUSE_AT").is_some_and(|p| p == point) {
+        let ms = std::env::var("SERVOID_PAUSE_MS")
+            .ok()
+            .and_then(|v| v.parse().ok())
+            .unwrap_or(1000);
+        std::thread::sleep(std::time::Duration::from_millis(ms));
+    }
     if std::env::var_os("SERVOID_KILL_AT").is_some_and(|p| p == point) {
         #[cfg(unix)]
         // SAFETY: raise only sends a signal to this process.
@@ -228,6 +256,42 @@ pub fn fault(point: &str) {
         #[cfg(not(unix))]
         std::process::abort();
     }
+}
+
+/// The lock of output folder `name` in `parent`, taken: at once, or after
+/// the job holding it ends (with a message naming it on stderr). The file
+/// stays (a later job reuses it); only the kernel's lock on it matters.
+fn lock_target(parent: &Path, name: &str, shown: &Path) -> std::io::Result<File> {
+    use std::io::{Read, Seek, Write};
+    let path = parent.join(format!(".{name}{WORK}lock"));
+    let mut file = File::options()
+        .create(true)
+        .truncate(false)
+        .read(true)
+        .write(true)
+        .open(&path)?;
+    match file.try_lock() {
+        Ok(()) => {}
+        Err(std::fs::TryLockError::WouldBlock) => {
+            let mut holder = String::new();
+            let _ = file.read_to_string(&mut holder);
+            eprintln!(
+                "servoid: the output folder {} is being written by another job ({}); waiting for it to finish",
+                shown.display(),
+                match holder.trim() {
+                    "" => "pid unknown".to_string(),
+                    pid => format!("pid {pid}"),
+                }
+            );
+            file.lock()?;
+        }
+        Err(std::fs::TryLockError::Error(e)) => return Err(e),
+    }
+    file.set_len(0)?;
+    file.rewind()?;
+    write!(file, "{}", std::process::id())?;
+    fault("locked");
+    Ok(file)
 }
 
 /// Create and remove a file in `dir`: can this job write there?

@@ -17,6 +17,9 @@ pub(super) struct History {
     path: PathBuf,
     /// Every entry of the table, every rig, in table order.
     entries: Vec<Entry>,
+    /// The table's columns that are not servoid's (a lab's notes, an
+    /// operator): kept through every update, as text.
+    extra: Extra,
     /// Where this campaign's entry goes: its own earlier entry's place, or
     /// the end.
     slot: usize,
@@ -32,28 +35,78 @@ pub(super) fn path(campaign: &Campaign, out_dir: &Path) -> PathBuf {
         .unwrap_or_else(|| out_dir.join("history.parquet"))
 }
 
+/// Columns of a history table that servoid does not write, with each
+/// row's cell.
+#[derive(Debug, Clone, Default)]
+struct Extra {
+    names: Vec<String>,
+    rows: Vec<Vec<Option<String>>>,
+}
+
+/// A history table that exists and cannot be read (damaged, or not a
+/// servoid history): the night's failure, not a warning, for the drift
+/// alarm is off until someone looks (issue 24).
+#[derive(Debug)]
+pub(super) struct Unreadable {
+    pub path: PathBuf,
+    pub what: String,
+}
+
+impl Unreadable {
+    /// What the night says, with `shown` the file as the user knows it:
+    /// what is wrong and how to recover.
+    pub(super) fn message(&self, shown: &Path) -> String {
+        let prev = previous_copy(&self.path);
+        let recover = if prev.is_file() {
+            let shown_prev = previous_copy(shown);
+            format!(
+                "its previous good copy is {}: restore it (cp {} {}), or move the damaged file aside to start a new history, then rerun",
+                shown_prev.display(),
+                shown_prev.display(),
+                shown.display()
+            )
+        } else {
+            "restore it from a backup, or move it aside to start a new history, then rerun".into()
+        };
+        format!(
+            "the rig history {} cannot be read ({}): the rig was not checked for drift and the history was not updated; {recover}",
+            shown.display(),
+            self.what
+        )
+    }
+}
+
+/// Where the previous good copy of the history at `path` is kept:
+/// `<file>.prev` beside it, written before each update replaces it.
+pub(super) fn previous_copy(path: &Path) -> PathBuf {
+    let mut name = path.file_name().unwrap_or_default().to_os_string();
+    name.push(".prev");
+    path.with_file_name(name)
+}
+
 /// Check `results`' rig against its history and record the checks in
 /// `results.drift`. Returns the history to update once results.json is
-/// written, or a warning (in results) when the table cannot be read: it is
-/// then left as it is for someone to look at.
-pub(super) fn check(campaign: &Campaign, out_dir: &Path, results: &mut Results) -> Option<History> {
-    let rig = results.rig.as_ref()?;
+/// written (None without a rig), or why the table that exists cannot be
+/// read: it is then left as it is for someone to look at.
+pub(super) fn check(
+    campaign: &Campaign,
+    out_dir: &Path,
+    results: &mut Results,
+) -> Result<Option<History>, Unreadable> {
+    let Some(rig) = results.rig.as_ref() else {
+        return Ok(None);
+    };
     let path = path(campaign, out_dir);
-    let entries = if path.exists() {
-        match ingest::read_table(&path, TableFormat::Parquet)
-            .map_err(|e| e.to_string())
-            .and_then(|t| entries(&t).map_err(|e| format!("{}: {e}", path.display())))
-        {
-            Ok(e) => e,
-            Err(e) => {
-                results.warnings.push(format!(
-                    "the rig history cannot be read, so the rig was not checked for drift and the history was not updated: {e}"
-                ));
-                return None;
-            }
-        }
+    let (entries, extra) = if std::fs::symlink_metadata(&path).is_ok() {
+        ingest::read_table(&path, TableFormat::Parquet)
+            .map_err(|e| e.problem.to_string())
+            .and_then(|t| entries(&t).map_err(|e| e.to_string()))
+            .map_err(|what| Unreadable {
+                path: path.clone(),
+                what,
+            })?
     } else {
-        Vec::new()
+        (Vec::new(), Extra::default())
     };
     let entry = Entry {
         rig: campaign.rig_name.clone(),
@@ -113,12 +166,13 @@ pub(super) fn check(campaign: &Campaign, out_dir: &Path, results: &mut Results) 
         checks,
         alarms,
     });
-    Some(History {
+    Ok(Some(History {
         path,
         entries,
+        extra,
         slot,
         entry,
-    })
+    }))
 }
 
 impl History {
@@ -132,11 +186,34 @@ impl History {
             .collect()
     }
 
-    /// Put this campaign's entry in, with the hash of its results.json.
+    /// Put this campaign's entry in, with the hash of its results.json;
+    /// the table it replaces is kept as `<file>.prev` first (a rerun that
+    /// changes nothing leaves the copy as it was).
     pub(super) fn write(mut self, results_json: &[u8]) -> Result<(), WriteError> {
         self.entry.results_sha256 = ingest::sha256_hex(results_json);
+        if self.slot == self.entries.len() {
+            self.extra.rows.push(vec![None; self.extra.names.len()]);
+        }
         put(&mut self.entries, self.slot, self.entry);
-        report::history::write(&self.path, &self.entries).map_err(|e| match e {
+        if let Ok(previous) = std::fs::read(&self.path) {
+            let prev = previous_copy(&self.path);
+            if std::fs::read(&prev).ok().as_deref() != Some(&previous[..]) {
+                report::write_atomic(&prev, &previous)?;
+            }
+        }
+        let columns: Vec<(String, Vec<Option<String>>)> = self
+            .extra
+            .names
+            .iter()
+            .enumerate()
+            .map(|(k, name)| {
+                (
+                    name.clone(),
+                    self.extra.rows.iter().map(|r| r[k].clone()).collect(),
+                )
+            })
+            .collect();
+        report::history::write(&self.path, &self.entries, &columns).map_err(|e| match e {
             LogWriteError::Write(w) => w,
             other => WriteError::Table(Box::new(other)),
         })
@@ -184,8 +261,24 @@ pub(super) enum HistoryError {
 }
 
 /// The table's rows as entries (its floats come back bit for bit: Parquet
-/// holds them as doubles, the reader prints them shortest round-trip).
-fn entries(t: &Table) -> Result<Vec<Entry>, HistoryError> {
+/// holds them as doubles, the reader prints them shortest round-trip), and
+/// its other columns.
+fn entries(t: &Table) -> Result<(Vec<Entry>, Extra), HistoryError> {
+    let others: Vec<usize> = (0..t.columns.len())
+        .filter(|&i| !report::history::COLUMNS.contains(&t.columns[i].as_str()))
+        .collect();
+    let extra = Extra {
+        names: others.iter().map(|&i| t.columns[i].clone()).collect(),
+        rows: t
+            .rows
+            .iter()
+            .map(|r| others.iter().map(|&i| r[i].clone()).collect())
+            .collect(),
+    };
+    Ok((servoid_entries(t)?, extra))
+}
+
+fn servoid_entries(t: &Table) -> Result<Vec<Entry>, HistoryError> {
     let col = |name: &'static str| t.column(name).ok_or(HistoryError::MissingColumn(name));
     let idx: Vec<usize> = report::history::COLUMNS
         .iter()

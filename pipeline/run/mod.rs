@@ -115,6 +115,9 @@ pub struct CampaignOutcome {
     pub seconds: f64,
     /// Runs whose outcome came from the cache.
     pub cached: usize,
+    /// The rig history exists and cannot be read: what is wrong and how to
+    /// recover. The night's failure (exit 1): its drift alarm is off.
+    pub history_error: Option<String>,
 }
 
 impl CampaignOutcome {
@@ -469,7 +472,15 @@ fn write_campaign(
     // Where the manifest is from where results.json will be, once the set
     // is in place (a simulated campaign's manifest is inside the set).
     results.campaign.manifest_path = relative_to(&set.final_path(&campaign.file), set.target());
-    let history = history::check(campaign, out_dir, &mut results);
+    let (history, history_error) = match history::check(campaign, out_dir, &mut results) {
+        Ok(h) => (h, None),
+        Err(u) => {
+            // Named as the user knows the file, not under the work folder.
+            let said = u.message(&set.final_path(&u.path));
+            results.warnings.push(said.clone());
+            (None, Some(said))
+        }
+    };
     let mut campaign_figures = analysed.campaign_figures;
     if let (Some(h), Some(files)) = (&history, &files)
         && let Some(spec) = figures::history_figure(&h.rig_entries())
@@ -511,6 +522,7 @@ fn write_campaign(
         page_path: set.final_path(&page_path),
         log_path: set.final_path(&log_path),
         seconds,
+        history_error,
     })
 }
 
