@@ -92,3 +92,47 @@ fn figures_without_run_and_an_unknown_choice_are_usage_errors() {
         o.stderr
     );
 }
+
+/// A run named `identification` keeps its FRF figure beside the campaign's
+/// (issue 24): run figures are `frf-<run>`, and the campaign's was
+/// `frf-identification`, which such a run overwrote. Now the campaign's is
+/// `identification-frf`, and no campaign figure starts as a run's does.
+#[test]
+fn a_run_named_like_a_campaign_figure_keeps_both_figures() {
+    let dir = scratch();
+    let manifest = crate::shards::campaign(dir.path());
+    let text = std::fs::read_to_string(&manifest).unwrap();
+    assert!(text.contains("id = \"spring-k1\""));
+    let renamed = dir.path().join("sim/renamed.toml");
+    std::fs::write(
+        &renamed,
+        text.replace("id = \"spring-k1\"", "id = \"identification\""),
+    )
+    .unwrap();
+    let out = dir.path().join("out");
+    let o = servoid_into(
+        dir.path(),
+        "run",
+        &renamed,
+        &out,
+        &["--figures", "png", "--quiet"],
+    );
+    assert_eq!(o.code, 0, "{}", o.stderr);
+    let figures = out.join("figures");
+    assert!(figures.join("frf-identification.png").is_file());
+    assert!(figures.join("identification-frf.png").is_file());
+    let page = std::fs::read_to_string(out.join("report.html"))
+        .unwrap()
+        .replace("&#x2f;", "/");
+    assert!(
+        page.contains("figures/identification-frf.png"),
+        "the campaign's FRF figure"
+    );
+    let run_page = std::fs::read_to_string(out.join("runs/identification.html"))
+        .unwrap()
+        .replace("&#x2f;", "/");
+    assert!(
+        run_page.contains("frf-identification.png"),
+        "the run's own FRF figure"
+    );
+}

@@ -569,8 +569,9 @@ fn check_header(partial: &Partial, bad: &mut impl FnMut(KeyPath, String)) {
     }
 }
 
-/// Run ids are unique across `[[runs]]` and the run table, and the
-/// campaign has runs. A duplicate in the table is a problem of its row (in
+/// Run ids are unique across `[[runs]]` and the run table, also when
+/// letter case is ignored (`K1` and `k1` name one file on a
+/// case-insensitive disk, issue 24), and the campaign has runs. A duplicate in the table is a problem of its row (in
 /// `table_problems`), naming where the id was first used.
 fn check_run_ids(
     partial: &Partial,
@@ -587,16 +588,23 @@ fn check_run_ids(
             "the campaign has no runs: give [[runs]] tables or a [run_table] with rows".into(),
         );
     }
-    let mut first_seen: BTreeMap<&str, String> = BTreeMap::new();
+    // By the id in lower case: the id as first written, and where.
+    let mut first_seen: BTreeMap<String, (&str, String)> = BTreeMap::new();
+    let clash = |id: &str, (first_id, first): &(&str, String)| {
+        if id == *first_id {
+            format!("duplicate run id `{id}` (first used by {first})")
+        } else {
+            format!(
+                "run id `{id}` differs from `{first_id}` (used by {first}) only in letter case: on a case-insensitive disk (macOS, Windows) their files would be one; rename one"
+            )
+        }
+    };
     for (i, id) in partial.raw_run_ids.iter().enumerate() {
         if let Some(id) = id {
-            if let Some(first) = first_seen.get(id.as_str()) {
-                bad(
-                    root.key("runs").index(i).key("id"),
-                    format!("duplicate run id `{id}` (first used by {first})"),
-                );
+            if let Some(first) = first_seen.get(&id.to_ascii_lowercase()) {
+                bad(root.key("runs").index(i).key("id"), clash(id, first));
             } else {
-                first_seen.insert(id, format!("runs[{i}]"));
+                first_seen.insert(id.to_ascii_lowercase(), (id, format!("runs[{i}]")));
             }
         }
     }
@@ -605,7 +613,7 @@ fn check_run_ids(
         let Some(id) = key.id.as_deref() else {
             continue;
         };
-        if let Some(first) = first_seen.get(id) {
+        if let Some(first) = first_seen.get(&id.to_ascii_lowercase()) {
             let place = TablePlace {
                 file: file.to_string(),
                 row: Some(key.row),
@@ -614,10 +622,13 @@ fn check_run_ids(
             table_problems.push(Problem::in_table(
                 place,
                 Some(id.to_string()),
-                format!("duplicate run id `{id}` (first used by {first})"),
+                clash(id, first),
             ));
         } else {
-            first_seen.insert(id, format!("row {} of {file}", key.row));
+            first_seen.insert(
+                id.to_ascii_lowercase(),
+                (id, format!("row {} of {file}", key.row)),
+            );
         }
     }
 }

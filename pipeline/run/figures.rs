@@ -624,7 +624,10 @@ fn overlay_figure(runs: &[OverlayRun]) -> FigureSpec {
         mag_label: "Magnitude (dB)".into(),
     };
     FigureSpec {
-        id: "frf-identification".into(),
+        // Not `frf-identification`: run figures are `frf-<run>`, and a run
+        // named `identification` overwrote it (issue 24). Campaign figures
+        // start as a run's do (`frf-`, `force-`, `time-`, `residual-`).
+        id: "identification-frf".into(),
         title: "All identification runs".into(),
         caption: "Counterpart of the paper's Fig. 15: the rig with no specimen and with each spring, measured (solid) and identified (dashed).".into(),
         size: fig.recommended_size(),
