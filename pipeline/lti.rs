@@ -256,7 +256,7 @@ pub fn log_response_std(grad: &[Complex<f64>], cov: impl Fn(usize, usize) -> f64
 /// The QR sweeps [`eigenvalues`] allows per eigenvalue: LAPACK's dhseqr
 /// allows 30 per eigenvalue; a matrix of the plant's scale converges in
 /// a handful.
-const SCHUR_SWEEPS_PER_EIGENVALUE: usize = 30;
+pub const SCHUR_SWEEPS_PER_EIGENVALUE: usize = 30;
 
 /// The eigenvalues of a square matrix (real Schur form), or None when an
 /// entry is not finite or the QR iteration does not converge within
