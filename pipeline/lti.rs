@@ -181,9 +181,10 @@ impl StateSpace {
     ///
     /// A is balanced first: the plant's A mixes 1/m ~ 0.3 with a1b0 ~ 1e9,
     /// and an unbalanced Schur decomposition loses five digits on it. None
-    /// as [`eigenvalues`] says (a non-finite entry, or no convergence).
+    /// as [`crate::poly::eigenvalues`] says (a non-finite entry, or no
+    /// convergence).
     pub fn eigenvalues(&self) -> Option<Vec<Complex<f64>>> {
-        let mut e = eigenvalues(&balance(&self.a))?;
+        let mut e = crate::poly::eigenvalues(&balance(&self.a))?;
         e.sort_by(|a, b| a.re.total_cmp(&b.re).then(a.im.total_cmp(&b.im)));
         Some(e)
     }
@@ -251,34 +252,6 @@ pub fn log_response_std(grad: &[Complex<f64>], cov: impl Fn(usize, usize) -> f64
         v.max(0.0).sqrt()
     };
     (var(&|z| db * z.re), var(&|z| z.im))
-}
-
-/// The QR sweeps [`eigenvalues`] allows per eigenvalue: LAPACK's dhseqr
-/// allows 30 per eigenvalue; a matrix of the plant's scale converges in
-/// a handful.
-pub const SCHUR_SWEEPS_PER_EIGENVALUE: usize = 30;
-
-/// The eigenvalues of a square matrix (real Schur form), or None when an
-/// entry is not finite or the QR iteration does not converge within
-/// [`SCHUR_SWEEPS_PER_EIGENVALUE`] sweeps per eigenvalue, or gives a
-/// non-finite value. nalgebra's `complex_eigenvalues` iterates without a
-/// bound, and on a matrix with an infinite entry (finite but extreme
-/// manifest numbers overflow a model's coefficients) never returned: the
-/// hang of issue 24.
-pub fn eigenvalues(m: &DMatrix<f64>) -> Option<Vec<Complex<f64>>> {
-    if m.iter().any(|v| !v.is_finite()) {
-        return None;
-    }
-    let n = m.nrows();
-    let schur = nalgebra::Schur::try_new(
-        m.clone(),
-        f64::EPSILON,
-        SCHUR_SWEEPS_PER_EIGENVALUE * n.max(1),
-    )?;
-    let e: Vec<Complex<f64>> = schur.complex_eigenvalues().iter().copied().collect();
-    e.iter()
-        .all(|z| z.re.is_finite() && z.im.is_finite())
-        .then_some(e)
 }
 
 /// Parlett-Reinsch balancing: a diagonal similarity D^-1 A D with powers of

@@ -438,7 +438,7 @@ pub fn ccf_linear_state_space(rig: &RigParams, sdof: &LinearSdof, cn: CnTerm) ->
 }
 
 /// Poles of a linear plant, from the state space (not the polynomials);
-/// None as [`crate::lti::eigenvalues`] says.
+/// None as [`crate::poly::eigenvalues`] says.
 pub fn poles(rig: &RigParams, specimen: &LinearSpecimen) -> Option<Vec<Complex<f64>>> {
     state_space(rig, specimen).eigenvalues()
 }

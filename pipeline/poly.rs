@@ -111,7 +111,7 @@ pub fn roots(coeffs: &[f64]) -> Vec<Complex<f64>> {
         }
         // Roots that cannot be found (a coefficient so large the QR
         // iteration overflows) are NaN: not stable, and not a hang.
-        crate::lti::eigenvalues(&c).unwrap_or_else(|| vec![Complex::new(f64::NAN, f64::NAN); n])
+        eigenvalues(&c).unwrap_or_else(|| vec![Complex::new(f64::NAN, f64::NAN); n])
     };
     let dp = derivative(&monic);
     for r in out.iter_mut() {
@@ -163,6 +163,34 @@ fn polish(p: &[f64], dp: &[f64], mut s: Complex<f64>) -> Complex<f64> {
         val = next_val;
     }
     s
+}
+
+/// The QR sweeps [`eigenvalues`] allows per eigenvalue: LAPACK's dhseqr
+/// allows 30 per eigenvalue; a matrix of the plant's scale converges in
+/// a handful.
+pub const SCHUR_SWEEPS_PER_EIGENVALUE: usize = 30;
+
+/// The eigenvalues of a square matrix (real Schur form), or None when an
+/// entry is not finite or the QR iteration does not converge within
+/// [`SCHUR_SWEEPS_PER_EIGENVALUE`] sweeps per eigenvalue, or gives a
+/// non-finite value. nalgebra's `complex_eigenvalues` iterates without a
+/// bound, and on a matrix with an infinite entry (finite but extreme
+/// manifest numbers overflow a model's coefficients) never returned: the
+/// hang of issue 24.
+pub fn eigenvalues(m: &DMatrix<f64>) -> Option<Vec<Complex<f64>>> {
+    if m.iter().any(|v| !v.is_finite()) {
+        return None;
+    }
+    let n = m.nrows();
+    let schur = nalgebra::Schur::try_new(
+        m.clone(),
+        f64::EPSILON,
+        SCHUR_SWEEPS_PER_EIGENVALUE * n.max(1),
+    )?;
+    let e: Vec<Complex<f64>> = schur.complex_eigenvalues().iter().copied().collect();
+    e.iter()
+        .all(|z| z.re.is_finite() && z.im.is_finite())
+        .then_some(e)
 }
 
 #[cfg(test)]

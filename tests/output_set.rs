@@ -210,11 +210,14 @@ fn history_campaigns(out: &Path) -> Vec<String> {
     t.rows.iter().map(|r| r[c].clone().unwrap()).collect()
 }
 
-/// Job A holds the output folder's lock (paused 4 s just after taking
-/// it); job B starts 1 s later into the same folder. Returns A's pid and
-/// both outputs.
+/// Job A holds the output folder `out`'s lock (paused 15 s just after
+/// taking it); job B starts once A's pid is in the lock file (A has it),
+/// into the same folder. The pause is long enough for B to load its
+/// manifest and reach the lock on a loaded two-core machine. Returns A's
+/// pid and both outputs.
 fn two_jobs(
     dir: &Path,
+    out: &Path,
     a: &[&str],
     b: &[&str],
 ) -> (u32, std::process::Output, std::process::Output) {
@@ -222,13 +225,19 @@ fn two_jobs(
         .args(a)
         .current_dir(dir)
         .env("SERVOID_PAUSE_AT", "locked")
-        .env("SERVOID_PAUSE_MS", "4000")
+        .env("SERVOID_PAUSE_MS", "15000")
         .stdout(std::process::Stdio::piped())
         .stderr(std::process::Stdio::piped())
         .spawn()
         .unwrap();
     let pid = first.id();
-    std::thread::sleep(std::time::Duration::from_secs(1));
+    let name = out.file_name().unwrap().to_string_lossy();
+    let lock = out.with_file_name(format!(".{name}.servoid-lock"));
+    let start = Instant::now();
+    while std::fs::read_to_string(&lock).ok().as_deref() != Some(pid.to_string().as_str()) {
+        assert!(start.elapsed().as_secs() < 120, "job A never took the lock");
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
     let second = Command::new(env!("CARGO_BIN_EXE_servoid"))
         .args(b)
         .current_dir(dir)
@@ -273,7 +282,7 @@ fn two_jobs_into_one_folder_take_turns_and_keep_both_history_entries() {
     };
     let (ra, rb) = (run(&a), run(&b));
 
-    let (pid, first, second) = two_jobs(d, &args(&ra), &args(&rb));
+    let (pid, first, second) = two_jobs(d, &out, &args(&ra), &args(&rb));
     assert!(
         first.status.success(),
         "{}",
@@ -312,7 +321,7 @@ fn two_jobs_into_one_folder_take_turns_and_keep_both_history_entries() {
     let mut merge = vec!["merge".to_string()];
     merge.extend(shards.iter().map(|s| s.to_str().unwrap().to_string()));
     merge.extend(["--out", out.to_str().unwrap(), "--quiet"].map(String::from));
-    let (_, first, second) = two_jobs(d, &args(&ra), &args(&merge));
+    let (_, first, second) = two_jobs(d, &out, &args(&ra), &args(&merge));
     assert!(
         first.status.success(),
         "{}",

@@ -213,6 +213,19 @@ pub enum IngestError {
         si: f64,
     },
     #[error(
+        "{}: {at}: {channel} (column {column}) is {si:e} {} after scaling, beyond the {} no servo-hydraulic test reaches: a corrupted sample, or a wrong unit? Fix or remove the line",
+        path.display(),
+        physical_range(channel).1,
+        physical_range(channel).2
+    )]
+    BeyondRange {
+        path: PathBuf,
+        at: At,
+        channel: &'static str,
+        column: String,
+        si: f64,
+    },
+    #[error(
         "{}: {at}: time does not increase ({t_s} s after {prev_s} s); time stamps must be strictly increasing",
         path.display()
     )]
@@ -834,7 +847,27 @@ fn format_name(f: LogFormat) -> &'static str {
     }
 }
 
-/// Scale, check finiteness and monotonic time, and measure the timing.
+/// The largest displacement or command a log may hold, m: ten times the
+/// stroke of the largest shake-table actuators (about +-1 m). Beyond it a
+/// sample is corrupt, or its unit wrong by a factor no lab means.
+pub const MAX_STROKE_M: f64 = 10.0;
+
+/// The largest force a log may hold, N: 1 GN, ten times the largest
+/// servo-hydraulic actuators' (about 100 MN).
+pub const MAX_FORCE_N: f64 = 1e9;
+
+/// A channel's largest magnitude in SI, its SI unit, and the range as a
+/// message says it.
+fn physical_range(channel: &str) -> (f64, &'static str, &'static str) {
+    match channel {
+        "command" | "displacement" => (MAX_STROKE_M, "m", "+-10 m"),
+        "force" => (MAX_FORCE_N, "N", "+-1e9 N"),
+        _ => (f64::INFINITY, "", "range"),
+    }
+}
+
+/// Scale, check finiteness, the physical range and monotonic time, and
+/// measure the timing.
 fn assemble(plan: &LogPlan, sha256: String, raw: Raw<'_>) -> Result<Log, IngestError> {
     let path = &plan.path;
     let n = raw.command.len();
@@ -854,6 +887,10 @@ fn assemble(plan: &LogPlan, sha256: String, raw: Raw<'_>) -> Result<Log, IngestE
                  mut v: Vec<f64>,
                  si: &dyn Fn(f64) -> f64|
      -> Result<Vec<f64>, IngestError> {
+        // A finite but absurd sample (one 9.9e37 in a log) passed before
+        // and gave an NRMSE of inf and an "offset removed" of 4.8e300 m
+        // (issue 24): beyond what any test reaches, it is the line's error.
+        let limit = physical_range(channel).0;
         for (i, x) in v.iter_mut().enumerate() {
             let raw = *x;
             *x = si(raw);
@@ -864,6 +901,15 @@ fn assemble(plan: &LogPlan, sha256: String, raw: Raw<'_>) -> Result<Log, IngestE
                     channel,
                     column: column.to_string(),
                     raw,
+                    si: *x,
+                });
+            }
+            if x.abs() > limit {
+                return Err(IngestError::BeyondRange {
+                    path: path.clone(),
+                    at: locate(i),
+                    channel,
+                    column: column.to_string(),
                     si: *x,
                 });
             }

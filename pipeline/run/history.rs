@@ -187,8 +187,9 @@ impl History {
     }
 
     /// Put this campaign's entry in, with the hash of its results.json;
-    /// the table it replaces is kept as `<file>.prev` first (a rerun that
-    /// changes nothing leaves the copy as it was).
+    /// the table it replaces (read cleanly: this history came from it) is
+    /// kept as `<file>.prev` first, the good copy an unreadable table's
+    /// message points to.
     pub(super) fn write(mut self, results_json: &[u8]) -> Result<(), WriteError> {
         self.entry.results_sha256 = ingest::sha256_hex(results_json);
         if self.slot == self.entries.len() {
