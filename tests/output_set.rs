@@ -213,8 +213,8 @@ fn history_campaigns(out: &Path) -> Vec<String> {
 /// Job A holds the output folder `out`'s lock (paused 15 s just after
 /// taking it); job B starts once A's pid is in the lock file (A has it),
 /// into the same folder. The pause is long enough for B to load its
-/// manifest and reach the lock on a loaded two-core machine. Returns A's
-/// pid and both outputs.
+/// manifest and reach the lock on a loaded two-core machine. Both must
+/// succeed. Returns A's pid and both outputs.
 fn two_jobs(
     dir: &Path,
     out: &Path,
@@ -244,7 +244,15 @@ fn two_jobs(
         .env_remove("SERVOID_PAUSE_AT")
         .output()
         .unwrap();
-    (pid, first.wait_with_output().unwrap(), second)
+    let first = first.wait_with_output().unwrap();
+    for job in [&first, &second] {
+        assert!(
+            job.status.success(),
+            "{}",
+            String::from_utf8_lossy(&job.stderr)
+        );
+    }
+    (pid, first, second)
 }
 
 /// Two jobs into one output folder at once (issue 24, defect 3): before,
@@ -282,17 +290,7 @@ fn two_jobs_into_one_folder_take_turns_and_keep_both_history_entries() {
     };
     let (ra, rb) = (run(&a), run(&b));
 
-    let (pid, first, second) = two_jobs(d, &out, &args(&ra), &args(&rb));
-    assert!(
-        first.status.success(),
-        "{}",
-        String::from_utf8_lossy(&first.stderr)
-    );
-    assert!(
-        second.status.success(),
-        "{}",
-        String::from_utf8_lossy(&second.stderr)
-    );
+    let (pid, _, second) = two_jobs(d, &out, &args(&ra), &args(&rb));
     let said = String::from_utf8_lossy(&second.stderr);
     assert!(
         said.contains(&format!(
@@ -321,17 +319,7 @@ fn two_jobs_into_one_folder_take_turns_and_keep_both_history_entries() {
     let mut merge = vec!["merge".to_string()];
     merge.extend(shards.iter().map(|s| s.to_str().unwrap().to_string()));
     merge.extend(["--out", out.to_str().unwrap(), "--quiet"].map(String::from));
-    let (_, first, second) = two_jobs(d, &out, &args(&ra), &args(&merge));
-    assert!(
-        first.status.success(),
-        "{}",
-        String::from_utf8_lossy(&first.stderr)
-    );
-    assert!(
-        second.status.success(),
-        "{}",
-        String::from_utf8_lossy(&second.stderr)
-    );
+    let (_, _, second) = two_jobs(d, &out, &args(&ra), &args(&merge));
     assert!(String::from_utf8_lossy(&second.stderr).contains("waiting for it to finish"));
     let names = history_campaigns(&out);
     assert_eq!(names.len(), 3, "{names:?}");
