@@ -32,9 +32,14 @@ pub const COLUMNS: [&str; 15] = [
 
 /// Write the history atomically: readers see the old table or the new.
 /// `extra` are columns of the lab's own (name, a cell per entry), written
-/// after servoid's as text.
+/// after servoid's as text. `before`, the bytes the table holds now, is
+/// first kept in `previous` when the update changes them (so the previous
+/// copy is the last table that differs, not the one a rerun rewrote
+/// unchanged).
 pub fn write(
     path: &Path,
+    previous: &Path,
+    before: Option<&[u8]>,
     entries: &[Entry],
     extra: &[(String, Vec<Option<String>>)],
 ) -> Result<(), LogWriteError> {
@@ -67,6 +72,12 @@ pub fn write(
             .iter()
             .map(|(name, cells)| Column::new(name.as_str().into(), cells.clone())),
     );
-    write_atomic(path, &frame_bytes(path, n, cols)?)?;
+    let bytes = frame_bytes(path, n, cols)?;
+    if let Some(before) = before.filter(|b| *b != &bytes[..])
+        && std::fs::read(previous).ok().as_deref() != Some(before)
+    {
+        write_atomic(previous, before)?;
+    }
+    write_atomic(path, &bytes)?;
     Ok(())
 }

@@ -188,20 +188,15 @@ impl History {
 
     /// Put this campaign's entry in, with the hash of its results.json;
     /// the table it replaces (read cleanly: this history came from it) is
-    /// kept as `<file>.prev` first, the good copy an unreadable table's
-    /// message points to.
+    /// kept as `<file>.prev` first when the update changes it, the good
+    /// copy an unreadable table's message points to.
     pub(super) fn write(mut self, results_json: &[u8]) -> Result<(), WriteError> {
         self.entry.results_sha256 = ingest::sha256_hex(results_json);
         if self.slot == self.entries.len() {
             self.extra.rows.push(vec![None; self.extra.names.len()]);
         }
         put(&mut self.entries, self.slot, self.entry);
-        if let Ok(previous) = std::fs::read(&self.path) {
-            let prev = previous_copy(&self.path);
-            if std::fs::read(&prev).ok().as_deref() != Some(&previous[..]) {
-                report::write_atomic(&prev, &previous)?;
-            }
-        }
+        let before = std::fs::read(&self.path).ok();
         let columns: Vec<(String, Vec<Option<String>>)> = self
             .extra
             .names
@@ -214,7 +209,14 @@ impl History {
                 )
             })
             .collect();
-        report::history::write(&self.path, &self.entries, &columns).map_err(|e| match e {
+        report::history::write(
+            &self.path,
+            &previous_copy(&self.path),
+            before.as_deref(),
+            &self.entries,
+            &columns,
+        )
+        .map_err(|e| match e {
             LogWriteError::Write(w) => w,
             other => WriteError::Table(Box::new(other)),
         })
