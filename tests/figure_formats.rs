@@ -136,3 +136,96 @@ fn a_run_named_like_a_campaign_figure_keeps_both_figures() {
         "the run's own FRF figure"
     );
 }
+
+/// The files under one of servoid's own folders of `out`, sorted.
+fn listed(out: &Path, folder: &str) -> Vec<String> {
+    let mut names: Vec<String> = std::fs::read_dir(out.join(folder))
+        .map(|d| {
+            d.flatten()
+                .map(|e| e.file_name().to_string_lossy().into_owned())
+                .collect()
+        })
+        .unwrap_or_default();
+    names.sort();
+    names
+}
+
+/// A rerun into the same folder holds what this job wrote and nothing an
+/// earlier job left in servoid's own folders (issue 24: figures stayed
+/// after `--figures none`, and a renamed run's pages, figures and tables
+/// stayed beside the new ones); the lab's own files stay.
+#[test]
+fn a_rerun_leaves_no_figure_page_or_table_of_an_earlier_one() {
+    let dir = scratch();
+    let manifest = crate::shards::campaign(dir.path());
+    let out = dir.path().join("out");
+    let run = |manifest: &Path, choice: &str| {
+        let o = servoid_into(
+            dir.path(),
+            "run",
+            manifest,
+            &out,
+            &["--figures", choice, "--quiet"],
+        );
+        assert_eq!(o.code, 0, "--figures {choice}: {}", o.stderr);
+    };
+    run(&manifest, "png");
+    let figures = listed(&out, "figures");
+    assert!(
+        figures.contains(&"frf-spring-k1.png".to_string()),
+        "{figures:?}"
+    );
+    assert!(figures.iter().all(|f| f.ends_with(".png")), "{figures:?}");
+    assert!(listed(&out, "runs").contains(&"spring-k1.html".to_string()));
+    assert!(listed(&out, "tables").contains(&"frf-spring-k1.parquet".to_string()));
+    std::fs::write(out.join("notes.txt"), "the lab's own").unwrap();
+
+    // The same campaign with spring-k1 renamed: nothing of spring-k1 is
+    // left, and spring-k9 has what spring-k1 had.
+    let text = std::fs::read_to_string(&manifest).unwrap();
+    assert!(text.contains("id = \"spring-k1\""));
+    let renamed = dir.path().join("sim/renamed.toml");
+    std::fs::write(
+        &renamed,
+        text.replace("id = \"spring-k1\"", "id = \"spring-k9\""),
+    )
+    .unwrap();
+    run(&renamed, "png");
+    // Sorted again after the rename; the history's trend figure is drawn
+    // from its second entry on (the renamed campaign's is the second).
+    let k9 = |names: Vec<String>, ext: &str| -> Vec<String> {
+        let mut names: Vec<String> = names
+            .into_iter()
+            .map(|n| n.replace("spring-k1", "spring-k9").replace(".png", ext))
+            .chain([format!("history{ext}")])
+            .collect();
+        names.sort();
+        names
+    };
+    assert_eq!(listed(&out, "figures"), k9(figures.clone(), ".png"));
+    for folder in ["runs", "tables"] {
+        let now = listed(&out, folder);
+        assert!(
+            now.iter().all(|n| !n.contains("spring-k1")),
+            "{folder}: {now:?}"
+        );
+        assert!(
+            now.iter().any(|n| n.contains("spring-k9")),
+            "{folder}: {now:?}"
+        );
+    }
+
+    run(&renamed, "none");
+    assert_eq!(listed(&out, "figures"), Vec::<String>::new());
+    assert!(
+        !listed(&out, "tables").is_empty(),
+        "tables do not depend on --figures"
+    );
+
+    run(&renamed, "svg");
+    assert_eq!(listed(&out, "figures"), k9(figures, ".svg"));
+    assert_eq!(
+        std::fs::read_to_string(out.join("notes.txt")).unwrap(),
+        "the lab's own"
+    );
+}

@@ -267,6 +267,44 @@ pub fn json_bytes(value: &impl serde::Serialize) -> Vec<u8> {
     s.into_bytes()
 }
 
+/// The folders of an output folder that hold only what servoid writes.
+pub const OWN_FOLDERS: [&str; 3] = ["figures", "runs", "tables"];
+
+/// Remove from servoid's own folders of `out_dir` ([`OWN_FOLDERS`]) every
+/// file this job did not write or keep: `keep` names the set's files
+/// relative to `out_dir`, `/`-separated. The set starts as a copy of the
+/// previous one, so without this a run dropped from the campaign, a figure
+/// format no longer drawn (`--figures none`) or a table a run no longer
+/// writes would stay beside the new outputs (issue 24).
+pub fn prune(
+    out_dir: &Path,
+    keep: &std::collections::BTreeSet<String>,
+) -> Result<Vec<String>, WriteError> {
+    let mut removed = Vec::new();
+    for folder in OWN_FOLDERS {
+        let dir = out_dir.join(folder);
+        let Ok(entries) = std::fs::read_dir(&dir) else {
+            continue;
+        };
+        let mut names: Vec<String> = entries
+            .flatten()
+            .filter(|e| e.file_type().is_ok_and(|t| !t.is_dir()))
+            .map(|e| e.file_name().to_string_lossy().into_owned())
+            .collect();
+        names.sort();
+        for name in names {
+            let rel = format!("{folder}/{name}");
+            if keep.contains(&rel) {
+                continue;
+            }
+            let path = dir.join(&name);
+            std::fs::remove_file(&path).map_err(|source| WriteError::Io { path, source })?;
+            removed.push(rel);
+        }
+    }
+    Ok(removed)
+}
+
 /// Write the campaign's page `report.html` and each run's page
 /// `runs/<id>.html` into `out_dir`; returns the campaign page's path.
 /// `run_figures` follow `results.runs`; `choice` is what the figures were

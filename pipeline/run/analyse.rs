@@ -141,6 +141,9 @@ pub struct Analysed {
     pub run_figures: Vec<Vec<PageFigure>>,
     /// The campaign's own figures as written.
     pub campaign_figures: Vec<PageFigure>,
+    /// Each run's tables as written (relative to the output folder), in
+    /// manifest order.
+    pub run_tables: Vec<Vec<String>>,
     /// Each run's log work (s), in manifest order: for run.jsonl, never
     /// results.json.
     pub seconds: Vec<f64>,
@@ -202,6 +205,7 @@ pub(super) fn analyse_with(
 
     let mut runs = Vec::with_capacity(second.len());
     let mut run_figures = Vec::with_capacity(second.len());
+    let mut run_tables = Vec::with_capacity(second.len());
     let mut seconds = Vec::with_capacity(second.len());
     let mut cached = Vec::with_capacity(second.len());
     let mut overlay = Vec::new();
@@ -210,6 +214,7 @@ pub(super) fn analyse_with(
         csi.extend(done.csi);
         runs.push(done.result);
         run_figures.push(done.figures);
+        run_tables.push(done.tables);
         warnings.extend(done.figure_warnings);
         seconds.push(done.seconds);
         cached.push(done.cached);
@@ -273,6 +278,7 @@ pub(super) fn analyse_with(
         results,
         run_figures,
         campaign_figures,
+        run_tables,
         seconds,
         cached,
     })
@@ -401,6 +407,8 @@ struct FirstPass {
     noise: Option<NoiseProfile>,
     figures: Vec<PageFigure>,
     figure_warnings: Vec<String>,
+    /// The run's tables as written (relative to the output folder).
+    tables: Vec<String>,
     seconds: f64,
     cached: bool,
 }
@@ -414,6 +422,8 @@ struct Done {
     csi: Option<Csi>,
     figures: Vec<PageFigure>,
     figure_warnings: Vec<String>,
+    /// The run's tables as written (relative to the output folder).
+    tables: Vec<String>,
     overlay: Option<OverlayRun>,
     seconds: f64,
     cached: bool,
@@ -491,6 +501,7 @@ fn first_pass(
         noise: None,
         figures: Vec::new(),
         figure_warnings: Vec::new(),
+        tables: Vec::new(),
         seconds: 0.0,
         cached: false,
     };
@@ -522,6 +533,7 @@ fn first_pass(
         pass.acquired = true;
         (pass.force, pass.overlay, pass.noise) = (s.force, s.overlay, s.noise);
         (pass.figures, pass.figure_warnings) = (s.figures, s.figure_warnings);
+        pass.tables = table_files(&s.files);
         pass.cached = true;
         return Ok(pass);
     }
@@ -579,6 +591,7 @@ fn first_pass(
                     },
                 )?;
             }
+            pass.tables = tables;
         }
     }
     pass.seconds = start.elapsed().as_secs_f64();
@@ -658,6 +671,7 @@ fn second_pass(
         csi: None,
         figures,
         figure_warnings,
+        tables: first.tables,
         overlay: first.overlay,
         seconds: first.seconds,
         cached: first.cached,
@@ -741,6 +755,7 @@ fn validation_run(
             seconds,
         });
         return Ok(Done {
+            tables: table_files(&s.files),
             result: s.result,
             csi: s.csi,
             figures: s.figures,
@@ -818,8 +833,11 @@ fn validation_run(
         }
     }
     let Some(st) = &acq.stage else {
-        draw.tables(&out, None)?;
-        return Ok(finish(plan, out, figures, start, observer));
+        let tables = draw.tables(&out, None)?;
+        return Ok(Done {
+            tables,
+            ..finish(plan, out, figures, start, observer)
+        });
     };
     let time = match validate::validation_run(&rig_at_p, &specimen, &record(&st.log)) {
         Ok(t) => {
@@ -886,6 +904,7 @@ fn validation_run(
     }
     Ok(Done {
         csi,
+        tables,
         ..finish(plan, out, figures, start, observer)
     })
 }
@@ -909,10 +928,21 @@ fn finish(
         csi: None,
         figures,
         figure_warnings,
+        tables: Vec::new(),
         overlay: None,
         seconds,
         cached: false,
     }
+}
+
+/// The tables among the files a stored run wrote.
+fn table_files(files: &[(String, u64)]) -> Vec<String> {
+    files
+        .iter()
+        .map(|(name, _)| name)
+        .filter(|name| name.starts_with("tables/"))
+        .cloned()
+        .collect()
 }
 
 /// A log's signals as the time-domain checks read them.

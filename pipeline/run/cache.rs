@@ -185,6 +185,15 @@ impl Cache {
     }
 }
 
+/// The place of the cache in `out_dir` taken by something that is not a
+/// folder (`.cache`, or `.cache/runs`), as a path relative to `out_dir`.
+pub(super) fn taken_place(out_dir: &Path) -> Option<PathBuf> {
+    [Path::new(".cache"), Path::new(".cache/runs")]
+        .into_iter()
+        .find(|p| std::fs::metadata(out_dir.join(p)).is_ok_and(|m| !m.is_dir()))
+        .map(Path::to_path_buf)
+}
+
 /// Fold the log stamps other caches (a merge's shards, in `dirs`) hold into
 /// `out_dir`'s, so that the logs they hashed are not read again.
 pub(super) fn merge_stamps(out_dir: &Path, dirs: &[PathBuf]) -> Result<(), WriteError> {

@@ -199,7 +199,7 @@ pub fn run_campaign(
         .out
         .clone()
         .unwrap_or_else(|| PathBuf::from("reports").join(&campaign.name));
-    let set = OutSet::begin(&out_dir)?;
+    let set = begin(&out_dir)?;
     let workers = pool(settings.jobs)?;
     let outcome = workers
         .install(|| write_campaign(&campaign, &set, settings, observer))
@@ -236,7 +236,7 @@ pub fn run_simulation(
         .unwrap_or_else(|| PathBuf::from("reports").join(&plan.manifest.simulation.name));
     // The logs and the campaign run on them are one set: a rerun never
     // leaves new logs beside the previous campaign's results.
-    let set = OutSet::begin(&out_dir)?;
+    let set = begin(&out_dir)?;
     let workers = pool(settings.jobs)?;
     let relocate = |e: JobError| e.relocated(&set);
     let simulated = workers
@@ -298,7 +298,7 @@ pub fn run_shard(
             campaign.name, shard.index, shard.count
         ))
     });
-    let set = OutSet::begin(&out_dir)?;
+    let set = begin(&out_dir)?;
     let share = shard.of(&campaign);
     let clock = std::time::Instant::now();
     let workers = pool(settings.jobs)?;
@@ -351,7 +351,7 @@ pub fn merge(
         .out
         .clone()
         .unwrap_or_else(|| PathBuf::from("reports").join(&first.campaign));
-    let set = OutSet::begin(&out_dir)?;
+    let set = begin(&out_dir)?;
     let relocate = |e: JobError| e.relocated(&set);
     let shard_dirs: Vec<PathBuf> = shards.iter().map(|(d, _)| d.clone()).collect();
     let gathered = (|| {
@@ -504,6 +504,13 @@ fn write_campaign(
         settings.figures,
         out_dir,
     )?;
+    let kept = set_files(
+        &results,
+        &analysed.run_figures,
+        &analysed.run_tables,
+        &campaign_figures,
+    );
+    report::prune(out_dir, &kept)?;
     let seconds = clock.elapsed().as_secs_f64();
     let log = RunLog {
         started,
@@ -524,6 +531,42 @@ fn write_campaign(
         seconds,
         history_error,
     })
+}
+
+/// The files this job's set holds in servoid's own folders (figures, run
+/// pages, tables), relative to the output folder.
+fn set_files(
+    results: &Results,
+    run_figures: &[Vec<report::html::PageFigure>],
+    run_tables: &[Vec<String>],
+    campaign_figures: &[report::html::PageFigure],
+) -> std::collections::BTreeSet<String> {
+    let figures = run_figures
+        .iter()
+        .flatten()
+        .chain(campaign_figures)
+        .flat_map(|f| [&f.png_file, &f.svg_file])
+        .flatten()
+        .cloned();
+    let pages = results.runs.iter().map(|r| report::html::run_page(&r.id));
+    let tables = run_tables.iter().flatten().cloned();
+    figures.chain(pages).chain(tables).collect()
+}
+
+/// Start the output set in `out_dir`, refusing, before any computing, a
+/// folder whose cache place is taken by a file: the job would compute for
+/// nothing and fail writing its first cache entry (issue 24).
+fn begin(out_dir: &Path) -> Result<OutSet, WriteError> {
+    if let Some(taken) = cache::taken_place(out_dir) {
+        return Err(WriteError::OutFolder {
+            path: out_dir.to_path_buf(),
+            why: format!(
+                "{} in the output folder (--out) is not a folder, and servoid keeps its cache there; remove it, or give another folder",
+                taken.display()
+            ),
+        });
+    }
+    OutSet::begin(out_dir)
 }
 
 /// How the cache names a log inside the work folder (a simulated
