@@ -188,11 +188,11 @@ fn dispatch(command: Command) -> u8 {
             let code = match args.shard {
                 Some(shard) => match run::run_shard(&manifest, &settings(&args), shard, &watch) {
                     Ok(outcome) => watch.shard(&outcome),
-                    Err(e) => job_failed(&e),
+                    Err(e) => job_failed(&e, watch.json),
                 },
                 None => match run::run_campaign(&manifest, &settings(&args), &watch) {
                     Ok(outcome) => watch.campaign(&outcome),
-                    Err(e) => job_failed(&e),
+                    Err(e) => job_failed(&e, watch.json),
                 },
             };
             watch.done();
@@ -202,7 +202,7 @@ fn dispatch(command: Command) -> u8 {
             let watch = Watch::new(&args);
             let code = match run::merge(&shards, &settings(&args), &watch) {
                 Ok(outcome) => watch.campaign(&outcome),
-                Err(e) => job_failed(&e),
+                Err(e) => job_failed(&e, watch.json),
             };
             watch.done();
             code
@@ -253,7 +253,7 @@ fn dispatch(command: Command) -> u8 {
 fn cmd_verify(results: &Path, manifest: Option<&Path>, jobs: Option<usize>) -> u8 {
     let v = match run::verify_results(results, manifest, jobs) {
         Ok(v) => v,
-        Err(e) => return job_failed(&e),
+        Err(e) => return job_failed(&e, false),
     };
     for d in &v.differences {
         say(&format!(
@@ -307,14 +307,21 @@ fn capped(jobs: Option<u64>) -> Option<usize> {
     Some(jobs as usize)
 }
 
-/// Report a job that wrote nothing (or could not finish writing).
-fn job_failed(e: &JobError) -> u8 {
-    warn(&format!("error: {e}"));
-    if e.is_usage() {
+/// Report a job that wrote nothing (or could not finish writing): on
+/// stderr, and with `--log-format json` as an `error` event on stdout too,
+/// so a nightly job's log parser sees why the night wrote nothing.
+fn job_failed(e: &JobError, json: bool) -> u8 {
+    let text = e.to_string();
+    warn(&format!("error: {text}"));
+    let code = if e.is_usage() {
         EXIT_USAGE
     } else {
         EXIT_FAILED
+    };
+    if json {
+        say(&serde_json::json!({"event": "error", "error": text, "exit": code}).to_string());
     }
+    code
 }
 
 fn cmd_simulate(manifest: &Path, then_run: bool, args: &RunArgs) -> u8 {
@@ -325,7 +332,7 @@ fn cmd_simulate(manifest: &Path, then_run: bool, args: &RunArgs) -> u8 {
     let watch = Watch::new(args);
     let outcome = match run::run_simulation(manifest, &settings(args), then_run, &watch) {
         Ok(o) => o,
-        Err(e) => return job_failed(&e),
+        Err(e) => return job_failed(&e, watch.json),
     };
     if watch.text() {
         say(&format!(
@@ -391,14 +398,51 @@ impl Watch {
         let n = results.runs.len();
         let failed = outcome.failed();
         let per_s = n as f64 / outcome.seconds.max(1e-9);
+        // Springs that disagree are a warning to act on before the rig is
+        // trusted, even with every run ok: said on stderr, as alarms are.
+        let inconsistent = results
+            .rig
+            .as_ref()
+            .and_then(|r| r.consistency.as_ref())
+            .filter(|c| c.consistent == Some(false))
+            .map(|c| {
+                format!(
+                    "rig: {}; likely causes: {}",
+                    c.note,
+                    c.likely_causes.join("; ")
+                )
+            });
+        let alarms = results.drift.as_ref().map_or(&[][..], |d| &d.alarms[..]);
         if self.json {
+            // Every warning the text summary prints, as an event, then the
+            // errors and alarms, then the summary: the last line.
+            for run in &results.runs {
+                for w in &run.warnings {
+                    say(
+                        &serde_json::json!({"event": "warning", "run": run.id, "warning": w})
+                            .to_string(),
+                    );
+                }
+            }
+            for w in results.warnings.iter().chain(&inconsistent) {
+                say(&serde_json::json!({"event": "warning", "warning": w}).to_string());
+            }
+            if let Some(h) = &outcome.history_error {
+                say(&serde_json::json!({"event": "history_unreadable", "error": h}).to_string());
+            }
+            for a in alarms {
+                say(&serde_json::json!({"event": "alarm", "alarm": a}).to_string());
+            }
             say(&serde_json::json!({
                 "event": "summary",
                 "campaign": results.campaign.name,
                 "ok": n - failed,
                 "failed": failed,
                 "cached": outcome.cached,
-                "alarms": results.drift.as_ref().map_or(0, |d| d.alarms.len()),
+                "warnings": results.warnings.len()
+                    + results.runs.iter().map(|r| r.warnings.len()).sum::<usize>()
+                    + usize::from(inconsistent.is_some()),
+                "alarms": alarms.len(),
                 "seconds": outcome.seconds,
                 "logs_per_s": per_s,
                 "results": outcome.results_path,
@@ -422,24 +466,12 @@ impl Watch {
                 r.error.as_deref().unwrap_or("failed")
             ));
         }
-        // Springs that disagree are a warning to act on before the rig is
-        // trusted, even with every run ok: said on stderr, as alarms are.
-        if let Some(c) = results.rig.as_ref().and_then(|r| r.consistency.as_ref())
-            && c.consistent == Some(false)
-        {
-            warn(&format!(
-                "warning: rig: {}; likely causes: {}",
-                c.note,
-                c.likely_causes.join("; ")
-            ));
+        if let Some(w) = &inconsistent {
+            warn(&format!("warning: {w}"));
         }
         if let Some(h) = &outcome.history_error {
-            if self.json {
-                say(&serde_json::json!({"event": "history_unreadable", "error": h}).to_string());
-            }
             warn(&format!("error: {h}"));
         }
-        let alarms = results.drift.as_ref().map_or(&[][..], |d| &d.alarms[..]);
         for a in alarms {
             warn(&format!("ALARM: {a}"));
         }
@@ -508,20 +540,25 @@ impl Observer for Watch {
             Event::RunFinished {
                 id,
                 status,
+                error,
                 seconds,
             } => {
                 if let Some(bar) = &self.bar {
                     bar.inc(1);
                 }
                 if self.json {
-                    let event = match status {
-                        Status::Ok => "run_finished",
-                        Status::Failed => "run_failed",
+                    let line = match status {
+                        Status::Ok => {
+                            serde_json::json!({"event": "run_finished", "run": id, "seconds": seconds})
+                        }
+                        Status::Failed => serde_json::json!({
+                            "event": "run_failed",
+                            "run": id,
+                            "seconds": seconds,
+                            "error": error.unwrap_or("failed"),
+                        }),
                     };
-                    say(
-                        &serde_json::json!({"event": event, "run": id, "seconds": seconds})
-                            .to_string(),
-                    );
+                    say(&line.to_string());
                 }
             }
             Event::RunCached { id, seconds } => {

@@ -424,3 +424,80 @@ fn verify_reruns_the_recorded_analysis_and_names_what_differs() {
         o.stderr
     );
 }
+
+/// With `--log-format json` a night's log parser sees everything the text
+/// output says (issue 24): a failed run's error in its `run_failed` event,
+/// each warning as an event naming its run, and a job that wrote nothing
+/// (a manifest error) as an `error` event with its exit code, not only on
+/// stderr.
+#[test]
+fn json_events_carry_errors_warnings_and_manifest_problems() {
+    let events = |stdout: &str| -> Vec<Value> {
+        stdout
+            .lines()
+            .map(|l| serde_json::from_str(l).unwrap_or_else(|e| panic!("{e}: {l}")))
+            .collect()
+    };
+    let json = ["--log-format", "json", "--figures", "none"];
+
+    // A run whose log is absent: its event says why.
+    let dir = scratch();
+    crate::corpus::copy_dir(&root().join("tests/bad/log-missing"), dir.path());
+    let manifest = dir.path().join("manifest.toml");
+    let o = servoid_into(dir.path(), "run", &manifest, &dir.path().join("out"), &json);
+    assert_eq!(o.code, 1, "{}", o.stderr);
+    let ev = events(&o.stdout);
+    let failed: Vec<&Value> = ev.iter().filter(|e| e["event"] == "run_failed").collect();
+    assert_eq!(failed.len(), 1, "{}", o.stdout);
+    assert_eq!(failed[0]["run"], "log1");
+    assert!(
+        failed[0]["error"]
+            .as_str()
+            .unwrap()
+            .ends_with("absent.csv: log file not found"),
+        "{}",
+        failed[0]
+    );
+    assert_eq!(ev.last().unwrap()["event"], "summary");
+
+    // A run with a warning (its channels swapped): a warning event naming
+    // it, before the summary, which counts it.
+    let dir = scratch();
+    crate::corpus::copy_dir(&root().join("tests/bad/log-swapped-columns"), dir.path());
+    let manifest = dir.path().join("manifest.toml");
+    let o = servoid_into(dir.path(), "run", &manifest, &dir.path().join("out"), &json);
+    assert_eq!(o.code, 0, "{}", o.stderr);
+    let ev = events(&o.stdout);
+    let warned: Vec<&Value> = ev
+        .iter()
+        .filter(|e| e["event"] == "warning" && e["run"] == "log1")
+        .collect();
+    assert!(
+        warned.iter().any(|e| e["warning"]
+            .as_str()
+            .unwrap()
+            .contains("the model explains only 31 % of the measured response")),
+        "{}",
+        o.stdout
+    );
+    let summary = ev.last().unwrap();
+    assert_eq!(summary["event"], "summary");
+    assert!(summary["warnings"].as_u64().unwrap() >= 1, "{summary}");
+
+    // A manifest that does not parse: nothing is written, and the one
+    // event says why, with the exit code.
+    let bad = dir.path().join("bad.toml");
+    std::fs::write(&bad, "schema_version = 1\n[campaign\n").unwrap();
+    let o = servoid_into(dir.path(), "run", &bad, &dir.path().join("never"), &json);
+    assert_eq!(o.code, 2, "{}", o.stderr);
+    let ev = events(&o.stdout);
+    assert_eq!(ev.len(), 1, "{}", o.stdout);
+    assert_eq!(ev[0]["event"], "error");
+    assert_eq!(ev[0]["exit"], 2);
+    assert!(
+        ev[0]["error"].as_str().unwrap().contains("bad.toml"),
+        "{}",
+        ev[0]
+    );
+    assert!(!dir.path().join("never").exists());
+}

@@ -116,10 +116,12 @@ pub enum Event<'a> {
     Started { runs: usize },
     /// A run's log work starts.
     RunStarted { id: &'a str },
-    /// A run's log work is done (or it failed), after `seconds`.
+    /// A run's log work is done (or it failed, with its error), after
+    /// `seconds`.
     RunFinished {
         id: &'a str,
         status: Status,
+        error: Option<&'a str>,
         seconds: f64,
     },
     /// A run's outcome came from the cache, after `seconds`.
@@ -598,6 +600,7 @@ fn first_pass(
     observer.event(&Event::RunFinished {
         id: &plan.id,
         status: out.status,
+        error: out.error.as_deref(),
         seconds: pass.seconds,
     });
     pass.result = Some(out);
@@ -921,6 +924,7 @@ fn finish(
     observer.event(&Event::RunFinished {
         id: &plan.id,
         status: result.status,
+        error: result.error.as_deref(),
         seconds,
     });
     Done {
