@@ -9,6 +9,8 @@
 //! truth.json, what `servoid simulate` says a campaign should find, is here
 //! too ([`Truth`]).
 
+use std::collections::BTreeMap;
+
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
@@ -442,6 +444,10 @@ pub struct RunResult {
     pub validation: Option<ValidationMetrics>,
     /// The log this run read, when it has one.
     pub log: Option<LogInfo>,
+    /// A run table row's cells in the lab's own columns (a `notes`, an
+    /// `operator`), by column; absent when there are none.
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub annotations: BTreeMap<String, String>,
 }
 
 /// Provenance of a run's log.

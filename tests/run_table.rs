@@ -582,3 +582,84 @@ fn dates_are_checked_and_normalised_in_both_places() {
         ]
     );
 }
+
+/// A lab's own columns (`notes`, `operator`) are carried, not refused
+/// (issue 24): each row's cells reach its run in results.json and on its
+/// page, a `description` column is the run's description, and editing a
+/// note redoes no work. A column named like one of servoid's (a typo) is
+/// still a problem with a suggestion: a misspelt stiffness must not
+/// become a note.
+#[test]
+fn a_table_carries_the_labs_own_columns_and_refuses_a_misspelt_one() {
+    let dir = scratch();
+    let sim = simulate(dir.path());
+    let with_notes = |note: &str| {
+        let mut text = String::from(
+            "id,role,p_gain,mass_kg,damping_ns_per_m,stiffness_n_per_m,date,description,notes,operator\n",
+        );
+        for (k, line) in TABLE_CSV.lines().skip(1).enumerate() {
+            let notes = if k == 0 { note } else { "" };
+            text.push_str(&format!("{line},run {k},{notes},ana\n"));
+        }
+        text
+    };
+    write(
+        &sim,
+        "specimens.csv",
+        &with_notes("\"oil changed, new filter\""),
+    );
+    let table = table_manifest(&sim, "file = \"specimens.csv\"\nlogs = \"logs/*.csv\"");
+    let (code, stderr, listed) = run(&sim, &sim.join("campaign.toml"), "out-runs");
+    assert_eq!(code, 0, "{stderr}");
+    let (code, stderr, tabled) = run(&sim, &table, "out-table");
+    assert_eq!(code, 0, "{stderr}");
+    assert_eq!(listed["rig"], tabled["rig"], "the notes change no number");
+    let bare = run_by_id(&tabled, "bare");
+    assert_eq!(
+        bare["annotations"],
+        serde_json::json!({ "notes": "oil changed, new filter", "operator": "ana" })
+    );
+    assert_eq!(bare["description"], "run 0");
+    assert_eq!(
+        run_by_id(&tabled, "k1")["annotations"],
+        serde_json::json!({ "operator": "ana" }),
+        "an empty cell is no annotation"
+    );
+    assert!(
+        run_by_id(&listed, "bare").get("annotations").is_none(),
+        "a [[runs]] run has none"
+    );
+    let page = std::fs::read_to_string(sim.join("out-table/runs/bare.html")).unwrap();
+    assert!(page.contains("oil changed, new filter"), "the run's page");
+
+    // A note edited: every run from the cache, the new note in place.
+    write(&sim, "specimens.csv", &with_notes("filter changed"));
+    let o = servoid_into(
+        &sim,
+        "run",
+        &table,
+        &sim.join("out-table"),
+        &["--figures", "none"],
+    );
+    assert_eq!(o.code, 0, "{}", o.stderr);
+    assert!(o.stdout.contains("5 cached"), "{}", o.stdout);
+    let again: Value =
+        serde_json::from_slice(&std::fs::read(sim.join("out-table/results.json")).unwrap())
+            .unwrap();
+    assert_eq!(
+        run_by_id(&again, "bare")["annotations"]["notes"],
+        "filter changed"
+    );
+
+    // A misspelt column of servoid's: refused, with the suggestion.
+    let misspelt = TABLE_CSV.replacen("stiffness_n_per_m", "stifness_n_per_m", 1);
+    write(&sim, "specimens.csv", &misspelt);
+    let o = servoid(&sim, &["check", table.to_str().unwrap()]);
+    assert_eq!(o.code, 2, "{}", o.stderr);
+    assert!(
+        o.stderr
+            .contains("unknown column `stifness_n_per_m`; did you mean `stiffness_n_per_m`?"),
+        "{}",
+        o.stderr
+    );
+}

@@ -107,6 +107,9 @@ pub struct RunPlan {
     pub specimen: SpecimenModel,
     pub source: RunSource,
     pub band_hz: (f64, f64),
+    /// A run table row's cells in the lab's own columns (a `notes`, an
+    /// `operator`), by column: carried to results.json and the run's page.
+    pub annotations: std::collections::BTreeMap<String, String>,
 }
 
 /// Where a run's transfer function comes from.
@@ -527,12 +530,13 @@ fn table_run_plan(
         index,
         id: t.id.clone(),
         role: t.role,
-        description: String::new(),
+        description: t.description.clone(),
         date: t.date.clone(),
         p_gain: t.p_gain,
         specimen: t.specimen,
         source,
         band_hz: ctx.ident.band_hz,
+        annotations: t.annotations.clone(),
     })
 }
 
@@ -700,6 +704,7 @@ fn check_run(
         specimen: specimen?,
         source: source?,
         band_hz: (band[0], band[1]),
+        annotations: Default::default(),
     })
     .filter(|_| p_ok)
 }

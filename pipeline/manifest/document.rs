@@ -452,7 +452,7 @@ fn unknown_key(schema: &Value, parent: &KeyPath, name: &str) -> Problem {
 }
 
 /// The one of `known` closest to `name`, if any is close.
-fn closest<'k>(known: &'k [impl AsRef<str>], name: &str) -> Option<&'k str> {
+pub(super) fn closest<'k>(known: &'k [impl AsRef<str>], name: &str) -> Option<&'k str> {
     known
         .iter()
         .map(|k| (strsim::jaro_winkler(k.as_ref(), name), k.as_ref()))

@@ -14,7 +14,7 @@ use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 
 use super::checks::{check_slug, check_specimen, normalise_date, positive};
-use super::document::suggest;
+use super::document::{closest, suggest};
 use super::keypath::{KeyPath, Seg};
 use super::problem::{Problem, TablePlace};
 use super::raw::{Role, RunTable, Specimen};
@@ -35,7 +35,7 @@ pub struct RunTableInfo {
 }
 
 /// The table's columns, and whether each is required.
-const COLUMNS: [(&str, bool); 8] = [
+const COLUMNS: [(&str, bool); 9] = [
     ("id", true),
     ("role", true),
     ("p_gain", true),
@@ -44,6 +44,7 @@ const COLUMNS: [(&str, bool); 8] = [
     ("stiffness_n_per_m", false),
     ("date", false),
     ("log", false),
+    ("description", false),
 ];
 
 /// A row that passed its checks.
@@ -57,6 +58,11 @@ pub(super) struct TableRun {
     /// Its log (which may not exist yet) and the log's format; None for a
     /// validation run without one, a prediction as in `[[runs]]`.
     pub log: Option<(PathBuf, LogFormat)>,
+    /// The `description` cell, or empty.
+    pub description: String,
+    /// The row's cells in the lab's own columns (a `notes`, an
+    /// `operator`), by column, empty cells left out.
+    pub annotations: BTreeMap<String, String>,
 }
 
 /// What a non-blank row says about its run, read leniently (whatever its
@@ -208,7 +214,7 @@ pub(super) fn check_table(
             return CheckedTable::default();
         }
     };
-    let columns = check_columns(&spec.file, &table.columns, problems);
+    let (columns, annotations) = check_columns(&spec.file, &table.columns, problems);
     let matched = spec
         .logs
         .as_ref()
@@ -230,6 +236,7 @@ pub(super) fn check_table(
             number: i + 1,
             cells,
             columns: &columns,
+            annotations: &annotations,
         };
         let (key, run) = check_row(&row, table_dir, source, problems);
         if let Some(run) = run {
@@ -251,13 +258,19 @@ pub(super) fn check_table(
     out
 }
 
-/// Each column of the header known (with a suggestion for one that is not)
-/// and each required column there; the known columns' indices by name.
+/// Each column of the header known, or the lab's own, and each required
+/// column there. Returns the known columns' indices by name and the lab's
+/// columns (name, index). A column whose name is close to a known one
+/// (`stifness_n_per_m`, `mass`) is a problem with a suggestion, not an
+/// annotation: a typo must not silently drop a specimen's value. A column
+/// without a name (a spreadsheet's index column) is neither, and is left
+/// out.
+#[allow(clippy::type_complexity)]
 fn check_columns(
     file: &str,
     header: &[String],
     problems: &mut Vec<Problem>,
-) -> BTreeMap<&'static str, usize> {
+) -> (BTreeMap<&'static str, usize>, Vec<(String, usize)>) {
     let at = |column: &str, message: String| {
         let place = TablePlace {
             file: file.to_string(),
@@ -268,15 +281,18 @@ fn check_columns(
     };
     let known: Vec<&str> = COLUMNS.iter().map(|(name, _)| *name).collect();
     let mut found = BTreeMap::new();
+    let mut own = Vec::new();
     for (i, name) in header.iter().enumerate() {
         match COLUMNS.iter().find(|(c, _)| c == name) {
             Some((c, _)) => {
                 found.insert(*c, i);
             }
-            None => problems.push(at(
+            None if name.trim().is_empty() => {}
+            None if closest(&known, name).is_some() => problems.push(at(
                 name,
                 format!("unknown column `{name}`{}", suggest(&known, name)),
             )),
+            None => own.push((name.clone(), i)),
         }
     }
     for (name, required) in COLUMNS {
@@ -284,7 +300,7 @@ fn check_columns(
             problems.push(at(name, "required column is missing".into()));
         }
     }
-    found
+    (found, own)
 }
 
 /// One data row and how to address its cells.
@@ -295,6 +311,8 @@ struct Row<'a> {
     number: usize,
     cells: &'a [Option<String>],
     columns: &'a BTreeMap<&'static str, usize>,
+    /// The lab's own columns (name, index).
+    annotations: &'a [(String, usize)],
 }
 
 impl Row<'_> {
@@ -398,6 +416,15 @@ fn check_row(
                 specimen,
                 date,
                 log,
+                description: row.cell("description").unwrap_or_default().to_string(),
+                annotations: row
+                    .annotations
+                    .iter()
+                    .filter_map(|(name, i)| {
+                        let cell = row.cells.get(*i)?.as_deref()?;
+                        Some((name.clone(), cell.to_string()))
+                    })
+                    .collect(),
             })
         }
         _ => None,

@@ -449,6 +449,7 @@ fn new_result(plan: &RunPlan) -> RunResult {
         fit: None,
         validation: None,
         log: None,
+        annotations: plan.annotations.clone(),
     }
 }
 
@@ -470,7 +471,12 @@ fn probe(
     // The plan as the manifest states it: its log relative to the
     // manifest's folder, so the key does not depend on the folder the job
     // ran from (shards on other machines find each other's runs).
+    // A run's description and the lab's notes do not change what it
+    // computes: they are left out of the key and put in a stored outcome
+    // as the manifest says them now, so editing a note redoes no work.
     let mut keyed = plan.clone();
+    keyed.description.clear();
+    keyed.annotations.clear();
     if let (RunSource::Log(kp), Some(base)) = (&mut keyed.source, campaign.file.parent()) {
         kp.path = kp.path.strip_prefix(base).unwrap_or(&kp.path).to_path_buf();
     }
@@ -482,7 +488,11 @@ fn probe(
     match cache.probe(&lp.path, lp.max_bytes, key, |s: &Stored| {
         draw.still_there(s)
     }) {
-        Probe::Hit(stored) => (Some(stored), None, None),
+        Probe::Hit(mut stored) => {
+            stored.result.description = plan.description.clone();
+            stored.result.annotations = plan.annotations.clone();
+            (Some(stored), None, None)
+        }
         Probe::Miss { key, file } => (None, Some(key), file),
     }
 }
