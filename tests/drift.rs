@@ -283,3 +283,41 @@ fn an_unreadable_history_fails_the_night_and_says_how_to_recover() {
     assert_eq!(code, 0, "{stderr}");
     assert_eq!(results["drift"]["earlier_entries"], 1);
 }
+
+/// A rig renamed by accident (`frame B` -> `Frame B`) starts a new history,
+/// and its drift goes unchecked against the old one: the night says so,
+/// naming the close name (issue 24). A rig of another name says nothing.
+#[test]
+fn a_renamed_rig_is_told_it_starts_a_new_history() {
+    let dir = scratch();
+    let out = dir.path().join("out");
+    assert_eq!(night(dir.path(), &out, 0, 267.0).0, 0);
+    let (code, _, stderr) = night(dir.path(), &out, 1, 267.0);
+    assert_eq!(code, 0, "{stderr}");
+    let manifest = dir.path().join("night-1/campaign.toml");
+    let text = std::fs::read_to_string(&manifest).unwrap();
+    assert!(text.contains("name = \"frame B\""));
+    let run_as = |name: &str| -> Value {
+        let renamed = write(
+            dir.path(),
+            "night-1/renamed.toml",
+            &text.replace("name = \"frame B\"", &format!("name = \"{name}\"")),
+        );
+        let o = servoid_into(dir.path(), "run", &renamed, &out, &["--figures", "none"]);
+        assert_eq!(o.code, 0, "{}", o.stderr);
+        serde_json::from_slice(&std::fs::read(out.join("results.json")).unwrap()).unwrap()
+    };
+    let said = "rig `Frame B` starts a new history in history.parquet, which holds 2 entries of rig `frame B`: if that is this rig renamed, give [rig] name = \"frame B\" to check its drift against them";
+    let results = run_as("Frame B");
+    assert_eq!(results["drift"]["earlier_entries"], 0);
+    let warnings: Vec<&str> = results["warnings"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|w| w.as_str().unwrap())
+        .collect();
+    assert!(warnings.contains(&said), "{warnings:?}");
+    let results = run_as("shake table 2");
+    let warnings = results["warnings"].to_string();
+    assert!(!warnings.contains("starts a new history"), "{warnings}");
+}

@@ -134,6 +134,17 @@ pub(super) fn check(
         .filter(|e| e.rig == entry.rig)
         .cloned()
         .collect();
+    if !entries.iter().any(|e| e.rig == entry.rig)
+        && let Some((other, n)) = close_rig(&entries, &entry.rig)
+    {
+        results.warnings.push(format!(
+            "rig `{}` starts a new history in {}, which holds {n} {} of rig `{other}`: if that is this rig renamed, give [rig] name = \"{other}\" to check its drift against {}",
+            entry.rig,
+            path.file_name().unwrap_or_default().to_string_lossy(),
+            if n == 1 { "entry" } else { "entries" },
+            if n == 1 { "it" } else { "them" },
+        ));
+    }
     let rule = campaign.history.rule;
     let checks = drift::check(&earlier, &entry, rule);
     let alarms = checks
@@ -221,6 +232,30 @@ impl History {
             other => WriteError::Table(Box::new(other)),
         })
     }
+}
+
+/// The rig of the history whose name is closest to `rig` (the same but
+/// for case, spaces and punctuation, or close to it: `frame B` for
+/// `Frame B`, `frame-b`), with its entry count: a renamed rig would start
+/// a new history silently and its drift would go unchecked.
+fn close_rig(entries: &[Entry], rig: &str) -> Option<(String, usize)> {
+    let fold = |s: &str| -> String {
+        s.chars()
+            .filter(|c| c.is_alphanumeric())
+            .flat_map(char::to_lowercase)
+            .collect()
+    };
+    let mine = fold(rig);
+    let mut counts: std::collections::BTreeMap<&str, usize> = Default::default();
+    for e in entries {
+        *counts.entry(e.rig.as_str()).or_default() += 1;
+    }
+    counts
+        .into_iter()
+        .map(|(name, n)| (strsim::jaro_winkler(&fold(name), &mine), name, n))
+        .filter(|(score, _, _)| *score >= 0.9)
+        .max_by(|a, b| a.0.total_cmp(&b.0))
+        .map(|(_, name, n)| (name.to_string(), n))
 }
 
 fn put(entries: &mut Vec<Entry>, slot: usize, entry: Entry) {
