@@ -26,9 +26,10 @@ pub struct Cli {
     pub command: Command,
 }
 
-/// How a campaign is run and reported.
+/// How a job is run and reported: what `run`, `simulate` and `merge`
+/// share.
 #[derive(Debug, clap::Args)]
-pub struct RunArgs {
+pub struct JobArgs {
     /// Output folder (default: `reports/<name>`).
     #[arg(long)]
     out: Option<PathBuf>,
@@ -36,9 +37,6 @@ pub struct RunArgs {
     /// output does not depend on it.
     #[arg(long, short, value_parser = clap::value_parser!(u64).range(1..))]
     jobs: Option<u64>,
-    /// Which figure files to draw.
-    #[arg(long, value_enum, default_value_t = Figures::All)]
-    figures: Figures,
     /// `text`: a progress bar on a terminal and a summary; `json`: one JSON
     /// object per line (each run started, finished or failed, with its
     /// duration, then a summary) on stdout, for cron.
@@ -48,13 +46,23 @@ pub struct RunArgs {
     /// done again (and the cache refreshed).
     #[arg(long)]
     force: bool,
+    /// Print nothing but errors.
+    #[arg(long, short)]
+    quiet: bool,
+}
+
+/// How a campaign is run: a job, its figures, and its share.
+#[derive(Debug, clap::Args)]
+pub struct RunArgs {
+    #[command(flatten)]
+    job: JobArgs,
+    /// Which figure files to draw.
+    #[arg(long, value_enum, default_value_t = Figures::All)]
+    figures: Figures,
     /// Do the i-th of n shares of the per-log work (0 <= i < n) into its
     /// own folder, for `servoid merge` (e.g. one Slurm array task each).
     #[arg(long, value_name = "I/N")]
     shard: Option<run::Shard>,
-    /// Print nothing but errors.
-    #[arg(long, short)]
-    quiet: bool,
 }
 
 #[derive(Debug, Subcommand)]
@@ -74,7 +82,10 @@ pub enum Command {
         #[arg(long)]
         run: bool,
         #[command(flatten)]
-        args: RunArgs,
+        args: JobArgs,
+        /// Which figure files the campaign's run draws (with --run).
+        #[arg(long, value_enum, default_value_t = Figures::All)]
+        figures: Figures,
     },
     /// Merge the folders of `servoid run --shard i/n` into the campaign's
     /// results and pages, as one run over all the logs writes them.
@@ -83,7 +94,15 @@ pub enum Command {
         #[arg(required = true)]
         shards: Vec<PathBuf>,
         #[command(flatten)]
-        args: RunArgs,
+        args: JobArgs,
+        /// Which figure files to draw (default: the shards' own, so the
+        /// merge does no per-log work; another choice is refused).
+        #[arg(long, value_enum)]
+        figures: Option<Figures>,
+        /// The campaign manifest, when it is no longer where the shards
+        /// recorded it (it must be the same file, by its SHA-256).
+        #[arg(long)]
+        manifest: Option<PathBuf>,
     },
     /// Rerun the analysis a results.json records (its manifest and logs
     /// checked by their hashes) and list every quantity that differs.
@@ -184,13 +203,14 @@ fn warn(line: &str) {
 fn dispatch(command: Command) -> u8 {
     match command {
         Command::Run { manifest, args } => {
-            let watch = Watch::new(&args);
+            let watch = Watch::new(&args.job);
+            let settings = settings(&args.job, args.figures);
             let code = match args.shard {
-                Some(shard) => match run::run_shard(&manifest, &settings(&args), shard, &watch) {
+                Some(shard) => match run::run_shard(&manifest, &settings, shard, &watch) {
                     Ok(outcome) => watch.shard(&outcome),
                     Err(e) => job_failed(&e, watch.json),
                 },
-                None => match run::run_campaign(&manifest, &settings(&args), &watch) {
+                None => match run::run_campaign(&manifest, &settings, &watch) {
                     Ok(outcome) => watch.campaign(&outcome),
                     Err(e) => job_failed(&e, watch.json),
                 },
@@ -198,9 +218,19 @@ fn dispatch(command: Command) -> u8 {
             watch.done();
             code
         }
-        Command::Merge { shards, args } => {
+        Command::Merge {
+            shards,
+            args,
+            figures,
+            manifest,
+        } => {
             let watch = Watch::new(&args);
-            let code = match run::merge(&shards, &settings(&args), &watch) {
+            let merge = run::MergeSettings {
+                job: settings(&args, Figures::All),
+                figures: figures.map(Into::into),
+                manifest,
+            };
+            let code = match run::merge(&shards, &merge, &watch) {
                 Ok(outcome) => watch.campaign(&outcome),
                 Err(e) => job_failed(&e, watch.json),
             };
@@ -211,7 +241,8 @@ fn dispatch(command: Command) -> u8 {
             manifest,
             run,
             args,
-        } => cmd_simulate(&manifest, run, &args),
+            figures,
+        } => cmd_simulate(&manifest, run, &args, figures),
         Command::Verify {
             results,
             manifest,
@@ -279,11 +310,11 @@ fn cmd_verify(results: &Path, manifest: Option<&Path>, jobs: Option<usize>) -> u
     }
 }
 
-fn settings(args: &RunArgs) -> Settings {
+fn settings(args: &JobArgs, figures: Figures) -> Settings {
     Settings {
         out: args.out.clone(),
         jobs: capped(args.jobs),
-        figures: args.figures.into(),
+        figures: figures.into(),
         force: args.force,
     }
 }
@@ -324,13 +355,13 @@ fn job_failed(e: &JobError, json: bool) -> u8 {
     code
 }
 
-fn cmd_simulate(manifest: &Path, then_run: bool, args: &RunArgs) -> u8 {
-    if args.figures != Figures::All && !then_run {
+fn cmd_simulate(manifest: &Path, then_run: bool, args: &JobArgs, figures: Figures) -> u8 {
+    if figures != Figures::All && !then_run {
         warn("error: --figures draws a campaign's figures; it needs --run");
         return EXIT_USAGE;
     }
     let watch = Watch::new(args);
-    let outcome = match run::run_simulation(manifest, &settings(args), then_run, &watch) {
+    let outcome = match run::run_simulation(manifest, &settings(args, figures), then_run, &watch) {
         Ok(o) => o,
         Err(e) => return job_failed(&e, watch.json),
     };
@@ -361,7 +392,7 @@ struct Watch {
 }
 
 impl Watch {
-    fn new(args: &RunArgs) -> Self {
+    fn new(args: &JobArgs) -> Self {
         let json = args.log_format == LogFormat::Json;
         let bar = (!json && !args.quiet && std::io::stdout().is_terminal()).then(|| {
             let bar = ProgressBar::new(0);

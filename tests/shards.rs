@@ -174,3 +174,92 @@ fn a_campaign_fitting_its_validation_runs_into_the_rig_is_not_sharded() {
     let o = servoid_into(dir.path(), "run", &manifest, &out, &["--quiet"]);
     assert_eq!(o.code, 0, "{}", o.stderr);
 }
+
+/// A merge draws what its shards drew (issue 24: with another `--figures`
+/// it redid every run's log work, silently, as the figure choice is in
+/// each run's cache key): by default the shards' choice, and another is
+/// refused naming both. `--shard` is not a merge's (it was accepted and
+/// ignored), and a manifest that moved with its logs is found with
+/// `--manifest`, which the message names.
+#[test]
+fn a_merge_draws_what_the_shards_drew_and_finds_a_moved_manifest() {
+    let dir = scratch();
+    let manifest = campaign(dir.path());
+    let run_shard = |i: usize| {
+        let out = dir.path().join(format!("png-{i}"));
+        let o = servoid_into(
+            dir.path(),
+            "run",
+            &manifest,
+            &out,
+            &["--shard", &format!("{i}/2"), "--figures", "png", "--quiet"],
+        );
+        assert_eq!(o.code, 0, "{}", o.stderr);
+        out
+    };
+    let (s0, s1) = (run_shard(0), run_shard(1));
+    let merge_with = |extra: &[&str], out: &str| {
+        let mut args = vec!["merge", s0.to_str().unwrap(), s1.to_str().unwrap()];
+        args.extend(["--out", out, "--log-format", "json"]);
+        args.extend_from_slice(extra);
+        servoid(dir.path(), &args)
+    };
+    let summary = |stdout: &str| -> serde_json::Value {
+        serde_json::from_str(stdout.lines().last().unwrap()).unwrap()
+    };
+
+    let o = merge_with(&["--figures", "all"], "refused");
+    assert_eq!(o.code, 2, "{}", o.stderr);
+    assert!(
+        o.stderr.contains("the shards drew their figures with --figures png, and each run's cached outcome is for those: merge with --figures png (the default)"),
+        "{}",
+        o.stderr
+    );
+    assert!(!dir.path().join("refused").exists());
+    let o = merge_with(&["--shard", "0/2"], "refused");
+    assert_eq!(o.code, 2, "{}", o.stderr);
+    assert!(
+        o.stderr.contains("unexpected argument '--shard'"),
+        "{}",
+        o.stderr
+    );
+
+    // The default: the shards' PNGs, every run from their caches.
+    let o = merge_with(&[], "merged");
+    assert_eq!(o.code, 0, "{}", o.stderr);
+    assert_eq!(summary(&o.stdout)["cached"], 7, "{}", o.stdout);
+    let figures: Vec<String> = std::fs::read_dir(dir.path().join("merged/figures"))
+        .unwrap()
+        .flatten()
+        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .collect();
+    assert!(
+        !figures.is_empty() && figures.iter().all(|f| f.ends_with(".png")),
+        "{figures:?}"
+    );
+    let rig = |out: &str| -> serde_json::Value {
+        let r: serde_json::Value = serde_json::from_slice(
+            &std::fs::read(dir.path().join(out).join("results.json")).unwrap(),
+        )
+        .unwrap();
+        r["rig"].clone()
+    };
+
+    // The campaign's folder moved (the merge on another machine).
+    std::fs::rename(dir.path().join("sim"), dir.path().join("moved")).unwrap();
+    let o = merge_with(&[], "refused");
+    assert_eq!(o.code, 2, "{}", o.stderr);
+    assert!(
+        o.stderr.contains(&format!(
+            "{}: the manifest the shards ran is not there (",
+            manifest.display()
+        )) && o.stderr.contains("if it moved, give it with --manifest"),
+        "{}",
+        o.stderr
+    );
+    let moved = dir.path().join("moved/campaign.toml");
+    let o = merge_with(&["--manifest", moved.to_str().unwrap()], "merged-moved");
+    assert_eq!(o.code, 0, "{}", o.stderr);
+    assert_eq!(summary(&o.stdout)["cached"], 7, "{}", o.stdout);
+    assert_eq!(rig("merged-moved"), rig("merged"));
+}

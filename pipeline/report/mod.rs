@@ -96,7 +96,8 @@ pub struct FigureSpec {
 
 /// Which figure files a run writes beside its pages, which show them from
 /// there (PNG where there is one, else SVG).
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
 pub enum FigureFormats {
     /// PNG and SVG files.
     #[default]
@@ -110,6 +111,16 @@ pub enum FigureFormats {
 }
 
 impl FigureFormats {
+    /// As `--figures` names it.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            FigureFormats::All => "all",
+            FigureFormats::Png => "png",
+            FigureFormats::Svg => "svg",
+            FigureFormats::None => "none",
+        }
+    }
+
     /// What to render, or None when nothing is drawn.
     fn formats(self) -> Option<figures::Formats> {
         let (png, svg) = match self {

@@ -47,6 +47,16 @@ pub struct Settings {
     pub force: bool,
 }
 
+/// How shards are merged: the job's settings (its `figures` unused), the
+/// figure files to draw (None: the shards' own) and the manifest when it
+/// is no longer where the shards recorded it.
+#[derive(Debug, Clone, Default)]
+pub struct MergeSettings {
+    pub job: Settings,
+    pub figures: Option<FigureFormats>,
+    pub manifest: Option<PathBuf>,
+}
+
 /// Why a job wrote nothing (or, for an output, could not finish writing).
 #[derive(Debug, thiserror::Error)]
 pub enum JobError {
@@ -323,6 +333,7 @@ pub fn run_shard(
         manifest: std::path::absolute(&campaign.file).unwrap_or_else(|_| campaign.file.clone()),
         shard,
         runs: share.runs.iter().map(|r| r.id.clone()).collect(),
+        figures: settings.figures,
     };
     shard::write_info(work, &info).map_err(|e| relocate(e.into()))?;
     let out_dir = set.commit()?;
@@ -342,11 +353,35 @@ pub fn run_shard(
 /// results and pages as one run would write them.
 pub fn merge(
     dirs: &[PathBuf],
-    settings: &Settings,
+    merge: &MergeSettings,
     observer: &dyn Observer,
 ) -> Result<CampaignOutcome, JobError> {
     let shards = shard::check(dirs)?;
     let first = &shards[0].1;
+    // The shards' figures are in each run's cache key: another choice
+    // would redo every run's log work here, silently (issue 24).
+    if let Some(asked) = merge.figures
+        && asked != first.figures
+    {
+        return Err(MergeError::OtherFigures {
+            shards: first.figures,
+            asked,
+        }
+        .into());
+    }
+    let settings = &Settings {
+        figures: first.figures,
+        ..merge.job.clone()
+    };
+    let manifest = merge
+        .manifest
+        .clone()
+        .unwrap_or_else(|| first.manifest.clone());
+    if let Err(source) = std::fs::metadata(&manifest)
+        && merge.manifest.is_none()
+    {
+        return Err(MergeError::ManifestGone { manifest, source }.into());
+    }
     let out_dir = settings
         .out
         .clone()
@@ -361,10 +396,10 @@ pub fn merge(
         cache::merge_stamps(set.dir(), &shard_dirs)
     })();
     gathered.map_err(|e| relocate(e.into()))?;
-    let campaign = load_campaign(&first.manifest)?;
+    let campaign = load_campaign(&manifest)?;
     if campaign.manifest_sha256 != first.manifest_sha256 {
         return Err(MergeError::ManifestChanged {
-            manifest: first.manifest.clone(),
+            manifest: manifest.clone(),
             recorded: first.manifest_sha256.clone(),
             now: campaign.manifest_sha256.clone(),
         }

@@ -20,7 +20,7 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 
 use crate::manifest::{Campaign, Role};
-use crate::report::{self, WriteError};
+use crate::report::{self, FigureFormats, WriteError};
 
 /// One share of a campaign: the `index`-th (0-based) of `count`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -86,6 +86,9 @@ pub struct ShardInfo {
     pub shard: Shard,
     /// The runs the shard did, in manifest order.
     pub runs: Vec<String>,
+    /// The figure files it drew (`--figures`): part of each run's cache
+    /// key, so the merge draws the same or redoes every run.
+    pub figures: FigureFormats,
 }
 
 /// Why shards cannot be merged; each names the folder.
@@ -133,6 +136,23 @@ pub enum MergeError {
         manifest: PathBuf,
         recorded: String,
         now: String,
+    },
+    #[error(
+        "{}: the manifest the shards ran is not there ({source}); if it moved, give it with --manifest",
+        manifest.display()
+    )]
+    ManifestGone {
+        manifest: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    #[error(
+        "the shards drew their figures with --figures {}, and each run's cached outcome is for those: merge with --figures {} (the default), or run the shards again with --figures {}",
+        shards.as_str(), shards.as_str(), asked.as_str()
+    )]
+    OtherFigures {
+        shards: FigureFormats,
+        asked: FigureFormats,
     },
 }
 
@@ -182,6 +202,13 @@ pub fn check(dirs: &[PathBuf]) -> Result<Vec<(PathBuf, ShardInfo)>, MergeError> 
                 "campaign",
                 format!("`{}`, manifest {}", info.campaign, info.manifest_sha256),
                 format!("`{}`, manifest {}", first.campaign, first.manifest_sha256),
+            ));
+        }
+        if info.figures != first.figures {
+            return Err(mismatch(
+                "--figures",
+                info.figures.as_str().to_string(),
+                first.figures.as_str().to_string(),
             ));
         }
         if info.shard.count != first.shard.count {
