@@ -286,24 +286,54 @@ fn cmd_verify(results: &Path, manifest: Option<&Path>, jobs: Option<usize>) -> u
         Ok(v) => v,
         Err(e) => return job_failed(&e, false),
     };
+    // The logs first: every other difference may follow from them.
+    for d in &v.log_differences {
+        say(&format!(
+            "log differs: run {}: {}: recorded sha256 {}, {}",
+            d.run,
+            d.file,
+            d.recorded,
+            d.now
+                .as_ref()
+                .map_or("cannot be read now".to_string(), |n| format!("now {n}"))
+        ));
+    }
+    for d in &v.file_differences {
+        match &d.now {
+            Some(now) => say(&format!(
+                "file differs: {}: recorded sha256 {}, now {now}",
+                d.file, d.recorded
+            )),
+            None => say(&format!("file missing: {}", d.file)),
+        }
+    }
     for d in &v.differences {
         say(&format!(
             "differs: {}: recorded {}, recomputed {}",
             d.key, d.recorded, d.recomputed
         ));
     }
+    let files = match v.files {
+        Some(n) => format!("{n} output files by the set's record"),
+        None => format!(
+            "no record of the output files ({}): results.json alone",
+            run::RECORD
+        ),
+    };
     let what = format!(
-        "{}: rerun from {} ({} logs checked by their hashes)",
+        "{}: rerun from {} ({} logs checked by their hashes, {files})",
         results.display(),
         v.manifest.display(),
-        v.logs
+        v.logs,
     );
-    if v.differences.is_empty() {
-        say(&format!("{what}: every quantity matches"));
+    if v.matches() {
+        say(&format!("{what}: everything matches"));
         EXIT_OK
     } else {
         say(&format!(
-            "{what}: {} quantities differ",
+            "{what}: {} logs, {} files and {} quantities differ",
+            v.log_differences.len(),
+            v.file_differences.len(),
             v.differences.len()
         ));
         EXIT_FAILED

@@ -367,20 +367,45 @@ fn each_run_has_its_frf_and_model_as_parquet_tables() {
 /// a file that is not a results.json is a usage error (exit 2).
 #[test]
 fn verify_reruns_the_recorded_analysis_and_names_what_differs() {
+    use polars::prelude::{ParquetReader, ParquetWriter, SerReader};
     let night = Night::new();
-    let (code, _, _, _) = night.run(&["--figures", "none"]);
+    let (code, _, _, _) = night.run(&["--figures", "png"]);
     assert_eq!(code, 0);
-    let results = night.out().join("results.json");
+    let out = night.out();
+    let results = out.join("results.json");
     let verify = |extra: &[&str]| {
         let mut args = vec!["verify", results.to_str().unwrap()];
         args.extend_from_slice(extra);
         crate::util::servoid(night.dir.path(), &args)
     };
+    // The record lists every output file, and `sha256sum -c` reads it as
+    // it is (an independent check of the hashes).
+    let record = std::fs::read_to_string(out.join("outputs.sha256")).unwrap();
+    for file in [
+        "results.json",
+        "report.html",
+        "history.parquet",
+        "runs/exp1.html",
+        "figures/frf-exp1.png",
+        "tables/frf-exp1.parquet",
+    ] {
+        assert!(record.contains(&format!("  {file}\n")), "{file}: {record}");
+    }
+    if let Ok(o) = std::process::Command::new("sha256sum")
+        .args(["--check", "--quiet", "outputs.sha256"])
+        .current_dir(&out)
+        .output()
+    {
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stdout));
+    }
+    let files = record.lines().count();
     let o = verify(&[]);
     assert_eq!(o.code, 0, "{}{}", o.stdout, o.stderr);
-    assert!(o.stdout.contains("every quantity matches"), "{}", o.stdout);
+    assert!(o.stdout.contains("everything matches"), "{}", o.stdout);
     assert!(
-        o.stdout.contains("(7 logs checked by their hashes)"),
+        o.stdout.contains(&format!(
+            "(7 logs checked by their hashes, {files} output files by the set's record)"
+        )),
         "{}",
         o.stdout
     );
@@ -403,12 +428,107 @@ fn verify_reruns_the_recorded_analysis_and_names_what_differs() {
     );
     std::fs::write(&results, &text).unwrap();
 
-    // A log changed since.
+    // A figure replaced by another run's, an edited page, a table whose
+    // values were doubled, a run page deleted: each named, nothing else.
+    std::fs::copy(
+        out.join("figures/frf-exp2.png"),
+        out.join("figures/frf-exp1.png"),
+    )
+    .unwrap();
+    let page = std::fs::read_to_string(out.join("report.html")).unwrap();
+    std::fs::write(
+        out.join("report.html"),
+        page.replacen("<h1", "<h1 data-x", 1),
+    )
+    .unwrap();
+    let table = out.join("tables/frf-exp1.parquet");
+    let mut df = ParquetReader::new(std::fs::File::open(&table).unwrap())
+        .finish()
+        .unwrap();
+    let names: Vec<String> = df
+        .get_column_names()
+        .iter()
+        .map(|n| n.to_string())
+        .collect();
+    let doubled = names
+        .iter()
+        .find(|n| n.contains("mag") || n.contains("re"))
+        .expect("a numeric column")
+        .clone();
+    let col = df.column(&doubled).unwrap().as_materialized_series() * 2.0;
+    df.with_column(col.into()).unwrap();
+    ParquetWriter::new(std::fs::File::create(&table).unwrap())
+        .finish(&mut df)
+        .unwrap();
+    std::fs::remove_file(out.join("runs/exp3.html")).unwrap();
+    let o = verify(&[]);
+    assert_eq!(o.code, 1, "{}", o.stdout);
+    let lines: Vec<&str> = o.stdout.lines().collect();
+    for file in [
+        "figures/frf-exp1.png",
+        "report.html",
+        "tables/frf-exp1.parquet",
+    ] {
+        assert!(
+            lines
+                .iter()
+                .any(|l| l.starts_with(&format!("file differs: {file}: recorded sha256 "))),
+            "{file}: {}",
+            o.stdout
+        );
+    }
+    assert!(
+        lines.contains(&"file missing: runs/exp3.html"),
+        "{}",
+        o.stdout
+    );
+    assert!(
+        o.stdout
+            .contains(": 0 logs, 4 files and 0 quantities differ"),
+        "{}",
+        o.stdout
+    );
+
+    // A log changed since: on its own line, before everything else.
     night.swap_log("exp4");
     let o = verify(&[]);
     assert_eq!(o.code, 1, "{}", o.stdout);
+    let first = o.stdout.lines().next().unwrap();
     assert!(
-        o.stdout.contains("differs: runs[6].log.sha256"),
+        first.starts_with("log differs: run exp4: exp4.csv: recorded sha256 ")
+            && first.contains(", now "),
+        "{}",
+        o.stdout
+    );
+    assert!(!o.stdout.contains("runs[6].log.sha256"), "{}", o.stdout);
+
+    // The folders moved: the message names the flag; with it, verify runs.
+    let moved = night.dir.path().join("moved");
+    std::fs::create_dir(&moved).unwrap();
+    std::fs::rename(&out, moved.join("out")).unwrap();
+    let results = moved.join("out/results.json");
+    let o = crate::util::servoid(night.dir.path(), &["verify", results.to_str().unwrap()]);
+    assert_eq!(o.code, 2, "{}", o.stderr);
+    assert!(
+        o.stderr
+            .contains("(../a/campaign.toml, relative to its folder) is not there (")
+            && o.stderr
+                .contains("if the folder moved, give the manifest with --manifest"),
+        "{}",
+        o.stderr
+    );
+    let o = crate::util::servoid(
+        night.dir.path(),
+        &[
+            "verify",
+            results.to_str().unwrap(),
+            "--manifest",
+            night.campaign().to_str().unwrap(),
+        ],
+    );
+    assert_eq!(o.code, 1, "{}", o.stderr);
+    assert!(
+        o.stdout.starts_with("log differs: run exp4"),
         "{}",
         o.stdout
     );

@@ -739,6 +739,15 @@ pub fn sha256_hex(bytes: &[u8]) -> String {
     format!("{:x}", Sha256::digest(bytes))
 }
 
+/// SHA-256 of the file at `path` as lowercase hexadecimal, read in pieces
+/// (an output set's figures and tables, for its record and `verify`).
+pub fn file_sha256(path: &Path) -> std::io::Result<String> {
+    let mut file = std::fs::File::open(path)?;
+    let mut hasher = Sha256::new();
+    std::io::copy(&mut file, &mut hasher)?;
+    Ok(format!("{:x}", hasher.finalize()))
+}
+
 /// Raw channels as a format reader found them, before scaling.
 struct Raw<'a> {
     time: RawTime,

@@ -316,6 +316,26 @@ pub fn prune(
     Ok(removed)
 }
 
+/// The record of an output set: `<sha256>  <file>` per output file,
+/// sorted by file, as `sha256sum` writes and checks it.
+pub const RECORD: &str = "outputs.sha256";
+
+/// Write [`RECORD`] into `out_dir` for `files` (relative to it,
+/// `/`-separated), each hashed as it is now on disk.
+pub fn write_record(
+    out_dir: &Path,
+    files: &std::collections::BTreeSet<String>,
+) -> Result<(), WriteError> {
+    let mut text = String::new();
+    for name in files {
+        let path = out_dir.join(name);
+        let sha =
+            crate::ingest::file_sha256(&path).map_err(|source| WriteError::Io { path, source })?;
+        text.push_str(&format!("{sha}  {name}\n"));
+    }
+    write_atomic(&out_dir.join(RECORD), text.as_bytes())
+}
+
 /// Write the campaign's page `report.html` and each run's page
 /// `runs/<id>.html` into `out_dir`; returns the campaign page's path.
 /// `run_figures` follow `results.runs`; `choice` is what the figures were

@@ -24,11 +24,11 @@ use std::path::{Path, PathBuf};
 pub use analyse::{Event, Observer, RunError, Unobserved, analyse};
 pub use rig::{FailedRun, RigError};
 pub use shard::{MergeError, Shard, ShardInfo};
-pub use verify::{Difference, Verification, VerifyError};
+pub use verify::{Difference, FileDifference, LogDifference, Verification, VerifyError};
 
 use crate::manifest::{self, Campaign, Loaded, ManifestError};
-pub use crate::report::FigureFormats;
 use crate::report::{self, FigureFiles, OutSet, WriteError};
+pub use crate::report::{FigureFormats, RECORD};
 use crate::results::{self, Results, Status};
 use analyse::Drawer;
 use cache::Cache;
@@ -557,6 +557,18 @@ fn write_campaign(
     };
     let log_path = out_dir.join("run.jsonl");
     report::write_atomic(&log_path, &log.jsonl())?;
+    // The record of the set, last: every output file by its hash, for
+    // `verify` (and `sha256sum -c`). Not run.jsonl, whose wall-clock times
+    // differ between two runs of the same inputs: the record is the same
+    // bytes for the same inputs, as every other output is.
+    let mut recorded = kept;
+    recorded.extend(["results.json", "report.html"].map(String::from));
+    if let Some(h) = relative_to(&history::path(campaign, out_dir), out_dir)
+        .filter(|h| !h.starts_with("..") && out_dir.join(h).is_file())
+    {
+        recorded.insert(h);
+    }
+    report::write_record(out_dir, &recorded)?;
     Ok(CampaignOutcome {
         cached: analysed.cached.iter().filter(|c| **c).count(),
         results,

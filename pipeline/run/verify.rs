@@ -6,6 +6,13 @@
 //! The comparison is of the JSON values, leaf by leaf, exactly: the same
 //! inputs give the same bytes, so anything else is a difference. The drift
 //! checks (the rig against its history as it stood then) are not rerun.
+//!
+//! Every other file of the set (pages, figures, tables, the history) is
+//! checked against the record the job wrote last, `outputs.sha256`: a
+//! figure replaced, a page edited or a table changed after the job is a
+//! difference, named. A log whose hash differs from the recorded one is
+//! reported first and on its own: every other difference may follow from
+//! it.
 
 use std::path::{Path, PathBuf};
 
@@ -36,6 +43,16 @@ pub enum VerifyError {
         path.display()
     )]
     NoManifestPath { path: PathBuf },
+    #[error(
+        "{}: the manifest results.json names ({recorded}, relative to its folder) is not there ({source}); if the folder moved, give the manifest with --manifest",
+        path.display()
+    )]
+    ManifestGone {
+        path: PathBuf,
+        recorded: String,
+        #[source]
+        source: std::io::Error,
+    },
 }
 
 /// One quantity that differs: where in results.json, and both values.
@@ -47,13 +64,51 @@ pub struct Difference {
     pub recomputed: String,
 }
 
+/// A run's log whose bytes are not those results.json records.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LogDifference {
+    pub run: String,
+    /// The log as the manifest names it.
+    pub file: String,
+    pub recorded: String,
+    /// None when the log cannot be read now.
+    pub now: Option<String>,
+}
+
+/// An output file that is not as the set's record says.
+#[derive(Debug, Clone, PartialEq)]
+pub struct FileDifference {
+    /// Relative to the output folder.
+    pub file: String,
+    pub recorded: String,
+    /// None when the file is not there.
+    pub now: Option<String>,
+}
+
 /// What a verification found.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Verification {
     pub manifest: PathBuf,
     /// Runs whose log was checked by its hash.
     pub logs: usize,
+    /// Logs whose hash differs: first, as everything may follow from them.
+    pub log_differences: Vec<LogDifference>,
+    /// Output files checked against the record; None when the set has no
+    /// record (a set written before servoid wrote one).
+    pub files: Option<usize>,
+    pub file_differences: Vec<FileDifference>,
+    /// The quantities of results.json that differ (the logs' hashes
+    /// excepted: they are in `log_differences`).
     pub differences: Vec<Difference>,
+}
+
+impl Verification {
+    /// Whether everything matches.
+    pub fn matches(&self) -> bool {
+        self.log_differences.is_empty()
+            && self.file_differences.is_empty()
+            && self.differences.is_empty()
+    }
 }
 
 /// Rerun the analysis `results_path` records and compare (on the current
@@ -68,6 +123,7 @@ pub fn verify(results_path: &Path, manifest: Option<&Path>) -> Result<Verificati
             path: results_path.to_path_buf(),
             source,
         })?;
+    let folder = results_path.parent().unwrap_or(Path::new(""));
     let manifest = match manifest {
         Some(m) => m.to_path_buf(),
         None => {
@@ -76,7 +132,16 @@ pub fn verify(results_path: &Path, manifest: Option<&Path>) -> Result<Verificati
                     path: results_path.to_path_buf(),
                 }
             })?;
-            results_path.parent().unwrap_or(Path::new("")).join(rel)
+            let path = folder.join(rel);
+            if let Err(source) = std::fs::metadata(&path) {
+                return Err(VerifyError::ManifestGone {
+                    path: results_path.to_path_buf(),
+                    recorded: rel.to_string(),
+                    source,
+                }
+                .into());
+            }
+            path
         }
     };
     let campaign = manifest::load(&manifest)?;
@@ -92,11 +157,67 @@ pub fn verify(results_path: &Path, manifest: Option<&Path>) -> Result<Verificati
     let a = serde_json::to_value(&recorded).expect("results serialise");
     let b = serde_json::to_value(&recomputed).expect("results serialise");
     diff("", &a, &b, &mut differences);
+    let log_differences = log_differences(&recorded, &recomputed);
+    differences.retain(|d| !is_log_hash(&d.key));
+    let (files, file_differences) = match check_record(folder) {
+        Some(found) => (Some(found.0), found.1),
+        None => (None, Vec::new()),
+    };
     Ok(Verification {
         manifest,
         logs,
+        log_differences,
+        files,
+        file_differences,
         differences,
     })
+}
+
+/// Whether `key` is a run's log hash (`runs[3].log.sha256`).
+fn is_log_hash(key: &str) -> bool {
+    key.starts_with("runs[") && key.ends_with("].log.sha256")
+}
+
+/// Each run whose log hash differs, with the run and the file named.
+fn log_differences(recorded: &Results, recomputed: &Results) -> Vec<LogDifference> {
+    recorded
+        .runs
+        .iter()
+        .filter_map(|r| {
+            let was = r.log.as_ref()?;
+            let now = recomputed.runs.iter().find(|n| n.id == r.id);
+            let now_sha = now.and_then(|n| n.log.as_ref()).map(|l| l.sha256.clone());
+            (now_sha.as_deref() != Some(was.sha256.as_str())).then(|| LogDifference {
+                run: r.id.clone(),
+                file: was.file.clone(),
+                recorded: was.sha256.clone(),
+                now: now_sha,
+            })
+        })
+        .collect()
+}
+
+/// The output files of the set in `folder` against its record: how many
+/// the record lists, and those that differ. None without a record.
+fn check_record(folder: &Path) -> Option<(usize, Vec<FileDifference>)> {
+    let text = std::fs::read_to_string(folder.join(crate::report::RECORD)).ok()?;
+    let mut differences = Vec::new();
+    let mut n = 0;
+    for line in text.lines() {
+        let Some((sha, file)) = line.split_once("  ") else {
+            continue;
+        };
+        n += 1;
+        let now = crate::ingest::file_sha256(&folder.join(file)).ok();
+        if now.as_deref() != Some(sha) {
+            differences.push(FileDifference {
+                file: file.to_string(),
+                recorded: sha.to_string(),
+                now,
+            });
+        }
+    }
+    Some((n, differences))
 }
 
 /// Every leaf where `a` and `b` differ, with its path.
