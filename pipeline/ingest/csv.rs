@@ -205,8 +205,13 @@ impl<'p> Layout<'p> {
                 },
             ));
         }
+        // A `.tsv` file is tab-delimited unless its options say otherwise
+        // (the default delimiter, a comma, is not what a .tsv holds).
+        let tsv = path
+            .extension()
+            .is_some_and(|e| e.eq_ignore_ascii_case("tsv"));
         Ok(Layout {
-            sep: d[0],
+            sep: if tsv && d == b"," { b'\t' } else { d[0] },
             decimal_comma: plan.csv.decimal == ",",
             skip_lines: plan.csv.skip_lines,
             comment: plan.csv.comment_prefix.as_deref().filter(|p| !p.is_empty()),

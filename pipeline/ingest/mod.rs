@@ -37,7 +37,10 @@ pub use plan::{
     ChannelPlan, Channels, Column, CsvOptions, DEFAULT_MAX_LOG_MIB, LogFormat, LogPlan, TimePlan,
 };
 pub use quantum::quantum_step;
-pub use table::{Table, TableError, TableFormat, TableProblem, read_table, table_from_bytes};
+pub use table::{
+    Table, TableError, TableFormat, TableProblem, TableText, read_table, read_table_as,
+    table_from_bytes, table_from_bytes_as,
+};
 
 /// A log read and converted to SI.
 #[derive(Debug, Clone, PartialEq)]

@@ -70,6 +70,22 @@ pub(super) fn read<'a>(
                 source,
             })
         })?;
+        let elapsed;
+        let col = match (w.channel, col.dtype(), &plan.channels.time) {
+            // A logger's timestamps (`timestamp[us]`): the time channel is
+            // the seconds since the first sample, in the channel's unit.
+            ("time", DataType::Datetime(unit, _), super::plan::TimePlan::Column { to_s, .. }) => {
+                elapsed = seconds_since_first(col, *unit, *to_s).ok_or_else(|| {
+                    format(FormatProblem::NotNumeric {
+                        column: name.clone(),
+                        channel: w.channel,
+                        dtype: Box::new(col.dtype().clone()),
+                    })
+                })?;
+                &elapsed
+            }
+            _ => col,
+        };
         if !col.dtype().is_primitive_numeric() {
             return Err(format(FormatProblem::NotNumeric {
                 column: name.clone(),
@@ -400,4 +416,30 @@ impl Thrift<'_> {
             )),
         }
     }
+}
+
+/// A timestamp column as the time since its first value, divided by `to_s`
+/// (the time channel's unit in seconds), so that the channel's own scaling
+/// gives seconds. Exact to the timestamp's unit: the differences are taken
+/// in integers. None when the column does not read as timestamps; a null
+/// stays null (the caller names its row).
+fn seconds_since_first(
+    col: &polars::prelude::Column,
+    unit: polars::prelude::TimeUnit,
+    to_s: f64,
+) -> Option<polars::prelude::Column> {
+    use polars::prelude::TimeUnit as Tu;
+    let tick = match unit {
+        Tu::Nanoseconds => 1e-9,
+        Tu::Microseconds => 1e-6,
+        Tu::Milliseconds => 1e-3,
+    };
+    let physical = col.to_physical_repr();
+    let ca = physical.i64().ok()?;
+    let first = ca.iter().flatten().next()?;
+    let values: Vec<Option<f64>> = ca
+        .iter()
+        .map(|v| v.map(|v| (v.wrapping_sub(first)) as f64 * tick / to_s))
+        .collect();
+    Some(polars::prelude::Column::new(col.name().clone(), values))
 }

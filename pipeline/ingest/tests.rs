@@ -530,6 +530,47 @@ fn parquet_round_trip_is_bit_exact_by_name_and_by_index() {
     }
 }
 
+/// A logger's timestamps as the time column (`timestamp[us]`, as pandas
+/// and many DAQs write Parquet; issue 24: refused as "not numbers"): the
+/// seconds since the first sample, so the rate is the samples' own. At
+/// 1 kHz in microseconds every step is exactly 1000 ticks, so the rate is
+/// exactly 1000 Hz.
+#[test]
+fn parquet_timestamps_are_the_time_since_the_first_sample() {
+    use polars::prelude::{
+        Column as PlColumn, DataFrame, NamedFrom, ParquetWriter, Series, TimeUnit as Tu,
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("stamped.parquet");
+    let n = 4000;
+    // 2024-05-01T09:30:00 in microseconds since 1970, then 1 ms a sample.
+    let start = (19_844_i64 * 86_400 + 34_200) * 1_000_000;
+    let t = Series::new(
+        "t".into(),
+        (0..n).map(|k| start + 1000 * k as i64).collect::<Vec<_>>(),
+    )
+    .cast(&polars::prelude::DataType::Datetime(Tu::Microseconds, None))
+    .unwrap();
+    let u = awkward(n, 1);
+    let x = awkward(n, 2);
+    let f = awkward(n, 3);
+    let mut df = DataFrame::new_infer_height(vec![
+        t.into(),
+        PlColumn::new("u".into(), &u),
+        PlColumn::new("x".into(), &x),
+        PlColumn::new("f".into(), &f),
+    ])
+    .unwrap();
+    ParquetWriter::new(std::fs::File::create(&path).unwrap())
+        .finish(&mut df)
+        .unwrap();
+    let log = read_log(&plan_by_name(&path, LogFormat::Parquet)).unwrap();
+    assert_eq!(log.n_rows, n);
+    assert_eq!(log.sample_rate_hz, 1000.0);
+    assert_same_bits(&log.command_m, &u);
+    assert_same_bits(&log.displacement_m, &x);
+}
+
 #[test]
 fn writers_give_identical_bytes_for_identical_columns() {
     let dir = tempfile::tempdir().unwrap();

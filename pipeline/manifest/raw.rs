@@ -227,6 +227,16 @@ pub struct RunTable {
     /// yet), and a matched file no run uses is a warning.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub logs: Option<String>,
+    /// A CSV table's field delimiter (one character: `,`, `;`, `\t`, ...);
+    /// detected when omitted: tab for a `.tsv` file, else the one of `,`,
+    /// `;` and tab its header line holds.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub delimiter: Option<String>,
+    /// A CSV table's decimal mark, `.` or `,`; detected when omitted (a
+    /// comma when the delimiter is not one, some number is written `4,5`
+    /// and none `4.5`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub decimal: Option<String>,
 }
 
 /// What the campaign is.

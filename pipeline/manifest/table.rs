@@ -207,7 +207,10 @@ pub(super) fn check_table(
         ));
         return CheckedTable::default();
     };
-    let table = match ingest::read_table(&path, format) {
+    let Some(text) = table_text(spec, format, &mut |m| problems.push(at_file(m))) else {
+        return CheckedTable::default();
+    };
+    let table = match ingest::read_table_as(&path, format, text) {
         Ok(t) => t,
         Err(e) => {
             problems.push(at_file(e.problem.to_string()));
@@ -237,6 +240,7 @@ pub(super) fn check_table(
             cells,
             columns: &columns,
             annotations: &annotations,
+            decimal_comma: table.decimal_comma,
         };
         let (key, run) = check_row(&row, table_dir, source, problems);
         if let Some(run) = run {
@@ -256,6 +260,51 @@ pub(super) fn check_table(
         rows: out.keys.len(),
     });
     out
+}
+
+/// The CSV options `[run_table]` gives (`delimiter`, `decimal`), checked:
+/// None, with each problem reported, when they cannot be used.
+fn table_text(
+    spec: &RunTable,
+    format: TableFormat,
+    bad: &mut impl FnMut(String),
+) -> Option<ingest::TableText> {
+    let mut ok = true;
+    if format == TableFormat::Parquet && (spec.delimiter.is_some() || spec.decimal.is_some()) {
+        bad("delimiter and decimal are for a CSV table; a Parquet table has neither".into());
+        return None;
+    }
+    let delimiter = match spec.delimiter.as_deref() {
+        None => None,
+        Some(d) if d.len() == 1 && d.is_ascii() && d != "\"" && d != "\n" && d != "\r" => {
+            Some(d.as_bytes()[0])
+        }
+        Some(d) => {
+            bad(format!(
+                "delimiter: must be one character other than a quote or a line break (got {d:?})"
+            ));
+            ok = false;
+            None
+        }
+    };
+    let decimal_comma = match spec.decimal.as_deref() {
+        None => None,
+        Some(".") => Some(false),
+        Some(",") => Some(true),
+        Some(d) => {
+            bad(format!("decimal: must be \".\" or \",\" (got {d:?})"));
+            ok = false;
+            None
+        }
+    };
+    if delimiter == Some(b',') && decimal_comma == Some(true) {
+        bad("decimal = \",\" needs another delimiter than a comma (a European export uses delimiter = \";\")".into());
+        ok = false;
+    }
+    ok.then_some(ingest::TableText {
+        delimiter,
+        decimal_comma,
+    })
 }
 
 /// Each column of the header known, or the lab's own, and each required
@@ -313,6 +362,8 @@ struct Row<'a> {
     columns: &'a BTreeMap<&'static str, usize>,
     /// The lab's own columns (name, index).
     annotations: &'a [(String, usize)],
+    /// Whether numbers are written with a decimal comma.
+    decimal_comma: bool,
 }
 
 impl Row<'_> {
@@ -370,10 +421,11 @@ fn check_row(
         }
         role
     });
-    let p_gain = number(p_cell, "p_gain", &mut bad)
+    let comma = row.decimal_comma;
+    let p_gain = number(p_cell, "p_gain", comma, &mut bad)
         .flatten()
         .filter(|&p| positive(p, &KeyPath::root(), &mut |_, m| bad("p_gain", m)));
-    let mut parsed = |c: &str| number(row.cell(c), c, &mut bad);
+    let mut parsed = |c: &str| number(row.cell(c), c, comma, &mut bad);
     let (mass, damping, stiffness) = (
         parsed("mass_kg"),
         parsed("damping_ns_per_m"),
@@ -446,11 +498,16 @@ fn specimen_column(path: &KeyPath) -> Option<&str> {
 fn number(
     cell: Option<&str>,
     column: &str,
+    decimal_comma: bool,
     bad: &mut impl FnMut(&str, String),
 ) -> Option<Option<f64>> {
     match cell {
         None => Some(None),
-        Some(text) => match text.parse::<f64>() {
+        Some(text) => match if decimal_comma {
+            text.replacen(',', ".", 1).parse::<f64>()
+        } else {
+            text.parse::<f64>()
+        } {
             Ok(v) => Some(Some(v)),
             Err(_) => {
                 bad(column, format!("must be a number (got {text:?})"));
