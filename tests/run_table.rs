@@ -243,6 +243,7 @@ name = "test rig"
 
 [run_table]
 file = "night/specimens.csv"
+predict = true
 
 "#,
     paper_tf_runs!()

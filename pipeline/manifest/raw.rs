@@ -237,6 +237,13 @@ pub struct RunTable {
     /// and none `4.5`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub decimal: Option<String>,
+    /// Whether a validation row without a log (no `log` cell, no `logs`)
+    /// is a prediction from the rig model, as a `[[runs]]` validation run
+    /// without data is: a table of specimens to predict. Without it such a
+    /// row is a problem, as a spring's is: a night's validation that reads
+    /// no log must not pass as done.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub predict: bool,
 }
 
 /// What the campaign is.

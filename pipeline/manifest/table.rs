@@ -242,7 +242,7 @@ pub(super) fn check_table(
             annotations: &annotations,
             decimal_comma: table.decimal_comma,
         };
-        let (key, run) = check_row(&row, table_dir, source, problems);
+        let (key, run) = check_row(&row, table_dir, source, spec.predict, problems);
         if let Some(run) = run {
             if let Some((log, _)) = &run.log {
                 used.insert(same_file(log));
@@ -391,6 +391,7 @@ fn check_row(
     row: &Row<'_>,
     table_dir: &Path,
     source: LogSource<'_>,
+    predict: bool,
     problems: &mut Vec<Problem>,
 ) -> (RowKey, Option<TableRun>) {
     let id = row.cell("id");
@@ -456,7 +457,7 @@ fn check_row(
         }
         _ => None,
     };
-    let log = role.and_then(|role| row_log(row, id, role, table_dir, source, problems));
+    let log = role.and_then(|role| row_log(row, id, role, table_dir, source, predict, problems));
     let run = match (id_cell, role, p_gain, specimen, log) {
         (Some(id), Some(role), Some(p_gain), Some(specimen), Some(log))
             if problems.len() == before =>
@@ -524,12 +525,14 @@ fn number(
 /// log's format is unknown, the id names several matched files, or a run
 /// that needs a log has none (and silently when the id, whose problem is
 /// reported, is needed and missing).
+#[allow(clippy::too_many_arguments)]
 fn row_log(
     row: &Row<'_>,
     id: Option<&str>,
     role: Role,
     table_dir: &Path,
     source: LogSource<'_>,
+    predict: bool,
     problems: &mut Vec<Problem>,
 ) -> Option<Option<(PathBuf, LogFormat)>> {
     let mut bad = |message: String| problems.push(row.problem(id, Some("log"), message));
@@ -564,7 +567,11 @@ fn row_log(
                 }
             }
         }
-        (None, LogSource::None) if role == Role::Validation => return Some(None),
+        (None, LogSource::None) if role == Role::Validation && predict => return Some(None),
+        (None, LogSource::None) if role == Role::Validation => {
+            bad("a validation run needs a log to be validated: give its `log` cell or [run_table] logs (or predict = true under [run_table] for a table of specimens to predict from the rig model)".into());
+            return None;
+        }
         (None, LogSource::None) => {
             bad(format!(
                 "a {} run needs a log: give its `log` cell or [run_table] logs",
