@@ -22,6 +22,7 @@ fn channel(column: Column, unit: Unit, scale: f64) -> ChannelPlan {
         unit,
         gain: scale * unit.to_si(),
         offset: 0.0,
+        range: None,
     }
 }
 

@@ -73,6 +73,7 @@ fn channel(column: Column, unit: Unit) -> ChannelPlan {
         unit,
         gain: unit.to_si(),
         offset: 0.0,
+        range: None,
     }
 }
 

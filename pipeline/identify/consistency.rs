@@ -52,6 +52,23 @@ pub struct Consistency {
     pub leave_one_out: Vec<LeaveOneOut>,
     /// When the springs disagree: what usually makes them.
     pub likely_causes: Vec<String>,
+    /// Why the test could not be made, when it could not (not in
+    /// results.json: `note` says it in words).
+    #[serde(skip)]
+    pub untested: Option<Untested>,
+}
+
+/// Why the springs' agreement could not be tested.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Untested {
+    /// One spring run: the campaign's design (a second spring makes the
+    /// test possible).
+    OneSpring,
+    /// Published transfer functions: no covariance, by what they are.
+    NoCovariance,
+    /// The springs' covariance is not positive definite: something in the
+    /// data or the specimens' values (a stiffness of 1e-300) is wrong.
+    NotPositiveDefinite,
 }
 
 /// One parameter's chi-square test across the springs.
@@ -94,8 +111,10 @@ pub fn check(springs: &[PerSpringValues], cov: Option<&[DMatrix<f64>; 3]>) -> Co
         note: String::new(),
         leave_one_out: Vec::new(),
         likely_causes: Vec::new(),
+        untested: None,
     };
     if n < 2 {
+        out.untested = Some(Untested::OneSpring);
         out.note = "one spring run: the springs' agreement cannot be checked (a second spring of another stiffness makes the check possible)".into();
         return out;
     }
@@ -121,11 +140,13 @@ pub fn check(springs: &[PerSpringValues], cov: Option<&[DMatrix<f64>; 3]>) -> Co
         })
         .collect();
     let Some(cov) = cov else {
+        out.untested = Some(Untested::NoCovariance);
         out.note = "the spring runs' fits carry no covariance (published transfer functions), so their agreement cannot be tested; the leave-one-out values show their spread".into();
         return out;
     };
     let all: Vec<usize> = (0..n).collect();
     let Some(checks) = tests(springs, cov, &all) else {
+        out.untested = Some(Untested::NotPositiveDefinite);
         out.note = "the springs' propagated covariance is not positive definite, so their agreement cannot be tested".into();
         return out;
     };

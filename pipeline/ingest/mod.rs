@@ -216,10 +216,9 @@ pub enum IngestError {
         si: f64,
     },
     #[error(
-        "{}: {at}: {channel} (column {column}) is {si:e} {} after scaling, beyond the {} no servo-hydraulic test reaches: a corrupted sample, or a wrong unit? Fix or remove the line",
+        "{}: {at}: {channel} (column {column}) is {si:e} {} after scaling, beyond {range}: a corrupted sample, or a wrong unit? Fix or remove the line",
         path.display(),
-        physical_range(channel).1,
-        physical_range(channel).2
+        physical_range(channel).1
     )]
     BeyondRange {
         path: PathBuf,
@@ -227,6 +226,9 @@ pub enum IngestError {
         channel: &'static str,
         column: String,
         si: f64,
+        /// The range as the message says it: the manifest's, or the
+        /// default beyond any test.
+        range: String,
     },
     #[error(
         "{}: {at}: time does not increase ({t_s} s after {prev_s} s); time stamps must be strictly increasing",
@@ -894,15 +896,19 @@ fn assemble(plan: &LogPlan, sha256: String, raw: Raw<'_>) -> Result<Log, IngestE
     // log's columns was a third of its reading's peak memory. A zero offset
     // is not added, so that -0 stays -0 and a log written in SI reads back
     // bit for bit.
+    // `given` is the manifest's range in SI with the channel's unit.
     let to_si = |channel: &'static str,
-                 column: &str,
+                 column: String,
+                 given: Option<((f64, f64), crate::units::Unit)>,
                  mut v: Vec<f64>,
                  si: &dyn Fn(f64) -> f64|
      -> Result<Vec<f64>, IngestError> {
         // A finite but absurd sample (one 9.9e37 in a log) passed before
         // and gave an NRMSE of inf and an "offset removed" of 4.8e300 m
-        // (issue 24): beyond what any test reaches, it is the line's error.
-        let limit = physical_range(channel).0;
+        // (issue 24): beyond the instrument's range (the manifest's), or
+        // beyond what any test reaches, it is the line's error.
+        let (default, _, said) = physical_range(channel);
+        let (lo, hi) = given.map_or((-default, default), |(r, _)| r);
         for (i, x) in v.iter_mut().enumerate() {
             let raw = *x;
             *x = si(raw);
@@ -916,13 +922,23 @@ fn assemble(plan: &LogPlan, sha256: String, raw: Raw<'_>) -> Result<Log, IngestE
                     si: *x,
                 });
             }
-            if x.abs() > limit {
+            if !(lo..=hi).contains(x) {
+                let range = match given {
+                    Some((_, unit)) => format!(
+                        "its range [{}, {}] {} ([channels.{channel}] range)",
+                        lo / unit.to_si(),
+                        hi / unit.to_si(),
+                        unit.symbol()
+                    ),
+                    None => format!("the {said} no servo-hydraulic test reaches"),
+                };
                 return Err(IngestError::BeyondRange {
                     path: path.clone(),
                     at: locate(i),
                     channel,
-                    column: column.to_string(),
+                    column: column.clone(),
                     si: *x,
+                    range,
                 });
             }
         }
@@ -930,15 +946,16 @@ fn assemble(plan: &LogPlan, sha256: String, raw: Raw<'_>) -> Result<Log, IngestE
     };
     let scale = |channel: &'static str, plan: &ChannelPlan, v: Vec<f64>| {
         let column = plan.column.to_string();
+        let given = plan.range.map(|r| (r, plan.unit));
         if plan.offset == 0.0 {
-            to_si(channel, &column, v, &|r| r * plan.gain)
+            to_si(channel, column, given, v, &|r| r * plan.gain)
         } else {
-            to_si(channel, &column, v, &|r| r * plan.gain + plan.offset)
+            to_si(channel, column, given, v, &|r| r * plan.gain + plan.offset)
         }
     };
     let (timing, sample_rate_hz, t0_s) = match raw.time {
         RawTime::Column { raw, to_s, column } => {
-            let t = to_si("time", &column, raw, &|r| r * to_s)?;
+            let t = to_si("time", column.to_string(), None, raw, &|r| r * to_s)?;
             let timing = measure_timing(path, &t, locate)?;
             (timing, 1.0 / timing.dt_s(), t[0])
         }

@@ -61,6 +61,8 @@ pub struct ChannelPlan {
     pub gain: f64,
     /// offset * unit-to-SI.
     pub offset: f64,
+    /// The instrument's range in SI (the manifest's `range`), when given.
+    pub range: Option<(f64, f64)>,
 }
 
 /// A column by name or by 0-based index.

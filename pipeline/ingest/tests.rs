@@ -19,6 +19,7 @@ fn ch(column: Column, unit: Unit, scale: f64) -> ChannelPlan {
         unit,
         gain: scale * unit.to_si(),
         offset: 0.0,
+        range: None,
     }
 }
 

@@ -973,6 +973,7 @@ fn plan_channel(c: &Channel) -> ChannelPlan {
         unit: c.unit,
         gain: c.scale * si,
         offset: c.offset * si,
+        range: c.range.map(|[lo, hi]| (lo * si, hi * si)),
     }
 }
 

@@ -237,6 +237,14 @@ fn check_channel(
     if !ch.offset.is_finite() {
         bad(path.key("offset"), "must be finite".into());
     }
+    if let Some([lo, hi]) = ch.range
+        && !(lo.is_finite() && hi.is_finite() && lo < hi)
+    {
+        bad(
+            path.key("range"),
+            format!("must be [min, max] with finite min < max (got [{lo}, {hi}])"),
+        );
+    }
     if let Column::Name(n) = &ch.column
         && n.is_empty()
     {

@@ -307,6 +307,13 @@ pub struct Channel {
     pub scale: f64,
     #[serde(default)]
     pub offset: f64,
+    /// The instrument's range `[min, max]` in `unit` (after `scale` and
+    /// `offset`), say its full scale `[-50, 50]` mm: a sample beyond it is
+    /// a corrupted sample or a wrong unit, and fails its run naming the
+    /// line. Without it: +-10 m for the command and displacement, +-1e9 N
+    /// for the force, beyond any servo-hydraulic test.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub range: Option<[f64; 2]>,
 }
 
 /// The time base of a log.

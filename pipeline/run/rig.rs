@@ -186,6 +186,19 @@ pub(super) fn establish<'a>(
             ident.consistency.likely_causes.join("; ")
         ));
     }
+    // A check that could not be made is said where the lab reads, not only
+    // in results.json (issue 24): unless the springs are published
+    // transfer functions, which carry no covariance by what they are.
+    if let Some(why) = ident.consistency.untested
+        && why != identify::consistency::Untested::NoCovariance
+    {
+        let runs: Vec<&str> = ident.per_spring.iter().map(|s| s.run.as_str()).collect();
+        warnings.push(format!(
+            "rig: the springs' agreement was not tested (spring runs {}): {}",
+            runs.join(", "),
+            ident.consistency.note
+        ));
+    }
     let sequential = RigEstimates {
         beta1: ident.beta1,
         a1b0: ident.a1b0,

@@ -265,6 +265,7 @@ fn analysis_manifest(plan: &SimulationPlan, truth: &Truth) -> Manifest {
         unit: sensor.unit,
         scale: 1.0,
         offset: 0.0,
+        range: None,
     };
     let runs = plan
         .runs
