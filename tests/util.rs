@@ -113,7 +113,8 @@ pub fn write(dir: &Path, name: &str, text: &str) -> PathBuf {
 /// holding `utfsm-mts-mrdamper/`), else `../shared/data` beside the
 /// checkout, one level further up (a worktree), or `/work/shared/data`.
 /// None, after a SKIPPED line on stderr, where none holds them: the logs
-/// are not part of the repository.
+/// are not part of the repository. With `SERVOID_REQUIRE_MTS_DATA` set
+/// (`.ci/run` sets it) their absence fails the test instead.
 pub fn mts_data() -> Option<PathBuf> {
     let candidates: Vec<PathBuf> = std::env::var_os("SERVOID_SHARED_DATA")
         .map(PathBuf::from)
@@ -129,7 +130,13 @@ pub fn mts_data() -> Option<PathBuf> {
         .map(|d| d.join("utfsm-mts-mrdamper"))
         .find(|d| d.join("0A.txt").exists() && d.join("1A.txt").exists());
     if found.is_none() {
-        skipped(&format!("the MTS logs are not in any of {candidates:?}"));
+        skip_unless_required(
+            "the MTS-log tests",
+            "SERVOID_REQUIRE_MTS_DATA",
+            &format!(
+                "the MTS logs are not in any of {candidates:?} (set SERVOID_SHARED_DATA to the folder holding utfsm-mts-mrdamper/)"
+            ),
+        );
     }
     found
 }

@@ -123,7 +123,9 @@ const NEEDS: Needs = Needs {
 /// checkout (as the brief has it), one level further up (a worktree), or
 /// `/work/shared/data`. The logs are not part of the repository; where none
 /// of these holds them the tests that need them say SKIPPED on stderr and
-/// pass, so that a clone without the data still builds and tests.
+/// pass, so that a clone without the data still builds and tests, unless
+/// `SERVOID_REQUIRE_MTS_DATA` is set (`.ci/run` sets it): then their absence
+/// fails the test.
 fn shared_log(file: &str) -> Option<PathBuf> {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     let candidates: Vec<PathBuf> = std::env::var_os("SERVOID_SHARED_DATA")
@@ -140,7 +142,17 @@ fn shared_log(file: &str) -> Option<PathBuf> {
         .map(|d| d.join("utfsm-mts-mrdamper").join(file))
         .find(|p| p.exists());
     if found.is_none() {
-        eprintln!("SKIPPED: {file} not found in {candidates:?}");
+        let why = format!("{file} not found in {candidates:?}");
+        if std::env::var_os("SERVOID_REQUIRE_MTS_DATA").is_some_and(|v| v != "0") {
+            panic!("SERVOID_REQUIRE_MTS_DATA is set but {why}");
+        }
+        // Straight to stderr: the harness hides `eprintln!` of a passing
+        // test, and a skip must be seen.
+        use std::io::Write;
+        let _ = writeln!(
+            std::io::stderr().lock(),
+            "SKIPPED: {why}; set SERVOID_REQUIRE_MTS_DATA=1 to make this a failure"
+        );
     }
     found
 }
