@@ -287,11 +287,7 @@ pub const OWN_FOLDERS: [&str; 3] = ["figures", "runs", "tables"];
 /// previous one, so without this a run dropped from the campaign, a figure
 /// format no longer drawn (`--figures none`) or a table a run no longer
 /// writes would stay beside the new outputs (issue 24).
-pub fn prune(
-    out_dir: &Path,
-    keep: &std::collections::BTreeSet<String>,
-) -> Result<Vec<String>, WriteError> {
-    let mut removed = Vec::new();
+pub fn prune(out_dir: &Path, keep: &std::collections::BTreeSet<String>) -> Result<(), WriteError> {
     for folder in OWN_FOLDERS {
         let dir = out_dir.join(folder);
         let Ok(entries) = std::fs::read_dir(&dir) else {
@@ -310,10 +306,9 @@ pub fn prune(
             }
             let path = dir.join(&name);
             std::fs::remove_file(&path).map_err(|source| WriteError::Io { path, source })?;
-            removed.push(rel);
         }
     }
-    Ok(removed)
+    Ok(())
 }
 
 /// The record of an output set: `<sha256>  <file>` per output file,
