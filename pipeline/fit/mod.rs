@@ -68,6 +68,13 @@ pub struct FitOptions {
     pub independent_lag: usize,
 }
 
+/// The Levenberg-Marquardt iteration limit of every fit `servoid run` makes
+/// (a run's transfer function, the joint fit's legs, the Monte Carlo's
+/// draws): decided here once. These problems converge in tens of
+/// iterations from the linear start; 200 leaves room for a poor one, and a
+/// fit that still has not converged is refused, not used.
+pub const RUN_MAX_ITERATIONS: u64 = 200;
+
 impl FitOptions {
     /// Options with a sample-and-hold command, no delay, 100 iterations and
     /// 10 SK re-weightings.

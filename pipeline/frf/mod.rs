@@ -18,8 +18,10 @@ use realfft::{RealFftPlanner, RealToComplex};
 
 mod lpm;
 mod settings;
+mod synthesis;
 
 pub use settings::{Detrend, Estimator, FrfPlan, Window};
+pub use synthesis::{EtfeSpectra, EtfeSynthesis, Unsynthesizable};
 
 /// Shortest Welch segment accepted (the manifest enforces the same bound).
 pub const MIN_SEGMENT_LENGTH: usize = 16;
@@ -244,14 +246,43 @@ fn etfe_or_lpm(
         transform.run(x, w.as_deref(), detrend_kind, &mut out);
         out
     };
-    let ((mut h, mut suy), coarse) = rayon::join(
+    let ((h, suy), coarse) = rayon::join(
         || rayon::join(|| transform_of(u), || transform_of(y)),
         || welch_spectra(u, y, sample_rate_hz, &segments),
     );
     // The LPM works on the transforms themselves: kept before they become
     // H and Suy in place.
     let transforms = lpm.then(|| (h.clone(), suy.clone()));
+    let coarse_coherence = coherence_of(&coarse.suu, &coarse.syy, &coarse.suy);
+    Ok(etfe_from_transforms(
+        h,
+        suy,
+        n,
+        scale,
+        sample_rate_hz,
+        &coarse_coherence,
+        sample_rate_hz / coherence_segment_length as f64,
+    ))
+    .map(|frf| match transforms {
+        Some((u_k, y_k)) => lpm::take_out_transient(frf, &u_k, &y_k),
+        None => frf,
+    })
+}
 
+/// The ETFE from the whole-record transforms U (in `h`) and Y (in `suy`),
+/// on their bins (all n/2 + 1, or the first few: each bin is computed from
+/// its own transforms alone): `scale` is 1/(fs sum w^2), and the coherence
+/// is the Welch estimate `coarse_coherence` (on bins `coarse_resolution_hz`
+/// apart) interpolated onto the ETFE's bins.
+fn etfe_from_transforms(
+    mut h: Vec<Complex<f64>>,
+    mut suy: Vec<Complex<f64>>,
+    n: usize,
+    scale: f64,
+    sample_rate_hz: f64,
+    coarse_coherence: &[f64],
+    coarse_resolution_hz: f64,
+) -> Frf {
     // Per bin, in place: the transforms U and Y become H = Y/U and
     // Suy = conj(U) Y; Suu and Syy are new. Each bin is computed on its own,
     // so splitting the bins across threads changes no bit of the result.
@@ -275,14 +306,12 @@ fn etfe_or_lpm(
 
     let resolution_hz = sample_rate_hz / n as f64;
     let freq_hz = bin_frequencies(nb, resolution_hz);
-    let coarse_coherence = coherence_of(&coarse.suu, &coarse.syy, &coarse.suy);
-    let coarse_resolution_hz = sample_rate_hz / coherence_segment_length as f64;
     let coherence = freq_hz
         .par_iter()
         .with_min_len(PAR_MIN_BINS)
-        .map(|&f| interpolate(&coarse_coherence, f / coarse_resolution_hz))
+        .map(|&f| interpolate(coarse_coherence, f / coarse_resolution_hz))
         .collect();
-    Ok(Frf {
+    Frf {
         freq_hz,
         h,
         coherence,
@@ -294,11 +323,7 @@ fn etfe_or_lpm(
         estimator: Estimator::Etfe,
         resolution_hz,
         variance: None,
-    })
-    .map(|frf| match transforms {
-        Some((u_k, y_k)) => lpm::take_out_transient(frf, &u_k, &y_k),
-        None => frf,
-    })
+    }
 }
 
 /// Periodic (DFT-even) window of length `n`: the symmetric window of length
@@ -652,9 +677,8 @@ fn etfe_local_noise_density(frf: &Frf, k: usize) -> f64 {
     let Some(inv) = a.try_inverse() else {
         return f64::INFINITY;
     };
-    let c: Vec<Complex<f64>> = (0..P)
-        .map(|p| (0..P).map(|q| b[q] * inv[(p, q)]).sum())
-        .collect();
+    // On the stack: a heap vector per bin was a tenth of the cost.
+    let c: [Complex<f64>; P] = std::array::from_fn(|p| (0..P).map(|q| b[q] * inv[(p, q)]).sum());
     let mut rss = 0.0;
     for j in window.filter(|&j| usable(j)) {
         let x = (j as f64 - k as f64) / r_half as f64;
@@ -877,28 +901,52 @@ fn welch_spectra(u: &[f64], y: &[f64], sample_rate_hz: f64, segments: &Segmentin
         let segment = s * hop..s * hop + l;
         transform.run(&u[segment.clone()], Some(&w), detrend_kind, &mut uf);
         transform.run(&y[segment], Some(&w), detrend_kind, &mut yf);
-        for k in 0..nb {
-            suu[k] += uf[k].norm_sqr();
-            syy[k] += yf[k].norm_sqr();
-            suy[k] += uf[k].conj() * yf[k];
-        }
+        accumulate_segment(&uf, &yf, (&mut suu, &mut syy, &mut suy));
     }
-
-    // One-sided density: |X|^2 / (fs sum w^2), averaged, doubled off DC and
-    // Nyquist, so that sum(S df) is the mean square (Parseval).
-    let scale = 1.0 / (sample_rate_hz * w.iter().map(|v| v * v).sum::<f64>() * n_segments as f64);
-    for k in 0..nb {
-        let s = scale * one_sided_factor(k, l);
-        suu[k] *= s;
-        syy[k] *= s;
-        suy[k] *= s;
-    }
+    to_density(
+        (&mut suu, &mut syy, &mut suy),
+        sample_rate_hz,
+        &w,
+        n_segments,
+    );
     Spectra {
         suu,
         syy,
         suy,
         n_segments,
         effective_averages: effective_averages(&w, hop, n_segments),
+    }
+}
+
+/// Adds one segment's |U|^2, |Y|^2 and conj(U) Y to the running sums, bin
+/// by bin (over the sums' bins: all of a segment's, or its first few).
+fn accumulate_segment(
+    uf: &[Complex<f64>],
+    yf: &[Complex<f64>],
+    (suu, syy, suy): (&mut [f64], &mut [f64], &mut [Complex<f64>]),
+) {
+    for k in 0..suu.len() {
+        suu[k] += uf[k].norm_sqr();
+        syy[k] += yf[k].norm_sqr();
+        suy[k] += uf[k].conj() * yf[k];
+    }
+}
+
+/// The sums of `n_segments` segments of length `w.len()` made one-sided
+/// densities: |X|^2 / (fs sum w^2), averaged, doubled off DC and Nyquist,
+/// so that sum(S df) is the mean square (Parseval).
+fn to_density(
+    (suu, syy, suy): (&mut [f64], &mut [f64], &mut [Complex<f64>]),
+    sample_rate_hz: f64,
+    w: &[f64],
+    n_segments: usize,
+) {
+    let scale = 1.0 / (sample_rate_hz * w.iter().map(|v| v * v).sum::<f64>() * n_segments as f64);
+    for k in 0..suu.len() {
+        let s = scale * one_sided_factor(k, w.len());
+        suu[k] *= s;
+        syy[k] *= s;
+        suy[k] *= s;
     }
 }
 

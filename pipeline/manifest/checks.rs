@@ -21,6 +21,10 @@ pub struct IdentificationPlan {
     pub frf: FrfPlan,
     pub intersample: Intersample,
     pub delay: DelayPlan,
+    /// The longest delay a fit may find (s): `identification.delay.max_s`,
+    /// whatever the mode, for the fits that look for a delay the
+    /// manifest's mode does not (the joint fit, the delay test).
+    pub max_delay_s: f64,
     pub numerator_order: usize,
     pub denominator_order: usize,
     pub trim_to_excitation: bool,
@@ -331,11 +335,9 @@ pub(super) fn check_identification(
             }
             DelayPlan::Fixed { delay_s: d.value_s }
         }
-        DelayMode::Fit => {
-            positive(d.max_s, &path.key("delay").key("max_s"), bad);
-            DelayPlan::Fit { max_s: d.max_s }
-        }
+        DelayMode::Fit => DelayPlan::Fit { max_s: d.max_s },
     };
+    positive(d.max_s, &path.key("delay").key("max_s"), bad);
     if id.model.denominator == 0 || id.model.numerator > id.model.denominator {
         bad(
             path.key("model"),
@@ -357,6 +359,7 @@ pub(super) fn check_identification(
         },
         intersample: id.command_intersample,
         delay,
+        max_delay_s: d.max_s,
         numerator_order: id.model.numerator,
         denominator_order: id.model.denominator,
         trim_to_excitation: id.trim_to_excitation,

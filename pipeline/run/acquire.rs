@@ -152,7 +152,7 @@ pub fn fit_options(ident: &IdentificationPlan, sample_rate_hz: f64) -> FitOption
     );
     opts.intersample = ident.intersample;
     opts.delay = ident.delay;
-    opts.max_iterations = 200;
+    opts.max_iterations = fit::RUN_MAX_ITERATIONS;
     opts.independent_lag = ident.frf.independent_lag();
     opts
 }
@@ -162,44 +162,103 @@ pub fn fit_options(ident: &IdentificationPlan, sample_rate_hz: f64) -> FitOption
 pub enum AcquireError {
     #[error(transparent)]
     Ingest(#[from] IngestError),
-    #[error("{}: FRF: {source}", path.display())]
-    Frf {
-        path: PathBuf,
-        #[source]
-        source: FrfError,
-    },
     #[error("{}: the fit band's upper edge {hi} Hz (identification.band_hz) is at or above the log's Nyquist frequency {nyquist} Hz (sampled at {} Hz)", path.display(), 2.0 * nyquist)]
     BandAboveNyquist {
         path: PathBuf,
         hi: f64,
         nyquist: f64,
     },
-    #[error("{}: the command has no energy in the fit band {lo}-{hi} Hz ({fraction:.2e} of its power)", path.display())]
-    NoExcitation {
+    #[error("{}: {source}", path.display())]
+    Tf {
         path: PathBuf,
-        lo: f64,
-        hi: f64,
-        fraction: f64,
+        #[source]
+        source: RunTfError,
     },
-    #[error("{}: only {n} bins in {lo}-{hi} Hz have coherence >= {coherence_min}; the fit needs at least {need} (lower identification.coherence_min or widen the band)", path.display())]
+}
+
+/// Why a run's FRF gives no transfer function: the one refusal `servoid
+/// run` and the Monte Carlo's simulated runs share.
+#[derive(Debug, thiserror::Error)]
+pub enum RunTfError {
+    #[error("FRF: {0}")]
+    Frf(#[from] FrfError),
+    #[error("the command has no energy in the fit band {lo}-{hi} Hz ({fraction:.2e} of its power)")]
+    NoExcitation { lo: f64, hi: f64, fraction: f64 },
+    #[error(
+        "only {n} bins in {lo}-{hi} Hz have coherence >= {coherence_min}; the fit needs at least {need} (lower identification.coherence_min or widen the band)"
+    )]
     TooFewBins {
-        path: PathBuf,
         n: usize,
         need: usize,
         lo: f64,
         hi: f64,
         coherence_min: f64,
     },
-    #[error("{}: transfer-function fit: {source}", path.display())]
-    Fit {
-        path: PathBuf,
-        #[source]
-        source: FitError,
-    },
-    #[error("{}: the fit did not converge ({termination}); refusing a model that is not an optimum", path.display())]
-    NotConverged { path: PathBuf, termination: String },
-    #[error("{}: the fitted model is unstable (poles {poles}); refusing it. Swapped command and displacement columns give this: check the channels' columns", path.display())]
-    Unstable { path: PathBuf, poles: String },
+    #[error("transfer-function fit: {0}")]
+    Fit(#[from] FitError),
+    #[error("the fit did not converge ({termination}); refusing a model that is not an optimum")]
+    NotConverged { termination: String },
+    #[error(
+        "the fitted model is unstable (poles {poles}); refusing it. Swapped command and displacement columns give this: check the channels' columns"
+    )]
+    Unstable { poles: String },
+}
+
+impl RunTfError {
+    /// What kind of refusal this is, in a few words: how the Monte Carlo
+    /// counts its failed draws.
+    pub fn kind(&self) -> &'static str {
+        match self {
+            RunTfError::Frf(_) => "the FRF failed",
+            RunTfError::NoExcitation { .. } => "no excitation in the band",
+            RunTfError::TooFewBins { .. } => "too few bins pass the coherence limit",
+            RunTfError::Fit(_) => "the fit failed",
+            RunTfError::NotConverged { .. } => "a fit that did not converge",
+            RunTfError::Unstable { .. } => "an unstable fit",
+        }
+    }
+}
+
+/// A run's transfer function fitted to its FRF `h` on the bins of `mask`
+/// (the band's, coherent enough), refused as `servoid run` refuses a run:
+/// too few bins for the model, a fit that fails, is unstable or did not
+/// converge. The fit's own warnings are in `TfFit::warnings`.
+pub fn fit_run(
+    h: &Frf,
+    mask: &[bool],
+    band_hz: (f64, f64),
+    ident: &IdentificationPlan,
+    sample_rate_hz: f64,
+) -> Result<(TfFit, FitData), RunTfError> {
+    let used = mask.iter().filter(|m| **m).count();
+    let need = bins_needed(ident);
+    if used < need {
+        return Err(RunTfError::TooFewBins {
+            n: used,
+            need,
+            lo: band_hz.0,
+            hi: band_hz.1,
+            coherence_min: ident.coherence_min,
+        });
+    }
+    let data = FitData::of(h, mask);
+    let fit = fit::fit(&data.input(), &fit_options(ident, sample_rate_hz))?;
+    if !fit.stable {
+        let poles = fit
+            .tf
+            .poles()
+            .iter()
+            .map(|p| format!("{:.4}{:+.4}j", p.re, p.im))
+            .collect::<Vec<_>>()
+            .join(", ");
+        return Err(RunTfError::Unstable { poles });
+    }
+    if !fit.converged {
+        return Err(RunTfError::NotConverged {
+            termination: fit.termination.clone(),
+        });
+    }
+    Ok((fit, data))
 }
 
 /// Largest tolerated sample-interval deviation (fraction of the interval)
@@ -276,10 +335,11 @@ pub fn log_stage_from(
             nyquist: 0.5 * fs,
         });
     }
-    let frf_err = |source: FrfError| AcquireError::Frf {
+    let tf_err = |source: RunTfError| AcquireError::Tf {
         path: path.clone(),
         source,
     };
+    let frf_err = |source: FrfError| tf_err(RunTfError::Frf(source));
     let mut h =
         frf::estimate(&log.command_m, &log.displacement_m, fs, &ident.frf).map_err(frf_err)?;
     // Excitation in the band: the command's power there against its total.
@@ -311,12 +371,7 @@ pub fn log_stage_from(
     };
     let fraction = if total > 0.0 { in_band / total } else { 0.0 };
     if fraction < MIN_BAND_POWER_FRACTION {
-        return Err(AcquireError::NoExcitation {
-            path,
-            lo,
-            hi,
-            fraction,
-        });
+        return Err(tf_err(RunTfError::NoExcitation { lo, hi, fraction }));
     }
     let mask = frf::band_mask(&h, run.band_hz, ident.coherence_min);
     if ident.frf.estimator != frf::Estimator::Lpm
@@ -335,40 +390,7 @@ pub fn log_stage_from(
     }
 
     let fit = if matches!(run.role, Role::NoSpecimen | Role::Spring | Role::Fit) {
-        let used = mask.iter().filter(|m| **m).count();
-        let need = bins_needed(ident);
-        if used < need {
-            return Err(AcquireError::TooFewBins {
-                path,
-                n: used,
-                need,
-                lo,
-                hi,
-                coherence_min: ident.coherence_min,
-            });
-        }
-        let data = FitData::of(&h, &mask);
-        let opts = fit_options(ident, fs);
-        let fit = fit::fit(&data.input(), &opts).map_err(|source| AcquireError::Fit {
-            path: path.clone(),
-            source,
-        })?;
-        if !fit.stable {
-            let poles = fit
-                .tf
-                .poles()
-                .iter()
-                .map(|p| format!("{:.4}{:+.4}j", p.re, p.im))
-                .collect::<Vec<_>>()
-                .join(", ");
-            return Err(AcquireError::Unstable { path, poles });
-        }
-        if !fit.converged {
-            return Err(AcquireError::NotConverged {
-                path,
-                termination: fit.termination.clone(),
-            });
-        }
+        let (fit, data) = fit_run(&h, &mask, run.band_hz, ident, fs).map_err(tf_err)?;
         warnings.extend(fit.warnings.iter().cloned());
         Some((fit, data))
     } else {

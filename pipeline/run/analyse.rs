@@ -29,7 +29,6 @@ use super::acquire::{AcquireError, Acquired, FitData, LogStage, acquire_with};
 use super::cache::{self, Cache, Probe};
 use super::compare::compare;
 use super::figures::{self, ForceBins, OverlayRun};
-use super::joint::DEFAULT_MAX_DELAY_S;
 use super::rig::{self, Evidence, RigError, RigInput, ValidationEvidence};
 use super::tables;
 use crate::fit::adequacy::{self, Adequacy, Residuals};
@@ -1145,7 +1144,7 @@ fn delay_test(ident: &IdentificationPlan, st: &LogStage, fit: &TfFit) -> Option<
     }
     let data = st.fit_data.as_ref()?;
     let opts = fit_options(ident, st.log.sample_rate_hz);
-    let t = fit::delay_test::delay_test(&data.input(), &opts, fit, DEFAULT_MAX_DELAY_S);
+    let t = fit::delay_test::delay_test(&data.input(), &opts, fit, ident.max_delay_s);
     let with = t.with_delay.as_ref().ok();
     let converged = with.filter(|w| w.converged && w.stable);
     let note = match (&t.with_delay, t.f_test) {

@@ -13,7 +13,6 @@
 
 use super::acquire::FitData;
 use super::rig::{Evidence, ValidationEvidence};
-use crate::fit::DelayPlan;
 use crate::fit::adequacy::Adequacy;
 use crate::fit::joint::{
     self, Candidate, Choice, JointFit, JointOptions, JointRun, Output, P_SIGNIFICANT, Place,
@@ -26,10 +25,6 @@ use crate::results::{
     FTestResult, JointCandidate, JointParameter, JointResult, JointStructureName, RigEstimates,
     RunAdequacy,
 };
-
-/// A delay bound when the manifest fits none (s): 20 ms, the default of
-/// `identification.delay.max_s`.
-pub(super) const DEFAULT_MAX_DELAY_S: f64 = 0.02;
 
 /// How much worse than the sequential fits' pooled reduced chi-square the
 /// joint fit's may be and still count as adequate.
@@ -155,15 +150,12 @@ pub(super) fn joint(
         intersample: ident.intersample,
         sample_rate_hz: fs,
         p_ref: start.p_gain,
-        max_iterations: 200,
+        max_iterations: crate::fit::RUN_MAX_ITERATIONS,
         valve_start: (0.0, 0.0),
         piston_start_kg: 1.0,
         delay_start_s: 0.0,
         force_delay_start_s: 0.0,
-        max_delay_s: match ident.delay {
-            DelayPlan::Fit { max_s } => max_s,
-            _ => DEFAULT_MAX_DELAY_S,
-        },
+        max_delay_s: ident.max_delay_s,
         lag: ident.frf.independent_lag(),
     };
     let choice = match campaign.joint.structure {

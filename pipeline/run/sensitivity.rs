@@ -9,6 +9,7 @@
 use super::acquire::{self, replayed_command};
 use super::cache::{self, Cache};
 use super::montecarlo::{McInput, monte_carlo};
+use crate::ingest::IngestError;
 use crate::manifest::{Campaign, MonteCarloSettings, Role, RunSource};
 use crate::model::RigParams;
 use crate::report::WriteError;
@@ -58,7 +59,7 @@ pub(super) fn sensitivity(
             ),
             Some(profile) => match cached_monte_carlo(campaign, rig, profile, range, mc, cache)? {
                 Ok(m) => (Some(m), None),
-                Err(why) => (None, Some(why)),
+                Err(why) => (None, Some(why.to_string())),
             },
         },
     };
@@ -130,6 +131,22 @@ fn analytic(
     Some(AnalyticSensitivity { basis, sweep })
 }
 
+/// Why the Monte Carlo cannot run: recorded in the results as its note, not
+/// a failure of the campaign.
+#[derive(Debug, thiserror::Error)]
+pub enum McUnavailable {
+    #[error("run {run}: too few fitted bins to tell its noise level")]
+    NoNoiseLevel { run: String },
+    #[error("run {run}: no log to replay")]
+    NoLog { run: String },
+    #[error("run {run}: {source}")]
+    Replay {
+        run: String,
+        #[source]
+        source: Box<IngestError>,
+    },
+}
+
 /// The Monte Carlo from the cache, or run and cached; Err says why it
 /// cannot run (recorded in the results, not a failure of the campaign).
 fn cached_monte_carlo(
@@ -139,7 +156,7 @@ fn cached_monte_carlo(
     range: (f64, f64),
     mc: &MonteCarloSettings,
     cache: Option<&Cache>,
-) -> Result<Result<MonteCarlo, String>, WriteError> {
+) -> Result<Result<MonteCarlo, McUnavailable>, WriteError> {
     let key = cache::key(&[
         &"monte carlo",
         rig,
@@ -164,12 +181,10 @@ fn run_monte_carlo(
     profile: &NoiseProfile,
     range: (f64, f64),
     mc: &MonteCarloSettings,
-) -> Result<MonteCarlo, String> {
+) -> Result<MonteCarlo, McUnavailable> {
+    let run = || profile.run.clone();
     let Some((noise_rms_m, whiteness)) = profile.white_noise else {
-        return Err(format!(
-            "run {}: too few fitted bins to tell its noise level",
-            profile.run
-        ));
+        return Err(McUnavailable::NoNoiseLevel { run: run() });
     };
     let log_plan = campaign
         .runs
@@ -179,9 +194,12 @@ fn run_monte_carlo(
             RunSource::Log(l) => Some(l),
             _ => None,
         })
-        .ok_or_else(|| format!("run {}: no log to replay", profile.run))?;
+        .ok_or_else(|| McUnavailable::NoLog { run: run() })?;
     let command = replayed_command(log_plan, &campaign.identification, &profile.log_sha256)
-        .map_err(|e| format!("run {}: {e}", profile.run))?;
+        .map_err(|e| McUnavailable::Replay {
+            run: run(),
+            source: Box::new(e),
+        })?;
     let fs = profile.sample_rate_hz;
     let input = McInput {
         rig: *rig,
@@ -194,6 +212,7 @@ fn run_monte_carlo(
         seed: mc.seed,
     };
     let ks = log_grid(range, mc.points);
+    let frequency_domain = input.in_frequency_domain();
     let mut points = monte_carlo(&input, &ks, mc.seeds);
     // The analytic prediction at exactly these stiffnesses.
     let opts = acquire::fit_options(&campaign.identification, fs);
@@ -210,7 +229,7 @@ fn run_monte_carlo(
     let agreement = compare(&mut points, &at_points, mc.seeds, whiteness);
     Ok(MonteCarlo {
         basis: format!(
-            "{} identifications per stiffness, each of a no-specimen run and a spring run simulated from the identified rig (Eq. 10 with the zero-order hold{}), driven by run {}'s logged command ({:.1} s at {fs} Hz), read with {:.3} um rms of white displacement noise (the level its FRF variance implies){}, and identified with the campaign's settings",
+            "{} identifications per stiffness, each of a no-specimen run and a spring run simulated from the identified rig (Eq. 10 with the zero-order hold{}), driven by run {}'s logged command ({:.1} s at {fs} Hz), read with {:.3} um rms of white displacement noise (the level its FRF variance implies){}{}, and identified with the campaign's settings",
             mc.seeds,
             if profile.delay_s > 0.0 {
                 format!(" and its {:.2} ms delay", 1e3 * profile.delay_s)
@@ -223,6 +242,11 @@ fn run_monte_carlo(
             match profile.displacement_step_m {
                 Some(q) => format!(" on its converter's {:.3} um grid", 1e6 * q),
                 None => String::new(),
+            },
+            if frequency_domain {
+                " (drawn on the ETFE's bins, exact for white noise, the grid's rounding as white noise of step^2/12)"
+            } else {
+                ""
             },
         ),
         excitation_run: profile.run.clone(),

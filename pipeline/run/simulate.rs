@@ -184,34 +184,41 @@ pub fn simulate_campaign(
     plan: &SimulationPlan,
     out_dir: &Path,
 ) -> Result<Simulated, SimulateError> {
-    let signals: Vec<RunSignals> = plan
-        .runs
-        .par_iter()
-        .map(|run| simulate_run(plan, run))
-        .collect::<Result<_, _>>()?;
-
     let m = &plan.manifest;
     let ext = match m.simulation.log_format {
         OutputFormat::Csv => "csv",
         OutputFormat::Parquet => "parquet",
     };
+    let log_path = |s: &RunSignals| out_dir.join(format!("logs/{}.{ext}", s.truth.id));
+    // Each run is simulated and its log's bytes made side by side (the
+    // shortest round-trip text of every sample is most of a CSV log's
+    // cost); the files are written after, in the manifest's order.
+    let logs: Vec<(RunSignals, Vec<u8>)> = plan
+        .runs
+        .par_iter()
+        .map(|run| {
+            let s = simulate_run(plan, run)?;
+            let cols: Vec<(&str, &[f64])> = s
+                .columns
+                .iter()
+                .map(|(n, v)| (n.as_str(), v.as_slice()))
+                .collect();
+            let path = log_path(&s);
+            let bytes = match m.simulation.log_format {
+                OutputFormat::Csv => logs::csv_bytes(&path, &cols),
+                OutputFormat::Parquet => logs::parquet_bytes(&path, &cols),
+            }?;
+            Ok((s, bytes))
+        })
+        .collect::<Result<_, SimulateError>>()?;
+
     let mut log_paths = Vec::new();
     let mut truth_runs = Vec::new();
-    for s in signals {
-        let rel = format!("logs/{}.{ext}", s.truth.id);
-        let path = out_dir.join(&rel);
-        let cols: Vec<(&str, &[f64])> = s
-            .columns
-            .iter()
-            .map(|(n, v)| (n.as_str(), v.as_slice()))
-            .collect();
-        let bytes = match m.simulation.log_format {
-            OutputFormat::Csv => logs::csv_bytes(&path, &cols),
-            OutputFormat::Parquet => logs::parquet_bytes(&path, &cols),
-        }?;
+    for (s, bytes) in logs {
+        let path = log_path(&s);
         report::write_artifact(&path, &bytes)?;
         let mut t = s.truth;
-        t.log = rel;
+        t.log = format!("logs/{}.{ext}", t.id);
         t.log_sha256 = sha256_hex(&bytes);
         truth_runs.push(t);
         log_paths.push(path);

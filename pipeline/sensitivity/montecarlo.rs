@@ -149,13 +149,13 @@ pub fn white_noise(variance: &[f64], suu: &[f64], sample_rate_hz: f64) -> Option
 /// they were simulated from.
 pub fn point(
     stiffness_n_per_m: f64,
-    outcomes: &[Result<[f64; 4], String>],
+    outcomes: &[Result<[f64; 4], &str>],
     truth: [f64; 4],
 ) -> MonteCarloPoint {
-    let got: Vec<[f64; 4]> = outcomes.iter().filter_map(|o| o.clone().ok()).collect();
+    let got: Vec<[f64; 4]> = outcomes.iter().filter_map(|o| o.ok()).collect();
     let mut failures = BTreeMap::new();
-    for e in outcomes.iter().filter_map(|o| o.as_ref().err()) {
-        *failures.entry(e.clone()).or_insert(0) += 1;
+    for e in outcomes.iter().filter_map(|o| o.err()) {
+        *failures.entry(e.to_string()).or_insert(0) += 1;
     }
     let n = got.len() as f64;
     let (rel_bias, rel_std) = if got.len() >= 2 {
@@ -473,7 +473,7 @@ mod tests {
     fn points_pool_and_say_why() {
         let truth = [1.0, 2.0, 3.0, 4.0];
         // Two seeds each: std of {x - d, x + d} is d sqrt(2).
-        let draws = |d: f64| -> Vec<Result<[f64; 4], String>> {
+        let draws = |d: f64| -> Vec<Result<[f64; 4], &str>> {
             vec![
                 Ok(truth.map(|t| t * (1.0 - d / 2f64.sqrt()))),
                 Ok(truth.map(|t| t * (1.0 + d / 2f64.sqrt()))),
@@ -481,7 +481,7 @@ mod tests {
         };
         let mut pts = vec![point(1e4, &draws(0.0108), truth), {
             let mut o = draws(0.009);
-            o.push(Err("an unstable fit".into()));
+            o.push(Err("an unstable fit"));
             point(1e5, &o, truth)
         }];
         assert_eq!(pts[1].failures.get("an unstable fit"), Some(&1));
