@@ -99,7 +99,7 @@ fn night(dir: &Path, out: &Path, n: usize, beta1: f64) -> (i32, Value, String) {
     (o.code, results, o.stderr)
 }
 
-/// The rule, restated from its description in the README: the median of
+/// The rule, restated from its description in docs/manifest.md: the median of
 /// up to K = 10 earlier values (at least 3), the history's scatter from
 /// successive differences (1.4826 MAD / sqrt 2), the limit 4 max(std,
 /// scatter).

@@ -3,7 +3,7 @@
 //! `fuzz/regressions/<target>/` (inputs that once crashed a reader) goes
 //! through the same target body the fuzzer runs (`fuzz/src/targets.rs`).
 //! None may panic, and every seed must read cleanly, so the seeds reach the
-//! readers' ends. Running the fuzzers themselves needs nightly (README).
+//! readers' ends. Running the fuzzers themselves needs nightly (docs/developers.md).
 
 #[path = "../fuzz/src/targets.rs"]
 mod targets;

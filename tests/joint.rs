@@ -481,7 +481,7 @@ fn a_fixed_structure_the_data_reject_is_kept_and_flagged() {
 /// is 0.98-1.02; 2,000 seeds' own sampling std is 0.016). With the ETFE's
 /// former noise estimate, which averaged windows holding the bin's own
 /// noise, the joint stds were some 4 % optimistic (94.5 % within 2 std,
-/// RMS 1.034-1.044; README, "Accuracy against known truth").
+/// RMS 1.034-1.044; docs/accuracy.md, "Accuracy against known truth").
 /// Fewer seeds are not enough: a campaign's four parameters share its
 /// noise, and 300 seeds leave the fraction about a percent from its
 /// expectation.
@@ -680,7 +680,7 @@ struct Mismatch {
     extras: Extras,
 }
 
-/// What one campaign of a rig gave: its README row, the rig's errors in
+/// What one campaign of a rig gave: its docs/accuracy.md row, the rig's errors in
 /// total stds, and whether a structure warning was given.
 struct Outcome {
     row: String,
@@ -764,7 +764,7 @@ fn base(
 /// SDOF validation runs; 120 s chirps at 1 kHz). For every rig parameter
 /// the campaign reports: within 1 % of the truth, or within 2 total stds
 /// of it with a structure warning. Across the suite at least 90 % of the
-/// parameters lie within 2 total stds. The table it prints is the README's.
+/// parameters lie within 2 total stds. The table it prints is docs/accuracy.md's.
 #[test]
 fn the_mismatch_suite_is_right_or_warned() {
     // The validation runs' x1/u and f/u join the fit where `include` says.
@@ -871,7 +871,7 @@ fn the_mismatch_suite_is_right_or_warned() {
 /// Beyond the candidates: rigs with what no structure holds, Coulomb
 /// friction on the piston and two modes at once (in the loop and in the
 /// command path). Their errors are not covered by the stated stds (the
-/// README's table says by how much); what the test asserts is that the
+/// docs/accuracy.md's table says by how much); what the test asserts is that the
 /// campaign says so: the chosen structure fails its adequacy tests and the
 /// misfit warning names it.
 #[test]

@@ -11,6 +11,7 @@ mod consistency;
 mod corpus;
 mod csi;
 mod disk_full;
+mod docs;
 mod drift;
 mod figure_formats;
 mod fuzz_replay;

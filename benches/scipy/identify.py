@@ -27,7 +27,7 @@ window (the manifest's rectangular one suits the coherence, not an H1).
 state in a Python loop, by scipy.signal.lfilter of the same model
 discretised with its hold (cont2discrete, "zoh"): the same response, in C.
 
-Where it differs from servoid, on purpose (see README.md): the fit's weights
+Where it differs from servoid, on purpose (see docs/accuracy.md): the fit's weights
 are |U(k)|^2 (white output noise) where servoid estimates the noise level
 locally; no standard deviations, no force FRF or force validation, no
 canonical-form checks, no per-window errors, no log checks or hashes.

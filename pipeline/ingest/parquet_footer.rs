@@ -17,8 +17,10 @@
 //! error, the walk stops too and leaves the refusal to polars: nothing is
 //! reserved after that point.
 //!
-//! This mirrors one version of polars: `Cargo.toml` pins polars 0.55, and
-//! the fuzz targets replay the inputs that found the divergence.
+//! This mirrors one version of polars, polars-parquet 0.55.2: `Cargo.toml`
+//! pins polars to it exactly, a test fails when Cargo.lock holds another
+//! polars-parquet, and the fuzz targets replay the inputs that found the
+//! divergence.
 
 /// Why the walk stopped early.
 enum Stop {
@@ -409,5 +411,21 @@ mod tests {
         // Wire type 13 does not exist; an unterminated struct ends early.
         assert_eq!(check(&[0x1D]), Ok(()));
         assert_eq!(check(&[0x15]), Ok(()));
+    }
+
+    /// Cargo.lock holds the polars-parquet this walk mirrors, and no other:
+    /// an upgrade of polars fails here until the walk is checked against
+    /// the new decoder and the constant moved.
+    #[test]
+    fn cargo_lock_holds_the_polars_the_walk_mirrors() {
+        let lock = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/Cargo.lock"))
+            .expect("Cargo.lock beside Cargo.toml");
+        let versions: Vec<&str> = lock
+            .split("[[package]]")
+            .filter(|p| p.contains("\nname = \"polars-parquet\"\n"))
+            .filter_map(|p| p.lines().find_map(|l| l.strip_prefix("version = ")))
+            .map(|v| v.trim_matches('"'))
+            .collect();
+        assert_eq!(versions, vec!["0.55.2"], "{versions:?}");
     }
 }

@@ -546,7 +546,7 @@ fn misfit_note(fit: &JointFit, m: &RunSpread) -> String {
         })
         .collect();
     format!(
-        "no candidate structure explains the data: the chosen \"{}\" fails its adequacy tests, so the rig has something none of the structures holds (friction, a nonlinear specimen, two modes at once) and its parameters carry an error no std here bounds. Refitted without each of the {} FRFs in turn the rig moves by (jackknife std) {}; the stds include what of that spread statistics do not explain (misfit_std in results.json), but not an error every run shares, which on simulated rigs with piston friction or two modes was 5 to 18 times larger (README). Use the rig as approximate: the difference from the sequential estimate (the model-error term) shows its scale, and the per-run adequacy table shows which runs the misfit weighs on",
+        "no candidate structure explains the data: the chosen \"{}\" fails its adequacy tests, so the rig has something none of the structures holds (friction, a nonlinear specimen, two modes at once) and its parameters carry an error no std here bounds. Refitted without each of the {} FRFs in turn the rig moves by (jackknife std) {}; the stds include what of that spread statistics do not explain (misfit_std in results.json), but not an error every run shares, which on simulated rigs with piston friction or two modes was 5 to 18 times larger (docs/accuracy.md). Use the rig as approximate: the difference from the sequential estimate (the model-error term) shows its scale, and the per-run adequacy table shows which runs the misfit weighs on",
         key_value(fit.structure),
         m.refits,
         spread.join(", ")
