@@ -144,15 +144,10 @@ pub(super) fn check_footer(bytes: &[u8]) -> Result<(), String> {
             "its footer declares {len} bytes of metadata in a file of {n} bytes"
         ));
     }
-    let meta = &bytes[n - 8 - len..n - 8];
-    let mut r = Thrift {
-        bytes: meta,
-        pos: 0,
-    };
-    r.skip_struct(0)?;
-    // The footer as polars' own decoder reads it, which a walk by wire
-    // types does not always follow (see `parquet_footer`).
-    super::parquet_footer::check(meta)
+    // The footer as polars' own decoder reads it (see `parquet_footer`):
+    // a generic walk by wire types, which this replaced, does not always
+    // read it as polars does.
+    super::parquet_footer::check(&bytes[n - 8 - len..n - 8])
 }
 
 /// Checks, on the metadata as polars parsed it (`reader` over `bytes`),
@@ -295,127 +290,6 @@ pub(super) fn chunk_pages(chunk: &[u8], values: i64) -> Result<(), String> {
         }
     }
     Ok(())
-}
-
-/// A reader of the thrift compact protocol that only checks and skips.
-struct Thrift<'a> {
-    bytes: &'a [u8],
-    pos: usize,
-}
-
-/// Deeper nesting than Parquet's metadata has is damage (and would exhaust
-/// the stack).
-const MAX_THRIFT_DEPTH: usize = 32;
-
-impl Thrift<'_> {
-    fn left(&self) -> usize {
-        self.bytes.len() - self.pos
-    }
-
-    fn byte(&mut self) -> Result<u8, String> {
-        let b = *self
-            .bytes
-            .get(self.pos)
-            .ok_or("its footer's metadata ends early")?;
-        self.pos += 1;
-        Ok(b)
-    }
-
-    fn varint(&mut self) -> Result<u64, String> {
-        let mut value = 0u64;
-        for shift in (0..64).step_by(7) {
-            let b = self.byte()?;
-            value |= u64::from(b & 0x7f) << shift;
-            if b & 0x80 == 0 {
-                return Ok(value);
-            }
-        }
-        Err("its footer holds a varint longer than 64 bits".into())
-    }
-
-    fn advance(&mut self, n: u64, what: &str) -> Result<(), String> {
-        if n > self.left() as u64 {
-            return Err(format!(
-                "its footer declares {what} of {n} bytes where {} remain",
-                self.left()
-            ));
-        }
-        self.pos += n as usize;
-        Ok(())
-    }
-
-    fn skip_struct(&mut self, depth: usize) -> Result<(), String> {
-        if depth > MAX_THRIFT_DEPTH {
-            return Err("its footer's metadata is nested too deep".into());
-        }
-        loop {
-            let header = self.byte()?;
-            if header == 0 {
-                return Ok(());
-            }
-            if header >> 4 == 0 {
-                // A long-form field id (zigzag i16) follows.
-                self.varint()?;
-            }
-            // A field's booleans are in its header (types 1 and 2).
-            if !matches!(header & 0x0f, 1 | 2) {
-                self.skip(header & 0x0f, depth)?;
-            }
-        }
-    }
-
-    /// A value of compact type `ty` (booleans as a byte, as in lists).
-    fn skip(&mut self, ty: u8, depth: usize) -> Result<(), String> {
-        match ty {
-            1..=3 => self.byte().map(|_| ()),
-            4..=6 => self.varint().map(|_| ()),
-            7 => self.advance(8, "a double"),
-            8 => {
-                let len = self.varint()?;
-                self.advance(len, "a string")
-            }
-            9 | 10 => {
-                let header = self.byte()?;
-                let mut size = u64::from(header >> 4);
-                if size == 15 {
-                    size = self.varint()?;
-                }
-                // Every element takes at least a byte.
-                if size > self.left() as u64 {
-                    return Err(format!(
-                        "its footer declares a list of {size} elements where {} bytes remain",
-                        self.left()
-                    ));
-                }
-                for _ in 0..size {
-                    self.skip(header & 0x0f, depth + 1)?;
-                }
-                Ok(())
-            }
-            11 => {
-                let size = self.varint()?;
-                if size == 0 {
-                    return Ok(());
-                }
-                let types = self.byte()?;
-                if size > self.left() as u64 {
-                    return Err(format!(
-                        "its footer declares a map of {size} entries where {} bytes remain",
-                        self.left()
-                    ));
-                }
-                for _ in 0..size {
-                    self.skip(types >> 4, depth + 1)?;
-                    self.skip(types & 0x0f, depth + 1)?;
-                }
-                Ok(())
-            }
-            12 => self.skip_struct(depth + 1),
-            other => Err(format!(
-                "its footer's metadata has an unknown thrift type {other}"
-            )),
-        }
-    }
 }
 
 /// A timestamp column as the time since its first value, divided by `to_s`

@@ -1602,10 +1602,13 @@ fn a_folder_or_a_named_pipe_is_not_read_as_a_log() {
 }
 
 /// The Parquet footer check against footers built by hand from the thrift
-/// compact protocol's definition: a list declaring 2^40 elements in a
-/// footer with no bytes left, and metadata longer than the file, are
-/// refused with what they declare; a struct with a short list of strings,
-/// and bytes without the Parquet magic, pass (polars judges the latter).
+/// compact protocol's definition: a list declaring 2^30 elements where
+/// polars reads a list (FileMetaData field 2, the schema) in a footer with
+/// no bytes left, and metadata longer than the file, are refused with what
+/// they declare; the same list where polars reads an i32 (field 1, the
+/// version) is polars' to refuse, and it does, without reserving it; a
+/// struct with a short list of strings, and bytes without the Parquet
+/// magic, pass (polars judges the latter).
 #[test]
 fn parquet_footers_that_declare_more_than_they_hold_are_refused() {
     fn file(meta: &[u8], declared_len: u32) -> Vec<u8> {
@@ -1615,18 +1618,33 @@ fn parquet_footers_that_declare_more_than_they_hold_are_refused() {
         b.extend_from_slice(b"PAR1");
         b
     }
-    // Field 1 (delta 1), type 9 (list); list header 0xF8: size 15 (a
-    // varint follows), element type 8 (binary); then 2^40 as a varint.
-    let mut huge = vec![0x19, 0xF8];
-    let mut v: u64 = 1 << 40;
-    while v >= 0x80 {
-        huge.push((v as u8 & 0x7f) | 0x80);
-        v >>= 7;
-    }
-    huge.push(v as u8);
+    // Field `id` (a delta from 0), type 9 (list); list header 0xFC: size 15
+    // (a varint follows), element type 12 (struct); then 2^30 as a varint
+    // (polars reads the count as an i32).
+    let huge = |id: u8| {
+        let mut b = vec![(id << 4) | 0x09, 0xFC];
+        let mut v: u64 = 1 << 30;
+        while v >= 0x80 {
+            b.push((v as u8 & 0x7f) | 0x80);
+            v >>= 7;
+        }
+        b.push(v as u8);
+        b
+    };
+    let schema = huge(2);
+    let refused = super::parquet::check_footer(&file(&schema, schema.len() as u32)).unwrap_err();
     assert_eq!(
-        super::parquet::check_footer(&file(&huge, huge.len() as u32)),
-        Err("its footer declares a list of 1099511627776 elements where 0 bytes remain".into())
+        refused,
+        "its footer declares 1073741824 schema elements where 0 bytes remain"
+    );
+    let version = huge(1);
+    let bytes = file(&version, version.len() as u32);
+    assert_eq!(super::parquet::check_footer(&bytes), Ok(()));
+    use polars::prelude::SerReader as _;
+    let mut reader = polars::prelude::ParquetReader::new(std::io::Cursor::new(&bytes[..]));
+    assert!(
+        !matches!(super::guard_polars(|| reader.schema()), Ok(Ok(_))),
+        "polars read a footer whose version is a list"
     );
     assert_eq!(
         super::parquet::check_footer(&file(&[0x00], 1000)),
