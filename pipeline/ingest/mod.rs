@@ -472,8 +472,11 @@ pub enum FormatProblem {
     ParquetDamaged { message: String },
     /// Its metadata or page headers declare what the file cannot hold
     /// (servoid's check before polars reads them).
-    #[error("a damaged Parquet file: {message}")]
-    ParquetMetadata { message: String },
+    #[error("a damaged Parquet file: {source}")]
+    ParquetMetadata {
+        #[source]
+        source: parquet::ParquetDamage,
+    },
     /// The schema reads, the wanted columns do not.
     #[error("polars cannot read it as Parquet: {source}")]
     ParquetRead {

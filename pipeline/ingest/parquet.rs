@@ -10,6 +10,72 @@ use polars::prelude::{DataType, ParquetReader, SerReader};
 use super::plan::{Column, LogPlan};
 use super::{At, FormatProblem, IngestError, Raw, list, raw_from_table, wanted};
 
+/// What a damaged Parquet file declares that it does not hold: found by
+/// servoid's checks before polars reads (and would reserve for) it.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum ParquetDamage {
+    #[error("its footer declares {len} bytes of metadata in a file of {file} bytes")]
+    MetadataLength { len: usize, file: usize },
+    #[error("its footer declares {size} {what} where {left} bytes remain")]
+    FooterList {
+        size: i32,
+        what: &'static str,
+        left: usize,
+    },
+    #[error("polars failed reading its footer ({0})")]
+    FooterPanicked(String),
+    #[error("row group {group}, column {column}: {source}")]
+    Column {
+        group: usize,
+        column: usize,
+        #[source]
+        source: Box<ParquetDamage>,
+    },
+    #[error(
+        "its metadata puts {values} values in bytes {start} to {end} of a file of {file} bytes"
+    )]
+    ChunkRange {
+        values: i64,
+        start: u64,
+        end: u64,
+        file: usize,
+    },
+    #[error(
+        "row group {group} declares {declared} rows where its columns hold at most {most} values"
+    )]
+    GroupRows {
+        group: usize,
+        declared: u64,
+        most: i64,
+    },
+    #[error("its footer declares {declared} rows where its row groups hold {rows}")]
+    FileRows { declared: i64, rows: u64 },
+    /// The page header does not parse (the thrift parser's message).
+    #[error("the page header at byte {pos} of its chunk does not read: {message}")]
+    PageHeader { pos: usize, message: String },
+    #[error(
+        "a page at byte {pos} of its chunk declares {compressed} bytes (uncompressed {uncompressed}) where {room} remain"
+    )]
+    PageSize {
+        pos: usize,
+        compressed: i64,
+        uncompressed: i32,
+        room: i64,
+    },
+    #[error(
+        "a page at byte {pos} of its chunk declares {what} {value} where its chunk has {values} values in {chunk} bytes"
+    )]
+    PageCount {
+        pos: usize,
+        what: &'static str,
+        value: i32,
+        values: i64,
+        chunk: usize,
+    },
+    #[error("its chunk ends after pages of {seen} of its {values} values")]
+    ChunkShort { seen: i64, values: i64 },
+}
+
 /// Read a Parquet log's wanted columns.
 pub(super) fn read<'a>(
     path: &Path,
@@ -21,12 +87,12 @@ pub(super) fn read<'a>(
     // A panic inside polars on damaged bytes (found by the Parquet fuzz
     // target) is reported as such, not a crash.
     let damaged = |message| format(FormatProblem::ParquetDamaged { message });
-    check_footer(bytes).map_err(|message| format(FormatProblem::ParquetMetadata { message }))?;
+    check_footer(bytes).map_err(|source| format(FormatProblem::ParquetMetadata { source }))?;
     let schema = super::guard_polars(|| reader.schema())
         .map_err(damaged)?
         .map_err(|source| format(FormatProblem::ParquetUnreadable { source }))?;
     check_pages(bytes, &mut reader)
-        .map_err(|message| format(FormatProblem::ParquetMetadata { message }))?;
+        .map_err(|source| format(FormatProblem::ParquetMetadata { source }))?;
     let names: Vec<String> = schema.iter_names().map(|n| n.to_string()).collect();
 
     let want = wanted(plan);
@@ -133,16 +199,14 @@ pub(super) fn read<'a>(
 /// The footer is `metadata | u32 length (little-endian) | "PAR1"`, the
 /// metadata a thrift struct in the compact protocol (Apache Thrift,
 /// `doc/specs/thrift-compact-protocol.md`).
-pub(super) fn check_footer(bytes: &[u8]) -> Result<(), String> {
+pub(super) fn check_footer(bytes: &[u8]) -> Result<(), ParquetDamage> {
     let n = bytes.len();
     if n < 12 || &bytes[n - 4..] != b"PAR1" {
         return Ok(());
     }
     let len = u32::from_le_bytes([bytes[n - 8], bytes[n - 7], bytes[n - 6], bytes[n - 5]]) as usize;
     if len > n - 12 {
-        return Err(format!(
-            "its footer declares {len} bytes of metadata in a file of {n} bytes"
-        ));
+        return Err(ParquetDamage::MetadataLength { len, file: n });
     }
     // The footer as polars' own decoder reads it (see `parquet_footer`):
     // a generic walk by wire types, which this replaced, does not always
@@ -169,44 +233,50 @@ pub(super) fn check_footer(bytes: &[u8]) -> Result<(), String> {
 pub(super) fn check_pages(
     bytes: &[u8],
     reader: &mut ParquetReader<Cursor<&[u8]>>,
-) -> Result<(), String> {
+) -> Result<(), ParquetDamage> {
     let meta = match super::guard_polars(|| reader.get_metadata().cloned()) {
         Ok(Ok(meta)) => meta,
         // polars refuses the footer: the read that follows says why.
         Ok(Err(_)) => return Ok(()),
-        Err(panic) => return Err(format!("polars failed reading its footer ({panic})")),
+        Err(panic) => return Err(ParquetDamage::FooterPanicked(panic)),
     };
     let mut rows = 0u64;
     for (g, group) in meta.row_groups.iter().enumerate() {
         let mut most = 0i64;
         for (c, column) in group.parquet_columns().iter().enumerate() {
-            let at = |e: String| format!("row group {g}, column {c}: {e}");
+            let at = |e: ParquetDamage| ParquetDamage::Column {
+                group: g,
+                column: c,
+                source: Box::new(e),
+            };
             let values = column.num_values();
             let range = column.byte_range();
             if values < 0 || range.start > range.end || range.end > bytes.len() as u64 {
-                return Err(at(format!(
-                    "its metadata puts {values} values in bytes {} to {} of a file of {} bytes",
-                    range.start,
-                    range.end,
-                    bytes.len()
-                )));
+                return Err(at(ParquetDamage::ChunkRange {
+                    values,
+                    start: range.start,
+                    end: range.end,
+                    file: bytes.len(),
+                }));
             }
             chunk_pages(&bytes[range.start as usize..range.end as usize], values).map_err(at)?;
             most = most.max(values);
         }
         let declared = group.num_rows() as u64;
         if declared > most as u64 {
-            return Err(format!(
-                "row group {g} declares {declared} rows where its columns hold at most {most} values"
-            ));
+            return Err(ParquetDamage::GroupRows {
+                group: g,
+                declared,
+                most,
+            });
         }
         rows += declared;
     }
     if meta.num_rows as u64 > rows {
-        return Err(format!(
-            "its footer declares {} rows where its row groups hold {rows}",
-            meta.num_rows
-        ));
+        return Err(ParquetDamage::FileRows {
+            declared: meta.num_rows as i64,
+            rows,
+        });
     }
     Ok(())
 }
@@ -214,7 +284,7 @@ pub(super) fn check_pages(
 /// The page headers of one column chunk of `values` values, as polars'
 /// page reader walks them: from the chunk's start, header after header,
 /// until the data pages' counts reach `values`.
-pub(super) fn chunk_pages(chunk: &[u8], values: i64) -> Result<(), String> {
+pub(super) fn chunk_pages(chunk: &[u8], values: i64) -> Result<(), ParquetDamage> {
     use polars_parquet_format::thrift::protocol::TCompactInputProtocol;
     use polars_parquet_format::{PageHeader, PageType};
 
@@ -228,23 +298,29 @@ pub(super) fn chunk_pages(chunk: &[u8], values: i64) -> Result<(), String> {
         // allocates no more than the chunk holds.
         let mut prot = TCompactInputProtocol::new(&mut cursor, left);
         let page = PageHeader::read_from_in_protocol(&mut prot).map_err(|e| {
-            format!("the page header at byte {pos} of its chunk does not read: {e}")
+            ParquetDamage::PageHeader {
+                pos,
+                message: e.to_string(),
+            }
         })?;
         let header_len = cursor.position() as usize;
         let compressed = i64::from(page.compressed_page_size);
         let room = (left - header_len) as i64;
         if page.uncompressed_page_size < 0 || !(0..=room).contains(&compressed) {
-            return Err(format!(
-                "a page at byte {pos} of its chunk declares {compressed} bytes (uncompressed {}) where {room} remain",
-                page.uncompressed_page_size
-            ));
+            return Err(ParquetDamage::PageSize {
+                pos,
+                compressed,
+                uncompressed: page.uncompressed_page_size,
+                room,
+            });
         }
-        let bad = |what: &str, v: i32, most: i64| {
-            (!(0..=most).contains(&i64::from(v))).then(|| {
-                format!(
-                    "a page at byte {pos} of its chunk declares {what} {v} where its chunk has {values} values in {} bytes",
-                    chunk.len()
-                )
+        let bad = |what: &'static str, v: i32, most: i64| {
+            (!(0..=most).contains(&i64::from(v))).then_some(ParquetDamage::PageCount {
+                pos,
+                what,
+                value: v,
+                values,
+                chunk: chunk.len(),
             })
         };
         let mut problems = Vec::new();
@@ -284,9 +360,7 @@ pub(super) fn chunk_pages(chunk: &[u8], values: i64) -> Result<(), String> {
         });
         pos += header_len + compressed as usize;
         if pos >= chunk.len() && seen < values {
-            return Err(format!(
-                "its chunk ends after pages of {seen} of its {values} values"
-            ));
+            return Err(ParquetDamage::ChunkShort { seen, values });
         }
     }
     Ok(())

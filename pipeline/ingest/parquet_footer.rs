@@ -25,7 +25,7 @@
 /// Why the walk stopped early.
 enum Stop {
     /// A list declares more elements than the footer has bytes left.
-    Refuse(String),
+    Refuse(super::parquet::ParquetDamage),
     /// polars' decoder errs (or panics, which is caught) here, before it
     /// reserves anything more.
     PolarsErrs,
@@ -44,7 +44,7 @@ const STRUCT: u8 = 12;
 
 /// Refuse what polars would over-reserve for in the footer's metadata
 /// `meta`; Ok where polars reads it or refuses it without reserving more.
-pub(super) fn check(meta: &[u8]) -> Result<(), String> {
+pub(super) fn check(meta: &[u8]) -> Result<(), super::parquet::ParquetDamage> {
     let mut w = Walk { buf: meta, pos: 0 };
     match w.file_metadata() {
         Ok(()) | Err(Stop::PolarsErrs) => Ok(()),
@@ -141,13 +141,14 @@ impl Walk<'_> {
     }
 
     /// `read_list` of structs: polars reserves the declared count first.
-    fn list(&mut self, what: &str, mut element: impl FnMut(&mut Self) -> Step) -> Step {
+    fn list(&mut self, what: &'static str, mut element: impl FnMut(&mut Self) -> Step) -> Step {
         let (_, size) = self.list_begin()?;
         if size.max(0) as usize > self.left() {
-            return Err(Stop::Refuse(format!(
-                "its footer declares {size} {what} where {} bytes remain",
-                self.left()
-            )));
+            return Err(Stop::Refuse(super::parquet::ParquetDamage::FooterList {
+                size,
+                what,
+                left: self.left(),
+            }));
         }
         for _ in 0..size {
             element(self)?;
@@ -398,7 +399,7 @@ mod tests {
         // sees nothing.
         let meta = [0x11, 0x00, 0x35, 0xFC, 0xFF, 0xFF, 0xFF, 0xFF, 0x07, 0x00];
         assert_eq!(
-            check(&meta),
+            check(&meta).map_err(|e| e.to_string()),
             Err("its footer declares 2147483647 row groups where 1 bytes remain".into())
         );
         // The same footer with a list of one row group with no fields.

@@ -99,8 +99,11 @@ pub enum TableProblem {
     },
     /// Its Parquet metadata or page headers declare what the file cannot
     /// hold (servoid's check before polars reads them).
-    #[error("a damaged Parquet table: {message}")]
-    Metadata { message: String },
+    #[error("a damaged Parquet table: {source}")]
+    Metadata {
+        #[source]
+        source: super::parquet::ParquetDamage,
+    },
     /// The reader failed inside polars on damaged bytes.
     #[error("a damaged {format} table: polars failed reading it ({message})")]
     Damaged {
@@ -212,7 +215,7 @@ pub fn table_from_bytes_as(
         TableFormat::Parquet => {
             let mut reader = ParquetReader::new(Cursor::new(bytes.as_slice()));
             super::parquet::check_pages(&bytes, &mut reader)
-                .map_err(|message| fail(TableProblem::Metadata { message }))?;
+                .map_err(|source| fail(TableProblem::Metadata { source }))?;
             reader
                 .finish()
                 .map_err(|source| fail(TableProblem::Parquet { source }))
@@ -222,7 +225,7 @@ pub fn table_from_bytes_as(
     // crash (found by the run-table fuzz target).
     if format == TableFormat::Parquet {
         super::parquet::check_footer(&bytes)
-            .map_err(|message| fail(TableProblem::Metadata { message }))?;
+            .map_err(|source| fail(TableProblem::Metadata { source }))?;
     }
     let df = super::off_pool(|| super::guard_polars(read)).map_err(|message| {
         fail(TableProblem::Damaged {
