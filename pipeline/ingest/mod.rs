@@ -717,20 +717,27 @@ pub fn off_pool<R: Send>(f: impl FnOnce() -> R + Send) -> R {
 /// Calls into polars running now under [`guard_polars`].
 static GUARDED: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
 
+/// A panic inside polars, caught by [`guard_polars`], with its message.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("{message}")]
+pub struct PolarsPanic {
+    pub message: String,
+}
+
 /// A call into polars that may panic on damaged input (the fuzz targets
 /// found index panics in its CSV and Parquet readers): the panic becomes
 /// `Err` with its message, and the reader reports the file as unreadable.
-pub(crate) fn guard_polars<R>(f: impl FnOnce() -> R) -> Result<R, String> {
+pub(crate) fn guard_polars<R>(f: impl FnOnce() -> R) -> Result<R, PolarsPanic> {
     use std::sync::atomic::Ordering;
     GUARDED.fetch_add(1, Ordering::SeqCst);
     let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(f));
     GUARDED.fetch_sub(1, Ordering::SeqCst);
-    result.map_err(|payload| {
-        payload
+    result.map_err(|payload| PolarsPanic {
+        message: payload
             .downcast_ref::<&str>()
             .map(|s| s.to_string())
             .or_else(|| payload.downcast_ref::<String>().cloned())
-            .unwrap_or_else(|| "a panic without a message".into())
+            .unwrap_or_else(|| "a panic without a message".into()),
     })
 }
 

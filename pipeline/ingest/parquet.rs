@@ -86,7 +86,8 @@ pub(super) fn read<'a>(
     let mut reader = ParquetReader::new(Cursor::new(bytes));
     // A panic inside polars on damaged bytes (found by the Parquet fuzz
     // target) is reported as such, not a crash.
-    let damaged = |message| format(FormatProblem::ParquetDamaged { message });
+    let damaged =
+        |p: super::PolarsPanic| format(FormatProblem::ParquetDamaged { message: p.message });
     check_footer(bytes).map_err(|source| format(FormatProblem::ParquetMetadata { source }))?;
     let schema = super::guard_polars(|| reader.schema())
         .map_err(damaged)?
@@ -238,7 +239,7 @@ pub(super) fn check_pages(
         Ok(Ok(meta)) => meta,
         // polars refuses the footer: the read that follows says why.
         Ok(Err(_)) => return Ok(()),
-        Err(panic) => return Err(ParquetDamage::FooterPanicked(panic)),
+        Err(panic) => return Err(ParquetDamage::FooterPanicked(panic.message)),
     };
     let mut rows = 0u64;
     for (g, group) in meta.row_groups.iter().enumerate() {

@@ -227,13 +227,13 @@ pub fn table_from_bytes_as(
         super::parquet::check_footer(&bytes)
             .map_err(|source| fail(TableProblem::Metadata { source }))?;
     }
-    let df = super::off_pool(|| super::guard_polars(read)).map_err(|message| {
+    let df = super::off_pool(|| super::guard_polars(read)).map_err(|p| {
         fail(TableProblem::Damaged {
             format: match format {
                 TableFormat::Csv => "CSV",
                 TableFormat::Parquet => "Parquet",
             },
-            message,
+            message: p.message,
         })
     })??;
     let (columns, rows) = text_cells(&df).map_err(fail)?;

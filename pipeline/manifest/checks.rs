@@ -62,27 +62,51 @@ pub(super) fn check_slug(s: &str, path: &KeyPath, bad: &mut impl FnMut(KeyPath, 
     }
 }
 
+/// A text that is not the ISO 8601 date a manifest or run table asks for.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("must be an ISO 8601 date, YYYY-MM-DD or YYYY-MM-DDTHH:MM:SS[Z] (got {text:?}: {why})")]
+pub struct BadDate {
+    pub text: String,
+    pub why: DateFault,
+}
+
+/// What is wrong with a date.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum DateFault {
+    #[error("the date is not YYYY-MM-DD")]
+    NotYmd,
+    #[error("there is no month {0:02}")]
+    Month(u32),
+    #[error("{year:04}-{month:02} has days 01 to {days}")]
+    Day { year: u32, month: u32, days: u32 },
+    #[error("the time is not HH:MM:SS, optionally followed by Z")]
+    NotHms,
+    #[error("there is no time {0}")]
+    Time(String),
+}
+
 /// A date as ISO 8601 `YYYY-MM-DD`, or `YYYY-MM-DDTHH:MM:SS` optionally
 /// ending in `Z`, checked against the calendar. Returns the normalised text
 /// (no surrounding space, upper-case `T` and `Z`; a space or `t` between date
 /// and time, as RFC 3339 allows, becomes `T`) or, when it is not such a
 /// date, the message saying so.
-pub(super) fn normalise_date(text: &str) -> Result<String, String> {
+pub(super) fn normalise_date(text: &str) -> Result<String, BadDate> {
     let s = text.trim();
-    let fail = |why: String| {
-        Err(format!(
-            "must be an ISO 8601 date, YYYY-MM-DD or YYYY-MM-DDTHH:MM:SS[Z] (got {text:?}: {why})"
-        ))
+    let fail = |why: DateFault| {
+        Err(BadDate {
+            text: text.to_string(),
+            why,
+        })
     };
     let (date, time) = match s.find(['T', 't', ' ']) {
         Some(i) => (&s[..i], Some(&s[i + 1..])),
         None => (s, None),
     };
     let Some([y, m, d]) = digit_fields(date, '-', [4, 2, 2]) else {
-        return fail("the date is not YYYY-MM-DD".into());
+        return fail(DateFault::NotYmd);
     };
     if !(1..=12).contains(&m) {
-        return fail(format!("there is no month {m:02}"));
+        return fail(DateFault::Month(m));
     }
     let leap = y % 4 == 0 && (y % 100 != 0 || y % 400 == 0);
     let days = match m {
@@ -92,7 +116,11 @@ pub(super) fn normalise_date(text: &str) -> Result<String, String> {
         _ => 31,
     };
     if !(1..=days).contains(&d) {
-        return fail(format!("{y:04}-{m:02} has days 01 to {days}"));
+        return fail(DateFault::Day {
+            year: y,
+            month: m,
+            days,
+        });
     }
     let Some(time) = time else {
         return Ok(date.to_string());
@@ -102,10 +130,10 @@ pub(super) fn normalise_date(text: &str) -> Result<String, String> {
         None => (time, ""),
     };
     let Some([h, min, sec]) = digit_fields(clock, ':', [2, 2, 2]) else {
-        return fail("the time is not HH:MM:SS, optionally followed by Z".into());
+        return fail(DateFault::NotHms);
     };
     if h > 23 || min > 59 || sec > 59 {
-        return fail(format!("there is no time {clock}"));
+        return fail(DateFault::Time(clock.to_string()));
     }
     Ok(format!("{date}T{clock}{zulu}"))
 }
@@ -135,7 +163,7 @@ pub(super) fn check_date(
     bad: &mut impl FnMut(KeyPath, String),
 ) -> Option<String> {
     normalise_date(text)
-        .map_err(|message| bad(path.clone(), message))
+        .map_err(|e| bad(path.clone(), e.to_string()))
         .ok()
 }
 
@@ -638,7 +666,7 @@ mod tests {
             ("", "the date is not YYYY-MM-DD"),
         ] {
             assert_eq!(
-                normalise_date(given),
+                normalise_date(given).map_err(|e| e.to_string()),
                 Err(format!(
                     "must be an ISO 8601 date, YYYY-MM-DD or YYYY-MM-DDTHH:MM:SS[Z] (got {given:?}: {why})"
                 )),

@@ -432,9 +432,11 @@ fn check_row(
         parsed("damping_ns_per_m"),
         parsed("stiffness_n_per_m"),
     );
-    let date = row
-        .cell("date")
-        .and_then(|d| normalise_date(d).map_err(|m| bad("date", m)).ok());
+    let date = row.cell("date").and_then(|d| {
+        normalise_date(d)
+            .map_err(|e| bad("date", e.to_string()))
+            .ok()
+    });
     let key = RowKey {
         row: row.number,
         id: id.map(str::to_string),

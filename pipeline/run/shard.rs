@@ -29,24 +29,26 @@ pub struct Shard {
     pub count: usize,
 }
 
+/// A `--shard` that is not `i/n` with 0 <= i < n.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum BadShard {
+    #[error("`{0}` is not i/n (e.g. 0/4)")]
+    NotIOverN(String),
+    #[error("shard {index}/{count}: needs 0 <= i < n, counting from 0")]
+    OutOfRange { index: usize, count: usize },
+}
+
 impl std::str::FromStr for Shard {
-    type Err = String;
+    type Err = BadShard;
 
     /// `i/n` with 0 <= i < n.
-    fn from_str(s: &str) -> Result<Self, String> {
-        let (i, n) = s
-            .split_once('/')
-            .ok_or_else(|| format!("`{s}` is not i/n (e.g. 0/4)"))?;
-        let parse = |v: &str| {
-            v.trim()
-                .parse::<usize>()
-                .map_err(|_| format!("`{s}` is not i/n (e.g. 0/4)"))
-        };
+    fn from_str(s: &str) -> Result<Self, BadShard> {
+        let syntax = || BadShard::NotIOverN(s.to_string());
+        let (i, n) = s.split_once('/').ok_or_else(syntax)?;
+        let parse = |v: &str| v.trim().parse::<usize>().map_err(|_| syntax());
         let (index, count) = (parse(i)?, parse(n)?);
         if count == 0 || index >= count {
-            return Err(format!(
-                "shard {index}/{count}: needs 0 <= i < n, counting from 0"
-            ));
+            return Err(BadShard::OutOfRange { index, count });
         }
         Ok(Self { index, count })
     }
@@ -276,8 +278,19 @@ mod tests {
     #[test]
     fn shards_parse_and_refuse_what_is_not_a_share() {
         assert_eq!("2/4".parse::<Shard>(), Ok(Shard { index: 2, count: 4 }));
-        assert!("4/4".parse::<Shard>().unwrap_err().contains("0 <= i < n"));
+        assert!(
+            "4/4"
+                .parse::<Shard>()
+                .unwrap_err()
+                .to_string()
+                .contains("0 <= i < n")
+        );
         assert!("1/0".parse::<Shard>().is_err());
-        assert!("x".parse::<Shard>().unwrap_err().contains("not i/n"));
+        assert!(
+            "x".parse::<Shard>()
+                .unwrap_err()
+                .to_string()
+                .contains("not i/n")
+        );
     }
 }
