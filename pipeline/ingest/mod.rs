@@ -717,7 +717,7 @@ pub fn off_pool<R: Send>(f: impl FnOnce() -> R + Send) -> R {
 /// Calls into polars running now under [`guard_polars`].
 static GUARDED: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
 
-/// A panic inside polars, caught by [`guard_polars`], with its message.
+/// A panic inside polars, caught by `guard_polars`, with its message.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 #[error("{message}")]
 pub struct PolarsPanic {
