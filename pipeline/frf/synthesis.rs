@@ -75,15 +75,10 @@ pub struct EtfeSynthesis {
 }
 
 impl EtfeSynthesis {
-    /// The synthesis of `plan`'s ETFE for runs driven by `u` sampled at
-    /// `sample_rate_hz`, keeping the bins up to `max_hz` and the reach of
-    /// their variance ([`VARIANCE_REACH_BINS`]), as `Frf::keep_up_to` does.
-    pub fn new(
-        u: &[f64],
-        sample_rate_hz: f64,
-        plan: &FrfPlan,
-        max_hz: f64,
-    ) -> Result<Self, Unsynthesizable> {
+    /// Whether `plan`'s ETFE is linear bin by bin in the noise, so that it
+    /// can be assembled from transforms (what [`EtfeSynthesis::new`] asks
+    /// of the plan before it looks at a signal).
+    pub fn check_plan(plan: &FrfPlan) -> Result<(), Unsynthesizable> {
         if plan.estimator != Estimator::Etfe {
             return Err(Unsynthesizable::Estimator(plan.estimator));
         }
@@ -93,6 +88,19 @@ impl EtfeSynthesis {
         if plan.detrend == Detrend::Linear {
             return Err(Unsynthesizable::LinearDetrend);
         }
+        Ok(())
+    }
+
+    /// The synthesis of `plan`'s ETFE for runs driven by `u` sampled at
+    /// `sample_rate_hz`, keeping the bins up to `max_hz` and the reach of
+    /// their variance ([`VARIANCE_REACH_BINS`]), as `Frf::keep_up_to` does.
+    pub fn new(
+        u: &[f64],
+        sample_rate_hz: f64,
+        plan: &FrfPlan,
+        max_hz: f64,
+    ) -> Result<Self, Unsynthesizable> {
+        Self::check_plan(plan)?;
         check_inputs(u, u, sample_rate_hz, plan.segment_length, plan.overlap)?;
         let n = u.len();
         let l = plan.segment_length;

@@ -134,7 +134,7 @@ impl FitData {
 
 /// The fewest band bins a fit may use: one per parameter, at least three
 /// (each bin gives two real equations, a margin over the bare minimum).
-pub fn bins_needed(ident: &IdentificationPlan) -> usize {
+fn bins_needed(ident: &IdentificationPlan) -> usize {
     let n_params = ident.numerator_order
         + 1
         + ident.denominator_order

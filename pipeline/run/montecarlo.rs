@@ -4,16 +4,22 @@
 //! campaign's delay, `simulate::discrete`), driven by the campaign's own
 //! measured command, their displacement read with white noise of the level
 //! the campaign's FRF variance implies and rounded to its converter's grid;
-//! each pair identified with the campaign's own FRF and fit settings,
-//! refused as `servoid run` refuses a run (too few bins, unstable, not
-//! converged), and Eqs. 18-20. The bias and spread of beta1, a1b0, a2 and
-//! a3 against k.
+//! each pair identified by the function that identifies a run
+//! (`acquire::fit_run`: the campaign's own FRF and fit settings, refused as
+//! `servoid run` refuses a run: too few bins, unstable, not converged), and
+//! Eqs. 18-20. The bias and spread of beta1, a1b0, a2 and a3 against k.
+//!
+//! Where the campaign's FRF settings allow it (`McInput::in_frequency_domain`)
+//! a reading is drawn in the frequency domain (`frf::synthesis`): the
+//! command's transforms are computed once and each noiseless response's
+//! once per stiffness, and a draw adds white noise's DFT on the bins the
+//! fit reads. Elsewhere each reading is simulated sample by sample.
 //!
 //! Deterministic whatever the thread count: each (stiffness, seed) draws
 //! its noise from its own ChaCha stream, and the results are gathered in
 //! grid order. The noiseless responses are simulated once per stiffness
 //! (and once for the no-specimen run) and shared by the seeds: the noise is
-//! all that differs between draws.
+//! all that differs between draws. The stiffnesses run side by side.
 
 use rand_distr::{Distribution, Normal, StandardNormal};
 use rayon::prelude::*;
@@ -102,18 +108,16 @@ enum Reading {
 
 impl McInput<'_> {
     /// Whether the draws are read in the frequency domain, where that is
-    /// exact: the ETFE with a rectangular window and the mean or nothing
-    /// taken out (`frf::synthesis`), and a converter step no coarser than
+    /// exact: a plan `EtfeSynthesis::check_plan` accepts (the ETFE with a
+    /// rectangular window and the mean or nothing taken out), and a
+    /// converter step no coarser than
     /// the noise. Rounding to a step q is then white noise of variance
     /// q^2/12 uncorrelated with the signal (Widrow & Kollar, *Quantization
     /// Noise*, 2008, Ch. 4-5: with Gaussian noise of std sigma >= q ahead
     /// of the quantiser, the rounding error departs from that model by
     /// terms of order exp(-2 pi^2 sigma^2 / q^2) < 1e-8).
     pub fn in_frequency_domain(&self) -> bool {
-        let f = &self.ident.frf;
-        f.estimator == frf::Estimator::Etfe
-            && f.window == frf::Window::Rectangular
-            && f.detrend != frf::Detrend::Linear
+        EtfeSynthesis::check_plan(&self.ident.frf).is_ok()
             && self.step_m.is_none_or(|q| self.noise_rms_m >= q)
     }
 }
@@ -219,7 +223,7 @@ fn clean(
 }
 
 /// One identification: the two noiseless responses `(none, spring)` read
-/// with noise from stream (i, seed) = `draw`, each identified as `servoid
+/// with noise from stream (i, seed), each identified as `servoid
 /// run` identifies a run (`acquire::fit_run`), and Eqs. 18-20.
 fn identify_once(
     input: &McInput<'_>,

@@ -189,7 +189,8 @@ pub fn simulate_campaign(
         OutputFormat::Csv => "csv",
         OutputFormat::Parquet => "parquet",
     };
-    let log_path = |s: &RunSignals| out_dir.join(format!("logs/{}.{ext}", s.truth.id));
+    // A log's path relative to the output folder, as truth.json names it.
+    let log_rel = |s: &RunSignals| format!("logs/{}.{ext}", s.truth.id);
     // Each run is simulated and its log's bytes made side by side (the
     // shortest round-trip text of every sample is most of a CSV log's
     // cost); the files are written after, in the manifest's order.
@@ -203,7 +204,7 @@ pub fn simulate_campaign(
                 .iter()
                 .map(|(n, v)| (n.as_str(), v.as_slice()))
                 .collect();
-            let path = log_path(&s);
+            let path = out_dir.join(log_rel(&s));
             let bytes = match m.simulation.log_format {
                 OutputFormat::Csv => logs::csv_bytes(&path, &cols),
                 OutputFormat::Parquet => logs::parquet_bytes(&path, &cols),
@@ -215,10 +216,11 @@ pub fn simulate_campaign(
     let mut log_paths = Vec::new();
     let mut truth_runs = Vec::new();
     for (s, bytes) in logs {
-        let path = log_path(&s);
+        let rel = log_rel(&s);
+        let path = out_dir.join(&rel);
         report::write_artifact(&path, &bytes)?;
         let mut t = s.truth;
-        t.log = format!("logs/{}.{ext}", t.id);
+        t.log = rel;
         t.log_sha256 = sha256_hex(&bytes);
         truth_runs.push(t);
         log_paths.push(path);
