@@ -128,11 +128,12 @@ fn flags_of(subcommand: &str) -> Vec<String> {
 #[test]
 fn every_command_in_the_readme_and_docs_runs_as_written() {
     let dir = scratch();
+    let cargo = std::fs::read_to_string(root().join("Cargo.toml")).unwrap();
     let mut ran = 0;
     for file in documents() {
         let text = std::fs::read_to_string(&file).unwrap();
         for command in sh_commands(&text) {
-            let Some(args) = servoid_args(&command) else {
+            let Some(mut args) = servoid_args(&command) else {
                 if let Some(rest) = command.strip_prefix("cargo +nightly fuzz run ") {
                     let w: Vec<&str> = rest.split_whitespace().collect();
                     let target = root().join(format!("fuzz/fuzz_targets/{}.rs", w[0]));
@@ -153,7 +154,6 @@ fn every_command_in_the_readme_and_docs_runs_as_written() {
             let manifest = args.get(1).map(|m| root().join(m));
             match manifest {
                 Some(m) if m.is_file() => {
-                    let mut args = args.clone();
                     if m.ends_with("utfsm-mts-mrdamper/campaign.toml") {
                         let Some(data) = mts_data() else { continue };
                         let as_written = m
@@ -185,7 +185,6 @@ fn every_command_in_the_readme_and_docs_runs_as_written() {
             }
         }
         // Benches named anywhere, fenced or inline.
-        let cargo = std::fs::read_to_string(root().join("Cargo.toml")).unwrap();
         for (i, _) in text.match_indices("cargo bench --bench ") {
             let name: String = text[i + "cargo bench --bench ".len()..]
                 .chars()
