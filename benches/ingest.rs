@@ -10,7 +10,7 @@ use std::path::{Path, PathBuf};
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use servoid::ingest::read_log;
 use servoid::ingest::{ChannelPlan, Channels, Column, CsvOptions, LogFormat, LogPlan, TimePlan};
-use servoid::report::logs::{write_csv, write_parquet};
+use servoid::report::columns::{write_csv, write_parquet};
 use servoid::units::Unit;
 
 const FS_HZ: f64 = 2048.0;

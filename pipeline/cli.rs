@@ -40,8 +40,8 @@ pub struct JobArgs {
     /// `text`: a progress bar on a terminal and a summary; `json`: one JSON
     /// object per line (each run started, finished or failed, with its
     /// duration, then a summary) on stdout, for cron.
-    #[arg(long, value_enum, default_value_t = LogFormat::Text)]
-    log_format: LogFormat,
+    #[arg(long, value_enum, default_value_t = ProgressFormat::Text)]
+    log_format: ProgressFormat,
     /// Ignore the cache of earlier runs into the same folder: every run is
     /// done again (and the cache refreshed).
     #[arg(long)]
@@ -57,8 +57,8 @@ pub struct RunArgs {
     #[command(flatten)]
     job: JobArgs,
     /// Which figure files to draw.
-    #[arg(long, value_enum, default_value_t = Figures::All)]
-    figures: Figures,
+    #[arg(long, value_enum, default_value_t = FigureFormats::All)]
+    figures: FigureFormats,
     /// Do the i-th of n shares of the per-log work (0 <= i < n) into its
     /// own folder, for `servoid merge` (e.g. one Slurm array task each).
     #[arg(long, value_name = "I/N")]
@@ -84,8 +84,8 @@ pub enum Command {
         #[command(flatten)]
         args: JobArgs,
         /// Which figure files the campaign's run draws (with --run).
-        #[arg(long, value_enum, default_value_t = Figures::All)]
-        figures: Figures,
+        #[arg(long, value_enum, default_value_t = FigureFormats::All)]
+        figures: FigureFormats,
     },
     /// Merge the folders of `servoid run --shard i/n` into the campaign's
     /// results and pages, as one run over all the logs writes them.
@@ -98,7 +98,7 @@ pub enum Command {
         /// Which figure files to draw (default: the shards' own, so the
         /// merge does no per-log work; another choice is refused).
         #[arg(long, value_enum)]
-        figures: Option<Figures>,
+        figures: Option<FigureFormats>,
         /// The campaign manifest, when it is no longer where the shards
         /// recorded it (it must be the same file, by its SHA-256).
         #[arg(long)]
@@ -129,33 +129,10 @@ pub enum Command {
     },
 }
 
-/// `--figures`: which figure files a run draws.
+/// `--log-format`: how a job reports its progress (not a data log's format,
+/// which is `ingest::LogFormat`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
-pub enum Figures {
-    /// PNG and SVG files.
-    All,
-    /// PNG files only.
-    Png,
-    /// SVG files only.
-    Svg,
-    /// No figure at all.
-    None,
-}
-
-impl From<Figures> for FigureFormats {
-    fn from(f: Figures) -> Self {
-        match f {
-            Figures::All => FigureFormats::All,
-            Figures::Png => FigureFormats::Png,
-            Figures::Svg => FigureFormats::Svg,
-            Figures::None => FigureFormats::None,
-        }
-    }
-}
-
-/// `--log-format`.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
-pub enum LogFormat {
+pub enum ProgressFormat {
     Text,
     Json,
 }
@@ -226,8 +203,8 @@ fn dispatch(command: Command) -> u8 {
         } => {
             let watch = Watch::new(&args);
             let merge = run::MergeSettings {
-                job: settings(&args, Figures::All),
-                figures: figures.map(Into::into),
+                job: settings(&args, FigureFormats::All),
+                figures,
                 manifest,
             };
             let code = match run::merge(&shards, &merge, &watch) {
@@ -340,11 +317,11 @@ fn cmd_verify(results: &Path, manifest: Option<&Path>, jobs: Option<usize>) -> u
     }
 }
 
-fn settings(args: &JobArgs, figures: Figures) -> Settings {
+fn settings(args: &JobArgs, figures: FigureFormats) -> Settings {
     Settings {
         out: args.out.clone(),
         jobs: capped(args.jobs),
-        figures: figures.into(),
+        figures,
         force: args.force,
     }
 }
@@ -385,8 +362,8 @@ fn job_failed(e: &JobError, json: bool) -> u8 {
     code
 }
 
-fn cmd_simulate(manifest: &Path, then_run: bool, args: &JobArgs, figures: Figures) -> u8 {
-    if figures != Figures::All && !then_run {
+fn cmd_simulate(manifest: &Path, then_run: bool, args: &JobArgs, figures: FigureFormats) -> u8 {
+    if figures != FigureFormats::All && !then_run {
         warn("error: --figures draws a campaign's figures; it needs --run");
         return EXIT_USAGE;
     }
@@ -423,7 +400,7 @@ struct Watch {
 
 impl Watch {
     fn new(args: &JobArgs) -> Self {
-        let json = args.log_format == LogFormat::Json;
+        let json = args.log_format == ProgressFormat::Json;
         let bar = (!json && !args.quiet && std::io::stdout().is_terminal()).then(|| {
             let bar = ProgressBar::new(0);
             bar.set_style(

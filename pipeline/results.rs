@@ -599,3 +599,22 @@ pub struct TruthRun {
     pub log_sha256: String,
     pub n_samples: usize,
 }
+
+/// Complex numbers as [re, im] pairs, for serde (`#[serde(with =
+/// "complex_vec")]`): the run cache keeps FRF bins this way.
+pub mod complex_vec {
+    use nalgebra::Complex;
+    use serde::{Deserialize, Deserializer, Serializer};
+
+    pub fn serialize<S: Serializer>(v: &[Complex<f64>], s: S) -> Result<S::Ok, S::Error> {
+        s.collect_seq(v.iter().map(|c| [c.re, c.im]))
+    }
+
+    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<Vec<Complex<f64>>, D::Error> {
+        let pairs = Vec::<[f64; 2]>::deserialize(d)?;
+        Ok(pairs
+            .into_iter()
+            .map(|[re, im]| Complex::new(re, im))
+            .collect())
+    }
+}

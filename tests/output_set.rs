@@ -4,7 +4,7 @@
 //! what the killed one left behind.
 //!
 //! The kills are real SIGKILLs: at named points where a mix was most
-//! likely before (`SERVOID_KILL_AT`, see `report/outset.rs`: after the work
+//! likely before (`SERVOID_KILL_AT`, see `report/output_folder.rs`: after the work
 //! folder is filled, after results.json, just before and just after the
 //! exchange), and from outside at fractions of the rerun's own duration.
 

@@ -22,7 +22,7 @@ mod mat;
 mod parquet;
 mod parquet_footer;
 mod plan;
-mod quantum;
+mod quantisation;
 mod table;
 #[cfg(test)]
 mod tests;
@@ -36,7 +36,7 @@ use sha2::{Digest, Sha256};
 pub use plan::{
     ChannelPlan, Channels, Column, CsvOptions, DEFAULT_MAX_LOG_MIB, LogFormat, LogPlan, TimePlan,
 };
-pub use quantum::quantum_step;
+pub use quantisation::quantum_step;
 pub use table::{
     Table, TableError, TableFormat, TableProblem, TableText, read_table, read_table_as,
     table_from_bytes, table_from_bytes_as,

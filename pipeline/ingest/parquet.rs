@@ -16,12 +16,8 @@ use super::{At, FormatProblem, IngestError, Raw, list, raw_from_table, wanted};
 pub enum ParquetDamage {
     #[error("its footer declares {len} bytes of metadata in a file of {file} bytes")]
     MetadataLength { len: usize, file: usize },
-    #[error("its footer declares {size} {what} where {left} bytes remain")]
-    FooterList {
-        size: i32,
-        what: &'static str,
-        left: usize,
-    },
+    #[error(transparent)]
+    FooterList(#[from] super::parquet_footer::OverlongList),
     #[error("polars failed reading its footer ({0})")]
     FooterPanicked(String),
     #[error("row group {group}, column {column}: {source}")]
@@ -212,7 +208,7 @@ pub(super) fn check_footer(bytes: &[u8]) -> Result<(), ParquetDamage> {
     // The footer as polars' own decoder reads it (see `parquet_footer`):
     // a generic walk by wire types, which this replaced, does not always
     // read it as polars does.
-    super::parquet_footer::check(&bytes[n - 8 - len..n - 8])
+    Ok(super::parquet_footer::check(&bytes[n - 8 - len..n - 8])?)
 }
 
 /// Checks, on the metadata as polars parsed it (`reader` over `bytes`),

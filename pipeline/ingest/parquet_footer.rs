@@ -22,10 +22,20 @@
 //! polars-parquet, and the fuzz targets replay the inputs that found the
 //! divergence.
 
+/// A list in the footer that declares more elements than the footer has
+/// bytes left: polars would reserve for all of them first.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("its footer declares {size} {what} where {left} bytes remain")]
+pub struct OverlongList {
+    pub size: i32,
+    pub what: &'static str,
+    pub left: usize,
+}
+
 /// Why the walk stopped early.
 enum Stop {
     /// A list declares more elements than the footer has bytes left.
-    Refuse(super::parquet::ParquetDamage),
+    Refuse(OverlongList),
     /// polars' decoder errs (or panics, which is caught) here, before it
     /// reserves anything more.
     PolarsErrs,
@@ -44,7 +54,7 @@ const STRUCT: u8 = 12;
 
 /// Refuse what polars would over-reserve for in the footer's metadata
 /// `meta`; Ok where polars reads it or refuses it without reserving more.
-pub(super) fn check(meta: &[u8]) -> Result<(), super::parquet::ParquetDamage> {
+pub(super) fn check(meta: &[u8]) -> Result<(), OverlongList> {
     let mut w = Walk { buf: meta, pos: 0 };
     match w.file_metadata() {
         Ok(()) | Err(Stop::PolarsErrs) => Ok(()),
@@ -144,7 +154,7 @@ impl Walk<'_> {
     fn list(&mut self, what: &'static str, mut element: impl FnMut(&mut Self) -> Step) -> Step {
         let (_, size) = self.list_begin()?;
         if size.max(0) as usize > self.left() {
-            return Err(Stop::Refuse(super::parquet::ParquetDamage::FooterList {
+            return Err(Stop::Refuse(OverlongList {
                 size,
                 what,
                 left: self.left(),

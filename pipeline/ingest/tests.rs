@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 use approx::assert_relative_eq;
 
 use super::*;
-use crate::report::logs::{csv_bytes, parquet_bytes, write_csv, write_parquet};
+use crate::report::columns::{csv_bytes, parquet_bytes, write_csv, write_parquet};
 use crate::units::Unit;
 
 // ---------------------------------------------------------------- helpers

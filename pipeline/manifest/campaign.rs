@@ -9,10 +9,11 @@ use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 
 use super::checks::{
-    IdentificationPlan, P_GAIN_RANGE, check_band, check_channels, check_date, check_identification,
-    check_slug, check_specimen, plausible, positive,
+    P_GAIN_RANGE, check_band, check_channels, check_date, check_slug, check_specimen, plausible,
+    positive,
 };
 use super::document::{Document, read};
+use super::identification::{IdentificationPlan, check_identification};
 use super::keypath::KeyPath;
 use super::problem::{ManifestError, Problem, TablePlace};
 use super::raw::{

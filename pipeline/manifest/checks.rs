@@ -1,34 +1,15 @@
 //! Checks that both manifest kinds share: names that become file names,
-//! positive numbers, channels and their units, the fit band, the
-//! identification section (into an [`IdentificationPlan`] of the stages' own
-//! settings) and specimens (into the simulator's [`SpecimenModel`]). Each
+//! positive numbers, channels and their units, the fit band and specimens
+//! (into the simulator's [`SpecimenModel`]); the identification section has
+//! its own file (`identification.rs`). Each
 //! check reports through `bad(key path, message)` and never stops at the
 //! first problem.
 
 use super::keypath::KeyPath;
-use super::raw::{Channel, Channels, DelayMode, Identification, Role, Specimen, SpecimenKind};
-use crate::fit::{DelayPlan, Intersample};
-use crate::frf::FrfPlan;
+use super::raw::{Channel, Channels, Role, Specimen, SpecimenKind};
 use crate::ingest::Column;
 use crate::simulate::specimen::{BoucWen, Duffing, Friction, SpecimenModel};
 use crate::units::UnitKind;
-
-/// Checked identification options.
-#[derive(Debug, Clone, PartialEq)]
-pub struct IdentificationPlan {
-    pub band_hz: (f64, f64),
-    pub coherence_min: f64,
-    pub frf: FrfPlan,
-    pub intersample: Intersample,
-    pub delay: DelayPlan,
-    /// The longest delay a fit may find (s): `identification.delay.max_s`,
-    /// whatever the mode, for the fits that look for a delay the
-    /// manifest's mode does not (the joint fit, the delay test).
-    pub max_delay_s: f64,
-    pub numerator_order: usize,
-    pub denominator_order: usize,
-    pub trim_to_excitation: bool,
-}
 
 /// The longest name that becomes part of a file name (a run id, a
 /// campaign's name), in bytes: a run's files are named after it
@@ -320,77 +301,6 @@ pub(super) fn check_band(band: [f64; 2], path: &KeyPath, bad: &mut impl FnMut(Ke
             path.clone(),
             format!("must be [low, high] with 0 <= low < high (got [{lo}, {hi}])"),
         );
-    }
-}
-
-pub(super) fn check_identification(
-    id: &Identification,
-    path: &KeyPath,
-    bad: &mut impl FnMut(KeyPath, String),
-) -> IdentificationPlan {
-    check_band(id.band_hz, &path.key("band_hz"), bad);
-    if !(0.0..1.0).contains(&id.coherence_min) {
-        bad(
-            path.key("coherence_min"),
-            format!("must be in [0, 1) (got {})", id.coherence_min),
-        );
-    }
-    let frf = path.key("frf");
-    if id.frf.segment_length < 16 {
-        bad(
-            frf.key("segment_length"),
-            format!(
-                "must be at least 16 samples (got {})",
-                id.frf.segment_length
-            ),
-        );
-    }
-    if !(0.0..1.0).contains(&id.frf.overlap) {
-        bad(
-            frf.key("overlap"),
-            format!("must be in [0, 1) (got {})", id.frf.overlap),
-        );
-    }
-    let d = &id.delay;
-    let delay = match d.mode {
-        DelayMode::None => DelayPlan::None,
-        DelayMode::Fixed => {
-            if !(d.value_s.is_finite() && d.value_s >= 0.0) {
-                bad(
-                    path.key("delay").key("value_s"),
-                    format!("must be a non-negative delay (got {})", d.value_s),
-                );
-            }
-            DelayPlan::Fixed { delay_s: d.value_s }
-        }
-        DelayMode::Fit => DelayPlan::Fit { max_s: d.max_s },
-    };
-    positive(d.max_s, &path.key("delay").key("max_s"), bad);
-    if id.model.denominator == 0 || id.model.numerator > id.model.denominator {
-        bad(
-            path.key("model"),
-            format!(
-                "needs 1 <= denominator and numerator <= denominator (got {}/{})",
-                id.model.numerator, id.model.denominator
-            ),
-        );
-    }
-    IdentificationPlan {
-        band_hz: (id.band_hz[0], id.band_hz[1]),
-        coherence_min: id.coherence_min,
-        frf: FrfPlan {
-            estimator: id.frf.estimator,
-            segment_length: id.frf.segment_length,
-            overlap: id.frf.overlap,
-            window: id.frf.window,
-            detrend: id.frf.detrend,
-        },
-        intersample: id.command_intersample,
-        delay,
-        max_delay_s: d.max_s,
-        numerator_order: id.model.numerator,
-        denominator_order: id.model.denominator,
-        trim_to_excitation: id.trim_to_excitation,
     }
 }
 

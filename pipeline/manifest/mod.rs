@@ -17,6 +17,7 @@
 mod campaign;
 mod checks;
 mod document;
+mod identification;
 mod keypath;
 mod problem;
 mod raw;
@@ -26,7 +27,7 @@ mod table;
 use std::path::Path;
 
 pub use campaign::{Campaign, Quantity, ReferencePlan, RunPlan, RunSource, load, load_str};
-pub use checks::IdentificationPlan;
+pub use identification::IdentificationPlan;
 pub use keypath::{KeyPath, Seg};
 pub use problem::{ManifestError, Problem, TablePlace};
 pub use raw::{

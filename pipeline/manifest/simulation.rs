@@ -13,10 +13,10 @@ use serde_json::Value;
 
 use super::campaign::check_sensitivity;
 use super::checks::{
-    P_GAIN_RANGE, STIFFNESS_RANGE, check_identification, check_slug, check_specimen, plausible,
-    positive,
+    P_GAIN_RANGE, STIFFNESS_RANGE, check_slug, check_specimen, plausible, positive,
 };
 use super::document::{Document, read};
+use super::identification::check_identification;
 use super::keypath::KeyPath;
 use super::problem::{ManifestError, Problem};
 use super::raw::{

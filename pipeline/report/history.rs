@@ -7,7 +7,7 @@ use std::path::Path;
 
 use polars::prelude::Column;
 
-use super::logs::{LogWriteError, frame_bytes};
+use super::columns::{ColumnWriteError, frame_bytes};
 use super::write_atomic;
 use crate::drift::Entry;
 
@@ -42,7 +42,7 @@ pub fn write(
     before: Option<&[u8]>,
     entries: &[Entry],
     extra: &[(String, Vec<Option<String>>)],
-) -> Result<(), LogWriteError> {
+) -> Result<(), ColumnWriteError> {
     let text = |f: fn(&Entry) -> &str| entries.iter().map(f).map(String::from).collect::<Vec<_>>();
     let num = |f: fn(&Entry) -> f64| entries.iter().map(f).collect::<Vec<f64>>();
     let opt = |f: fn(&Entry) -> Option<f64>| entries.iter().map(f).collect::<Vec<Option<f64>>>();

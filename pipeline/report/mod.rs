@@ -1,8 +1,9 @@
 //! Writing outputs: results.json, the figures, the campaign's page
-//! (`html`) and, for the simulator, logs (`logs`). Every file is written to a
+//! (`html`), named columns as CSV or Parquet (`columns`: the simulator's
+//! logs, the runs' tables, the history). Every file is written to a
 //! temporary sibling and renamed into place, so a reader never sees a
 //! half-written file; the files of one job are written as a set into a work
-//! folder that replaces the output folder at the end ([`OutSet`]), so a
+//! folder that replaces the output folder at the end ([`OutputFolder`]), so a
 //! reader never sees a mix of two jobs' files and a failure never destroys
 //! the previous output.
 
@@ -10,16 +11,16 @@ pub mod html;
 
 pub mod figures;
 
-pub mod logs;
+pub mod columns;
 
 pub mod tables;
 
 pub mod history;
 
-pub mod outset;
+pub mod output_folder;
 
 pub use html::PageFigure;
-pub use outset::OutSet;
+pub use output_folder::OutputFolder;
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -32,7 +33,7 @@ pub enum WriteError {
     #[error(transparent)]
     Html(#[from] html::HtmlError),
     #[error(transparent)]
-    Table(Box<logs::LogWriteError>),
+    Table(Box<columns::ColumnWriteError>),
     #[error("{}: {source}", path.display())]
     Io {
         path: PathBuf,
@@ -62,7 +63,7 @@ impl WriteError {
     }
 
     /// This error with every path it names passed through `f` (a work
-    /// folder's paths named as the output folder's, see [`OutSet`]).
+    /// folder's paths named as the output folder's, see [`OutputFolder`]).
     pub fn map_paths(self, f: &dyn Fn(&Path) -> PathBuf) -> Self {
         match self {
             Self::Io { path, source } => Self::Io {
@@ -94,9 +95,35 @@ pub struct FigureSpec {
     pub size: (u32, u32),
 }
 
+/// What a run's log gave, as its figures and tables show it: borrowed from
+/// the run's analysis while its log is in memory.
+#[derive(Debug, Clone, Copy)]
+pub struct Measured<'a> {
+    pub sample_rate_hz: f64,
+    /// Command to displacement.
+    pub frf: &'a crate::frf::Frf,
+    /// Command to force, when the log has a force channel.
+    pub force_frf: Option<&'a crate::frf::Frf>,
+    /// The bins the run's fit used (band and coherence).
+    pub mask: &'a [bool],
+    /// The run's own fit, when it has one.
+    pub fit: Option<&'a crate::fit::TfFit>,
+}
+
 /// Which figure files a run writes beside its pages, which show them from
-/// there (PNG where there is one, else SVG).
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+/// there (PNG where there is one, else SVG). The command line's `--figures`
+/// takes the same names (lowercase), with these lines as its help.
+#[derive(
+    Debug,
+    Clone,
+    Copy,
+    Default,
+    PartialEq,
+    Eq,
+    serde::Serialize,
+    serde::Deserialize,
+    clap::ValueEnum,
+)]
 #[serde(rename_all = "lowercase")]
 pub enum FigureFormats {
     /// PNG and SVG files.

@@ -1,16 +1,75 @@
 //! Each run's FRF and model as Parquet tables beside results.json, for users
 //! who continue in polars or pandas: `tables/frf-<id>.parquet` (one row per
-//! frequency bin up to the figures' upper frequency) and
-//! `tables/model-<id>.parquet` (one row per coefficient). Same data, same
-//! bytes: the writer stamps no time or host into the file.
+//! frequency bin up to the upper frequency the figures show: the band's upper
+//! edge or 35 Hz, whichever is higher, since the force path's notch lies
+//! below 35 Hz for the paper's specimens), with the fit's mask and the model
+//! as the measurement sees it, and `tables/model-<id>.parquet` (one row per
+//! coefficient). What a run's tables hold ([`RunTables::of`]) and how they are
+//! written ([`RunTables::write`]) live here together. Same data, same bytes:
+//! the writer stamps no time or host into the file.
 
 use std::path::Path;
 
 use nalgebra::Complex;
 use polars::prelude::Column;
 
-use super::logs::{LogWriteError, frame_bytes};
-use super::write_artifact;
+use super::columns::{ColumnWriteError, frame_bytes};
+use super::figures::catalogue::model_response;
+use super::{Measured, WriteError, write_artifact};
+use crate::fit::Intersample;
+use crate::lti::TransferFunction;
+use crate::results::RunResult;
+
+/// Highest frequency a table holds, unless the fit band reaches higher.
+pub const TABLE_MAX_HZ: f64 = 35.0;
+
+/// The files of one run's tables, relative to the output folder.
+fn names(id: &str) -> [String; 2] {
+    [
+        format!("tables/frf-{id}.parquet"),
+        format!("tables/model-{id}.parquet"),
+    ]
+}
+
+/// A run's tables as computed: its FRF table (when it has a log) and its
+/// model table (when it has a transfer function).
+#[derive(Debug, Clone, PartialEq)]
+pub struct RunTables {
+    id: String,
+    frf: Option<FrfTable>,
+    model: Option<ModelTable>,
+}
+
+impl RunTables {
+    /// The tables of `run`, with its log's FRFs when it has a log.
+    pub fn of(run: &RunResult, measured: Option<&Measured<'_>>, intersample: Intersample) -> Self {
+        Self {
+            id: run.id.clone(),
+            frf: measured.map(|m| frf_table(run, m, intersample)),
+            model: model_table(run),
+        }
+    }
+
+    /// Write the tables under `out_dir`; returns the files written,
+    /// relative to it.
+    pub fn write(&self, out_dir: &Path) -> Result<Vec<String>, WriteError> {
+        let [frf_name, model_name] = names(&self.id);
+        let mut written = Vec::new();
+        let unwrap = |e: ColumnWriteError| match e {
+            ColumnWriteError::Write(w) => w,
+            other => WriteError::Table(Box::new(other)),
+        };
+        if let Some(t) = &self.frf {
+            write_frf(&out_dir.join(&frf_name), t).map_err(unwrap)?;
+            written.push(frf_name);
+        }
+        if let Some(t) = &self.model {
+            write_model(&out_dir.join(&model_name), t).map_err(unwrap)?;
+            written.push(model_name);
+        }
+        Ok(written)
+    }
+}
 
 /// A run's measured FRF with what the fit and the model make of it.
 #[derive(Debug, Clone, PartialEq)]
@@ -38,7 +97,7 @@ pub struct ModelTable {
 }
 
 /// Write a run's FRF table to `path` (under the output folder).
-pub fn write_frf(path: &Path, t: &FrfTable) -> Result<(), LogWriteError> {
+pub fn write_frf(path: &Path, t: &FrfTable) -> Result<(), ColumnWriteError> {
     let re = |v: &[Complex<f64>]| v.iter().map(|c| c.re).collect::<Vec<f64>>();
     let im = |v: &[Complex<f64>]| v.iter().map(|c| c.im).collect::<Vec<f64>>();
     let mut cols = vec![
@@ -61,7 +120,7 @@ pub fn write_frf(path: &Path, t: &FrfTable) -> Result<(), LogWriteError> {
 }
 
 /// Write a run's model table to `path`.
-pub fn write_model(path: &Path, t: &ModelTable) -> Result<(), LogWriteError> {
+pub fn write_model(path: &Path, t: &ModelTable) -> Result<(), ColumnWriteError> {
     let cols = vec![
         Column::new("name".into(), &t.name),
         Column::new("value".into(), &t.value),
@@ -70,7 +129,63 @@ pub fn write_model(path: &Path, t: &ModelTable) -> Result<(), LogWriteError> {
     write(path, t.name.len(), cols)
 }
 
-fn write(path: &Path, rows: usize, cols: Vec<Column>) -> Result<(), LogWriteError> {
+fn write(path: &Path, rows: usize, cols: Vec<Column>) -> Result<(), ColumnWriteError> {
     write_artifact(path, &frame_bytes(path, rows, cols)?)?;
     Ok(())
+}
+
+fn frf_table(run: &RunResult, st: &Measured<'_>, intersample: Intersample) -> FrfTable {
+    let f_max = TABLE_MAX_HZ.max(run.fit.as_ref().map_or(0.0, |f| f.band_hz[1]));
+    let bins: Vec<usize> = (0..st.frf.freq_hz.len())
+        .filter(|&i| st.frf.freq_hz[i] > 0.0 && st.frf.freq_hz[i] <= f_max)
+        .collect();
+    let freq_hz: Vec<f64> = bins.iter().map(|&i| st.frf.freq_hz[i]).collect();
+    let fs = st.sample_rate_hz;
+    let model_tf = match st.fit {
+        Some(fit) => Some(fit.tf.clone()),
+        None => run.tf.as_ref().map(|t| TransferFunction {
+            num: t.num.clone(),
+            den: t.den.clone(),
+            delay_s: t.delay_s,
+        }),
+    };
+    FrfTable {
+        h: bins.iter().map(|&i| st.frf.h[i]).collect(),
+        coherence: bins.iter().map(|&i| st.frf.coherence[i]).collect(),
+        in_fit: bins.iter().map(|&i| st.mask[i]).collect(),
+        model: model_tf.map(|tf| model_response(&tf, intersample, fs, &freq_hz)),
+        force: st.force_frf.map(|ff| {
+            (
+                bins.iter().map(|&i| ff.h[i]).collect(),
+                bins.iter().map(|&i| ff.coherence[i]).collect(),
+            )
+        }),
+        freq_hz,
+    }
+}
+
+/// The fitted parameters with their standard deviations, else the model's
+/// coefficients (`num[k]`, `den[k]`, highest power first).
+fn model_table(run: &RunResult) -> Option<ModelTable> {
+    if let Some(fit) = &run.fit {
+        return Some(ModelTable {
+            name: fit.param_names.clone(),
+            value: fit.params.clone(),
+            std: fit.std.iter().map(|s| Some(*s)).collect(),
+        });
+    }
+    let tf = run.tf.as_ref()?;
+    let mut t = ModelTable {
+        name: Vec::new(),
+        value: Vec::new(),
+        std: Vec::new(),
+    };
+    for (part, coeffs) in [("num", &tf.num), ("den", &tf.den)] {
+        for (k, c) in coeffs.iter().enumerate() {
+            t.name.push(format!("{part}[{k}]"));
+            t.value.push(*c);
+            t.std.push(None);
+        }
+    }
+    Some(t)
 }

@@ -11,6 +11,8 @@ use crate::frf::{self, Frf, FrfError};
 use crate::ingest::{self, IngestError, Log, LogFile, LogPlan, Needs};
 use crate::lti::TransferFunction;
 use crate::manifest::{Campaign, IdentificationPlan, Role, RunPlan, RunSource};
+use crate::report::Measured;
+use crate::report::figures::catalogue;
 use crate::results::TfSource;
 
 /// What the first stage gives for each run: its own transfer function, and
@@ -87,12 +89,25 @@ pub struct LogStage {
     pub warnings: Vec<String>,
 }
 
+impl LogStage {
+    /// The stage as its figures and tables show it.
+    pub fn measured(&self) -> Measured<'_> {
+        Measured {
+            sample_rate_hz: self.log.sample_rate_hz,
+            frf: &self.frf,
+            force_frf: self.force_frf.as_ref(),
+            mask: &self.mask,
+            fit: self.fit.as_ref(),
+        }
+    }
+}
+
 /// What the fit is given from an FRF: the bins of `mask` whose variance is
 /// defined, their frequencies, estimates and E|dH|^2.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct FitData {
     pub freq_hz: Vec<f64>,
-    #[serde(with = "super::figures::complex_vec")]
+    #[serde(with = "crate::results::complex_vec")]
     pub h: Vec<nalgebra::Complex<f64>>,
     pub variance: Vec<f64>,
     /// The input's one-sided auto-spectral density at those bins
@@ -357,9 +372,9 @@ pub fn log_stage_from(
     // freed before the force path's FRF is estimated (a long ETFE's bins up
     // to Nyquist took half the memory of a 1 GB log's analysis).
     let keep_hz = hi
-        .max(super::tables::TABLE_MAX_HZ)
-        .max(super::figures::FRF_MAX_HZ)
-        .max(super::figures::FORCE_FRF_MAX_HZ);
+        .max(crate::report::tables::TABLE_MAX_HZ)
+        .max(catalogue::FRF_MAX_HZ)
+        .max(catalogue::FORCE_FRF_MAX_HZ);
     h.keep_up_to(keep_hz, frf::VARIANCE_REACH_BINS);
     let force_frf = match &log.force_n {
         Some(f) => {

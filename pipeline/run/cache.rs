@@ -54,7 +54,7 @@ pub(super) enum Probe<T> {
 impl Cache {
     /// The cache in `out_dir/.cache`, empty when there is none; `fresh`
     /// ignores what it holds. `names` is (work folder, output folder), both
-    /// absolute (see `report::OutSet`).
+    /// absolute (see `report::OutputFolder`).
     pub(super) fn open(out_dir: &Path, fresh: bool, names: (PathBuf, PathBuf)) -> Self {
         let dir = out_dir.join(".cache");
         let stamps = if fresh {
@@ -210,8 +210,9 @@ pub(super) fn merge_stamps(out_dir: &Path, dirs: &[PathBuf]) -> Result<(), Write
 /// What a run's outcome holds, counted up whenever a change between
 /// releases adds to it or computes it differently: the version alone
 /// would let an older build's entries stand in for outcomes this build
-/// computes otherwise. 2: the per-run fit's delay test.
-const OUTCOME_FORMAT: u32 = 2;
+/// computes otherwise. 2: the per-run fit's delay test; 3: what a run
+/// keeps stored apart from the files it wrote.
+const OUTCOME_FORMAT: u32 = 3;
 
 /// A key from the text of what decides a run's outcome. The plan's Debug
 /// text holds every setting with its floats to the last bit; a rebuild that

@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 use crate::drift::{self, Entry};
 use crate::ingest::{self, Table, TableFormat};
 use crate::manifest::Campaign;
-use crate::report::{self, WriteError, logs::LogWriteError};
+use crate::report::{self, WriteError, columns::ColumnWriteError};
 use crate::results::{DriftResult, Results};
 
 /// A campaign's place in its rig's history.
@@ -228,7 +228,7 @@ impl History {
             &columns,
         )
         .map_err(|e| match e {
-            LogWriteError::Write(w) => w,
+            ColumnWriteError::Write(w) => w,
             other => WriteError::Table(Box::new(other)),
         })
     }

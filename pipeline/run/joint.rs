@@ -12,7 +12,7 @@
 //! estimate or something neither model has is.
 
 use super::acquire::FitData;
-use super::rig::{Evidence, ValidationEvidence};
+use super::evidence::{Evidence, ValidationEvidence};
 use crate::fit::adequacy::Adequacy;
 use crate::fit::joint::{
     self, Candidate, Choice, JointFit, JointOptions, JointRun, Output, P_SIGNIFICANT, Place,

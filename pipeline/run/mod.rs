@@ -1,14 +1,15 @@
 //! The orchestrator: the one module that knows every stage. It loads a
-//! manifest of either kind, analyses a campaign ([`analyse`]), simulates one
-//! ([`run_simulation`], through [`simulate`]), draws the figures ([`figures`]) and writes the outputs
-//! (through `report`). It never prints: each entry point returns what it did,
+//! manifest of either kind, analyses a campaign ([`analyse`]: each run's
+//! work in `step`, pure, its output written by `sink` as it arrives),
+//! simulates one ([`run_simulation`], through [`simulate`]) and writes the
+//! outputs (through `report`, which also decides what each figure shows). It never prints: each entry point returns what it did,
 //! or a [`JobError`] that says why nothing was written, for `cli` to report.
 
 pub mod acquire;
 mod analyse;
 mod cache;
 mod compare;
-pub mod figures;
+mod evidence;
 mod history;
 mod joint;
 pub mod montecarlo;
@@ -16,7 +17,8 @@ mod rig;
 mod sensitivity;
 mod shard;
 pub mod simulate;
-mod tables;
+mod sink;
+mod step;
 mod verify;
 
 use std::path::{Path, PathBuf};
@@ -27,12 +29,12 @@ pub use shard::{MergeError, Shard, ShardInfo};
 pub use verify::{Difference, FileDifference, LogDifference, Verification, VerifyError};
 
 use crate::manifest::{self, Campaign, Loaded, ManifestError};
-use crate::report::{self, FigureFiles, OutSet, WriteError};
+use crate::report::{self, FigureFiles, OutputFolder, WriteError};
 pub use crate::report::{FigureFormats, RECORD};
 use crate::results::{self, Results, Status};
-use analyse::Drawer;
 use cache::Cache;
 use simulate::{SimulateError, Simulated};
+use sink::Sink;
 
 /// How a job runs and what it writes.
 #[derive(Debug, Clone, Default)]
@@ -88,8 +90,8 @@ pub enum JobError {
 impl JobError {
     /// This error as the user should read it: an output error's paths under
     /// the output folder, not under `set`'s work folder (see
-    /// [`OutSet::relocate`]).
-    pub fn relocated(self, set: &OutSet) -> Self {
+    /// [`OutputFolder::relocate`]).
+    pub fn relocated(self, set: &OutputFolder) -> Self {
         let f = |p: &Path| set.final_path(p);
         match self {
             JobError::Write(e) => JobError::Write(e.map_paths(&f)),
@@ -315,7 +317,7 @@ pub fn run_shard(
     let work = set.dir();
     let files = FigureFiles::new(work, settings.figures);
     let cache = Cache::open(work, settings.force, cache_names(&set));
-    let draw = Drawer {
+    let draw = Sink {
         out_dir: Some(work),
         files: files.as_ref(),
         choice: settings.figures,
@@ -486,7 +488,7 @@ pub fn cores() -> usize {
 /// results.json), then results.json, the pages and run.jsonl.
 fn write_campaign(
     campaign: &Campaign,
-    set: &OutSet,
+    set: &OutputFolder,
     settings: &Settings,
     observer: &dyn Observer,
 ) -> Result<CampaignOutcome, JobError> {
@@ -495,7 +497,7 @@ fn write_campaign(
     let out_dir = set.dir();
     let files = FigureFiles::new(out_dir, settings.figures);
     let cache = Cache::open(out_dir, settings.force, cache_names(set));
-    let draw = Drawer {
+    let draw = Sink {
         out_dir: Some(out_dir),
         files: files.as_ref(),
         choice: settings.figures,
@@ -518,7 +520,7 @@ fn write_campaign(
     };
     let mut campaign_figures = analysed.campaign_figures;
     if let (Some(h), Some(files)) = (&history, &files)
-        && let Some(spec) = figures::history_figure(&h.rig_entries())
+        && let Some(spec) = crate::report::figures::catalogue::history_figure(&h.rig_entries())
     {
         let (figures, warnings) = files.write(std::slice::from_ref(&spec))?;
         campaign_figures.extend(figures);
@@ -528,7 +530,7 @@ fn write_campaign(
     let results_path = out_dir.join("results.json");
     report::settle(out_dir)?;
     report::write_atomic(&results_path, &json)?;
-    report::outset::fault("results");
+    report::output_folder::fault("results");
     if let Some(h) = history {
         h.write(&json)?;
     }
@@ -603,7 +605,7 @@ fn set_files(
 /// Start the output set in `out_dir`, refusing, before any computing, a
 /// folder whose cache place is taken by a file: the job would compute for
 /// nothing and fail writing its first cache entry (issue 24).
-fn begin(out_dir: &Path) -> Result<OutSet, WriteError> {
+fn begin(out_dir: &Path) -> Result<OutputFolder, WriteError> {
     if let Some(taken) = cache::taken_place(out_dir) {
         return Err(WriteError::OutFolder {
             path: out_dir.to_path_buf(),
@@ -613,12 +615,12 @@ fn begin(out_dir: &Path) -> Result<OutSet, WriteError> {
             ),
         });
     }
-    OutSet::begin(out_dir)
+    OutputFolder::begin(out_dir)
 }
 
 /// How the cache names a log inside the work folder (a simulated
 /// campaign's): by where it will be, so a rerun finds its stamp.
-fn cache_names(set: &OutSet) -> (PathBuf, PathBuf) {
+fn cache_names(set: &OutputFolder) -> (PathBuf, PathBuf) {
     (set.dir().to_path_buf(), set.resolved().to_path_buf())
 }
 

@@ -5,10 +5,9 @@
 use std::fmt;
 use std::sync::Arc;
 
-use super::acquire::{AcquireError, FitData};
-use crate::fit::adequacy::Adequacy;
+use super::acquire::AcquireError;
+use super::evidence::RigInput;
 use crate::identify::{self, Estimate, IdentifyError, SecondOrder, SpringRun, TfEstimate};
-use crate::lti::TransferFunction;
 use crate::manifest::{Campaign, Role};
 use crate::model::RigParams;
 use crate::results::{RigEstimates, RigResult, RigSource, Spread};
@@ -54,47 +53,6 @@ fn join(failed: &[FailedRun]) -> String {
         .map(ToString::to_string)
         .collect::<Vec<_>>()
         .join("; ")
-}
-
-/// What a run gives the rig's identification.
-#[derive(Debug, Clone)]
-pub(super) enum RigInput {
-    /// Its model and what its fit was given.
-    Estimate(Box<Evidence>),
-    /// Its first stage failed.
-    Failed(Arc<AcquireError>),
-    /// A validation run's FRFs, for the joint fit
-    /// (`identification.joint.include_validation`).
-    Validation(Box<ValidationEvidence>),
-    /// Nothing (a run without a model of its own).
-    Nothing,
-}
-
-/// A run's model, and what the joint fit needs of it.
-#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
-pub(super) struct Evidence {
-    /// Its transfer function, with the covariance of (n0, d1, d0) when
-    /// fitted.
-    pub tf: TransferFunction,
-    pub cov: Option<[[f64; 3]; 3]>,
-    /// The bins its fit was given (None for a published model).
-    pub data: Option<FitData>,
-    /// Its own fit's adequacy tests.
-    pub adequacy: Option<Adequacy>,
-    pub sample_rate_hz: Option<f64>,
-}
-
-/// What a validation run gives the joint fit: the band's bins of its x1/u
-/// and, with a force channel, of its f/u (each with the coherence test the
-/// identification runs pass).
-#[derive(Debug, Clone)]
-pub(super) struct ValidationEvidence {
-    pub displacement: FitData,
-    pub force: Option<FitData>,
-    pub sample_rate_hz: f64,
-    /// The log's SHA-256, which the second pass's own read of the log must
-    /// find again (the rig was fitted to these bytes).
-    pub sha256: String,
 }
 
 /// The rig: identified when the campaign can (Fig. 6), else given. A given

@@ -15,7 +15,7 @@ use crate::manifest::{
     Specimen, SpecimenKind, TimeChannel,
 };
 use crate::model;
-use crate::report::logs::{self, LogWriteError};
+use crate::report::columns::{self, ColumnWriteError};
 use crate::report::{self, WriteError};
 use crate::results::{Truth, TruthRun};
 use crate::simulate::excitation::{self, Excitation, ExcitationError};
@@ -51,7 +51,7 @@ pub enum SimulateError {
         source: crate::lti::LtiError,
     },
     #[error(transparent)]
-    Log(#[from] LogWriteError),
+    Log(#[from] ColumnWriteError),
     #[error(transparent)]
     Write(#[from] WriteError),
 }
@@ -206,8 +206,8 @@ pub fn simulate_campaign(
                 .collect();
             let path = out_dir.join(log_rel(&s));
             let bytes = match m.simulation.log_format {
-                OutputFormat::Csv => logs::csv_bytes(&path, &cols),
-                OutputFormat::Parquet => logs::parquet_bytes(&path, &cols),
+                OutputFormat::Csv => columns::csv_bytes(&path, &cols),
+                OutputFormat::Parquet => columns::parquet_bytes(&path, &cols),
             }?;
             Ok((s, bytes))
         })

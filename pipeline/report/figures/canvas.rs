@@ -3,7 +3,8 @@
 //! chart is laid out once; `svg.rs` writes the list as SVG and `raster.rs`
 //! rasterises the same list into pixels, so both files show one drawing.
 //! The geometry both of them trace (pixel centres, glyph contours) is
-//! produced here and in `text.rs` through the `Outline` trait, once.
+//! produced here and in `text.rs` through the `Outline` trait (`geometry.rs`),
+//! once.
 //!
 //! Coordinates: plotters' integer coordinate (x, y) names the pixel whose
 //! centre is (x + 0.5, y + 0.5); strokes and polygons are drawn through pixel
@@ -16,7 +17,8 @@ use plotters_backend::{
     BackendColor, BackendCoord, BackendStyle, BackendTextStyle, DrawingBackend, DrawingErrorKind,
 };
 
-use super::text::{self, Placement, Pt, Seg};
+use super::geometry::{Outline, Pt, Seg};
+use super::text::{self, Placement};
 
 /// An sRGB colour with opacity in 0..=1.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -32,17 +34,6 @@ impl From<BackendColor> for Rgba {
             alpha: c.alpha.clamp(0.0, 1.0),
         }
     }
-}
-
-/// Receives path geometry in device pixels. The SVG writer and the
-/// rasteriser both implement it, so each primitive's outline is described
-/// once for both outputs.
-pub(crate) trait Outline {
-    fn move_to(&mut self, p: Pt);
-    fn line_to(&mut self, p: Pt);
-    fn quad_to(&mut self, c: Pt, p: Pt);
-    fn cubic_to(&mut self, c1: Pt, c2: Pt, p: Pt);
-    fn close(&mut self);
 }
 
 /// The centre of pixel `p`.

@@ -16,9 +16,11 @@
 //! Functions here are pure: they write no files (the caller does).
 
 mod canvas;
+pub mod catalogue;
 mod chart;
 mod decimate;
 mod encode;
+mod geometry;
 mod raster;
 mod svg;
 #[cfg(test)]

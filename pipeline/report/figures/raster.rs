@@ -7,8 +7,9 @@
 
 use tiny_skia::{FillRule, LineCap, LineJoin, Paint, PathBuilder, Pixmap, Rect, Stroke, Transform};
 
-use super::canvas::{self, Op, Outline, Rgba};
-use super::text::{self, Pt};
+use super::canvas::{self, Op, Rgba};
+use super::geometry::{Outline, Pt};
+use super::text;
 
 impl Outline for PathBuilder {
     fn move_to(&mut self, p: Pt) {

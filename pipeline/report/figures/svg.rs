@@ -4,8 +4,9 @@
 
 use std::fmt::Write;
 
-use super::canvas::{self, Op, Outline, Rgba};
-use super::text::{self, Pt};
+use super::canvas::{self, Op, Rgba};
+use super::geometry::{Outline, Pt};
+use super::text;
 
 /// The SVG document for `ops` on a `size` canvas; `title` becomes `<title>`.
 pub(crate) fn write(ops: &[Op], size: (u32, u32), title: &str) -> String {

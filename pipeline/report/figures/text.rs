@@ -16,7 +16,7 @@ use plotters::style::FontStyle;
 use plotters_backend::FontTransform;
 use plotters_backend::text_anchor::{HPos, Pos, VPos};
 
-use super::canvas::Outline;
+use super::geometry::{Outline, Pt, Seg};
 use super::{FigureError, FontProblem};
 
 /// The family name the charts ask plotters for.
@@ -48,30 +48,6 @@ pub(crate) fn ensure_registered() -> Result<(), FigureError> {
         font().map(|_| ())
     } else {
         Err(FigureError::Font(FontProblem::Rejected))
-    }
-}
-
-/// A point in device pixels (x right, y down).
-pub(crate) type Pt = (f32, f32);
-
-/// One piece of a glyph outline in device pixels.
-#[derive(Clone, Copy, Debug)]
-pub(crate) enum Seg {
-    Line(Pt, Pt),
-    Quad(Pt, Pt, Pt),
-    Cubic(Pt, Pt, Pt, Pt),
-}
-
-impl Seg {
-    fn start(&self) -> Pt {
-        match *self {
-            Seg::Line(a, _) | Seg::Quad(a, _, _) | Seg::Cubic(a, _, _, _) => a,
-        }
-    }
-    fn end(&self) -> Pt {
-        match *self {
-            Seg::Line(_, b) | Seg::Quad(_, _, b) | Seg::Cubic(_, _, _, b) => b,
-        }
     }
 }
 

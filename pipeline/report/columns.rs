@@ -1,5 +1,6 @@
-//! Writing logs: named f64 columns as CSV or Parquet, as the simulator writes
-//! synthetic lab logs for `ingest` to read back. Both writers give the same
+//! Named columns as CSV or Parquet: the simulator's synthetic lab logs (for
+//! `ingest` to read back), and through `frame_bytes` the runs' tables and the
+//! rig's history. Both writers give the same
 //! bytes for the same columns, and write atomically (temporary sibling, then
 //! rename).
 
@@ -10,9 +11,9 @@ use polars::prelude::{Column, DataFrame, ParquetCompression, ParquetWriter};
 
 use super::{WriteError, write_artifact};
 
-/// Why a log could not be written.
+/// Why named columns could not be written.
 #[derive(Debug, thiserror::Error)]
-pub enum LogWriteError {
+pub enum ColumnWriteError {
     #[error(transparent)]
     Write(#[from] WriteError),
     #[error("{}: no columns to write", path.display())]
@@ -35,7 +36,7 @@ pub enum LogWriteError {
     },
 }
 
-impl LogWriteError {
+impl ColumnWriteError {
     /// This error with every path it names passed through `f`.
     pub fn map_paths(self, f: &dyn Fn(&Path) -> PathBuf) -> Self {
         match self {
@@ -71,14 +72,14 @@ impl LogWriteError {
 /// in the shortest form that reads back to the same f64 (plain decimals for
 /// magnitudes in \[1e-5, 1e16), else exponent form; `NaN`, `inf`, `-inf` for
 /// non-finite values).
-pub fn write_csv(path: &Path, columns: &[(&str, &[f64])]) -> Result<(), LogWriteError> {
+pub fn write_csv(path: &Path, columns: &[(&str, &[f64])]) -> Result<(), ColumnWriteError> {
     let bytes = csv_bytes(path, columns)?;
     write_artifact(path, &bytes)?;
     Ok(())
 }
 
 /// The bytes [`write_csv`] writes (`path` only names the file in errors).
-pub fn csv_bytes(path: &Path, columns: &[(&str, &[f64])]) -> Result<Vec<u8>, LogWriteError> {
+pub fn csv_bytes(path: &Path, columns: &[(&str, &[f64])]) -> Result<Vec<u8>, ColumnWriteError> {
     let n = check(path, columns)?;
     // About 20 bytes per value is typical of shortest round-trip output.
     let mut s = String::with_capacity(20 * n * columns.len() + 64);
@@ -112,14 +113,14 @@ fn push_shortest(s: &mut String, x: f64) {
 /// Write `columns` as a Parquet file of f64 columns (Snappy-compressed pages,
 /// one row group per 512^2 rows as polars chooses). The same columns give the
 /// same bytes: the writer stamps no time or host into the file.
-pub fn write_parquet(path: &Path, columns: &[(&str, &[f64])]) -> Result<(), LogWriteError> {
+pub fn write_parquet(path: &Path, columns: &[(&str, &[f64])]) -> Result<(), ColumnWriteError> {
     let bytes = parquet_bytes(path, columns)?;
     write_artifact(path, &bytes)?;
     Ok(())
 }
 
 /// The bytes [`write_parquet`] writes (`path` only names the file in errors).
-pub fn parquet_bytes(path: &Path, columns: &[(&str, &[f64])]) -> Result<Vec<u8>, LogWriteError> {
+pub fn parquet_bytes(path: &Path, columns: &[(&str, &[f64])]) -> Result<Vec<u8>, ColumnWriteError> {
     let n = check(path, columns)?;
     let cols: Vec<Column> = columns
         .iter()
@@ -135,8 +136,8 @@ pub(super) fn frame_bytes(
     path: &Path,
     rows: usize,
     cols: Vec<Column>,
-) -> Result<Vec<u8>, LogWriteError> {
-    let parquet = |source| LogWriteError::Parquet {
+) -> Result<Vec<u8>, ColumnWriteError> {
+    let parquet = |source| ColumnWriteError::Parquet {
         path: path.to_path_buf(),
         source,
     };
@@ -153,9 +154,9 @@ pub(super) fn frame_bytes(
 }
 
 /// Common checks; returns the row count.
-fn check(path: &Path, columns: &[(&str, &[f64])]) -> Result<usize, LogWriteError> {
+fn check(path: &Path, columns: &[(&str, &[f64])]) -> Result<usize, ColumnWriteError> {
     let Some((first, first_values)) = columns.first() else {
-        return Err(LogWriteError::NoColumns {
+        return Err(ColumnWriteError::NoColumns {
             path: path.to_path_buf(),
         });
     };
@@ -163,13 +164,13 @@ fn check(path: &Path, columns: &[(&str, &[f64])]) -> Result<usize, LogWriteError
         let bad_char = name.contains([',', '"', '\n', '\r']);
         let duplicate = columns[..j].iter().any(|(other, _)| other == name);
         if name.is_empty() || bad_char || duplicate {
-            return Err(LogWriteError::BadName {
+            return Err(ColumnWriteError::BadName {
                 path: path.to_path_buf(),
                 name: name.to_string(),
             });
         }
         if values.len() != first_values.len() {
-            return Err(LogWriteError::Ragged {
+            return Err(ColumnWriteError::Ragged {
                 path: path.to_path_buf(),
                 name: name.to_string(),
                 len: values.len(),

@@ -39,11 +39,11 @@ use super::{WriteError, settle};
 /// The infix of work folders beside a target, `.<name>.servoid-<pid>`.
 const WORK: &str = ".servoid-";
 
-/// A set of outputs being written; [`OutSet::commit`] puts it in place of
+/// A set of outputs being written; [`OutputFolder::commit`] puts it in place of
 /// the target. Dropped without a commit (an error), it is removed and the
 /// target is left as it was.
 #[derive(Debug)]
-pub struct OutSet {
+pub struct OutputFolder {
     /// The output folder, absolute, symbolic links resolved: what is
     /// replaced.
     resolved: PathBuf,
@@ -59,7 +59,7 @@ pub struct OutSet {
     committed: bool,
 }
 
-impl OutSet {
+impl OutputFolder {
     /// Check that `target` can take the outputs (it is not a file, its
     /// folder can be made and written), remove dead jobs' work folders
     /// beside it and start a work folder holding the previous set.
@@ -227,7 +227,7 @@ impl OutSet {
     }
 }
 
-impl Drop for OutSet {
+impl Drop for OutputFolder {
     fn drop(&mut self) {
         if !self.committed {
             let _ = std::fs::remove_dir_all(&self.work);
@@ -467,7 +467,7 @@ mod tests {
         std::fs::write(target.join(".cache/runs/a.json"), "entry").unwrap();
         std::fs::write(target.join(".results.json.tmp-4242"), "half").unwrap();
 
-        let set = OutSet::begin(&target).unwrap();
+        let set = OutputFolder::begin(&target).unwrap();
         // The previous set is there to read (the cache), and its files are
         // shared, not copied.
         assert_eq!(
@@ -496,7 +496,7 @@ mod tests {
         let target = scratch.path().join("out");
         std::fs::create_dir(&target).unwrap();
         std::fs::write(target.join("results.json"), "old").unwrap();
-        let set = OutSet::begin(&target).unwrap();
+        let set = OutputFolder::begin(&target).unwrap();
         std::fs::write(set.dir().join("report.html"), "new").unwrap();
         let work = set.dir().to_path_buf();
         drop(set);
@@ -519,7 +519,7 @@ mod tests {
         }
         let held = File::open(&live).unwrap();
         held.lock().unwrap();
-        let set = OutSet::begin(&target).unwrap();
+        let set = OutputFolder::begin(&target).unwrap();
         assert!(!dead.exists());
         assert!(live.exists());
         assert!(other.exists(), "only servoid's own names are swept");
@@ -534,7 +534,7 @@ mod tests {
         let aside = scratch.path().join(".out.servoid-4242-old");
         std::fs::create_dir(&aside).unwrap();
         std::fs::write(aside.join("results.json"), "old").unwrap();
-        let set = OutSet::begin(&target).unwrap();
+        let set = OutputFolder::begin(&target).unwrap();
         assert!(!aside.exists());
         assert_eq!(
             tree(&target),
@@ -550,7 +550,7 @@ mod tests {
     fn a_path_under_the_work_folder_is_named_under_the_target() {
         let scratch = tempfile::tempdir().unwrap();
         let target = scratch.path().join("out");
-        let set = OutSet::begin(&target).unwrap();
+        let set = OutputFolder::begin(&target).unwrap();
         let inside = set.dir().join("figures/a.png");
         assert_eq!(set.final_path(&inside), target.join("figures/a.png"));
         assert_eq!(set.final_path(set.dir()), target);

@@ -1,5 +1,6 @@
-//! The campaign's figures as plain data for `report::figures`: the paper's
-//! figures regenerated from a campaign (Figs. 8, 11, 13 per identification
+//! Which figures a campaign gets and what each shows, as plain data for the
+//! drawing in this module's parent: the paper's figures regenerated from a
+//! campaign (Figs. 8, 11, 13 per identification
 //! run; Fig. 15 all together; Figs. 16-17 command to force; Figs. 9, 12, 14,
 //! 19-22 in the paper's four time windows), residuals, and the stiffness
 //! sensitivity. Axis ranges follow the paper's figures. One builder per
@@ -11,42 +12,42 @@ use std::sync::Arc;
 
 use nalgebra::Complex;
 
-use super::acquire::LogStage;
+use super::{
+    BodeBand, BodeFigure, BodeSeries, Figure, LinesFigure, PanelsFigure, TimePanel, TimeSeries,
+    Trace, XySeries, decimate_minmax_by,
+};
 use crate::fit::band::response_std;
 use crate::fit::{Intersample, hold_response};
 use crate::frf::Estimator;
 use crate::lti::TransferFunction;
 use crate::manifest::Role;
 use crate::model::{LinearSpecimen, RigParams, x1_u_std};
-use crate::report::FigureSpec;
-use crate::report::figures::{
-    BodeBand, BodeFigure, BodeSeries, Figure, LinesFigure, PanelsFigure, TimePanel, TimeSeries,
-    Trace, XySeries, decimate_minmax_by,
-};
+use crate::report::{FigureSpec, Measured};
+use crate::results::complex_vec;
 use crate::results::{RunResult, SensitivityResult, TfResult};
 use crate::sensitivity::montecarlo::{MonteCarlo, MonteCarloPoint, PerParameter};
 use crate::validate::TimeStage;
 use crate::validate::csi::Csi;
 
 /// Frequency (Hz) where the paper's FRF figures stop.
-pub(super) const FRF_MAX_HZ: f64 = 30.0;
+pub const FRF_MAX_HZ: f64 = 30.0;
 
 /// Frequency (Hz) where the force path's bins (Figs. 16-17, Eq. 45) stop.
-pub(super) const FORCE_FRF_MAX_HZ: f64 = 35.0;
+pub const FORCE_FRF_MAX_HZ: f64 = 35.0;
 
 /// A run's figures that do not depend on the rig, drawn as soon as its log
 /// is analysed: the FRF (for a validation run the caller passes the
 /// result with the rig's model), the time windows and the residual. For an
 /// identification run, also what Fig. 15 needs of it.
-pub(super) fn log_figures(
+pub fn log_figures(
     run: &RunResult,
-    stage: &LogStage,
+    measured: &Measured<'_>,
     time: Option<&TimeStage>,
     intersample: Intersample,
     prediction: Option<&Prediction>,
 ) -> (Vec<FigureSpec>, Option<OverlayRun>) {
-    let frf = RunFrf::new(run, stage, intersample, prediction);
-    let mut out = vec![frf_figure(run, stage, &frf)];
+    let frf = RunFrf::new(run, measured, intersample, prediction);
+    let mut out = vec![frf_figure(run, measured, &frf)];
     let overlay = match (&frf.model, run.role) {
         (Some((model, _)), Role::NoSpecimen | Role::Spring) => Some(OverlayRun {
             id: run.id.clone(),
@@ -57,7 +58,7 @@ pub(super) fn log_figures(
         _ => None,
     };
     if let Some(time) = time {
-        let fs = stage.log.sample_rate_hz;
+        let fs = measured.sample_rate_hz;
         out.extend(time_figure(run, time, fs));
         out.push(residual_figure(run, time, fs));
     }
@@ -66,7 +67,7 @@ pub(super) fn log_figures(
 
 /// The campaign's own figures: the identification runs together (Fig. 15,
 /// when there are two or more) and the stiffness sensitivity.
-pub(super) fn campaign_figures(
+pub fn campaign_figures(
     overlay: &[OverlayRun],
     sensitivity: Option<&SensitivityResult>,
 ) -> Vec<FigureSpec> {
@@ -86,7 +87,7 @@ pub(super) fn campaign_figures(
 /// A log's measured command-to-force FRF as Figs. 16-17 show it (5-35 Hz),
 /// kept small so that it can wait for the rig while the log is dropped.
 #[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
-pub(super) struct ForceBins {
+pub struct ForceBins {
     sample_rate_hz: f64,
     freq_hz: Vec<f64>,
     #[serde(with = "complex_vec")]
@@ -96,16 +97,16 @@ pub(super) struct ForceBins {
 
 impl ForceBins {
     /// The bins as (frequency Hz, f/u N/m).
-    pub(super) fn bins(&self) -> (&[f64], &[Complex<f64>]) {
+    pub fn bins(&self) -> (&[f64], &[Complex<f64>]) {
         (&self.freq_hz, &self.h)
     }
 
-    pub(super) fn of(stage: &LogStage) -> Option<Self> {
-        let ff = stage.force_frf.as_ref()?;
+    pub fn of(measured: &Measured<'_>) -> Option<Self> {
+        let ff = measured.force_frf?;
         let (freq_hz, h, coherence) =
             measured_bins(&ff.freq_hz, &ff.h, &ff.coherence, FORCE_FRF_MAX_HZ);
         Some(Self {
-            sample_rate_hz: stage.log.sample_rate_hz,
+            sample_rate_hz: measured.sample_rate_hz,
             freq_hz,
             h,
             coherence,
@@ -133,7 +134,7 @@ fn measured_bins(
 
 /// The model as the measurement sees it: plant, delay and the command's
 /// hold.
-pub(super) fn model_response(
+pub fn model_response(
     tf: &TransferFunction,
     intersample: Intersample,
     fs: f64,
@@ -155,7 +156,7 @@ fn tf_of(t: &TfResult, delay_s: f64) -> TransferFunction {
 /// A validation run's prediction with the rig's uncertainty: the rig and
 /// the covariance of (beta1, a1b0, a2, a3) at the run's P gain, and its
 /// specimen.
-pub(super) struct Prediction {
+pub struct Prediction {
     pub rig: RigParams,
     pub cov: [[f64; 4]; 4],
     pub specimen: LinearSpecimen,
@@ -177,19 +178,19 @@ struct RunFrf {
 impl RunFrf {
     fn new(
         run: &RunResult,
-        stage: &LogStage,
+        measured: &Measured<'_>,
         intersample: Intersample,
         prediction: Option<&Prediction>,
     ) -> Self {
-        let fs = stage.log.sample_rate_hz;
+        let fs = measured.sample_rate_hz;
         let f_max = FRF_MAX_HZ.max(run.fit.as_ref().map_or(0.0, |f| f.band_hz[1]));
         let (freq_hz, h, coherence) = measured_bins(
-            &stage.frf.freq_hz,
-            &stage.frf.h,
-            &stage.frf.coherence,
+            &measured.frf.freq_hz,
+            &measured.frf.h,
+            &measured.frf.coherence,
             f_max,
         );
-        let model = match (&stage.fit, run.role) {
+        let model = match (measured.fit, run.role) {
             (Some(fit), _) => Some((
                 model_response(&fit.tf, intersample, fs, &freq_hz),
                 "identified model",
@@ -204,7 +205,7 @@ impl RunFrf {
         };
         // The fitted model's uncertainty, propagated from its covariance;
         // for a prediction, the rig's through Eq. 17.
-        let band = match (&stage.fit, prediction) {
+        let band = match (measured.fit, prediction) {
             (Some(fit), _) => {
                 let sd = response_std(fit, &freq_hz);
                 Some(BodeBand {
@@ -237,7 +238,7 @@ impl RunFrf {
 
 /// Figs. 8, 11 and 13: one run's measured FRF and its model, magnitude,
 /// phase and coherence.
-fn frf_figure(run: &RunResult, stage: &LogStage, frf: &RunFrf) -> FigureSpec {
+fn frf_figure(run: &RunResult, measured: &Measured<'_>, frf: &RunFrf) -> FigureSpec {
     let mut series = vec![BodeSeries {
         label: "Experimental".into(),
         freq_hz: frf.freq_hz.clone(),
@@ -281,7 +282,7 @@ fn frf_figure(run: &RunResult, stage: &LogStage, frf: &RunFrf) -> FigureSpec {
             )
         })
         .unwrap_or_default();
-    let estimator = match stage.frf.estimator {
+    let estimator = match measured.frf.estimator {
         Estimator::H1 => "H1",
         Estimator::H2 => "H2",
         Estimator::Etfe => "ETFE",
@@ -292,7 +293,7 @@ fn frf_figure(run: &RunResult, stage: &LogStage, frf: &RunFrf) -> FigureSpec {
         title: format!("{}: frequency response, command to displacement", run.id),
         caption: format!(
             "Counterpart of the paper's Figs. 8, 11 and 13: measured FRF ({estimator} estimate, {} averages) and the model, magnitude, phase and coherence.{fit_note}",
-            stage.frf.n_averages
+            measured.frf.n_averages
         ),
         size: bode.recommended_size(),
         figure: Figure::Bode(bode),
@@ -301,7 +302,7 @@ fn frf_figure(run: &RunResult, stage: &LogStage, frf: &RunFrf) -> FigureSpec {
 
 /// Figs. 16-17: command to force, measured against Eq. 45; the specimen's
 /// poles are zeros of the force path.
-pub(super) fn force_figure(
+pub fn force_figure(
     run: &RunResult,
     measured: &ForceBins,
     model: &TfResult,
@@ -563,31 +564,13 @@ fn residual_figure(run: &RunResult, time: &TimeStage, fs: f64) -> FigureSpec {
 
 /// An identification run's FRF kept for Fig. 15.
 #[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
-pub(super) struct OverlayRun {
+pub struct OverlayRun {
     id: String,
     freq_hz: Vec<f64>,
     #[serde(with = "complex_vec")]
     measured: Vec<Complex<f64>>,
     #[serde(with = "complex_vec")]
     model: Vec<Complex<f64>>,
-}
-
-/// Complex numbers as [re, im] pairs, for the run cache.
-pub(super) mod complex_vec {
-    use nalgebra::Complex;
-    use serde::{Deserialize, Deserializer, Serializer};
-
-    pub fn serialize<S: Serializer>(v: &[Complex<f64>], s: S) -> Result<S::Ok, S::Error> {
-        s.collect_seq(v.iter().map(|c| [c.re, c.im]))
-    }
-
-    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<Vec<Complex<f64>>, D::Error> {
-        let pairs = Vec::<[f64; 2]>::deserialize(d)?;
-        Ok(pairs
-            .into_iter()
-            .map(|[re, im]| Complex::new(re, im))
-            .collect())
-    }
 }
 
 /// Fig. 15: every identification run together, 0-15 Hz.
@@ -706,7 +689,7 @@ fn sensitivity_figure(s: &SensitivityResult) -> FigureSpec {
 /// The rig's history: each parameter over the campaigns (a1b0 referred to
 /// P = 1), with its +-2 std band; the last point is this campaign. None with
 /// fewer than two entries.
-pub(super) fn history_figure(entries: &[crate::drift::Entry]) -> Option<FigureSpec> {
+pub fn history_figure(entries: &[crate::drift::Entry]) -> Option<FigureSpec> {
     if entries.len() < 2 {
         return None;
     }
