@@ -318,14 +318,14 @@ pub fn replayed_command(
     Ok(log.command_m)
 }
 
-/// The log stage of one run whose log file is already read.
-pub fn log_stage_from(
-    run: &RunPlan,
+/// A log read from `file` and checked (units, NaN, monotonic time, clipping,
+/// length), trimmed to its excitation when the manifest asks, with its
+/// warnings.
+fn checked_log(
     plan: &LogPlan,
     ident: &IdentificationPlan,
     file: LogFile,
-) -> Result<LogStage, AcquireError> {
-    let path = plan.path.clone();
+) -> Result<(Log, Vec<String>), IngestError> {
     let mut log = ingest::read_log_from(plan, file)?;
     let needs = Needs {
         min_samples: ident.frf.segment_length,
@@ -340,6 +340,51 @@ pub fn log_stage_from(
         // Trimming can leave too little for one segment.
         warnings = ingest::check_log(&log, &needs)?;
     }
+    Ok((log, warnings))
+}
+
+/// The command's power in `band` (Hz) against its total (without DC), from
+/// the FRF's input spectrum; 0 without power.
+fn band_power_fraction(h: &Frf, (lo, hi): (f64, f64)) -> f64 {
+    let total: f64 = h.suu.iter().skip(1).sum();
+    let in_band: f64 = h
+        .freq_hz
+        .iter()
+        .zip(&h.suu)
+        .filter(|(f, _)| **f >= lo && **f <= hi)
+        .map(|(_, s)| s)
+        .sum();
+    if total > 0.0 { in_band / total } else { 0.0 }
+}
+
+/// The warning for a command not at rest at the record's ends, whose
+/// transient the estimator (not the LPM) counts as noise.
+fn motion_warning(ident: &IdentificationPlan, command: &[f64]) -> Option<String> {
+    if ident.frf.estimator == frf::Estimator::Lpm {
+        return None;
+    }
+    let (end, ratio) = frf::ends_in_motion(command)?;
+    Some(format!(
+        "the command is not at rest at the record's {end} (its RMS over the last or first {:.1} % of the record is {:.0} % of the whole): the {} counts the transient's leakage as noise, and the fits' stds come out too large (1.5 to 7 times on sweeps cut in motion); identification.frf = {{ estimator = \"lpm\" }} takes the transient out",
+        100.0 * frf::REST_END_FRACTION,
+        100.0 * ratio,
+        match ident.frf.estimator {
+            frf::Estimator::H1 => "Welch H1 estimate",
+            frf::Estimator::H2 => "Welch H2 estimate",
+            _ => "ETFE",
+        }
+    ))
+}
+
+/// The log stage of one run whose log file is already read.
+pub fn log_stage_from(
+    run: &RunPlan,
+    plan: &LogPlan,
+    ident: &IdentificationPlan,
+    file: LogFile,
+) -> Result<LogStage, AcquireError> {
+    let path = plan.path.clone();
+    let (log, mut warnings) = checked_log(plan, ident, file)?;
     let fs = log.sample_rate_hz;
     // The manifest cannot know the rate of a log that carries its own (a
     // time column, a DAQ header), so the band is checked against it here.
@@ -357,17 +402,10 @@ pub fn log_stage_from(
     let frf_err = |source: FrfError| tf_err(RunTfError::Frf(source));
     let mut h =
         frf::estimate(&log.command_m, &log.displacement_m, fs, &ident.frf).map_err(frf_err)?;
-    // Excitation in the band: the command's power there against its total.
+    // Excitation in the band, taken before the bins above it are freed.
     let (lo, hi) = run.band_hz;
-    let total: f64 = h.suu.iter().skip(1).sum();
-    let in_band: f64 = h
-        .freq_hz
-        .iter()
-        .zip(&h.suu)
-        .filter(|(f, _)| **f >= lo && **f <= hi)
-        .map(|(_, s)| s)
-        .sum();
-    // Past that total, nothing reads a bin above the band, the tables or
+    let fraction = band_power_fraction(&h, run.band_hz);
+    // Past that fraction, nothing reads a bin above the band, the tables or
     // the figures (and the noise estimate's reach beyond them): those are
     // freed before the force path's FRF is estimated (a long ETFE's bins up
     // to Nyquist took half the memory of a 1 GB log's analysis).
@@ -384,25 +422,11 @@ pub fn log_stage_from(
         }
         None => None,
     };
-    let fraction = if total > 0.0 { in_band / total } else { 0.0 };
     if fraction < MIN_BAND_POWER_FRACTION {
         return Err(tf_err(RunTfError::NoExcitation { lo, hi, fraction }));
     }
     let mask = frf::band_mask(&h, run.band_hz, ident.coherence_min);
-    if ident.frf.estimator != frf::Estimator::Lpm
-        && let Some((end, ratio)) = frf::ends_in_motion(&log.command_m)
-    {
-        warnings.push(format!(
-            "the command is not at rest at the record's {end} (its RMS over the last or first {:.1} % of the record is {:.0} % of the whole): the {} counts the transient's leakage as noise, and the fits' stds come out too large (1.5 to 7 times on sweeps cut in motion); identification.frf = {{ estimator = \"lpm\" }} takes the transient out",
-            100.0 * frf::REST_END_FRACTION,
-            100.0 * ratio,
-            match ident.frf.estimator {
-                frf::Estimator::H1 => "Welch H1 estimate",
-                frf::Estimator::H2 => "Welch H2 estimate",
-                _ => "ETFE",
-            }
-        ));
-    }
+    warnings.extend(motion_warning(ident, &log.command_m));
 
     let fit = if matches!(run.role, Role::NoSpecimen | Role::Spring | Role::Fit) {
         let (fit, data) = fit_run(&h, &mask, run.band_hz, ident, fs).map_err(tf_err)?;

@@ -10,7 +10,7 @@ use crate::drift::{self, Entry};
 use crate::ingest::{self, Table, TableFormat};
 use crate::manifest::Campaign;
 use crate::report::{self, WriteError, columns::ColumnWriteError};
-use crate::results::{DriftResult, Results};
+use crate::results::{DriftResult, Results, RigResult};
 
 /// A campaign's place in its rig's history.
 pub(super) struct History {
@@ -84,31 +84,24 @@ pub(super) fn previous_copy(path: &Path) -> PathBuf {
     path.with_file_name(name)
 }
 
-/// Check `results`' rig against its history and record the checks in
-/// `results.drift`. Returns the history to update once results.json is
-/// written (None without a rig), or why the table that exists cannot be
-/// read: it is then left as it is for someone to look at.
-pub(super) fn check(
-    campaign: &Campaign,
-    out_dir: &Path,
-    results: &mut Results,
-) -> Result<Option<History>, Unreadable> {
-    let Some(rig) = results.rig.as_ref() else {
-        return Ok(None);
-    };
-    let path = path(campaign, out_dir);
-    let (entries, extra) = if std::fs::symlink_metadata(&path).is_ok() {
-        ingest::read_table(&path, TableFormat::Parquet)
-            .map_err(|e| e.problem.to_string())
-            .and_then(|t| entries(&t).map_err(|e| e.to_string()))
-            .map_err(|what| Unreadable {
-                path: path.clone(),
-                what,
-            })?
-    } else {
-        (Vec::new(), Extra::default())
-    };
-    let entry = Entry {
+/// The history's entries and what else its table holds, or why the table
+/// that exists cannot be read. None there yet: empty.
+fn read(path: &Path) -> Result<(Vec<Entry>, Extra), Unreadable> {
+    if std::fs::symlink_metadata(path).is_err() {
+        return Ok((Vec::new(), Extra::default()));
+    }
+    ingest::read_table(path, TableFormat::Parquet)
+        .map_err(|e| e.problem.to_string())
+        .and_then(|t| entries(&t).map_err(|e| e.to_string()))
+        .map_err(|what| Unreadable {
+            path: path.to_path_buf(),
+            what,
+        })
+}
+
+/// This campaign's entry: its rig's parameters with their stds.
+fn entry_of(campaign: &Campaign, results: &Results, rig: &RigResult) -> Entry {
+    Entry {
         rig: campaign.rig_name.clone(),
         campaign: campaign.name.clone(),
         date: campaign.runs.iter().filter_map(|r| r.date.clone()).max(),
@@ -124,7 +117,41 @@ pub(super) fn check(
         a2_std: rig.a2.std,
         a3: rig.a3.value,
         a3_std: rig.a3.std,
+    }
+}
+
+/// The alarm's text: which parameter of `rig` moved, from what, by how much,
+/// beyond which limit.
+fn alarm(rig: &str, c: &drift::Check, rule: &drift::Rule) -> String {
+    format!(
+        "rig `{}`: {} = {:.6e} moved {:+.3e} from the median {:.6e} of its last {} entries, beyond {} x {:.3e} = {:.3e}",
+        rig,
+        c.parameter,
+        c.value,
+        c.deviation.unwrap_or(0.0),
+        c.median.unwrap_or(0.0),
+        c.entries,
+        rule.threshold,
+        c.limit.unwrap_or(0.0) / rule.threshold,
+        c.limit.unwrap_or(0.0)
+    )
+}
+
+/// Check `results`' rig against its history and record the checks in
+/// `results.drift`. Returns the history to update once results.json is
+/// written (None without a rig), or why the table that exists cannot be
+/// read: it is then left as it is for someone to look at.
+pub(super) fn check(
+    campaign: &Campaign,
+    out_dir: &Path,
+    results: &mut Results,
+) -> Result<Option<History>, Unreadable> {
+    let Some(rig) = results.rig.as_ref() else {
+        return Ok(None);
     };
+    let path = path(campaign, out_dir);
+    let (entries, extra) = read(&path)?;
+    let entry = entry_of(campaign, results, rig);
     let own = entries
         .iter()
         .position(|e| e.rig == entry.rig && e.inputs_sha256 == entry.inputs_sha256);
@@ -150,20 +177,7 @@ pub(super) fn check(
     let alarms = checks
         .iter()
         .filter(|c| c.alarm)
-        .map(|c| {
-            format!(
-                "rig `{}`: {} = {:.6e} moved {:+.3e} from the median {:.6e} of its last {} entries, beyond {} x {:.3e} = {:.3e}",
-                entry.rig,
-                c.parameter,
-                c.value,
-                c.deviation.unwrap_or(0.0),
-                c.median.unwrap_or(0.0),
-                c.entries,
-                rule.threshold,
-                c.limit.unwrap_or(0.0) / rule.threshold,
-                c.limit.unwrap_or(0.0)
-            )
-        })
+        .map(|c| alarm(&entry.rig, c, &rule))
         .collect();
     results.drift = Some(DriftResult {
         rig: entry.rig.clone(),

@@ -19,7 +19,7 @@ use crate::fit::joint::{
     RunSpread, Selection, Structure, StructureSpread,
 };
 use crate::identify::Estimate;
-use crate::manifest::{Campaign, JointRig, JointStructure, Role, RunPlan};
+use crate::manifest::{Campaign, IdentificationPlan, JointRig, JointStructure, Role, RunPlan};
 use crate::model::RigParams;
 use crate::results::{
     FTestResult, JointCandidate, JointParameter, JointResult, JointStructureName, RigEstimates,
@@ -98,8 +98,69 @@ pub(super) fn joint(
     sequential: &RigEstimates,
     warnings: &mut Vec<String>,
 ) -> Option<JointResult> {
-    // Each FRF the fit is given: its run, what it measures, its bins and
-    // the rate they were logged at.
+    let (fitted, identification_frfs) = fitted_frfs(evidence, validation)?;
+    let fs = fitted[0].3;
+    if fitted.iter().any(|f| f.3 != fs) {
+        warnings.push(
+            "rig: no joint fit: the runs it would fit were logged at different sample rates; the sequential estimate is used".into(),
+        );
+        return None;
+    }
+    let runs: Vec<JointRun<'_>> = fitted
+        .iter()
+        .map(|(p, output, d, _)| JointRun {
+            specimen: p.specimen.linear().expect("filtered"),
+            p_gain: p.p_gain,
+            output: *output,
+            freq_hz: &d.freq_hz,
+            h: &d.h,
+            variance: &d.variance,
+            bin_hz: d.bin_hz,
+        })
+        .collect();
+    let opts = options(&campaign.identification, start, fs);
+    let choice = choice(campaign.joint.structure);
+    let band_top = fitted.iter().map(|(p, ..)| p.band_hz.1).fold(0.0, f64::max);
+    let sel = joint::select(&runs, start, &opts, choice, band_top);
+    let misfit = joint::run_spread(&runs, &sel, &opts);
+    // An identification run is named by its id; a validation run's two
+    // FRFs by what each measures.
+    let ids: Vec<String> = fitted
+        .iter()
+        .map(|(p, output, ..)| match (p.role, output) {
+            (Role::Validation, Output::Displacement) => format!("{} x1/u", p.id),
+            (Role::Validation, Output::Force) => format!("{} f/u", p.id),
+            _ => p.id.clone(),
+        })
+        .collect();
+    let seq_chi2 = sequential_chi2(evidence);
+    let mut result = describe(
+        &sel,
+        misfit.as_ref(),
+        &ids,
+        campaign,
+        sequential,
+        seq_chi2,
+        warnings,
+    );
+    if ids.len() > identification_frfs {
+        result.explanation.push_str(&format!(
+            "; the validation runs' FRFs are in the fit (identification.joint.include_validation: {}), so their validation is not independent of the rig",
+            ids[identification_frfs..].join(", ")
+        ));
+    }
+    Some(result)
+}
+
+/// Each FRF the joint fit is given: its run, what it measures, its bins and
+/// the rate they were logged at; the identification runs' first, then the
+/// validation runs' (their count is the second value). None when no
+/// identification run has bins to fit.
+#[allow(clippy::type_complexity)]
+fn fitted_frfs<'a>(
+    evidence: &[(&'a RunPlan, &'a Evidence)],
+    validation: &[(&'a RunPlan, &'a ValidationEvidence)],
+) -> Option<(Vec<(&'a RunPlan, Output, &'a FitData, f64)>, usize)> {
     let mut fitted: Vec<(&RunPlan, Output, &FitData, f64)> = evidence
         .iter()
         .filter_map(|(p, e)| {
@@ -125,27 +186,13 @@ pub(super) fn joint(
             fitted.push((p, Output::Force, force, v.sample_rate_hz));
         }
     }
-    let fs = fitted[0].3;
-    if fitted.iter().any(|f| f.3 != fs) {
-        warnings.push(
-            "rig: no joint fit: the runs it would fit were logged at different sample rates; the sequential estimate is used".into(),
-        );
-        return None;
-    }
-    let runs: Vec<JointRun<'_>> = fitted
-        .iter()
-        .map(|(p, output, d, _)| JointRun {
-            specimen: p.specimen.linear().expect("filtered"),
-            p_gain: p.p_gain,
-            output: *output,
-            freq_hz: &d.freq_hz,
-            h: &d.h,
-            variance: &d.variance,
-            bin_hz: d.bin_hz,
-        })
-        .collect();
-    let ident = &campaign.identification;
-    let opts = JointOptions {
+    Some((fitted, identification_frfs))
+}
+
+/// The joint fit's options from the campaign's identification settings,
+/// the sequential rig `start` and the runs' sample rate.
+fn options(ident: &IdentificationPlan, start: &RigParams, fs: f64) -> JointOptions {
+    JointOptions {
         structure: Structure::Plain,
         intersample: ident.intersample,
         sample_rate_hz: fs,
@@ -157,8 +204,12 @@ pub(super) fn joint(
         force_delay_start_s: 0.0,
         max_delay_s: ident.max_delay_s,
         lag: ident.frf.independent_lag(),
-    };
-    let choice = match campaign.joint.structure {
+    }
+}
+
+/// The manifest's structure: fixed, or the data's choice.
+fn choice(structure: JointStructure) -> Choice {
+    match structure {
         JointStructure::Auto => Choice::Auto,
         JointStructure::None => Choice::Fixed(Structure::Plain),
         JointStructure::Delay => Choice::Fixed(Structure::Delay),
@@ -166,44 +217,20 @@ pub(super) fn joint(
         JointStructure::DelayCommand => Choice::Fixed(Structure::DelayCommand),
         JointStructure::DelayMeasurement => Choice::Fixed(Structure::DelayMeasurement),
         JointStructure::DelayPiston => Choice::Fixed(Structure::DelayPiston),
-    };
-    let band_top = fitted.iter().map(|(p, ..)| p.band_hz.1).fold(0.0, f64::max);
-    let sel = joint::select(&runs, start, &opts, choice, band_top);
-    let misfit = joint::run_spread(&runs, &sel, &opts);
-    // An identification run is named by its id; a validation run's two
-    // FRFs by what each measures.
-    let ids: Vec<String> = fitted
-        .iter()
-        .map(|(p, output, ..)| match (p.role, output) {
-            (Role::Validation, Output::Displacement) => format!("{} x1/u", p.id),
-            (Role::Validation, Output::Force) => format!("{} f/u", p.id),
-            _ => p.id.clone(),
-        })
-        .collect();
+    }
+}
+
+/// The per-run fits' pooled reduced chi-square (their costs over their
+/// degrees of freedom), which the joint fit is compared with.
+fn sequential_chi2(evidence: &[(&RunPlan, &Evidence)]) -> Option<f64> {
     let seq_adequacy: Vec<&Adequacy> = evidence
         .iter()
         .filter_map(|(_, e)| e.adequacy.as_ref())
         .collect();
-    let seq_chi2 = (!seq_adequacy.is_empty()).then(|| {
+    (!seq_adequacy.is_empty()).then(|| {
         seq_adequacy.iter().map(|a| a.cost).sum::<f64>()
             / seq_adequacy.iter().map(|a| a.dof).sum::<usize>() as f64
-    });
-    let mut result = describe(
-        &sel,
-        misfit.as_ref(),
-        &ids,
-        campaign,
-        sequential,
-        seq_chi2,
-        warnings,
-    );
-    if ids.len() > identification_frfs {
-        result.explanation.push_str(&format!(
-            "; the validation runs' FRFs are in the fit (identification.joint.include_validation: {}), so their validation is not independent of the rig",
-            ids[identification_frfs..].join(", ")
-        ));
-    }
-    Some(result)
+    })
 }
 
 /// The table row of one candidate, with its Schwarz weight.
@@ -281,55 +308,9 @@ fn describe(
 ) -> JointResult {
     let split = sel.candidate(Structure::DelayMeasurement).is_some();
     let spread = sel.spread();
-    let candidates: Vec<JointCandidate> = sel
-        .candidates
-        .iter()
-        .enumerate()
-        .map(|(i, c)| {
-            let weight = spread
-                .as_ref()
-                .map(|s| s.weights[i])
-                .filter(|_| c.usable().is_some());
-            row(c, sel.chosen, split, weight)
-        })
-        .collect();
-    let mut explanation = explain(sel);
-    if let Choice::Fixed(s) = sel.choice {
-        explanation = format!(
-            "identification.joint.structure = \"{}\" fixes it; {explanation}",
-            key_value(s)
-        );
-        if let Some(auto) = sel.auto.filter(|a| *a != s) {
-            warnings.push(format!(
-                "rig: identification.joint.structure = \"{}\" is kept, but the data reject it: they choose \"{}\" (F tests in the report); remove the key to let the data choose",
-                key_value(s),
-                key_value(auto)
-            ));
-        }
-    }
+    let mut result = table(sel, spread.as_ref(), split, warnings);
     let chosen = sel.chosen.and_then(|s| sel.candidate(s));
-    let fit = chosen.and_then(|c| c.fit.as_ref().ok());
-    let mut result = JointResult {
-        structure: fit.map(|f| name(f.structure)),
-        chosen_by: match sel.choice {
-            Choice::Auto => "data".into(),
-            Choice::Fixed(_) => "manifest".into(),
-        },
-        data_choose: sel.auto.map(name),
-        explanation,
-        candidates,
-        parameters: Vec::new(),
-        r1: None,
-        covariance: None,
-        structure_covariance: None,
-        ambiguity: None,
-        misfit: None,
-        adequacy: None,
-        per_run: Vec::new(),
-        used: false,
-        use_note: String::new(),
-    };
-    let Some(fit) = fit else {
+    let Some(fit) = chosen.and_then(|c| c.fit.as_ref().ok()) else {
         let why = match chosen.map(|c| &c.fit) {
             Some(Err(e)) => e.to_string(),
             _ => "no structure could be fitted".into(),
@@ -374,29 +355,107 @@ fn describe(
             adequacy: a.clone(),
         })
         .collect();
+    adequacy_warnings(fit, campaign, warnings);
+    // `select` has judged convergence and physical sense already.
+    let unusable = chosen.and_then(|c| c.unusable.clone());
+    (result.used, result.use_note) = use_decision(fit, campaign, unusable, seq_chi2, warnings);
+    result
+}
+
+/// The candidates' table with why the data choose what they choose; the
+/// chosen fit's numbers are filled in by `describe`. A manifest structure
+/// the data reject is a warning.
+fn table(
+    sel: &Selection,
+    spread: Option<&StructureSpread>,
+    split: bool,
+    warnings: &mut Vec<String>,
+) -> JointResult {
+    let candidates: Vec<JointCandidate> = sel
+        .candidates
+        .iter()
+        .enumerate()
+        .map(|(i, c)| {
+            let weight = spread
+                .map(|s| s.weights[i])
+                .filter(|_| c.usable().is_some());
+            row(c, sel.chosen, split, weight)
+        })
+        .collect();
+    let mut explanation = explain(sel);
+    if let Choice::Fixed(s) = sel.choice {
+        explanation = format!(
+            "identification.joint.structure = \"{}\" fixes it; {explanation}",
+            key_value(s)
+        );
+        if let Some(auto) = sel.auto.filter(|a| *a != s) {
+            warnings.push(format!(
+                "rig: identification.joint.structure = \"{}\" is kept, but the data reject it: they choose \"{}\" (F tests in the report); remove the key to let the data choose",
+                key_value(s),
+                key_value(auto)
+            ));
+        }
+    }
+    let fit = sel
+        .chosen
+        .and_then(|s| sel.candidate(s))
+        .and_then(|c| c.fit.as_ref().ok());
+    JointResult {
+        structure: fit.map(|f| name(f.structure)),
+        chosen_by: match sel.choice {
+            Choice::Auto => "data".into(),
+            Choice::Fixed(_) => "manifest".into(),
+        },
+        data_choose: sel.auto.map(name),
+        explanation,
+        candidates,
+        parameters: Vec::new(),
+        r1: None,
+        covariance: None,
+        structure_covariance: None,
+        ambiguity: None,
+        misfit: None,
+        adequacy: None,
+        per_run: Vec::new(),
+        used: false,
+        use_note: String::new(),
+    }
+}
+
+/// The chosen fit's adequacy, said where the lab reads: residuals the
+/// model does not explain, or noise the FRF's variance overstates.
+fn adequacy_warnings(fit: &JointFit, campaign: &Campaign, warnings: &mut Vec<String>) {
     let structure = key_value(fit.structure);
+    let estimator = campaign.identification.frf.estimator;
     if let Some(d) = fit.adequacy.diagnosis(
         (fit.structure == Structure::Plain)
             .then_some("set identification.joint.structure = \"auto\" (or \"delay\")"),
-        campaign.identification.frf.estimator.understated_noise(),
+        estimator.understated_noise(),
     ) {
         warnings.push(format!(
             "rig: the joint fit (structure \"{structure}\"): {d}"
         ));
     }
-    if let Some(o) = fit
-        .adequacy
-        .overstated(campaign.identification.frf.estimator.overstated_noise())
-    {
+    if let Some(o) = fit.adequacy.overstated(estimator.overstated_noise()) {
         warnings.push(format!(
             "rig: the joint fit (structure \"{structure}\"): {o}"
         ));
     }
-    // `select` has judged convergence and physical sense already.
-    let unusable = chosen.and_then(|c| c.unusable.clone());
+}
+
+/// Whether the campaign uses the joint estimate, and the note that says why
+/// (`unusable`: what `select` found wrong with the chosen fit).
+fn use_decision(
+    fit: &JointFit,
+    campaign: &Campaign,
+    unusable: Option<String>,
+    seq_chi2: Option<f64>,
+    warnings: &mut Vec<String>,
+) -> (bool, String) {
+    let structure = key_value(fit.structure);
     let reduced = fit.cost / fit.dof as f64;
     let as_good = seq_chi2.is_some_and(|s| reduced <= AS_GOOD_AS_SEQUENTIAL * s);
-    let (used, note) = match (campaign.joint.rig, &unusable) {
+    match (campaign.joint.rig, &unusable) {
         (JointRig::Sequential, _) => (
             false,
             "the sequential estimate is used: identification.joint.rig = \"sequential\""
@@ -436,10 +495,7 @@ fn describe(
                 "the sequential estimate is used: the joint fit is not adequate".to_string(),
             )
         }
-    };
-    result.used = used;
-    result.use_note = note;
-    result
+    }
 }
 
 /// The warning when structures the data cannot tell apart move the rig:
@@ -493,7 +549,14 @@ fn ambiguity(
     text.push_str(
         "; the rig's stds include that spread (the structure std; results.json keeps the statistical, structure and total stds). To settle it: ",
     );
-    let mut settle: Vec<&str> = Vec::new();
+    text.push_str(&settle(fit, spread).join("; or "));
+    Some(text)
+}
+
+/// What would settle which of the structures `fit` and `spread`'s rivals is
+/// the rig's: the experiments that tell their places apart.
+fn settle(fit: &JointFit, spread: &StructureSpread) -> Vec<&'static str> {
+    let mut settle: Vec<&'static str> = Vec::new();
     let places: Vec<Option<Place>> = std::iter::once(fit.structure)
         .chain(spread.rivals.iter().map(|r| r.structure))
         .map(Structure::place)
@@ -528,8 +591,7 @@ fn ambiguity(
     if settle.is_empty() {
         settle.push("a longer or stronger excitation over the band, which narrows every fit's std");
     }
-    text.push_str(&settle.join("; or "));
-    Some(text)
+    settle
 }
 
 /// The warning when the chosen structure fails its adequacy tests and the

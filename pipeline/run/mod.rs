@@ -497,19 +497,19 @@ fn write_campaign(
     let out_dir = set.dir();
     let files = FigureFiles::new(out_dir, settings.figures);
     let cache = Cache::open(out_dir, settings.force, cache_names(set));
-    let draw = Sink {
+    let sink = Sink {
         out_dir: Some(out_dir),
         files: files.as_ref(),
         choice: settings.figures,
         intersample: campaign.identification.intersample,
         cache: Some(&cache),
     };
-    let analysed = analyse::analyse_with(campaign, &draw, observer)?;
-    let mut results = analysed.results;
+    let mut analysed = analyse::analyse_with(campaign, &sink, observer)?;
+    let results = &mut analysed.results;
     // Where the manifest is from where results.json will be, once the set
     // is in place (a simulated campaign's manifest is inside the set).
     results.campaign.manifest_path = relative_to(&set.final_path(&campaign.file), set.target());
-    let (history, history_error) = match history::check(campaign, out_dir, &mut results) {
+    let (history, history_error) = match history::check(campaign, out_dir, results) {
         Ok(h) => (h, None),
         Err(u) => {
             // Named as the user knows the file, not under the work folder.
@@ -518,42 +518,20 @@ fn write_campaign(
             (None, Some(said))
         }
     };
-    let mut campaign_figures = analysed.campaign_figures;
     if let (Some(h), Some(files)) = (&history, &files)
         && let Some(spec) = crate::report::figures::catalogue::history_figure(&h.rig_entries())
     {
         let (figures, warnings) = files.write(std::slice::from_ref(&spec))?;
-        campaign_figures.extend(figures);
+        analysed.campaign_figures.extend(figures);
         results.warnings.extend(warnings);
     }
-    let json = report::json_bytes(&results);
-    let results_path = out_dir.join("results.json");
-    report::settle(out_dir)?;
-    report::write_atomic(&results_path, &json)?;
-    report::output_folder::fault("results");
-    if let Some(h) = history {
-        h.write(&json)?;
-    }
-    let page_path = report::write_pages(
-        &results,
-        &analysed.run_figures,
-        &campaign_figures,
-        settings.figures,
-        out_dir,
-    )?;
-    let kept = set_files(
-        &results,
-        &analysed.run_figures,
-        &analysed.run_tables,
-        &campaign_figures,
-    );
-    report::prune(out_dir, &kept)?;
+    let written = write_set(campaign, set, settings, &analysed, history)?;
     let seconds = clock.elapsed().as_secs_f64();
     let log = RunLog {
         started,
         seconds,
         jobs: rayon::current_num_threads(),
-        runs: &results.runs,
+        runs: &analysed.results.runs,
         run_seconds: &analysed.seconds,
         cached: &analysed.cached,
     };
@@ -563,6 +541,59 @@ fn write_campaign(
     // `verify` (and `sha256sum -c`). Not run.jsonl, whose wall-clock times
     // differ between two runs of the same inputs: the record is the same
     // bytes for the same inputs, as every other output is.
+    report::write_record(out_dir, &written.recorded)?;
+    Ok(CampaignOutcome {
+        cached: analysed.cached.iter().filter(|c| **c).count(),
+        results: analysed.results,
+        results_path: set.final_path(&written.results),
+        page_path: set.final_path(&written.page),
+        log_path: set.final_path(&log_path),
+        seconds,
+        history_error,
+    })
+}
+
+/// What `write_set` wrote: results.json, the campaign's page, and every
+/// file the set's record lists.
+struct Written {
+    results: PathBuf,
+    page: PathBuf,
+    recorded: std::collections::BTreeSet<String>,
+}
+
+/// Write the analysed campaign's set: results.json, the history's new
+/// entry, the pages, and the set pruned to this job's files.
+fn write_set(
+    campaign: &Campaign,
+    set: &OutputFolder,
+    settings: &Settings,
+    analysed: &analyse::Analysed,
+    history: Option<history::History>,
+) -> Result<Written, JobError> {
+    let out_dir = set.dir();
+    let results = &analysed.results;
+    let json = report::json_bytes(results);
+    let results_path = out_dir.join("results.json");
+    report::settle(out_dir)?;
+    report::write_atomic(&results_path, &json)?;
+    report::output_folder::fault("results");
+    if let Some(h) = history {
+        h.write(&json)?;
+    }
+    let page = report::write_pages(
+        results,
+        &analysed.run_figures,
+        &analysed.campaign_figures,
+        settings.figures,
+        out_dir,
+    )?;
+    let kept = set_files(
+        results,
+        &analysed.run_figures,
+        &analysed.run_tables,
+        &analysed.campaign_figures,
+    );
+    report::prune(out_dir, &kept)?;
     let mut recorded = kept;
     recorded.extend(["results.json", "report.html"].map(String::from));
     if let Some(h) = relative_to(&history::path(campaign, out_dir), out_dir)
@@ -570,15 +601,10 @@ fn write_campaign(
     {
         recorded.insert(h);
     }
-    report::write_record(out_dir, &recorded)?;
-    Ok(CampaignOutcome {
-        cached: analysed.cached.iter().filter(|c| **c).count(),
-        results,
-        results_path: set.final_path(&results_path),
-        page_path: set.final_path(&page_path),
-        log_path: set.final_path(&log_path),
-        seconds,
-        history_error,
+    Ok(Written {
+        results: results_path,
+        page,
+        recorded,
     })
 }
 

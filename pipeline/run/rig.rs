@@ -6,9 +6,9 @@ use std::fmt;
 use std::sync::Arc;
 
 use super::acquire::AcquireError;
-use super::evidence::RigInput;
+use super::evidence::{Evidence, RigInput, ValidationEvidence};
 use crate::identify::{self, Estimate, IdentifyError, SecondOrder, SpringRun, TfEstimate};
-use crate::manifest::{Campaign, Role};
+use crate::manifest::{Campaign, Role, RunPlan};
 use crate::model::RigParams;
 use crate::results::{RigEstimates, RigResult, RigSource, Spread};
 use crate::simulate::specimen::SpecimenModel;
@@ -59,7 +59,7 @@ fn join(failed: &[FailedRun]) -> String {
 /// rig beside an identifying campaign is reported in `warnings`. `inputs`
 /// follow the campaign's runs.
 pub(super) fn establish<'a>(
-    campaign: &Campaign,
+    campaign: &'a Campaign,
     inputs: impl Iterator<Item = &'a RigInput>,
     warnings: &mut Vec<String>,
 ) -> Result<(RigParams, RigResult), RigError> {
@@ -69,94 +69,9 @@ pub(super) fn establish<'a>(
             None => Err(RigError::Unavailable),
         };
     }
-    let mut no_spec = Vec::new();
-    let mut springs = Vec::new();
-    let mut failed = Vec::new();
-    let mut evidence = Vec::new();
-    let mut validation = Vec::new();
-    for (plan, input) in campaign.runs.iter().zip(inputs) {
-        if let RigInput::Validation(e) = input {
-            validation.push((plan, e.as_ref()));
-        }
-        if !matches!(plan.role, Role::NoSpecimen | Role::Spring) {
-            continue;
-        }
-        if let RigInput::Estimate(e) = input {
-            evidence.push((plan, e.as_ref()));
-        }
-        let run = plan.id.clone();
-        let estimate = match input {
-            RigInput::Estimate(e) => match SecondOrder::from_tf(&e.tf) {
-                Ok(so) => TfEstimate {
-                    run,
-                    p_gain: plan.p_gain,
-                    tf: so,
-                    cov: e.cov,
-                },
-                Err(error) => {
-                    failed.push(FailedRun::NotSecondOrder { run, error });
-                    continue;
-                }
-            },
-            RigInput::Nothing | RigInput::Validation(_) => continue,
-            RigInput::Failed(error) => {
-                failed.push(FailedRun::Failed {
-                    run,
-                    error: error.clone(),
-                });
-                continue;
-            }
-        };
-        match plan.specimen {
-            SpecimenModel::Spring { stiffness_n_per_m } => springs.push(SpringRun {
-                stiffness_n_per_m,
-                estimate,
-            }),
-            _ => no_spec.push(estimate),
-        }
-    }
-    if !failed.is_empty() {
-        return Err(RigError::RunsFailed(failed));
-    }
-    let ident = identify::identify_rig(&no_spec, &springs)?;
-    if let Some(given) = &campaign.given_rig {
-        warnings.push(format!(
-            "the manifest gives [rig.parameters] and the campaign identifies the rig; the identified parameters are used (given: beta1 = {:.6e}, a1b0 = {:.6e} at P = {}, a2 = {:.6e}, a3 = {:.6e})",
-            given.beta1_per_s, given.a1b0_n_per_m_s2, given.p_gain, given.a2_n_per_m, given.a3_per_s
-        ));
-    }
-    let spread = (ident.per_spring.len() >= 2).then(|| {
-        let sd = |f: &dyn Fn(&identify::PerSpring) -> f64| {
-            let v: Vec<f64> = ident.per_spring.iter().map(f).collect();
-            let mean = v.iter().sum::<f64>() / v.len() as f64;
-            (v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (v.len() - 1) as f64).sqrt()
-        };
-        Spread {
-            a1b0: sd(&|s| s.a1b0.value),
-            a2: sd(&|s| s.a2.value),
-            a3: sd(&|s| s.a3.value),
-        }
-    });
-    if ident.consistency.consistent == Some(false) {
-        warnings.push(format!(
-            "rig: {}; likely causes: {}",
-            ident.consistency.note,
-            ident.consistency.likely_causes.join("; ")
-        ));
-    }
-    // A check that could not be made is said where the lab reads, not only
-    // in results.json (issue 24): unless the springs are published
-    // transfer functions, which carry no covariance by what they are.
-    if let Some(why) = ident.consistency.untested
-        && why != identify::consistency::Untested::NoCovariance
-    {
-        let runs: Vec<&str> = ident.per_spring.iter().map(|s| s.run.as_str()).collect();
-        warnings.push(format!(
-            "rig: the springs' agreement was not tested (spring runs {}): {}",
-            runs.join(", "),
-            ident.consistency.note
-        ));
-    }
+    let runs = Gathered::of(campaign, inputs)?;
+    let ident = identify::identify_rig(&runs.no_spec, &runs.springs)?;
+    identification_warnings(campaign, &ident, warnings);
     let sequential = RigEstimates {
         beta1: ident.beta1,
         a1b0: ident.a1b0,
@@ -167,8 +82,8 @@ pub(super) fn establish<'a>(
     };
     let joint = super::joint::joint(
         campaign,
-        &evidence,
-        &validation,
+        &runs.evidence,
+        &runs.validation,
         &ident.params(),
         &sequential,
         warnings,
@@ -193,14 +108,139 @@ pub(super) fn establish<'a>(
         a3: chosen.a3,
         R1: chosen.R1,
         valve_time_constant_ms: time_constant(&chosen.beta1),
+        spread: spread(&ident.per_spring),
         per_spring: ident.per_spring,
-        spread,
         consistency: Some(ident.consistency),
         covariance: chosen.covariance,
         sequential: Some(sequential),
         joint,
     };
     Ok((params, result))
+}
+
+/// What the identification runs give the rig, sorted by role.
+struct Gathered<'a> {
+    /// The no-specimen runs' second-order models.
+    no_spec: Vec<TfEstimate>,
+    /// The spring runs' models with their stiffness.
+    springs: Vec<SpringRun>,
+    /// Each identification run's model with what its fit was given (the
+    /// joint fit's).
+    evidence: Vec<(&'a RunPlan, &'a Evidence)>,
+    /// The validation runs' FRFs the joint fit may include.
+    validation: Vec<(&'a RunPlan, &'a ValidationEvidence)>,
+}
+
+impl<'a> Gathered<'a> {
+    /// The runs' inputs, or every identification run that failed or gave no
+    /// second-order model (Eqs. 18-19 need one).
+    fn of(
+        campaign: &'a Campaign,
+        inputs: impl Iterator<Item = &'a RigInput>,
+    ) -> Result<Self, RigError> {
+        let mut g = Gathered {
+            no_spec: Vec::new(),
+            springs: Vec::new(),
+            evidence: Vec::new(),
+            validation: Vec::new(),
+        };
+        let mut failed = Vec::new();
+        for (plan, input) in campaign.runs.iter().zip(inputs) {
+            if let RigInput::Validation(e) = input {
+                g.validation.push((plan, e.as_ref()));
+            }
+            if !matches!(plan.role, Role::NoSpecimen | Role::Spring) {
+                continue;
+            }
+            let run = plan.id.clone();
+            let e = match input {
+                RigInput::Estimate(e) => e.as_ref(),
+                RigInput::Nothing | RigInput::Validation(_) => continue,
+                RigInput::Failed(error) => {
+                    let error = error.clone();
+                    failed.push(FailedRun::Failed { run, error });
+                    continue;
+                }
+            };
+            g.evidence.push((plan, e));
+            let estimate = match SecondOrder::from_tf(&e.tf) {
+                Ok(tf) => TfEstimate {
+                    run,
+                    p_gain: plan.p_gain,
+                    tf,
+                    cov: e.cov,
+                },
+                Err(error) => {
+                    failed.push(FailedRun::NotSecondOrder { run, error });
+                    continue;
+                }
+            };
+            match plan.specimen {
+                SpecimenModel::Spring { stiffness_n_per_m } => g.springs.push(SpringRun {
+                    stiffness_n_per_m,
+                    estimate,
+                }),
+                _ => g.no_spec.push(estimate),
+            }
+        }
+        match failed.is_empty() {
+            true => Ok(g),
+            false => Err(RigError::RunsFailed(failed)),
+        }
+    }
+}
+
+/// What the lab reads of the sequential identification: a given rig the
+/// identified one replaces, springs that disagree, and an agreement that
+/// could not be tested.
+fn identification_warnings(
+    campaign: &Campaign,
+    ident: &identify::RigIdentification,
+    warnings: &mut Vec<String>,
+) {
+    if let Some(given) = &campaign.given_rig {
+        warnings.push(format!(
+            "the manifest gives [rig.parameters] and the campaign identifies the rig; the identified parameters are used (given: beta1 = {:.6e}, a1b0 = {:.6e} at P = {}, a2 = {:.6e}, a3 = {:.6e})",
+            given.beta1_per_s, given.a1b0_n_per_m_s2, given.p_gain, given.a2_n_per_m, given.a3_per_s
+        ));
+    }
+    if ident.consistency.consistent == Some(false) {
+        warnings.push(format!(
+            "rig: {}; likely causes: {}",
+            ident.consistency.note,
+            ident.consistency.likely_causes.join("; ")
+        ));
+    }
+    // A check that could not be made is said where the lab reads, not only
+    // in results.json (issue 24): unless the springs are published
+    // transfer functions, which carry no covariance by what they are.
+    if let Some(why) = ident.consistency.untested
+        && why != identify::consistency::Untested::NoCovariance
+    {
+        let runs: Vec<&str> = ident.per_spring.iter().map(|s| s.run.as_str()).collect();
+        warnings.push(format!(
+            "rig: the springs' agreement was not tested (spring runs {}): {}",
+            runs.join(", "),
+            ident.consistency.note
+        ));
+    }
+}
+
+/// The spread of the springs' a1b0, a2 and a3 (sample std), with two
+/// springs or more.
+fn spread(per_spring: &[identify::PerSpring]) -> Option<Spread> {
+    (per_spring.len() >= 2).then(|| {
+        let sd = |f: &dyn Fn(&identify::PerSpring) -> f64| {
+            let v: Vec<f64> = per_spring.iter().map(f).collect();
+            let mean = v.iter().sum::<f64>() / v.len() as f64;
+            (v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (v.len() - 1) as f64).sqrt()
+        };
+        Spread {
+            a1b0: sd(&|s| s.a1b0.value),
+            a2: sd(&|s| s.a2.value),
+            a3: sd(&|s| s.a3.value),
+        }
+    })
 }
 
 /// 1/beta1 in ms, with its propagated std.

@@ -175,6 +175,38 @@ fn cached_monte_carlo(
     Ok(outcome)
 }
 
+/// What the Monte Carlo did, in a sentence for results.json and the page.
+fn basis(
+    mc: &MonteCarloSettings,
+    profile: &NoiseProfile,
+    record_s: f64,
+    noise_rms_m: f64,
+    frequency_domain: bool,
+) -> String {
+    format!(
+        "{} identifications per stiffness, each of a no-specimen run and a spring run simulated from the identified rig (Eq. 10 with the zero-order hold{}), driven by run {}'s logged command ({:.1} s at {} Hz), read with {:.3} um rms of white displacement noise (the level its FRF variance implies){}{}, and identified with the campaign's settings",
+        mc.seeds,
+        if profile.delay_s > 0.0 {
+            format!(" and its {:.2} ms delay", 1e3 * profile.delay_s)
+        } else {
+            String::new()
+        },
+        profile.run,
+        record_s,
+        profile.sample_rate_hz,
+        1e6 * noise_rms_m,
+        match profile.displacement_step_m {
+            Some(q) => format!(" on its converter's {:.3} um grid", 1e6 * q),
+            None => String::new(),
+        },
+        if frequency_domain {
+            " (drawn on the ETFE's bins, exact for white noise, the grid's rounding as white noise of step^2/12)"
+        } else {
+            ""
+        },
+    )
+}
+
 fn run_monte_carlo(
     campaign: &Campaign,
     rig: &RigParams,
@@ -228,26 +260,12 @@ fn run_monte_carlo(
     .unwrap_or_else(|_| StiffnessSensitivity::empty());
     let agreement = compare(&mut points, &at_points, mc.seeds, whiteness);
     Ok(MonteCarlo {
-        basis: format!(
-            "{} identifications per stiffness, each of a no-specimen run and a spring run simulated from the identified rig (Eq. 10 with the zero-order hold{}), driven by run {}'s logged command ({:.1} s at {fs} Hz), read with {:.3} um rms of white displacement noise (the level its FRF variance implies){}{}, and identified with the campaign's settings",
-            mc.seeds,
-            if profile.delay_s > 0.0 {
-                format!(" and its {:.2} ms delay", 1e3 * profile.delay_s)
-            } else {
-                String::new()
-            },
-            profile.run,
+        basis: basis(
+            mc,
+            profile,
             command.len() as f64 / fs,
-            1e6 * noise_rms_m,
-            match profile.displacement_step_m {
-                Some(q) => format!(" on its converter's {:.3} um grid", 1e6 * q),
-                None => String::new(),
-            },
-            if frequency_domain {
-                " (drawn on the ETFE's bins, exact for white noise, the grid's rounding as white noise of step^2/12)"
-            } else {
-                ""
-            },
+            noise_rms_m,
+            frequency_domain,
         ),
         excitation_run: profile.run.clone(),
         noise_rms_m,
