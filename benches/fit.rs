@@ -17,24 +17,6 @@ const SAMPLE_RATE_HZ: f64 = 2048.0;
 const SEGMENT: usize = 8192;
 const BAND_HZ: (f64, f64) = (0.5, 30.0);
 
-/// SplitMix64 + Box-Muller, for reproducible noise without a dependency.
-struct SplitMix64(u64);
-
-impl SplitMix64 {
-    fn next_f64(&mut self) -> f64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        (((z ^ (z >> 31)) >> 11) as f64 + 0.5) / (1_u64 << 53) as f64
-    }
-
-    fn normal(&mut self) -> f64 {
-        let (u1, u2) = (self.next_f64(), self.next_f64());
-        (-2.0 * u1.ln()).sqrt() * (2.0 * std::f64::consts::PI * u2).cos()
-    }
-}
-
 /// The Welch bins inside the band, and a noisy measured response there:
 /// the paper's no-specimen model (Eq. 36) with a 1 ms delay, through the
 /// hold, plus 2 % complex noise.
@@ -45,7 +27,7 @@ fn data() -> (Vec<f64>, Vec<Complex<f64>>, Vec<f64>) {
         .filter(|f| (BAND_HZ.0..=BAND_HZ.1).contains(f))
         .collect();
     let plant = TransferFunction::with_delay(&[3060.0], &[1.0, 267.0, 3060.0], 0.001).unwrap();
-    let mut rng = SplitMix64(2018);
+    let mut rng = servoid::simulate::Draws::new(2018, "fit bench");
     let mut h = Vec::with_capacity(freq.len());
     let mut variance = Vec::with_capacity(freq.len());
     for &f in &freq {

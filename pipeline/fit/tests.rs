@@ -7,36 +7,7 @@ use nalgebra::{Complex, DMatrix, DVector};
 
 use super::*;
 use crate::model::{LinearSpecimen, tf_x1_u};
-
-/// SplitMix64 (Steele, Lea & Flood 2014) with Box-Muller normals: a seeded,
-/// dependency-free generator for the Monte Carlo tests.
-struct SplitMix64(u64);
-
-impl SplitMix64 {
-    fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    }
-
-    /// Uniform on the open interval (0, 1).
-    fn uniform(&mut self) -> f64 {
-        ((self.next_u64() >> 11) as f64 + 0.5) / (1_u64 << 53) as f64
-    }
-
-    fn normal(&mut self) -> f64 {
-        let (u1, u2) = (self.uniform(), self.uniform());
-        (-2.0 * u1.ln()).sqrt() * (2.0 * std::f64::consts::PI * u2).cos()
-    }
-
-    /// Circular complex Gaussian with E|z|^2 = variance.
-    fn complex_normal(&mut self, variance: f64) -> Complex<f64> {
-        let s = (0.5 * variance).sqrt();
-        Complex::new(s * self.normal(), s * self.normal())
-    }
-}
+use crate::simulate::Draws;
 
 /// The bins of a 2048 Hz log with 8192-sample segments (0.25 Hz apart) in
 /// the paper's 0.5-30 Hz band.
@@ -232,7 +203,7 @@ fn standard_deviations_are_honest_in_monte_carlo() {
     let clean = analytic(&plant, &freq, Some(fs));
     let variance: Vec<f64> = clean.iter().map(|h| (0.03 * h.norm()).powi(2)).collect();
     let opts = FitOptions::new(0, 2, fs);
-    let mut rng = SplitMix64(20_180_398);
+    let mut rng = Draws::new(20_180_398, "fit tests");
     let reps = 200;
     let mut estimates = vec![Vec::new(); 3];
     let mut stds = vec![Vec::new(); 3];
@@ -296,7 +267,7 @@ fn standard_deviations_are_honest_in_monte_carlo() {
 
 #[test]
 fn analytic_jacobian_matches_central_differences() {
-    let mut rng = SplitMix64(7);
+    let mut rng = Draws::new(7, "fit tests");
     let shapes = [(0, 2, true), (1, 3, true), (0, 4, false), (2, 2, true)];
     for (m, n, fit_delay) in shapes {
         let shape = ModelShape {
@@ -349,7 +320,7 @@ fn noisy_second_order(seed: u64, fs: f64) -> (Vec<f64>, Vec<Complex<f64>>, Vec<f
     let freq = band_bins();
     let clean = analytic(&plant, &freq, Some(fs));
     let variance: Vec<f64> = clean.iter().map(|h| (0.02 * h.norm()).powi(2)).collect();
-    let mut rng = SplitMix64(seed);
+    let mut rng = Draws::new(seed, "fit tests");
     let h = clean
         .iter()
         .zip(variance.iter())
@@ -426,7 +397,7 @@ fn fitted_delay_from_noisy_data_is_within_its_uncertainty() {
     let freq = band_bins();
     let clean = analytic(&plant, &freq, Some(fs));
     let variance: Vec<f64> = clean.iter().map(|h| (0.01 * h.norm()).powi(2)).collect();
-    let mut rng = SplitMix64(3);
+    let mut rng = Draws::new(3, "fit tests");
     let h: Vec<Complex<f64>> = clean
         .iter()
         .zip(variance.iter())
@@ -623,7 +594,7 @@ fn bad_inputs_give_errors_that_say_what_and_where() {
 fn covariance_is_the_scaled_inverse_normal_matrix() {
     // Independent route: explicit inverse of J^T J, on a Jacobian whose
     // columns differ in scale by 1e6 (as unscaled coefficients would).
-    let mut rng = SplitMix64(99);
+    let mut rng = Draws::new(99, "fit tests");
     let jac = DMatrix::from_fn(40, 3, |_, j| rng.normal() * 1e3_f64.powi(j as i32));
     let cov = covariance(&jac, 2.5).unwrap();
     let want = (jac.transpose() * &jac).try_inverse().unwrap() * 2.5;
@@ -643,7 +614,7 @@ fn covariance_is_the_scaled_inverse_normal_matrix() {
 fn covariance_from_the_normal_matrix_is_that_of_j_where_it_answers() {
     // The same 1e6-spread columns: J^T J alone gives the covariance QR of J
     // gives, to 1e-10 of the stds' scale.
-    let mut rng = SplitMix64(7);
+    let mut rng = Draws::new(7, "fit tests");
     let jac = DMatrix::from_fn(40, 3, |_, j| rng.normal() * 1e3_f64.powi(j as i32));
     let a = jac.transpose() * &jac;
     let from_normal = covariance_from_normal(&a, 2.5).unwrap();

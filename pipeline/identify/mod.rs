@@ -538,21 +538,8 @@ mod tests {
         let lin = rig.a3.std.unwrap();
 
         let n_samples = 4000;
-        // SplitMix64 (Steele et al. 2014) and Box-Muller: a seeded, independent
-        // normal generator for the test.
-        let mut state: u64 = 0x5EED_2018;
-        let mut uniform = move || {
-            state = state.wrapping_add(0x9E37_79B9_7F4A_7C15);
-            let mut z = state;
-            z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-            z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-            z ^= z >> 31;
-            ((z >> 11) as f64 + 0.5) / (1u64 << 53) as f64
-        };
-        let mut normal = move || {
-            let (u1, u2) = (uniform(), uniform());
-            (-2.0 * u1.ln()).sqrt() * (2.0 * std::f64::consts::PI * u2).cos()
-        };
+        let mut draws = crate::simulate::Draws::new(2018, "identify tests");
+        let mut normal = move || draws.normal();
         let mut samples = Vec::with_capacity(n_samples);
         for _ in 0..n_samples {
             let mut jitter = |t: &SecondOrder| SecondOrder {

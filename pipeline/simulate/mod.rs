@@ -115,6 +115,35 @@ pub fn seeded_rng(seed: u64, label: &str) -> ChaCha8Rng {
     ChaCha8Rng::from_seed(h.finalize().into())
 }
 
+/// Seeded draws from a [`seeded_rng`] stream: uniforms and standard
+/// normals (rand_distr's ziggurat, as the simulator's noise draws them). The
+/// one generator of the simulator's noise, the unit tests' noise and the
+/// benches' data, so no test carries a generator of its own.
+pub struct Draws(ChaCha8Rng);
+
+impl Draws {
+    /// The stream named by `seed` and `label`.
+    pub fn new(seed: u64, label: &str) -> Self {
+        Self(seeded_rng(seed, label))
+    }
+
+    /// Uniform on [0, 1).
+    pub fn uniform(&mut self) -> f64 {
+        rand::Rng::random(&mut self.0)
+    }
+
+    /// Standard normal.
+    pub fn normal(&mut self) -> f64 {
+        rand::Rng::sample(&mut self.0, rand_distr::StandardNormal)
+    }
+
+    /// Circular complex Gaussian with E|z|^2 = `variance`.
+    pub fn complex_normal(&mut self, variance: f64) -> nalgebra::Complex<f64> {
+        let s = (0.5 * variance).sqrt();
+        nalgebra::Complex::new(s * self.normal(), s * self.normal())
+    }
+}
+
 /// Checks that `value` is finite and positive.
 pub(crate) fn require_positive(
     owner: &'static str,
