@@ -16,83 +16,24 @@ use crate::util::{paper_tf_runs, run_by_id, scratch, servoid, servoid_into, writ
 /// tests/simulate.rs): no specimen, two springs and two validation runs with
 /// a specimen mass (so they have a controllable canonical form). No run has
 /// a description: a table row has none.
-const SIM: &str = r#"
-schema_version = 1
-
-[simulation]
-name = "table-test"
-sample_rate_hz = 1000.0
-seed = 11
-log_format = "csv"
-
-[rig]
-name = "test rig"
-
-[rig.parameters]
-beta1_per_s = 250.0
-a1b0_n_per_m_s2 = 2.0e9
-a2_n_per_m = 7.0e5
-a3_per_s = 15.0
-
-[excitation]
-kind = "chirp"
-law = "linear"
-f0_hz = 0.5
-f1_hz = 40.0
-duration_s = 20.0
-amplitude_m = 0.003
-lead_in_s = 0.5
-lead_out_s = 0.5
-
-[instrument.command]
-unit = "mm"
-
-[instrument.displacement]
-unit = "mm"
-noise_rms = 0.002
-quantization = { bits = 18, full_scale = 50.0 }
-
-[instrument.force]
-unit = "N"
-noise_rms = 1.0
-
-[identification]
-band_hz = [0.5, 30.0]
-coherence_min = 0.8
-command_intersample = "sample_and_hold"
-frf = { estimator = "etfe", segment_length = 4096, overlap = 0.5, window = "rectangular", detrend = "mean" }
-
-[[runs]]
-id = "bare"
-role = "no_specimen"
-p_gain = 1.0
-
-[[runs]]
-id = "k1"
-role = "spring"
-p_gain = 1.0
-specimen = { stiffness_n_per_m = 100000.0 }
-
-[[runs]]
-id = "k2"
-role = "spring"
-p_gain = 1.0
-specimen = { stiffness_n_per_m = 80000.0 }
-
-[[runs]]
-id = "v1"
-role = "validation"
-p_gain = 1.5
-specimen = { mass_kg = 4.0, damping_ns_per_m = 10.0, stiffness_n_per_m = 120000.0 }
-
+fn sim() -> String {
+    include_str!("fixtures/small-simulation.toml")
+        .replace("name = \"cli-test\"", "name = \"table-test\"")
+        .replace("seed = 7", "seed = 11")
+        .replace(
+            "[[runs]]\nid = \"v1\"",
+            "[[runs]]\nid = \"k2\"\nrole = \"spring\"\np_gain = 1.0\nspecimen = { stiffness_n_per_m = 80000.0 }\n\n[[runs]]\nid = \"v1\"",
+        )
+        + r#"
 [[runs]]
 id = "v2"
 role = "validation"
 p_gain = 1.0
 specimen = { mass_kg = 3.0, damping_ns_per_m = 5.0, stiffness_n_per_m = 90000.0 }
-"#;
+"#
+}
 
-/// SIM's runs as a CSV run table, in SIM's order.
+/// sim()'s runs as a CSV run table, in its order.
 const TABLE_CSV: &str = "\
 id,role,p_gain,mass_kg,damping_ns_per_m,stiffness_n_per_m,date
 bare,no_specimen,1,,,,2024-05-01
@@ -102,10 +43,10 @@ v1,validation,1.5,4,10,120000,
 v2,validation,1.0,3,5,90000,
 ";
 
-/// Simulate SIM into `dir/sim` (logs, truth and the `[[runs]]` manifest
+/// Simulate sim() into `dir/sim` (logs, truth and the `[[runs]]` manifest
 /// `campaign.toml`) and return that folder.
 fn simulate(dir: &Path) -> PathBuf {
-    let sim = write(dir, "sim.toml", SIM);
+    let sim = write(dir, "sim.toml", &sim());
     let out = dir.join("sim");
     let o = servoid_into(dir, "simulate", &sim, &out, &["--quiet"]);
     assert_eq!(o.code, 0, "simulate: {}", o.stderr);

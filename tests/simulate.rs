@@ -9,70 +9,7 @@ use crate::util::{root, run_by_id, scratch, servoid, servoid_into, tree, write};
 
 /// A short campaign (20 s linear chirp at 1 kHz) on a rig that is not the
 /// paper's, so nothing here can lean on the bundled numbers.
-const BASE: &str = r#"
-schema_version = 1
-
-[simulation]
-name = "cli-test"
-description = "a short synthetic campaign for the CLI tests"
-sample_rate_hz = 1000.0
-seed = 7
-log_format = "csv"
-
-[rig]
-name = "test rig"
-
-[rig.parameters]
-beta1_per_s = 250.0
-a1b0_n_per_m_s2 = 2.0e9
-a2_n_per_m = 7.0e5
-a3_per_s = 15.0
-
-[excitation]
-kind = "chirp"
-law = "linear"
-f0_hz = 0.5
-f1_hz = 40.0
-duration_s = 20.0
-amplitude_m = 0.003
-lead_in_s = 0.5
-lead_out_s = 0.5
-
-[instrument.command]
-unit = "mm"
-
-[instrument.displacement]
-unit = "mm"
-noise_rms = 0.002
-quantization = { bits = 18, full_scale = 50.0 }
-
-[instrument.force]
-unit = "N"
-noise_rms = 1.0
-
-[identification]
-band_hz = [0.5, 30.0]
-coherence_min = 0.8
-command_intersample = "sample_and_hold"
-frf = { estimator = "etfe", segment_length = 4096, overlap = 0.5, window = "rectangular", detrend = "mean" }
-
-[[runs]]
-id = "bare"
-role = "no_specimen"
-p_gain = 1.0
-
-[[runs]]
-id = "k1"
-role = "spring"
-p_gain = 1.0
-specimen = { stiffness_n_per_m = 100000.0 }
-
-[[runs]]
-id = "v1"
-role = "validation"
-p_gain = 1.5
-specimen = { mass_kg = 4.0, damping_ns_per_m = 10.0, stiffness_n_per_m = 120000.0 }
-"#;
+const BASE: &str = include_str!("fixtures/small-simulation.toml");
 
 // The rig of BASE.
 const BETA1: f64 = 250.0;

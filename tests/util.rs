@@ -109,36 +109,13 @@ pub fn write(dir: &Path, name: &str, text: &str) -> PathBuf {
     p
 }
 
-/// The shared folder of real MTS logs: `$SERVOID_SHARED_DATA` (the folder
-/// holding `utfsm-mts-mrdamper/`), else `../shared/data` beside the
-/// checkout, one level further up (a worktree), or `/work/shared/data`.
-/// None, after a SKIPPED line on stderr, where none holds them: the logs
-/// are not part of the repository. With `SERVOID_REQUIRE_MTS_DATA` set
-/// (`.ci/run` sets it) their absence fails the test instead.
+#[path = "support/mts_data.rs"]
+mod mts_data;
+
+/// The shared folder of real MTS logs (see `support/mts_data.rs`, which the
+/// unit tests include too), or None after a SKIPPED line.
 pub fn mts_data() -> Option<PathBuf> {
-    let candidates: Vec<PathBuf> = std::env::var_os("SERVOID_SHARED_DATA")
-        .map(PathBuf::from)
-        .into_iter()
-        .chain([
-            root().join("../shared/data"),
-            root().join("../../shared/data"),
-            PathBuf::from("/work/shared/data"),
-        ])
-        .collect();
-    let found = candidates
-        .iter()
-        .map(|d| d.join("utfsm-mts-mrdamper"))
-        .find(|d| d.join("0A.txt").exists() && d.join("1A.txt").exists());
-    if found.is_none() {
-        skip_unless_required(
-            "the MTS-log tests",
-            "SERVOID_REQUIRE_MTS_DATA",
-            &format!(
-                "the MTS logs are not in any of {candidates:?} (set SERVOID_SHARED_DATA to the folder holding utfsm-mts-mrdamper/)"
-            ),
-        );
-    }
-    found
+    mts_data::mts_data_in(&root())
 }
 
 /// The paper's identification runs as its published transfer functions: no

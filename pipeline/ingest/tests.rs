@@ -118,43 +118,13 @@ const NEEDS: Needs = Needs {
 
 // ------------------------------------------------------- real DAQ logs
 
-/// A real MTS log from the shared data folder: `$SERVOID_SHARED_DATA` (the
-/// folder holding `utfsm-mts-mrdamper/`), else `../shared/data` beside the
-/// checkout (as the brief has it), one level further up (a worktree), or
-/// `/work/shared/data`. The logs are not part of the repository; where none
-/// of these holds them the tests that need them say SKIPPED on stderr and
-/// pass, so that a clone without the data still builds and tests, unless
-/// `SERVOID_REQUIRE_MTS_DATA` is set (`.ci/run` sets it): then their absence
-/// fails the test.
+#[path = "../../tests/support/mts_data.rs"]
+mod mts_data;
+
+/// A real MTS log from the shared data folder (`tests/support/mts_data.rs`,
+/// which the integration tests include too), or None after a SKIPPED line.
 fn shared_log(file: &str) -> Option<PathBuf> {
-    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-    let candidates: Vec<PathBuf> = std::env::var_os("SERVOID_SHARED_DATA")
-        .map(PathBuf::from)
-        .into_iter()
-        .chain([
-            root.join("../shared/data"),
-            root.join("../../shared/data"),
-            PathBuf::from("/work/shared/data"),
-        ])
-        .collect();
-    let found = candidates
-        .iter()
-        .map(|d| d.join("utfsm-mts-mrdamper").join(file))
-        .find(|p| p.exists());
-    if found.is_none() {
-        let why = format!("{file} not found in {candidates:?}");
-        if std::env::var_os("SERVOID_REQUIRE_MTS_DATA").is_some_and(|v| v != "0") {
-            panic!("SERVOID_REQUIRE_MTS_DATA is set but {why}");
-        }
-        // Straight to stderr: the harness hides `eprintln!` of a passing
-        // test, and a skip must be seen.
-        use std::io::Write;
-        let _ = writeln!(
-            std::io::stderr().lock(),
-            "SKIPPED: {why}; set SERVOID_REQUIRE_MTS_DATA=1 to make this a failure"
-        );
-    }
-    found
+    mts_data::mts_data_in(Path::new(env!("CARGO_MANIFEST_DIR"))).map(|d| d.join(file))
 }
 
 /// The UTFSM convention: CHANNEL2 = command (x 10 -> mm), CHANNEL0 =

@@ -708,70 +708,12 @@ mod tests {
     use crate::manifest::simulation::load_simulation_str;
     use crate::run::simulate::simulate_campaign;
 
-    /// A 30 s campaign at 1 kHz: a no-specimen run, a spring and the
-    /// paper's Exp1 as a validation run, the joint fit including it.
-    const CAMPAIGN: &str = r#"
-schema_version = 1
-
-[simulation]
-name = "changed"
-sample_rate_hz = 1000.0
-seed = 3
-log_format = "csv"
-
-[rig]
-name = "a simulated rig"
-
-[rig.parameters]
-beta1_per_s = 267.0
-a1b0_n_per_m_s2 = 2.412e9
-a2_n_per_m = 7.881e5
-a3_per_s = 16.118
-
-[excitation]
-kind = "chirp"
-law = "quadratic"
-f0_hz = 0.1
-f1_hz = 35.0
-duration_s = 30.0
-amplitude_m = 0.004
-lead_in_s = 1.0
-lead_out_s = 1.0
-
-[instrument.command]
-unit = "mm"
-
-[instrument.displacement]
-unit = "mm"
-noise_rms = 0.002
-
-[instrument.force]
-unit = "N"
-noise_rms = 2.0
-
-[identification]
-band_hz = [0.5, 30.0]
-coherence_min = 0.8
-frf = { estimator = "etfe", segment_length = 8192, overlap = 0.5, window = "rectangular", detrend = "mean" }
-joint = { include_validation = true }
-
-[[runs]]
-id = "bare"
-role = "no_specimen"
-p_gain = 1.0
-
-[[runs]]
-id = "k1"
-role = "spring"
-p_gain = 1.0
-specimen = { stiffness_n_per_m = 116640.0 }
-
-[[runs]]
-id = "exp1"
-role = "validation"
-p_gain = 1.0
-specimen = { mass_kg = 3.8, damping_ns_per_m = 5.0, stiffness_n_per_m = 129400.0 }
-"#;
+    /// The tests' short campaign (a no-specimen run, a spring and a
+    /// validation run), the joint fit including the validation run.
+    const CAMPAIGN: &str = concat!(
+        include_str!("../../tests/fixtures/small-simulation.toml"),
+        "\n[identification.joint]\ninclude_validation = true\n"
+    );
 
     /// The joint fit read a validation run's log; the second pass finds
     /// other bytes there (here: told the fit read other ones). The run
@@ -785,7 +727,7 @@ specimen = { mass_kg = 3.8, damping_ns_per_m = 5.0, stiffness_n_per_m = 129400.0
             load_simulation_str(CAMPAIGN, &dir.path().join("sim.toml")).expect("a simulation");
         let out = simulate_campaign(&sim, dir.path()).expect("simulates");
         let campaign = load(&out.manifest).expect("the manifest loads");
-        let plan = campaign.runs.iter().find(|r| r.id == "exp1").unwrap();
+        let plan = campaign.runs.iter().find(|r| r.id == "v1").unwrap();
         let RigInput::Validation(read) = validation_evidence(&campaign, plan) else {
             panic!("the joint fit reads the validation run");
         };
