@@ -4,7 +4,9 @@
 //! list the available ones), then has polars parse the wanted columns as f64.
 //! When polars refuses the file (spaces around values, a value that is not a
 //! number), a line-by-line parser reads the wanted fields trimmed, and either
-//! copes or names the line and column at fault. Both skip the first
+//! copes or names the line and column at fault. Both the header and that
+//! parser split a line as CSV quotes it (`fields`, csv-core): a quoted field
+//! may hold the delimiter. Both skip the first
 //! `skip_lines` lines, comment lines and blank lines. Line numbers count every
 //! line of the file, 1-based.
 
@@ -15,6 +17,7 @@ use polars::prelude::{
     CsvParseOptions, CsvReadOptions, DataType, Field, Schema, SchemaRef, SerReader,
 };
 
+use super::fields::Fields;
 use super::plan::{Column, LogPlan};
 use super::{At, FormatProblem, IngestError, Raw, Wanted, list, raw_from_table, wanted};
 
@@ -34,7 +37,8 @@ pub(super) fn read<'a>(
             what: "only skipped, comment or blank lines".into(),
         });
     };
-    let first_fields: Vec<&str> = split(first, opts.sep).map(unquote).collect();
+    let mut header_fields = Fields::new(opts.sep);
+    let first_fields: Vec<&str> = header_fields.split(first);
     let names = plan.csv.header.then_some(first_fields.as_slice());
     if names.is_some() && lines.next().is_none() {
         return Err(IngestError::HeaderOnly {
@@ -233,11 +237,6 @@ impl<'p> Layout<'p> {
     }
 }
 
-fn split(line: &[u8], sep: u8) -> impl Iterator<Item = &str> {
-    line.split(move |&b| b == sep)
-        .map(|f| std::str::from_utf8(f).unwrap_or("\u{fffd}"))
-}
-
 /// When the header reads as one field holding `;` or a tab, the file is
 /// delimited by that instead: say how to read it.
 fn delimiter_hint(names: &[&str]) -> String {
@@ -248,7 +247,9 @@ fn delimiter_hint(names: &[&str]) -> String {
     }
 }
 
-/// A field without one pair of surrounding double quotes.
+/// A field without one pair of surrounding double quotes: CSV quoting
+/// unquotes a field only where the quote opens it, and a value padded with
+/// spaces (` "1.5" `) is quoted inside them.
 fn unquote(f: &str) -> &str {
     f.strip_prefix('"')
         .and_then(|s| s.strip_suffix('"'))
@@ -326,8 +327,9 @@ fn by_hand(
     index: &[usize],
 ) -> Result<Vec<Vec<f64>>, IngestError> {
     let mut columns = vec![Vec::new(); want.len()];
+    let mut splitter = Fields::new(opts.sep);
     for (line_no, line) in opts.data_lines(bytes).skip(usize::from(header)) {
-        let fields: Vec<&str> = split(line, opts.sep).collect();
+        let fields = splitter.split(line);
         for ((w, &i), col) in want.iter().zip(index).zip(&mut columns) {
             let missing = |detail: String| IngestError::MissingValue {
                 path: path.to_path_buf(),
@@ -362,7 +364,7 @@ fn by_hand(
 
 /// Why field `i` of `line` gave no value.
 fn field_detail(line: &[u8], sep: u8, i: usize) -> String {
-    let n = split(line, sep).count();
+    let n = Fields::new(sep).split(line).len();
     if i < n {
         format!("field {i} is empty")
     } else {

@@ -18,6 +18,7 @@
 
 mod csv;
 mod daq;
+mod fields;
 mod mat;
 mod parquet;
 mod parquet_footer;

@@ -476,6 +476,59 @@ fn csv_comment_before_header_byte_order_mark_and_spaces() {
     assert_relative_eq!(log.sample_rate_hz, 2.0);
 }
 
+/// A logger's free-text column whose values and name hold the delimiter in
+/// quotes: polars reads the clean file, and where a value padded with
+/// spaces sends the file to the line parser, that parser splits the quoted
+/// fields as CSV does too (it used to split them at the quoted commas and
+/// read the note's second half as the displacement). The header's quoted
+/// name with a comma is one column.
+#[test]
+fn csv_quoted_fields_may_hold_the_delimiter_in_either_reader() {
+    let dir = tempfile::tempdir().unwrap();
+    for (file, text) in [
+        (
+            "clean.csv",
+            "t,\"note, free text\",u,x\n0,\"start, slow\",1,2\n0.5,\"a, b, c\",1.5,2.5\n1,\"\",1,2\n",
+        ),
+        (
+            "spaced.csv",
+            "t,\"note, free text\",u,x\n0,\"start, slow\",1,2\n0.5,\"a, b, c\", 1.5 ,2.5\n1,\"\",1,2\n",
+        ),
+    ] {
+        let path = write_file(dir.path(), file, text.as_bytes());
+        let p = plan(
+            &path,
+            LogFormat::Csv,
+            TimePlan::Column {
+                column: name("t"),
+                to_s: 1.0,
+            },
+            ch(name("u"), Unit::Meter, 1.0),
+            ch(name("x"), Unit::Meter, 1.0),
+            None,
+        );
+        let log = read_log(&p).unwrap_or_else(|e| panic!("{file}: {e}"));
+        assert_eq!(log.command_m, vec![1.0, 1.5, 1.0], "{file}");
+        assert_eq!(log.displacement_m, vec![2.0, 2.5, 2.0], "{file}");
+        let mut by_index = p.clone();
+        by_index.channels.command.column = Column::Index(2);
+        by_index.channels.displacement.column = Column::Index(3);
+        let log = read_log(&by_index).unwrap_or_else(|e| panic!("{file} by index: {e}"));
+        assert_eq!(log.displacement_m, vec![2.0, 2.5, 2.0], "{file}");
+    }
+    // The column list in a refusal names the quoted column whole.
+    let path = write_file(
+        dir.path(),
+        "named.csv",
+        b"t,\"note, free text\",u,x\n0,a,1,2\n1,b,1,2\n",
+    );
+    let mut p = plan_by_name(&path, LogFormat::Csv);
+    p.channels.force = None;
+    p.channels.displacement.column = name("disp");
+    let msg = err(&p);
+    assert_contains(&msg, &["`note, free text`", "`disp`"]);
+}
+
 // ------------------------------------------------------------ Parquet
 
 #[test]
