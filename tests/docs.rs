@@ -12,7 +12,9 @@
 //! - `cargo +nightly fuzz run TARGET CORPUS`: the target and its corpus
 //!   exist;
 //! - every `cargo bench --bench NAME` written anywhere in them names a
-//!   bench Cargo.toml declares.
+//!   bench Cargo.toml declares;
+//! - every fenced `toml` block passes `servoid check`: the complete
+//!   manifest as written, each fragment merged into it.
 //!
 //! `cargo test` is this test's own command; other shell lines (`case`,
 //! `cargo install`) are the reader's.
@@ -210,5 +212,114 @@ fn sh_blocks_are_read_as_a_shell_reads_them() {
     assert_eq!(
         servoid_args("servoid run n.toml --quiet >> night.jsonl").unwrap(),
         vec!["run", "n.toml", "--quiet"]
+    );
+}
+
+/// The fenced `toml` blocks of `text`, each without the indentation of its
+/// fence (a block inside a list item is indented).
+fn toml_blocks(text: &str) -> Vec<String> {
+    let mut blocks = Vec::new();
+    let mut current: Option<(usize, String)> = None;
+    for line in text.lines() {
+        let t = line.trim_start();
+        match (&mut current, t.strip_prefix("```")) {
+            (None, Some(lang)) if lang.trim() == "toml" => {
+                current = Some((line.len() - t.len(), String::new()));
+            }
+            (Some(_), Some(_)) => blocks.push(current.take().expect("a block").1),
+            (Some((indent, block)), None) => {
+                block.push_str(line.get(*indent..).unwrap_or("").trim_end());
+                block.push('\n');
+            }
+            _ => {}
+        }
+    }
+    blocks
+}
+
+/// `fragment`'s keys put into `base`, tables merged key by key.
+fn merge(base: &mut toml::Table, fragment: toml::Table) {
+    for (key, value) in fragment {
+        match (base.get_mut(&key), value) {
+            (Some(toml::Value::Table(b)), toml::Value::Table(f)) => merge(b, f),
+            (_, value) => {
+                base.insert(key, value);
+            }
+        }
+    }
+}
+
+/// Every manifest example in the docs passes `servoid check` (issue 25,
+/// item 6): the complete one as written, and each fragment (`[history]`,
+/// `[run_table]`, `[identification.joint]`, `[sensitivity]`) merged into
+/// it. A run table's file is written for the check, with one row, as the
+/// fragment names it. The complete example is the first block that has
+/// `schema_version`.
+#[test]
+fn every_manifest_example_in_the_docs_passes_servoid_check() {
+    let blocks: Vec<(PathBuf, String)> = documents()
+        .into_iter()
+        .flat_map(|doc| {
+            let text = std::fs::read_to_string(&doc).unwrap();
+            toml_blocks(&text)
+                .into_iter()
+                .map(move |b| (doc.clone(), b))
+        })
+        .collect();
+    let (_, complete) = blocks
+        .iter()
+        .find(|(_, b)| b.contains("schema_version"))
+        .expect("the docs show a complete manifest");
+    let base: toml::Table = toml::from_str(complete).expect("the complete example is TOML");
+    assert!(blocks.len() >= 5, "{} toml blocks", blocks.len());
+    for (n, (doc, block)) in blocks.iter().enumerate() {
+        let fragment: toml::Table = toml::from_str(block).unwrap_or_else(|e| {
+            panic!(
+                "{}: a toml block does not parse: {e}\n{block}",
+                doc.display()
+            )
+        });
+        let mut manifest = base.clone();
+        merge(&mut manifest, fragment);
+        let dir = scratch();
+        if let Some(file) = manifest
+            .get("run_table")
+            .and_then(|t| t.get("file"))
+            .and_then(toml::Value::as_str)
+        {
+            let table = dir.path().join(file);
+            std::fs::create_dir_all(table.parent().unwrap()).unwrap();
+            std::fs::write(
+                &table,
+                "id,role,p_gain,stiffness_n_per_m\nk9,spring,1.0,90000\n",
+            )
+            .unwrap();
+        }
+        let path = dir.path().join(format!("example-{n}.toml"));
+        std::fs::write(&path, toml::to_string(&manifest).unwrap()).unwrap();
+        let o = servoid(&root(), &["check", path.to_str().unwrap()]);
+        assert_eq!(
+            o.code,
+            0,
+            "{}: this example does not pass `servoid check`:\n{block}\n{}",
+            doc.display(),
+            o.stderr
+        );
+    }
+}
+
+/// The block reader takes indented blocks and leaves the others.
+#[test]
+fn toml_blocks_are_read_with_their_indentation_taken_off() {
+    let text = "a\n```toml\nx = 1\n```\n- item\n\n   ```toml\n   [t]\n   y = \"z\"\n   ```\n```sh\nservoid\n```\n";
+    assert_eq!(toml_blocks(text), vec!["x = 1\n", "[t]\ny = \"z\"\n"]);
+    let mut base: toml::Table = toml::from_str("[a]\nb = 1\nc = 2\n").unwrap();
+    merge(
+        &mut base,
+        toml::from_str("[a]\nc = 3\n[d]\ne = 4\n").unwrap(),
+    );
+    assert_eq!(
+        toml::to_string(&base).unwrap(),
+        "[a]\nb = 1\nc = 3\n\n[d]\ne = 4\n"
     );
 }
