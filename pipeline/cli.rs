@@ -18,9 +18,19 @@ use crate::identify::Estimate;
 use crate::results::{Results, RigSource, Status};
 use crate::run::{self, CampaignOutcome, Event, FigureFormats, JobError, Observer, Settings};
 
+/// `servoid --version`: the release and the commit it was built from
+/// (`build.rs`; "+modified" when the sources differed from it, "unknown
+/// commit" outside a git checkout).
+const VERSION: &str = concat!(
+    env!("CARGO_PKG_VERSION"),
+    " (commit ",
+    env!("SERVOID_COMMIT"),
+    ")"
+);
+
 /// Identify servo-hydraulic actuators from lab logs (Maghareh, Silva & Dyke 2018).
 #[derive(Debug, Parser)]
-#[command(name = "servoid", version, about, long_about = None)]
+#[command(name = "servoid", version = VERSION, about, long_about = None)]
 pub struct Cli {
     #[command(subcommand)]
     pub command: Command,
@@ -127,6 +137,16 @@ pub enum Command {
         #[arg(long, default_value = "schemas")]
         out_dir: PathBuf,
     },
+    /// Print a shell's completion script for servoid (e.g. `servoid
+    /// completions bash > ~/.local/share/bash-completion/completions/servoid`).
+    Completions {
+        /// The shell.
+        #[arg(value_enum)]
+        shell: clap_complete::Shell,
+    },
+    /// Print servoid's man page (roff), e.g. `servoid man > servoid.1;
+    /// man -l servoid.1`.
+    Man,
 }
 
 /// `--log-format`: how a job reports its progress (not a data log's format,
@@ -241,6 +261,23 @@ fn dispatch(command: Command) -> u8 {
                 EXIT_USAGE
             }
         },
+        Command::Completions { shell } => {
+            let mut cmd = <Cli as clap::CommandFactory>::command();
+            let mut script = Vec::new();
+            clap_complete::generate(shell, &mut cmd, "servoid", &mut script);
+            print_bytes(&script, "the completion script")
+        }
+        Command::Man => {
+            let cmd = <Cli as clap::CommandFactory>::command();
+            let mut page = Vec::new();
+            match clap_mangen::Man::new(cmd).render(&mut page) {
+                Ok(()) => print_bytes(&page, "the man page"),
+                Err(e) => {
+                    warn(&format!("error: the man page could not be made: {e}"));
+                    EXIT_FAILED
+                }
+            }
+        }
         Command::Schema { out_dir } => match run::write_schemas(&out_dir) {
             Ok(paths) => {
                 for p in paths {
@@ -253,6 +290,21 @@ fn dispatch(command: Command) -> u8 {
                 EXIT_FAILED
             }
         },
+    }
+}
+
+/// Write `bytes` (`what`) to stdout. A reader that stops early (`| head`)
+/// is not an error: the rest is not wanted.
+fn print_bytes(bytes: &[u8], what: &str) -> u8 {
+    use std::io::Write;
+    let mut out = std::io::stdout().lock();
+    match out.write_all(bytes).and_then(|()| out.flush()) {
+        Ok(()) => EXIT_OK,
+        Err(e) if e.kind() == std::io::ErrorKind::BrokenPipe => EXIT_OK,
+        Err(e) => {
+            warn(&format!("error: {what} could not be written: {e}"));
+            EXIT_FAILED
+        }
     }
 }
 

@@ -7,6 +7,7 @@ mod accuracy;
 mod bad_logs;
 mod batch;
 mod browser;
+mod cli_conventions;
 mod consistency;
 mod corpus;
 mod csi;
