@@ -440,17 +440,8 @@ fn csv_with_decimal_commas() {
         ),
     ] {
         let path = write_file(dir.path(), file, text.as_bytes());
-        let mut p = plan(
-            &path,
-            LogFormat::Csv,
-            TimePlan::Column {
-                column: name("t"),
-                to_s: 1.0,
-            },
-            ch(name("u"), Unit::Meter, 1.0),
-            ch(name("x"), Unit::Meter, 1.0),
-            None,
-        );
+        let mut p = plan_by_name(&path, LogFormat::Csv);
+        p.channels.force = None;
         p.csv = CsvOptions {
             delimiter: ";".into(),
             decimal: ",".into(),
@@ -496,17 +487,8 @@ fn csv_quoted_fields_may_hold_the_delimiter_in_either_reader() {
         ),
     ] {
         let path = write_file(dir.path(), file, text.as_bytes());
-        let p = plan(
-            &path,
-            LogFormat::Csv,
-            TimePlan::Column {
-                column: name("t"),
-                to_s: 1.0,
-            },
-            ch(name("u"), Unit::Meter, 1.0),
-            ch(name("x"), Unit::Meter, 1.0),
-            None,
-        );
+        let mut p = plan_by_name(&path, LogFormat::Csv);
+        p.channels.force = None;
         let log = read_log(&p).unwrap_or_else(|e| panic!("{file}: {e}"));
         assert_eq!(log.command_m, vec![1.0, 1.5, 1.0], "{file}");
         assert_eq!(log.displacement_m, vec![2.0, 2.5, 2.0], "{file}");

@@ -403,7 +403,7 @@ fn run_once(
     observer.event(&Event::RunStarted { id: &plan.id });
     let start = Instant::now();
     let mut done = match sink.probe(campaign, plan, parts) {
-        Probed::Hit(stored) => sink.replay(*stored),
+        Probed::Hit(stored) => Done::from_stored(*stored),
         Probed::Miss { key, file } => sink.keep(key.as_deref(), step(file))?,
     };
     done.seconds = start.elapsed().as_secs_f64();

@@ -317,7 +317,7 @@ pub fn run_shard(
     let work = set.dir();
     let files = FigureFiles::new(work, settings.figures);
     let cache = Cache::open(work, settings.force, cache_names(&set));
-    let draw = Sink {
+    let sink = Sink {
         out_dir: Some(work),
         files: files.as_ref(),
         choice: settings.figures,
@@ -326,7 +326,7 @@ pub fn run_shard(
     };
     let relocate = |e: JobError| e.relocated(&set);
     let analysed = workers
-        .install(|| analyse::analyse_with(&share, &draw, observer))
+        .install(|| analyse::analyse_with(&share, &sink, observer))
         .map_err(|e| relocate(e.into()))?;
     let info = ShardInfo {
         servoid_version: env!("CARGO_PKG_VERSION").to_string(),

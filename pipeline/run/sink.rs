@@ -63,7 +63,8 @@ pub(super) struct Done {
 }
 
 impl Done {
-    fn from_stored(s: Stored) -> Self {
+    /// A run's outcome from the cache.
+    pub(super) fn from_stored(s: Stored) -> Self {
         Self {
             tables: table_files(&s.files),
             kept: s.kept,
@@ -131,11 +132,6 @@ impl Sink<'_> {
                 file,
             },
         }
-    }
-
-    /// A run's outcome from the cache.
-    pub(super) fn replay(&self, stored: Stored) -> Done {
-        Done::from_stored(stored)
     }
 
     /// Write a run's output as it arrives: its figures and tables, then its
