@@ -13,6 +13,8 @@ pub mod figures;
 
 pub mod columns;
 
+pub mod matlab;
+
 pub mod tables;
 
 pub mod history;

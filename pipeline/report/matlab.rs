@@ -1,0 +1,309 @@
+//! MATLAB level-5 MAT files (`models.mat`), written by servoid itself: the
+//! format is a header and a list of tagged elements (MathWorks, "MAT-File
+//! Format", R2024a, ch. 1), and what models.mat holds (numeric matrices,
+//! text, structs, cell arrays) is a small part of it. The Rust MAT writers
+//! were weighed and not taken: matrw 0.1 returns Ok when its write failed
+//! and writes text as UTF-8 bytes MATLAB reads as another length; matio-rs
+//! needs cmake and libclang to build. MATLAB, Octave and
+//! `scipy.io.loadmat` read these files; the tests read them back with the
+//! `matfile` crate (numbers) and scipy (everything).
+//!
+//! Layout (little-endian): 128-byte header (116 bytes of text, 8 of
+//! subsystem offset, version 0x0100, "IM"); then one `miMATRIX` element per
+//! variable: array flags (class), dimensions, name, then the data: `miDOUBLE`
+//! values in column-major order; `miUINT16` UTF-16 code units for text; for
+//! a struct its field-name length, the names and one unnamed `miMATRIX` per
+//! field; for a cell array one unnamed `miMATRIX` per element. Every element
+//! is padded to 8 bytes.
+
+/// A value in a MAT file.
+#[derive(Debug, Clone, PartialEq)]
+pub enum MatValue {
+    /// A real matrix, `rows` x `cols`, its values column by column.
+    Matrix {
+        rows: usize,
+        cols: usize,
+        data: Vec<f64>,
+    },
+    /// A char row vector.
+    Text(String),
+    /// A 1 x 1 struct, its fields in order.
+    Struct(Vec<(String, MatValue)>),
+    /// A 1 x n cell array.
+    Cell(Vec<MatValue>),
+}
+
+impl MatValue {
+    /// A scalar.
+    pub fn scalar(v: f64) -> Self {
+        Self::Matrix {
+            rows: 1,
+            cols: 1,
+            data: vec![v],
+        }
+    }
+
+    /// A row vector (1 x n), as MATLAB's `tf(num, den)` takes coefficients.
+    pub fn row(v: &[f64]) -> Self {
+        Self::Matrix {
+            rows: 1,
+            cols: v.len(),
+            data: v.to_vec(),
+        }
+    }
+
+    /// A matrix from its rows.
+    pub fn from_rows<const C: usize>(rows: &[[f64; C]]) -> Self {
+        let data = (0..C)
+            .flat_map(|j| rows.iter().map(move |r| r[j]))
+            .collect();
+        Self::Matrix {
+            rows: rows.len(),
+            cols: C,
+            data,
+        }
+    }
+}
+
+/// Why a MAT file could not be made.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum MatWriteError {
+    #[error(
+        "`{name}` is not a MATLAB name (a letter, then letters, digits or underscores, at most {MAX_NAME} characters)"
+    )]
+    BadName { name: String },
+    #[error("matrix `{name}` is {rows} x {cols} but holds {len} values")]
+    Shape {
+        name: String,
+        rows: usize,
+        cols: usize,
+        len: usize,
+    },
+    #[error("`{name}` holds more than a MAT level-5 element can (2^31 bytes)")]
+    TooLarge { name: String },
+}
+
+/// The longest variable or field name MATLAB takes (`namelengthmax`).
+pub const MAX_NAME: usize = 63;
+
+const MI_INT8: u32 = 1;
+const MI_UINT16: u32 = 4;
+const MI_INT32: u32 = 5;
+const MI_UINT32: u32 = 6;
+const MI_DOUBLE: u32 = 9;
+const MI_MATRIX: u32 = 14;
+
+const MX_CELL: u32 = 1;
+const MX_STRUCT: u32 = 2;
+const MX_CHAR: u32 = 4;
+const MX_DOUBLE: u32 = 6;
+
+/// The bytes of a MAT file holding `vars` in order; `text` heads the file
+/// (truncated to 116 bytes), as MATLAB's own "MATLAB 5.0 MAT-file, ...".
+pub fn mat_bytes(text: &str, vars: &[(String, MatValue)]) -> Result<Vec<u8>, MatWriteError> {
+    let mut out = Vec::with_capacity(4096);
+    let mut head: Vec<u8> = text.bytes().take(116).collect();
+    head.resize(116, b' ');
+    out.extend_from_slice(&head);
+    out.extend_from_slice(&[0; 8]);
+    out.extend_from_slice(&0x0100_u16.to_le_bytes());
+    out.extend_from_slice(b"IM");
+    for (name, value) in vars {
+        check_name(name)?;
+        out.extend(matrix(name, value)?);
+    }
+    Ok(out)
+}
+
+fn check_name(name: &str) -> Result<(), MatWriteError> {
+    let mut chars = name.chars();
+    let ok = chars.next().is_some_and(|c| c.is_ascii_alphabetic())
+        && chars.all(|c| c.is_ascii_alphanumeric() || c == '_')
+        && name.len() <= MAX_NAME;
+    match ok {
+        true => Ok(()),
+        false => Err(MatWriteError::BadName { name: name.into() }),
+    }
+}
+
+/// One tagged element: type, byte count, data, padding to 8 bytes.
+fn element(out: &mut Vec<u8>, ty: u32, data: &[u8]) {
+    out.extend_from_slice(&ty.to_le_bytes());
+    out.extend_from_slice(&(data.len() as u32).to_le_bytes());
+    out.extend_from_slice(data);
+    out.resize(out.len().next_multiple_of(8), 0);
+}
+
+/// A `miMATRIX` element named `name` ("" inside a struct or cell).
+fn matrix(name: &str, value: &MatValue) -> Result<Vec<u8>, MatWriteError> {
+    let mut body = Vec::new();
+    let (class, dims): (u32, [usize; 2]) = match value {
+        MatValue::Matrix { rows, cols, data } => {
+            if rows * cols != data.len() {
+                return Err(MatWriteError::Shape {
+                    name: name.into(),
+                    rows: *rows,
+                    cols: *cols,
+                    len: data.len(),
+                });
+            }
+            (MX_DOUBLE, [*rows, *cols])
+        }
+        MatValue::Text(s) => (MX_CHAR, [1, s.encode_utf16().count()]),
+        MatValue::Struct(_) => (MX_STRUCT, [1, 1]),
+        MatValue::Cell(items) => (MX_CELL, [1, items.len()]),
+    };
+    let mut flags = Vec::with_capacity(8);
+    flags.extend_from_slice(&class.to_le_bytes());
+    flags.extend_from_slice(&0_u32.to_le_bytes());
+    element(&mut body, MI_UINT32, &flags);
+    let too_large = || MatWriteError::TooLarge { name: name.into() };
+    let dim_bytes: Vec<u8> = dims
+        .iter()
+        .map(|&d| i32::try_from(d).map_err(|_| too_large()))
+        .collect::<Result<Vec<i32>, _>>()?
+        .iter()
+        .flat_map(|d| d.to_le_bytes())
+        .collect();
+    element(&mut body, MI_INT32, &dim_bytes);
+    element(&mut body, MI_INT8, name.as_bytes());
+    match value {
+        MatValue::Matrix { data, .. } => {
+            let bytes: Vec<u8> = data.iter().flat_map(|v| v.to_le_bytes()).collect();
+            element(&mut body, MI_DOUBLE, &bytes);
+        }
+        MatValue::Text(s) => {
+            let bytes: Vec<u8> = s.encode_utf16().flat_map(|u| u.to_le_bytes()).collect();
+            element(&mut body, MI_UINT16, &bytes);
+        }
+        MatValue::Struct(fields) => {
+            // Each name null-terminated in a slot of the longest name's
+            // length plus one.
+            let slot = fields.iter().map(|(n, _)| n.len()).max().unwrap_or(0) + 1;
+            element(&mut body, MI_INT32, &(slot as i32).to_le_bytes());
+            let mut names = Vec::with_capacity(slot * fields.len());
+            for (n, _) in fields {
+                check_name(n)?;
+                names.extend_from_slice(n.as_bytes());
+                names.resize(names.len().next_multiple_of(slot).max(names.len() + 1), 0);
+            }
+            element(&mut body, MI_INT8, &names);
+            for (_, v) in fields {
+                body.extend(matrix("", v)?);
+            }
+        }
+        MatValue::Cell(items) => {
+            for v in items {
+                body.extend(matrix("", v)?);
+            }
+        }
+    }
+    if u32::try_from(body.len()).is_err() || body.len() > i32::MAX as usize {
+        return Err(too_large());
+    }
+    let mut out = Vec::with_capacity(body.len() + 8);
+    element(&mut out, MI_MATRIX, &body);
+    Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Numbers written here read back through the `matfile` crate (an
+    /// independent level-5 reader, the one `ingest` uses): names, shapes and
+    /// every value to the bit, column-major.
+    #[test]
+    fn numeric_variables_read_back_through_the_matfile_crate() {
+        let a = MatValue::from_rows(&[[1.0, 2.0, 3.0], [4.0, 5.0, 6.0]]);
+        let num = MatValue::row(&[3060.0]);
+        let den = MatValue::row(&[1.0, 267.0, 3060.0]);
+        let tiny = MatValue::scalar(f64::MIN_POSITIVE);
+        let vars = vec![
+            ("A".to_string(), a),
+            ("num".to_string(), num),
+            ("den".to_string(), den),
+            ("tiny".to_string(), tiny),
+            ("label".to_string(), MatValue::Text("x1/u".into())),
+        ];
+        let bytes = mat_bytes("MATLAB 5.0 MAT-file, written by servoid tests", &vars).unwrap();
+        assert_eq!(bytes.len() % 8, 0);
+        let mat = matfile::MatFile::parse(bytes.as_slice()).unwrap();
+        let get = |name: &str| -> (Vec<usize>, Vec<f64>) {
+            let a = mat.find_by_name(name).unwrap_or_else(|| panic!("{name}"));
+            match a.data() {
+                matfile::NumericData::Double { real, imag: None } => {
+                    (a.size().to_vec(), real.clone())
+                }
+                other => panic!("{name}: {other:?}"),
+            }
+        };
+        assert_eq!(get("A"), (vec![2, 3], vec![1.0, 4.0, 2.0, 5.0, 3.0, 6.0]));
+        assert_eq!(get("num"), (vec![1, 1], vec![3060.0]));
+        assert_eq!(get("den"), (vec![1, 3], vec![1.0, 267.0, 3060.0]));
+        assert_eq!(get("tiny").1[0].to_bits(), f64::MIN_POSITIVE.to_bits());
+    }
+
+    #[test]
+    fn names_and_shapes_are_checked() {
+        let bad = |name: &str| mat_bytes("", &[(name.to_string(), MatValue::scalar(1.0))]);
+        for name in ["", "1a", "a-b", "a b", &"a".repeat(64)] {
+            assert!(
+                matches!(bad(name), Err(MatWriteError::BadName { .. })),
+                "{name:?}"
+            );
+        }
+        assert!(bad("a_1").is_ok());
+        let shape = MatValue::Matrix {
+            rows: 2,
+            cols: 2,
+            data: vec![1.0; 3],
+        };
+        assert_eq!(
+            mat_bytes("", &[("m".into(), shape)])
+                .unwrap_err()
+                .to_string(),
+            "matrix `m` is 2 x 2 but holds 3 values"
+        );
+        let field = MatValue::Struct(vec![
+            ("ok".into(), MatValue::scalar(1.0)),
+            ("no good".into(), MatValue::scalar(2.0)),
+        ]);
+        assert!(matches!(
+            mat_bytes("", &[("s".into(), field)]),
+            Err(MatWriteError::BadName { .. })
+        ));
+    }
+
+    /// The struct layout by hand, from the format's description: the field
+    /// name length (longest name + 1), the names in slots of that length,
+    /// then one unnamed matrix per field.
+    #[test]
+    fn a_struct_is_laid_out_as_the_format_says() {
+        let s = MatValue::Struct(vec![
+            ("k".into(), MatValue::scalar(2.5)),
+            ("name".into(), MatValue::Text("ab".into())),
+        ]);
+        let bytes = mat_bytes("", &[("s".into(), s)]).unwrap();
+        let u32_at = |i: usize| u32::from_le_bytes(bytes[i..i + 4].try_into().unwrap());
+        assert_eq!(&bytes[124..128], &[0x00, 0x01, b'I', b'M']);
+        assert_eq!(u32_at(128), 14, "miMATRIX");
+        assert_eq!(u32_at(128 + 4) as usize, bytes.len() - 136);
+        // flags: class 2 (struct)
+        assert_eq!((u32_at(136), u32_at(140), u32_at(144)), (6, 8, 2));
+        // dims 1 x 1
+        assert_eq!(
+            (u32_at(152), u32_at(156), u32_at(160), u32_at(164)),
+            (5, 8, 1, 1)
+        );
+        // name "s"
+        assert_eq!((u32_at(168), u32_at(172), bytes[176]), (1, 1, b's'));
+        // field name length 5 ("name" + 1)
+        assert_eq!((u32_at(184), u32_at(188), u32_at(192)), (5, 4, 5));
+        // names: "k\0\0\0\0name\0" in 10 bytes
+        assert_eq!((u32_at(200), u32_at(204)), (1, 10));
+        assert_eq!(&bytes[208..218], b"k\0\0\0\0name\0");
+        // then the first field's matrix, unnamed
+        assert_eq!(u32_at(224), 14);
+    }
+}
