@@ -484,6 +484,10 @@ pub struct FitSummary {
     pub param_names: Vec<String>,
     pub params: Vec<f64>,
     pub std: Vec<f64>,
+    /// Covariance of `params`, row by row ((J^T W J)^-1 scaled by the
+    /// reduced chi-square): `std` is the root of its diagonal.
+    #[serde(default)]
+    pub covariance: Option<Vec<Vec<f64>>>,
     /// Welch segments averaged, and the bin spacing (Hz).
     pub frf_averages: usize,
     pub frf_resolution_hz: f64,

@@ -218,12 +218,18 @@ fn sh_blocks_are_read_as_a_shell_reads_them() {
 /// The fenced `toml` blocks of `text`, each without the indentation of its
 /// fence (a block inside a list item is indented).
 fn toml_blocks(text: &str) -> Vec<String> {
+    fenced_blocks(text, "toml")
+}
+
+/// The fenced blocks of `text` in language `lang`, each without the
+/// indentation of its fence.
+pub(crate) fn fenced_blocks(text: &str, lang: &str) -> Vec<String> {
     let mut blocks = Vec::new();
     let mut current: Option<(usize, String)> = None;
     for line in text.lines() {
         let t = line.trim_start();
         match (&mut current, t.strip_prefix("```")) {
-            (None, Some(lang)) if lang.trim() == "toml" => {
+            (None, Some(l)) if l.trim() == lang => {
                 current = Some((line.len() - t.len(), String::new()));
             }
             (Some(_), Some(_)) => blocks.push(current.take().expect("a block").1),

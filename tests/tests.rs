@@ -20,6 +20,7 @@ mod joint;
 mod layering;
 mod manifest_errors;
 mod memory;
+mod models_mat;
 mod mts;
 mod output_set;
 mod paper;

@@ -13,8 +13,9 @@
 //! variable: array flags (class), dimensions, name, then the data: `miDOUBLE`
 //! values in column-major order; `miUINT16` UTF-16 code units for text; for
 //! a struct its field-name length, the names and one unnamed `miMATRIX` per
-//! field; for a cell array one unnamed `miMATRIX` per element. Every element
-//! is padded to 8 bytes.
+//! field (a struct array: the names once, then each element's fields in
+//! turn); for a cell array one unnamed `miMATRIX` per element. Every
+//! element is padded to 8 bytes.
 
 /// A value in a MAT file.
 #[derive(Debug, Clone, PartialEq)]
@@ -29,6 +30,12 @@ pub enum MatValue {
     Text(String),
     /// A 1 x 1 struct, its fields in order.
     Struct(Vec<(String, MatValue)>),
+    /// A 1 x n struct array: every element has the same fields, named once;
+    /// MATLAB's `s(i).field`.
+    StructArray {
+        fields: Vec<String>,
+        elements: Vec<Vec<MatValue>>,
+    },
     /// A 1 x n cell array.
     Cell(Vec<MatValue>),
 }
@@ -50,6 +57,34 @@ impl MatValue {
             cols: v.len(),
             data: v.to_vec(),
         }
+    }
+
+    /// The empty matrix `[]`, for what a run does not have.
+    pub fn empty() -> Self {
+        Self::Matrix {
+            rows: 0,
+            cols: 0,
+            data: Vec::new(),
+        }
+    }
+
+    /// A column vector (n x 1).
+    pub fn column(v: &[f64]) -> Self {
+        Self::Matrix {
+            rows: v.len(),
+            cols: 1,
+            data: v.to_vec(),
+        }
+    }
+
+    /// A 1 x n cell array of text.
+    pub fn texts<S: AsRef<str>>(items: &[S]) -> Self {
+        Self::Cell(
+            items
+                .iter()
+                .map(|s| Self::Text(s.as_ref().into()))
+                .collect(),
+        )
     }
 
     /// A matrix from its rows.
@@ -78,6 +113,13 @@ pub enum MatWriteError {
         rows: usize,
         cols: usize,
         len: usize,
+    },
+    #[error("element {element} of struct array `{name}` has {got} fields, not the {want} named")]
+    Fields {
+        name: String,
+        element: usize,
+        got: usize,
+        want: usize,
     },
     #[error("`{name}` holds more than a MAT level-5 element can (2^31 bytes)")]
     TooLarge { name: String },
@@ -151,6 +193,7 @@ fn matrix(name: &str, value: &MatValue) -> Result<Vec<u8>, MatWriteError> {
         }
         MatValue::Text(s) => (MX_CHAR, [1, s.encode_utf16().count()]),
         MatValue::Struct(_) => (MX_STRUCT, [1, 1]),
+        MatValue::StructArray { elements, .. } => (MX_STRUCT, [1, elements.len()]),
         MatValue::Cell(items) => (MX_CELL, [1, items.len()]),
     };
     let mut flags = Vec::with_capacity(8);
@@ -177,19 +220,29 @@ fn matrix(name: &str, value: &MatValue) -> Result<Vec<u8>, MatWriteError> {
             element(&mut body, MI_UINT16, &bytes);
         }
         MatValue::Struct(fields) => {
-            // Each name null-terminated in a slot of the longest name's
-            // length plus one.
-            let slot = fields.iter().map(|(n, _)| n.len()).max().unwrap_or(0) + 1;
-            element(&mut body, MI_INT32, &(slot as i32).to_le_bytes());
-            let mut names = Vec::with_capacity(slot * fields.len());
-            for (n, _) in fields {
-                check_name(n)?;
-                names.extend_from_slice(n.as_bytes());
-                names.resize(names.len().next_multiple_of(slot).max(names.len() + 1), 0);
-            }
-            element(&mut body, MI_INT8, &names);
+            let names: Vec<&str> = fields.iter().map(|(n, _)| n.as_str()).collect();
+            field_names(&mut body, &names)?;
             for (_, v) in fields {
                 body.extend(matrix("", v)?);
+            }
+        }
+        MatValue::StructArray { fields, elements } => {
+            let names: Vec<&str> = fields.iter().map(String::as_str).collect();
+            field_names(&mut body, &names)?;
+            // Element after element (column-major over the 1 x n array),
+            // each element's fields in the order named.
+            for (i, values) in elements.iter().enumerate() {
+                if values.len() != fields.len() {
+                    return Err(MatWriteError::Fields {
+                        name: name.into(),
+                        element: i + 1,
+                        got: values.len(),
+                        want: fields.len(),
+                    });
+                }
+                for v in values {
+                    body.extend(matrix("", v)?);
+                }
             }
         }
         MatValue::Cell(items) => {
@@ -204,6 +257,25 @@ fn matrix(name: &str, value: &MatValue) -> Result<Vec<u8>, MatWriteError> {
     let mut out = Vec::with_capacity(body.len() + 8);
     element(&mut out, MI_MATRIX, &body);
     Ok(out)
+}
+
+/// A struct's field names: the slot length (the longest name plus one),
+/// then each name null-terminated in its slot.
+fn field_names(body: &mut Vec<u8>, fields: &[&str]) -> Result<(), MatWriteError> {
+    let slot = fields.iter().map(|n| n.len()).max().unwrap_or(0) + 1;
+    // The slot length in the small data element format (type and byte
+    // count in one word, then the value), as MATLAB writes it: Octave's
+    // reader takes no other form here.
+    body.extend_from_slice(&((4_u32 << 16) | MI_INT32).to_le_bytes());
+    body.extend_from_slice(&(slot as i32).to_le_bytes());
+    let mut names = Vec::with_capacity(slot * fields.len());
+    for n in fields {
+        check_name(n)?;
+        names.extend_from_slice(n.as_bytes());
+        names.resize(names.len().next_multiple_of(slot).max(names.len() + 1), 0);
+    }
+    element(body, MI_INT8, &names);
+    Ok(())
 }
 
 #[cfg(test)]
@@ -298,12 +370,54 @@ mod tests {
         );
         // name "s"
         assert_eq!((u32_at(168), u32_at(172), bytes[176]), (1, 1, b's'));
-        // field name length 5 ("name" + 1)
-        assert_eq!((u32_at(184), u32_at(188), u32_at(192)), (5, 4, 5));
+        // field name length 5 ("name" + 1), a small element (4 bytes of
+        // miINT32 in the tag's word), as MATLAB writes it and Octave needs
+        assert_eq!((u32_at(184), u32_at(188)), ((4 << 16) | 5, 5));
         // names: "k\0\0\0\0name\0" in 10 bytes
-        assert_eq!((u32_at(200), u32_at(204)), (1, 10));
-        assert_eq!(&bytes[208..218], b"k\0\0\0\0name\0");
+        assert_eq!((u32_at(192), u32_at(196)), (1, 10));
+        assert_eq!(&bytes[200..210], b"k\0\0\0\0name\0");
         // then the first field's matrix, unnamed
-        assert_eq!(u32_at(224), 14);
+        assert_eq!(u32_at(216), 14);
+    }
+
+    /// A 1 x 2 struct array: dims 1 x 2, the names once, then element 1's
+    /// fields and element 2's, each an unnamed matrix; an element without
+    /// every field is refused, naming it.
+    #[test]
+    fn a_struct_array_names_its_fields_once_then_each_element() {
+        let runs = MatValue::StructArray {
+            fields: vec!["id".into(), "k".into()],
+            elements: vec![
+                vec![MatValue::Text("a".into()), MatValue::scalar(1.0)],
+                vec![MatValue::Text("b".into()), MatValue::empty()],
+            ],
+        };
+        let bytes = mat_bytes("", &[("runs".into(), runs)]).unwrap();
+        let u32_at = |i: usize| u32::from_le_bytes(bytes[i..i + 4].try_into().unwrap());
+        assert_eq!((u32_at(144), u32_at(160), u32_at(164)), (2, 1, 2));
+        // name "runs", then the slot length 3 as a small element
+        assert_eq!(&bytes[176..180], b"runs");
+        assert_eq!((u32_at(184), u32_at(188)), ((4 << 16) | 5, 3));
+        assert_eq!((u32_at(192), u32_at(196)), (1, 6));
+        assert_eq!(&bytes[200..206], b"id\0k\0\0");
+        // Four unnamed matrices follow, in element order: "a", 1, "b", [].
+        let mut at = 208;
+        let mut classes = Vec::new();
+        while at < bytes.len() {
+            assert_eq!(u32_at(at), 14);
+            classes.push((u32_at(at + 16), u32_at(at + 32), u32_at(at + 36)));
+            at += 8 + u32_at(at + 4) as usize;
+        }
+        assert_eq!(classes, [(4, 1, 1), (6, 1, 1), (4, 1, 1), (6, 0, 0)]);
+        let short = MatValue::StructArray {
+            fields: vec!["id".into(), "k".into()],
+            elements: vec![vec![MatValue::scalar(1.0)]],
+        };
+        assert_eq!(
+            mat_bytes("", &[("runs".into(), short)])
+                .unwrap_err()
+                .to_string(),
+            "element 1 of struct array `runs` has 1 fields, not the 2 named"
+        );
     }
 }

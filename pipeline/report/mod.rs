@@ -15,6 +15,8 @@ pub mod columns;
 
 pub mod matlab;
 
+pub mod models;
+
 pub mod tables;
 
 pub mod history;
@@ -36,6 +38,8 @@ pub enum WriteError {
     Html(#[from] html::HtmlError),
     #[error(transparent)]
     Table(Box<columns::ColumnWriteError>),
+    #[error("models.mat: {0}")]
+    Models(#[from] matlab::MatWriteError),
     #[error("{}: {source}", path.display())]
     Io {
         path: PathBuf,
@@ -81,7 +85,7 @@ impl WriteError {
                 source: Box::new(source.map_paths(f)),
             },
             Self::Table(e) => Self::Table(Box::new(e.map_paths(f))),
-            e @ Self::Html(_) => e,
+            e @ (Self::Html(_) | Self::Models(_)) => e,
         }
     }
 }

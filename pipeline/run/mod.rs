@@ -577,6 +577,10 @@ fn write_set(
     report::settle(out_dir)?;
     report::write_atomic(&results_path, &json)?;
     report::output_folder::fault("results");
+    report::write_atomic(
+        &out_dir.join("models.mat"),
+        &report::models::models_mat(results).map_err(WriteError::from)?,
+    )?;
     if let Some(h) = history {
         h.write(&json)?;
     }
@@ -595,7 +599,7 @@ fn write_set(
     );
     report::prune(out_dir, &kept)?;
     let mut recorded = kept;
-    recorded.extend(["results.json", "report.html"].map(String::from));
+    recorded.extend(["results.json", "models.mat", "report.html"].map(String::from));
     if let Some(h) = relative_to(&history::path(campaign, out_dir), out_dir)
         .filter(|h| !h.starts_with("..") && out_dir.join(h).is_file())
     {

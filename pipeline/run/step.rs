@@ -659,6 +659,12 @@ fn fit_summary(
         param_names: fit.param_names.clone(),
         params: fit.params.clone(),
         std: fit.std.clone(),
+        covariance: Some(
+            fit.covariance
+                .row_iter()
+                .map(|r| r.iter().copied().collect())
+                .collect(),
+        ),
         frf_averages: st.frf.n_averages,
         frf_resolution_hz: st.frf.resolution_hz,
         adequacy: fit_adequacy(ident, st, fit),
