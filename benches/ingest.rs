@@ -1,6 +1,8 @@
 //! Log reading throughput (`cargo bench --bench ingest`): a 170 s log at
 //! 2048 Hz (348,160 rows of time_s, command_mm, displacement_mm, force_kn)
-//! from Parquet and from CSV, and the real 1 kHz DAQ text export 0A.txt.
+//! from Parquet, CSV, MATLAB level 5 and v7.3, HDF5 (chunked, deflated)
+//! and TDMS, as the simulator writes them, and the real 1 kHz DAQ text
+//! export 0A.txt.
 //! Throughput is file bytes per second; each read includes hashing the file
 //! (SHA-256) and converting to SI, as `read_log` always does.
 
@@ -10,7 +12,9 @@ use std::path::{Path, PathBuf};
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use servoid::ingest::read_log;
 use servoid::ingest::{ChannelPlan, Channels, Column, CsvOptions, LogFormat, LogPlan, TimePlan};
-use servoid::report::columns::{write_csv, write_parquet};
+use servoid::report::columns::{
+    UnitColumn, hdf5_bytes, mat_bytes, mat_v73_bytes, tdms_bytes, write_csv, write_parquet,
+};
 use servoid::units::Unit;
 
 const FS_HZ: f64 = 2048.0;
@@ -92,6 +96,34 @@ fn bench(c: &mut Criterion) {
     let spaced = dir.path().join("chirp-spaced.csv");
     let text = std::fs::read_to_string(&csv).unwrap().replace(',', " ,");
     std::fs::write(&spaced, text).unwrap();
+    let units = ["s", "mm", "mm", "kN"];
+    let with_units: Vec<UnitColumn<'_>> = cols
+        .iter()
+        .zip(units)
+        .map(|((n, v), unit)| UnitColumn {
+            name: n,
+            unit,
+            values: v,
+        })
+        .collect();
+    let array_file = |file: &str, bytes: Vec<u8>| {
+        let p = dir.path().join(file);
+        std::fs::write(&p, bytes).unwrap();
+        p
+    };
+    let mat5 = array_file(
+        "chirp5.mat",
+        mat_bytes(Path::new("x"), &with_units).unwrap(),
+    );
+    let mat73 = array_file(
+        "chirp73.mat",
+        mat_v73_bytes(Path::new("x"), &with_units).unwrap(),
+    );
+    let h5 = array_file("chirp.h5", hdf5_bytes(Path::new("x"), &with_units).unwrap());
+    let tdms = array_file(
+        "chirp.tdms",
+        tdms_bytes(Path::new("x"), &with_units, "g", 1.0 / FS_HZ).unwrap(),
+    );
 
     let name = |n: &str| Column::Name(n.into());
     let table_channels = || {
@@ -101,6 +133,11 @@ fn bench(c: &mut Criterion) {
             channel(name("force_kn"), Unit::Kilonewton, 1.0),
         ]
     };
+    let tdms_channels = [
+        channel(name("g/command_mm"), Unit::Millimeter, 1.0),
+        channel(name("g/displacement_mm"), Unit::Millimeter, 1.0),
+        channel(name("g/force_kn"), Unit::Kilonewton, 1.0),
+    ];
     let time = TimePlan::Column {
         column: name("time_s"),
         to_s: 1.0,
@@ -117,7 +154,23 @@ fn bench(c: &mut Criterion) {
         ),
         (
             format!("csv_line_parser/{ROWS}x4"),
-            plan(&spaced, LogFormat::Csv, time, table_channels()),
+            plan(&spaced, LogFormat::Csv, time.clone(), table_channels()),
+        ),
+        (
+            format!("mat_level5/{ROWS}x4"),
+            plan(&mat5, LogFormat::Mat, time.clone(), table_channels()),
+        ),
+        (
+            format!("mat_v73/{ROWS}x4"),
+            plan(&mat73, LogFormat::Mat, time.clone(), table_channels()),
+        ),
+        (
+            format!("hdf5_deflate/{ROWS}x4"),
+            plan(&h5, LogFormat::Hdf5, time, table_channels()),
+        ),
+        (
+            format!("tdms/{ROWS}x4"),
+            plan(&tdms, LogFormat::Tdms, TimePlan::FromLog, tdms_channels),
         ),
         (
             "daq_text/0A.txt".to_string(),

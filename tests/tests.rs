@@ -18,6 +18,7 @@ mod figure_formats;
 mod fuzz_replay;
 mod joint;
 mod layering;
+mod log_formats;
 mod manifest_errors;
 mod memory;
 mod models_mat;

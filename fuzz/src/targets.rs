@@ -25,6 +25,9 @@ pub const TARGETS: &[(&str, Target)] = &[
     ("log_daq", log_daq),
     ("log_parquet", log_parquet),
     ("log_mat", log_mat),
+    ("log_mat_v73", log_mat_v73),
+    ("log_hdf5", log_hdf5),
+    ("log_tdms", log_tdms),
     ("run_table_csv", run_table_csv),
     ("run_table_parquet", run_table_parquet),
     ("manifest_numbers", manifest_numbers),
@@ -161,6 +164,46 @@ pub fn log_mat(data: &[u8]) -> bool {
         LogFormat::Mat,
         TimePlan::FromLog,
         [by_name("u"), by_name("data:1"), Column::Index(2)],
+    )
+}
+
+/// A MAT v7.3 file (HDF5 behind MATLAB's header): the rate from its `t`,
+/// channels by name (one in a struct) and one by index of a table.
+pub fn log_mat_v73(data: &[u8]) -> bool {
+    log(
+        data,
+        "fuzz.mat",
+        LogFormat::Mat,
+        TimePlan::FromLog,
+        [by_name("u"), by_name("log.x"), Column::Index(2)],
+    )
+}
+
+/// A plain HDF5 file: time, command and displacement datasets by path,
+/// force a channel of a 2-D dataset.
+pub fn log_hdf5(data: &[u8]) -> bool {
+    let time = TimePlan::Column {
+        column: by_name("t"),
+        to_s: 1.0,
+    };
+    log(
+        data,
+        "fuzz.h5",
+        LogFormat::Hdf5,
+        time,
+        [by_name("u"), by_name("run/x"), by_name("table:1")],
+    )
+}
+
+/// A TDMS file: the rate from a channel's `wf_increment`, channels by
+/// group and name.
+pub fn log_tdms(data: &[u8]) -> bool {
+    log(
+        data,
+        "fuzz.tdms",
+        LogFormat::Tdms,
+        TimePlan::FromLog,
+        [by_name("g/u"), by_name("g/x"), by_name("g/f")],
     )
 }
 

@@ -16,15 +16,18 @@
 //! [`read_table`] reads a side table (a campaign's run table, CSV or
 //! Parquet) as text cells for the manifest to check.
 
+mod arrays;
 mod csv;
 mod daq;
 mod fields;
+mod hdf5;
 mod mat;
 mod parquet;
 mod parquet_footer;
 mod plan;
 mod quantisation;
 mod table;
+mod tdms;
 #[cfg(test)]
 mod tests;
 
@@ -369,9 +372,24 @@ pub enum FormatProblem {
     )]
     NoHeaderRate,
 
-    // MAT.
-    #[error("a MAT v7.3 file (HDF5) is not supported; save it with `save(..., '-v7')`")]
-    MatV73,
+    // MAT, HDF5, TDMS.
+    /// hdf5-pure cannot read the file (damaged, cut short, or a layout it
+    /// does not know).
+    #[error("not a readable {what} file ({why})")]
+    Hdf5Unreadable { what: &'static str, why: String },
+    /// tedium cannot read the file.
+    #[error("not a readable TDMS file ({why})")]
+    TdmsUnreadable { why: String },
+    /// The file states a channel's unit, and it is not the manifest's.
+    #[error(
+        "variable `{variable}` ({channel} channel) is in {stated:?} by the file's own word, but the manifest says `{manifest}`; correct the manifest's unit (a wrong one scales every parameter)"
+    )]
+    UnitDisagrees {
+        variable: String,
+        channel: &'static str,
+        stated: String,
+        manifest: &'static str,
+    },
     #[error("not a level-5 MAT-file (no 128-byte header ending in the `IM`/`MI` endian mark)")]
     NotMat,
     /// A data element runs past the end of the file.
@@ -693,6 +711,8 @@ pub fn read_log_from(plan: &LogPlan, file: LogFile) -> Result<Log, IngestError> 
         LogFormat::Parquet => off_pool(|| parquet::read(path, &bytes, plan))?,
         LogFormat::Mat => mat::read(path, &bytes, plan)?,
         LogFormat::DaqText => daq::read(path, &bytes, plan)?,
+        LogFormat::Hdf5 => hdf5::read(path, &bytes, plan, false)?,
+        LogFormat::Tdms => tdms::read(path, &bytes, plan)?,
     };
     assemble(plan, sha256, raw)
 }
@@ -869,6 +889,8 @@ fn format_name(f: LogFormat) -> &'static str {
         LogFormat::Parquet => "Parquet",
         LogFormat::Mat => "MAT",
         LogFormat::DaqText => "DAQ text",
+        LogFormat::Hdf5 => "HDF5",
+        LogFormat::Tdms => "TDMS",
     }
 }
 

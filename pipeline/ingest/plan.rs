@@ -90,16 +90,22 @@ pub enum LogFormat {
     Csv,
     /// Apache Parquet (`.parquet`).
     Parquet,
-    /// MATLAB level-5 MAT-file (`.mat`), as real-time targets save logs.
+    /// MATLAB MAT-file (`.mat`), as real-time targets save logs: level 5
+    /// (v5, v7) or v7.3 (HDF5).
     Mat,
     /// DAQ text export: a header block with the sampling rate, then
     /// `Sample Number, Date/Time, CHANNEL0, ..., Events` (`.txt`).
     DaqText,
+    /// HDF5 (`.h5`, `.hdf5`): each channel a dataset.
+    Hdf5,
+    /// NI TDMS (`.tdms`): each channel `Group/Channel`.
+    Tdms,
 }
 
 impl LogFormat {
     /// The format a log's extension names (`.csv`, `.tsv`, `.parquet`,
-    /// `.pq`, `.mat`, `.txt`, in any case), if it names one.
+    /// `.pq`, `.mat`, `.txt`, `.h5`, `.hdf5`, `.tdms`, in any case), if it
+    /// names one.
     pub fn from_path(path: &Path) -> Option<Self> {
         let ext = path.extension()?.to_str()?.to_ascii_lowercase();
         match ext.as_str() {
@@ -107,6 +113,8 @@ impl LogFormat {
             "parquet" | "pq" => Some(LogFormat::Parquet),
             "mat" => Some(LogFormat::Mat),
             "txt" => Some(LogFormat::DaqText),
+            "h5" | "hdf5" => Some(LogFormat::Hdf5),
+            "tdms" => Some(LogFormat::Tdms),
             _ => None,
         }
     }

@@ -835,7 +835,15 @@ fn mat_errors_name_the_file() {
     let mut v73 = b"MATLAB 7.3 MAT-file, Platform: GLNXA64".to_vec();
     v73.resize(512, 0);
     let path = write_file(dir.path(), "v73.mat", &v73);
-    assert_contains(&err(&mat_plan(&path)), &["v73.mat", "v7.3", "-v7"]);
+    // A v7.3 header with no HDF5 behind it: cut after MATLAB's user block.
+    assert_contains(
+        &err(&mat_plan(&path)),
+        &[
+            "v73.mat",
+            "not a readable MAT v7.3 (HDF5) file",
+            "signature",
+        ],
+    );
 
     let mut cut = mat_file(false, 50);
     cut.truncate(cut.len() - 100);
@@ -1348,7 +1356,7 @@ fn mat_format_errors_word_for_word() {
     let path = write_file(dir.path(), "v73.mat", &v73);
     assert_refused(
         &mat_plan(&path),
-        "a MAT v7.3 file (HDF5) is not supported; save it with `save(..., '-v7')`",
+        "not a readable MAT v7.3 (HDF5) file (HDF5 format error: HDF5 signature not found at any valid offset)",
     );
     let path = write_file(dir.path(), "text.mat", &[b'x'; 200]);
     assert_refused(
@@ -1705,4 +1713,162 @@ fn parquet_pages_that_declare_impossible_counts_are_refused() {
         pages(&chunk(3, 8), 4).map_err(|e| e.to_string()),
         Err("its chunk ends after pages of 3 of its 4 values".into())
     );
+}
+
+// ------------------------------------------------- HDF5, MAT v7.3, TDMS
+
+/// The fuzz seeds of the array formats, written by other tools (h5py,
+/// hdf5storage in MATLAB's v7.3 layout, npTDMS) by
+/// `fuzz/seeds/make_array_seeds.py`.
+fn seed(target: &str, file: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("fuzz/corpus")
+        .join(target)
+        .join(file)
+}
+
+/// What the seed script wrote: 256 samples at 1 kHz of u, x (mm) and f (N),
+/// in SI.
+fn seed_signals() -> [Vec<f64>; 3] {
+    let w = 2.0 * std::f64::consts::PI * 37.0;
+    let t = |k: usize| k as f64 / 1000.0;
+    [
+        (0..256).map(|k| 2e-3 * (w * t(k)).sin()).collect(),
+        (0..256).map(|k| 1.8e-3 * (w * t(k) - 0.3).sin()).collect(),
+        (0..256).map(|k| 150.0 * (w * t(k) - 0.1).sin()).collect(),
+    ]
+}
+
+fn assert_signals(log: &Log, what: &str) {
+    let [u, x, f] = seed_signals();
+    for (got, want, name) in [
+        (&log.command_m, &u, "u"),
+        (&log.displacement_m, &x, "x"),
+        (log.force_n.as_ref().expect("force"), &f, "f"),
+    ] {
+        assert_eq!(got.len(), 256, "{what} {name}");
+        for (g, w) in got.iter().zip(want) {
+            // numpy's sine and Rust's may differ in the last bit.
+            assert!(
+                (g - w).abs() <= 1e-12 * w.abs().max(1e-3),
+                "{what} {name}: {g} vs {w}"
+            );
+        }
+    }
+    assert_relative_eq!(log.sample_rate_hz, 1000.0, max_relative = 1e-12);
+}
+
+fn seed_plan(path: &Path, format: LogFormat, time: TimePlan, cols: [Column; 3]) -> LogPlan {
+    let [u, x, f] = cols;
+    plan(
+        path,
+        format,
+        time,
+        ch(u, Unit::Millimeter, 1.0),
+        ch(x, Unit::Millimeter, 1.0),
+        Some(ch(f, Unit::Newton, 1.0)),
+    )
+}
+
+fn v73_plan(path: &Path) -> LogPlan {
+    seed_plan(
+        path,
+        LogFormat::Mat,
+        TimePlan::FromLog,
+        [name("u"), name("log.x"), Column::Index(2)],
+    )
+}
+
+fn hdf5_plan(path: &Path) -> LogPlan {
+    let time = TimePlan::Column {
+        column: name("t"),
+        to_s: 1.0,
+    };
+    seed_plan(
+        path,
+        LogFormat::Hdf5,
+        time,
+        [name("u"), name("run/x"), name("table:2")],
+    )
+}
+
+fn tdms_plan(path: &Path) -> LogPlan {
+    seed_plan(
+        path,
+        LogFormat::Tdms,
+        TimePlan::FromLog,
+        [name("g/u"), name("g/x"), name("g/f")],
+    )
+}
+
+/// Files other tools wrote read back to the values written: MATLAB's v7.3
+/// layout (a struct's field `log.x`, a 256 x 3 matrix stored transposed,
+/// the time base from `t`), h5py's (a dataset in a group, deflated; a
+/// row-major 256 x 3 table), and NI's TDMS (the rate from `wf_increment`).
+#[test]
+fn hdf5_v73_and_tdms_files_of_other_tools_read_back() {
+    let log = read_log(&v73_plan(&seed("log_mat_v73", "vectors.mat"))).unwrap();
+    assert_signals(&log, "v7.3");
+    let log = read_log(&hdf5_plan(&seed("log_hdf5", "datasets.h5"))).unwrap();
+    assert_signals(&log, "HDF5");
+    assert!(matches!(log.timing, Timing::Measured { .. }));
+    let log = read_log(&tdms_plan(&seed("log_tdms", "waveforms.tdms"))).unwrap();
+    assert_signals(&log, "TDMS");
+    assert!(matches!(log.timing, Timing::Exact { .. }));
+}
+
+/// Damaged and cut files, channels that are not there and a unit the file
+/// contradicts: each refused with a message naming the file and what to
+/// do; an unknown unit is a warning.
+#[test]
+fn hdf5_v73_and_tdms_errors_name_the_file_and_the_channel() {
+    let dir = tempfile::tempdir().unwrap();
+    for (target, file, make) in [
+        (
+            "log_mat_v73",
+            "vectors.mat",
+            v73_plan as fn(&Path) -> LogPlan,
+        ),
+        ("log_hdf5", "datasets.h5", hdf5_plan),
+        ("log_tdms", "waveforms.tdms", tdms_plan),
+    ] {
+        let bytes = std::fs::read(seed(target, file)).unwrap();
+        let cut = write_file(
+            dir.path(),
+            &format!("cut-{file}"),
+            &bytes[..bytes.len() / 2],
+        );
+        let msg = err(&make(&cut));
+        assert!(msg.starts_with(&cut.display().to_string()), "{msg}");
+        let mut damaged = bytes.clone();
+        let mid = damaged.len() / 3;
+        damaged[mid..mid + 64].fill(0xA5);
+        let path = write_file(dir.path(), &format!("damaged-{file}"), &damaged);
+        // Either refused or read: never a panic; refused, it names the file.
+        if let Err(e) = read_log(&make(&path)) {
+            assert!(
+                e.to_string().starts_with(&path.display().to_string()),
+                "{e}"
+            );
+        }
+        let path = seed(target, file);
+        let mut p = make(&path);
+        p.channels.displacement.column = name("nope");
+        assert_contains(&err(&p), &[file, "`nope`", "displacement", "variables: "]);
+    }
+    let path = seed("log_hdf5", "datasets.h5");
+    let mut p = hdf5_plan(&path);
+    p.channels.command = ch(name("u"), Unit::Meter, 1.0);
+    assert_refused(
+        &p,
+        "variable `u` (command channel) is in \"mm\" by the file's own word, but the manifest says `m`; correct the manifest's unit (a wrong one scales every parameter)",
+    );
+    let path = seed("log_tdms", "waveforms.tdms");
+    let mut p = tdms_plan(&path);
+    p.channels.force = Some(ch(name("g/f"), Unit::Kilonewton, 1.0));
+    assert_contains(&err(&p), &["`g/f`", "\"N\"", "`kN`"]);
+    let mut p = tdms_plan(&path);
+    p.channels.time = TimePlan::SampleRate { hz: 1000.0 };
+    p.channels.command.column = name("u");
+    assert_contains(&err(&p), &["`u`", "`g/u` (256x1)", "`g/x` (256x1)"]);
 }

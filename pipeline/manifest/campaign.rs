@@ -929,7 +929,13 @@ fn plan_channels(
             (None, Some(hz)) => TimePlan::SampleRate { hz },
             (None, None) => TimePlan::FromLog,
         },
-        None if matches!(format, Some(LogFormat::DaqText | LogFormat::Mat)) => TimePlan::FromLog,
+        None if matches!(
+            format,
+            Some(LogFormat::DaqText | LogFormat::Mat | LogFormat::Hdf5 | LogFormat::Tdms)
+        ) =>
+        {
+            TimePlan::FromLog
+        }
         None => {
             bad(
                 ch_path.key("time"),

@@ -83,6 +83,15 @@ pub enum OutputFormat {
     #[default]
     Csv,
     Parquet,
+    /// MATLAB level-5 MAT-file: each column an N x 1 double.
+    Mat,
+    /// MATLAB v7.3 MAT-file (HDF5): each column an N x 1 double.
+    MatV73,
+    /// HDF5: each column a dataset at the root, with its `units`.
+    Hdf5,
+    /// NI TDMS: each column a channel of group `servoid`, with its
+    /// `unit_string` and `wf_increment`.
+    Tdms,
 }
 
 /// Integrator for nonlinear plants.

@@ -1,8 +1,10 @@
 //! Named columns as CSV or Parquet: the simulator's synthetic lab logs (for
 //! `ingest` to read back), and through `frame_bytes` the runs' tables and the
-//! rig's history. Both writers give the same
-//! bytes for the same columns, and write atomically (temporary sibling, then
-//! rename).
+//! rig's history. Every writer gives the same bytes for the same columns,
+//! and writes atomically (temporary sibling, then rename). The simulator's
+//! logs may also be MATLAB MAT-files (level 5 and v7.3), HDF5 or TDMS, as
+//! labs' acquisition systems write them, so each reader is tried on a
+//! campaign whose truth is known.
 
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -28,6 +30,12 @@ pub enum ColumnWriteError {
     },
     #[error("{}: column name {name:?} must be non-empty, unique and free of commas, quotes and line breaks", path.display())]
     BadName { path: PathBuf, name: String },
+    #[error("{}: {format} encoding failed: {why}", path.display())]
+    Encode {
+        path: PathBuf,
+        format: &'static str,
+        why: String,
+    },
     #[error("{}: Parquet encoding failed: {source}", path.display())]
     Parquet {
         path: PathBuf,
@@ -62,6 +70,11 @@ impl ColumnWriteError {
             Self::Parquet { path, source } => Self::Parquet {
                 path: f(&path),
                 source,
+            },
+            Self::Encode { path, format, why } => Self::Encode {
+                path: f(&path),
+                format,
+                why,
             },
         }
     }
@@ -127,6 +140,121 @@ pub fn parquet_bytes(path: &Path, columns: &[(&str, &[f64])]) -> Result<Vec<u8>,
         .map(|(name, values)| Column::new((*name).into(), *values))
         .collect();
     frame_bytes(path, n, cols)
+}
+
+/// A column with the unit of its values, as the formats that hold units
+/// (HDF5, TDMS) state it.
+pub struct UnitColumn<'a> {
+    pub name: &'a str,
+    pub unit: &'a str,
+    pub values: &'a [f64],
+}
+
+fn names_and_values<'a>(columns: &[UnitColumn<'a>]) -> Vec<(&'a str, &'a [f64])> {
+    columns.iter().map(|c| (c.name, c.values)).collect()
+}
+
+fn encode_error<'p>(
+    path: &'p Path,
+    format: &'static str,
+) -> impl Fn(String) -> ColumnWriteError + 'p {
+    move |why| ColumnWriteError::Encode {
+        path: path.to_path_buf(),
+        format,
+        why,
+    }
+}
+
+/// The columns as a MATLAB level-5 MAT-file, each an N x 1 double variable
+/// named as the column.
+pub fn mat_bytes(path: &Path, columns: &[UnitColumn<'_>]) -> Result<Vec<u8>, ColumnWriteError> {
+    check(path, &names_and_values(columns))?;
+    let vars: Vec<(String, super::matlab::MatValue)> = columns
+        .iter()
+        .map(|c| {
+            (
+                c.name.to_string(),
+                super::matlab::MatValue::column(c.values),
+            )
+        })
+        .collect();
+    super::matlab::mat_bytes(
+        "MATLAB 5.0 MAT-file, Platform: servoid, a synthetic log",
+        &vars,
+    )
+    .map_err(|e| encode_error(path, "MAT")(e.to_string()))
+}
+
+/// The columns as a MATLAB v7.3 MAT-file (HDF5 behind MATLAB's 512-byte
+/// header), each an N x 1 double variable, written by hdf5-pure's MATLAB
+/// writer.
+pub fn mat_v73_bytes(path: &Path, columns: &[UnitColumn<'_>]) -> Result<Vec<u8>, ColumnWriteError> {
+    check(path, &names_and_values(columns))?;
+    let bad = encode_error(path, "MAT v7.3");
+    let mut mat = hdf5_pure::mat::MatBuilder::new(hdf5_pure::mat::Options::default());
+    for c in columns {
+        mat.write_f64(c.name, &[c.values.len(), 1], c.values)
+            .map_err(|e| bad(e.to_string()))?;
+    }
+    mat.finish().map_err(|e| bad(e.to_string()))
+}
+
+/// The columns as HDF5, each a 1-D f64 dataset at the root, chunked and
+/// deflated as loggers write them, with a `units` attribute.
+pub fn hdf5_bytes(path: &Path, columns: &[UnitColumn<'_>]) -> Result<Vec<u8>, ColumnWriteError> {
+    let n = check(path, &names_and_values(columns))?;
+    let mut file = hdf5_pure::FileBuilder::new();
+    let chunk = (n as u64).clamp(1, 65_536);
+    for c in columns {
+        file.create_dataset(c.name)
+            .with_f64_data(c.values)
+            .with_shape(&[n as u64])
+            .with_chunks(&[chunk])
+            .with_shuffle()
+            .with_deflate(4)
+            .set_attr("units", hdf5_pure::AttrValue::String(c.unit.to_string()));
+    }
+    file.finish()
+        .map_err(|e| encode_error(path, "HDF5")(e.to_string()))
+}
+
+/// The columns as TDMS: group `group`, each a channel with its
+/// `unit_string` and, as a waveform, its sample interval `wf_increment`.
+pub fn tdms_bytes(
+    path: &Path,
+    columns: &[UnitColumn<'_>],
+    group: &str,
+    dt_s: f64,
+) -> Result<Vec<u8>, ColumnWriteError> {
+    use tedium::{ChannelPath, DataLayout, PropertyPath, PropertyValue, TdmsFile};
+    check(path, &names_and_values(columns))?;
+    let bad = encode_error(path, "TDMS");
+    let mut bytes = Vec::new();
+    {
+        let mut file =
+            TdmsFile::new(std::io::Cursor::new(&mut bytes)).map_err(|e| bad(e.to_string()))?;
+        let mut w = file.writer().map_err(|e| bad(e.to_string()))?;
+        for c in columns {
+            w.write_properties(
+                &PropertyPath::channel(group, c.name),
+                &[
+                    ("unit_string", PropertyValue::String(c.unit.to_string())),
+                    ("wf_increment", PropertyValue::DoubleFloat(dt_s)),
+                    ("wf_start_offset", PropertyValue::DoubleFloat(0.0)),
+                ],
+            )
+            .map_err(|e| bad(e.to_string()))?;
+        }
+        for c in columns {
+            w.write_channels(
+                &[ChannelPath::new(group, c.name)],
+                c.values,
+                DataLayout::Contigious,
+            )
+            .map_err(|e| bad(e.to_string()))?;
+        }
+    }
+    Ok(bytes)
 }
 
 /// `rows` rows of `cols` as Parquet bytes (Snappy pages, no time or host

@@ -79,6 +79,8 @@ pub struct Simulated {
 /// The simulated signals of one run, in the channels' units.
 struct RunSignals {
     columns: Vec<(String, Vec<f64>)>,
+    /// Each column's unit, as formats that state units write it.
+    units: Vec<&'static str>,
     truth: TruthRun,
 }
 
@@ -152,8 +154,15 @@ fn simulate_run(plan: &SimulationPlan, run: &SimRunPlan) -> Result<RunSignals, S
         .transpose()
         .map_err(|source| SimulateError::Model { run: id(), source })?;
     let plant_tf = plant::linear_state_space(&spec).map(|ss| ss.transfer_function(model::OUT_X1));
+    let units = vec![
+        "s",
+        ins.command.unit.symbol(),
+        ins.displacement.unit.symbol(),
+        ins.force.unit.symbol(),
+    ];
     Ok(RunSignals {
         columns,
+        units,
         truth: TruthRun {
             id: run.id.clone(),
             role: run.role,
@@ -179,6 +188,49 @@ fn seed_for(seed: u64, purpose: &str) -> u64 {
     u64::from_le_bytes(d[..8].try_into().expect("8 bytes"))
 }
 
+/// The TDMS group the simulator's channels sit in.
+const TDMS_GROUP: &str = "servoid";
+
+/// How the analysis manifest names a logged column: in TDMS by its group.
+fn column_in_log(format: OutputFormat, name: &str) -> String {
+    match format {
+        OutputFormat::Tdms => format!("{TDMS_GROUP}/{name}"),
+        _ => name.to_string(),
+    }
+}
+
+/// A simulated run's log in `format` (`path` only names it in errors).
+fn log_bytes(
+    format: OutputFormat,
+    path: &Path,
+    s: &RunSignals,
+    dt_s: f64,
+) -> Result<Vec<u8>, columns::ColumnWriteError> {
+    let cols: Vec<(&str, &[f64])> = s
+        .columns
+        .iter()
+        .map(|(n, v)| (n.as_str(), v.as_slice()))
+        .collect();
+    let with_units: Vec<columns::UnitColumn<'_>> = s
+        .columns
+        .iter()
+        .zip(&s.units)
+        .map(|((n, v), u)| columns::UnitColumn {
+            name: n,
+            unit: u,
+            values: v,
+        })
+        .collect();
+    match format {
+        OutputFormat::Csv => columns::csv_bytes(path, &cols),
+        OutputFormat::Parquet => columns::parquet_bytes(path, &cols),
+        OutputFormat::Mat => columns::mat_bytes(path, &with_units),
+        OutputFormat::MatV73 => columns::mat_v73_bytes(path, &with_units),
+        OutputFormat::Hdf5 => columns::hdf5_bytes(path, &with_units),
+        OutputFormat::Tdms => columns::tdms_bytes(path, &with_units, TDMS_GROUP, dt_s),
+    }
+}
+
 /// Simulate every run and write the campaign into `out_dir`.
 pub fn simulate_campaign(
     plan: &SimulationPlan,
@@ -188,6 +240,9 @@ pub fn simulate_campaign(
     let ext = match m.simulation.log_format {
         OutputFormat::Csv => "csv",
         OutputFormat::Parquet => "parquet",
+        OutputFormat::Mat | OutputFormat::MatV73 => "mat",
+        OutputFormat::Hdf5 => "h5",
+        OutputFormat::Tdms => "tdms",
     };
     // A log's path relative to the output folder, as truth.json names it.
     let log_rel = |s: &RunSignals| format!("logs/{}.{ext}", s.truth.id);
@@ -199,16 +254,13 @@ pub fn simulate_campaign(
         .par_iter()
         .map(|run| {
             let s = simulate_run(plan, run)?;
-            let cols: Vec<(&str, &[f64])> = s
-                .columns
-                .iter()
-                .map(|(n, v)| (n.as_str(), v.as_slice()))
-                .collect();
             let path = out_dir.join(log_rel(&s));
-            let bytes = match m.simulation.log_format {
-                OutputFormat::Csv => columns::csv_bytes(&path, &cols),
-                OutputFormat::Parquet => columns::parquet_bytes(&path, &cols),
-            }?;
+            let bytes = log_bytes(
+                m.simulation.log_format,
+                &path,
+                &s,
+                1.0 / m.simulation.sample_rate_hz,
+            )?;
             Ok((s, bytes))
         })
         .collect::<Result<_, SimulateError>>()?;
@@ -337,7 +389,10 @@ fn analysis_manifest(plan: &SimulationPlan, truth: &Truth) -> Manifest {
     let m = &plan.manifest;
     let ins = &m.instrument;
     let channel = |name: &str, sensor: &Sensor| Channel {
-        column: Column::Name(column_name(name, sensor)),
+        column: Column::Name(column_in_log(
+            m.simulation.log_format,
+            &column_name(name, sensor),
+        )),
         unit: sensor.unit,
         scale: 1.0,
         offset: 0.0,
@@ -370,7 +425,10 @@ fn analysis_manifest(plan: &SimulationPlan, truth: &Truth) -> Manifest {
         },
         channels: Channels {
             time: Some(TimeChannel {
-                column: Some(Column::Name("time_s".into())),
+                column: Some(Column::Name(column_in_log(
+                    m.simulation.log_format,
+                    "time_s",
+                ))),
                 unit: Some(TimeUnit::Second),
                 sample_rate_hz: None,
             }),
