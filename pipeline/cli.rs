@@ -126,6 +126,17 @@ pub enum Command {
         #[arg(long, short, value_parser = clap::value_parser!(u64).range(1..))]
         jobs: Option<u64>,
     },
+    /// Propose a campaign manifest from a lab's logs: channels from the
+    /// columns' names and units, roles from the files' names, and every
+    /// value only the lab knows as a placeholder `servoid check` names.
+    Init {
+        /// Logs: files, folders of logs, or globs.
+        #[arg(required = true)]
+        logs: Vec<PathBuf>,
+        /// Where to write the manifest (never overwritten).
+        #[arg(long, default_value = "campaign.toml")]
+        out: PathBuf,
+    },
     /// Check a manifest (campaign or simulation) and report every problem, without running it.
     Check {
         /// The manifest.
@@ -254,6 +265,22 @@ fn dispatch(command: Command) -> u8 {
                         log.display()
                     ));
                 }
+                EXIT_OK
+            }
+            Err(e) => {
+                warn(&format!("error: {e}"));
+                EXIT_USAGE
+            }
+        },
+        Command::Init { logs, out } => match run::init::init(&logs, &out) {
+            Ok(done) => {
+                say(&format!(
+                    "wrote {} for {} log(s): {} placeholder(s) to fill; `servoid check {}` names them",
+                    done.manifest.display(),
+                    done.logs,
+                    done.placeholders,
+                    done.manifest.display()
+                ));
                 EXIT_OK
             }
             Err(e) => {

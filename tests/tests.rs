@@ -16,6 +16,7 @@ mod docs;
 mod drift;
 mod figure_formats;
 mod fuzz_replay;
+mod init;
 mod joint;
 mod layering;
 mod log_formats;

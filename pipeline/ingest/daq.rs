@@ -159,6 +159,32 @@ pub(super) fn read<'a>(
 }
 
 /// The header block, up to the column-name line, and the column names.
+/// A DAQ text export's numeric columns and the rate its header gives.
+pub(super) fn columns(
+    path: &Path,
+    bytes: &[u8],
+) -> Result<(Vec<super::inspect::LogColumn>, Option<f64>), IngestError> {
+    let mut lines = Lines {
+        bytes,
+        pos: 0,
+        no: 0,
+    };
+    let (header, names) = read_header(path, &mut lines)?;
+    let rate = header
+        .rate_hz
+        .or(header.interval_s.map(|dt| 1.0 / dt))
+        .filter(|r| r.is_finite() && *r > 0.0);
+    let columns = names
+        .iter()
+        .filter(|n| !TEXT_COLUMNS.contains(n) && **n != "Sample Number")
+        .map(|n| super::inspect::LogColumn {
+            name: n.to_string(),
+            unit: None,
+        })
+        .collect();
+    Ok((columns, rate))
+}
+
 fn read_header<'a>(
     path: &Path,
     lines: &mut Lines<'a>,

@@ -38,6 +38,19 @@ pub(super) fn read<'a>(
     plan: &'a LogPlan,
     matlab: bool,
 ) -> Result<Raw<'a>, IngestError> {
+    arrays::read(path, &open(path, bytes, matlab)?, plan)
+}
+
+/// The numeric datasets of an HDF5 log, with the units they state.
+pub(super) fn columns(
+    path: &Path,
+    bytes: &[u8],
+    matlab: bool,
+) -> Result<Vec<super::inspect::LogColumn>, IngestError> {
+    Ok(arrays::columns(&open(path, bytes, matlab)?))
+}
+
+fn open<'p>(path: &'p Path, bytes: &[u8], matlab: bool) -> Result<Hdf5<'p>, IngestError> {
     let file = File::from_bytes(bytes.to_vec()).map_err(|e| unreadable(path, matlab, &e))?;
     let mut h = Hdf5 {
         path,
@@ -53,7 +66,7 @@ pub(super) fn read<'a>(
             what: "no numeric datasets".into(),
         });
     }
-    arrays::read(path, &h, plan)
+    Ok(h)
 }
 
 fn unreadable(path: &Path, matlab: bool, e: &dyn std::fmt::Display) -> IngestError {

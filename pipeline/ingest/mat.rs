@@ -23,11 +23,30 @@ pub(super) fn read<'a>(
     bytes: &[u8],
     plan: &'a LogPlan,
 ) -> Result<Raw<'a>, IngestError> {
-    let format = |problem| IngestError::format(path, problem);
-    // MATLAB writes v7.3 files with this header text in the user block.
-    if bytes.starts_with(b"MATLAB 7.3") || super::hdf5::is_hdf5(bytes) {
+    if is_v73(bytes) {
         return super::hdf5::read(path, bytes, plan, true);
     }
+    arrays::read(path, &open(path, bytes)?, plan)
+}
+
+/// A MAT log's numeric variables.
+pub(super) fn columns(
+    path: &Path,
+    bytes: &[u8],
+) -> Result<Vec<super::inspect::LogColumn>, IngestError> {
+    if is_v73(bytes) {
+        return super::hdf5::columns(path, bytes, true);
+    }
+    Ok(arrays::columns(&open(path, bytes)?))
+}
+
+/// MATLAB writes v7.3 files with this header text in the user block.
+fn is_v73(bytes: &[u8]) -> bool {
+    bytes.starts_with(b"MATLAB 7.3") || super::hdf5::is_hdf5(bytes)
+}
+
+fn open<'p>(path: &'p Path, bytes: &[u8]) -> Result<Level5<'p>, IngestError> {
+    let format = |problem| IngestError::format(path, problem);
     let endian = bytes.get(126..HEADER_LEN);
     if bytes.len() < HEADER_LEN || !matches!(endian, Some(b"IM" | b"MI")) {
         return Err(format(FormatProblem::NotMat));
@@ -47,7 +66,7 @@ pub(super) fn read<'a>(
             what: "no numeric variables".into(),
         });
     }
-    let level5 = Level5 {
+    Ok(Level5 {
         path,
         variables: mat
             .arrays()
@@ -58,8 +77,7 @@ pub(super) fn read<'a>(
             })
             .collect(),
         mat,
-    };
-    arrays::read(path, &level5, plan)
+    })
 }
 
 /// A parsed level-5 file's numeric variables.

@@ -21,6 +21,7 @@ mod csv;
 mod daq;
 mod fields;
 mod hdf5;
+mod inspect;
 mod mat;
 mod parquet;
 mod parquet_footer;
@@ -37,6 +38,7 @@ use std::path::{Path, PathBuf};
 use polars::prelude::{DataType, PolarsError};
 use sha2::{Digest, Sha256};
 
+pub use inspect::{Inspected, LogColumn, inspect};
 pub use plan::{
     ChannelPlan, Channels, Column, CsvOptions, DEFAULT_MAX_LOG_MIB, LogFormat, LogPlan, TimePlan,
 };

@@ -73,6 +73,19 @@ pub enum ParquetDamage {
 }
 
 /// Read a Parquet log's wanted columns.
+/// A Parquet log's column names.
+pub(super) fn names(path: &Path, bytes: &[u8]) -> Result<Vec<String>, IngestError> {
+    let format = |problem| IngestError::format(path, problem);
+    let mut reader = ParquetReader::new(Cursor::new(bytes));
+    let damaged =
+        |p: super::PolarsPanic| format(FormatProblem::ParquetDamaged { message: p.message });
+    check_footer(bytes).map_err(|source| format(FormatProblem::ParquetMetadata { source }))?;
+    let schema = super::guard_polars(|| reader.schema())
+        .map_err(damaged)?
+        .map_err(|source| format(FormatProblem::ParquetUnreadable { source }))?;
+    Ok(schema.iter_names().map(|n| n.to_string()).collect())
+}
+
 pub(super) fn read<'a>(
     path: &Path,
     bytes: &'a [u8],

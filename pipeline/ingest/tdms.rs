@@ -24,6 +24,24 @@ pub(super) fn read<'a>(
     bytes: &[u8],
     plan: &'a LogPlan,
 ) -> Result<Raw<'a>, IngestError> {
+    arrays::read(path, &open(path, bytes)?, plan)
+}
+
+/// A TDMS log's channels with their units, and the rate its waveforms
+/// state.
+pub(super) fn columns(
+    path: &Path,
+    bytes: &[u8],
+) -> Result<(Vec<super::inspect::LogColumn>, Option<f64>), IngestError> {
+    let t = open(path, bytes)?;
+    let rate = match t.own_time(path) {
+        Ok(RawTime::Rate { hz, .. }) if hz.is_finite() && hz > 0.0 => Some(hz),
+        _ => None,
+    };
+    Ok((arrays::columns(&t), rate))
+}
+
+fn open<'p, 'b>(path: &'p Path, bytes: &'b [u8]) -> Result<Tdms<'p, 'b>, IngestError> {
     let file = TdmsFile::new(Cursor::new(bytes)).map_err(|e| unreadable(path, &said(&e)))?;
     let mut channels = Vec::new();
     let groups: Vec<String> = file.list_groups().map(str::to_owned).collect();
@@ -55,7 +73,7 @@ pub(super) fn read<'a>(
             what: "no channels".into(),
         });
     }
-    let t = Tdms {
+    Ok(Tdms {
         path,
         variables: channels
             .iter()
@@ -66,8 +84,7 @@ pub(super) fn read<'a>(
             .collect(),
         channels: channels.into_iter().map(|(ch, _)| ch).collect(),
         file: RefCell::new(file),
-    };
-    arrays::read(path, &t, plan)
+    })
 }
 
 fn name_of(ch: &ChannelPath) -> String {

@@ -76,6 +76,10 @@ pub(super) struct Document<'a> {
     non_finite: bool,
     /// How many problems there were when the cross-key checks began.
     structural: Option<usize>,
+    /// Values `servoid init` left for the lab to fill
+    /// ([`super::scaffold::PLACEHOLDER`]): while there are any, they are
+    /// the only problems reported (the rest follow from them).
+    placeholders: Vec<Problem>,
 }
 
 impl<'a> Document<'a> {
@@ -125,8 +129,10 @@ impl<'a> Document<'a> {
             problems: Vec::new(),
             non_finite: false,
             structural: None,
+            placeholders: Vec::new(),
         };
         doc.non_finite_numbers();
+        doc.find_placeholders();
         Ok(doc)
     }
 
@@ -183,6 +189,32 @@ impl<'a> Document<'a> {
             ));
             self.non_finite = true;
         }
+    }
+
+    /// Every string that is a placeholder `servoid init` wrote, by key.
+    fn find_placeholders(&mut self) {
+        fn walk(v: &Value, path: KeyPath, found: &mut Vec<Problem>) {
+            match v {
+                Value::String(text) => {
+                    if let Some(rest) = text.strip_prefix(super::scaffold::PLACEHOLDER) {
+                        let what = rest.trim_start();
+                        found.push(Problem::new(path, format!("a placeholder to fill: {what}")));
+                    }
+                }
+                Value::Object(map) => {
+                    for (k, x) in map {
+                        walk(x, path.key(k), found);
+                    }
+                }
+                Value::Array(items) => {
+                    for (i, x) in items.iter().enumerate() {
+                        walk(x, path.index(i), found);
+                    }
+                }
+                _ => {}
+            }
+        }
+        walk(&self.value, KeyPath::root(), &mut self.placeholders);
     }
 
     /// Marks where the checks across keys begin (ranges, one key against
@@ -278,6 +310,9 @@ impl<'a> Document<'a> {
     /// The result when there is no problem; else every problem, with run ids,
     /// lines and columns, in file order.
     pub fn finish<R>(mut self, result: Option<R>) -> Result<R, ManifestError> {
+        if !self.placeholders.is_empty() {
+            self.problems = std::mem::take(&mut self.placeholders);
+        }
         if let (true, Some(r)) = (self.problems.is_empty(), result) {
             return Ok(r);
         }

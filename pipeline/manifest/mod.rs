@@ -21,6 +21,7 @@ mod identification;
 mod keypath;
 mod problem;
 mod raw;
+pub mod scaffold;
 pub mod simulation;
 mod table;
 

@@ -11,6 +11,7 @@ mod cache;
 mod compare;
 mod evidence;
 mod history;
+pub mod init;
 mod joint;
 pub mod montecarlo;
 mod rig;

@@ -1,0 +1,244 @@
+//! `servoid init` on the bundled default's logs: the manifest it proposes
+//! finds the channels and the roles, `servoid check` names every
+//! placeholder by key, and once they are filled with what the lab knows
+//! (the values of the hand-written manifest `servoid simulate` made) the
+//! campaign gives the same rig, to the last digit, as that manifest. On the
+//! same logs renamed `log1.csv`... the channels are still found and the
+//! roles are left to fill.
+
+use std::path::Path;
+
+use serde_json::Value;
+
+use crate::util::{bundled_simulation, scratch, servoid, servoid_into};
+
+fn toml_of(path: &Path) -> toml::Table {
+    toml::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
+}
+
+fn rig_of(results: &Path) -> Value {
+    let v: Value = serde_json::from_slice(&std::fs::read(results).unwrap()).unwrap();
+    v["rig"].clone()
+}
+
+fn runs(t: &toml::Table) -> &Vec<toml::Value> {
+    t["runs"].as_array().unwrap()
+}
+
+#[test]
+fn init_proposes_a_manifest_that_reproduces_the_bundled_rig_once_filled() {
+    let dir = scratch();
+    let sim = bundled_simulation(dir.path(), false);
+    let out = dir.path().join("sim");
+    let o = servoid_into(dir.path(), "simulate", &sim, &out, &["--run"]);
+    assert_eq!(o.code, 0, "{}", o.stderr);
+    let reference = toml_of(&out.join("campaign.toml"));
+
+    let proposed = dir.path().join("proposed.toml");
+    let o = servoid(
+        dir.path(),
+        &["init", "sim/logs", "--out", proposed.to_str().unwrap()],
+    );
+    assert_eq!(o.code, 0, "{}", o.stderr);
+    assert!(o.stdout.contains("7 log(s)"), "{}", o.stdout);
+    // Writing over it is refused.
+    let again = servoid(
+        dir.path(),
+        &["init", "sim/logs", "--out", proposed.to_str().unwrap()],
+    );
+    assert_eq!(again.code, 2);
+    assert!(again.stderr.contains("already exists"), "{}", again.stderr);
+
+    let mut t = toml_of(&proposed);
+    // The channels as the hand-written manifest has them.
+    for ch in ["time", "command", "displacement", "force"] {
+        assert_eq!(
+            t["channels"][ch]["column"], reference["channels"][ch]["column"],
+            "{ch}"
+        );
+        assert_eq!(
+            t["channels"][ch]["unit"], reference["channels"][ch]["unit"],
+            "{ch}"
+        );
+    }
+    // The roles from the files' names.
+    for r in runs(&t) {
+        let id = r["id"].as_str().unwrap();
+        let want = runs(&reference)
+            .iter()
+            .find(|x| x["id"].as_str() == Some(id))
+            .unwrap_or_else(|| panic!("run {id} in the reference"));
+        assert_eq!(r["role"], want["role"], "{id}");
+        assert!(r["p_gain"].as_str().unwrap().starts_with("FILL:"), "{id}");
+    }
+    // check names every placeholder by key.
+    let o = servoid(dir.path(), &["check", "proposed.toml"]);
+    assert_eq!(o.code, 2);
+    assert!(
+        o.stderr
+            .contains("runs[0].p_gain (run \"exp1\"): a placeholder to fill"),
+        "{}",
+        o.stderr
+    );
+    assert!(
+        o.stderr.contains("rig.name: a placeholder to fill"),
+        "{}",
+        o.stderr
+    );
+    let named = o.stderr.matches("a placeholder to fill").count();
+    assert_eq!(named, 1 + 7 + 2 + 4 * 3, "{}", o.stderr);
+
+    // Filled as the lab would: the rig's name, each run's P gain and
+    // specimen, and the identification settings it chose.
+    t["rig"]["name"] = reference["rig"]["name"].clone();
+    t.insert("identification".into(), reference["identification"].clone());
+    let reference_runs = runs(&reference).clone();
+    for r in t["runs"].as_array_mut().unwrap() {
+        let id = r["id"].as_str().unwrap().to_string();
+        let want = reference_runs
+            .iter()
+            .find(|x| x["id"].as_str() == Some(id.as_str()))
+            .unwrap();
+        let r = r.as_table_mut().unwrap();
+        r.insert("p_gain".into(), want["p_gain"].clone());
+        match want.get("specimen") {
+            Some(s) => {
+                r.insert("specimen".into(), s.clone());
+            }
+            None => assert!(r.get("specimen").is_none(), "{id}"),
+        }
+    }
+    std::fs::write(&proposed, toml::to_string(&t).unwrap()).unwrap();
+    let o = servoid(dir.path(), &["check", "proposed.toml"]);
+    assert_eq!(o.code, 0, "{}", o.stderr);
+    let o = servoid(dir.path(), &["run", "proposed.toml", "--out", "filled"]);
+    assert_eq!(o.code, 0, "{}", o.stderr);
+    let rig = rig_of(&dir.path().join("filled/results.json"));
+    assert!(rig["beta1"]["value"].is_f64());
+    assert_eq!(
+        rig,
+        rig_of(&out.join("results.json")),
+        "the same rig as the hand-written manifest"
+    );
+}
+
+#[test]
+fn init_on_unnamed_logs_finds_the_channels_and_leaves_the_roles_to_fill() {
+    let dir = scratch();
+    let sim = bundled_simulation(dir.path(), false);
+    let out = dir.path().join("sim");
+    let o = servoid_into(dir.path(), "simulate", &sim, &out, &[]);
+    assert_eq!(o.code, 0, "{}", o.stderr);
+    let logs = dir.path().join("unnamed");
+    std::fs::create_dir(&logs).unwrap();
+    let mut names: Vec<_> = std::fs::read_dir(out.join("logs"))
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .collect();
+    names.sort();
+    for (i, p) in names.iter().enumerate() {
+        std::fs::copy(p, logs.join(format!("log{}.csv", i + 1))).unwrap();
+    }
+    let o = servoid(
+        dir.path(),
+        &["init", "unnamed/*.csv", "--out", "unnamed.toml"],
+    );
+    assert_eq!(o.code, 0, "{}", o.stderr);
+    let t = toml_of(&dir.path().join("unnamed.toml"));
+    assert_eq!(
+        t["channels"]["displacement"]["column"].as_str(),
+        Some("displacement_mm")
+    );
+    assert_eq!(t["channels"]["force"]["unit"].as_str(), Some("kN"));
+    assert_eq!(runs(&t).len(), 7);
+    for r in runs(&t) {
+        assert!(r["role"].as_str().unwrap().starts_with("FILL:"), "{r}");
+    }
+    let o = servoid(dir.path(), &["check", "unnamed.toml"]);
+    assert_eq!(o.code, 2);
+    assert!(o.stderr.contains("runs[6].role (run \"log7\"): a placeholder to fill: no_specimen, spring, validation or fit"), "{}", o.stderr);
+}
+
+/// The real MTS logs (DAQ text, anonymous `CHANNEL0`-`CHANNEL2`): the rate
+/// comes from their header, the channels, their units and the roles are
+/// left to fill; filled from the example manifest
+/// (experiments/utfsm-mts-mrdamper/campaign.toml: its channels with their
+/// scale factors, roles, P gains and identification), the runs' fits are
+/// the example's to the last digit.
+#[test]
+fn init_on_the_mts_logs_leaves_their_anonymous_channels_to_fill() {
+    let Some(data) = crate::util::mts_data() else {
+        return;
+    };
+    let dir = scratch();
+    let o = servoid(
+        dir.path(),
+        &["init", data.to_str().unwrap(), "--out", "mts.toml"],
+    );
+    assert_eq!(o.code, 0, "{}", o.stderr);
+    let text = std::fs::read_to_string(dir.path().join("mts.toml")).unwrap();
+    assert!(text.contains("the file states its rate, 1000 Hz"), "{text}");
+    let o = servoid(dir.path(), &["check", "mts.toml"]);
+    assert_eq!(o.code, 2);
+    for key in [
+        "channels.command.column",
+        "channels.displacement.unit",
+        "runs[0].role (run \"0A\")",
+        "runs[1].p_gain (run \"1A\")",
+    ] {
+        assert!(
+            o.stderr.contains(&format!("{key}: a placeholder to fill")),
+            "{key}: {}",
+            o.stderr
+        );
+    }
+    let example_path = crate::util::root().join("experiments/utfsm-mts-mrdamper/campaign.toml");
+    let example = toml_of(&example_path);
+    let mut t: toml::Table = toml::from_str(&text).unwrap();
+    t["rig"]["name"] = example["rig"]["name"].clone();
+    t.insert("channels".into(), example["channels"].clone());
+    t.insert("identification".into(), example["identification"].clone());
+    for r in t["runs"].as_array_mut().unwrap() {
+        let id = r["id"].as_str().unwrap().to_string();
+        let want = runs(&example)
+            .iter()
+            .find(|x| x["id"].as_str() == Some(id.as_str()))
+            .unwrap()
+            .clone();
+        let r = r.as_table_mut().unwrap();
+        r.insert("role".into(), want["role"].clone());
+        r.insert("p_gain".into(), want["p_gain"].clone());
+    }
+    std::fs::write(dir.path().join("mts.toml"), toml::to_string(&t).unwrap()).unwrap();
+    let o = servoid(dir.path(), &["run", "mts.toml", "--out", "filled"]);
+    assert_eq!(o.code, 0, "{}", o.stderr);
+    let mine: Value =
+        serde_json::from_slice(&std::fs::read(dir.path().join("filled/results.json")).unwrap())
+            .unwrap();
+    // The example, run on the same logs where they are.
+    let example_text = std::fs::read_to_string(&example_path).unwrap().replace(
+        "../../../shared/data/utfsm-mts-mrdamper",
+        data.to_str().unwrap(),
+    );
+    std::fs::write(dir.path().join("example.toml"), example_text).unwrap();
+    let o = servoid(dir.path(), &["run", "example.toml", "--out", "example"]);
+    assert_eq!(o.code, 0, "{}", o.stderr);
+    let theirs: Value =
+        serde_json::from_slice(&std::fs::read(dir.path().join("example/results.json")).unwrap())
+            .unwrap();
+    for (a, b) in mine["runs"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .zip(theirs["runs"].as_array().unwrap())
+    {
+        assert_eq!(a["id"], b["id"]);
+        assert!(a["tf"]["num"].is_array(), "{}", a["id"]);
+        assert_eq!(
+            (&a["tf"], &a["fit"]),
+            (&b["tf"], &b["fit"]),
+            "run {}",
+            a["id"]
+        );
+    }
+}
