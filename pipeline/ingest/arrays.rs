@@ -63,18 +63,18 @@ pub(super) trait Arrays {
 
 /// The vector variables and each 2-D variable's channels (`name:j`), with
 /// the units the file states, as `servoid init` lists them.
-pub(super) fn columns(arrays: &dyn Arrays) -> Vec<super::inspect::LogColumn> {
+pub(super) fn columns(arrays: &dyn Arrays) -> Vec<super::LogColumn> {
     let mut out = Vec::new();
     for v in arrays.variables() {
         let unit = arrays.stated_unit(&v.name);
         if is_vector(&v.size) {
-            out.push(super::inspect::LogColumn {
+            out.push(super::LogColumn {
                 name: v.name.clone(),
                 unit,
             });
         } else if v.size.len() == 2 {
             let n = v.size[0].min(v.size[1]);
-            out.extend((0..n).map(|j| super::inspect::LogColumn {
+            out.extend((0..n).map(|j| super::LogColumn {
                 name: format!("{}:{j}", v.name),
                 unit: unit.clone(),
             }));

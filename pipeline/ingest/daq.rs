@@ -163,7 +163,7 @@ pub(super) fn read<'a>(
 pub(super) fn columns(
     path: &Path,
     bytes: &[u8],
-) -> Result<(Vec<super::inspect::LogColumn>, Option<f64>), IngestError> {
+) -> Result<(Vec<super::LogColumn>, Option<f64>), IngestError> {
     let mut lines = Lines {
         bytes,
         pos: 0,
@@ -177,7 +177,7 @@ pub(super) fn columns(
     let columns = names
         .iter()
         .filter(|n| !TEXT_COLUMNS.contains(n) && **n != "Sample Number")
-        .map(|n| super::inspect::LogColumn {
+        .map(|n| super::LogColumn {
             name: n.to_string(),
             unit: None,
         })

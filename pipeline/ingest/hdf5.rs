@@ -46,7 +46,7 @@ pub(super) fn columns(
     path: &Path,
     bytes: &[u8],
     matlab: bool,
-) -> Result<Vec<super::inspect::LogColumn>, IngestError> {
+) -> Result<Vec<super::LogColumn>, IngestError> {
     Ok(arrays::columns(&open(path, bytes, matlab)?))
 }
 

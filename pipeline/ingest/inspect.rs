@@ -5,7 +5,7 @@
 use std::path::Path;
 
 use super::plan::LogFormat;
-use super::{IngestError, LogFile};
+use super::{IngestError, LogColumn, LogFile};
 
 /// A log's columns, as `servoid init` sees them.
 #[derive(Debug, Clone, PartialEq)]
@@ -17,15 +17,6 @@ pub struct Inspected {
     pub rate_hz: Option<f64>,
     /// A CSV log's delimiter, as its header splits best.
     pub csv_delimiter: Option<char>,
-}
-
-/// One column, or one channel of a 2-D variable (`data:2`).
-#[derive(Debug, Clone, PartialEq)]
-pub struct LogColumn {
-    pub name: String,
-    /// The unit the file states for it (an HDF5 `units` attribute, a TDMS
-    /// `unit_string`), when it does.
-    pub unit: Option<String>,
 }
 
 /// Inspect the log at `path` in `format` (at most `max_bytes`).

@@ -30,10 +30,7 @@ pub(super) fn read<'a>(
 }
 
 /// A MAT log's numeric variables.
-pub(super) fn columns(
-    path: &Path,
-    bytes: &[u8],
-) -> Result<Vec<super::inspect::LogColumn>, IngestError> {
+pub(super) fn columns(path: &Path, bytes: &[u8]) -> Result<Vec<super::LogColumn>, IngestError> {
     if is_v73(bytes) {
         return super::hdf5::columns(path, bytes, true);
     }

@@ -38,7 +38,7 @@ use std::path::{Path, PathBuf};
 use polars::prelude::{DataType, PolarsError};
 use sha2::{Digest, Sha256};
 
-pub use inspect::{Inspected, LogColumn, inspect};
+pub use inspect::{Inspected, inspect};
 pub use plan::{
     ChannelPlan, Channels, Column, CsvOptions, DEFAULT_MAX_LOG_MIB, LogFormat, LogPlan, TimePlan,
 };
@@ -47,6 +47,16 @@ pub use table::{
     Table, TableError, TableFormat, TableProblem, TableText, read_table, read_table_as,
     table_from_bytes, table_from_bytes_as,
 };
+
+/// One column of a log, or one channel of a 2-D variable (`data:2`), as
+/// `servoid init` lists them ([`inspect`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct LogColumn {
+    pub name: String,
+    /// The unit the file states for it (an HDF5 `units` attribute, a TDMS
+    /// `unit_string`), when it does.
+    pub unit: Option<String>,
+}
 
 /// A log read and converted to SI.
 #[derive(Debug, Clone, PartialEq)]

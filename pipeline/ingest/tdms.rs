@@ -32,7 +32,7 @@ pub(super) fn read<'a>(
 pub(super) fn columns(
     path: &Path,
     bytes: &[u8],
-) -> Result<(Vec<super::inspect::LogColumn>, Option<f64>), IngestError> {
+) -> Result<(Vec<super::LogColumn>, Option<f64>), IngestError> {
     let t = open(path, bytes)?;
     let rate = match t.own_time(path) {
         Ok(RawTime::Rate { hz, .. }) if hz.is_finite() && hz > 0.0 => Some(hz),
