@@ -54,6 +54,7 @@ fn open<'p>(path: &'p Path, bytes: &[u8], matlab: bool) -> Result<Hdf5<'p>, Inge
     let file = File::from_bytes(bytes.to_vec()).map_err(|e| unreadable(path, matlab, &e))?;
     let mut h = Hdf5 {
         path,
+        bytes: bytes.len(),
         file,
         matlab,
         variables: Vec::new(),
@@ -81,6 +82,8 @@ fn unreadable(path: &Path, matlab: bool, e: &dyn std::fmt::Display) -> IngestErr
 
 struct Hdf5<'p> {
     path: &'p Path,
+    /// The file's length in bytes.
+    bytes: usize,
     file: File,
     matlab: bool,
     variables: Vec<MatVariable>,
@@ -186,6 +189,24 @@ impl Arrays for Hdf5<'_> {
     fn values(&self, name: &str, _channel: &'static str) -> Result<Vec<f64>, IngestError> {
         let (full, row_major, v) = self.dataset_of(name);
         let bad = |e: hdf5_pure::Error| unreadable(self.path, self.matlab, &e);
+        // A damaged or hostile file can declare a shape its bytes cannot
+        // hold, and the reader reserves for it before reading (found by the
+        // log_hdf5 fuzz target: hundreds of GB). Deflate packs at most
+        // about 1032 bytes into one, so no dataset of this file can hold
+        // more values than that many bytes' worth.
+        let declared = v.size.iter().try_fold(1usize, |a, &d| a.checked_mul(d));
+        let most = self.bytes.saturating_mul(1032) / 8;
+        if declared.is_none_or(|n| n > most) {
+            return Err(unreadable(
+                self.path,
+                self.matlab,
+                &format!(
+                    "dataset `{name}` declares {} values, more than a file of {} bytes can hold even compressed",
+                    super::dims(&v.size),
+                    self.bytes
+                ),
+            ));
+        }
         let values = self
             .file
             .dataset(full)
