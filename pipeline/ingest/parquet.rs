@@ -72,25 +72,16 @@ pub enum ParquetDamage {
     ChunkShort { seen: i64, values: i64 },
 }
 
-/// Read a Parquet log's wanted columns.
 /// A Parquet log's column names.
 pub(super) fn names(path: &Path, bytes: &[u8]) -> Result<Vec<String>, IngestError> {
-    let format = |problem| IngestError::format(path, problem);
-    let mut reader = ParquetReader::new(Cursor::new(bytes));
-    let damaged =
-        |p: super::PolarsPanic| format(FormatProblem::ParquetDamaged { message: p.message });
-    check_footer(bytes).map_err(|source| format(FormatProblem::ParquetMetadata { source }))?;
-    let schema = super::guard_polars(|| reader.schema())
-        .map_err(damaged)?
-        .map_err(|source| format(FormatProblem::ParquetUnreadable { source }))?;
-    Ok(schema.iter_names().map(|n| n.to_string()).collect())
+    Ok(open(path, bytes)?.1)
 }
 
-pub(super) fn read<'a>(
-    path: &Path,
-    bytes: &'a [u8],
-    plan: &'a LogPlan,
-) -> Result<Raw<'a>, IngestError> {
+/// A Parquet reader over a log's bytes.
+type Reader<'a> = ParquetReader<Cursor<&'a [u8]>>;
+
+/// The reader of a Parquet log, its footer checked, and its column names.
+fn open<'a>(path: &Path, bytes: &'a [u8]) -> Result<(Reader<'a>, Vec<String>), IngestError> {
     let format = |problem| IngestError::format(path, problem);
     let mut reader = ParquetReader::new(Cursor::new(bytes));
     // A panic inside polars on damaged bytes (found by the Parquet fuzz
@@ -101,9 +92,21 @@ pub(super) fn read<'a>(
     let schema = super::guard_polars(|| reader.schema())
         .map_err(damaged)?
         .map_err(|source| format(FormatProblem::ParquetUnreadable { source }))?;
+    Ok((reader, schema.iter_names().map(|n| n.to_string()).collect()))
+}
+
+/// Read a Parquet log's wanted columns.
+pub(super) fn read<'a>(
+    path: &Path,
+    bytes: &'a [u8],
+    plan: &'a LogPlan,
+) -> Result<Raw<'a>, IngestError> {
+    let format = |problem| IngestError::format(path, problem);
+    let damaged =
+        |p: super::PolarsPanic| format(FormatProblem::ParquetDamaged { message: p.message });
+    let (mut reader, names) = open(path, bytes)?;
     check_pages(bytes, &mut reader)
         .map_err(|source| format(FormatProblem::ParquetMetadata { source }))?;
-    let names: Vec<String> = schema.iter_names().map(|n| n.to_string()).collect();
 
     let want = wanted(plan);
     let mut index = Vec::with_capacity(want.len());

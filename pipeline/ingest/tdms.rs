@@ -158,30 +158,24 @@ impl Arrays for Tdms<'_, '_> {
 
     fn values(&self, name: &str, _channel: &'static str) -> Result<Vec<f64>, IngestError> {
         let (ch, len) = self.channel(name);
+        // The stored type cannot be asked: try each numeric one in turn.
+        let readers: [&dyn Fn() -> Result<Option<Vec<f64>>, TdmsError>; 8] = [
+            &|| self.read_as::<f64>(ch, len),
+            &|| self.read_as::<f32>(ch, len),
+            &|| self.read_as::<i32>(ch, len),
+            &|| self.read_as::<i16>(ch, len),
+            &|| self.read_as::<u32>(ch, len),
+            &|| self.read_as::<u16>(ch, len),
+            &|| self.read_as::<i8>(ch, len),
+            &|| self.read_as::<u8>(ch, len),
+        ];
         let read = || -> Result<Option<Vec<f64>>, TdmsError> {
-            // The stored type cannot be asked: try each numeric one.
-            if let Some(v) = self.read_as::<f64>(ch, len)? {
-                return Ok(Some(v));
+            for r in readers {
+                if let Some(v) = r()? {
+                    return Ok(Some(v));
+                }
             }
-            if let Some(v) = self.read_as::<f32>(ch, len)? {
-                return Ok(Some(v));
-            }
-            if let Some(v) = self.read_as::<i32>(ch, len)? {
-                return Ok(Some(v));
-            }
-            if let Some(v) = self.read_as::<i16>(ch, len)? {
-                return Ok(Some(v));
-            }
-            if let Some(v) = self.read_as::<u32>(ch, len)? {
-                return Ok(Some(v));
-            }
-            if let Some(v) = self.read_as::<u16>(ch, len)? {
-                return Ok(Some(v));
-            }
-            if let Some(v) = self.read_as::<i8>(ch, len)? {
-                return Ok(Some(v));
-            }
-            self.read_as::<u8>(ch, len)
+            Ok(None)
         };
         match read() {
             Ok(Some(v)) => Ok(v),

@@ -10,7 +10,7 @@
 
 use std::fmt::Write as _;
 
-use crate::ingest::{Inspected, LogColumn, LogFormat};
+use crate::ingest::{Inspected, LogColumn};
 
 /// The prefix of a value the lab must fill in: `servoid check` names every
 /// key that still holds one.
@@ -257,9 +257,11 @@ pub fn role_of(stem: &str) -> Option<(&'static str, String)> {
     validation.then(|| ("validation", stem.to_string()))
 }
 
-/// A run id from a file's stem: letters, digits, `.`, `_` and `-`.
-fn run_id(stem: &str) -> String {
-    let id: String = stem
+/// A name a manifest accepts (a run id, a campaign name) from a file's or
+/// folder's: letters, digits, `.`, `_` and `-`, not starting with `.` (a
+/// folder such as `.tmpXYZ`); `fallback` when nothing is left.
+pub fn manifest_name(text: &str, fallback: &str) -> String {
+    let cleaned: String = text
         .chars()
         .map(|c| {
             if c.is_ascii_alphanumeric() || matches!(c, '.' | '_' | '-') {
@@ -269,7 +271,10 @@ fn run_id(stem: &str) -> String {
             }
         })
         .collect();
-    if id.is_empty() { "run".into() } else { id }
+    match cleaned.trim_start_matches('.') {
+        "" => fallback.to_string(),
+        name => name.to_string(),
+    }
 }
 
 fn quoted(s: &str) -> String {
@@ -385,7 +390,11 @@ pub fn manifest_text(
 }
 
 fn run_block(out: &mut String, log: &FoundLog, back: &ReadBack) {
-    let _ = writeln!(out, "\n[[runs]]\nid = {}", quoted(&run_id(&log.stem)));
+    let _ = writeln!(
+        out,
+        "\n[[runs]]\nid = {}",
+        quoted(&manifest_name(&log.stem, "run"))
+    );
     match back {
         ReadBack::Read {
             sample_rate_hz,
@@ -464,11 +473,6 @@ fn run_block(out: &mut String, log: &FoundLog, back: &ReadBack) {
             let _ = writeln!(out, "data = {{ log = {} }}", quoted(&log.path));
         }
     }
-}
-
-/// The format a log's name gives, for the folder walk.
-pub fn log_format(path: &std::path::Path) -> Option<LogFormat> {
-    LogFormat::from_path(path)
 }
 
 #[cfg(test)]

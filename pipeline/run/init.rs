@@ -74,31 +74,12 @@ pub fn init(logs: &[PathBuf], out: &Path) -> Result<Initialised, InitError> {
         .zip(&found)
         .map(|((path, format), log)| read_back(path, *format, log, &channels))
         .collect();
-    let name = base
+    let folder = base
         .canonicalize()
         .ok()
         .and_then(|b| b.file_name().map(|n| n.to_string_lossy().into_owned()))
-        .filter(|n| !n.is_empty())
-        .unwrap_or_else(|| "campaign".into());
-    // A campaign name may hold letters, digits, `.`, `_` and `-`, and may
-    // not start with `.` (a folder such as `.tmpXYZ`).
-    let name: String = name
-        .chars()
-        .map(|c| {
-            if c.is_ascii_alphanumeric() || matches!(c, '.' | '_' | '-') {
-                c
-            } else {
-                '-'
-            }
-        })
-        .collect::<String>()
-        .trim_start_matches('.')
-        .to_string();
-    let name = if name.is_empty() {
-        "campaign".to_string()
-    } else {
-        name
-    };
+        .unwrap_or_default();
+    let name = scaffold::manifest_name(&folder, "campaign");
     let text = scaffold::manifest_text(&name, &found, &channels, &read);
     report::write_atomic(out, text.as_bytes())?;
     Ok(Initialised {
