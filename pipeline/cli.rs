@@ -136,6 +136,13 @@ pub enum Command {
         /// Where to write the manifest (never overwritten).
         #[arg(long, default_value = "campaign.toml")]
         out: PathBuf,
+        /// Also write a run table (CSV) here, a row per log for the lab to
+        /// fill, which the manifest names as its `[run_table]` (a night's
+        /// hundreds of logs). Logs that already have a run table (a CSV or
+        /// Parquet file with columns id and role among them) get it
+        /// without this.
+        #[arg(long)]
+        table: Option<PathBuf>,
     },
     /// Check a manifest (campaign or simulation) and report every problem, without running it.
     Check {
@@ -265,6 +272,9 @@ fn dispatch(command: Command) -> u8 {
                         log.display()
                     ));
                 }
+                for w in &checked.warnings {
+                    warn(&format!("warning: {w}"));
+                }
                 EXIT_OK
             }
             Err(e) => {
@@ -272,22 +282,28 @@ fn dispatch(command: Command) -> u8 {
                 EXIT_USAGE
             }
         },
-        Command::Init { logs, out } => match run::init::init(&logs, &out) {
-            Ok(done) => {
-                say(&format!(
-                    "wrote {} for {} log(s): {} placeholder(s) to fill; `servoid check {}` names them",
-                    done.manifest.display(),
-                    done.logs,
-                    done.placeholders,
-                    done.manifest.display()
-                ));
-                EXIT_OK
+        Command::Init { logs, out, table } => {
+            match run::init::init(&logs, &out, table.as_deref()) {
+                Ok(done) => {
+                    let table = done
+                        .table
+                        .map(|t| format!(" (runs from the table {})", t.display()))
+                        .unwrap_or_default();
+                    say(&format!(
+                        "wrote {} for {} log(s){table}: {} placeholder(s) to fill; `servoid check {}` names them",
+                        done.manifest.display(),
+                        done.logs,
+                        done.placeholders,
+                        done.manifest.display()
+                    ));
+                    EXIT_OK
+                }
+                Err(e) => {
+                    warn(&format!("error: {e}"));
+                    EXIT_USAGE
+                }
             }
-            Err(e) => {
-                warn(&format!("error: {e}"));
-                EXIT_USAGE
-            }
-        },
+        }
         Command::Completions { shell } => {
             let mut cmd = <Cli as clap::CommandFactory>::command();
             let mut script = Vec::new();

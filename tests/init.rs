@@ -242,3 +242,245 @@ fn init_on_the_mts_logs_leaves_their_anonymous_channels_to_fill() {
         );
     }
 }
+
+/// The reference's runs as a run table (CSV), in its order, with the
+/// lab's own `operator` column.
+fn table_of(reference: &toml::Table) -> String {
+    let mut out = String::from(
+        "id,role,p_gain,mass_kg,damping_ns_per_m,stiffness_n_per_m,description,operator\n",
+    );
+    for r in runs(reference) {
+        let s = r.get("specimen");
+        let cell = |k: &str| {
+            s.and_then(|s| s.get(k))
+                .map(|v| v.to_string())
+                .unwrap_or_default()
+        };
+        out.push_str(&format!(
+            "{},{},{},{},{},{},\"{}\",ana\n",
+            r["id"].as_str().unwrap(),
+            r["role"].as_str().unwrap(),
+            r["p_gain"],
+            cell("mass_kg"),
+            cell("damping_ns_per_m"),
+            cell("stiffness_n_per_m"),
+            r.get("description")
+                .and_then(|d| d.as_str())
+                .unwrap_or_default()
+        ));
+    }
+    out
+}
+
+/// A night folder as a nightly batch keeps it: its run table
+/// (`specimens.csv`, with the lab's own column) beside a `logs/` folder,
+/// and the same with the table among the logs. `init` names the table as
+/// the manifest's `[run_table]` and the logs' folder, leaves only the rig's
+/// name to fill, and the filled manifest gives the hand-written
+/// manifest's rig to the last digit.
+#[test]
+fn init_on_a_night_folder_names_its_run_table() {
+    let dir = scratch();
+    let sim = bundled_simulation(dir.path(), false);
+    let out = dir.path().join("sim");
+    let o = servoid_into(dir.path(), "simulate", &sim, &out, &["--run"]);
+    assert_eq!(o.code, 0, "{}", o.stderr);
+    let reference = toml_of(&out.join("campaign.toml"));
+    let table = table_of(&reference);
+    let logs = out.join("logs");
+    for (night, log_dir) in [("night", "night/logs"), ("flat", "flat")] {
+        let d = dir.path().join(log_dir);
+        std::fs::create_dir_all(&d).unwrap();
+        for e in std::fs::read_dir(&logs).unwrap() {
+            let p = e.unwrap().path();
+            std::fs::copy(&p, d.join(p.file_name().unwrap())).unwrap();
+        }
+        std::fs::write(dir.path().join(night).join("specimens.csv"), &table).unwrap();
+
+        let manifest = format!("{night}.toml");
+        let o = servoid(dir.path(), &["init", night, "--out", &manifest]);
+        assert_eq!(o.code, 0, "{night}: {}", o.stderr);
+        assert!(
+            o.stdout.contains(&format!(
+                "7 log(s) (runs from the table {night}/specimens.csv)"
+            )),
+            "{night}: {}",
+            o.stdout
+        );
+        let mut t = toml_of(&dir.path().join(&manifest));
+        assert!(
+            t.get("runs").is_none(),
+            "{night}: no [[runs]] beside the table"
+        );
+        assert_eq!(
+            t["run_table"]["file"].as_str(),
+            Some(format!("{night}/specimens.csv").as_str())
+        );
+        assert_eq!(t["run_table"]["logs"].as_str(), Some(log_dir));
+        let text = std::fs::read_to_string(dir.path().join(&manifest)).unwrap();
+        assert!(
+            text.contains(&format!(
+                "{night}/specimens.csv: 7 row(s); 7 find their log among the 7 found"
+            )),
+            "{text}"
+        );
+        // Only the rig's name is left: the table holds the rest.
+        let o = servoid(dir.path(), &["check", &manifest]);
+        assert_eq!(o.code, 2);
+        assert_eq!(
+            o.stderr.matches("a placeholder to fill").count(),
+            1,
+            "{}",
+            o.stderr
+        );
+        assert!(o.stderr.contains("rig.name: a placeholder to fill"));
+
+        t["rig"]["name"] = reference["rig"]["name"].clone();
+        t.insert("identification".into(), reference["identification"].clone());
+        std::fs::write(dir.path().join(&manifest), toml::to_string(&t).unwrap()).unwrap();
+        let o = servoid(dir.path(), &["check", &manifest]);
+        assert_eq!(o.code, 0, "{night}: {}", o.stderr);
+        // The table is not one of its own logs, in a folder of CSV logs.
+        assert!(
+            !o.stderr.contains("no run uses it"),
+            "{night}: {}",
+            o.stderr
+        );
+        let results = format!("{night}-out");
+        let o = servoid(dir.path(), &["run", &manifest, "--out", &results]);
+        assert_eq!(o.code, 0, "{night}: {}", o.stderr);
+        assert_eq!(
+            rig_of(&dir.path().join(&results).join("results.json")),
+            rig_of(&out.join("results.json")),
+            "{night}: the same rig as the hand-written manifest"
+        );
+    }
+    // A log no row uses is still a warning: the table alone is left out.
+    std::fs::copy(logs.join("exp1.csv"), dir.path().join("flat/extra.csv")).unwrap();
+    let o = servoid(dir.path(), &["check", "flat.toml"]);
+    assert_eq!(o.code, 0, "{}", o.stderr);
+    assert!(
+        o.stderr.contains(
+            "warning: flat/extra.csv: matched by [run_table] logs = \"flat\", but no run uses it"
+        ),
+        "{}",
+        o.stderr
+    );
+    assert!(!o.stderr.contains("specimens.csv"), "{}", o.stderr);
+}
+
+/// A night of logs without a run table: `init --table` writes one, a row
+/// per log, whose cells the lab must give are placeholders `servoid check`
+/// names by row and column; filled in from the hand-written manifest, the
+/// campaign gives its rig to the last digit.
+#[test]
+fn init_writes_a_run_table_to_fill_for_a_night_without_one() {
+    let dir = scratch();
+    let sim = bundled_simulation(dir.path(), false);
+    let out = dir.path().join("sim");
+    let o = servoid_into(dir.path(), "simulate", &sim, &out, &["--run"]);
+    assert_eq!(o.code, 0, "{}", o.stderr);
+    let reference = toml_of(&out.join("campaign.toml"));
+
+    let o = servoid(
+        dir.path(),
+        &[
+            "init",
+            "sim/logs",
+            "--table",
+            "night/runs.csv",
+            "--out",
+            "night.toml",
+        ],
+    );
+    assert_eq!(o.code, 0, "{}", o.stderr);
+    // 1 rig name, 7 P gains, 2 springs' and 4 specimens' 3 cells.
+    assert!(o.stdout.contains("22 placeholder(s)"), "{}", o.stdout);
+    let o = servoid(dir.path(), &["check", "night.toml"]);
+    assert_eq!(o.code, 2);
+    assert_eq!(
+        o.stderr.matches("a placeholder to fill").count(),
+        22,
+        "{}",
+        o.stderr
+    );
+    assert!(
+        o.stderr.contains(
+            "night/runs.csv: row 6 (run \"spring-k1\"), column stiffness_n_per_m: a placeholder to fill: the spring's stiffness in N/m"
+        ),
+        "{}",
+        o.stderr
+    );
+    // Writing over the table is refused, as over the manifest.
+    let again = servoid(
+        dir.path(),
+        &[
+            "init",
+            "sim/logs",
+            "--table",
+            "night/runs.csv",
+            "--out",
+            "other.toml",
+        ],
+    );
+    assert_eq!(again.code, 2);
+    assert!(
+        again.stderr.contains("night/runs.csv: already exists"),
+        "{}",
+        again.stderr
+    );
+
+    // The lab fills the table (as a spreadsheet would: every cell it
+    // knows, the proposed `log` cell kept) and the rig's name.
+    let text = std::fs::read_to_string(dir.path().join("night/runs.csv")).unwrap();
+    let mut lines = text.lines();
+    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+    assert_eq!(
+        header,
+        [
+            "id",
+            "role",
+            "p_gain",
+            "mass_kg",
+            "damping_ns_per_m",
+            "stiffness_n_per_m",
+            "log"
+        ]
+    );
+    let mut filled = header.join(",") + "\n";
+    for line in lines {
+        let id = line.split(',').next().unwrap();
+        let log = line.rsplit(',').next().unwrap();
+        assert_eq!(log, format!("../sim/logs/{id}.csv"));
+        let want = runs(&reference)
+            .iter()
+            .find(|x| x["id"].as_str() == Some(id))
+            .unwrap_or_else(|| panic!("{id} in the reference"));
+        let s = want.get("specimen");
+        let cell = |k: &str| {
+            s.and_then(|s| s.get(k))
+                .map(|v| v.to_string())
+                .unwrap_or_default()
+        };
+        filled += &format!(
+            "{id},{},{},{},{},{},{log}\n",
+            want["role"].as_str().unwrap(),
+            want["p_gain"],
+            cell("mass_kg"),
+            cell("damping_ns_per_m"),
+            cell("stiffness_n_per_m")
+        );
+    }
+    std::fs::write(dir.path().join("night/runs.csv"), filled).unwrap();
+    let mut t = toml_of(&dir.path().join("night.toml"));
+    t["rig"]["name"] = reference["rig"]["name"].clone();
+    t.insert("identification".into(), reference["identification"].clone());
+    std::fs::write(dir.path().join("night.toml"), toml::to_string(&t).unwrap()).unwrap();
+    let o = servoid(dir.path(), &["run", "night.toml", "--out", "filled"]);
+    assert_eq!(o.code, 0, "{}", o.stderr);
+    assert_eq!(
+        rig_of(&dir.path().join("filled/results.json")),
+        rig_of(&out.join("results.json")),
+        "the same rig as the hand-written manifest"
+    );
+}

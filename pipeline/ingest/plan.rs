@@ -103,6 +103,10 @@ pub enum LogFormat {
 }
 
 impl LogFormat {
+    /// The extensions [`LogFormat::from_path`] knows, as messages list them.
+    pub const EXTENSIONS: &'static str =
+        ".csv, .tsv, .parquet, .pq, .mat, .txt, .h5, .hdf5 or .tdms";
+
     /// The format a log's extension names (`.csv`, `.tsv`, `.parquet`,
     /// `.pq`, `.mat`, `.txt`, `.h5`, `.hdf5`, `.tdms`, in any case), if it
     /// names one.

@@ -841,7 +841,7 @@ fn check_log(
         bad(
             dpath.key("format"),
             format!(
-                "cannot tell the format of `{log}` from its extension; give format = \"csv\", \"parquet\", \"mat\" or \"daq_text\""
+                "cannot tell the format of `{log}` from its extension; give format = \"csv\", \"parquet\", \"mat\", \"daq_text\", \"hdf5\" or \"tdms\""
             ),
         );
         ok = false;

@@ -198,7 +198,10 @@ impl<'a> Document<'a> {
                 Value::String(text) => {
                     if let Some(rest) = text.strip_prefix(super::scaffold::PLACEHOLDER) {
                         let what = rest.trim_start();
-                        found.push(Problem::new(path, format!("a placeholder to fill: {what}")));
+                        found.push(Problem {
+                            placeholder: true,
+                            ..Problem::new(path, format!("a placeholder to fill: {what}"))
+                        });
                     }
                 }
                 Value::Object(map) => {
@@ -310,8 +313,18 @@ impl<'a> Document<'a> {
     /// The result when there is no problem; else every problem, with run ids,
     /// lines and columns, in file order.
     pub fn finish<R>(mut self, result: Option<R>) -> Result<R, ManifestError> {
-        if !self.placeholders.is_empty() {
+        // While `servoid init`'s placeholders are left (the manifest's, and
+        // a run table's cells), they are the only problems: the rest follow
+        // from them.
+        let cells: Vec<Problem> = self
+            .problems
+            .iter()
+            .filter(|p| p.placeholder)
+            .cloned()
+            .collect();
+        if !self.placeholders.is_empty() || !cells.is_empty() {
             self.problems = std::mem::take(&mut self.placeholders);
+            self.problems.extend(cells);
         }
         if let (true, Some(r)) = (self.problems.is_empty(), result) {
             return Ok(r);

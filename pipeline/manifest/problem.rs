@@ -23,6 +23,9 @@ pub struct Problem {
     /// For an unknown key, the known key its suggestion names: that key's
     /// own "missing" problem is then left out (it says the same thing).
     pub meant: Option<KeyPath>,
+    /// A value `servoid init` left for the lab to fill (a manifest's key or
+    /// a run table's cell): while any is left, only these are reported.
+    pub placeholder: bool,
 }
 
 /// A place in a run table.
@@ -46,6 +49,7 @@ impl Problem {
             table: None,
             message: message.into(),
             meant: None,
+            placeholder: false,
         }
     }
 
@@ -59,6 +63,7 @@ impl Problem {
             table: Some(place),
             message: message.into(),
             meant: None,
+            placeholder: false,
         }
     }
 }

@@ -221,7 +221,7 @@ pub struct RunTable {
     pub format: Option<TableFormat>,
     /// Where the logs are, relative to the manifest's folder: a glob
     /// (`logs/*.parquet`) or a folder (every file in it with a log extension:
-    /// csv, tsv, parquet, pq, mat, txt); hidden files (`.name`) are left out.
+    /// csv, tsv, parquet, pq, mat, txt, h5, hdf5, tdms); hidden files (`.name`) are left out.
     /// A row without a `log` cell takes the matched file whose stem is its
     /// id; when there is none, its run fails alone (the log is not there
     /// yet), and a matched file no run uses is a warning.

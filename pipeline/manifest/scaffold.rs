@@ -306,13 +306,29 @@ fn channel_line(out: &mut String, key: &str, p: &Proposed, units_hint: &str, opt
     let _ = writeln!(out, "{key} = {{ column = {column}, unit = {unit} }}");
 }
 
-/// The manifest text for `logs`, with `read` the result of reading each
-/// with the channels proposed for the first (same order as `logs`).
+/// Where a proposed manifest's runs are.
+#[derive(Debug, Clone)]
+pub enum Runs<'a> {
+    /// One `[[runs]]` table per log, each with what reading it with the
+    /// proposed channels gave (same order as the logs).
+    Blocks(&'a [ReadBack]),
+    /// A `[run_table]`: its file and the logs' folder as the manifest
+    /// names them (relative to it), with lines of comment on what `init`
+    /// found (rows matched to logs, logs read).
+    Table {
+        file: String,
+        logs: String,
+        comments: Vec<String>,
+    },
+}
+
+/// The manifest text for `logs`, with the channels proposed for the first
+/// and the runs as `runs` says.
 pub fn manifest_text(
     name: &str,
     logs: &[FoundLog],
     channels: &ProposedChannels,
-    read: &[ReadBack],
+    runs: &Runs<'_>,
 ) -> String {
     let mut out = String::new();
     let _ = writeln!(
@@ -383,8 +399,101 @@ pub fn manifest_text(
          # of a few minutes at 1-2 kHz; see docs/manifest.md.\n\
          [identification]\nband_hz = [0.5, 30.0]\ncoherence_min = 0.8\n",
     );
-    for (log, back) in logs.iter().zip(read) {
-        run_block(&mut out, log, back);
+    match runs {
+        Runs::Blocks(read) => {
+            for (log, back) in logs.iter().zip(*read) {
+                run_block(&mut out, log, back);
+            }
+        }
+        Runs::Table {
+            file,
+            logs,
+            comments,
+        } => {
+            out.push_str(
+                "\n# The runs are the table's rows (id, role, p_gain, the specimen's cells):\n\
+                 # see docs/manifest.md, \"Runs from a table\". A row's log is its `log`\n\
+                 # cell, else the log in `logs` whose stem is its id.\n",
+            );
+            for c in comments {
+                let _ = writeln!(out, "# {c}");
+            }
+            let _ = writeln!(
+                out,
+                "[run_table]\nfile = {}\nlogs = {}",
+                quoted(file),
+                quoted(logs)
+            );
+        }
+    }
+    out
+}
+
+/// The run table's columns as `servoid init --table` writes them.
+pub const TABLE_HEADER: [&str; 7] = [
+    "id",
+    "role",
+    "p_gain",
+    "mass_kg",
+    "damping_ns_per_m",
+    "stiffness_n_per_m",
+    "log",
+];
+
+/// A CSV cell: quoted (RFC 4180) where it holds a delimiter, a quote or a
+/// line break, or starts or ends with white space.
+fn csv_cell(text: &str) -> String {
+    let plain = !text.contains([',', '"', '\n', '\r']) && text.trim() == text;
+    if plain {
+        text.to_string()
+    } else {
+        format!("\"{}\"", text.replace('"', "\"\""))
+    }
+}
+
+/// A run table (CSV) with one row per log, for a lab to fill in a
+/// spreadsheet: the id from the file's name, the role where the name says
+/// it, every other cell the lab must give as a [`PLACEHOLDER`] (`servoid
+/// check` names each by row and column), and the `log` cell, `log_cells`,
+/// as the table's folder names it (same order as `logs`).
+pub fn run_table_text(logs: &[FoundLog], log_cells: &[String]) -> String {
+    let mut out = TABLE_HEADER.join(",");
+    out.push('\n');
+    for (log, cell) in logs.iter().zip(log_cells) {
+        let role = role_of(&log.stem).map(|(r, _)| r);
+        let filled = |what: &str| format!("{PLACEHOLDER} {what}");
+        let (mass, damping, stiffness) = match role {
+            Some("spring") => (
+                String::new(),
+                String::new(),
+                filled("the spring's stiffness in N/m"),
+            ),
+            Some("validation") => (
+                filled("the specimen's mass in kg"),
+                filled("its damping in N s/m"),
+                filled("its stiffness in N/m"),
+            ),
+            Some(_) => (String::new(), String::new(), String::new()),
+            None => (
+                filled("the specimen's mass in kg (empty unless a validation run)"),
+                filled("its damping in N s/m (empty unless a validation run)"),
+                filled("its stiffness in N/m (empty for a no_specimen or fit run)"),
+            ),
+        };
+        let row = [
+            manifest_name(&log.stem, "run"),
+            role.map(str::to_string).unwrap_or_else(|| {
+                filled("no_specimen, spring, validation or fit; the file's name does not say")
+            }),
+            filled("the controller's P gain in this run"),
+            mass,
+            damping,
+            stiffness,
+            cell.clone(),
+        ];
+        let cells: Vec<String> = row.iter().map(|c| csv_cell(c)).collect();
+        out.push_str(&cells.join(","));
+        out.push('\n');
     }
     out
 }
@@ -555,6 +664,47 @@ mod tests {
             [p.command.column, p.displacement.column, p.force.column]
                 .iter()
                 .all(Option::is_none)
+        );
+    }
+
+    /// The table `init --table` writes reads back, through the run table's
+    /// reader, to the cells it meant: a placeholder with commas in it is
+    /// one cell, a role the name gives is the role.
+    #[test]
+    fn a_proposed_run_table_reads_back_cell_for_cell() {
+        let log = |stem: &str| FoundLog {
+            path: format!("logs/{stem}.csv"),
+            stem: stem.into(),
+            inspected: Inspected {
+                format: crate::ingest::LogFormat::Csv,
+                columns: cols(&["t", "u", "x"]),
+                rate_hz: None,
+                csv_delimiter: Some(','),
+            },
+        };
+        let logs = [log("log 1"), log("k2")];
+        let cells = ["logs/log 1.csv".to_string(), "logs/k2.csv".to_string()];
+        let text = run_table_text(&logs, &cells);
+        let t = crate::ingest::table_from_bytes(
+            std::path::Path::new("runs.csv"),
+            text.into_bytes(),
+            crate::ingest::TableFormat::Csv,
+        )
+        .unwrap();
+        assert_eq!(t.columns, TABLE_HEADER);
+        let cell = |row: usize, c: &str| t.rows[row][t.column(c).unwrap()].clone();
+        assert_eq!(cell(0, "id").as_deref(), Some("log-1"));
+        assert_eq!(
+            cell(0, "role").as_deref(),
+            Some("FILL: no_specimen, spring, validation or fit; the file's name does not say")
+        );
+        assert_eq!(cell(0, "log").as_deref(), Some("logs/log 1.csv"));
+        assert_eq!(cell(1, "role").as_deref(), Some("spring"));
+        assert_eq!(cell(1, "mass_kg"), None);
+        assert!(
+            cell(1, "stiffness_n_per_m")
+                .unwrap()
+                .starts_with(PLACEHOLDER)
         );
     }
 

@@ -18,6 +18,7 @@ use super::document::{closest, suggest};
 use super::keypath::{KeyPath, Seg};
 use super::problem::{Problem, TablePlace};
 use super::raw::{Role, RunTable, Specimen};
+use super::scaffold::PLACEHOLDER;
 use crate::ingest::{self, LogFormat, TableFormat};
 use crate::simulate::specimen::SpecimenModel;
 
@@ -218,10 +219,16 @@ pub(super) fn check_table(
         }
     };
     let (columns, annotations) = check_columns(&spec.file, &table.columns, problems);
-    let matched = spec
+    let mut matched = spec
         .logs
         .as_ref()
         .map(|l| match_logs(l, base_dir, problems));
+    // The table is not one of its own logs (it may sit among them, a CSV
+    // in a folder of CSV logs).
+    if let Some(Some(m)) = &mut matched {
+        let own = same_file(&path);
+        m.files.retain(|f| same_file(f) != own);
+    }
     let source = match &matched {
         None => LogSource::None,
         Some(None) => LogSource::Broken,
@@ -394,7 +401,41 @@ fn check_row(
     predict: bool,
     problems: &mut Vec<Problem>,
 ) -> (RowKey, Option<TableRun>) {
-    let id = row.cell("id");
+    let id = row.cell("id").filter(|c| !c.starts_with(PLACEHOLDER));
+    // A cell `servoid init --table` left to fill: that is the row's problem
+    // until it is filled (its other checks would only repeat it).
+    let mut left = false;
+    let mut in_order: Vec<(&&str, &usize)> = row.columns.iter().collect();
+    in_order.sort_by_key(|(_, i)| **i);
+    for (name, i) in in_order {
+        if let Some(what) = row
+            .cells
+            .get(*i)
+            .and_then(|c| c.as_deref()?.strip_prefix(PLACEHOLDER))
+        {
+            problems.push(Problem {
+                placeholder: true,
+                ..row.problem(
+                    id,
+                    Some(name),
+                    format!("a placeholder to fill: {}", what.trim_start()),
+                )
+            });
+            left = true;
+        }
+    }
+    if left {
+        let role = row
+            .cell("role")
+            .and_then(|r| Role::ALL.into_iter().find(|x| x.as_str() == r));
+        let key = RowKey {
+            row: row.number,
+            id: id.map(str::to_string),
+            role,
+            has_mass: false,
+        };
+        return (key, None);
+    }
     let before = problems.len();
     let mut bad = |column: &str, message: String| {
         problems.push(row.problem(id, Some(column), message));
@@ -586,7 +627,8 @@ fn row_log(
         Some(format) => Some(Some((path, format))),
         None => {
             bad(format!(
-                "cannot tell the format of `{shown}` from its extension; use .csv, .tsv, .parquet, .pq, .mat or .txt"
+                "cannot tell the format of `{shown}` from its extension; use {}",
+                LogFormat::EXTENSIONS
             ));
             None
         }

@@ -165,6 +165,9 @@ pub struct Checked {
     pub runs: usize,
     /// Runs whose log is not there (yet): each will fail alone when run.
     pub missing_logs: Vec<(String, PathBuf)>,
+    /// The manifest's warnings (a run table's logs no row uses, ...), as
+    /// results.json would carry them.
+    pub warnings: Vec<String>,
 }
 
 impl std::fmt::Display for Checked {
@@ -190,12 +193,14 @@ pub fn check(path: &Path) -> Result<Checked, ManifestError> {
                     _ => None,
                 })
                 .collect(),
+            warnings: c.warnings.clone(),
         },
         Loaded::Simulation(p) => Checked {
             kind: "simulation",
             name: p.manifest.simulation.name.clone(),
             runs: p.runs.len(),
             missing_logs: Vec::new(),
+            warnings: Vec::new(),
         },
     })
 }
