@@ -184,11 +184,12 @@ pub const EXIT_USAGE: u8 = 2;
 pub const EXIT_ALARM: u8 = 3;
 
 pub fn main() -> ExitCode {
-    // A panic inside polars on a damaged log is caught and reported as the
-    // run's error; its raw panic message would only confuse the log.
+    // A panic inside a log reader (polars, tedium, hdf5-pure) on a damaged
+    // log is caught and reported as the run's error; its raw panic message
+    // would only confuse the log.
     let default_hook = std::panic::take_hook();
     std::panic::set_hook(Box::new(move |info| {
-        if !crate::ingest::caught_polars_panic(info) {
+        if !crate::ingest::caught_reader_panic(info) {
             default_hook(info);
         }
     }));

@@ -33,7 +33,8 @@ pub const TARGETS: &[(&str, Target)] = &[
     ("manifest_numbers", manifest_numbers),
 ];
 
-/// Lets the panics `servoid::ingest` catches inside polars unwind to it:
+/// Lets the panics `servoid::ingest` catches inside the readers it calls
+/// (polars, tedium, hdf5-pure) unwind to it:
 /// libFuzzer's hook aborts on every panic, which would report a damaged
 /// file that servoid handles as a crash. Every other panic still aborts.
 pub fn let_caught_panics_unwind() {
@@ -41,7 +42,7 @@ pub fn let_caught_panics_unwind() {
     ONCE.call_once(|| {
         let next = std::panic::take_hook();
         std::panic::set_hook(Box::new(move |info| {
-            if !ingest::caught_polars_panic(info) {
+            if !ingest::caught_reader_panic(info) {
                 next(info);
             }
         }));

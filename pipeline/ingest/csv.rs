@@ -108,7 +108,7 @@ fn by_polars(
     let cleaned = without_blank_lines(bytes, plan.csv.skip_lines);
     // A panic inside polars (damaged input) is a refusal like its errors:
     // the line parser then reads the file or names what is wrong with it.
-    let df = super::guard_polars(|| {
+    let df = super::guard_reader(|| {
         CsvReadOptions::default()
             .with_has_header(plan.csv.header)
             .with_skip_lines(plan.csv.skip_lines)

@@ -38,7 +38,25 @@ pub(super) fn read<'a>(
     plan: &'a LogPlan,
     matlab: bool,
 ) -> Result<Raw<'a>, IngestError> {
-    arrays::read(path, &open(path, bytes, matlab)?, plan)
+    guarded(path, matlab, || {
+        arrays::read(path, &open(path, bytes, matlab)?, plan)
+    })
+}
+
+/// `f`, with a panic inside hdf5-pure on damaged bytes reported as the
+/// file's damage.
+fn guarded<R>(
+    path: &Path,
+    matlab: bool,
+    f: impl FnOnce() -> Result<R, IngestError>,
+) -> Result<R, IngestError> {
+    super::guard_reader(f).unwrap_or_else(|p| {
+        Err(unreadable(
+            path,
+            matlab,
+            &format!("the HDF5 reader failed on damaged bytes ({p})"),
+        ))
+    })
 }
 
 /// The numeric datasets of an HDF5 log, with the units they state.
@@ -47,7 +65,9 @@ pub(super) fn columns(
     bytes: &[u8],
     matlab: bool,
 ) -> Result<Vec<super::LogColumn>, IngestError> {
-    Ok(arrays::columns(&open(path, bytes, matlab)?))
+    guarded(path, matlab, || {
+        Ok(arrays::columns(&open(path, bytes, matlab)?))
+    })
 }
 
 fn open<'p>(path: &'p Path, bytes: &[u8], matlab: bool) -> Result<Hdf5<'p>, IngestError> {

@@ -747,25 +747,27 @@ pub fn off_pool<R: Send>(f: impl FnOnce() -> R + Send) -> R {
     })
 }
 
-/// Calls into polars running now under [`guard_polars`].
+/// Calls into a third-party reader running now under [`guard_reader`].
 static GUARDED: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
 
-/// A panic inside polars, caught by `guard_polars`, with its message.
+/// A panic inside a third-party reader (polars, tedium, hdf5-pure), caught
+/// by `guard_reader`, with its message.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 #[error("{message}")]
-pub struct PolarsPanic {
+pub struct ReaderPanic {
     pub message: String,
 }
 
-/// A call into polars that may panic on damaged input (the fuzz targets
-/// found index panics in its CSV and Parquet readers): the panic becomes
-/// `Err` with its message, and the reader reports the file as unreadable.
-pub(crate) fn guard_polars<R>(f: impl FnOnce() -> R) -> Result<R, PolarsPanic> {
+/// A call into a third-party reader that may panic on damaged input (the
+/// fuzz targets found index panics in polars' CSV and Parquet readers and
+/// a division by zero in tedium's TDMS reader): the panic becomes `Err`
+/// with its message, and the reader reports the file as unreadable.
+pub(crate) fn guard_reader<R>(f: impl FnOnce() -> R) -> Result<R, ReaderPanic> {
     use std::sync::atomic::Ordering;
     GUARDED.fetch_add(1, Ordering::SeqCst);
     let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(f));
     GUARDED.fetch_sub(1, Ordering::SeqCst);
-    result.map_err(|payload| PolarsPanic {
+    result.map_err(|payload| ReaderPanic {
         message: payload
             .downcast_ref::<&str>()
             .map(|s| s.to_string())
@@ -774,12 +776,19 @@ pub(crate) fn guard_polars<R>(f: impl FnOnce() -> R) -> Result<R, PolarsPanic> {
     })
 }
 
-/// Whether a panic is one `guard_polars` catches: raised in polars code
-/// while a guarded call runs. A panic hook that skips these keeps a damaged
-/// file's report to the reader's own error (the CLI's, the fuzz targets').
-pub fn caught_polars_panic(info: &std::panic::PanicHookInfo<'_>) -> bool {
+/// The crates whose panics [`guard_reader`] catches, as their source paths
+/// name them.
+const GUARDED_CRATES: [&str; 3] = ["polars", "tedium", "hdf5-pure"];
+
+/// Whether a panic is one `guard_reader` catches: raised in a guarded
+/// crate's code while a guarded call runs (a panic of servoid's own is
+/// never one). A panic hook that skips these keeps a damaged file's report
+/// to the reader's own error (the CLI's, the fuzz targets').
+pub fn caught_reader_panic(info: &std::panic::PanicHookInfo<'_>) -> bool {
     GUARDED.load(std::sync::atomic::Ordering::SeqCst) > 0
-        && info.location().is_some_and(|l| l.file().contains("polars"))
+        && info
+            .location()
+            .is_some_and(|l| GUARDED_CRATES.iter().any(|c| l.file().contains(c)))
 }
 
 /// SHA-256 of `bytes` as lowercase hexadecimal.

@@ -87,9 +87,9 @@ fn open<'a>(path: &Path, bytes: &'a [u8]) -> Result<(Reader<'a>, Vec<String>), I
     // A panic inside polars on damaged bytes (found by the Parquet fuzz
     // target) is reported as such, not a crash.
     let damaged =
-        |p: super::PolarsPanic| format(FormatProblem::ParquetDamaged { message: p.message });
+        |p: super::ReaderPanic| format(FormatProblem::ParquetDamaged { message: p.message });
     check_footer(bytes).map_err(|source| format(FormatProblem::ParquetMetadata { source }))?;
-    let schema = super::guard_polars(|| reader.schema())
+    let schema = super::guard_reader(|| reader.schema())
         .map_err(damaged)?
         .map_err(|source| format(FormatProblem::ParquetUnreadable { source }))?;
     Ok((reader, schema.iter_names().map(|n| n.to_string()).collect()))
@@ -103,7 +103,7 @@ pub(super) fn read<'a>(
 ) -> Result<Raw<'a>, IngestError> {
     let format = |problem| IngestError::format(path, problem);
     let damaged =
-        |p: super::PolarsPanic| format(FormatProblem::ParquetDamaged { message: p.message });
+        |p: super::ReaderPanic| format(FormatProblem::ParquetDamaged { message: p.message });
     let (mut reader, names) = open(path, bytes)?;
     check_pages(bytes, &mut reader)
         .map_err(|source| format(FormatProblem::ParquetMetadata { source }))?;
@@ -130,7 +130,7 @@ pub(super) fn read<'a>(
     let mut projection = index.clone();
     projection.sort_unstable();
     projection.dedup();
-    let df = super::guard_polars(|| reader.with_projection(Some(projection)).finish())
+    let df = super::guard_reader(|| reader.with_projection(Some(projection)).finish())
         .map_err(damaged)?
         .map_err(|source| format(FormatProblem::ParquetRead { source }))?;
     if df.height() == 0 {
@@ -247,7 +247,7 @@ pub(super) fn check_pages(
     bytes: &[u8],
     reader: &mut ParquetReader<Cursor<&[u8]>>,
 ) -> Result<(), ParquetDamage> {
-    let meta = match super::guard_polars(|| reader.get_metadata().cloned()) {
+    let meta = match super::guard_reader(|| reader.get_metadata().cloned()) {
         Ok(Ok(meta)) => meta,
         // polars refuses the footer: the read that follows says why.
         Ok(Err(_)) => return Ok(()),

@@ -227,7 +227,7 @@ pub fn table_from_bytes_as(
         super::parquet::check_footer(&bytes)
             .map_err(|source| fail(TableProblem::Metadata { source }))?;
     }
-    let df = super::off_pool(|| super::guard_polars(read)).map_err(|p| {
+    let df = super::off_pool(|| super::guard_reader(read)).map_err(|p| {
         fail(TableProblem::Damaged {
             format: match format {
                 TableFormat::Csv => "CSV",

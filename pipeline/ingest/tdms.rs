@@ -24,7 +24,19 @@ pub(super) fn read<'a>(
     bytes: &[u8],
     plan: &'a LogPlan,
 ) -> Result<Raw<'a>, IngestError> {
-    arrays::read(path, &open(path, bytes)?, plan)
+    guarded(path, || arrays::read(path, &open(path, bytes)?, plan))
+}
+
+/// `f`, with a panic inside tedium on damaged bytes (fuzzing found a
+/// division by zero in its reader of interleaved channels) reported as the
+/// file's damage.
+fn guarded<R>(path: &Path, f: impl FnOnce() -> Result<R, IngestError>) -> Result<R, IngestError> {
+    super::guard_reader(f).unwrap_or_else(|p| {
+        Err(unreadable(
+            path,
+            &format!("the TDMS reader failed on damaged bytes ({p})"),
+        ))
+    })
 }
 
 /// A TDMS log's channels with their units, and the rate its waveforms
@@ -33,12 +45,14 @@ pub(super) fn columns(
     path: &Path,
     bytes: &[u8],
 ) -> Result<(Vec<super::LogColumn>, Option<f64>), IngestError> {
-    let t = open(path, bytes)?;
-    let rate = match t.own_time(path) {
-        Ok(RawTime::Rate { hz, .. }) if hz.is_finite() && hz > 0.0 => Some(hz),
-        _ => None,
-    };
-    Ok((arrays::columns(&t), rate))
+    guarded(path, || {
+        let t = open(path, bytes)?;
+        let rate = match t.own_time(path) {
+            Ok(RawTime::Rate { hz, .. }) if hz.is_finite() && hz > 0.0 => Some(hz),
+            _ => None,
+        };
+        Ok((arrays::columns(&t), rate))
+    })
 }
 
 fn open<'p, 'b>(path: &'p Path, bytes: &'b [u8]) -> Result<Tdms<'p, 'b>, IngestError> {
