@@ -21,8 +21,18 @@ use serde::{Deserialize, Serialize};
 /// Fewest earlier entries a parameter is checked against.
 pub const MIN_HISTORY: usize = 3;
 
-/// The parameters checked, in this order.
-pub const PARAMETERS: [&str; 4] = ["beta1", "a1b0", "a2", "a3"];
+/// The parameters checked, in this order: the rig's four, and the night's
+/// actuator delay ([`Entry::delay_s`]) where the night measured one.
+pub const PARAMETERS: [&str; 5] = ["beta1", "a1b0", "a2", "a3", "delay"];
+
+/// The least move of the delay that raises its alarm (s). The delay has no
+/// stated std of its own, so its limit is the history's scatter (about
+/// 0.07 ms between nights of 20 s sweeps with 0.1 mm of LVDT noise,
+/// `tests/drift.rs`), which a handful of nights can understate by chance;
+/// the floor keeps a stable rig from alarming on such a night. A quarter of
+/// a millisecond is a fraction of the delay an RTHS loop's compensation is
+/// tuned to (tens of milliseconds for the paper's actuator).
+pub const DELAY_FLOOR_S: f64 = 0.25e-3;
 
 /// One campaign's rig in the history.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
@@ -50,10 +60,17 @@ pub struct Entry {
     pub a2_std: Option<f64>,
     pub a3: f64,
     pub a3_std: Option<f64>,
+    /// The night's actuator delay by cross-correlation (s): the median over
+    /// its no-specimen runs, or over all its runs that measured one when it
+    /// has none (`tracking::xcorr_delay`). None in entries written before
+    /// servoid measured it, and for a night without logs.
+    #[serde(default)]
+    pub delay_s: Option<f64>,
 }
 
 impl Entry {
-    /// A parameter's value and std, a1b0 referred to P = 1.
+    /// A parameter's value and std, a1b0 referred to P = 1; None for the
+    /// delay of an entry without one (and for an unknown name).
     pub fn parameter(&self, name: &str) -> Option<(f64, Option<f64>)> {
         let per_p = |v: f64| v / self.p_gain;
         Some(match name {
@@ -61,6 +78,7 @@ impl Entry {
             "a1b0" => (per_p(self.a1b0), self.a1b0_std.map(per_p)),
             "a2" => (self.a2, self.a2_std),
             "a3" => (self.a3, self.a3_std),
+            "delay" => (self.delay_s?, None),
             _ => return None,
         })
     }
@@ -96,13 +114,15 @@ pub struct Check {
 }
 
 /// Check each parameter of `current` against `earlier` (this rig's entries
-/// before it, oldest first).
+/// before it, oldest first). The delay is checked where `current` has one,
+/// against the earlier entries that have one, and its limit is at least
+/// [`DELAY_FLOOR_S`].
 pub fn check(earlier: &[Entry], current: &Entry, rule: Rule) -> Vec<Check> {
     let window = &earlier[earlier.len().saturating_sub(rule.window)..];
     PARAMETERS
         .iter()
-        .map(|&name| {
-            let (value, std) = current.parameter(name).expect("a known parameter");
+        .filter_map(|&name| {
+            let (value, std) = current.parameter(name)?;
             let past: Vec<f64> = window
                 .iter()
                 .filter_map(|e| e.parameter(name).map(|p| p.0))
@@ -121,7 +141,10 @@ pub fn check(earlier: &[Entry], current: &Entry, rule: Rule) -> Vec<Check> {
             if past.len() >= MIN_HISTORY {
                 let median = median(&past);
                 let scatter = difference_scatter(&past);
-                let limit = rule.threshold * std.unwrap_or(0.0).max(scatter);
+                let mut limit = rule.threshold * std.unwrap_or(0.0).max(scatter);
+                if name == "delay" {
+                    limit = limit.max(DELAY_FLOOR_S);
+                }
                 let deviation = value - median;
                 c.median = Some(median);
                 c.history_scatter = Some(scatter);
@@ -129,7 +152,7 @@ pub fn check(earlier: &[Entry], current: &Entry, rule: Rule) -> Vec<Check> {
                 c.deviation = Some(deviation);
                 c.alarm = deviation.abs() > limit;
             }
-            c
+            Some(c)
         })
         .collect()
 }
@@ -176,6 +199,7 @@ mod tests {
             a2_std: Some(300.0),
             a3: 16.1,
             a3_std: Some(0.01),
+            delay_s: None,
         }
     }
 

@@ -19,11 +19,14 @@
 //! 6. The stages, each owning its settings type: `ingest` (the only module
 //!    that reads data files), `frf`, `fit`, `identify` (Eqs. 18-20),
 //!    `validate` (Eqs. 47-48), `sensitivity`, `simulate`, `drift` (the rig's
-//!    history and its alarm rule). Within this layer
-//!    three uses run one way only: `sensitivity` propagates through
+//!    history and its alarm rule), `tracking` (how the actuator follows its
+//!    command: delays, the frequency evaluation index, the tracking
+//!    indicator, the RTHS benchmark's errors). Within this layer
+//!    four uses run one way only: `sensitivity` propagates through
 //!    `identify`'s algebra and predicts planned runs' covariance with
-//!    `fit`'s Jacobian, and `validate` drives models with `simulate`'s
-//!    exact discretisation and integrators.
+//!    `fit`'s Jacobian, `validate` drives models with `simulate`'s
+//!    exact discretisation and integrators, and `tracking` measures in
+//!    `validate`'s windows of a sweep.
 //! 7. `model`: the plant of Eq. 10 and its canonical form (Eqs. 34-35).
 //! 8. `lti`: transfer functions and state spaces.
 //! 9. `poly` (real polynomials) and `units` (physical units and their SI
@@ -48,5 +51,6 @@ pub mod results;
 pub mod run;
 pub mod sensitivity;
 pub mod simulate;
+pub mod tracking;
 pub mod units;
 pub mod validate;

@@ -442,6 +442,10 @@ pub struct RunResult {
     pub fit: Option<FitSummary>,
     /// Measured vs simulated displacement (Eqs. 47-48), when the run has a log.
     pub validation: Option<ValidationMetrics>,
+    /// How the actuator followed its command, when the run has a log:
+    /// measured, and for a validation run as the identified model predicts
+    /// it for the same command.
+    pub tracking: Option<RunTracking>,
     /// The log this run read, when it has one.
     pub log: Option<LogInfo>,
     /// A run table row's cells in the lab's own columns (a `notes`, an
@@ -462,6 +466,17 @@ pub struct LogInfo {
 }
 
 pub use crate::validate::{SimplifiedCcf, ValidationMetrics, WindowErrors};
+
+/// A run's tracking measures (`tracking::measure`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+pub struct RunTracking {
+    /// The log's displacement against its command.
+    pub measured: crate::tracking::Tracking,
+    /// The displacement the identified rig with the run's specimen predicts
+    /// for the measured command (validation runs): a model that predicts
+    /// the measured tracking is one to design a compensator on.
+    pub predicted: Option<crate::tracking::Tracking>,
+}
 
 /// A transfer-function fit to a run's FRF.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]

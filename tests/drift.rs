@@ -13,6 +13,12 @@ use crate::util::{scratch, servoid_into, write};
 /// One night of the paper's identification runs (no specimen and two
 /// springs; 20 s chirps at 2048 Hz), the rig's beta1 as given.
 fn night_manifest(beta1: f64, seed: u64) -> String {
+    night_manifest_delayed(beta1, seed, 0.0)
+}
+
+/// The same with the displacement transducer `delay_s` late: the actuator's
+/// measured delay grows by as much.
+fn night_manifest_delayed(beta1: f64, seed: u64, delay_s: f64) -> String {
     format!(
         r#"schema_version = 1
 
@@ -46,6 +52,7 @@ unit = "mm"
 [instrument.displacement]
 unit = "mm"
 noise_rms = 0.1
+delay_s = {delay_s:e}
 
 [instrument.force]
 unit = "kN"
@@ -78,12 +85,12 @@ specimen = {{ stiffness_n_per_m = 88540.0 }}
 /// Simulate night `n` and run it into `out`: (exit code, results.json,
 /// stderr).
 fn night(dir: &Path, out: &Path, n: usize, beta1: f64) -> (i32, Value, String) {
+    night_of(dir, out, n, &night_manifest(beta1, 100 + n as u64))
+}
+
+fn night_of(dir: &Path, out: &Path, n: usize, manifest: &str) -> (i32, Value, String) {
     let name = format!("night-{n}");
-    let sim = write(
-        dir,
-        &format!("{name}.toml"),
-        &night_manifest(beta1, 100 + n as u64),
-    );
+    let sim = write(dir, &format!("{name}.toml"), manifest);
     let folder = dir.join(&name);
     let o = servoid_into(dir, "simulate", &sim, &folder, &["--quiet"]);
     assert_eq!(o.code, 0, "{}", o.stderr);
@@ -320,4 +327,82 @@ fn a_renamed_rig_is_told_it_starts_a_new_history() {
     let results = run_as("shake table 2");
     let warnings = results["warnings"].to_string();
     assert!(!warnings.contains("starts a new history"), "{warnings}");
+}
+
+/// A transducer (or valve) that adds 0.5 ms of delay a night: the night's
+/// measured delay grows by as much (within the 20 s sweeps' night-to-night
+/// scatter, about 0.07 ms here), and the delay's alarm fires where the rule
+/// restated here predicts from the reported delays: on night 3, the first
+/// with three nights before it, whose median is a whole millisecond behind.
+#[test]
+fn a_delay_that_grows_raises_the_delay_alarm_on_the_night_the_rule_predicts() {
+    let dir = scratch();
+    let out = dir.path().join("out");
+    let step = 0.5e-3;
+    let mut delays = Vec::new();
+    let mut raised = Vec::new();
+    for n in 0..6 {
+        let manifest = night_manifest_delayed(267.0, 300 + n as u64, step * n as f64);
+        let (code, results, stderr) = night_of(dir.path(), &out, n, &manifest);
+        let checks = results["drift"]["checks"].as_array().unwrap();
+        let delay = checks
+            .iter()
+            .find(|c| c["parameter"] == "delay")
+            .unwrap_or_else(|| panic!("night {n}: a delay check in {checks:?}"));
+        delays.push(delay["value"].as_f64().unwrap());
+        let alarm = delay["alarm"].as_bool().unwrap();
+        if alarm {
+            assert_eq!(code, 3, "night {n}: {stderr}");
+            assert!(
+                stderr.contains("ALARM: rig `frame B`: delay = "),
+                "{stderr}"
+            );
+        }
+        raised.push(alarm);
+    }
+    // The measured delay follows the transducer's, night by night, within
+    // its scatter.
+    for n in 1..delays.len() {
+        let grew = delays[n] - delays[0];
+        assert!(
+            (grew - step * n as f64).abs() < 0.25e-3,
+            "night {n}: grew {grew} s, not {} s: {delays:?}",
+            step * n as f64
+        );
+    }
+    // The rule, restated: the median of up to 10 earlier values (at least
+    // 3), the limit max(4 x their difference scatter, 0.25 ms).
+    fn median(v: &[f64]) -> f64 {
+        let mut s = v.to_vec();
+        s.sort_by(f64::total_cmp);
+        let n = s.len();
+        if n % 2 == 1 {
+            s[n / 2]
+        } else {
+            (s[n / 2 - 1] + s[n / 2]) / 2.0
+        }
+    }
+    let predicted: Vec<bool> = (0..delays.len())
+        .map(|n| {
+            let past = &delays[n.saturating_sub(10)..n];
+            if past.len() < 3 {
+                return false;
+            }
+            let d: Vec<f64> = past.windows(2).map(|w| w[1] - w[0]).collect();
+            let md = median(&d);
+            let mad = median(&d.iter().map(|x| (x - md).abs()).collect::<Vec<_>>());
+            let limit = (4.0 * 1.4826 * mad / 2f64.sqrt()).max(0.25e-3);
+            (delays[n] - median(past)).abs() > limit
+        })
+        .collect();
+    assert_eq!(raised, predicted, "delays: {delays:?}");
+    assert_eq!(
+        raised.iter().position(|a| *a),
+        Some(3),
+        "the first alarm on night 3: {delays:?}"
+    );
+    crate::util::note(&format!(
+        "drift: the bare actuator's delay {:.3} ms on night 0, growing 0.5 ms a night; the delay alarm on night 3",
+        1e3 * delays[0]
+    ));
 }

@@ -25,6 +25,7 @@ const LAYERS: &[&[&str]] = &[
         "sensitivity",
         "simulate",
         "drift",
+        "tracking",
     ],
     &["model"],
     &["lti"],
@@ -36,6 +37,7 @@ const WITHIN_LAYER: &[(&str, &str)] = &[
     ("sensitivity", "identify"),
     ("sensitivity", "fit"),
     ("validate", "simulate"),
+    ("tracking", "validate"),
 ];
 
 fn layer_of(module: &str) -> Option<usize> {

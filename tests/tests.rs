@@ -32,3 +32,4 @@ mod sensitivity;
 mod shards;
 mod simulate;
 mod slurm;
+mod tracking;

@@ -1,7 +1,8 @@
 //! The rig history as a Parquet table, one row per campaign (see
 //! `servoid::drift`), for the next campaign and for anyone who plots a
 //! rig's life in polars or pandas. Units: beta1 and a3 in 1/s, a1b0 in
-//! N/(m s^2) at the row's p_gain, a2 in N/m. Same entries, same bytes.
+//! N/(m s^2) at the row's p_gain, a2 in N/m, the delay in s. Same entries,
+//! same bytes.
 
 use std::path::Path;
 
@@ -29,6 +30,10 @@ pub const COLUMNS: [&str; 15] = [
     "a3_std",
     "servoid_version",
 ];
+
+/// Columns written after those, which a table written before them lacks
+/// (read as absent).
+pub const OPTIONAL_COLUMNS: [&str; 1] = ["delay_s"];
 
 /// Write the history atomically: readers see the old table or the new.
 /// `extra` are columns of the lab's own (name, a cell per entry), written
@@ -66,6 +71,7 @@ pub fn write(
         Column::new("a3".into(), num(|e| e.a3)),
         Column::new("a3_std".into(), opt(|e| e.a3_std)),
         Column::new("servoid_version".into(), text(|e| &e.servoid_version)),
+        Column::new("delay_s".into(), opt(|e| e.delay_s)),
     ];
     cols.extend(
         extra

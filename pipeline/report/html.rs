@@ -83,6 +83,7 @@ impl<'a> Pages<'a> {
         env.add_filter("num", num);
         env.add_filter("pm", pm);
         env.add_filter("pct", pct);
+        env.add_filter("ms", ms);
         env.add_filter("specimen", specimen);
         env.add_filter("poles", poles);
         env.add_template("style.html", STYLE)?;
@@ -178,6 +179,14 @@ pub fn format_number(x: f64, sig: usize) -> String {
 
 fn num(v: Value, sig: Option<usize>) -> String {
     as_f64(&v).map_or_else(|| "\u{2013}".into(), |x| format_number(x, sig.unwrap_or(4)))
+}
+
+/// Seconds as milliseconds, to `sig` significant digits (4).
+fn ms(v: Value, sig: Option<usize>) -> String {
+    as_f64(&v).map_or_else(
+        || "\u{2013}".into(),
+        |x| format_number(x * 1e3, sig.unwrap_or(4)),
+    )
 }
 
 fn pm(v: Value) -> String {

@@ -117,6 +117,31 @@ fn entry_of(campaign: &Campaign, results: &Results, rig: &RigResult) -> Entry {
         a2_std: rig.a2.std,
         a3: rig.a3.value,
         a3_std: rig.a3.std,
+        delay_s: night_delay(results),
+    }
+}
+
+/// The night's actuator delay: the median of its no-specimen runs'
+/// measured delays (the actuator alone), or of all its runs' when it has
+/// none; None when no run measured one.
+fn night_delay(results: &Results) -> Option<f64> {
+    let delays = |bare: bool| -> Vec<f64> {
+        results
+            .runs
+            .iter()
+            .filter(|r| !bare || r.role == crate::manifest::Role::NoSpecimen)
+            .filter_map(|r| r.tracking.as_ref()?.measured.delay_xcorr_s)
+            .collect()
+    };
+    let mut d = delays(true);
+    if d.is_empty() {
+        d = delays(false);
+    }
+    d.sort_by(f64::total_cmp);
+    match d.len() {
+        0 => None,
+        n if n % 2 == 1 => Some(d[n / 2]),
+        n => Some(0.5 * (d[n / 2 - 1] + d[n / 2])),
     }
 }
 
@@ -317,7 +342,11 @@ pub(super) enum HistoryError {
 /// its other columns.
 fn entries(t: &Table) -> Result<(Vec<Entry>, Extra), HistoryError> {
     let others: Vec<usize> = (0..t.columns.len())
-        .filter(|&i| !report::history::COLUMNS.contains(&t.columns[i].as_str()))
+        .filter(|&i| {
+            let c = t.columns[i].as_str();
+            !report::history::COLUMNS.contains(&c)
+                && !report::history::OPTIONAL_COLUMNS.contains(&c)
+        })
         .collect();
     let extra = Extra {
         names: others.iter().map(|&i| t.columns[i].clone()).collect(),
@@ -337,6 +366,8 @@ fn servoid_entries(t: &Table) -> Result<Vec<Entry>, HistoryError> {
         .map(|c| col(c))
         .collect::<Result<_, _>>()?;
     let at = |k: usize| report::history::COLUMNS[k];
+    // Written since servoid measured the delay; an older table has none.
+    let delay = t.column("delay_s");
     t.rows
         .iter()
         .enumerate()
@@ -382,6 +413,14 @@ fn servoid_entries(t: &Table) -> Result<Vec<Entry>, HistoryError> {
                 a3: num(12)?,
                 a3_std: opt(13)?,
                 servoid_version: text(14)?,
+                delay_s: match delay.and_then(|c| row[c].clone()) {
+                    None => None,
+                    Some(v) => Some(v.parse::<f64>().map_err(|_| HistoryError::NotANumber {
+                        row: row_no,
+                        column: "delay_s",
+                        value: v.clone(),
+                    })?),
+                },
             })
         })
         .collect()

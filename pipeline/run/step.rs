@@ -13,14 +13,18 @@ use crate::fit::adequacy::{self, Adequacy, Residuals};
 use crate::fit::{self, DelayPlan, Intersample, TfFit};
 use crate::frf::{self, Frf};
 use crate::ingest::{IngestError, Log, LogFile};
+use crate::lti::TransferFunction;
 use crate::manifest::{Campaign, IdentificationPlan, Role, RunPlan, RunSource};
 use crate::model::{self, LinearSpecimen, RigParams};
 use crate::report::figures::catalogue::{self, ForceBins, OverlayRun, Prediction};
 use crate::report::tables::RunTables;
 use crate::report::{FigureSpec, Measured};
-use crate::results::{DelayTestResult, FitSummary, LogInfo, RunResult, Status, TfResult, TfSource};
+use crate::results::{
+    DelayTestResult, FitSummary, LogInfo, RunResult, RunTracking, Status, TfResult, TfSource,
+};
 use crate::sensitivity::NoiseProfile;
 use crate::simulate::specimen::SpecimenModel;
+use crate::tracking::{self, FrfBins, Tracking};
 use crate::validate::csi::Csi;
 use crate::validate::{self, Record, ValidateError};
 
@@ -210,8 +214,16 @@ pub(super) fn without_rig(
             kept.noise = noise_profile(plan, st);
         }
         if wants.figures {
-            let (specs, overlay) =
+            let (mut specs, overlay) =
                 catalogue::log_figures(&kept.result, m, time.as_ref(), wants.intersample, None);
+            if let Some(t) = &time {
+                specs.extend(catalogue::subspace_figure(
+                    &kept.result,
+                    &st.log.command_m,
+                    t,
+                    st.log.sample_rate_hz,
+                ));
+            }
             (figures, kept.overlay) = (specs, overlay);
         }
     }
@@ -354,6 +366,10 @@ fn validated(
     let time = match validate::validation_run(rig_at_p, &plan.specimen, &record(&st.log)) {
         Ok(t) => {
             out.validation = Some(t.metrics.clone());
+            out.tracking = Some(RunTracking {
+                measured: measured_tracking(st),
+                predicted: Some(predicted_tracking(st, &t, out.tf.as_ref())),
+            });
             Some(t)
         }
         Err(e) => {
@@ -386,6 +402,14 @@ fn validated(
         if let (Some(bins), Some(model)) = (&bins, &out.force_tf) {
             let force = catalogue::force_figure(&out, bins, model, wants.intersample, csi.as_ref());
             specs.insert(1, force);
+        }
+        if let Some(t) = &time {
+            specs.extend(catalogue::subspace_figure(
+                &out,
+                &st.log.command_m,
+                t,
+                st.log.sample_rate_hz,
+            ));
         }
         specs
     } else {
@@ -420,6 +444,7 @@ fn new_result(plan: &RunPlan) -> RunResult {
         force_tf: None,
         fit: None,
         validation: None,
+        tracking: None,
         log: None,
         annotations: plan.annotations.clone(),
     }
@@ -489,6 +514,52 @@ fn models(
 }
 
 /// A log's signals as the time-domain checks read them.
+/// The log's tracking, the FRF's phase slope over the fitted bins.
+fn measured_tracking(st: &LogStage) -> Tracking {
+    let bins = FrfBins {
+        freq_hz: &st.frf.freq_hz,
+        h: &st.frf.h,
+        keep: &st.mask,
+    };
+    tracking::measure(
+        &st.log.command_m,
+        &st.log.displacement_m,
+        st.log.sample_rate_hz,
+        Some(bins),
+        &validate::locate_windows(&st.log.command_m, st.log.sample_rate_hz),
+    )
+}
+
+/// The tracking the model predicts for the log's command: its simulated
+/// displacement, and its transfer function's phase over the bins the
+/// measured FRF kept.
+fn predicted_tracking(
+    st: &LogStage,
+    time: &validate::TimeStage,
+    tf: Option<&TfResult>,
+) -> Tracking {
+    let model = tf.and_then(|tf| TransferFunction::with_delay(&tf.num, &tf.den, tf.delay_s).ok());
+    let h: Option<Vec<_>> = model.map(|model| {
+        st.frf
+            .freq_hz
+            .iter()
+            .map(|f| model.freq_response(*f))
+            .collect()
+    });
+    let bins = h.as_ref().map(|h| FrfBins {
+        freq_hz: &st.frf.freq_hz,
+        h,
+        keep: &st.mask,
+    });
+    tracking::measure(
+        &st.log.command_m,
+        &time.x1_simulated,
+        st.log.sample_rate_hz,
+        bins,
+        &time.windows,
+    )
+}
+
 fn record(log: &Log) -> Record<'_> {
     Record {
         sample_rate_hz: log.sample_rate_hz,
@@ -556,6 +627,12 @@ fn fitted(
         }
         t
     });
+    if let Some(st) = &stage {
+        out.tracking = Some(RunTracking {
+            measured: measured_tracking(st),
+            predicted: None,
+        });
+    }
     let mut time = None;
     if let Some(st) = &stage
         && let Some(fit) = &st.fit

@@ -562,6 +562,90 @@ fn residual_figure(run: &RunResult, time: &TimeStage, fs: f64) -> FigureSpec {
     }
 }
 
+/// The most points a subspace loop is drawn with: an ellipse reads the
+/// same from 2,000 as from the 12,000 two periods at 0.35 Hz hold at 2 kHz.
+const SUBSPACE_POINTS: usize = 2000;
+
+/// The synchronized subspace plot (Mercan & Ricles 2007): the displacement
+/// against its command over two periods at the middle of each of the
+/// paper's windows, measured and (for a validation run) as the identified
+/// model predicts it, beside the line of perfect tracking. A loop's width
+/// is the phase lag at that frequency, its tilt from the diagonal the
+/// amplitude error; traced anticlockwise, the actuator lags. None without
+/// windows.
+pub fn subspace_figure(
+    run: &RunResult,
+    command_m: &[f64],
+    time: &TimeStage,
+    fs: f64,
+) -> Option<FigureSpec> {
+    let n = command_m
+        .len()
+        .min(time.x1_measured.len())
+        .min(time.x1_simulated.len());
+    let mut series = Vec::new();
+    let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+    for (i, w) in time.windows.iter().enumerate() {
+        let mid = 0.5 * (w.start_s + w.end_s);
+        let half = (1.0 / w.target_hz).min(0.5 * (w.end_s - w.start_s));
+        let a = (((mid - half) * fs).round().max(0.0) as usize).min(n);
+        let b = (((mid + half) * fs).round().max(0.0) as usize).min(n);
+        if b <= a + 2 {
+            continue;
+        }
+        let step = (b - a).div_ceil(SUBSPACE_POINTS);
+        let pick =
+            |x: &[f64]| -> Vec<f64> { x[a..b].iter().step_by(step).map(|v| v * 1e3).collect() };
+        let x = pick(command_m);
+        for v in &x {
+            (lo, hi) = (lo.min(*v), hi.max(*v));
+        }
+        series.push(XySeries {
+            label: format!("{}: measured", w.label),
+            x: x.clone(),
+            y: pick(&time.x1_measured),
+            trace: Trace::Measured,
+            palette_index: Some(i),
+        });
+        if run.role == Role::Validation {
+            series.push(XySeries {
+                label: format!("{}: predicted", w.label),
+                x,
+                y: pick(&time.x1_simulated),
+                trace: Trace::Model,
+                palette_index: Some(i),
+            });
+        }
+    }
+    if series.is_empty() {
+        return None;
+    }
+    series.push(XySeries {
+        label: "perfect tracking".into(),
+        x: vec![lo, hi],
+        y: vec![lo, hi],
+        trace: Trace::Reference,
+        palette_index: None,
+    });
+    Some(FigureSpec {
+        id: format!("subspace-{}", run.id),
+        title: format!("{}: synchronized subspace plot", run.id),
+        caption: "Displacement against its command over two periods in the middle of each window (Mercan & Ricles 2007). A loop traced anticlockwise lags its command; its width is the phase lag at that frequency, its tilt from the diagonal the amplitude error.".into(),
+        figure: Figure::Lines(LinesFigure {
+            title: format!("{}: displacement against command", run.id),
+            x_label: "Command (mm)".into(),
+            y_label: "Displacement (mm)".into(),
+            series,
+            x_range: None,
+            y_range: None,
+            log_x: false,
+            log_y: false,
+            zero_line: false,
+        }),
+        size: (900, 800),
+    })
+}
+
 /// An identification run's FRF kept for Fig. 15.
 #[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
 pub struct OverlayRun {
@@ -695,20 +779,25 @@ pub fn history_figure(entries: &[crate::drift::Entry]) -> Option<FigureSpec> {
     }
     let x: Arc<[f64]> = (1..=entries.len()).map(|k| k as f64).collect();
     let n = entries.len() as f64;
-    let units = [
-        ("beta1", "beta1 (1/s)"),
-        ("a1b0", "a1b0 at P = 1 (N/(m s^2))"),
-        ("a2", "a2 (N/m)"),
-        ("a3", "a3 (1/s)"),
+    let mut units = vec![
+        ("beta1", "beta1 (1/s)", 1.0),
+        ("a1b0", "a1b0 at P = 1 (N/(m s^2))", 1.0),
+        ("a2", "a2 (N/m)", 1.0),
+        ("a3", "a3 (1/s)", 1.0),
     ];
+    // The night's delay, where the entries measured one (none before
+    // servoid did: those entries leave a gap).
+    if entries.iter().any(|e| e.delay_s.is_some()) {
+        units.push(("delay", "actuator delay (ms)", 1e3));
+    }
     let panels = units
         .iter()
-        .map(|&(name, label)| {
+        .map(|&(name, label, scale)| {
             let p: Vec<(f64, f64)> = entries
                 .iter()
-                .map(|e| {
-                    let (v, s) = e.parameter(name).expect("a known parameter");
-                    (v, s.unwrap_or(0.0))
+                .map(|e| match e.parameter(name) {
+                    Some((v, s)) => (v * scale, s.unwrap_or(0.0) * scale),
+                    None => (f64::NAN, 0.0),
                 })
                 .collect();
             let line = |f: &dyn Fn(&(f64, f64)) -> f64| -> Arc<[f64]> { p.iter().map(f).collect() };
@@ -741,7 +830,7 @@ pub fn history_figure(entries: &[crate::drift::Entry]) -> Option<FigureSpec> {
         id: "history".into(),
         title: "The rig's history".into(),
         caption: format!(
-            "Each identified parameter over the rig's last {} campaigns (entry number; the last is this campaign), with its +-2 std band. An alarm is raised when a value moves from the median of its recent entries by more than the manifest's threshold times the larger of its std and the history's scatter.",
+            "Each identified parameter over the rig's last {} campaigns (entry number; the last is this campaign), with its +-2 std band, and the night's actuator delay where it was measured. An alarm is raised when a value moves from the median of its recent entries by more than the manifest's threshold times the larger of its std and the history's scatter (for the delay, at least 0.25 ms).",
             entries.len()
         ),
         size: fig.recommended_size(),

@@ -1,0 +1,192 @@
+//! Each tracking measure against an answer worked out by hand: a pure
+//! delay of 2.37 samples, a first-order lag, a known amplitude error.
+
+use std::f64::consts::PI;
+
+use nalgebra::Complex;
+
+use super::*;
+
+const FS: f64 = 1000.0;
+
+/// A multisine of components well below the Nyquist frequency (0.5-40 Hz,
+/// fixed phases), sampled at `t_k - shift_s`: the record of a pure delay.
+fn multisine(n: usize, shift_s: f64) -> Vec<f64> {
+    let comps: Vec<(f64, f64, f64)> = (0..12)
+        .map(|j| {
+            let f = 0.5 + 3.5 * j as f64;
+            (1.0 / (1.0 + j as f64), f, 0.7 * j as f64 * j as f64)
+        })
+        .collect();
+    (0..n)
+        .map(|k| {
+            let t = k as f64 / FS - shift_s;
+            comps
+                .iter()
+                .map(|(a, f, p)| a * (2.0 * PI * f * t + p).sin())
+                .sum::<f64>()
+                * 1e-3
+        })
+        .collect()
+}
+
+/// A displacement that is its command 2.37 samples later: the
+/// cross-correlation finds 2.37 samples, well below a sample's resolution.
+#[test]
+fn a_pure_delay_of_2_37_samples_is_found_by_cross_correlation() {
+    let tau = 2.37 / FS;
+    let u = multisine(20_000, 0.0);
+    let x = multisine(20_000, tau);
+    let d = xcorr_delay(&u, &x, FS, MAX_DELAY_S).unwrap();
+    assert!((d * FS - 2.37).abs() < 1e-4, "{} samples, not 2.37", d * FS);
+    // A lead is a negative delay.
+    let d = xcorr_delay(&x, &u, FS, MAX_DELAY_S).unwrap();
+    assert!((d * FS + 2.37).abs() < 1e-4, "{} samples", d * FS);
+    // A record of several FFT blocks (the correlation is summed block by
+    // block) and more samples than the refinement sums over (strided).
+    let u = multisine(1_300_000, 0.0);
+    let x = multisine(1_300_000, tau);
+    let d = xcorr_delay(&u, &x, FS, MAX_DELAY_S).unwrap();
+    assert!((d * FS - 2.37).abs() < 1e-4, "{} samples", d * FS);
+}
+
+/// The FRF of a pure delay, exp(-i 2 pi f tau): its phase's slope is tau
+/// exactly, over a band where the phase wraps several times.
+#[test]
+fn the_phase_slope_of_a_pure_delay_is_the_delay() {
+    let tau = 0.0237;
+    let f: Vec<f64> = (0..400).map(|k| k as f64 * 0.25).collect();
+    let h: Vec<Complex<f64>> = f
+        .iter()
+        .map(|f| Complex::from_polar(1.0, -2.0 * PI * f * tau))
+        .collect();
+    let keep: Vec<bool> = f.iter().map(|f| (0.5..=80.0).contains(f)).collect();
+    let d = phase_slope_delay(&f, &h, &keep).unwrap();
+    assert!((d - tau).abs() < 1e-12, "{d}");
+}
+
+/// A first-order lag 1 / (1 + s T), T = 2 ms, driven by sines of 0.5 to
+/// 5 Hz (its exact steady-state response, no transient): its group delay,
+/// T / (1 + (w T)^2), lies within 0.4 % of T over the band, so both
+/// estimates are T to within 1 %.
+#[test]
+fn a_first_order_lag_is_its_time_constant_at_low_frequency() {
+    let t_c = 0.002;
+    let comps = [
+        (1.0, 0.5, 0.0),
+        (0.6, 1.5, 1.0),
+        (0.4, 3.0, 2.0),
+        (0.3, 5.0, 0.3),
+    ];
+    let n = 40_000;
+    let (mut u, mut x) = (vec![0.0; n], vec![0.0; n]);
+    for k in 0..n {
+        let t = k as f64 / FS;
+        for (a, f, p) in comps {
+            let w = 2.0 * PI * f;
+            let g = Complex::new(1.0, w * t_c).inv();
+            u[k] += a * (w * t + p).sin();
+            x[k] += a * g.norm() * (w * t + p + g.arg()).sin();
+        }
+    }
+    let d = xcorr_delay(&u, &x, FS, MAX_DELAY_S).unwrap();
+    assert!((d / t_c - 1.0).abs() < 0.01, "xcorr {d}");
+    let f: Vec<f64> = (1..=50).map(|k| k as f64 * 0.1).collect();
+    let h: Vec<Complex<f64>> = f
+        .iter()
+        .map(|f| Complex::new(1.0, 2.0 * PI * f * t_c).inv())
+        .collect();
+    let d = phase_slope_delay(&f, &h, &vec![true; f.len()]).unwrap();
+    assert!((d / t_c - 1.0).abs() < 0.005, "phase slope {d}");
+    assert!(d < t_c, "a lag's group delay falls with frequency");
+}
+
+/// A sine of 2 Hz over 40 whole cycles, followed at 95 % of its amplitude
+/// and 2.37 samples late: the frequency evaluation index is 0.95 at
+/// -360 f tau degrees; the tracking indicator falls by pi a b sin(phi) a
+/// cycle; J2 and J3 are those of the difference sine, whose amplitude is
+/// sqrt(a^2 + b^2 - 2 a b cos phi).
+#[test]
+fn a_known_amplitude_error_and_delay_give_every_measure_by_hand() {
+    let (a, b, f, tau) = (2e-3, 0.95 * 2e-3, 2.0, 2.37 / FS);
+    let n = 20_000;
+    let w = 2.0 * PI * f;
+    let phi = w * tau;
+    let u: Vec<f64> = (0..n).map(|k| a * (w * k as f64 / FS).sin()).collect();
+    let x: Vec<f64> = (0..n)
+        .map(|k| b * (w * k as f64 / FS - phi).sin())
+        .collect();
+
+    let fei = frequency_evaluation(&u, &x, FS).unwrap();
+    assert!((fei.amplitude - 0.95).abs() < 1e-9, "{fei:?}");
+    assert!((fei.equivalent_frequency_hz - f).abs() < 1e-9, "{fei:?}");
+    assert!((fei.phase_deg + phi.to_degrees()).abs() < 1e-7, "{fei:?}");
+    assert!((fei.delay_s - tau).abs() < 1e-12, "{fei:?}");
+
+    let (ti, ti_pct) = tracking_indicator(&u, &x).unwrap();
+    let cycles = 40.0;
+    let want = -cycles * PI * a * b * phi.sin();
+    assert!((ti / want - 1.0).abs() < 1e-4, "TI {ti}, by hand {want}");
+    assert!((ti_pct - want / (a * a) * 100.0).abs() < 1e-3 * want.abs() / (a * a) * 100.0);
+    // A lead raises it by as much.
+    let (lead, _) = tracking_indicator(&x, &u).unwrap();
+    assert!((lead + ti).abs() < 1e-9 * ti.abs(), "{lead} {ti}");
+
+    let e = tracking_errors(&u, &x).unwrap();
+    let diff = (a * a + b * b - 2.0 * a * b * phi.cos()).sqrt();
+    // Whole cycles: sum e^2 / sum u^2 = diff^2 / a^2.
+    assert!((e.nrms_pct - diff / a * 100.0).abs() < 1e-9, "{e:?}");
+    // Sampled peaks lie within (w / FS)^2 / 8 of the true ones.
+    assert!(
+        (e.peak_pct / (diff / a * 100.0) - 1.0).abs() < 1e-4,
+        "{e:?}"
+    );
+    assert!((e.peak_error_m / diff - 1.0).abs() < 1e-4, "{e:?}");
+
+    // The delay two ways on the same sine.
+    let d = xcorr_delay(&u, &x, FS, MAX_DELAY_S).unwrap();
+    assert!((d * FS - 2.37).abs() < 1e-4, "{}", d * FS);
+}
+
+/// Records with nothing to track give a note, not a number.
+#[test]
+fn bad_records_give_notes_not_numbers() {
+    let u = multisine(4096, 0.0);
+    let flat = vec![1.5e-3; 4096];
+    assert_eq!(
+        xcorr_delay(&flat, &u, FS, MAX_DELAY_S),
+        Err(DelayNote::ConstantCommand)
+    );
+    assert_eq!(
+        xcorr_delay(&u, &flat, FS, MAX_DELAY_S),
+        Err(DelayNote::ConstantResponse)
+    );
+    assert_eq!(
+        frequency_evaluation(&flat, &u, FS),
+        Err(FeiNote::ConstantCommand)
+    );
+    assert_eq!(tracking_errors(&vec![0.0; 100], &u[..100]), None);
+    // A delay beyond the search: 0.3 s against a limit of 0.25 s, on a
+    // chirp (which correlates with itself at one lag only).
+    let chirp = |shift: f64| -> Vec<f64> {
+        (0..8192)
+            .map(|k| {
+                let t = k as f64 / FS - shift;
+                (2.0 * PI * (1.0 * t + 2.0 * t * t)).sin()
+            })
+            .collect()
+    };
+    assert!(matches!(
+        xcorr_delay(&chirp(0.0), &chirp(0.3), FS, MAX_DELAY_S),
+        Err(DelayNote::Uncorrelated { .. })
+    ));
+    // The same chirp 2.37 samples late is found.
+    let d = xcorr_delay(&chirp(0.0), &chirp(2.37 / FS), FS, MAX_DELAY_S).unwrap();
+    assert!((d * FS - 2.37).abs() < 1e-4, "{}", d * FS);
+    let f = [1.0, 2.0];
+    let h = [Complex::new(1.0, 0.0); 2];
+    assert_eq!(
+        phase_slope_delay(&f, &h, &[true, true]),
+        Err(DelayNote::TooFewBins)
+    );
+}

@@ -1,0 +1,202 @@
+//! Tracking measures end to end (issue 27): every run of the bundled
+//! default, the rich campaign and the MTS logs has its measured tracking in
+//! results.json and on its page; every validation run also the tracking the
+//! identified model predicts for its command, beside the measured one.
+//! The measures themselves are checked against hand computations in
+//! `pipeline/tracking/tests.rs`; here, against physics and the truth the
+//! simulator was given.
+
+use std::path::Path;
+
+use serde_json::Value;
+
+use crate::util::{bundled_simulation, root, scratch, servoid, servoid_into};
+
+fn results_of(out: &Path) -> Value {
+    serde_json::from_slice(&std::fs::read(out.join("results.json")).unwrap()).unwrap()
+}
+
+fn f(v: &Value) -> f64 {
+    v.as_f64().unwrap_or_else(|| panic!("a number, not {v}"))
+}
+
+/// The measured tracking of every run: a delay both ways, the frequency
+/// evaluation index, the tracking indicator, the errors, one entry a
+/// window, and no note.
+fn assert_measured(run: &Value, windows: usize) -> &Value {
+    let id = &run["id"];
+    let m = &run["tracking"]["measured"];
+    assert!(m.is_object(), "run {id}: no measured tracking");
+    assert_eq!(m["notes"].as_array().unwrap().len(), 0, "run {id}: {m}");
+    for key in [
+        "delay_xcorr_s",
+        "delay_phase_slope_s",
+        "tracking_indicator_pct",
+    ] {
+        assert!(f(&m[key]).is_finite(), "run {id}: {key}");
+    }
+    assert!(f(&m["fei"]["amplitude"]) > 0.0, "run {id}");
+    assert!(f(&m["errors"]["nrms_pct"]) > 0.0, "run {id}");
+    assert_eq!(m["windows"].as_array().unwrap().len(), windows, "run {id}");
+    m
+}
+
+/// The bundled default: the paper's rig under P control is a third-order
+/// low-pass, so its delays are long and the two estimates differ; a higher
+/// P gain (Exp2, Exp4) widens the loop's bandwidth and shortens its delay.
+/// The simulator's rig is the model's, so the prediction matches the
+/// measurement up to the LVDT's noise. The page shows both, with a
+/// synchronized subspace figure.
+#[test]
+fn every_run_of_the_bundled_default_has_its_tracking_and_validation_runs_their_prediction() {
+    let dir = scratch();
+    let sim = bundled_simulation(dir.path(), false);
+    let out = dir.path().join("sim");
+    let o = servoid_into(
+        dir.path(),
+        "simulate",
+        &sim,
+        &out,
+        &["--run", "--figures", "svg", "--quiet"],
+    );
+    assert_eq!(o.code, 0, "{}", o.stderr);
+    let r = results_of(&out);
+    let mut by_id = std::collections::BTreeMap::new();
+    for run in r["runs"].as_array().unwrap() {
+        let id = run["id"].as_str().unwrap().to_string();
+        let m = assert_measured(run, 4);
+        let (xcorr, slope) = (f(&m["delay_xcorr_s"]), f(&m["delay_phase_slope_s"]));
+        // Not a pure delay: the estimates differ by more than a
+        // millisecond, and a lag's group delay over the band is shorter
+        // than its correlation delay, which low frequencies dominate.
+        assert!((0.005..0.05).contains(&xcorr), "{id}: {xcorr}");
+        assert!(slope < xcorr - 1e-3, "{id}: {slope} against {xcorr}");
+        // Lagging all along: the tracking indicator falls.
+        assert!(f(&m["tracking_indicator_m2"]) < 0.0, "{id}");
+        by_id.insert(id.clone(), xcorr);
+        let p = &run["tracking"]["predicted"];
+        if run["role"] == "validation" {
+            assert!(p.is_object(), "{id}: no prediction");
+            let d = f(&p["delay_xcorr_s"]) - xcorr;
+            assert!(d.abs() < 0.1e-3, "{id}: predicted delay off by {d} s");
+            let a = f(&p["fei"]["amplitude"]) / f(&m["fei"]["amplitude"]) - 1.0;
+            assert!(a.abs() < 0.01, "{id}: predicted amplitude off by {a}");
+            let j2 = f(&p["errors"]["nrms_pct"]) - f(&m["errors"]["nrms_pct"]);
+            assert!(j2.abs() < 1.0, "{id}: predicted J2 off by {j2} points");
+        } else {
+            assert!(p.is_null(), "{id}: a prediction without a specimen model");
+        }
+    }
+    // P = 2 against P = 1 on the same specimens.
+    assert!(by_id["exp2"] < by_id["exp1"] - 1e-3, "{by_id:?}");
+    assert!(by_id["exp4"] < by_id["exp3"] - 1e-3, "{by_id:?}");
+    crate::util::note(&format!(
+        "tracking, bundled default: delay by cross-correlation {:.2} ms bare, {:.2} ms Exp1 (P = 1), {:.2} ms Exp2 (P = 2)",
+        1e3 * by_id["no-specimen"],
+        1e3 * by_id["exp1"],
+        1e3 * by_id["exp2"]
+    ));
+
+    let page = std::fs::read_to_string(out.join("runs/exp1.html")).unwrap();
+    assert!(page.contains("id=\"tracking-table\""), "exp1's page");
+    assert!(page.contains("<th>Predicted</th>"), "exp1's page");
+    assert!(page.contains("id=\"tracking-windows\""), "exp1's page");
+    // (the page writes the path's slash as &#x2f;)
+    assert!(page.contains("subspace-exp1.svg"), "exp1's page");
+    assert!(out.join("figures/subspace-exp1.svg").is_file());
+    let bare = std::fs::read_to_string(out.join("runs/no-specimen.html")).unwrap();
+    assert!(bare.contains("id=\"tracking-table\""));
+    assert!(
+        !bare.contains("<th>Predicted</th>"),
+        "no prediction without a specimen"
+    );
+    let report = std::fs::read_to_string(out.join("report.html")).unwrap();
+    assert!(report.contains(">Delay (ms)</th>"), "the campaign table");
+}
+
+/// The rich campaign: a rig with a 150 Hz spool mode (damping ratio 0.7)
+/// the model lacks and an LVDT 0.6 ms late. The prediction, the identified
+/// rig of Eq. 10 with the specimen, has neither, so it falls short of the
+/// measured delay by what they add at low frequency: the LVDT's 0.6 ms and
+/// the spool mode's group delay 2 zeta / omega_n = 1.49 ms, 2.09 ms in all.
+/// An honest gap the page shows: a compensator designed on this model
+/// would leave it.
+#[test]
+fn the_rich_campaign_predicts_its_tracking_short_by_the_delay_the_model_lacks() {
+    let dir = scratch();
+    let sim = root().join("experiments/maghareh2018/simulation-rich.toml");
+    let out = dir.path().join("rich");
+    let o = servoid_into(
+        dir.path(),
+        "simulate",
+        &sim,
+        &out,
+        &["--run", "--figures", "none", "--quiet"],
+    );
+    assert!(o.code == 0 || o.code == 1, "{}", o.stderr);
+    let r = results_of(&out);
+    for run in r["runs"].as_array().unwrap() {
+        if run["status"] != "ok" {
+            continue;
+        }
+        let id = &run["id"];
+        let m = assert_measured(
+            run,
+            run["tracking"]["measured"]["windows"]
+                .as_array()
+                .unwrap()
+                .len(),
+        );
+        if run["role"] == "validation" {
+            let p = &run["tracking"]["predicted"];
+            let d = f(&p["delay_xcorr_s"]) - f(&m["delay_xcorr_s"]);
+            crate::util::note(&format!(
+                "tracking, rich {id}: measured delay {:.3} ms, predicted {:.3} ms",
+                1e3 * f(&m["delay_xcorr_s"]),
+                1e3 * f(&p["delay_xcorr_s"])
+            ));
+            let lacked = 0.6e-3 + 2.0 * 0.7 / (2.0 * std::f64::consts::PI * 150.0);
+            assert!(
+                (-d - lacked).abs() < 0.3e-3,
+                "{id}: predicted {d} s from the measured, not -{lacked} s"
+            );
+        }
+    }
+}
+
+/// The real MTS logs (a servo-hydraulic press with an MR damper): each run
+/// has its measured tracking, the delay positive and below 50 ms.
+#[test]
+fn every_mts_run_has_its_measured_tracking() {
+    let Some(data) = crate::util::mts_data() else {
+        return;
+    };
+    let dir = scratch();
+    let example =
+        std::fs::read_to_string(root().join("experiments/utfsm-mts-mrdamper/campaign.toml"))
+            .unwrap()
+            .replace(
+                "../../../shared/data/utfsm-mts-mrdamper",
+                data.to_str().unwrap(),
+            );
+    std::fs::write(dir.path().join("mts.toml"), example).unwrap();
+    let o = servoid(
+        dir.path(),
+        &["run", "mts.toml", "--out", "out", "--figures", "none"],
+    );
+    assert_eq!(o.code, 0, "{}", o.stderr);
+    let r = results_of(&dir.path().join("out"));
+    for run in r["runs"].as_array().unwrap() {
+        let id = &run["id"];
+        let m = &run["tracking"]["measured"];
+        let d = f(&m["delay_xcorr_s"]);
+        crate::util::note(&format!(
+            "tracking, MTS {id}: delay {:.2} ms by cross-correlation, {:.2} ms by phase slope, FEI amplitude {:.3}, J2 {:.1} %",
+            1e3 * d,
+            1e3 * f(&m["delay_phase_slope_s"]),
+            f(&m["fei"]["amplitude"]),
+            f(&m["errors"]["nrms_pct"])
+        ));
+        assert!((0.0..0.05).contains(&d), "{id}: {d}");
+    }
+}
