@@ -109,8 +109,9 @@ fn night_of(dir: &Path, out: &Path, n: usize, manifest: &str) -> (i32, Value, St
 /// The rule, restated from its description in docs/manifest.md: the median of
 /// up to K = 10 earlier values (at least 3), the history's scatter from
 /// successive differences (1.4826 MAD / sqrt 2), the limit 4 max(std,
-/// scatter).
-fn rule_alarms(values: &[(f64, f64)]) -> Vec<bool> {
+/// scatter), and at least `floor` (the delay's 0.25 ms; 0 for the rig's
+/// parameters).
+fn rule_alarms(values: &[(f64, f64)], floor: f64) -> Vec<bool> {
     fn median(v: &[f64]) -> f64 {
         let mut s = v.to_vec();
         s.sort_by(f64::total_cmp);
@@ -135,7 +136,7 @@ fn rule_alarms(values: &[(f64, f64)]) -> Vec<bool> {
             let mad = median(&d.iter().map(|x| (x - md).abs()).collect::<Vec<_>>());
             let scatter = 1.4826 * mad / 2f64.sqrt();
             let (x, std) = values[n];
-            (x - median(&past)).abs() > 4.0 * std.max(scatter)
+            (x - median(&past)).abs() > (4.0 * std.max(scatter)).max(floor)
         })
         .collect()
 }
@@ -170,7 +171,7 @@ fn a_drifting_valve_raises_the_alarm_on_the_night_the_rule_predicts() {
         }
         raised.push(alarm);
     }
-    let predicted = rule_alarms(&values);
+    let predicted = rule_alarms(&values, 0.0);
     assert_eq!(raised, predicted, "values (beta1, std): {values:?}");
     // The rule fires within the nine nights, but not on night 3, the first
     // it can check (3 earlier entries): there the median lags 2 % behind,
@@ -370,31 +371,9 @@ fn a_delay_that_grows_raises_the_delay_alarm_on_the_night_the_rule_predicts() {
             step * n as f64
         );
     }
-    // The rule, restated: the median of up to 10 earlier values (at least
-    // 3), the limit max(4 x their difference scatter, 0.25 ms).
-    fn median(v: &[f64]) -> f64 {
-        let mut s = v.to_vec();
-        s.sort_by(f64::total_cmp);
-        let n = s.len();
-        if n % 2 == 1 {
-            s[n / 2]
-        } else {
-            (s[n / 2 - 1] + s[n / 2]) / 2.0
-        }
-    }
-    let predicted: Vec<bool> = (0..delays.len())
-        .map(|n| {
-            let past = &delays[n.saturating_sub(10)..n];
-            if past.len() < 3 {
-                return false;
-            }
-            let d: Vec<f64> = past.windows(2).map(|w| w[1] - w[0]).collect();
-            let md = median(&d);
-            let mad = median(&d.iter().map(|x| (x - md).abs()).collect::<Vec<_>>());
-            let limit = (4.0 * 1.4826 * mad / 2f64.sqrt()).max(0.25e-3);
-            (delays[n] - median(past)).abs() > limit
-        })
-        .collect();
+    // The rule, restated, with the delay's floor and no stated std.
+    let values: Vec<(f64, f64)> = delays.iter().map(|d| (*d, 0.0)).collect();
+    let predicted = rule_alarms(&values, 0.25e-3);
     assert_eq!(raised, predicted, "delays: {delays:?}");
     assert_eq!(
         raised.iter().position(|a| *a),

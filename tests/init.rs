@@ -25,14 +25,30 @@ fn runs(t: &toml::Table) -> &Vec<toml::Value> {
     t["runs"].as_array().unwrap()
 }
 
+/// The bundled default simulated into `dir/sim` (and run there with
+/// `run`): the folder and its hand-written manifest, the reference.
+fn simulated(dir: &Path, run: bool) -> (std::path::PathBuf, toml::Table) {
+    let sim = bundled_simulation(dir, false);
+    let out = dir.join("sim");
+    let args: &[&str] = if run { &["--run"] } else { &[] };
+    let o = servoid_into(dir, "simulate", &sim, &out, args);
+    assert_eq!(o.code, 0, "{}", o.stderr);
+    let reference = toml_of(&out.join("campaign.toml"));
+    (out, reference)
+}
+
+/// What the lab fills in a proposed manifest besides its runs: the rig's
+/// name, and the identification settings it chose (init writes the
+/// defaults).
+fn fill_rig(t: &mut toml::Table, reference: &toml::Table) {
+    t["rig"]["name"] = reference["rig"]["name"].clone();
+    t.insert("identification".into(), reference["identification"].clone());
+}
+
 #[test]
 fn init_proposes_a_manifest_that_reproduces_the_bundled_rig_once_filled() {
     let dir = scratch();
-    let sim = bundled_simulation(dir.path(), false);
-    let out = dir.path().join("sim");
-    let o = servoid_into(dir.path(), "simulate", &sim, &out, &["--run"]);
-    assert_eq!(o.code, 0, "{}", o.stderr);
-    let reference = toml_of(&out.join("campaign.toml"));
+    let (out, reference) = simulated(dir.path(), true);
 
     let proposed = dir.path().join("proposed.toml");
     let o = servoid(
@@ -90,8 +106,7 @@ fn init_proposes_a_manifest_that_reproduces_the_bundled_rig_once_filled() {
 
     // Filled as the lab would: the rig's name, each run's P gain and
     // specimen, and the identification settings it chose.
-    t["rig"]["name"] = reference["rig"]["name"].clone();
-    t.insert("identification".into(), reference["identification"].clone());
+    fill_rig(&mut t, &reference);
     let reference_runs = runs(&reference).clone();
     for r in t["runs"].as_array_mut().unwrap() {
         let id = r["id"].as_str().unwrap().to_string();
@@ -125,10 +140,7 @@ fn init_proposes_a_manifest_that_reproduces_the_bundled_rig_once_filled() {
 #[test]
 fn init_on_unnamed_logs_finds_the_channels_and_leaves_the_roles_to_fill() {
     let dir = scratch();
-    let sim = bundled_simulation(dir.path(), false);
-    let out = dir.path().join("sim");
-    let o = servoid_into(dir.path(), "simulate", &sim, &out, &[]);
-    assert_eq!(o.code, 0, "{}", o.stderr);
+    let (out, _) = simulated(dir.path(), false);
     let logs = dir.path().join("unnamed");
     std::fs::create_dir(&logs).unwrap();
     let mut names: Vec<_> = std::fs::read_dir(out.join("logs"))
@@ -281,11 +293,7 @@ fn table_of(reference: &toml::Table) -> String {
 #[test]
 fn init_on_a_night_folder_names_its_run_table() {
     let dir = scratch();
-    let sim = bundled_simulation(dir.path(), false);
-    let out = dir.path().join("sim");
-    let o = servoid_into(dir.path(), "simulate", &sim, &out, &["--run"]);
-    assert_eq!(o.code, 0, "{}", o.stderr);
-    let reference = toml_of(&out.join("campaign.toml"));
+    let (out, reference) = simulated(dir.path(), true);
     let table = table_of(&reference);
     let logs = out.join("logs");
     for (night, log_dir) in [("night", "night/logs"), ("flat", "flat")] {
@@ -335,8 +343,7 @@ fn init_on_a_night_folder_names_its_run_table() {
         );
         assert!(o.stderr.contains("rig.name: a placeholder to fill"));
 
-        t["rig"]["name"] = reference["rig"]["name"].clone();
-        t.insert("identification".into(), reference["identification"].clone());
+        fill_rig(&mut t, &reference);
         std::fs::write(dir.path().join(&manifest), toml::to_string(&t).unwrap()).unwrap();
         let o = servoid(dir.path(), &["check", &manifest]);
         assert_eq!(o.code, 0, "{night}: {}", o.stderr);
@@ -376,11 +383,7 @@ fn init_on_a_night_folder_names_its_run_table() {
 #[test]
 fn init_writes_a_run_table_to_fill_for_a_night_without_one() {
     let dir = scratch();
-    let sim = bundled_simulation(dir.path(), false);
-    let out = dir.path().join("sim");
-    let o = servoid_into(dir.path(), "simulate", &sim, &out, &["--run"]);
-    assert_eq!(o.code, 0, "{}", o.stderr);
-    let reference = toml_of(&out.join("campaign.toml"));
+    let (out, reference) = simulated(dir.path(), true);
 
     let o = servoid(
         dir.path(),
@@ -473,8 +476,7 @@ fn init_writes_a_run_table_to_fill_for_a_night_without_one() {
     }
     std::fs::write(dir.path().join("night/runs.csv"), filled).unwrap();
     let mut t = toml_of(&dir.path().join("night.toml"));
-    t["rig"]["name"] = reference["rig"]["name"].clone();
-    t.insert("identification".into(), reference["identification"].clone());
+    fill_rig(&mut t, &reference);
     std::fs::write(dir.path().join("night.toml"), toml::to_string(&t).unwrap()).unwrap();
     let o = servoid(dir.path(), &["run", "night.toml", "--out", "filled"]);
     assert_eq!(o.code, 0, "{}", o.stderr);

@@ -17,6 +17,7 @@
 //! Pure: signals in, numbers or notes out. Displacements in m, times in
 //! s. A positive delay is a displacement that lags its command.
 
+pub mod compensator;
 pub mod delay;
 
 #[cfg(test)]
