@@ -367,7 +367,7 @@ fn validated(
         Ok(t) => {
             out.validation = Some(t.metrics.clone());
             out.tracking = Some(RunTracking {
-                measured: measured_tracking(st),
+                measured: measured_tracking(st, Some(&t.windows)),
                 predicted: Some(predicted_tracking(st, &t, out.tf.as_ref())),
             });
             Some(t)
@@ -513,9 +513,10 @@ fn models(
     ))
 }
 
-/// A log's signals as the time-domain checks read them.
-/// The log's tracking, the FRF's phase slope over the fitted bins.
-fn measured_tracking(st: &LogStage) -> Tracking {
+/// The log's tracking, the FRF's phase slope over the fitted bins, in the
+/// paper's windows: those the time-domain check located when it ran (the
+/// same command, the same windows), else located here.
+fn measured_tracking(st: &LogStage, windows: Option<&[validate::Window]>) -> Tracking {
     let bins = FrfBins {
         freq_hz: &st.frf.freq_hz,
         h: &st.frf.h,
@@ -526,7 +527,10 @@ fn measured_tracking(st: &LogStage) -> Tracking {
         &st.log.displacement_m,
         st.log.sample_rate_hz,
         Some(bins),
-        &validate::locate_windows(&st.log.command_m, st.log.sample_rate_hz),
+        &windows.map_or_else(
+            || validate::locate_windows(&st.log.command_m, st.log.sample_rate_hz),
+            <[validate::Window]>::to_vec,
+        ),
     )
 }
 
@@ -560,6 +564,7 @@ fn predicted_tracking(
     )
 }
 
+/// A log's signals as the time-domain checks read them.
 fn record(log: &Log) -> Record<'_> {
     Record {
         sample_rate_hz: log.sample_rate_hz,
@@ -627,12 +632,6 @@ fn fitted(
         }
         t
     });
-    if let Some(st) = &stage {
-        out.tracking = Some(RunTracking {
-            measured: measured_tracking(st),
-            predicted: None,
-        });
-    }
     let mut time = None;
     if let Some(st) = &stage
         && let Some(fit) = &st.fit
@@ -681,6 +680,15 @@ fn fitted(
                 .warnings
                 .push(format!("time-domain check of the fitted model: {e}")),
         }
+    }
+    if let Some(st) = &stage {
+        let windows = time
+            .as_ref()
+            .map(|t: &validate::TimeStage| t.windows.as_slice());
+        out.tracking = Some(RunTracking {
+            measured: measured_tracking(st, windows),
+            predicted: None,
+        });
     }
     (out, stage, time)
 }
