@@ -21,12 +21,13 @@
 //!    `validate` (Eqs. 47-48), `sensitivity`, `simulate`, `drift` (the rig's
 //!    history and its alarm rule), `tracking` (how the actuator follows its
 //!    command: delays, the frequency evaluation index, the tracking
-//!    indicator, the RTHS benchmark's errors). Within this layer
-//!    four uses run one way only: `sensitivity` propagates through
-//!    `identify`'s algebra and predicts planned runs' covariance with
-//!    `fit`'s Jacobian, `validate` drives models with `simulate`'s
-//!    exact discretisation and integrators, and `tracking` measures in
-//!    `validate`'s windows of a sweep.
+//!    indicator, the RTHS benchmark's errors, the model-based compensator).
+//!    Within this layer five uses run one way only: `sensitivity`
+//!    propagates through `identify`'s algebra and predicts planned runs'
+//!    covariance with `fit`'s Jacobian, `validate` drives models with
+//!    `simulate`'s exact discretisation and integrators, and `tracking`
+//!    measures in `validate`'s windows of a sweep and drives the
+//!    compensated plant with `simulate`'s discretisation.
 //! 7. `model`: the plant of Eq. 10 and its canonical form (Eqs. 34-35).
 //! 8. `lti`: transfer functions and state spaces.
 //! 9. `poly` (real polynomials) and `units` (physical units and their SI

@@ -476,6 +476,13 @@ pub struct RunTracking {
     /// for the measured command (validation runs): a model that predicts
     /// the measured tracking is one to design a compensator on.
     pub predicted: Option<crate::tracking::Tracking>,
+    /// The measured delay by cross-correlation less the predicted (s): the
+    /// delay the model lacks, which a compensator designed on it leaves on
+    /// the rig.
+    pub model_gap_s: Option<f64>,
+    /// The model-based compensator for the run's specimen (validation runs
+    /// whose specimen is linear).
+    pub compensator: Option<crate::tracking::compensator::CompensatorOutcome>,
 }
 
 /// A transfer-function fit to a run's FRF.

@@ -38,6 +38,7 @@ const WITHIN_LAYER: &[(&str, &str)] = &[
     ("sensitivity", "fit"),
     ("validate", "simulate"),
     ("tracking", "validate"),
+    ("tracking", "simulate"),
 ];
 
 fn layer_of(module: &str) -> Option<usize> {

@@ -417,6 +417,38 @@ fn a_bad_sensitivity_range_too_few_points_and_a_target_not_positive() {
     assert_eq!(c.code, 0, "{}", c.stderr);
 }
 
+/// A compensator's cut-off that is not a positive frequency, and a key the
+/// table does not take, each named by its key; a good table passes.
+#[test]
+fn a_compensator_cutoff_not_positive_or_an_unknown_key() {
+    for (bad, why) in [
+        ("-240.0", "must be a positive frequency in Hz (got -240)"),
+        ("0.0", "must be a positive frequency in Hz (got 0)"),
+        ("nan", "nan is not a finite number"),
+    ] {
+        let c = check(&format!("{BASE}\n[compensator]\ncutoff_hz = {bad}\n"));
+        assert_eq!(c.code, 2, "{bad}: {}", c.stderr);
+        assert!(
+            c.stderr.contains(&format!("compensator.cutoff_hz: {why}")),
+            "{bad}: {}",
+            c.stderr
+        );
+        assert!(!c.wrote_output);
+    }
+    let c = check(&format!("{BASE}\n[compensator]\ncutoff = 240.0\n"));
+    assert_eq!(c.code, 2);
+    assert!(c.stderr.contains("compensator.cutoff"), "{}", c.stderr);
+    assert!(
+        c.stderr.contains("cutoff_hz"),
+        "names the key it takes: {}",
+        c.stderr
+    );
+    let c = check(&format!(
+        "{BASE}\n[compensator]\ncutoff_hz = 200.0\nlead = false\n"
+    ));
+    assert_eq!(c.code, 0, "{}", c.stderr);
+}
+
 /// The Monte Carlo's zero seeds and one stiffness, each named by its key;
 /// an unknown key in its table is named with the ones it takes.
 #[test]

@@ -17,9 +17,9 @@ use super::identification::{IdentificationPlan, check_identification};
 use super::keypath::KeyPath;
 use super::problem::{ManifestError, Problem, TablePlace};
 use super::raw::{
-    CampaignInfo, Channel, Channels as RawChannels, CompareMode, History, Identification,
-    JointSettings, Limits, Manifest, MonteCarloSettings, Reference, Rig, Role, Run, RunData,
-    RunTable, SCHEMA_VERSION, SensitivitySettings, manifest_schema,
+    CampaignInfo, Channel, Channels as RawChannels, CompareMode, CompensatorSettings, History,
+    Identification, JointSettings, Limits, Manifest, MonteCarloSettings, Reference, Rig, Role, Run,
+    RunData, RunTable, SCHEMA_VERSION, SensitivitySettings, manifest_schema,
 };
 use super::table::{CheckedTable, RowKey, RunTableInfo, TableRun, check_table};
 use crate::drift::{MIN_HISTORY, Rule};
@@ -57,6 +57,8 @@ pub struct Campaign {
     pub history: HistoryPlan,
     /// The stiffness sensitivity's sweep and target.
     pub sensitivity: SensitivityPlan,
+    /// The compensator designed for each validation run.
+    pub compensator: CompensatorSettings,
     /// The joint grey-box fit's settings (`[identification.joint]`): kept
     /// apart from `identification` so that changing them does not redo the
     /// runs' own fits.
@@ -190,6 +192,7 @@ pub fn load_str(text: &str, path: &Path) -> Result<Campaign, ManifestError> {
         run_table_given: doc.has("run_table"),
         history: doc.section::<History>("history"),
         sensitivity: doc.section::<SensitivitySettings>("sensitivity"),
+        compensator: doc.section::<CompensatorSettings>("compensator"),
         limits: doc.section::<Limits>("limits"),
     };
     doc.begin_checks();
@@ -218,6 +221,7 @@ struct Partial {
     run_table_given: bool,
     history: Option<History>,
     sensitivity: Option<SensitivitySettings>,
+    compensator: Option<CompensatorSettings>,
     limits: Option<Limits>,
 }
 
@@ -248,6 +252,7 @@ fn validate(
     check_header(&partial, &mut bad);
     let history = check_history(partial.history.as_ref(), base_dir, &mut bad);
     let sensitivity = check_sensitivity(partial.sensitivity.as_ref(), &mut bad);
+    let compensator = check_compensator(partial.compensator.as_ref(), &mut bad);
     let default_channels = partial.channels.clone().unwrap_or_default();
     check_channels(&default_channels, &root.key("channels"), &mut bad);
     let ident = partial.identification.clone().unwrap_or_default();
@@ -330,6 +335,7 @@ fn validate(
         run_table: partial.run_table,
         history: partial.history,
         sensitivity: partial.sensitivity,
+        compensator: partial.compensator,
         limits: partial.limits,
     };
     Some(Campaign {
@@ -348,6 +354,7 @@ fn validate(
         warnings: table.warnings,
         history,
         sensitivity,
+        compensator,
         joint: ident.joint,
     })
 }
@@ -410,6 +417,24 @@ pub(super) fn check_sensitivity(
         target_rel_std: s.target_rel_std,
         monte_carlo: s.monte_carlo,
     }
+}
+
+/// The compensator's settings: a positive, finite cut-off when given (each
+/// log's rate bounds it further, run by run).
+fn check_compensator(
+    c: Option<&CompensatorSettings>,
+    bad: &mut impl FnMut(KeyPath, String),
+) -> CompensatorSettings {
+    let c = c.cloned().unwrap_or_default();
+    if let Some(fc) = c.cutoff_hz
+        && !(fc.is_finite() && fc > 0.0)
+    {
+        bad(
+            KeyPath::root().key("compensator").key("cutoff_hz"),
+            format!("must be a positive frequency in Hz (got {fc})"),
+        );
+    }
+    c
 }
 
 /// The history's settings: a window the rule can use and a positive

@@ -32,10 +32,10 @@ pub use identification::IdentificationPlan;
 pub use keypath::{KeyPath, Seg};
 pub use problem::{ManifestError, Problem, TablePlace};
 pub use raw::{
-    BoucWenParams, CampaignInfo, Channel, Channels, CompareMode, DelayMode, DelaySettings,
-    FrfSettings, Identification, JointRig, JointSettings, JointStructure, Manifest, ModelOrders,
-    MonteCarloSettings, PublishedTf, Reference, Rig, Role, Run, RunData, RunTable, SCHEMA_VERSION,
-    SensitivitySettings, Specimen, SpecimenKind, TimeChannel, manifest_schema,
+    BoucWenParams, CampaignInfo, Channel, Channels, CompareMode, CompensatorSettings, DelayMode,
+    DelaySettings, FrfSettings, Identification, JointRig, JointSettings, JointStructure, Manifest,
+    ModelOrders, MonteCarloSettings, PublishedTf, Reference, Rig, Role, Run, RunData, RunTable,
+    SCHEMA_VERSION, SensitivitySettings, Specimen, SpecimenKind, TimeChannel, manifest_schema,
 };
 pub use simulation::{SimulationPlan, load_simulation, simulation_schema};
 pub use table::RunTableInfo;

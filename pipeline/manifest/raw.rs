@@ -61,9 +61,43 @@ pub struct Manifest {
     /// springs for (defaults apply when the table is absent).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub sensitivity: Option<SensitivitySettings>,
+    /// The model-based compensator designed for each validation run's
+    /// specimen (defaults apply when the table is absent).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub compensator: Option<CompensatorSettings>,
     /// Resource limits (defaults apply when the table is absent).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub limits: Option<Limits>,
+}
+
+/// The feedforward compensator designed on the identified plant with each
+/// validation run's specimen: its inverse made proper by a Butterworth
+/// low-pass, with a phase lead (docs/tracking.md).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[schemars(deny_unknown_fields)]
+pub struct CompensatorSettings {
+    /// The low-pass's cut-off in Hz (> 0, below 0.4 of each log's rate);
+    /// by default 8 times the top of the run's band.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub cutoff_hz: Option<f64>,
+    /// Whether to make up the delay the low-pass, the hold and the plant
+    /// leave by extrapolating the command ahead (a cubic through the last
+    /// four samples).
+    #[serde(default = "default_lead")]
+    pub lead: bool,
+}
+
+impl Default for CompensatorSettings {
+    fn default() -> Self {
+        Self {
+            cutoff_hz: None,
+            lead: default_lead(),
+        }
+    }
+}
+
+fn default_lead() -> bool {
+    true
 }
 
 /// Resource limits of a job.

@@ -14,12 +14,15 @@
 //!   specimen give one, the plant as a state space: in physical form
 //!   (Eq. 10) and, for an SDOF specimen, in controllable canonical form
 //!   (Eqs. 34-35) with Cn kept (the plant exactly) and dropped (the paper's
-//!   simplified model, Sec. 3.2.2). What a run does not have is `[]`.
+//!   simplified model, Sec. 3.2.2); for a validation run, the model-based
+//!   compensator designed for its specimen (`filter(b, a, x)` at `fs`).
+//!   What a run does not have is `[]`.
 
 use super::matlab::{MatValue, MatWriteError, mat_bytes};
 use crate::model::{self, CnTerm, LinearSdof, LinearSpecimen, RigParams};
 use crate::results::{FitSummary, Results, RigResult, RunResult, Status, TfResult, TfSource};
 use crate::simulate::SpecimenModel;
+use crate::tracking::compensator::CompensatorOutcome;
 
 /// The bytes of `models.mat` for `results`. The header names the servoid
 /// version and nothing that changes from one run to the next (no date), so
@@ -115,7 +118,7 @@ fn rig_params(rig: &RigResult) -> RigParams {
     }
 }
 
-const RUN_FIELDS: [&str; 10] = [
+const RUN_FIELDS: [&str; 11] = [
     "id",
     "role",
     "status",
@@ -125,6 +128,7 @@ const RUN_FIELDS: [&str; 10] = [
     "physical",
     "ccf",
     "ccf_simplified",
+    "compensator",
     "error",
 ];
 
@@ -177,8 +181,31 @@ fn run_value(run: &RunResult, rig: Option<&RigResult>) -> Vec<MatValue> {
         physical,
         ccf,
         simplified,
+        run.tracking
+            .as_ref()
+            .and_then(|t| t.compensator.as_ref())
+            .map_or_else(MatValue::empty, compensator),
         text(run.error.as_deref().unwrap_or("")),
     ]
+}
+
+/// The run's compensator as `filter(b, a, x)` runs it at `fs`, with its
+/// continuous design `tf(num_s, den_s)` before the lead; `[]` without one.
+fn compensator(c: &CompensatorOutcome) -> MatValue {
+    let Some(d) = &c.design else {
+        return MatValue::empty();
+    };
+    MatValue::Struct(vec![
+        ("b".into(), MatValue::row(&d.b)),
+        ("a".into(), MatValue::row(&d.a)),
+        ("fs".into(), MatValue::scalar(d.sample_rate_hz)),
+        ("cutoff_hz".into(), MatValue::scalar(d.cutoff_hz)),
+        ("order".into(), MatValue::scalar(d.order as f64)),
+        ("lead_s".into(), MatValue::scalar(d.lead_s)),
+        ("num_s".into(), MatValue::row(&d.num_s)),
+        ("den_s".into(), MatValue::row(&d.den_s)),
+        ("band_hz".into(), MatValue::row(&c.band_hz)),
+    ])
 }
 
 /// The specimen's m, c, k; `[]` for what it does not have, and its kind.

@@ -361,8 +361,15 @@ fn second_pass(
                 .as_ref()
                 .ok()
                 .map(|(r, cov)| (r.at_p_gain(plan.p_gain), *cov));
-            let parts = keyed.as_ref().map(|(r, cov)| -> [&dyn std::fmt::Debug; 4] {
-                [&"validation", &campaign.identification, r, cov]
+            // The compensator's settings and the stiffnesses it is swept
+            // over decide the outcome too.
+            let sweep = (
+                &campaign.compensator,
+                campaign.sensitivity.range_n_per_m,
+                campaign.sensitivity.points,
+            );
+            let parts = keyed.as_ref().map(|(r, cov)| -> [&dyn std::fmt::Debug; 5] {
+                [&"validation", &campaign.identification, r, cov, &sweep]
             });
             return run_once(
                 campaign,

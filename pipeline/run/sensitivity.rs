@@ -22,6 +22,14 @@ use crate::simulate::specimen::SpecimenModel;
 
 /// The sensitivity of a campaign whose rig is `rig`; `noise` the first
 /// no-specimen run's FRF noise. None when the rig allows no sweep.
+/// The stiffness range of the sensitivity analysis (N/m): the manifest's,
+/// else 0.01 a2 .. 10 a2 (the paper's springs sit near 0.1 a2). The
+/// compensator's stiffness sweep uses it too.
+pub(super) fn stiffness_range(given: Option<(f64, f64)>, rig: &RigParams) -> (f64, f64) {
+    let a2 = rig.a2_n_per_m;
+    given.unwrap_or((0.01 * a2, 10.0 * a2))
+}
+
 pub(super) fn sensitivity(
     campaign: &Campaign,
     rig: &RigParams,
@@ -38,9 +46,7 @@ pub(super) fn sensitivity(
         })
         .collect();
     let plan = &campaign.sensitivity;
-    // 0.01 a2 .. 10 a2 by default: the paper's springs sit near 0.1 a2.
-    let a2 = rig.a2_n_per_m;
-    let range = plan.range_n_per_m.unwrap_or((0.01 * a2, 10.0 * a2));
+    let range = stiffness_range(plan.range_n_per_m, rig);
     let Some(analytic) = analytic(campaign, rig, results, noise, range) else {
         return Ok(None);
     };

@@ -442,6 +442,7 @@ fn analysis_manifest(plan: &SimulationPlan, truth: &Truth) -> Manifest {
         run_table: None,
         history: None,
         sensitivity: m.sensitivity.clone(),
+        compensator: None,
         limits: None,
     }
 }

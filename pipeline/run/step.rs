@@ -6,6 +6,8 @@
 
 use std::sync::Arc;
 
+use nalgebra::Complex;
+
 use super::acquire::{AcquireError, Acquired, FitData, LogStage, acquire_with, fit_options};
 use super::evidence::{Evidence, RigInput, ValidationEvidence};
 use super::rig::RigError;
@@ -14,7 +16,9 @@ use crate::fit::{self, DelayPlan, Intersample, TfFit};
 use crate::frf::{self, Frf};
 use crate::ingest::{IngestError, Log, LogFile};
 use crate::lti::TransferFunction;
-use crate::manifest::{Campaign, IdentificationPlan, Role, RunPlan, RunSource};
+use crate::manifest::{
+    Campaign, CompensatorSettings, IdentificationPlan, Role, RunPlan, RunSource,
+};
 use crate::model::{self, LinearSpecimen, RigParams};
 use crate::report::figures::catalogue::{self, ForceBins, OverlayRun, Prediction};
 use crate::report::tables::RunTables;
@@ -22,8 +26,9 @@ use crate::report::{FigureSpec, Measured};
 use crate::results::{
     DelayTestResult, FitSummary, LogInfo, RunResult, RunTracking, Status, TfResult, TfSource,
 };
-use crate::sensitivity::NoiseProfile;
+use crate::sensitivity::{self, NoiseProfile};
 use crate::simulate::specimen::SpecimenModel;
+use crate::tracking::compensator::{self, Compensator, CompensatorOutcome};
 use crate::tracking::{self, FrfBins, Tracking};
 use crate::validate::csi::Csi;
 use crate::validate::{self, Record, ValidateError};
@@ -349,7 +354,22 @@ pub(super) fn validation(
             ..Output::unfinished(out, None, wants)
         };
     };
-    validated(plan, out, st, &rig_at_p, rig_cov, wants)
+    // The compensator's stiffness sweep covers the sensitivity analysis's
+    // range (a2 does not depend on the P gain).
+    let range = super::sensitivity::stiffness_range(campaign.sensitivity.range_n_per_m, &rig_at_p);
+    let design = CompensatorPlan {
+        settings: &campaign.compensator,
+        range,
+        stiffnesses: sensitivity::log_grid(range, campaign.sensitivity.points),
+    };
+    validated(plan, out, st, &rig_at_p, rig_cov, &design, wants)
+}
+
+/// What a validation run's compensator is designed and swept with.
+struct CompensatorPlan<'a> {
+    settings: &'a CompensatorSettings,
+    range: (f64, f64),
+    stiffnesses: Vec<f64>,
 }
 
 /// A validation run with its log and model: the time-domain validation
@@ -360,16 +380,13 @@ fn validated(
     st: &LogStage,
     rig_at_p: &RigParams,
     rig_cov: Option<Cov4>,
+    design: &CompensatorPlan<'_>,
     wants: Wants,
 ) -> Output {
     let linear = plan.specimen.linear();
     let time = match validate::validation_run(rig_at_p, &plan.specimen, &record(&st.log)) {
         Ok(t) => {
             out.validation = Some(t.metrics.clone());
-            out.tracking = Some(RunTracking {
-                measured: measured_tracking(st, Some(&t.windows)),
-                predicted: Some(predicted_tracking(st, &t, out.tf.as_ref())),
-            });
             Some(t)
         }
         Err(e) => {
@@ -377,6 +394,29 @@ fn validated(
             None
         }
     };
+    // The log's own tracking stands whether or not the model could be
+    // simulated.
+    let measured = measured_tracking(st, time.as_ref().map(|t| t.windows.as_slice()));
+    let plant = out
+        .tf
+        .as_ref()
+        .and_then(|tf| TransferFunction::with_delay(&tf.num, &tf.den, tf.delay_s).ok());
+    let predicted = time
+        .as_ref()
+        .map(|t| predicted_tracking(st, t, plant.as_ref()));
+    let compensator = match (linear, &time, &plant) {
+        (Some(lin), Some(t), Some(g)) => Some(compensate(plan, st, t, rig_at_p, &lin, g, design)),
+        _ => None,
+    };
+    out.tracking = Some(RunTracking {
+        model_gap_s: measured
+            .delay_xcorr_s
+            .zip(predicted.as_ref().and_then(|p| p.delay_xcorr_s))
+            .map(|(m, p)| m - p),
+        measured,
+        predicted,
+        compensator,
+    });
     let measured = st.measured();
     let bins = ForceBins::of(&measured);
     let csi = linear.and_then(|lin| {
@@ -402,6 +442,9 @@ fn validated(
         if let (Some(bins), Some(model)) = (&bins, &out.force_tf) {
             let force = catalogue::force_figure(&out, bins, model, wants.intersample, csi.as_ref());
             specs.insert(1, force);
+        }
+        if let Some(g) = &plant {
+            specs.extend(catalogue::compensator_figures(&out, g));
         }
         if let Some(t) = &time {
             specs.extend(catalogue::subspace_figure(
@@ -535,19 +578,25 @@ fn measured_tracking(st: &LogStage, windows: Option<&[validate::Window]>) -> Tra
 }
 
 /// The tracking the model predicts for the log's command: its simulated
-/// displacement, and its transfer function's phase over the bins the
-/// measured FRF kept.
-fn predicted_tracking(
+/// displacement, and the phase over the bins the measured FRF kept of the
+/// plant as it was simulated, driven through the hold (times `comp` when
+/// given).
+fn predicted_tracking_of(
     st: &LogStage,
-    time: &validate::TimeStage,
-    tf: Option<&TfResult>,
+    windows: &[validate::Window],
+    displacement: &[f64],
+    plant: Option<&TransferFunction>,
+    comp: Option<&Compensator>,
 ) -> Tracking {
-    let model = tf.and_then(|tf| TransferFunction::with_delay(&tf.num, &tf.den, tf.delay_s).ok());
-    let h: Option<Vec<_>> = model.map(|model| {
+    let fs = st.log.sample_rate_hz;
+    let h: Option<Vec<_>> = plant.map(|g| {
         st.frf
             .freq_hz
             .iter()
-            .map(|f| model.freq_response(*f))
+            .map(|&f| {
+                compensator::held_response(g, f, fs)
+                    * comp.map_or(Complex::new(1.0, 0.0), |c| c.response(f))
+            })
             .collect()
     });
     let bins = h.as_ref().map(|h| FrfBins {
@@ -555,13 +604,93 @@ fn predicted_tracking(
         h,
         keep: &st.mask,
     });
-    tracking::measure(
-        &st.log.command_m,
-        &time.x1_simulated,
-        st.log.sample_rate_hz,
-        bins,
-        &time.windows,
-    )
+    tracking::measure(&st.log.command_m, displacement, fs, bins, windows)
+}
+
+/// The tracking the model predicts for the log's command, uncompensated.
+fn predicted_tracking(
+    st: &LogStage,
+    time: &validate::TimeStage,
+    plant: Option<&TransferFunction>,
+) -> Tracking {
+    predicted_tracking_of(st, &time.windows, &time.x1_simulated, plant, None)
+}
+
+/// The compensator for the run's specimen on the identified plant `plant`
+/// (x1/u, Eqs. 34-35), its tracking over the run's band with and without
+/// it, on the run's measured command (the desired displacement) through the
+/// plant's state space, and over the sensitivity's stiffnesses.
+fn compensate(
+    plan: &RunPlan,
+    st: &LogStage,
+    time: &validate::TimeStage,
+    rig_at_p: &RigParams,
+    specimen: &LinearSpecimen,
+    plant: &TransferFunction,
+    design: &CompensatorPlan<'_>,
+) -> CompensatorOutcome {
+    let fs = st.log.sample_rate_hz;
+    let band = plan.band_hz;
+    let uncompensated = compensator::band_tracking(plant, None, band, fs);
+    let settings = design.settings;
+    let c = match compensator::design(plant, fs, band.1, settings.cutoff_hz, settings.lead) {
+        Ok(c) => c,
+        Err(note) => {
+            return CompensatorOutcome {
+                design: None,
+                note: Some(note.to_string()),
+                band_hz: [band.0, band.1],
+                uncompensated,
+                compensated: None,
+                meets_target: None,
+                predicted: None,
+                peak_command_m: None,
+                peak_desired_m: None,
+                stiffness: Vec::new(),
+                target_stiffness_n_per_m: None,
+            };
+        }
+    };
+    let compensated = compensator::band_tracking(plant, Some(&c), band, fs);
+    let ss = model::state_space(rig_at_p, specimen);
+    let (predicted, peak, note) =
+        match compensator::compensated_displacement(&ss, &c, &st.log.command_m) {
+            Ok((x, peak)) => (
+                Some(predicted_tracking_of(
+                    st,
+                    &time.windows,
+                    &x,
+                    Some(plant),
+                    Some(&c),
+                )),
+                Some(peak),
+                None,
+            ),
+            Err(e) => (
+                None,
+                None,
+                Some(format!("the compensated plant could not be simulated: {e}")),
+            ),
+        };
+    CompensatorOutcome {
+        stiffness: compensator::stiffness_sweep(rig_at_p, specimen, &c, &design.stiffnesses, band),
+        target_stiffness_n_per_m: compensator::target_stiffness(
+            rig_at_p,
+            specimen,
+            &c,
+            design.range,
+            band,
+        ),
+        design: Some(c),
+        note,
+        band_hz: [band.0, band.1],
+        uncompensated,
+        meets_target: Some(compensated.meets_target()),
+        compensated: Some(compensated),
+        predicted,
+        peak_command_m: peak,
+        peak_desired_m: Some(st.log.command_m.iter().fold(0.0_f64, |m, v| m.max(v.abs()))),
+    }
 }
 
 /// A log's signals as the time-domain checks read them.
@@ -688,6 +817,8 @@ fn fitted(
         out.tracking = Some(RunTracking {
             measured: measured_tracking(st, windows),
             predicted: None,
+            model_gap_s: None,
+            compensator: None,
         });
     }
     (out, stage, time)

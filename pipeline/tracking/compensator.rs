@@ -30,8 +30,11 @@ use nalgebra::Complex;
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
-use crate::lti::TransferFunction;
+use crate::lti::{StateSpace, TransferFunction};
+use crate::model::{self, LinearSpecimen, RigParams};
 use crate::poly;
+use crate::simulate::SimError;
+use crate::simulate::discrete::simulate_linear;
 
 /// The cut-off's default: this many times the top of the fitted band, where
 /// an r-th order Butterworth is flat to 1e-7 and its group delay (about
@@ -243,4 +246,266 @@ impl Compensator {
             })
             .collect()
     }
+}
+
+/// The targets issue 27 sets for the compensated plant over the band: a
+/// delay under one sample and an amplitude within 1 %.
+pub const TARGET_DELAY_SAMPLES: f64 = 1.0;
+pub const TARGET_AMPLITUDE_PCT: f64 = 1.0;
+
+/// Frequencies over the band where [`band_tracking`] reads the response.
+const BAND_POINTS: usize = 200;
+
+/// The plant driven through the controller's zero-order hold and sampled at
+/// `fs`: `G(i w) sinc(w T / 2) exp(-i w T / 2)`. The folded images the
+/// sampling adds are below 1e-11 of it for x1/u (relative degree 4; the
+/// test `sine_through_the_plant_has_the_sampled_frequency_response` in
+/// `simulate::discrete` sums them).
+pub fn held_response(plant: &TransferFunction, f_hz: f64, fs: f64) -> Complex<f64> {
+    let x = std::f64::consts::PI * f_hz / fs;
+    let sinc = if x == 0.0 { 1.0 } else { x.sin() / x };
+    plant.freq_response(f_hz) * Complex::from_polar(sinc, -x)
+}
+
+/// How a plant, with or without the compensator, follows its command over
+/// a band: the worst amplitude error and the range of the delay, from the
+/// frequency response of the held plant (times the compensator's).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, JsonSchema)]
+pub struct BandTracking {
+    /// max over the band of | |H| - 1 | (%).
+    pub max_amplitude_error_pct: f64,
+    /// The delay -arg H / w (phase unwrapped from low frequency), least and
+    /// greatest over the band (samples; negative leads).
+    pub delay_samples_min: f64,
+    pub delay_samples_max: f64,
+}
+
+impl BandTracking {
+    /// The largest delay or lead over the band (samples).
+    pub fn max_abs_delay_samples(&self) -> f64 {
+        self.delay_samples_min
+            .abs()
+            .max(self.delay_samples_max.abs())
+    }
+
+    /// Issue 27's targets: under one sample, within 1 %.
+    pub fn meets_target(&self) -> bool {
+        self.max_abs_delay_samples() < TARGET_DELAY_SAMPLES
+            && self.max_amplitude_error_pct < TARGET_AMPLITUDE_PCT
+    }
+}
+
+/// The tracking of `plant` held at `fs`, times `comp` when given, over
+/// `band_hz` (log-spaced points, both ends). The phase is unwrapped along
+/// a grid that starts a hundred times below the band, where any plant here
+/// lags by far less than half a cycle.
+pub fn band_tracking(
+    plant: &TransferFunction,
+    comp: Option<&Compensator>,
+    band_hz: (f64, f64),
+    fs: f64,
+) -> BandTracking {
+    let (lo, hi) = band_hz;
+    let h = |f: f64| {
+        held_response(plant, f, fs) * comp.map_or(Complex::new(1.0, 0.0), |c| c.response(f))
+    };
+    let lead_in = (0..50).map(|i| lo * 0.01_f64.powf(1.0 - i as f64 / 50.0));
+    let band = (0..BAND_POINTS).map(|i| lo * (hi / lo).powf(i as f64 / (BAND_POINTS - 1) as f64));
+    let mut phase = 0.0_f64;
+    let mut prev: Option<f64> = None;
+    let mut out = BandTracking {
+        max_amplitude_error_pct: 0.0,
+        delay_samples_min: f64::INFINITY,
+        delay_samples_max: f64::NEG_INFINITY,
+    };
+    for (i, f) in lead_in.chain(band).enumerate() {
+        let v = h(f);
+        let arg = v.arg();
+        phase = match prev {
+            None => arg,
+            Some(p) => {
+                let step = (arg - p + std::f64::consts::PI).rem_euclid(2.0 * std::f64::consts::PI)
+                    - std::f64::consts::PI;
+                phase + step
+            }
+        };
+        prev = Some(arg);
+        if i < 50 {
+            continue;
+        }
+        let delay = -phase / (2.0 * std::f64::consts::PI * f) * fs;
+        out.max_amplitude_error_pct = out
+            .max_amplitude_error_pct
+            .max(100.0 * (v.norm() - 1.0).abs());
+        out.delay_samples_min = out.delay_samples_min.min(delay);
+        out.delay_samples_max = out.delay_samples_max.max(delay);
+    }
+    out
+}
+
+/// The compensator designed on the model of one specimen, on the plant of
+/// another: the tracking over the band with and without it.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, JsonSchema)]
+pub struct StiffnessPoint {
+    pub stiffness_n_per_m: f64,
+    pub uncompensated: BandTracking,
+    pub compensated: BandTracking,
+}
+
+/// `specimen` with its stiffness set to `k` (a spring where there was
+/// none): the specimen a compensator meets when the one it was designed
+/// for differs only in stiffness, the paper's theme (Sec. 2.3).
+pub fn with_stiffness(specimen: &LinearSpecimen, k: f64) -> LinearSpecimen {
+    match *specimen {
+        LinearSpecimen::None | LinearSpecimen::Spring { .. } => LinearSpecimen::Spring {
+            stiffness_n_per_m: k,
+        },
+        LinearSpecimen::Sdof {
+            mass_kg,
+            damping_ns_per_m,
+            ..
+        } => LinearSpecimen::Sdof {
+            mass_kg,
+            damping_ns_per_m,
+            stiffness_n_per_m: k,
+        },
+    }
+}
+
+/// `comp`, designed for `specimen` on `rig`, on the plant with each of the
+/// stiffnesses `ks` instead (Eqs. 34-35); a stiffness whose plant leaves
+/// f64's range is left out.
+pub fn stiffness_sweep(
+    rig: &RigParams,
+    specimen: &LinearSpecimen,
+    comp: &Compensator,
+    ks: &[f64],
+    band_hz: (f64, f64),
+) -> Vec<StiffnessPoint> {
+    let fs = comp.sample_rate_hz;
+    ks.iter()
+        .filter_map(|&k| {
+            let plant = model::tf_x1_u(rig, &with_stiffness(specimen, k)).ok()?;
+            Some(StiffnessPoint {
+                stiffness_n_per_m: k,
+                uncompensated: band_tracking(&plant, None, band_hz, fs),
+                compensated: band_tracking(&plant, Some(comp), band_hz, fs),
+            })
+        })
+        .collect()
+}
+
+/// The stiffnesses around the designed-for specimen's over which `comp`
+/// still meets the targets over the band ([`BandTracking::meets_target`]),
+/// searched within `range_n_per_m` (extended to take in the specimen's own)
+/// by bisection on each side to 1e-6 of the stiffness; None when the
+/// compensator misses the targets on its own specimen. A bound equal to
+/// the range's end means the targets hold that far at least.
+pub fn target_stiffness(
+    rig: &RigParams,
+    specimen: &LinearSpecimen,
+    comp: &Compensator,
+    range_n_per_m: (f64, f64),
+    band_hz: (f64, f64),
+) -> Option<[f64; 2]> {
+    let fs = comp.sample_rate_hz;
+    let meets = |k: f64| {
+        model::tf_x1_u(rig, &with_stiffness(specimen, k))
+            .is_ok_and(|g| band_tracking(&g, Some(comp), band_hz, fs).meets_target())
+    };
+    let own = model::tf_x1_u(rig, specimen).ok()?;
+    if !band_tracking(&own, Some(comp), band_hz, fs).meets_target() {
+        return None;
+    }
+    let k0 = specimen.mck().2;
+    // From `inside` (meets) toward `outside` (the range's end): the last
+    // stiffness that meets.
+    let edge = |inside: f64, outside: f64| {
+        if meets(outside) {
+            return outside;
+        }
+        let (mut a, mut b) = (inside, outside);
+        while (b - a).abs() > 1e-6 * a.abs().max(b.abs()) {
+            let mid = if a > 0.0 && b > 0.0 {
+                (a * b).sqrt()
+            } else {
+                0.5 * (a + b)
+            };
+            if meets(mid) { a = mid } else { b = mid }
+        }
+        a
+    };
+    let lo = if k0 > 0.0 {
+        edge(k0, range_n_per_m.0.min(k0))
+    } else {
+        0.0
+    };
+    let hi = edge(k0, range_n_per_m.1.max(k0));
+    Some([lo, hi])
+}
+
+/// The displacement the plant `ss` (first output x1, Eq. 10) gives when a
+/// controller runs `comp` on the desired displacement `desired`, sampled at
+/// the compensator's rate through a zero-order hold. The rig rests at the
+/// first desired sample before the record begins; C has the plant's
+/// inverse gain at DC, so the displacement rests there too, and only the
+/// departures from it pass through the filter from rest.
+///
+/// Returns the displacement and the largest command the controller sends
+/// (m; at rest, `x0 / G(0)`): an inverse asks for much more than the
+/// desired displacement where that has content the plant attenuates (a
+/// sweep cut off mid-cycle asks for a step), which the actuator's stroke
+/// and valve may not give.
+pub fn compensated_displacement(
+    ss: &StateSpace,
+    comp: &Compensator,
+    desired: &[f64],
+) -> Result<(Vec<f64>, f64), SimError> {
+    let x0 = desired.first().copied().unwrap_or(0.0);
+    let departures: Vec<f64> = desired.iter().map(|v| v - x0).collect();
+    let command = comp.apply(&departures);
+    let outputs = ss.c.nrows();
+    let mut y = simulate_linear(ss, &command, 1.0 / comp.sample_rate_hz, &vec![0.0; outputs])?;
+    let mut x1 = y.swap_remove(model::OUT_X1);
+    x1.iter_mut().for_each(|v| *v += x0);
+    let dc = ss.eval(model::OUT_X1, Complex::new(0.0, 0.0)).re;
+    let rest = if x0 == 0.0 { 0.0 } else { x0 / dc };
+    let peak = command
+        .iter()
+        .fold(rest.abs(), |m, c| m.max((rest + c).abs()));
+    Ok((x1, peak))
+}
+
+/// The compensator of one validation run: designed on the identified plant
+/// with the run's specimen, its tracking over the run's band with and
+/// without it, on the run's own command, and on specimens of other
+/// stiffness.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+pub struct CompensatorOutcome {
+    /// The design; null with `note` when the plant has no usable inverse.
+    pub design: Option<Compensator>,
+    pub note: Option<String>,
+    /// The band the tracking is read over (the run's fitted band, Hz).
+    pub band_hz: [f64; 2],
+    /// The held plant alone and with the compensator, over the band.
+    pub uncompensated: BandTracking,
+    pub compensated: Option<BandTracking>,
+    /// Whether the compensated plant meets issue 27's targets over the
+    /// band: a delay under one sample, an amplitude within 1 %.
+    pub meets_target: Option<bool>,
+    /// The tracking measures of the displacement the plant with the
+    /// compensator gives for the run's measured command (as `predicted`
+    /// without it).
+    pub predicted: Option<super::Tracking>,
+    /// The largest command the compensator sends for the run's command
+    /// (m), beside that command's own peak in `peak_desired_m`.
+    pub peak_command_m: Option<f64>,
+    pub peak_desired_m: Option<f64>,
+    /// The compensator on the plant with the specimen's stiffness changed,
+    /// over the stiffness sensitivity's range.
+    pub stiffness: Vec<StiffnessPoint>,
+    /// The specimens' stiffnesses (N/m) around this one's for which the
+    /// compensator still meets the targets; null when it misses them on
+    /// its own.
+    pub target_stiffness_n_per_m: Option<[f64; 2]>,
 }

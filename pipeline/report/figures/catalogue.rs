@@ -26,6 +26,7 @@ use crate::report::{FigureSpec, Measured};
 use crate::results::complex_vec;
 use crate::results::{RunResult, SensitivityResult, TfResult};
 use crate::sensitivity::montecarlo::{MonteCarlo, MonteCarloPoint, PerParameter};
+use crate::tracking::compensator;
 use crate::validate::TimeStage;
 use crate::validate::csi::Csi;
 
@@ -644,6 +645,141 @@ pub fn subspace_figure(
         }),
         size: (900, 800),
     })
+}
+
+/// Points of the compensator's frequency-response figure.
+const COMPENSATOR_POINTS: usize = 300;
+
+/// A validation run's compensator (issue 27): the predicted FRF of the
+/// held plant `plant` (x1/u with the run's specimen) with and without it,
+/// from the band's bottom to past the low-pass's cut-off; and how the
+/// compensated tracking degrades when the specimen's stiffness differs
+/// from the one it was designed for. None without a design.
+pub fn compensator_figures(run: &RunResult, plant: &TransferFunction) -> Vec<FigureSpec> {
+    let Some(outcome) = run.tracking.as_ref().and_then(|t| t.compensator.as_ref()) else {
+        return Vec::new();
+    };
+    let Some(c) = &outcome.design else {
+        return Vec::new();
+    };
+    let fs = c.sample_rate_hz;
+    let lo = outcome.band_hz[0];
+    let hi = (2.0 * c.cutoff_hz).min(0.45 * fs);
+    let freq_hz: Vec<f64> = (0..COMPENSATOR_POINTS)
+        .map(|i| lo * (hi / lo).powf(i as f64 / (COMPENSATOR_POINTS - 1) as f64))
+        .collect();
+    let held: Vec<Complex<f64>> = freq_hz
+        .iter()
+        .map(|&f| compensator::held_response(plant, f, fs))
+        .collect();
+    let series = |label: &str, h: Vec<Complex<f64>>, trace, slot| BodeSeries {
+        label: label.into(),
+        freq_hz: freq_hz.clone(),
+        h,
+        coherence: None,
+        trace,
+        palette_index: slot,
+        band: None,
+    };
+    let bode = BodeFigure {
+        title: format!("{}: predicted tracking, command to displacement", run.id),
+        series: vec![
+            series("without compensator", held.clone(), Trace::Model, Some(1)),
+            series(
+                "with compensator",
+                held.iter()
+                    .zip(&freq_hz)
+                    .map(|(h, &f)| h * c.response(f))
+                    .collect(),
+                Trace::Model,
+                Some(2),
+            ),
+            series(
+                "perfect tracking",
+                vec![Complex::new(1.0, 0.0); freq_hz.len()],
+                Trace::Reference,
+                None,
+            ),
+        ],
+        freq_range_hz: (lo, hi),
+        mag_range_db: None,
+        phase: true,
+        coherence: false,
+        log_frequency: true,
+        mag_label: String::new(),
+    };
+    let mut figures = vec![FigureSpec {
+        id: format!("compensator-{}", run.id),
+        title: format!("{}: model-based compensator", run.id),
+        caption: format!(
+            "The identified plant with this specimen, driven through the hold at {fs} Hz, without and with the compensator (its inverse times a Butterworth low-pass of order {} at {:.0} Hz, with a lead of {:.3} ms): predicted from the model, not measured. The band is {}-{} Hz.",
+            c.order,
+            c.cutoff_hz,
+            1e3 * c.lead_s,
+            outcome.band_hz[0],
+            outcome.band_hz[1]
+        ),
+        size: bode.recommended_size(),
+        figure: Figure::Bode(bode),
+    }];
+    let points = &outcome.stiffness;
+    if points.len() >= 2 {
+        let k: Vec<f64> = points.iter().map(|p| p.stiffness_n_per_m).collect();
+        let mut lines = vec![
+            XySeries {
+                label: "worst amplitude error over the band (%)".into(),
+                x: k.clone(),
+                y: points
+                    .iter()
+                    .map(|p| p.compensated.max_amplitude_error_pct)
+                    .collect(),
+                trace: Trace::Model,
+                palette_index: Some(1),
+            },
+            XySeries {
+                label: "worst delay or lead over the band (samples)".into(),
+                x: k.clone(),
+                y: points
+                    .iter()
+                    .map(|p| p.compensated.max_abs_delay_samples())
+                    .collect(),
+                trace: Trace::Model,
+                palette_index: Some(2),
+            },
+            XySeries {
+                label: "target (1 % and 1 sample)".into(),
+                x: vec![k[0], k[k.len() - 1]],
+                y: vec![1.0, 1.0],
+                trace: Trace::Reference,
+                palette_index: None,
+            },
+        ];
+        let own = run.specimen.linear_mck().map_or(0.0, |(_, _, k)| k);
+        if own > 0.0 {
+            mark_springs(&mut lines, &[own]);
+            if let Some(l) = lines.last_mut() {
+                l.label = "designed for".into();
+            }
+        }
+        figures.push(FigureSpec {
+            id: format!("compensator-stiffness-{}", run.id),
+            title: format!("{}: the compensator on other specimens", run.id),
+            caption: "The compensator designed for this specimen, on the identified plant with the specimen's stiffness changed over the sensitivity analysis's range (mass and damping kept): the worst amplitude error and delay over the band, predicted from the model.".into(),
+            figure: Figure::Lines(LinesFigure {
+                title: format!("{}: compensated tracking against specimen stiffness", run.id),
+                x_label: "Specimen stiffness k (N/m)".into(),
+                y_label: "Error (% or samples)".into(),
+                series: lines,
+                x_range: None,
+                y_range: None,
+                log_x: true,
+                log_y: true,
+                zero_line: false,
+            }),
+            size: (1200, 600),
+        });
+    }
+    figures
 }
 
 /// An identification run's FRF kept for Fig. 15.
