@@ -100,21 +100,44 @@ pub fn xcorr_delay(
     let first = limit + KERNEL_HALF + 1;
     let last = n - limit - KERNEL_HALF - 1;
     let stride = (last - first).div_ceil(REFINE_SAMPLES).max(1);
+    // Every tau in [best - 1, best + 1] reads the command at the 2K + 1
+    // integer lags best - K ..= best + K, so one pass over the samples
+    // gathers what each evaluation needs: the displacement's products with
+    // the command at those lags (`rl`) and the command's with itself
+    // (`gram`). Then r(tau) = w . rl and E(tau) = w' gram w for the taps w
+    // of tau, the same sums as interpolating sample by sample.
+    let half = KERNEL_HALF as i64;
+    let lags = 2 * KERNEL_HALF + 1;
+    let low = best - half;
+    let mut rl = vec![0.0; lags];
+    let mut gram = vec![0.0; lags * lags];
+    let mut v = vec![0.0; lags];
+    for t in (first..last).step_by(stride) {
+        for (o, vo) in v.iter_mut().enumerate() {
+            *vo = u[(t as i64 - low - o as i64) as usize] - mu;
+        }
+        let xt = x[t] - mx;
+        for a in 0..lags {
+            rl[a] += xt * v[a];
+            let row = &mut gram[a * lags..(a + 1) * lags];
+            for b in a..lags {
+                row[b] += v[a] * v[b];
+            }
+        }
+    }
     let corr = |tau: f64| -> f64 {
-        // tau = shift + frac: u(t - tau) = sum_j u[t - shift - j] L(j - frac).
-        let shift = tau.floor();
-        let frac = tau - shift;
-        let half = KERNEL_HALF as i64;
-        let taps = lagrange_taps(frac);
-        let (mut r, mut e) = (0.0, 0.0);
-        for t in (first..last).step_by(stride) {
-            let base = t as i64 - shift as i64;
-            let v: f64 = (1 - half..=half)
-                .zip(&taps)
-                .map(|(j, w)| (u[(base - j) as usize] - mu) * w)
-                .sum();
-            r += (x[t] - mx) * v;
-            e += v * v;
+        // tau = shift + frac: u(t - tau) = sum_j u[t - shift - j] L(j - frac),
+        // j = 1 - K ..= K, the lag shift + j at offset shift + j - low.
+        let shift = tau.floor().min(best as f64);
+        let taps = lagrange_taps(tau - shift);
+        let off = (shift as i64 + 1 - half - low) as usize;
+        let r: f64 = taps.iter().enumerate().map(|(a, w)| w * rl[off + a]).sum();
+        let mut e = 0.0;
+        for (a, wa) in taps.iter().enumerate() {
+            for (b, wb) in taps.iter().enumerate() {
+                let (i, j) = (off + a.min(b), off + a.max(b));
+                e += wa * wb * gram[i * lags + j];
+            }
         }
         r / e.sqrt()
     };
