@@ -128,6 +128,84 @@ fn every_run_of_the_bundled_default_has_its_tracking_and_validation_runs_their_p
     );
     let report = std::fs::read_to_string(out.join("report.html")).unwrap();
     assert!(report.contains(">Delay (ms)</th>"), "the campaign table");
+    tracking_table_matches_results(&out, &r);
+}
+
+/// `tables/tracking.parquet`, read by polars, holds every run's tracking as
+/// results.json (a separate serialisation of the same results) states it,
+/// one row per run in manifest order, null where a run has no measure.
+fn tracking_table_matches_results(out: &Path, r: &Value) {
+    use polars::prelude::{ParquetReader, SerReader};
+    let file = std::fs::File::open(out.join("tables/tracking.parquet")).unwrap();
+    let df = ParquetReader::new(file).finish().unwrap();
+    let runs = r["runs"].as_array().unwrap();
+    assert_eq!(df.height(), runs.len());
+    let ids: Vec<String> = df
+        .column("run")
+        .unwrap()
+        .str()
+        .unwrap()
+        .iter()
+        .map(|s| s.unwrap().to_string())
+        .collect();
+    let want: Vec<&str> = runs.iter().map(|x| x["id"].as_str().unwrap()).collect();
+    assert_eq!(ids, want);
+    let col = |name: &str| -> Vec<Option<f64>> {
+        df.column(name)
+            .unwrap_or_else(|_| panic!("column {name}"))
+            .f64()
+            .unwrap()
+            .iter()
+            .collect()
+    };
+    for (name, path) in [
+        (
+            "measured_delay_xcorr_s",
+            &["tracking", "measured", "delay_xcorr_s"][..],
+        ),
+        (
+            "measured_fei_amplitude",
+            &["tracking", "measured", "fei", "amplitude"],
+        ),
+        (
+            "measured_j2_pct",
+            &["tracking", "measured", "errors", "nrms_pct"],
+        ),
+        (
+            "predicted_delay_xcorr_s",
+            &["tracking", "predicted", "delay_xcorr_s"],
+        ),
+        (
+            "predicted_j3_pct",
+            &["tracking", "predicted", "errors", "peak_pct"],
+        ),
+        (
+            "compensated_delay_xcorr_s",
+            &["tracking", "compensator", "predicted", "delay_xcorr_s"],
+        ),
+        (
+            "compensated_j2_pct",
+            &["tracking", "compensator", "predicted", "errors", "nrms_pct"],
+        ),
+        ("model_gap_s", &["tracking", "model_gap_s"]),
+        (
+            "compensator_cutoff_hz",
+            &["tracking", "compensator", "design", "cutoff_hz"],
+        ),
+    ] {
+        for (got, run) in col(name).into_iter().zip(runs) {
+            let want = path.iter().fold(run, |v, k| &v[*k]).as_f64();
+            assert_eq!(got, want, "{name} of run {}", run["id"]);
+        }
+    }
+    let validation = runs.iter().filter(|x| x["role"] == "validation").count();
+    let meets = df
+        .column("compensator_meets_target")
+        .unwrap()
+        .bool()
+        .unwrap()
+        .clone();
+    assert_eq!(meets.iter().flatten().filter(|m| *m).count(), validation);
 }
 
 /// A validation run's compensator on the bundled default (issue 27's

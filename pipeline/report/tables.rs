@@ -189,3 +189,90 @@ fn model_table(run: &RunResult) -> Option<ModelTable> {
     }
     Some(t)
 }
+
+/// The campaign's tracking table, `tables/tracking.parquet`, relative to the
+/// output folder.
+pub const TRACKING_TABLE: &str = "tables/tracking.parquet";
+
+/// Every run's tracking in one table (one row per run, manifest order): the
+/// measured measures, the model's prediction and the compensated
+/// prediction (each `measured_`, `predicted_`, `compensated_` and the
+/// measure: delays in s, FEI amplitude, phase in degrees and delay in s,
+/// the tracking indicator in % of peak^2, J2 and J3 in %), the delay the
+/// model lacks, and the compensator's design and target range. A measure a
+/// run does not have is null. Built from the results alone, so a merged
+/// campaign writes the same table as one run whole.
+pub fn write_tracking(path: &Path, runs: &[RunResult]) -> Result<(), ColumnWriteError> {
+    use crate::tracking::Tracking;
+    type Measure = fn(&Tracking) -> Option<f64>;
+    type Source = fn(&RunResult) -> Option<&Tracking>;
+    const MEASURES: [(&str, Measure); 8] = [
+        ("delay_xcorr_s", |t| t.delay_xcorr_s),
+        ("delay_phase_slope_s", |t| t.delay_phase_slope_s),
+        ("fei_amplitude", |t| t.fei.as_ref().map(|f| f.amplitude)),
+        ("fei_phase_deg", |t| t.fei.as_ref().map(|f| f.phase_deg)),
+        ("fei_delay_s", |t| t.fei.as_ref().map(|f| f.delay_s)),
+        ("tracking_indicator_pct", |t| t.tracking_indicator_pct),
+        ("j2_pct", |t| t.errors.as_ref().map(|e| e.nrms_pct)),
+        ("j3_pct", |t| t.errors.as_ref().map(|e| e.peak_pct)),
+    ];
+    fn compensator(r: &RunResult) -> Option<&crate::tracking::compensator::CompensatorOutcome> {
+        r.tracking.as_ref().and_then(|t| t.compensator.as_ref())
+    }
+    let sources: [(&str, Source); 3] = [
+        ("measured", |r| r.tracking.as_ref().map(|t| &t.measured)),
+        ("predicted", |r| {
+            r.tracking.as_ref().and_then(|t| t.predicted.as_ref())
+        }),
+        ("compensated", |r| {
+            r.tracking
+                .as_ref()
+                .and_then(|t| t.compensator.as_ref())
+                .and_then(|c| c.predicted.as_ref())
+        }),
+    ];
+    let text = |f: &dyn Fn(&RunResult) -> String| runs.iter().map(f).collect::<Vec<String>>();
+    let mut cols = vec![
+        Column::new("run".into(), text(&|r| r.id.clone())),
+        Column::new("role".into(), text(&|r| r.role.as_str().to_string())),
+    ];
+    for (source, of) in sources {
+        for (name, measure) in MEASURES {
+            let v: Vec<Option<f64>> = runs.iter().map(|r| of(r).and_then(measure)).collect();
+            cols.push(Column::new(format!("{source}_{name}").into(), v));
+        }
+    }
+    let opt = |f: &dyn Fn(&RunResult) -> Option<f64>| runs.iter().map(f).collect::<Vec<_>>();
+    cols.push(Column::new(
+        "model_gap_s".into(),
+        opt(&|r| r.tracking.as_ref().and_then(|t| t.model_gap_s)),
+    ));
+    fn design(r: &RunResult) -> Option<&crate::tracking::compensator::Compensator> {
+        compensator(r).and_then(|c| c.design.as_ref())
+    }
+    cols.push(Column::new(
+        "compensator_cutoff_hz".into(),
+        opt(&|r| design(r).map(|d| d.cutoff_hz)),
+    ));
+    cols.push(Column::new(
+        "compensator_lead_s".into(),
+        opt(&|r| design(r).map(|d| d.lead_s)),
+    ));
+    cols.push(Column::new(
+        "compensator_meets_target".into(),
+        runs.iter()
+            .map(|r| compensator(r).and_then(|c| c.meets_target))
+            .collect::<Vec<Option<bool>>>(),
+    ));
+    for (i, name) in ["low", "high"].iter().enumerate() {
+        cols.push(Column::new(
+            format!("compensator_target_k_{name}_n_per_m").into(),
+            opt(&|r| {
+                compensator(r)
+                    .and_then(|c| c.target_stiffness_n_per_m)
+                    .map(|k| k[i])
+            }),
+        ));
+    }
+    write(path, runs.len(), cols)
+}

@@ -587,6 +587,11 @@ fn write_set(
         &out_dir.join("models.mat"),
         &report::models::models_mat(results).map_err(WriteError::from)?,
     )?;
+    report::tables::write_tracking(&out_dir.join(report::tables::TRACKING_TABLE), &results.runs)
+        .map_err(|e| match e {
+            report::columns::ColumnWriteError::Write(w) => w,
+            other => WriteError::Table(Box::new(other)),
+        })?;
     if let Some(h) = history {
         h.write(&json)?;
     }
@@ -634,7 +639,11 @@ fn set_files(
         .flatten()
         .cloned();
     let pages = results.runs.iter().map(|r| report::html::run_page(&r.id));
-    let tables = run_tables.iter().flatten().cloned();
+    let tables = run_tables
+        .iter()
+        .flatten()
+        .cloned()
+        .chain([report::tables::TRACKING_TABLE.to_string()]);
     figures.chain(pages).chain(tables).collect()
 }
 
