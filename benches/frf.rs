@@ -52,6 +52,8 @@ fn bench_frf(c: &mut Criterion) {
         overlap: 0.5,
         window: Window::Hann,
         detrend: Detrend::Mean,
+        transient: None,
+        model_noise: false,
     };
     let mut group = c.benchmark_group("frf");
     group.throughput(Throughput::Elements(u.len() as u64));

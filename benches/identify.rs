@@ -14,6 +14,12 @@
 //!   to less than together (most likely because each alone runs with its
 //!   data in cache; not page faults, which were counted).
 //!
+//! - `auto`: what the default estimator costs on the same log beside the
+//!   fit it replaces: its choice (`FrfRequest::resolve`), then the ETFE and
+//!   `fit_run`'s two fits (the second on the noise level of what the first
+//!   leaves), on the record as logged (at rest at both ends) and cut 1.5 s
+//!   before its end (in motion: the transient fitted beside each model).
+//!
 //! `cargo bench --bench identify`
 
 use std::hint::black_box;
@@ -21,10 +27,11 @@ use std::hint::black_box;
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use servoid::fit::fit;
 use servoid::frf;
+use servoid::frf::FrfRequest;
 use servoid::ingest::LogFormat;
 use servoid::manifest::simulation::load_simulation_str;
 use servoid::manifest::{RunSource, load};
-use servoid::run::acquire::{FitData, fit_options, log_stage};
+use servoid::run::acquire::{FitData, fit_options, fit_run, log_stage};
 use servoid::run::simulate::simulate_campaign;
 
 fn bench_identify(c: &mut Criterion) {
@@ -58,6 +65,7 @@ fn bench_identify(c: &mut Criterion) {
         stage.log.sample_rate_hz,
     );
 
+    let plan = &stage.choice.plan;
     let mut group = c.benchmark_group("identify_170s_2048hz");
     group.sample_size(20);
     group.throughput(Throughput::Bytes(bytes));
@@ -68,26 +76,47 @@ fn bench_identify(c: &mut Criterion) {
     // The FRF and the fit alone, as acquire.rs calls them.
     group.throughput(Throughput::Elements(u.len() as u64));
     group.bench_function("frf_only", |b| {
-        b.iter(|| frf::estimate(black_box(&u), black_box(&y), fs, &ident.frf).unwrap())
+        b.iter(|| frf::estimate(black_box(&u), black_box(&y), fs, plan).unwrap())
     });
-    let h = frf::estimate(&u, &y, fs, &ident.frf).unwrap();
+    let h = frf::estimate(&u, &y, fs, plan).unwrap();
     let mask = frf::band_mask(&h, run.band_hz, ident.coherence_min);
     let bins: Vec<usize> = (0..h.freq_hz.len()).filter(|&i| mask[i]).collect();
     group.bench_function("variance_only", |b| {
         b.iter(|| frf::h_variance_at(black_box(&h), black_box(&bins)))
     });
-    let opts = fit_options(ident, fs);
-    let data = FitData::of(&h, &mask);
+    let opts = fit_options(ident, plan, fs);
+    let data = FitData::of(&h, &mask, plan);
     group.bench_function(format!("fit_only/{}_bins", data.freq_hz.len()), |b| {
         b.iter(|| fit(black_box(&data.input()), &opts).unwrap())
     });
     group.bench_function("frf_and_fit", |b| {
         b.iter(|| {
-            let h = frf::estimate(black_box(&u), black_box(&y), fs, &ident.frf).unwrap();
+            let h = frf::estimate(black_box(&u), black_box(&y), fs, plan).unwrap();
             let mask = frf::band_mask(&h, run.band_hz, ident.coherence_min);
-            fit(&FitData::of(&h, &mask).input(), &opts).unwrap()
+            fit(&FitData::of(&h, &mask, plan).input(), &opts).unwrap()
         })
     });
+    // The default estimator, on the record as logged and cut in motion.
+    let auto = FrfRequest::default();
+    let cut = u.len() - (1.5 * fs) as usize;
+    for (name, u, y) in [
+        ("auto/at_rest", &u[..], &y[..]),
+        ("auto/in_motion", &u[..cut], &y[..cut]),
+    ] {
+        let choice = auto.resolve(u, y, fs, run.band_hz).unwrap();
+        assert_eq!(choice.ends.at_rest(), name.ends_with("at_rest"));
+        group.throughput(Throughput::Elements(u.len() as u64));
+        group.bench_function(name, |b| {
+            b.iter(|| {
+                let choice = auto
+                    .resolve(black_box(u), black_box(y), fs, run.band_hz)
+                    .unwrap();
+                let mut h = frf::estimate(u, y, fs, &choice.plan).unwrap();
+                let mask = frf::band_mask(&h, run.band_hz, ident.coherence_min);
+                fit_run(&mut h, &mask, run.band_hz, ident, &choice.plan, fs).unwrap()
+            })
+        });
+    }
     group.finish();
 }
 

@@ -11,7 +11,9 @@ use std::path::{Path, PathBuf};
 
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use servoid::ingest::read_log;
-use servoid::ingest::{ChannelPlan, Channels, Column, CsvOptions, LogFormat, LogPlan, TimePlan};
+use servoid::ingest::{
+    ChannelPlan, Channels, Column, CsvOptions, LogFormat, LogPlan, Repair, TimePlan,
+};
 use servoid::report::columns::{
     UnitColumn, hdf5_bytes, mat_bytes, mat_v73_bytes, tdms_bytes, write_csv, write_parquet,
 };
@@ -27,6 +29,7 @@ fn channel(column: Column, unit: Unit, scale: f64) -> ChannelPlan {
         gain: scale * unit.to_si(),
         offset: 0.0,
         range: None,
+        repair: Repair::None,
     }
 }
 

@@ -98,6 +98,7 @@ fn bench_joint(c: &mut Criterion) {
             h,
             variance: &var,
             bin_hz: f[1] - f[0],
+            lag: 1,
         })
         .collect();
     let start = RigParams {
@@ -118,7 +119,6 @@ fn bench_joint(c: &mut Criterion) {
         delay_start_s: 0.0,
         max_delay_s: 0.05,
         force_delay_start_s: 0.0,
-        lag: 1,
     };
     // Fail loudly rather than time a fit that does not work.
     let fit = joint_fit(&runs, &start, &opts).unwrap();

@@ -61,16 +61,19 @@ fn main() {
     )
     .expect("a valid chirp");
     assert_eq!(command.len(), 120_000);
+    let frf = FrfPlan {
+        estimator: Estimator::Etfe,
+        segment_length: 4096,
+        overlap: 0.5,
+        window: Window::Rectangular,
+        detrend: Detrend::Mean,
+        transient: None,
+        model_noise: false,
+    };
     let ident = IdentificationPlan {
         band_hz: (0.5, 30.0),
         coherence_min: 0.8,
-        frf: FrfPlan {
-            estimator: Estimator::Etfe,
-            segment_length: 4096,
-            overlap: 0.5,
-            window: Window::Rectangular,
-            detrend: Detrend::Mean,
-        },
+        frf: frf.clone().into(),
         intersample: Intersample::SampleAndHold,
         delay: DelayPlan::None,
         max_delay_s: 0.02,
@@ -88,6 +91,7 @@ fn main() {
         step_m: Some(0.05 / f64::from((1u32 << 17) - 1)),
         delay_s: 0.0,
         ident: &ident,
+        frf: &frf,
         seed: 0,
     };
     // 20 stiffnesses, log-spaced over 0.01-10 a2.

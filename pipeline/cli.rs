@@ -730,6 +730,9 @@ fn print_summary(r: &Results) {
         ));
         // Why a run is an outlier, under its line: "OUTLIER" alone does
         // not say what to look at.
+        if let Some(frf) = &run.frf {
+            say(&format!("      FRF: {}", frf.reason));
+        }
         if let Some(note) = run
             .validation
             .as_ref()

@@ -448,6 +448,9 @@ pub struct RunResult {
     pub tracking: Option<RunTracking>,
     /// The log this run read, when it has one.
     pub log: Option<LogInfo>,
+    /// The FRF settings the run got and why, when it has a log.
+    #[serde(default)]
+    pub frf: Option<FrfUsed>,
     /// A run table row's cells in the lab's own columns (a `notes`, an
     /// `operator`), by column; absent when there are none.
     #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
@@ -463,6 +466,37 @@ pub struct LogInfo {
     pub sample_rate_hz: f64,
     pub n_samples: usize,
     pub duration_s: f64,
+    /// Isolated spikes replaced by their neighbours' line, as a channel's
+    /// `repair = "interpolate"` asked.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub repairs: Vec<crate::ingest::Repaired>,
+}
+
+/// The FRF settings a run got and why (`frf::FrfRequest::resolve`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+pub struct FrfUsed {
+    /// "auto" when the default estimator chose them from the log, else
+    /// "manifest".
+    pub chosen_by: String,
+    pub estimator: crate::frf::Estimator,
+    pub window: crate::frf::Window,
+    /// Samples per Welch segment (for the ETFE, the coherence's segments).
+    pub segment_length: usize,
+    pub overlap: f64,
+    pub detrend: crate::frf::Detrend,
+    /// Whether the record's transient was fitted beside the run's model
+    /// and taken out of its FRF.
+    pub transient: bool,
+    /// Whether the bins' noise level was read from what a first fit left.
+    pub model_noise: bool,
+    /// What the command holds: "sweep", "multisine", "noise",
+    /// "narrowband" or "unknown"; and in words.
+    pub excitation: String,
+    pub excitation_note: String,
+    /// How the record's ends stand, in words.
+    pub ends: String,
+    /// What was chosen and why, in a sentence.
+    pub reason: String,
 }
 
 pub use crate::validate::{SimplifiedCcf, ValidationMetrics, WindowErrors};

@@ -84,3 +84,24 @@ impl TimeUnit {
         }
     }
 }
+
+/// A number with `sig` significant digits: plain between 1e-3 and 1e6,
+/// scientific outside; a dash for none.
+pub fn format_number(x: f64, sig: usize) -> String {
+    let sig = sig.max(1);
+    if x == 0.0 {
+        return "0".into();
+    }
+    let e = x.abs().log10().floor() as i32;
+    if (-3..6).contains(&e) {
+        let decimals = (sig as i32 - 1 - e).max(0) as usize;
+        let s = format!("{x:.decimals$}");
+        if s.contains('.') {
+            s.trim_end_matches('0').trim_end_matches('.').to_string()
+        } else {
+            s
+        }
+    } else {
+        format!("{:.*e}", sig - 1, x)
+    }
+}

@@ -347,7 +347,10 @@ fn the_noise_variance_matches_the_scatter_of_h_over_seeds_on_a_sweep() {
                 &log.command_m,
                 &log.displacement_m,
                 log.sample_rate_hz,
-                &c.identification.frf,
+                &c.identification
+                    .frf
+                    .explicit()
+                    .expect("the campaign names the ETFE"),
             )
             .expect("an FRF");
             if seed == 0 {

@@ -120,3 +120,103 @@ fn logs_without_excitation_or_coherence_fail_alone_and_name_their_files() {
     assert!((beta1 - 267.0).abs() < 1e-9, "beta1 = {beta1}");
     assert!(out.join("report.html").is_file(), "the report is written");
 }
+
+/// A flipped sample in a no-specimen log (the corpus's chirp,
+/// `tests/bad/log-displacement-unit/bare.csv`, read in its own unit, mm)
+/// fails its run; with `repair = "interpolate"` on the displacement the
+/// run completes, its warning names the sample, results.json records what
+/// was replaced and by what, and the fit is the clean log's within a
+/// tenth of its std (the line between the neighbours stands in for one
+/// sample of 2,200).
+#[test]
+fn a_spike_is_repaired_when_the_channel_asks_and_recorded() {
+    let dir = scratch();
+    let clean = std::fs::read_to_string(
+        crate::util::root().join("tests/bad/log-displacement-unit/bare.csv"),
+    )
+    .unwrap();
+    let mut lines: Vec<String> = clean.lines().map(String::from).collect();
+    // Line 1001 of the file (sample 999): its displacement made -3725 mm.
+    let fields: Vec<String> = lines[1000].split(',').map(String::from).collect();
+    let (before, after): (f64, f64) = (
+        lines[999].split(',').nth(2).unwrap().parse().unwrap(),
+        lines[1001].split(',').nth(2).unwrap().parse().unwrap(),
+    );
+    lines[1000] = format!("{},{},-3725.0", fields[0], fields[1]);
+    write(dir.path(), "clean.csv", &clean);
+    write(dir.path(), "spiked.csv", &(lines.join("\n") + "\n"));
+    let manifest = |log: &str, repair: &str| {
+        format!(
+            r#"schema_version = 1
+
+[campaign]
+name = "repair"
+
+[rig]
+name = "test rig"
+
+[channels]
+time = {{ column = "t", unit = "s" }}
+command = {{ column = "u", unit = "mm" }}
+displacement = {{ column = "x", unit = "mm"{repair} }}
+
+[identification]
+band_hz = [0.5, 30.0]
+
+[[runs]]
+id = "bare"
+role = "no_specimen"
+p_gain = 1.0
+data = {{ log = "{log}" }}
+"#
+        )
+    };
+    let run = |name: &str, log: &str, repair: &str| {
+        let path = write(dir.path(), &format!("{name}.toml"), &manifest(log, repair));
+        let o = servoid_into(dir.path(), "run", &path, &dir.path().join(name), &[]);
+        let results: serde_json::Value = serde_json::from_slice(
+            &std::fs::read(dir.path().join(name).join("results.json")).unwrap(),
+        )
+        .unwrap();
+        (o, results)
+    };
+    let (o, _) = run("failed", "spiked.csv", "");
+    assert_eq!(o.code, 1, "{}", o.stderr);
+    assert!(
+        o.stderr.contains("spiked.csv: line 1001 (sample 999, t = 4.995 s): displacement (column `x`) is an isolated spike: -3725 mm"),
+        "{}",
+        o.stderr
+    );
+    let (o, repaired) = run("repaired", "spiked.csv", r#", repair = "interpolate""#);
+    assert_eq!(o.code, 0, "{}\n{}", o.stdout, o.stderr);
+    assert!(
+        o.stdout.contains("1 isolated spike(s) in the displacement replaced by their neighbours' line as channels.displacement.repair asks, the first at line 1001"),
+        "{}",
+        o.stdout
+    );
+    let bare = run_by_id(&repaired, "bare");
+    let repairs = bare["log"]["repairs"].as_array().unwrap();
+    assert_eq!(repairs.len(), 1, "{repairs:?}");
+    let r = &repairs[0];
+    assert_eq!(r["channel"], "displacement");
+    assert_eq!(r["at"], "line 1001");
+    assert_eq!(r["sample"], 999);
+    assert_eq!(r["width"], 1);
+    // The file's values (mm) in m: the spike and lines 1000 and 1002.
+    for (key, mm) in [("value", -3725.0), ("before", before), ("after", after)] {
+        let got = r[key].as_f64().unwrap();
+        assert!((got - mm * 1e-3).abs() < 1e-12, "{key}: {got} vs {mm} mm");
+    }
+    assert!((r["time_s"].as_f64().unwrap() - 4.995).abs() < 1e-12);
+    let (o, reference) = run("clean", "clean.csv", "");
+    assert_eq!(o.code, 0, "{}", o.stderr);
+    let (fit, want) = (&bare["fit"], &run_by_id(&reference, "bare")["fit"]);
+    for k in 0..3 {
+        let (p, q, sd) = (
+            fit["params"][k].as_f64().unwrap(),
+            want["params"][k].as_f64().unwrap(),
+            want["std"][k].as_f64().unwrap(),
+        );
+        assert!((p - q).abs() < 0.1 * sd, "{k}: {p} vs {q} (std {sd})");
+    }
+}

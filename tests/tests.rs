@@ -15,6 +15,7 @@ mod disk_full;
 mod docs;
 mod drift;
 mod figure_formats;
+mod first_night;
 mod fuzz_replay;
 mod init;
 mod joint;

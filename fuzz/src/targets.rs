@@ -7,8 +7,8 @@
 use std::path::Path;
 
 use servoid::ingest::{
-    self, ChannelPlan, Channels, Column, CsvOptions, LogFile, LogFormat, LogPlan, TableFormat,
-    TimePlan,
+    self, ChannelPlan, Channels, Column, CsvOptions, LogFile, LogFormat, LogPlan, Repair,
+    TableFormat, TimePlan,
 };
 use servoid::units::Unit;
 
@@ -78,6 +78,7 @@ fn channel(column: Column, unit: Unit) -> ChannelPlan {
         gain: unit.to_si(),
         offset: 0.0,
         range: None,
+        repair: Repair::None,
     }
 }
 

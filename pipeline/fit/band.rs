@@ -105,6 +105,7 @@ mod tests {
             stable: true,
             n_bins: 100,
             warnings: Vec::new(),
+            transient: None,
         }
     }
 

@@ -75,6 +75,11 @@ pub struct JointRun<'a> {
     /// The FRF's grid spacing (Hz): the residual correlation test pairs
     /// bins on it.
     pub bin_hz: f64,
+    /// The lag (bins) from which its errors are independent: the FRF
+    /// estimator's kernel (`frf::FrfPlan::independent_lag`). The residual
+    /// correlation test pairs its bins this far apart, and bins closer
+    /// share data in the sandwich covariance.
+    pub lag: usize,
 }
 
 /// The nuisance dynamics the fit includes besides the hold.
@@ -204,9 +209,6 @@ pub struct JointOptions {
     /// Where the force FRFs' delay starts (s), when there is one; its bound
     /// is the delay's.
     pub force_delay_start_s: f64,
-    /// The lag (bins) at which the residual correlation test pairs bins:
-    /// the FRF estimator's kernel (`frf::Window::independent_lag`).
-    pub lag: usize,
 }
 
 /// The joint estimate.
@@ -332,6 +334,8 @@ struct JointProblem {
     runs: Vec<RunModel>,
     /// Each run's FRF grid spacing (Hz).
     bin_hz: Vec<f64>,
+    /// Each run's independent lag ([`JointRun::lag`]).
+    lag: Vec<usize>,
     structure: Structure,
     /// Where the force FRFs' delay is in theta, when it is fitted.
     force_delay: Option<usize>,
@@ -401,6 +405,7 @@ impl JointProblem {
             bins,
             runs: self.runs.clone(),
             bin_hz: self.bin_hz.iter().map(|h| h * stride as f64).collect(),
+            lag: self.lag.clone(),
             structure: self.structure,
             force_delay: self.force_delay,
             period_s: self.period_s,
@@ -636,13 +641,13 @@ impl JointProblem {
 
 impl JointProblem {
     /// [`super::correlated_covariance`] at `theta`: each bin's score, and
-    /// its place along its run's FRF in bins, paired up to `lag - 1` bins
-    /// apart (`lag` being the first lag at which bins are independent).
+    /// its place along its run's FRF in bins, paired up to its run's lag
+    /// less one bins apart (the lag being the first at which bins are
+    /// independent).
     fn correlated_covariance(
         &self,
         theta: &[f64],
         a_inv: &DMatrix<f64>,
-        lag: usize,
         dof: usize,
     ) -> DMatrix<f64> {
         let x = self.point(theta);
@@ -658,19 +663,18 @@ impl JointProblem {
             let f = b.s.im / (2.0 * std::f64::consts::PI);
             position.push((b.run, f / self.bin_hz[b.run]));
         }
-        super::correlated_covariance(
-            &scores,
-            &position,
-            (lag - 1) as f64,
-            a_inv,
-            2 * self.bins.len(),
-            dof,
-        )
+        let reach: Vec<f64> = self.lag.iter().map(|l| (l - 1) as f64).collect();
+        super::correlated_covariance(&scores, &position, &reach, a_inv, 2 * self.bins.len(), dof)
+    }
+
+    /// Whether any run's bins share data with their neighbours.
+    fn correlated(&self) -> bool {
+        self.lag.iter().any(|&l| l > 1)
     }
 
     /// The adequacy tests at `theta`: over every bin, and per run with the
     /// run's share of the parameters.
-    fn adequacy(&self, theta: &[f64], lag: usize) -> (Adequacy, Vec<Adequacy>) {
+    fn adequacy(&self, theta: &[f64]) -> (Adequacy, Vec<Adequacy>) {
         let x = self.point(theta);
         let p = self.n_params();
         let total = self.bins.len().max(1);
@@ -678,6 +682,7 @@ impl JointProblem {
         let mut per_run = Vec::with_capacity(self.runs.len());
         let mut start = 0;
         for (r, &bin_hz) in self.bin_hz.iter().enumerate() {
+            let lag = self.lag[r];
             let end = start + self.bins[start..].iter().take_while(|b| b.run == r).count();
             let bins = &self.bins[start..end];
             let freq: Vec<f64> = bins
@@ -706,7 +711,8 @@ impl JointProblem {
             pooled += sums;
             start = end;
         }
-        (pooled.finish(p, lag), per_run)
+        let widest = self.lag.iter().copied().max().unwrap_or(1);
+        (pooled.finish(p, widest), per_run)
     }
 }
 
@@ -714,6 +720,7 @@ fn problem(runs: &[JointRun<'_>], opts: &JointOptions) -> Result<JointProblem, F
     let mut bins = Vec::new();
     let mut models = Vec::with_capacity(runs.len());
     let bin_hz = runs.iter().map(|r| r.bin_hz).collect();
+    let lag = runs.iter().map(|r| r.lag.max(1)).collect();
     for (r, run) in runs.iter().enumerate() {
         if run.freq_hz.len() != run.h.len() || run.h.len() != run.variance.len() {
             return Err(FitError::LengthMismatch {
@@ -755,6 +762,7 @@ fn problem(runs: &[JointRun<'_>], opts: &JointOptions) -> Result<JointProblem, F
         bins,
         runs: models,
         bin_hz,
+        lag,
         structure: opts.structure,
         force_delay: (has_force && opts.structure != Structure::Plain)
             .then(|| opts.structure.n_params()),
@@ -971,10 +979,10 @@ fn finish(
             }
         })?,
     };
-    // Bins that share data (opts.lag > 1: a window's kernel, the LPM's
-    // transient) have correlated errors: the sandwich over their range.
-    let cov_theta = if opts.lag > 1 && scale > 0.0 {
-        problem.correlated_covariance(&theta, &(&cov_theta / scale), opts.lag, dof)
+    // Bins that share data (a window's kernel, the LPM's transient) have
+    // correlated errors: the sandwich over their range.
+    let cov_theta = if problem.correlated() && scale > 0.0 {
+        problem.correlated_covariance(&theta, &(&cov_theta / scale), dof)
     } else {
         cov_theta
     };
@@ -1003,7 +1011,7 @@ fn finish(
     }
     let covariance = DMatrix::from_fn(p, p, |i, j| cov_theta[(i, j)] * factors[i] * factors[j]);
     let std = (0..p).map(|i| covariance[(i, i)].sqrt()).collect();
-    let (adequacy, per_run) = problem.adequacy(&theta, opts.lag);
+    let (adequacy, per_run) = problem.adequacy(&theta);
     Ok(JointFit {
         structure: opts.structure,
         rig: RigParams {

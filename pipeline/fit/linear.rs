@@ -307,6 +307,7 @@ mod tests {
             h,
             known: vec![Complex::new(1.0, 0.0); freq.len()],
             weight: vec![1.0; freq.len()],
+            projector: None,
         }
     }
 

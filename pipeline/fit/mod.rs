@@ -19,6 +19,7 @@ pub mod linear;
 pub mod lm;
 pub mod problem;
 mod settings;
+pub mod transient;
 
 #[cfg(test)]
 mod tests;
@@ -129,6 +130,9 @@ pub struct TfFit {
     pub n_bins: usize,
     /// What the caller should know (not converged, unstable, delay at bound).
     pub warnings: Vec<String>,
+    /// The record's transient fitted beside the model
+    /// ([`fit_with_transient`]); None for a plain fit.
+    pub transient: Option<transient::Transient>,
 }
 
 impl TfFit {
@@ -257,6 +261,73 @@ struct Prepared {
     names: Vec<String>,
     fixed_delay_s: f64,
     max_delay_s: Option<f64>,
+    /// The command's DFT at the bins, for a fit with the transient.
+    transient: Option<TransientData>,
+}
+
+/// What a fit with the transient knows besides the bins: the command's DFT
+/// at each (any common scale: the coefficients absorb it).
+struct TransientData {
+    u: Vec<Complex<f64>>,
+}
+
+impl TransientData {
+    /// The projector of the columns for the model at `theta` (scaled).
+    fn projector(&self, prep: &Prepared, theta: &[f64]) -> Option<transient::Projector> {
+        let problem = &prep.problem;
+        transient::Projector::new(transient::weighted_columns(
+            &problem.s,
+            &self.u,
+            &problem.weight,
+            den_of(&problem.shape, theta),
+            delay_of(prep, theta),
+        ))
+    }
+
+    /// The transient the columns of `q` hold at the optimum `theta`.
+    fn found(
+        &self,
+        prep: &Prepared,
+        q: &transient::Projector,
+        theta: &[f64],
+    ) -> transient::Transient {
+        let problem = &prep.problem;
+        // The residuals before the projection, data less model, weighted
+        // as the columns are: their coefficients are the unweighted
+        // columns'.
+        let plain = FrfProblem {
+            projector: None,
+            ..problem.clone()
+        };
+        let w0 = prep.scaling.w0_rad_per_s;
+        transient::Transient {
+            w0_rad_per_s: w0,
+            den: den_of(&problem.shape, theta).to_vec(),
+            delay_s: delay_of(prep, theta) / w0,
+            coefficients: q
+                .coefficients(&plain.residuals(theta))
+                .iter()
+                .copied()
+                .collect(),
+        }
+    }
+}
+
+/// The monic denominator's coefficients (after the leading 1) in `theta`.
+fn den_of<'a>(shape: &ModelShape, theta: &'a [f64]) -> &'a [f64] {
+    &theta[shape.numerator_order + 1..shape.n_rational()]
+}
+
+/// The model's whole delay in units of 1/w0: the fitted one in `theta`
+/// and the fixed one (which the known factor holds with the hold; the
+/// transient passes the delay but not the hold).
+fn delay_of(prep: &Prepared, theta: &[f64]) -> f64 {
+    let fitted = if prep.problem.shape.fit_delay {
+        theta[prep.problem.shape.n_rational()]
+    } else {
+        0.0
+    };
+    fitted + prep.fixed_delay_s * prep.scaling.w0_rad_per_s
 }
 
 fn check_options(opts: &FitOptions) -> Result<(), FitError> {
@@ -403,6 +474,7 @@ fn prepare(input: &FitInput, opts: &FitOptions) -> Result<Prepared, FitError> {
         h: input.h.to_vec(),
         known,
         weight: input.variance.iter().map(|v| (2.0 / v).sqrt()).collect(),
+        projector: None,
     };
     Ok(Prepared {
         names: shape.names(),
@@ -410,6 +482,7 @@ fn prepare(input: &FitInput, opts: &FitOptions) -> Result<Prepared, FitError> {
         scaling,
         fixed_delay_s,
         max_delay_s,
+        transient: None,
     })
 }
 
@@ -450,6 +523,81 @@ pub fn fit_from(input: &FitInput, opts: &FitOptions, start: &[f64]) -> Result<Tf
     }
     let scaled = prep.scaling.to_scaled(&prep.problem.shape, start);
     refine(&prep, opts, scaled)
+}
+
+/// The most passes [`fit_with_transient`] makes, each with the transient's
+/// columns rebuilt from the last pass's denominator; they stop sooner when
+/// no parameter moved by [`TRANSIENT_SETTLED`] of its std.
+const TRANSIENT_PASSES: usize = 8;
+const TRANSIENT_SETTLED: f64 = 1e-3;
+
+/// As [`fit`] (or from `start`, physical parameters laid out as
+/// [`TfFit::params`]), with the record's transient fitted beside the model
+/// ([`transient`]): `u` is the command's DFT at each bin of `input`, on any
+/// common scale. The covariance is the model's marginal one.
+pub fn fit_with_transient(
+    input: &FitInput,
+    u: &[Complex<f64>],
+    opts: &FitOptions,
+    start: Option<&[f64]>,
+) -> Result<TfFit, FitError> {
+    let mut prep = prepare(input, opts)?;
+    if u.len() != input.freq_hz.len() {
+        return Err(FitError::InvalidOption {
+            option: "u",
+            reason: format!(
+                "needs the command's DFT at each of the {} bins, got {}",
+                input.freq_hz.len(),
+                u.len()
+            ),
+        });
+    }
+    if let Some((index, v)) = u
+        .iter()
+        .enumerate()
+        .find(|(_, v)| !(v.re.is_finite() && v.im.is_finite()))
+    {
+        return Err(FitError::NonFinite {
+            field: "u",
+            index,
+            value: InputValue::Complex(*v),
+        });
+    }
+    let shape = prep.problem.shape;
+    let first = match start {
+        Some(start) => {
+            check_param_count(&prep, "start", start)?;
+            start.to_vec()
+        }
+        // The plain fit's optimum is the first pass's start and
+        // denominator.
+        None => fit(input, opts)?.params,
+    };
+    let mut theta = prep.scaling.to_scaled(&shape, &first);
+    prep.transient = Some(TransientData { u: u.to_vec() });
+    let mut last = None;
+    for _ in 0..TRANSIENT_PASSES {
+        let data = prep.transient.as_ref().expect("set above");
+        let q = data
+            .projector(&prep, &theta)
+            .ok_or_else(|| FitError::InvalidOption {
+                option: "u",
+                reason: "the command's DFT is zero at every bin".into(),
+            })?;
+        prep.problem.projector = Some(std::sync::Arc::new(q));
+        let f = refine(&prep, opts, theta.clone())?;
+        let next = prep.scaling.to_scaled(&shape, &f.params);
+        let factors = prep.scaling.factors(&shape);
+        let moved = (0..next.len())
+            .map(|k| ((next[k] - theta[k]) * factors[k]).abs() / f.std[k])
+            .fold(0.0, f64::max);
+        theta = next;
+        last = Some(f);
+        if moved < TRANSIENT_SETTLED {
+            break;
+        }
+    }
+    Ok(last.expect("at least one pass"))
 }
 
 /// Covariance of least-squares parameters, (J^T J)^-1 * `scale`, for the
@@ -502,12 +650,13 @@ pub fn covariance(jac: &DMatrix<f64>, scale: f64) -> Result<DMatrix<f64>, RankDe
 ///
 /// `scores` has a row per bin, `position` each bin's group (a run's FRF)
 /// and place in bins along it, ascending within a group; bins of different
-/// groups are independent. `a_inv` is (J^T J)^-1 and `dof` the residuals'
-/// degrees of freedom (rows - p), for the small-sample factor rows / dof.
+/// groups are independent, and bins of group g correlate up to `reach[g]`
+/// bins apart. `a_inv` is (J^T J)^-1 and `dof` the residuals' degrees of
+/// freedom (rows - p), for the small-sample factor rows / dof.
 pub fn correlated_covariance(
     scores: &DMatrix<f64>,
     position: &[(usize, f64)],
-    reach: f64,
+    reach: &[f64],
     a_inv: &DMatrix<f64>,
     rows: usize,
     dof: usize,
@@ -519,6 +668,7 @@ pub fn correlated_covariance(
             let si = scores.row(i);
             omega += si.transpose() * si;
             let (gi, fi) = position[i];
+            let reach = reach[gi];
             for (j, &(gj, fj)) in position.iter().enumerate().skip(i + 1) {
                 let d = fj - fi;
                 if gj != gi || d > reach + 1e-9 {
@@ -705,7 +855,10 @@ fn refine(prep: &Prepared, opts: &FitOptions, start: Vec<f64>) -> Result<TfFit, 
     let n = problem.n_bins();
     let jac = problem.jacobian_matrix(&theta);
     let chi2 = problem.residuals(&theta).norm_squared();
-    let reduced_chi2 = chi2 / (2 * n - p) as f64;
+    // The transient's coefficients are parameters too (eliminated).
+    let eliminated = problem.projector.as_ref().map_or(0, |q| q.rank());
+    let dof = (2 * n).saturating_sub(p + eliminated).max(1);
+    let reduced_chi2 = chi2 / dof as f64;
     let mut cov_scaled = covariance(&jac, reduced_chi2)
         .map_err(|e| not_identifiable(prep, e, "Jacobian at the optimum (J^T W J)"))?;
     if opts.independent_lag > 1 && reduced_chi2 > 0.0 {
@@ -722,10 +875,10 @@ fn refine(prep: &Prepared, opts: &FitOptions, start: Vec<f64>) -> Result<TfFit, 
         cov_scaled = correlated_covariance(
             &scores,
             &position,
-            (opts.independent_lag - 1) as f64,
+            &[(opts.independent_lag - 1) as f64],
             &(&cov_scaled / reduced_chi2),
             2 * n,
-            2 * n - p,
+            dof,
         );
     }
     let factors = prep.scaling.factors(&shape);
@@ -743,21 +896,31 @@ fn refine(prep: &Prepared, opts: &FitOptions, start: Vec<f64>) -> Result<TfFit, 
     den.extend_from_slice(&params[m + 1..shape.n_rational()]);
     let tf = TransferFunction::with_delay(&params[..=m], &den, tau_s)?;
 
+    let transient = prep
+        .transient
+        .as_ref()
+        .zip(problem.projector.as_ref())
+        .map(|(t, q)| t.found(prep, q, &theta));
+    // The response the model is compared with: the transient out.
+    let h: Vec<Complex<f64>> = match &transient {
+        Some(t) => problem
+            .h
+            .iter()
+            .zip(&prep.transient.as_ref().expect("with the transient").u)
+            .zip(&problem.s)
+            .map(|((h, u), s)| h - t.at(s.im * w0 / (2.0 * std::f64::consts::PI), *u))
+            .collect(),
+        None => problem.h.clone(),
+    };
     let model = problem.model(&theta);
-    let mean = problem.h.iter().sum::<Complex<f64>>() / n as f64;
-    let err = problem
-        .h
+    let mean = h.iter().sum::<Complex<f64>>() / n as f64;
+    let err = h
         .iter()
         .zip(model.iter())
         .map(|(h, hm)| (h - hm).norm_sqr())
         .sum::<f64>()
         .sqrt();
-    let spread = problem
-        .h
-        .iter()
-        .map(|h| (h - mean).norm_sqr())
-        .sum::<f64>()
-        .sqrt();
+    let spread = h.iter().map(|h| (h - mean).norm_sqr()).sum::<f64>().sqrt();
     let fit_percent = 100.0 * (1.0 - err / spread);
 
     let termination = reason.text().to_string();
@@ -798,5 +961,6 @@ fn refine(prep: &Prepared, opts: &FitOptions, start: Vec<f64>) -> Result<TfFit, 
         stable,
         n_bins: n,
         warnings,
+        transient,
     })
 }

@@ -158,6 +158,9 @@ pub struct FrfProblem {
     pub known: Vec<Complex<f64>>,
     /// sqrt(2 / variance) at each bin.
     pub weight: Vec<f64>,
+    /// The record's transient columns, projected out of the residuals and
+    /// the Jacobian (`fit::transient`); None for a plain fit.
+    pub projector: Option<std::sync::Arc<super::transient::Projector>>,
 }
 
 /// D' and the model H at one bin.
@@ -221,6 +224,9 @@ impl FrfProblem {
             r[i] = e.re;
             r[n + i] = e.im;
         }
+        if let Some(p) = &self.projector {
+            p.project(&mut r);
+        }
         r
     }
 
@@ -257,6 +263,9 @@ impl FrfProblem {
                 jac[(i, j)] = -dh.re * w;
                 jac[(n + i, j)] = -dh.im * w;
             }
+        }
+        if let Some(p) = &self.projector {
+            p.project_columns(&mut jac);
         }
         jac
     }
@@ -345,6 +354,7 @@ mod tests {
             h: vec![Complex::new(0.0, 0.0); freq.len()],
             known: vec![Complex::new(1.0, 0.0); freq.len()],
             weight: vec![1.0; freq.len()],
+            projector: None,
         };
         for (hm, &f) in problem.model(&scaled).iter().zip(freq.iter()) {
             let want = tf.freq_response(f);

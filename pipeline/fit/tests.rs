@@ -286,6 +286,7 @@ fn analytic_jacobian_matches_central_differences() {
                 .map(|_| Complex::from_polar(0.5 + rng.uniform(), -rng.uniform()))
                 .collect(),
             weight: (0..nb).map(|_| 0.5 + rng.uniform()).collect(),
+            projector: None,
         };
         for _ in 0..20 {
             let mut theta: Vec<f64> = (0..shape.n_rational())
@@ -716,7 +717,7 @@ fn the_sandwich_covers_the_mean_of_correlated_errors() {
         let y: Vec<f64> = (0..n).map(|i| a[i + 1] + theta * a[i]).collect();
         let mean = y.iter().sum::<f64>() / n as f64;
         let scores = DMatrix::from_fn(n, 1, |i, _| y[i] - mean);
-        let cov = correlated_covariance(&scores, &position, 1.0, &a_inv, n, n - 1);
+        let cov = correlated_covariance(&scores, &position, &[1.0], &a_inv, n, n - 1);
         let s2 = y.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1) as f64;
         z.push(mean / cov[(0, 0)].sqrt());
         plain.push(mean / (s2 / n as f64).sqrt());

@@ -16,10 +16,15 @@ use std::sync::Arc;
 
 use realfft::{RealFftPlanner, RealToComplex};
 
+mod choice;
 mod lpm;
 mod settings;
 mod synthesis;
 
+pub use choice::{
+    DEFAULT_OVERLAP, DEFAULT_SEGMENT_LENGTH, Ends, Excitation, FrfChoice, FrfRequest, MIN_PERIODS,
+    describe, excitation,
+};
 pub use settings::{Detrend, Estimator, FrfPlan, Window};
 pub use synthesis::{EtfeSpectra, EtfeSynthesis, Unsynthesizable};
 
@@ -56,6 +61,10 @@ pub struct Frf {
     /// computes it with the estimate (the LPM; infinite where it cannot),
     /// else None and [`h_variance_at`] derives it.
     pub variance: Option<Vec<f64>>,
+    /// The command's DFT at each bin (the whole record's transform, as
+    /// realfft gives it), kept when the plan fits the record's transient
+    /// (`FrfPlan::transient`), whose columns divide by it.
+    pub input_dft: Option<Vec<Complex<f64>>>,
 }
 
 /// Why an FRF cannot be estimated from the given signals and settings.
@@ -80,6 +89,14 @@ pub enum FrfError {
     BadOverlap(f64),
     #[error("segment_length must be at least {MIN_SEGMENT_LENGTH} (got {0})")]
     SegmentTooShort(usize),
+    #[error(
+        "the record of {record_s:.3} s cannot resolve the band's lowest frequency {lo_hz} Hz (identification.band_hz): it needs at least {need_s:.3} s ({MIN_PERIODS} periods); raise the band's lower edge to at least {:.3} Hz or record longer", MIN_PERIODS / record_s
+    )]
+    BandBelowResolution {
+        record_s: f64,
+        lo_hz: f64,
+        need_s: f64,
+    },
 }
 
 /// Estimates the FRF u -> y with the plan's estimator and segment settings
@@ -96,6 +113,16 @@ pub fn estimate(
     sample_rate_hz: f64,
     plan: &FrfPlan,
 ) -> Result<Frf, FrfError> {
+    if matches!(plan.estimator, Estimator::Etfe | Estimator::Lpm) {
+        return etfe_or_lpm(
+            u,
+            y,
+            sample_rate_hz,
+            plan.window,
+            (plan.detrend, plan.segment_length, plan.overlap),
+            (plan.estimator == Estimator::Lpm, plan.transient),
+        );
+    }
     welch(
         u,
         y,
@@ -114,8 +141,9 @@ pub fn estimate(
 /// (samples after the last whole segment are not used), each detrended, then
 /// windowed, then transformed; spectra are averaged in segment order.
 ///
-/// `Estimator::Etfe` is passed on to [`etfe`] with these segment settings for
-/// its coherence.
+/// `Estimator::Etfe` (and `Auto`, which reads as the ETFE here: a resolved
+/// plan is never `Auto`) is passed on to [`etfe`] with these segment
+/// settings for its coherence.
 #[allow(clippy::too_many_arguments)]
 pub fn welch(
     u: &[f64],
@@ -127,14 +155,17 @@ pub fn welch(
     detrend_kind: Detrend,
     estimator: Estimator,
 ) -> Result<Frf, FrfError> {
-    if matches!(estimator, Estimator::Etfe | Estimator::Lpm) {
+    if matches!(
+        estimator,
+        Estimator::Etfe | Estimator::Lpm | Estimator::Auto
+    ) {
         return etfe_or_lpm(
             u,
             y,
             sample_rate_hz,
             window_kind,
             (detrend_kind, segment_length, overlap),
-            estimator == Estimator::Lpm,
+            (estimator == Estimator::Lpm, None),
         );
     }
     check_inputs(u, y, sample_rate_hz, segment_length, overlap)?;
@@ -169,6 +200,7 @@ pub fn welch(
         estimator,
         resolution_hz,
         variance: None,
+        input_dft: None,
     })
 }
 
@@ -200,19 +232,21 @@ pub fn etfe(
         sample_rate_hz,
         window_kind,
         (detrend_kind, coherence_segment_length, coherence_overlap),
-        false,
+        (false, None),
     )
 }
 
 /// [`etfe`], and with `lpm` the transient taken out by [`lpm`] from the
-/// whole-record transforms (which the LPM needs with their phases).
+/// whole-record transforms (which the LPM needs with their phases); with
+/// `keep_input` = Some(f) the command's transform kept in
+/// [`Frf::input_dft`] up to f Hz and [`VARIANCE_REACH_BINS`] beyond.
 fn etfe_or_lpm(
     u: &[f64],
     y: &[f64],
     sample_rate_hz: f64,
     window_kind: Window,
     (detrend_kind, coherence_segment_length, coherence_overlap): (Detrend, usize, f64),
-    lpm: bool,
+    (lpm, keep_input): (bool, Option<f64>),
 ) -> Result<Frf, FrfError> {
     check_inputs(
         u,
@@ -253,8 +287,15 @@ fn etfe_or_lpm(
     // The LPM works on the transforms themselves: kept before they become
     // H and Suy in place.
     let transforms = lpm.then(|| (h.clone(), suy.clone()));
+    // Up to the band's top only: a copy of a 14 M-sample record's whole
+    // transform was 115 MB.
+    let input_dft = keep_input.map(|f_hz| {
+        let bins = ((f_hz * n as f64 / sample_rate_hz).floor() as usize + 1 + VARIANCE_REACH_BINS)
+            .min(h.len());
+        h[..bins].to_vec()
+    });
     let coarse_coherence = coherence_of(&coarse.suu, &coarse.syy, &coarse.suy);
-    Ok(etfe_from_transforms(
+    let mut frf = etfe_from_transforms(
         h,
         suy,
         n,
@@ -262,8 +303,9 @@ fn etfe_or_lpm(
         sample_rate_hz,
         &coarse_coherence,
         sample_rate_hz / coherence_segment_length as f64,
-    ))
-    .map(|frf| match transforms {
+    );
+    frf.input_dft = input_dft;
+    Ok(match transforms {
         Some((u_k, y_k)) => lpm::take_out_transient(frf, &u_k, &y_k),
         None => frf,
     })
@@ -323,6 +365,7 @@ fn etfe_from_transforms(
         estimator: Estimator::Etfe,
         resolution_hz,
         variance: None,
+        input_dft: None,
     }
 }
 
@@ -376,11 +419,7 @@ impl Frf {
     /// reads, up to `f_hz` with `extra` bins of reach, is unchanged to the
     /// bit.
     pub fn keep_up_to(&mut self, f_hz: f64, extra: usize) {
-        let keep = self
-            .freq_hz
-            .partition_point(|f| *f <= f_hz)
-            .saturating_add(extra)
-            .min(self.freq_hz.len());
+        let keep = self.kept(f_hz, extra);
         fn cut<T>(v: &mut Vec<T>, keep: usize) {
             v.truncate(keep);
             v.shrink_to_fit();
@@ -394,6 +433,66 @@ impl Frf {
         if let Some(v) = &mut self.variance {
             cut(v, keep);
         }
+        if let Some(u) = &mut self.input_dft {
+            cut(u, keep);
+        }
+    }
+
+    /// The bins [`Frf::keep_up_to`] keeps.
+    fn kept(&self, f_hz: f64, extra: usize) -> usize {
+        self.freq_hz
+            .partition_point(|f| *f <= f_hz)
+            .saturating_add(extra)
+            .min(self.freq_hz.len())
+    }
+
+    /// A copy of the bins [`Frf::keep_up_to`] would keep, without copying
+    /// the rest first.
+    pub fn head(&self, f_hz: f64, extra: usize) -> Frf {
+        let keep = self.kept(f_hz, extra);
+        Frf {
+            freq_hz: self.freq_hz[..keep].to_vec(),
+            h: self.h[..keep].to_vec(),
+            coherence: self.coherence[..keep].to_vec(),
+            suu: self.suu[..keep].to_vec(),
+            syy: self.syy[..keep].to_vec(),
+            suy: self.suy[..keep].to_vec(),
+            n_averages: self.n_averages,
+            effective_averages: self.effective_averages,
+            estimator: self.estimator,
+            resolution_hz: self.resolution_hz,
+            variance: self
+                .variance
+                .as_ref()
+                .map(|v| v[..keep.min(v.len())].to_vec()),
+            input_dft: self
+                .input_dft
+                .as_ref()
+                .map(|u| u[..keep.min(u.len())].to_vec()),
+        }
+    }
+
+    /// The FRF with a transient taken out of it: at each bin with the
+    /// command's DFT U, H less `t_over_u(f, U)` (the transient over U, in
+    /// H's units), and the cross- and output spectra with it. Unchanged
+    /// without [`Frf::input_dft`].
+    pub fn without_transient(&mut self, t_over_u: impl Fn(f64, Complex<f64>) -> Complex<f64>) {
+        let Some(u) = &self.input_dft else {
+            return;
+        };
+        for (k, &uk) in u.iter().enumerate().take(self.h.len()).skip(1) {
+            if uk.norm_sqr() == 0.0 {
+                continue;
+            }
+            let t = t_over_u(self.freq_hz[k], uk);
+            self.h[k] -= t;
+            // Suy = s conj(U) Y and Suu = s |U|^2, so Y less T changes Suy
+            // by Suu T/U; Syy = |Suy|^2 / Suu for a single record.
+            self.suy[k] -= t * self.suu[k];
+            if self.suu[k] > 0.0 {
+                self.syy[k] = self.suy[k].norm_sqr() / self.suu[k];
+            }
+        }
     }
 }
 
@@ -401,16 +500,20 @@ impl Frf {
 /// least [`REST_MIN_SAMPLES`] samples.
 pub const REST_END_FRACTION: f64 = 1e-3;
 pub const REST_MIN_SAMPLES: usize = 16;
-/// An end whose command RMS is above this share of the record's is in
-/// motion.
+/// An end whose signal moves by more than this share of the record's RMS
+/// across its window, or that rests this far from the other end's level,
+/// is not at rest.
 pub const REST_RMS_RATIO: f64 = 0.1;
 
-/// Where a record's command is still moving at its start or end: the end
-/// ("start", "end" or "start and end") and the larger ratio of that end's
-/// RMS (about the record's mean) to the record's, above
-/// [`REST_RMS_RATIO`]; None when both ends are at rest. A sweep cut while
-/// the rig still moves makes the ETFE's DFT hold the transient's leakage
-/// T(k) beside G U (see `lpm`), which the ETFE's variance counts as noise.
+/// Where a signal is not at rest at the record's ends: "start", "end" or
+/// "start and end" for an end whose window of [`REST_END_FRACTION`] of the
+/// record spans more than [`REST_RMS_RATIO`] of the record's RMS from its
+/// lowest to its highest sample (it moves), or "end, away from its start"
+/// for ends resting at levels that far apart; with the largest of those
+/// ratios. None when both ends rest at one level. What matters is the
+/// state's difference between the ends: the ETFE's DFT then holds its
+/// leakage T(k) beside G U (see `fit::transient`); ends that rest at one
+/// level, however far from the record's mean, leave none.
 pub fn ends_in_motion(u: &[f64]) -> Option<(&'static str, f64)> {
     let n = u.len();
     let w = ((n as f64 * REST_END_FRACTION) as usize).max(REST_MIN_SAMPLES);
@@ -418,39 +521,72 @@ pub fn ends_in_motion(u: &[f64]) -> Option<(&'static str, f64)> {
         return None;
     }
     let mean = u.iter().sum::<f64>() / n as f64;
-    let rms =
-        |x: &[f64]| (x.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / x.len() as f64).sqrt();
-    let whole = rms(u);
+    let whole = (u.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / n as f64).sqrt();
     if !(whole > 0.0 && whole.is_finite()) {
         return None;
     }
-    let (start, end) = (rms(&u[..w]) / whole, rms(&u[n - w..]) / whole);
+    let span = |x: &[f64]| {
+        let (lo, hi) = x
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &v| {
+                (lo.min(v), hi.max(v))
+            });
+        (hi - lo) / whole
+    };
+    let level = |x: &[f64]| x.iter().sum::<f64>() / x.len() as f64;
+    let (first, last) = (&u[..w], &u[n - w..]);
+    let (start, end) = (span(first), span(last));
+    let apart = (level(last) - level(first)).abs() / whole;
     match (start > REST_RMS_RATIO, end > REST_RMS_RATIO) {
         (true, true) => Some(("start and end", start.max(end))),
         (true, false) => Some(("start", start)),
         (false, true) => Some(("end", end)),
+        (false, false) if apart > REST_RMS_RATIO => Some(("end, away from its start", apart)),
         (false, false) => None,
     }
 }
 
 /// Bins to fit: inside `band_hz` (inclusive), coherence at least
-/// `coherence_min`, and a finite, non-zero estimate.
+/// `coherence_min`, a finite, non-zero estimate, and for a single record
+/// (the ETFE) an input there: a bin whose |U|^2 is below
+/// [`UNEXCITED_SHARE`] of the band's mean holds no excitation (between a
+/// multisine's tones), however coherent the coarser Welch segments around
+/// it are.
 pub fn band_mask(frf: &Frf, band_hz: (f64, f64), coherence_min: f64) -> Vec<bool> {
+    let in_band = |f: f64| f >= band_hz.0 && f <= band_hz.1;
+    let floor = if frf.n_averages == 1 {
+        let (sum, n) = frf
+            .freq_hz
+            .iter()
+            .zip(&frf.suu)
+            .filter(|(f, _)| in_band(**f))
+            .fold((0.0, 0usize), |(s, n), (_, p)| (s + p, n + 1));
+        UNEXCITED_SHARE * sum / n.max(1) as f64
+    } else {
+        0.0
+    };
     frf.freq_hz
         .iter()
         .zip(&frf.coherence)
         .zip(&frf.h)
-        .map(|((&f, &c), h)| {
-            f >= band_hz.0
-                && f <= band_hz.1
+        .zip(&frf.suu)
+        .map(|(((&f, &c), h), &p)| {
+            in_band(f)
                 && c >= coherence_min
                 && c > 0.0
+                && p >= floor
                 && h.re.is_finite()
                 && h.im.is_finite()
                 && h.norm_sqr() > 0.0
         })
         .collect()
 }
+
+/// The share of the band's mean input power below which an ETFE bin holds
+/// no excitation: an unexcited bin of a periodic multisine sits some 100
+/// dB below its tones; a Gaussian signal's bin falls this low once in a
+/// million.
+pub const UNEXCITED_SHARE: f64 = 1e-6;
 
 /// Random-error variance of each of Re(H) and Im(H) at each bin (the weight
 /// of a residual stacked as [Re; Im] is its inverse); the variance of the

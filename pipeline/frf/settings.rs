@@ -1,18 +1,32 @@
 //! The FRF stage's settings: the estimator, Welch's segments, window and
 //! detrending. The manifest reads them (its `identification.frf` table uses
-//! these types) and checks them into an [`FrfPlan`].
+//! these types) and checks them into an [`FrfRequest`](super::FrfRequest),
+//! which each run's log resolves into an [`FrfPlan`].
 
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
-/// Checked FRF settings.
-#[derive(Debug, Clone, PartialEq)]
+/// The FRF settings of one run, every one decided: the estimator is never
+/// `Auto` here.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct FrfPlan {
     pub estimator: Estimator,
     pub segment_length: usize,
     pub overlap: f64,
     pub window: Window,
     pub detrend: Detrend,
+    /// Some(f): the run's fit takes the record's transient out beside its
+    /// model (`fit::transient`), as `auto` does; the ETFE keeps the
+    /// command's DFT up to f Hz (the band's top) and the noise estimate's
+    /// reach, where the transient is fitted and taken out.
+    pub transient: Option<f64>,
+    /// Whether the run's fit reads its bins' noise level from what a first
+    /// fit leaves (`run::acquire::fit_run`) rather than from the FRF
+    /// itself, as `auto` does: the ETFE's local polynomials then follow
+    /// only the model's smooth misfit, not the plant's own curvature,
+    /// which over the wide bins of a short record they cannot (the noise
+    /// came out 14 % high on 20 s records, 38 % on 10 s ones).
+    pub model_noise: bool,
 }
 
 impl FrfPlan {
@@ -33,8 +47,14 @@ impl FrfPlan {
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
 #[serde(rename_all = "snake_case")]
 pub enum Estimator {
-    /// Welch H1 = Syu/Suu (noise on the output).
+    /// Chosen per run from its log and the band (`frf::choice`): the ETFE
+    /// over the whole record with a rectangular window, the record's
+    /// transient fitted beside the model where it does not start and end
+    /// at rest, and the coherence's segments from the record's length and
+    /// the band.
     #[default]
+    Auto,
+    /// Welch H1 = Syu/Suu (noise on the output).
     H1,
     /// Welch H2 = Syy/Suy (noise on the input).
     H2,
@@ -57,12 +77,12 @@ impl Estimator {
             // coherence is near 1 and the segments do not hold the same
             // spectrum (a sweep: each segment sees a different band).
             Estimator::H1 | Estimator::H2 => {
-                "noise the variances understate (a sweep analysed with H1/H2, whose coherence is biased); set identification.frf.estimator = \"etfe\" (or \"lpm\") for a sweep"
+                "noise the variances understate (a sweep analysed with H1/H2, whose coherence is biased); leave identification.frf.estimator out (\"auto\") for a sweep"
             }
             // The ETFE's and the LPM's variances are local averages of the
             // residual spectrum: what they miss is distortion that is not
             // noise, or noise that changes faster than the average follows.
-            Estimator::Etfe | Estimator::Lpm => {
+            Estimator::Auto | Estimator::Etfe | Estimator::Lpm => {
                 "noise the variances understate (a nonlinearity's distortion, or noise that changes along the record or across a few bins); check the specimen and the rig for friction or a nonlinear spring"
             }
         }
@@ -73,11 +93,11 @@ impl Estimator {
     /// correlation, well below expectation).
     pub fn overstated_noise(self) -> &'static str {
         match self {
-            Estimator::Lpm => {
+            Estimator::Lpm | Estimator::Auto => {
                 "noise that changes along the record (the variance is the record's average), or a transient faster than the local polynomials follow"
             }
             _ => {
-                "a transient or a drift the FRF estimator counts as noise (a record not at rest at its ends, a drifting sensor); identification.frf = { estimator = \"lpm\" } takes them out"
+                "a transient or a drift the FRF estimator counts as noise (a record not at rest at its ends, a drifting sensor); the default estimator (\"auto\") takes them out"
             }
         }
     }

@@ -72,6 +72,9 @@ pub struct EtfeSynthesis {
     /// The segments' (rectangular) window.
     w: Vec<f64>,
     u: EtfeSpectra,
+    /// Whether the FRFs keep the command's DFT for a fit with the record's
+    /// transient (`FrfPlan::transient`): all the bins it keeps.
+    transient: bool,
 }
 
 impl EtfeSynthesis {
@@ -79,7 +82,7 @@ impl EtfeSynthesis {
     /// can be assembled from transforms (what [`EtfeSynthesis::new`] asks
     /// of the plan before it looks at a signal).
     pub fn check_plan(plan: &FrfPlan) -> Result<(), Unsynthesizable> {
-        if plan.estimator != Estimator::Etfe {
+        if !matches!(plan.estimator, Estimator::Etfe | Estimator::Auto) {
             return Err(Unsynthesizable::Estimator(plan.estimator));
         }
         if plan.window != Window::Rectangular {
@@ -128,6 +131,7 @@ impl EtfeSynthesis {
             keep,
             keep_coarse,
             w: window(Window::Rectangular, l),
+            transient: plan.transient.is_some(),
             u: EtfeSpectra {
                 whole: Vec::new(),
                 segments: Vec::new(),
@@ -229,7 +233,7 @@ impl EtfeSynthesis {
             .zip(&noise.whole)
             .map(|(c, e)| c + e)
             .collect();
-        etfe_from_transforms(
+        let mut frf = etfe_from_transforms(
             self.u.whole.clone(),
             y,
             self.n,
@@ -237,6 +241,8 @@ impl EtfeSynthesis {
             self.sample_rate_hz,
             &coherence,
             self.sample_rate_hz / self.segment_length as f64,
-        )
+        );
+        frf.input_dft = self.transient.then(|| self.u.whole.clone());
+        frf
     }
 }

@@ -600,6 +600,8 @@ fn each_error_names_its_numbers() {
         overlap,
         window: Window::Hann,
         detrend: Detrend::Mean,
+        transient: None,
+        model_noise: false,
     };
     let message =
         |u: &[f64], y: &[f64], fs: f64, p: FrfPlan| estimate(u, y, fs, &p).unwrap_err().to_string();
@@ -687,6 +689,8 @@ fn the_same_input_gives_the_same_bits() {
             overlap: 0.6,
             window: Window::Hamming,
             detrend: Detrend::Linear,
+            transient: None,
+            model_noise: false,
         };
         let a = estimate(&u, &y, FS_HZ, &plan).unwrap();
         let b = estimate(&u, &y, FS_HZ, &plan).unwrap();
@@ -866,6 +870,7 @@ fn band_mask_keeps_coherent_bins_inside_the_band() {
         estimator: Estimator::H1,
         resolution_hz: 1.0,
         variance: None,
+        input_dft: None,
     };
     assert_eq!(
         band_mask(&frf, (1.0, 4.0), 0.9),
@@ -1074,9 +1079,8 @@ fn the_lpm_takes_a_transient_and_a_drift_out_of_estimate_and_variance() {
 
 #[test]
 fn a_record_cut_in_motion_is_told_from_one_at_rest() {
-    // A 10 s sine at 1 kHz: with 1 s of rest at each end both ends are at
-    // rest; started a quarter period in (at a crest) and 13 cycles later
-    // cut at the next, both end windows sit on a crest.
+    // A sine of 1.3 Hz at 1 kHz, 10 s: 13 whole cycles. With 1 s of rest
+    // at each end both ends are at rest.
     let fs = 1000.0;
     let sine = |t: f64| (2.0 * std::f64::consts::PI * 1.3 * t).sin();
     let rest: Vec<f64> = (0..12_000)
@@ -1090,14 +1094,34 @@ fn a_record_cut_in_motion_is_told_from_one_at_rest() {
         })
         .collect();
     assert_eq!(ends_in_motion(&rest), None);
-    let cut: Vec<f64> = (0..10_000)
-        .map(|i| sine(i as f64 / fs + 0.25 / 1.3))
-        .collect();
+    // Started and cut at a zero crossing: each 16-sample window rises by
+    // sin(2 pi 1.3 0.015) = 0.1222 at the start and by sin(-2 pi 1.3
+    // 0.001) - sin(-2 pi 1.3 0.016) = 0.1219 at the end, against an RMS of
+    // 1/sqrt(2).
+    let cut: Vec<f64> = (0..10_000).map(|i| sine(i as f64 / fs)).collect();
     let (end, ratio) = ends_in_motion(&cut).unwrap();
     assert_eq!(end, "start and end");
-    // The 16-sample windows hold the crest (sin within 1 % of 1 there):
-    // the RMS ratio to the whole's 1/sqrt(2) is sqrt(2) less 1 %.
-    assert!((1.39..1.415).contains(&ratio), "{ratio}");
+    let rms = (cut.iter().map(|v| v * v).sum::<f64>() / 1e4).sqrt();
+    let want = (2.0 * std::f64::consts::PI * 1.3 * 0.015).sin() / rms;
+    assert!((ratio - want).abs() < 1e-9, "{ratio} vs {want}");
+    // Started and cut at a crest, 13 cycles apart: the same state at both
+    // ends, however far from the record's mean: at rest.
+    let crest: Vec<f64> = (0..10_000)
+        .map(|i| sine(i as f64 / fs + 0.25 / 1.3))
+        .collect();
+    assert_eq!(ends_in_motion(&crest), None);
+    // At rest, then the sine, then held half a unit up: the ends rest at
+    // levels 0.5 apart.
+    let mut held = rest.clone();
+    held[11_000..].iter_mut().for_each(|v| *v = 0.5);
+    let rms = {
+        let m = held.iter().sum::<f64>() / held.len() as f64;
+        (held.iter().map(|v| (v - m).powi(2)).sum::<f64>() / held.len() as f64).sqrt()
+    };
+    let (end, ratio) = ends_in_motion(&held).unwrap();
+    assert_eq!(end, "end, away from its start");
+    assert!((ratio - 0.5 / rms).abs() < 1e-9, "{ratio}");
+    // Only the end cut in motion.
     let mut half = cut.clone();
     half[..2000].iter_mut().for_each(|v| *v = 0.0);
     assert_eq!(ends_in_motion(&half).map(|e| e.0), Some("end"));
@@ -1105,12 +1129,15 @@ fn a_record_cut_in_motion_is_told_from_one_at_rest() {
 
 #[test]
 fn the_noise_causes_a_fit_names_follow_its_estimator() {
-    // The LPM already takes the transient out: its findings must not send
-    // the user to it; Welch's coherence bias is Welch's alone.
+    // The default (auto) fits the transient and the LPM takes it out:
+    // their findings must not send the user to them; Welch's coherence
+    // bias is Welch's alone.
     for e in [Estimator::Etfe, Estimator::H1, Estimator::H2] {
-        assert!(e.overstated_noise().contains("\"lpm\""), "{e:?}");
+        assert!(e.overstated_noise().contains("\"auto\""), "{e:?}");
     }
-    assert!(!Estimator::Lpm.overstated_noise().contains("\"lpm\""));
+    for e in [Estimator::Lpm, Estimator::Auto] {
+        assert!(!e.overstated_noise().contains("\"auto\""), "{e:?}");
+    }
     for e in [Estimator::H1, Estimator::H2] {
         assert!(e.understated_noise().contains("H1/H2"), "{e:?}");
     }
@@ -1137,6 +1164,8 @@ fn the_synthesised_etfe_is_the_etfe_of_the_summed_record() {
             overlap: 0.5,
             window: Window::Rectangular,
             detrend,
+            transient: None,
+            model_noise: false,
         };
         let synthesis = EtfeSynthesis::new(&u, FS_HZ, &plan, 150.0).unwrap();
         let got = synthesis.frf(
@@ -1190,6 +1219,8 @@ fn synthesised_white_noise_has_the_variance_of_a_white_records_dft() {
         overlap: 0.5,
         window: Window::Rectangular,
         detrend: Detrend::Mean,
+        transient: None,
+        model_noise: false,
     };
     let synthesis = EtfeSynthesis::new(&u, FS_HZ, &plan, 80.0).unwrap();
     let sigma = 0.3;
@@ -1232,6 +1263,8 @@ fn the_synthesis_refuses_what_it_cannot_assemble() {
         overlap: 0.5,
         window,
         detrend,
+        transient: None,
+        model_noise: false,
     };
     let refuse = |p: FrfPlan| EtfeSynthesis::new(&u, FS_HZ, &p, 50.0).unwrap_err();
     assert_eq!(

@@ -22,7 +22,15 @@ pub struct Inspected {
 /// Inspect the log at `path` in `format` (at most `max_bytes`).
 pub fn inspect(path: &Path, format: LogFormat, max_bytes: u64) -> Result<Inspected, IngestError> {
     let file = LogFile::read(path, max_bytes)?;
-    let bytes = file.bytes.as_slice();
+    inspect_bytes(path, &file.bytes, format)
+}
+
+/// [`inspect`] of a log's bytes already read (`path` names it in errors).
+pub fn inspect_bytes(
+    path: &Path,
+    bytes: &[u8],
+    format: LogFormat,
+) -> Result<Inspected, IngestError> {
     if bytes.iter().all(u8::is_ascii_whitespace) {
         return Err(IngestError::Empty {
             path: path.to_path_buf(),

@@ -23,10 +23,12 @@ mod fields;
 mod hdf5;
 mod inspect;
 mod mat;
+pub mod naming;
 mod parquet;
 mod parquet_footer;
 mod plan;
 mod quantisation;
+pub mod spikes;
 mod table;
 mod tdms;
 #[cfg(test)]
@@ -38,9 +40,12 @@ use std::path::{Path, PathBuf};
 use polars::prelude::{DataType, PolarsError};
 use sha2::{Digest, Sha256};
 
+use crate::units::format_number;
+
 pub use inspect::{Inspected, inspect};
 pub use plan::{
-    ChannelPlan, Channels, Column, CsvOptions, DEFAULT_MAX_LOG_MIB, LogFormat, LogPlan, TimePlan,
+    ChannelPlan, Channels, Column, CsvOptions, DEFAULT_MAX_LOG_MIB, LogFormat, LogPlan, Repair,
+    TimePlan,
 };
 pub use quantisation::quantum_step;
 pub use table::{
@@ -82,6 +87,51 @@ pub struct Log {
     pub timing: Timing,
     /// Oddities found while reading; each names the file.
     pub warnings: Vec<String>,
+    /// The isolated spikes a channel's `repair = "interpolate"` replaced.
+    pub repairs: Vec<Repaired>,
+}
+
+/// An isolated spike in a channel whose `repair` is not set: where it is,
+/// its value and its neighbours' in the channel's unit.
+#[derive(Debug, thiserror::Error)]
+#[error(
+    "{}: {at} (sample {sample}, t = {} s): {channel} (column {column}) is an isolated spike: {} {unit} where its neighbours read {} and {} {unit} ({} times the channel's local sample-to-sample scale): a corrupted sample? Fix the file, or set channels.{channel}.repair = \"interpolate\" to replace it by its neighbours' line (results.json records it)",
+    path.display(),
+    format_number(*time_s, 6),
+    format_number(*value, 6),
+    format_number(*before, 6),
+    format_number(*after, 6),
+    format_number(*ratio, 2)
+)]
+pub struct SpikeFound {
+    pub path: PathBuf,
+    pub at: At,
+    pub sample: usize,
+    pub time_s: f64,
+    pub channel: &'static str,
+    pub column: String,
+    pub value: f64,
+    pub before: f64,
+    pub after: f64,
+    pub unit: &'static str,
+    pub ratio: f64,
+}
+
+/// One isolated spike replaced by its neighbours' line (`ingest::spikes`).
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize, schemars::JsonSchema)]
+pub struct Repaired {
+    pub channel: String,
+    /// Where it sits in the file (a line, row or element), and its first
+    /// sample (0-based) and time (s from the record's start).
+    pub at: String,
+    pub sample: usize,
+    pub time_s: f64,
+    /// Samples replaced (1 or 2).
+    pub width: usize,
+    /// The spike's value and its neighbours', in SI (m or N).
+    pub value: f64,
+    pub before: f64,
+    pub after: f64,
 }
 
 /// How the time base was obtained.
@@ -230,6 +280,21 @@ pub enum IngestError {
         column: String,
         raw: f64,
         si: f64,
+    },
+    #[error(transparent)]
+    Spike(Box<SpikeFound>),
+    #[error(
+        "{}: the manifest states a sampling rate of {} Hz (channels.time.sample_rate_hz), but the log's own time column `{column}` steps {} s ({} Hz): name that column as the time base (time = {{ column = \"{column}\", unit = \"s\" }}) or correct the rate",
+        path.display(),
+        format_number(*stated_hz, 6),
+        format_number(*dt_s, 6),
+        format_number(1.0 / dt_s, 6)
+    )]
+    RateContradicts {
+        path: PathBuf,
+        stated_hz: f64,
+        column: String,
+        dt_s: f64,
     },
     #[error(
         "{}: {at}: {channel} (column {column}) is {si:e} {} after scaling, beyond {range}: a corrupted sample, or a wrong unit? Fix or remove the line",
@@ -718,15 +783,101 @@ pub fn read_log_from(plan: &LogPlan, file: LogFile) -> Result<Log, IngestError> 
             path: path.to_path_buf(),
         });
     }
-    let raw = match plan.format {
-        LogFormat::Csv => off_pool(|| csv::read(path, &bytes, plan))?,
-        LogFormat::Parquet => off_pool(|| parquet::read(path, &bytes, plan))?,
-        LogFormat::Mat => mat::read(path, &bytes, plan)?,
-        LogFormat::DaqText => daq::read(path, &bytes, plan)?,
-        LogFormat::Hdf5 => hdf5::read(path, &bytes, plan, false)?,
-        LogFormat::Tdms => tdms::read(path, &bytes, plan)?,
-    };
+    if let TimePlan::SampleRate { hz } = plan.channels.time
+        && let Some((probe, unit_known)) = undeclared_time(plan, &bytes)
+        && let Ok(log) =
+            read_raw(&probe, &bytes).and_then(|raw| assemble(&probe, sha256.clone(), raw))
+    {
+        return stated_rate(log, hz, &probe, unit_known);
+    }
+    let raw = read_raw(plan, &bytes)?;
     assemble(plan, sha256, raw)
+}
+
+/// The columns `plan` names, read from the log's `bytes`.
+fn read_raw<'a>(plan: &'a LogPlan, bytes: &'a [u8]) -> Result<Raw<'a>, IngestError> {
+    let path = plan.path.as_path();
+    Ok(match plan.format {
+        LogFormat::Csv => off_pool(|| csv::read(path, bytes, plan))?,
+        LogFormat::Parquet => off_pool(|| parquet::read(path, bytes, plan))?,
+        LogFormat::Mat => mat::read(path, bytes, plan)?,
+        LogFormat::DaqText => daq::read(path, bytes, plan)?,
+        LogFormat::Hdf5 => hdf5::read(path, bytes, plan, false)?,
+        LogFormat::Tdms => tdms::read(path, bytes, plan)?,
+    })
+}
+
+/// The relative difference between a stated rate and the one a log's own
+/// time column steps at beyond which the two contradict: a DAQ's clock is
+/// good to parts per million, its time stamps' rounding to a part in ten
+/// thousand.
+pub const RATE_TOLERANCE: f64 = 1e-3;
+
+/// For a plan that states a rate: the same plan with the log's own time
+/// column as its time base, when the log has one the channels do not use
+/// (found by its name and unit as `servoid init` finds one), and whether
+/// its unit was known (stated, or in its name).
+fn undeclared_time(plan: &LogPlan, bytes: &[u8]) -> Option<(LogPlan, bool)> {
+    let columns = inspect::inspect_bytes(&plan.path, bytes, plan.format)
+        .ok()?
+        .columns;
+    let ch = &plan.channels;
+    let used: Vec<String> = [Some(&ch.command), Some(&ch.displacement), ch.force.as_ref()]
+        .into_iter()
+        .flatten()
+        .filter_map(|c| match &c.column {
+            Column::Name(n) => Some(n.clone()),
+            Column::Index(i) => columns.get(*i).map(|c| c.name.clone()),
+        })
+        .collect();
+    let free: Vec<LogColumn> = columns
+        .into_iter()
+        .filter(|c| !used.contains(&c.name))
+        .collect();
+    let (name, to_s, unit_known) = naming::time_column(&free)?;
+    let mut probe = plan.clone();
+    probe.channels.time = TimePlan::Column {
+        column: Column::Name(name),
+        to_s,
+    };
+    Some((probe, unit_known))
+}
+
+/// `log`, read with its own time column (`probe`'s), as the plan that
+/// states `hz` reads it: an error when the column steps at another rate
+/// (in seconds, or when its unit is not known also in milliseconds or
+/// microseconds).
+fn stated_rate(log: Log, hz: f64, probe: &LogPlan, unit_known: bool) -> Result<Log, IngestError> {
+    let dt_s = log.timing.dt_s();
+    let scales: &[f64] = if unit_known {
+        &[1.0]
+    } else {
+        &[1.0, 1e-3, 1e-6]
+    };
+    let agrees = scales
+        .iter()
+        .any(|k| (hz * dt_s * k - 1.0).abs() <= RATE_TOLERANCE);
+    if !agrees {
+        let TimePlan::Column {
+            column: Column::Name(column),
+            ..
+        } = &probe.channels.time
+        else {
+            unreachable!("the probe reads a time column by name")
+        };
+        return Err(IngestError::RateContradicts {
+            path: log.path.clone(),
+            stated_hz: hz,
+            column: column.clone(),
+            dt_s,
+        });
+    }
+    Ok(Log {
+        sample_rate_hz: hz,
+        t0_s: 0.0,
+        timing: Timing::Exact { dt_s: 1.0 / hz },
+        ..log
+    })
 }
 
 /// Run a polars call off the caller's rayon pool, on a thread of its own.
@@ -1025,12 +1176,72 @@ fn assemble(plan: &LogPlan, sha256: String, raw: Raw<'_>) -> Result<Log, IngestE
         }
     };
     let ch = &plan.channels;
-    let command_m = scale("command", &ch.command, raw.command)?;
-    let displacement_m = scale("displacement", &ch.displacement, raw.displacement)?;
+    let mut repairs = Vec::new();
+    let dt_s = 1.0 / sample_rate_hz;
+    let mut despiked = |channel: &'static str, plan: &ChannelPlan, mut v: Vec<f64>| {
+        let found = spikes::find(&v);
+        let Some(first) = found.first() else {
+            return Ok(v);
+        };
+        let (unit, si) = (plan.unit.symbol(), plan.unit.to_si());
+        if plan.repair == Repair::None {
+            return Err(IngestError::Spike(Box::new(SpikeFound {
+                path: path.clone(),
+                at: locate(first.index),
+                sample: first.index,
+                time_s: first.index as f64 * dt_s,
+                channel,
+                column: plan.column.to_string(),
+                value: first.value / si,
+                before: first.before / si,
+                after: first.after / si,
+                unit,
+                ratio: first.ratio,
+            })));
+        }
+        spikes::interpolate(&mut v, &found);
+        repairs.extend(found.iter().map(|s| Repaired {
+            channel: channel.to_string(),
+            at: locate(s.index).to_string(),
+            sample: s.index,
+            time_s: s.index as f64 * dt_s,
+            width: s.width,
+            value: s.value,
+            before: s.before,
+            after: s.after,
+        }));
+        Ok(v)
+    };
+    let command_m = despiked(
+        "command",
+        &ch.command,
+        scale("command", &ch.command, raw.command)?,
+    )?;
+    let displacement_m = despiked(
+        "displacement",
+        &ch.displacement,
+        scale("displacement", &ch.displacement, raw.displacement)?,
+    )?;
     let force_n = match (&ch.force, raw.force) {
-        (Some(p), Some(v)) => Some(scale("force", p, v)?),
+        (Some(p), Some(v)) => Some(despiked("force", p, scale("force", p, v)?)?),
         _ => None,
     };
+    let mut warnings = raw.warnings;
+    for channel in ["command", "displacement", "force"] {
+        let mut these = repairs.iter().filter(|r| r.channel == channel);
+        if let Some(first) = these.next() {
+            warnings.push(format!(
+                "{}: {} isolated spike(s) in the {channel} replaced by their neighbours' line as channels.{channel}.repair asks, the first at {} (t = {:.4} s, {:e} where its neighbours read {:e} and {:e} in SI)",
+                path.display(),
+                1 + these.count(),
+                first.at,
+                first.time_s,
+                first.value,
+                first.before,
+                first.after
+            ));
+        }
+    }
     Ok(Log {
         path: path.clone(),
         sha256,
@@ -1042,7 +1253,8 @@ fn assemble(plan: &LogPlan, sha256: String, raw: Raw<'_>) -> Result<Log, IngestE
         force_n,
         n_rows: n,
         timing,
-        warnings: raw.warnings,
+        warnings,
+        repairs,
     })
 }
 

@@ -63,6 +63,26 @@ pub struct ChannelPlan {
     pub offset: f64,
     /// The instrument's range in SI (the manifest's `range`), when given.
     pub range: Option<(f64, f64)>,
+    /// What to do with an isolated spike (`ingest::spikes`).
+    pub repair: Repair,
+}
+
+/// What ingest does with a channel's isolated spikes.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
+#[serde(rename_all = "snake_case")]
+pub enum Repair {
+    /// Fail the run, naming the sample.
+    #[default]
+    None,
+    /// Replace each by the straight line between its neighbours, and
+    /// record it in results.json.
+    Interpolate,
+}
+
+impl Repair {
+    pub fn is_none(&self) -> bool {
+        *self == Repair::None
+    }
 }
 
 /// A column by name or by 0-based index.

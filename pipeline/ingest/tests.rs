@@ -20,6 +20,7 @@ fn ch(column: Column, unit: Unit, scale: f64) -> ChannelPlan {
         gain: scale * unit.to_si(),
         offset: 0.0,
         range: None,
+        repair: Repair::None,
     }
 }
 
@@ -1233,6 +1234,7 @@ fn log_with_command(u: Vec<f64>, fs: f64) -> Log {
         n_rows: n,
         timing: Timing::Exact { dt_s: 1.0 / fs },
         warnings: Vec::new(),
+        repairs: Vec::new(),
     }
 }
 

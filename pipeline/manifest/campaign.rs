@@ -1006,6 +1006,7 @@ fn plan_channel(c: &Channel) -> ChannelPlan {
         gain: c.scale * si,
         offset: c.offset * si,
         range: c.range.map(|[lo, hi]| (lo * si, hi * si)),
+        repair: c.repair,
     }
 }
 

@@ -7,14 +7,15 @@ use super::checks::{check_band, positive};
 use super::keypath::KeyPath;
 use super::raw::{DelayMode, Identification};
 use crate::fit::{DelayPlan, Intersample};
-use crate::frf::FrfPlan;
+use crate::frf::FrfRequest;
 
 /// Checked identification options.
 #[derive(Debug, Clone, PartialEq)]
 pub struct IdentificationPlan {
     pub band_hz: (f64, f64),
     pub coherence_min: f64,
-    pub frf: FrfPlan,
+    /// The FRF settings as stated; each run's log resolves them.
+    pub frf: FrfRequest,
     pub intersample: Intersample,
     pub delay: DelayPlan,
     /// The longest delay a fit may find (s): `identification.delay.max_s`,
@@ -39,20 +40,21 @@ pub(super) fn check_identification(
         );
     }
     let frf = path.key("frf");
-    if id.frf.segment_length < 16 {
+    if let Some(l) = id.frf.segment_length
+        && l < crate::frf::MIN_SEGMENT_LENGTH
+    {
         bad(
             frf.key("segment_length"),
             format!(
-                "must be at least 16 samples (got {})",
-                id.frf.segment_length
+                "must be at least {} samples (got {l})",
+                crate::frf::MIN_SEGMENT_LENGTH
             ),
         );
     }
-    if !(0.0..1.0).contains(&id.frf.overlap) {
-        bad(
-            frf.key("overlap"),
-            format!("must be in [0, 1) (got {})", id.frf.overlap),
-        );
+    if let Some(o) = id.frf.overlap
+        && !(0.0..1.0).contains(&o)
+    {
+        bad(frf.key("overlap"), format!("must be in [0, 1) (got {o})"));
     }
     let d = &id.delay;
     let delay = match d.mode {
@@ -81,7 +83,7 @@ pub(super) fn check_identification(
     IdentificationPlan {
         band_hz: (id.band_hz[0], id.band_hz[1]),
         coherence_min: id.coherence_min,
-        frf: FrfPlan {
+        frf: FrfRequest {
             estimator: id.frf.estimator,
             segment_length: id.frf.segment_length,
             overlap: id.frf.overlap,

@@ -11,7 +11,7 @@ use serde_json::Value;
 
 use crate::fit::Intersample;
 use crate::frf::{Detrend, Estimator, Window};
-use crate::ingest::{Column, CsvOptions, LogFormat, TableFormat};
+use crate::ingest::{Column, CsvOptions, LogFormat, Repair, TableFormat};
 use crate::model::RigParams;
 use crate::units::{TimeUnit, Unit};
 
@@ -348,6 +348,12 @@ pub struct Channel {
     /// for the force, beyond any servo-hydraulic test.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub range: Option<[f64; 2]>,
+    /// What to do with an isolated spike in this channel (one or two
+    /// samples far from both neighbours): by default the run fails naming
+    /// the sample; `"interpolate"` replaces it by its neighbours' line and
+    /// records it in results.json.
+    #[serde(default, skip_serializing_if = "Repair::is_none")]
+    pub repair: Repair,
 }
 
 /// The time base of a log.
@@ -466,34 +472,28 @@ impl Default for Identification {
     }
 }
 
-/// Frequency-response estimation settings.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+/// Frequency-response estimation settings. With the estimator left out
+/// (`auto`) each run's are chosen from its log and the band; a setting
+/// given beside `auto` is kept.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[schemars(deny_unknown_fields)]
 pub struct FrfSettings {
     #[serde(default)]
     pub estimator: Estimator,
-    /// Samples per Welch segment.
-    #[serde(default = "default_segment")]
-    pub segment_length: usize,
-    /// Fraction of a segment shared with the next, in [0, 1).
-    #[serde(default = "default_overlap")]
-    pub overlap: f64,
+    /// Samples per Welch segment (for the ETFE and the LPM, the coherence's
+    /// segments). Default: 8192 for H1 and H2; chosen from the record and
+    /// the band by `auto`.
     #[serde(default)]
-    pub window: Window,
+    pub segment_length: Option<usize>,
+    /// Fraction of a segment shared with the next, in [0, 1); default 0.5.
     #[serde(default)]
-    pub detrend: Detrend,
-}
-
-impl Default for FrfSettings {
-    fn default() -> Self {
-        Self {
-            estimator: Estimator::default(),
-            segment_length: default_segment(),
-            overlap: default_overlap(),
-            window: Window::default(),
-            detrend: Detrend::default(),
-        }
-    }
+    pub overlap: Option<f64>,
+    /// Default: Hann for H1 and H2, rectangular for `auto`.
+    #[serde(default)]
+    pub window: Option<Window>,
+    /// Default: the mean.
+    #[serde(default)]
+    pub detrend: Option<Detrend>,
 }
 
 /// Pure delay in the fitted model (sensor and conditioning delays).
@@ -745,12 +745,6 @@ fn default_band() -> [f64; 2] {
 }
 fn default_coherence() -> f64 {
     0.8
-}
-fn default_segment() -> usize {
-    8192
-}
-fn default_overlap() -> f64 {
-    0.5
 }
 fn default_max_delay() -> f64 {
     0.02

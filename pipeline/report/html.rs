@@ -9,6 +9,7 @@
 //! Rendering is linear in the number of runs: the results become a
 //! template value once, and nothing in a template searches the runs.
 
+use crate::units::format_number;
 use std::collections::{BTreeMap, HashMap};
 
 use minijinja::value::Serde;
@@ -154,27 +155,6 @@ fn as_f64(v: &Value) -> Option<f64> {
         return None;
     }
     f64::try_from(v.clone()).ok().filter(|x| x.is_finite())
-}
-
-/// A number with `sig` significant digits: plain between 1e-3 and 1e6,
-/// scientific outside; a dash for none.
-pub fn format_number(x: f64, sig: usize) -> String {
-    let sig = sig.max(1);
-    if x == 0.0 {
-        return "0".into();
-    }
-    let e = x.abs().log10().floor() as i32;
-    if (-3..6).contains(&e) {
-        let decimals = (sig as i32 - 1 - e).max(0) as usize;
-        let s = format!("{x:.decimals$}");
-        if s.contains('.') {
-            s.trim_end_matches('0').trim_end_matches('.').to_string()
-        } else {
-            s
-        }
-    } else {
-        format!("{:.*e}", sig - 1, x)
-    }
 }
 
 fn num(v: Value, sig: Option<usize>) -> String {

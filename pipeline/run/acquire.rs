@@ -7,7 +7,7 @@
 use std::path::PathBuf;
 
 use crate::fit::{self, DelayPlan, FitError, FitInput, FitOptions, TfFit};
-use crate::frf::{self, Frf, FrfError};
+use crate::frf::{self, Frf, FrfChoice, FrfError, FrfPlan};
 use crate::ingest::{self, IngestError, Log, LogFile, LogPlan, Needs};
 use crate::lti::TransferFunction;
 use crate::manifest::{Campaign, IdentificationPlan, Role, RunPlan, RunSource};
@@ -76,7 +76,12 @@ pub fn acquire_with(
 #[derive(Debug, Clone)]
 pub struct LogStage {
     pub log: Log,
-    /// Command to displacement.
+    /// The FRF settings the run got, and why.
+    pub choice: FrfChoice,
+    /// What its command holds.
+    pub excitation: frf::Excitation,
+    /// Command to displacement (with the record's transient out, when the
+    /// run's fit took it out).
     pub frf: Frf,
     /// Command to force, when the log has a force channel.
     pub force_frf: Option<Frf>,
@@ -115,26 +120,41 @@ pub struct FitData {
     pub suu: Vec<f64>,
     /// The FRF's grid spacing (Hz).
     pub bin_hz: f64,
+    /// The lag in bins from which the FRF's errors are independent
+    /// (`FrfPlan::independent_lag` of the run's settings).
+    pub lag: usize,
 }
 
 impl FitData {
-    pub fn of(h: &Frf, mask: &[bool]) -> Self {
+    /// The bins of `mask`, of an FRF `plan` made.
+    pub fn of(h: &Frf, mask: &[bool], plan: &FrfPlan) -> Self {
+        let (bins, variance) = Self::usable(h, mask);
+        Self::at(h, &bins, variance, plan)
+    }
+
+    /// The bins of `mask` whose variance is defined, and E|dH|^2 there.
+    fn usable(h: &Frf, mask: &[bool]) -> (Vec<usize>, Vec<f64>) {
         let masked: Vec<usize> = (0..h.freq_hz.len()).filter(|&i| mask[i]).collect();
         // frf gives the variance of Re(H) and of Im(H) each; fit wants
         // E|dH|^2, their sum. A bin whose variance is undefined (no noise
         // information around it) carries no weight and is left out.
-        let (bins, variance): (Vec<usize>, Vec<f64>) = masked
+        masked
             .iter()
             .zip(frf::h_variance_at(h, &masked))
             .filter(|(_, v)| v.is_finite())
             .map(|(&i, v)| (i, 2.0 * v))
-            .unzip();
+            .unzip()
+    }
+
+    /// `h` at `bins`, with their variances.
+    fn at(h: &Frf, bins: &[usize], variance: Vec<f64>, plan: &FrfPlan) -> Self {
         Self {
             freq_hz: bins.iter().map(|&i| h.freq_hz[i]).collect(),
             h: bins.iter().map(|&i| h.h[i]).collect(),
             variance,
             suu: bins.iter().map(|&i| h.suu[i]).collect(),
             bin_hz: h.resolution_hz,
+            lag: plan.independent_lag(),
         }
     }
 
@@ -157,9 +177,9 @@ fn bins_needed(ident: &IdentificationPlan) -> usize {
     n_params.max(3)
 }
 
-/// The fit options of a campaign's identification settings for a log
-/// sampled at `sample_rate_hz`.
-pub fn fit_options(ident: &IdentificationPlan, sample_rate_hz: f64) -> FitOptions {
+/// The fit options of a campaign's identification settings for a run
+/// whose FRF was made by `plan` from a log sampled at `sample_rate_hz`.
+pub fn fit_options(ident: &IdentificationPlan, plan: &FrfPlan, sample_rate_hz: f64) -> FitOptions {
     let mut opts = FitOptions::new(
         ident.numerator_order,
         ident.denominator_order,
@@ -168,7 +188,7 @@ pub fn fit_options(ident: &IdentificationPlan, sample_rate_hz: f64) -> FitOption
     opts.intersample = ident.intersample;
     opts.delay = ident.delay;
     opts.max_iterations = fit::RUN_MAX_ITERATIONS;
-    opts.independent_lag = ident.frf.independent_lag();
+    opts.independent_lag = plan.independent_lag();
     opts
 }
 
@@ -177,11 +197,23 @@ pub fn fit_options(ident: &IdentificationPlan, sample_rate_hz: f64) -> FitOption
 pub enum AcquireError {
     #[error(transparent)]
     Ingest(#[from] IngestError),
-    #[error("{}: the fit band's upper edge {hi} Hz (identification.band_hz) is at or above the log's Nyquist frequency {nyquist} Hz (sampled at {} Hz)", path.display(), 2.0 * nyquist)]
+    #[error("{}: the fit band's upper edge {hi} Hz (identification.band_hz) is at or above the log's Nyquist frequency {nyquist} Hz (sampled at {} Hz){hint}", path.display(), 2.0 * nyquist)]
     BandAboveNyquist {
         path: PathBuf,
         hi: f64,
         nyquist: f64,
+        /// The likely unit mistake, when one explains it ("" otherwise).
+        hint: String,
+    },
+    #[error(
+        "{}: the no-specimen run's static gain x1/u is {gain:.4}, where an actuator under P control follows its command at rest (1): the displacement reads {gain:.3} times the command{hint}",
+        path.display()
+    )]
+    StaticGain {
+        path: PathBuf,
+        gain: f64,
+        /// The likely unit mistake, when one explains it ("" otherwise).
+        hint: String,
     },
     #[error("{}: {source}", path.display())]
     Tf {
@@ -234,15 +266,22 @@ impl RunTfError {
     }
 }
 
-/// A run's transfer function fitted to its FRF `h` on the bins of `mask`
-/// (the band's, coherent enough), refused as `servoid run` refuses a run:
-/// too few bins for the model, a fit that fails, is unstable or did not
-/// converge. The fit's own warnings are in `TfFit::warnings`.
+/// A run's transfer function fitted to its FRF `h` (made by `plan`) on the
+/// bins of `mask` (the band's, coherent enough), refused as `servoid run`
+/// refuses a run: too few bins for the model, a fit that fails, is
+/// unstable or did not converge. The fit's own warnings are in
+/// `TfFit::warnings`.
+///
+/// With `plan.transient` the record's transient is fitted beside the model
+/// (`fit::transient`) and taken out of `h`; the bins' variances are then
+/// estimated again from `h` without it (the ETFE's local noise level
+/// counts a transient as noise) and the model fitted once more with them.
 pub fn fit_run(
-    h: &Frf,
+    h: &mut Frf,
     mask: &[bool],
     band_hz: (f64, f64),
     ident: &IdentificationPlan,
+    plan: &FrfPlan,
     sample_rate_hz: f64,
 ) -> Result<(TfFit, FitData), RunTfError> {
     let used = mask.iter().filter(|m| **m).count();
@@ -256,8 +295,13 @@ pub fn fit_run(
             coherence_min: ident.coherence_min,
         });
     }
-    let data = FitData::of(h, mask);
-    let fit = fit::fit(&data.input(), &fit_options(ident, sample_rate_hz))?;
+    let opts = fit_options(ident, plan, sample_rate_hz);
+    let (fit, data) = if plan.model_noise {
+        refined_fit(h, mask, plan, &opts, ident.max_delay_s)?
+    } else {
+        let data = FitData::of(h, mask, plan);
+        (fit::fit(&data.input(), &opts)?, data)
+    };
     if !fit.stable {
         let poles = fit
             .tf
@@ -274,6 +318,95 @@ pub fn fit_run(
         });
     }
     Ok((fit, data))
+}
+
+/// [`fit_run`]'s fit as `auto` makes it (`plan.model_noise`). First what
+/// is not the model: the record's transient (when `plan.transient`) and
+/// the bins' noise level, from a fit of the model with a delay (up to
+/// `max_delay_s`, whatever the manifest's delay: a sensor's delay the
+/// model lacks would leave the transient's columns wrong and its misfit
+/// in the noise); the transient is taken out of `h` and the noise level
+/// read from what that fit leaves. Then the manifest's model, fitted to
+/// `h` on those variances. The data returned are `h` at its bins with the
+/// variances the model was weighted by, so that its cost is theirs.
+fn refined_fit(
+    h: &mut Frf,
+    mask: &[bool],
+    plan: &FrfPlan,
+    opts: &FitOptions,
+    max_delay_s: f64,
+) -> Result<(TfFit, FitData), FitError> {
+    let u = h.input_dft.clone().filter(|_| plan.transient.is_some());
+    let (bins, variance) = FitData::usable(h, mask);
+    let data = FitData::at(h, &bins, variance, plan);
+    let nuisance = FitOptions {
+        delay: match opts.delay {
+            DelayPlan::None => DelayPlan::Fit { max_s: max_delay_s },
+            given => given,
+        },
+        ..opts.clone()
+    };
+    let first = fit_at(&data, &bins, u.as_deref(), &nuisance, None)?;
+    if let Some(t) = &first.transient {
+        h.without_transient(|f, u| t.at(f, u));
+    }
+    let (bins, variance) = residual_noise(h, mask, &first, opts);
+    let data = FitData::at(h, &bins, variance, plan);
+    let start = &first.params[..first.shape.n_rational()];
+    let start: Vec<f64> = match opts.delay {
+        DelayPlan::Fit { .. } => first.params.clone(),
+        _ => start.to_vec(),
+    };
+    let fit = fit::fit_from(&data.input(), opts, &start)?;
+    Ok((fit, data))
+}
+
+/// One fit of `data` (at the FRF's `bins`), with the record's transient
+/// when the command's DFT `u` is given, from `start` when given.
+fn fit_at(
+    data: &FitData,
+    bins: &[usize],
+    u: Option<&[nalgebra::Complex<f64>]>,
+    opts: &FitOptions,
+    start: Option<&[f64]>,
+) -> Result<TfFit, FitError> {
+    match (u, start) {
+        (Some(u), _) => {
+            let at: Vec<_> = bins.iter().map(|&k| u[k]).collect();
+            fit::fit_with_transient(&data.input(), &at, opts, start)
+        }
+        (None, Some(start)) => fit::fit_from(&data.input(), opts, start),
+        (None, None) => fit::fit(&data.input(), opts),
+    }
+}
+
+/// The bins of `mask` with a defined noise level and E|dH|^2 there, read
+/// (as the ETFE reads it, `frf::h_variance_at`) from `h` less `fit`'s model
+/// with the hold: the local polynomials then only follow the model's
+/// misfit, which is smooth, where on `h` itself they must follow the
+/// plant's curvature.
+fn residual_noise(
+    h: &Frf,
+    mask: &[bool],
+    fit: &TfFit,
+    opts: &FitOptions,
+) -> (Vec<usize>, Vec<f64>) {
+    // The bins the mask holds and the noise estimate's reach beyond them.
+    let top = h
+        .freq_hz
+        .iter()
+        .zip(mask)
+        .filter(|(_, m)| **m)
+        .map(|(f, _)| *f)
+        .fold(0.0, f64::max);
+    let mut residual = h.head(top, frf::VARIANCE_REACH_BINS);
+    for (hk, &f) in residual.h.iter_mut().zip(&h.freq_hz) {
+        if f > 0.0 {
+            *hk -= fit.tf.freq_response(f)
+                * fit::hold_response(opts.intersample, opts.sample_rate_hz, f);
+        }
+    }
+    FitData::usable(&residual, &mask[..residual.h.len()])
 }
 
 /// Largest tolerated sample-interval deviation (fraction of the interval)
@@ -328,7 +461,7 @@ fn checked_log(
 ) -> Result<(Log, Vec<String>), IngestError> {
     let mut log = ingest::read_log_from(plan, file)?;
     let needs = Needs {
-        min_samples: ident.frf.segment_length,
+        min_samples: ident.frf.min_samples(),
         max_jitter_fraction: MAX_JITTER_FRACTION,
         clip_fraction: CLIP_FRACTION,
     };
@@ -357,23 +490,188 @@ fn band_power_fraction(h: &Frf, (lo, hi): (f64, f64)) -> f64 {
     if total > 0.0 { in_band / total } else { 0.0 }
 }
 
-/// The warning for a command not at rest at the record's ends, whose
-/// transient the estimator (not the LPM) counts as noise.
-fn motion_warning(ident: &IdentificationPlan, command: &[f64]) -> Option<String> {
-    if ident.frf.estimator == frf::Estimator::Lpm {
+/// The warning for an explicit ETFE or Welch estimate of a command not at
+/// rest at the record's ends, whose transient it counts as noise (`auto`
+/// fits it, the LPM takes it out).
+fn motion_warning(choice: &FrfChoice) -> Option<String> {
+    let plan = &choice.plan;
+    if choice.chosen || plan.estimator == frf::Estimator::Lpm {
         return None;
     }
-    let (end, ratio) = frf::ends_in_motion(command)?;
+    let (end, ratio) = choice.ends.command?;
     Some(format!(
-        "the command is not at rest at the record's {end} (its RMS over the last or first {:.1} % of the record is {:.0} % of the whole): the {} counts the transient's leakage as noise, and the fits' stds come out too large (1.5 to 7 times on sweeps cut in motion); identification.frf = {{ estimator = \"lpm\" }} takes the transient out",
+        "the command is not at rest at the record's {end} (over the first or last {:.1} % of the record, or between its ends, it moves by {:.0} % of its RMS): the {} counts the transient's leakage as noise, and the fits' stds come out too large (1.5 to 7 times on sweeps cut in motion); the default estimator (identification.frf.estimator left out, \"auto\") fits the transient beside the model and takes it out",
         100.0 * frf::REST_END_FRACTION,
         100.0 * ratio,
-        match ident.frf.estimator {
+        match plan.estimator {
             frf::Estimator::H1 => "Welch H1 estimate",
             frf::Estimator::H2 => "Welch H2 estimate",
             _ => "ETFE",
         }
     ))
+}
+
+/// Why settings the manifest names are wrong for this log, if they are:
+/// Welch segments over a sweep (each sees another part of it), fewer
+/// segments than the averages need, a tapered window over a whole sweep.
+fn contradiction(plan: &FrfPlan, excitation: frf::Excitation, n: usize) -> Option<String> {
+    let mut why = Vec::new();
+    let welch = matches!(plan.estimator, frf::Estimator::H1 | frf::Estimator::H2);
+    let sweep = matches!(excitation, frf::Excitation::Sweep { .. });
+    if welch && sweep {
+        why.push(format!(
+            "the {} of {}: each segment sees another part of the sweep, which biases the estimate and its coherence (on simulated sweeps of the paper's rig a1b0 came out 16 % high from 20 s records with 8,192-sample segments, a3 1.1 % from 170 s ones)",
+            frf::describe(plan),
+            excitation.describe()
+        ));
+    }
+    if welch {
+        let hop =
+            plan.segment_length - (plan.overlap * plan.segment_length as f64).floor() as usize;
+        let segments = n.saturating_sub(plan.segment_length) / hop.max(1) + 1;
+        if segments < MIN_WELCH_SEGMENTS {
+            why.push(format!(
+                "the record of {n} samples holds only {segments} of the {}-sample segments: the coherence and the variances are read from too few averages (at least {MIN_WELCH_SEGMENTS})",
+                plan.segment_length
+            ));
+        }
+    }
+    if !welch && plan.window != frf::Window::Rectangular && sweep {
+        why.push(format!(
+            "a {:?} window over the whole record of {} weighs the sweep's start and end down to nothing",
+            plan.window,
+            excitation.describe()
+        ));
+    }
+    (!why.is_empty()).then(|| why.join("; "))
+}
+
+/// A no-specimen run's static gain beyond which its channels' units are
+/// taken as wrong: the gain is 1 (Eqs. 11-12, n0 = d0 = a1b0), a real rig's
+/// within a few per cent (the MTS press's 1.008); a unit mistake puts it a
+/// factor of 2.54 (inches) or more away.
+const STATIC_GAIN_LIMIT: f64 = 2.0;
+/// Beyond this (but within the limit) the gain is a warning.
+const STATIC_GAIN_WARN: f64 = 1.1;
+
+/// The no-specimen run's static gain n0/d0 against 1: an error naming the
+/// likely unit mistake beyond [`STATIC_GAIN_LIMIT`], a warning beyond
+/// [`STATIC_GAIN_WARN`].
+fn static_gain_check(
+    path: &std::path::Path,
+    plan: &LogPlan,
+    fit: &TfFit,
+) -> Result<Option<String>, AcquireError> {
+    let (n0, d0) = (
+        fit.tf.num.last().copied().unwrap_or(f64::NAN),
+        fit.tf.den.last().copied().unwrap_or(f64::NAN),
+    );
+    let gain = n0 / d0;
+    let off = gain.max(1.0 / gain);
+    if !gain.is_finite() || gain <= 0.0 || off <= STATIC_GAIN_WARN {
+        return Ok(None);
+    }
+    if off <= STATIC_GAIN_LIMIT {
+        return Ok(Some(format!(
+            "{}: the no-specimen run's static gain x1/u is {gain:.4}, {:.0} % from the 1 an actuator under P control has at rest: check the channels' scale and offset, and that the run had no specimen",
+            path.display(),
+            100.0 * (gain - 1.0).abs()
+        )));
+    }
+    let ch = &plan.channels;
+    let unit_for = |factor: f64| {
+        [
+            crate::units::Unit::Meter,
+            crate::units::Unit::Centimeter,
+            crate::units::Unit::Millimeter,
+            crate::units::Unit::Inch,
+        ]
+        .into_iter()
+        .find(|u| (u.to_si() / factor - 1.0).abs() < 0.05)
+    };
+    // x1 = gain u: the displacement's factor to SI is gain times too
+    // large, or the command's gain times too small.
+    let mut fixes = Vec::new();
+    if let Some(u) = unit_for(ch.displacement.unit.to_si() / gain) {
+        fixes.push(format!(
+            "channels.displacement.unit = \"{}\" (the manifest says \"{}\")",
+            u.symbol(),
+            ch.displacement.unit.symbol()
+        ));
+    }
+    if let Some(u) = unit_for(ch.command.unit.to_si() * gain) {
+        fixes.push(format!(
+            "channels.command.unit = \"{}\" (the manifest says \"{}\")",
+            u.symbol(),
+            ch.command.unit.symbol()
+        ));
+    }
+    let hint = if fixes.is_empty() {
+        ": check the channels' units and scales".to_string()
+    } else {
+        format!(
+            ": a unit mistake? The gain is 1 with {}",
+            fixes.join(", or with ")
+        )
+    };
+    Err(AcquireError::StaticGain {
+        path: path.to_path_buf(),
+        gain,
+        hint,
+    })
+}
+
+/// The fewest Welch segments a record must hold for their averages.
+const MIN_WELCH_SEGMENTS: usize = 8;
+
+/// For settings the manifest names that the log contradicts
+/// ([`contradiction`]), a warning naming what the default (`auto`) would
+/// choose and, for a run fitted here, how far its own fit would move with
+/// that choice, in its stds.
+fn settings_warning(
+    run: &RunPlan,
+    ident: &IdentificationPlan,
+    choice: &FrfChoice,
+    excitation: frf::Excitation,
+    log: &Log,
+    fit: Option<&TfFit>,
+) -> Option<String> {
+    if choice.chosen {
+        return None;
+    }
+    let why = contradiction(&choice.plan, excitation, log.command_m.len())?;
+    let (u, y, fs) = (&log.command_m, &log.displacement_m, log.sample_rate_hz);
+    let mut text = format!("identification.frf: {why}");
+    let Ok(auto) = frf::FrfRequest::default().resolve(u, y, fs, run.band_hz) else {
+        return Some(text);
+    };
+    text += &format!(
+        "; the default (leave identification.frf.estimator out: \"auto\") would use the {}",
+        frf::describe(&auto.plan)
+    );
+    let moved = fit.and_then(|fit| {
+        let mut h = frf::estimate(u, y, fs, &auto.plan).ok()?;
+        let mask = frf::band_mask(&h, run.band_hz, ident.coherence_min);
+        let (other, _) = fit_run(&mut h, &mask, run.band_hz, ident, &auto.plan, fs).ok()?;
+        let parts: Vec<String> = fit
+            .param_names
+            .iter()
+            .zip(fit.params.iter().zip(&fit.std))
+            .zip(&other.params)
+            .map(|((name, (p, sd)), q)| {
+                format!(
+                    "{name} {:+.2} % ({:+.1} stds)",
+                    100.0 * (q / p - 1.0),
+                    (q - p) / sd
+                )
+            })
+            .collect();
+        Some(parts.join(", "))
+    });
+    if let Some(moved) = moved {
+        text += &format!(", with which this run's own fit moves by {moved}");
+    }
+    Some(text)
 }
 
 /// The log stage of one run whose log file is already read.
@@ -389,10 +687,21 @@ pub fn log_stage_from(
     // The manifest cannot know the rate of a log that carries its own (a
     // time column, a DAQ header), so the band is checked against it here.
     if run.band_hz.1 >= 0.5 * fs {
+        // A time column in milliseconds read as seconds: a thousand times
+        // too slow a rate, which a band in Hz then lies above.
+        let hint = match log.timing {
+            ingest::Timing::Measured { .. } if 500.0 * fs > run.band_hz.1 => format!(
+                ": the time column steps {:.4} per sample; were it milliseconds (channels.time.unit = \"ms\"), the rate would be {} Hz",
+                1.0 / fs,
+                1000.0 * fs
+            ),
+            _ => String::new(),
+        };
         return Err(AcquireError::BandAboveNyquist {
             path,
             hi: run.band_hz.1,
             nyquist: 0.5 * fs,
+            hint,
         });
     }
     let tf_err = |source: RunTfError| AcquireError::Tf {
@@ -400,8 +709,12 @@ pub fn log_stage_from(
         source,
     };
     let frf_err = |source: FrfError| tf_err(RunTfError::Frf(source));
+    let choice = ident
+        .frf
+        .resolve(&log.command_m, &log.displacement_m, fs, run.band_hz)
+        .map_err(frf_err)?;
     let mut h =
-        frf::estimate(&log.command_m, &log.displacement_m, fs, &ident.frf).map_err(frf_err)?;
+        frf::estimate(&log.command_m, &log.displacement_m, fs, &choice.plan).map_err(frf_err)?;
     // Excitation in the band, taken before the bins above it are freed.
     let (lo, hi) = run.band_hz;
     let fraction = band_power_fraction(&h, run.band_hz);
@@ -416,7 +729,13 @@ pub fn log_stage_from(
     h.keep_up_to(keep_hz, frf::VARIANCE_REACH_BINS);
     let force_frf = match &log.force_n {
         Some(f) => {
-            let mut ff = frf::estimate(&log.command_m, f, fs, &ident.frf).map_err(frf_err)?;
+            // The force path's transient is not fitted: its FRF is shown,
+            // not fitted run by run.
+            let plan = FrfPlan {
+                transient: None,
+                ..choice.plan.clone()
+            };
+            let mut ff = frf::estimate(&log.command_m, f, fs, &plan).map_err(frf_err)?;
             ff.keep_up_to(keep_hz, frf::VARIANCE_REACH_BINS);
             Some(ff)
         }
@@ -426,18 +745,36 @@ pub fn log_stage_from(
         return Err(tf_err(RunTfError::NoExcitation { lo, hi, fraction }));
     }
     let mask = frf::band_mask(&h, run.band_hz, ident.coherence_min);
-    warnings.extend(motion_warning(ident, &log.command_m));
+    warnings.extend(motion_warning(&choice));
 
     let fit = if matches!(run.role, Role::NoSpecimen | Role::Spring | Role::Fit) {
-        let (fit, data) = fit_run(&h, &mask, run.band_hz, ident, fs).map_err(tf_err)?;
+        let (fit, data) =
+            fit_run(&mut h, &mask, run.band_hz, ident, &choice.plan, fs).map_err(tf_err)?;
         warnings.extend(fit.warnings.iter().cloned());
         Some((fit, data))
     } else {
         None
     };
     let (fit, fit_data) = fit.unzip();
+    if run.role == Role::NoSpecimen
+        && let Some(f) = &fit
+    {
+        warnings.extend(static_gain_check(&path, plan, f)?);
+    }
+    let periodogram = (h.n_averages == 1).then_some(h.suu.as_slice());
+    let excitation = frf::excitation(&log.command_m, fs, periodogram);
+    warnings.extend(settings_warning(
+        run,
+        ident,
+        &choice,
+        excitation,
+        &log,
+        fit.as_ref(),
+    ));
     Ok(LogStage {
         log,
+        choice,
+        excitation,
         frf: h,
         force_frf,
         mask,

@@ -27,6 +27,7 @@ use rayon::prelude::*;
 use super::compare::compare;
 use super::evidence::RigInput;
 use super::rig;
+use super::sensitivity::NoiseSource;
 use super::sink::{Done, Probed, Sink};
 use super::step::{self, Output, RigOutcome};
 use crate::ingest::LogFile;
@@ -37,7 +38,6 @@ use crate::report::{FigureFormats, PageFigure, WriteError};
 use crate::results::{
     CampaignSummary, CcfResult, ComplexValue, RESULTS_SCHEMA_VERSION, Results, RunResult, Status,
 };
-use crate::sensitivity::NoiseProfile;
 use crate::simulate::specimen::SpecimenModel;
 use crate::validate::csi::Csi;
 use crate::validate::{self, ValidationMetrics};
@@ -197,7 +197,7 @@ fn campaign_level(
     campaign: &Campaign,
     mut results: Results,
     rig: Option<RigParams>,
-    noise: Option<&NoiseProfile>,
+    noise: Option<&NoiseSource>,
     overlay: &[OverlayRun],
     sink: &Sink<'_>,
 ) -> Result<(Results, Vec<PageFigure>), WriteError> {

@@ -213,7 +213,7 @@ pub(super) fn merge_stamps(out_dir: &Path, dirs: &[PathBuf]) -> Result<(), Write
 /// computes otherwise. 2: the per-run fit's delay test; 3: what a run
 /// keeps stored apart from the files it wrote; 4: the fit's covariance;
 /// 5: the run's tracking measures; 6: the validation runs' compensator.
-const OUTCOME_FORMAT: u32 = 6;
+const OUTCOME_FORMAT: u32 = 7;
 
 /// A key from the text of what decides a run's outcome. The plan's Debug
 /// text holds every setting with its floats to the last bit; a rebuild that

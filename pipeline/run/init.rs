@@ -9,8 +9,8 @@ use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
 
 use crate::ingest::{
-    self, ChannelPlan, Channels, Column, CsvOptions, Inspected, LogFormat, LogPlan, TableFormat,
-    TimePlan,
+    self, ChannelPlan, Channels, Column, CsvOptions, Inspected, LogFormat, LogPlan, Repair,
+    TableFormat, TimePlan,
 };
 use crate::manifest::scaffold::{self, FoundLog, ProposedChannels, ReadBack, Runs};
 use crate::report::{self, WriteError};
@@ -435,6 +435,7 @@ fn read_back(path: &Path, format: LogFormat, log: &FoundLog, p: &ProposedChannel
             gain: unit.to_si(),
             offset: 0.0,
             range: None,
+            repair: Repair::None,
         })
     };
     let time = match (&p.time.column, p.time.unit, log.inspected.rate_hz) {

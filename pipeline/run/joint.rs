@@ -116,6 +116,7 @@ pub(super) fn joint(
             h: &d.h,
             variance: &d.variance,
             bin_hz: d.bin_hz,
+            lag: d.lag,
         })
         .collect();
     let opts = options(&campaign.identification, start, fs);
@@ -203,7 +204,6 @@ fn options(ident: &IdentificationPlan, start: &RigParams, fs: f64) -> JointOptio
         delay_start_s: 0.0,
         force_delay_start_s: 0.0,
         max_delay_s: ident.max_delay_s,
-        lag: ident.frf.independent_lag(),
     }
 }
 

@@ -25,7 +25,7 @@ use rand_distr::{Distribution, Normal, StandardNormal};
 use rayon::prelude::*;
 
 use super::acquire::{RunTfError, fit_run};
-use crate::frf::{self, EtfeSpectra, EtfeSynthesis, Frf};
+use crate::frf::{self, EtfeSpectra, EtfeSynthesis, Frf, FrfPlan};
 use crate::identify::{self, SecondOrder, SpringRun, TfEstimate, identify_rig};
 use crate::lti::LtiError;
 use crate::manifest::IdentificationPlan;
@@ -47,8 +47,10 @@ pub struct McInput<'a> {
     /// Pure delay from command to displacement (s), as the campaign's
     /// no-specimen fit found it.
     pub delay_s: f64,
-    /// The campaign's FRF and fit settings, band and coherence limit.
+    /// The campaign's fit settings, band and coherence limit.
     pub ident: &'a IdentificationPlan,
+    /// The FRF settings of the run whose command is replayed.
+    pub frf: &'a FrfPlan,
     /// Base seed of every draw.
     pub seed: u64,
 }
@@ -117,7 +119,7 @@ impl McInput<'_> {
     /// of the quantiser, the rounding error departs from that model by
     /// terms of order exp(-2 pi^2 sigma^2 / q^2) < 1e-8).
     pub fn in_frequency_domain(&self) -> bool {
-        EtfeSynthesis::check_plan(&self.ident.frf).is_ok()
+        EtfeSynthesis::check_plan(self.frf).is_ok()
             && self.step_m.is_none_or(|q| self.noise_rms_m >= q)
     }
 }
@@ -131,7 +133,7 @@ impl Reading {
         match EtfeSynthesis::new(
             input.command_m,
             input.sample_rate_hz,
-            &input.ident.frf,
+            input.frf,
             input.ident.band_hz.1,
         ) {
             Ok(synthesis) => Reading::Spectra {
@@ -236,9 +238,9 @@ fn identify_once(
     let ident = input.ident;
     let run = |clean: &Clean, label: &'static str| -> Result<TfEstimate, DrawError> {
         let mut rng = seeded_rng(input.seed, &format!("mc/{i}/{seed}/{label}"));
-        let h = read(input, reading, clean, &mut rng)?;
+        let mut h = read(input, reading, clean, &mut rng)?;
         let mask = frf::band_mask(&h, ident.band_hz, ident.coherence_min);
-        let (f, _) = fit_run(&h, &mask, ident.band_hz, ident, fs)
+        let (f, _) = fit_run(&mut h, &mask, ident.band_hz, ident, input.frf, fs)
             .map_err(|source| DrawError::Run { run: label, source })?;
         Ok(TfEstimate {
             run: label.to_string(),
@@ -284,7 +286,7 @@ fn read(
             }
         })
         .collect();
-    frf::estimate(input.command_m, &y, input.sample_rate_hz, &input.ident.frf).map_err(|e| {
+    frf::estimate(input.command_m, &y, input.sample_rate_hz, input.frf).map_err(|e| {
         DrawError::Run {
             run: "simulated",
             source: RunTfError::Frf(e),
@@ -319,7 +321,11 @@ mod tests {
     }
 
     /// The paper's rig driven by `u` at 1 kHz with 2 um of noise.
-    fn paper_input<'a>(u: &'a [f64], ident: &'a IdentificationPlan) -> McInput<'a> {
+    fn paper_input<'a>(
+        u: &'a [f64],
+        ident: &'a IdentificationPlan,
+        frf: &'a FrfPlan,
+    ) -> McInput<'a> {
         McInput {
             rig: crate::model::PAPER_RIG,
             command_m: u,
@@ -328,7 +334,21 @@ mod tests {
             step_m: None,
             delay_s: 0.0,
             ident,
+            frf,
             seed: 0,
+        }
+    }
+
+    /// The ETFE with a rectangular window, as the bundled default states it.
+    fn etfe() -> FrfPlan {
+        FrfPlan {
+            estimator: Estimator::Etfe,
+            segment_length: 4096,
+            overlap: 0.5,
+            window: Window::Rectangular,
+            detrend: Detrend::Mean,
+            transient: None,
+            model_noise: false,
         }
     }
 
@@ -336,13 +356,7 @@ mod tests {
         IdentificationPlan {
             band_hz: (0.5, 30.0),
             coherence_min: 0.0,
-            frf: FrfPlan {
-                estimator: Estimator::Etfe,
-                segment_length: 4096,
-                overlap: 0.5,
-                window: Window::Rectangular,
-                detrend: Detrend::Mean,
-            },
+            frf: etfe().into(),
             intersample: Intersample::SampleAndHold,
             delay: DelayPlan::None,
             max_delay_s: 0.02,
@@ -359,8 +373,8 @@ mod tests {
     #[test]
     fn the_spread_is_the_analytic_prediction_where_noise_is_small() {
         let u = chirp();
-        let ident = ident();
-        let input = paper_input(&u, &ident);
+        let (ident, frf) = (ident(), etfe());
+        let input = paper_input(&u, &ident, &frf);
         let rig = input.rig;
         let ks = [5e4, 1.2e5, 5e5];
         let mc = monte_carlo(&input, &ks, 1000);
@@ -375,8 +389,8 @@ mod tests {
         for v in &mut y {
             *v += noise.sample(&mut rng);
         }
-        let h = frf::estimate(&u, &y, 1000.0, &ident.frf).unwrap();
-        let data = FitData::of(&h, &frf::band_mask(&h, ident.band_hz, 0.0));
+        let h = frf::estimate(&u, &y, 1000.0, &frf).unwrap();
+        let data = FitData::of(&h, &frf::band_mask(&h, ident.band_hz, 0.0), &frf);
         let profile = NoiseProfile {
             run: "no-specimen".into(),
             freq_hz: data.freq_hz,
@@ -387,7 +401,7 @@ mod tests {
             displacement_step_m: None,
             log_sha256: String::new(),
         };
-        let opts = fit_options(&ident, 1000.0);
+        let opts = fit_options(&ident, &frf, 1000.0);
         for p in &mc {
             let k = p.stiffness_n_per_m;
             let sweep = stiffness_sweep(
@@ -438,7 +452,8 @@ mod tests {
         let u = chirp();
         let mut ident = ident();
         ident.coherence_min = 0.8;
-        let mut input = paper_input(&u, &ident);
+        let frf = etfe();
+        let mut input = paper_input(&u, &ident, &frf);
         input.noise_rms_m = 2e-5;
         input.step_m = Some(1e-5);
         let reading = Reading::of(&input);
@@ -483,15 +498,17 @@ mod tests {
     #[test]
     fn coarse_steps_and_other_estimators_are_read_in_time() {
         let u = chirp();
-        let ident = ident();
-        let mut input = paper_input(&u, &ident);
+        let (ident, frf) = (ident(), etfe());
+        let mut input = paper_input(&u, &ident, &frf);
         input.step_m = Some(4e-6);
         assert!(matches!(Reading::of(&input), Reading::Samples));
         input.step_m = Some(1e-6);
         assert!(matches!(Reading::of(&input), Reading::Spectra { .. }));
-        let mut welch = ident.clone();
-        welch.frf.estimator = Estimator::H1;
-        let input = paper_input(&u, &welch);
+        let welch = FrfPlan {
+            estimator: Estimator::H1,
+            ..etfe()
+        };
+        let input = paper_input(&u, &ident, &welch);
         assert!(matches!(Reading::of(&input), Reading::Samples));
     }
 
@@ -499,8 +516,8 @@ mod tests {
     #[test]
     fn the_thread_count_changes_nothing() {
         let u = chirp();
-        let ident = ident();
-        let input = paper_input(&u, &ident);
+        let (ident, frf) = (ident(), etfe());
+        let input = paper_input(&u, &ident, &frf);
         let run = |threads| {
             rayon::ThreadPoolBuilder::new()
                 .num_threads(threads)

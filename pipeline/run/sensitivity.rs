@@ -9,6 +9,7 @@
 use super::acquire::{self, replayed_command};
 use super::cache::{self, Cache};
 use super::montecarlo::{McInput, monte_carlo};
+use crate::frf::FrfPlan;
 use crate::ingest::IngestError;
 use crate::manifest::{Campaign, MonteCarloSettings, Role, RunSource};
 use crate::model::RigParams;
@@ -30,11 +31,20 @@ pub(super) fn stiffness_range(given: Option<(f64, f64)>, rig: &RigParams) -> (f6
     given.unwrap_or((0.01 * a2, 10.0 * a2))
 }
 
+/// A no-specimen run's FRF noise and the FRF settings that gave it: what
+/// the stiffness sensitivity reads, and the settings the Monte Carlo's
+/// draws get.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub(super) struct NoiseSource {
+    pub profile: NoiseProfile,
+    pub frf: FrfPlan,
+}
+
 pub(super) fn sensitivity(
     campaign: &Campaign,
     rig: &RigParams,
     results: &Results,
-    noise: Option<&NoiseProfile>,
+    noise: Option<&NoiseSource>,
     cache: Option<&Cache>,
 ) -> Result<Option<SensitivityResult>, WriteError> {
     let springs: Vec<f64> = campaign
@@ -63,7 +73,7 @@ pub(super) fn sensitivity(
                 None,
                 Some("the Monte Carlo replays a no-specimen run's logged command with its measured noise, and this campaign has no no-specimen log that was fitted".to_string()),
             ),
-            Some(profile) => match cached_monte_carlo(campaign, rig, profile, range, mc, cache)? {
+            Some(source) => match cached_monte_carlo(campaign, rig, source, range, mc, cache)? {
                 Ok(m) => (Some(m), None),
                 Err(why) => (None, Some(why.to_string())),
             },
@@ -86,15 +96,15 @@ fn analytic(
     campaign: &Campaign,
     rig: &RigParams,
     results: &Results,
-    noise: Option<&NoiseProfile>,
+    noise: Option<&NoiseSource>,
     range: (f64, f64),
 ) -> Option<AnalyticSensitivity> {
     let points = campaign.sensitivity.points;
     // The campaign's own noise when a no-specimen log measured it: its
     // FRF variance through the fit's Jacobian (Sec. 2.3's analysis with
     // the lab's noise, not an assumed one).
-    if let Some(profile) = noise {
-        let opts = acquire::fit_options(&campaign.identification, profile.sample_rate_hz);
+    if let Some(NoiseSource { profile, frf }) = noise {
+        let opts = acquire::fit_options(&campaign.identification, frf, profile.sample_rate_hz);
         let measured = CoefficientNoise::Measured {
             profile,
             opts: &opts,
@@ -158,7 +168,7 @@ pub enum McUnavailable {
 fn cached_monte_carlo(
     campaign: &Campaign,
     rig: &RigParams,
-    profile: &NoiseProfile,
+    source: &NoiseSource,
     range: (f64, f64),
     mc: &MonteCarloSettings,
     cache: Option<&Cache>,
@@ -166,7 +176,7 @@ fn cached_monte_carlo(
     let key = cache::key(&[
         &"monte carlo",
         rig,
-        profile,
+        source,
         &campaign.identification,
         mc,
         &range,
@@ -174,7 +184,7 @@ fn cached_monte_carlo(
     if let Some(hit) = cache.and_then(|c| c.lookup::<MonteCarlo>(&key)) {
         return Ok(Ok(hit));
     }
-    let outcome = run_monte_carlo(campaign, rig, profile, range, mc);
+    let outcome = run_monte_carlo(campaign, rig, source, range, mc);
     if let (Some(c), Ok(m)) = (cache, &outcome) {
         c.store(&key, m)?;
     }
@@ -216,7 +226,7 @@ fn basis(
 fn run_monte_carlo(
     campaign: &Campaign,
     rig: &RigParams,
-    profile: &NoiseProfile,
+    NoiseSource { profile, frf }: &NoiseSource,
     range: (f64, f64),
     mc: &MonteCarloSettings,
 ) -> Result<MonteCarlo, McUnavailable> {
@@ -247,13 +257,14 @@ fn run_monte_carlo(
         step_m: profile.displacement_step_m,
         delay_s: profile.delay_s,
         ident: &campaign.identification,
+        frf,
         seed: mc.seed,
     };
     let ks = log_grid(range, mc.points);
     let frequency_domain = input.in_frequency_domain();
     let mut points = monte_carlo(&input, &ks, mc.seeds);
     // The analytic prediction at exactly these stiffnesses.
-    let opts = acquire::fit_options(&campaign.identification, fs);
+    let opts = acquire::fit_options(&campaign.identification, frf, fs);
     let at_points = stiffness_sweep(
         rig,
         range,

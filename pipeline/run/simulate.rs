@@ -397,6 +397,7 @@ fn analysis_manifest(plan: &SimulationPlan, truth: &Truth) -> Manifest {
         scale: 1.0,
         offset: 0.0,
         range: None,
+        repair: Default::default(),
     };
     Manifest {
         schema_version: SCHEMA_VERSION,

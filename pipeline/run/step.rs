@@ -11,6 +11,7 @@ use nalgebra::Complex;
 use super::acquire::{AcquireError, Acquired, FitData, LogStage, acquire_with, fit_options};
 use super::evidence::{Evidence, RigInput, ValidationEvidence};
 use super::rig::RigError;
+use super::sensitivity::NoiseSource;
 use crate::fit::adequacy::{self, Adequacy, Residuals};
 use crate::fit::{self, DelayPlan, Intersample, TfFit};
 use crate::frf::{self, Frf};
@@ -24,7 +25,8 @@ use crate::report::figures::catalogue::{self, ForceBins, OverlayRun, Prediction}
 use crate::report::tables::RunTables;
 use crate::report::{FigureSpec, Measured};
 use crate::results::{
-    DelayTestResult, FitSummary, LogInfo, RunResult, RunTracking, Status, TfResult, TfSource,
+    DelayTestResult, FitSummary, FrfUsed, LogInfo, RunResult, RunTracking, Status, TfResult,
+    TfSource,
 };
 use crate::sensitivity::{self, NoiseProfile};
 use crate::simulate::specimen::SpecimenModel;
@@ -115,7 +117,7 @@ pub(super) struct Kept {
     /// A validation run's control-structure interaction.
     pub csi: Option<Csi>,
     /// A no-specimen run's FRF noise, for the stiffness sensitivity.
-    pub noise: Option<NoiseProfile>,
+    pub noise: Option<NoiseSource>,
 }
 
 impl Kept {
@@ -338,6 +340,7 @@ pub(super) fn validation(
     };
     out.warnings = acq.warnings.clone();
     out.log = log_info(plan, acq.stage.as_deref());
+    out.frf = acq.stage.as_deref().map(frf_used);
     let stage = acq.stage.as_deref();
     let (rig_at_p, rig_cov) = match rig {
         Ok((r, cov)) => at_p_gain(r, cov.as_ref(), plan.p_gain),
@@ -489,6 +492,7 @@ fn new_result(plan: &RunPlan) -> RunResult {
         validation: None,
         tracking: None,
         log: None,
+        frf: None,
         annotations: plan.annotations.clone(),
     }
 }
@@ -505,7 +509,13 @@ pub(super) fn validation_evidence(campaign: &Campaign, plan: &RunPlan) -> RigInp
         return RigInput::Nothing;
     };
     let coherence_min = campaign.identification.coherence_min;
-    let data = |h: &Frf| FitData::of(h, &frf::band_mask(h, plan.band_hz, coherence_min));
+    let data = |h: &Frf| {
+        FitData::of(
+            h,
+            &frf::band_mask(h, plan.band_hz, coherence_min),
+            &st.choice.plan,
+        )
+    };
     RigInput::Validation(Box::new(ValidationEvidence {
         displacement: data(&st.frf),
         force: st.force_frf.as_ref().map(data),
@@ -518,19 +528,24 @@ pub(super) fn validation_evidence(campaign: &Campaign, plan: &RunPlan) -> RigInp
 /// their variance, the white noise level that implies, the displacement's
 /// quantisation step and the log's hash (for the Monte Carlo, which
 /// replays its command).
-fn noise_profile(plan: &RunPlan, st: &LogStage) -> Option<NoiseProfile> {
+fn noise_profile(plan: &RunPlan, st: &LogStage) -> Option<NoiseSource> {
     let (fit, data) = (st.fit.as_ref()?, st.fit_data.as_ref()?);
     let fs = st.log.sample_rate_hz;
-    (!data.freq_hz.is_empty()).then(|| NoiseProfile {
-        run: plan.id.clone(),
-        white_noise: crate::sensitivity::montecarlo::white_noise(&data.variance, &data.suu, fs),
-        freq_hz: data.freq_hz.clone(),
-        variance: data.variance.clone(),
-        sample_rate_hz: fs,
-        delay_s: fit.tf.delay_s,
-        displacement_step_m: crate::ingest::quantum_step(&st.log.displacement_m),
-        log_sha256: st.log.sha256.clone(),
-    })
+    (!data.freq_hz.is_empty())
+        .then(|| NoiseProfile {
+            run: plan.id.clone(),
+            white_noise: crate::sensitivity::montecarlo::white_noise(&data.variance, &data.suu, fs),
+            freq_hz: data.freq_hz.clone(),
+            variance: data.variance.clone(),
+            sample_rate_hz: fs,
+            delay_s: fit.tf.delay_s,
+            displacement_step_m: crate::ingest::quantum_step(&st.log.displacement_m),
+            log_sha256: st.log.sha256.clone(),
+        })
+        .map(|profile| NoiseSource {
+            profile,
+            frf: st.choice.plan.clone(),
+        })
 }
 
 /// The model's x1/u (Eq. 17) and force path f/u (Eq. 45) for a linear
@@ -718,7 +733,27 @@ fn log_info(plan: &RunPlan, stage: Option<&LogStage>) -> Option<LogInfo> {
         sample_rate_hz: st.log.sample_rate_hz,
         n_samples: st.log.n_rows,
         duration_s: st.log.n_rows as f64 / st.log.sample_rate_hz,
+        repairs: st.log.repairs.clone(),
     })
+}
+
+/// The FRF settings the run's log got, as results.json states them.
+fn frf_used(st: &LogStage) -> FrfUsed {
+    let (choice, plan) = (&st.choice, &st.choice.plan);
+    FrfUsed {
+        chosen_by: if choice.chosen { "auto" } else { "manifest" }.into(),
+        estimator: plan.estimator,
+        window: plan.window,
+        segment_length: plan.segment_length,
+        overlap: plan.overlap,
+        detrend: plan.detrend,
+        transient: plan.transient.is_some(),
+        model_noise: plan.model_noise,
+        excitation: st.excitation.kind().into(),
+        excitation_note: st.excitation.describe(),
+        ends: choice.ends.describe(),
+        reason: choice.reason.clone(),
+    }
 }
 
 /// A run marked failed with its error.
@@ -745,6 +780,7 @@ fn fitted(
 ) {
     out.warnings = acq.warnings.clone();
     out.log = log_info(plan, acq.stage.as_deref());
+    out.frf = acq.stage.as_deref().map(frf_used);
     let stage = acq.stage;
     let fit = stage.as_ref().and_then(|s| s.fit.as_ref());
     out.tf = acq.tf.as_ref().map(|tf| {
@@ -778,7 +814,7 @@ fn fitted(
         if let Some(d) = summary.adequacy.as_ref().and_then(|a| {
             a.diagnosis(
                 (!fit.shape.fit_delay).then_some("set identification.delay = \"fit\""),
-                ident.frf.estimator.understated_noise(),
+                st.choice.plan.estimator.understated_noise(),
             )
         }) {
             out.warnings.push(format!("the run's own fit: {d}"));
@@ -786,7 +822,7 @@ fn fitted(
         if let Some(o) = summary
             .adequacy
             .as_ref()
-            .and_then(|a| a.overstated(ident.frf.estimator.overstated_noise()))
+            .and_then(|a| a.overstated(st.choice.plan.estimator.overstated_noise()))
         {
             out.warnings.push(format!("the run's own fit: {o}"));
         }
@@ -843,7 +879,7 @@ fn fit_adequacy(ident: &IdentificationPlan, st: &LogStage, fit: &TfFit) -> Optio
         },
         fit.params.len(),
         st.frf.resolution_hz,
-        ident.frf.independent_lag(),
+        st.choice.plan.independent_lag(),
     ))
 }
 
@@ -895,7 +931,7 @@ fn delay_test(ident: &IdentificationPlan, st: &LogStage, fit: &TfFit) -> Option<
         return None;
     }
     let data = st.fit_data.as_ref()?;
-    let opts = fit_options(ident, st.log.sample_rate_hz);
+    let opts = fit_options(ident, &st.choice.plan, st.log.sample_rate_hz);
     let t = fit::delay_test::delay_test(&data.input(), &opts, fit, ident.max_delay_s);
     let with = t.with_delay.as_ref().ok();
     let converged = with.filter(|w| w.converged && w.stable);

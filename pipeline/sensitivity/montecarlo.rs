@@ -429,6 +429,8 @@ mod tests {
             overlap: 0.5,
             window: Window::Rectangular,
             detrend: Detrend::Mean,
+            transient: None,
+            model_noise: false,
         };
         let h = frf::estimate(&u, &y, fs, &plan).unwrap();
         let bins: Vec<usize> = (0..h.freq_hz.len())

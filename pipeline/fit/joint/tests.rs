@@ -76,7 +76,6 @@ fn options(structure: Structure) -> JointOptions {
         delay_start_s: 0.0,
         max_delay_s: 0.05,
         force_delay_start_s: 0.0,
-        lag: 1,
     }
 }
 
@@ -131,6 +130,7 @@ impl Campaign {
                 h,
                 variance: &self.var,
                 bin_hz: 0.05,
+                lag: 1,
             })
             .collect()
     }
@@ -366,6 +366,7 @@ fn a_validation_runs_displacement_and_force_join_the_fit() {
             h,
             variance: var,
             bin_hz: 0.05,
+            lag: 1,
         });
     }
     let opts = options(Structure::DelayValve);
@@ -465,6 +466,7 @@ fn a_run_at_another_p_gain_scales_a1b0() {
             h: &h0,
             variance: &var,
             bin_hz: 0.05,
+            lag: 1,
         },
         JointRun {
             specimen: LinearSpecimen::Spring {
@@ -476,6 +478,7 @@ fn a_run_at_another_p_gain_scales_a1b0() {
             h: &h1,
             variance: &var,
             bin_hz: 0.05,
+            lag: 1,
         },
     ];
     let start = RigParams {
@@ -662,6 +665,7 @@ impl WithForce {
                 h,
                 variance: var,
                 bin_hz: 0.05,
+                lag: 1,
             });
         }
         runs

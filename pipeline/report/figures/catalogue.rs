@@ -286,7 +286,7 @@ fn frf_figure(run: &RunResult, measured: &Measured<'_>, frf: &RunFrf) -> FigureS
     let estimator = match measured.frf.estimator {
         Estimator::H1 => "H1",
         Estimator::H2 => "H2",
-        Estimator::Etfe => "ETFE",
+        Estimator::Etfe | Estimator::Auto => "ETFE",
         Estimator::Lpm => "ETFE, LPM transient out",
     };
     FigureSpec {

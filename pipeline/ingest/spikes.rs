@@ -1,0 +1,192 @@
+//! Isolated spikes in a logged channel: one or two samples a corrupted
+//! transfer, a flipped bit or a DAQ glitch put far from both neighbours,
+//! which a sweep's FRF turns into a rig thousands of times off.
+//!
+//! The rule. A run of w = 1 or 2 samples starting at i is a spike when each
+//! departs from the straight line through its neighbours x(i-1) and x(i+w)
+//! by more than [`THRESHOLD`] times the channel's local scale, all on the
+//! same side, and the neighbours agree with each other better than the
+//! run does with them (a step moves its neighbours apart: it is not a
+//! spike). The local scale is the median of |x(j) - (x(j-1) + x(j+1))/2|
+//! over the block of [`BLOCK`] samples around, the larger of it and its two
+//! neighbouring blocks', and no less than the median over the record's
+//! blocks or the channel's converter step. A sine's departure swings within
+//! 1.4 times its median, Gaussian noise's beyond 7.5 times once in a
+//! million samples; a flipped exponent bit puts a sample thousands of times
+//! out.
+
+/// How many local scales a spike departs by.
+pub const THRESHOLD: f64 = 30.0;
+/// The samples of a block the local scale is the median of.
+pub const BLOCK: usize = 256;
+
+/// One spike: its first sample, its width, its value(s) and neighbours.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Spike {
+    pub index: usize,
+    pub width: usize,
+    /// The sample farthest from its neighbours' line.
+    pub value: f64,
+    pub before: f64,
+    pub after: f64,
+    /// Its departure over the local scale.
+    pub ratio: f64,
+}
+
+/// The isolated spikes of `x`, in order.
+pub fn find(x: &[f64]) -> Vec<Spike> {
+    let n = x.len();
+    if n < 4 {
+        return Vec::new();
+    }
+    let departure = |j: usize| (x[j] - 0.5 * (x[j - 1] + x[j + 1])).abs();
+    let scale = local_scales(x);
+    let mut out: Vec<Spike> = Vec::new();
+    let mut j = 1;
+    while j + 1 < n {
+        let s = scale[j / BLOCK];
+        if departure(j) <= THRESHOLD * s {
+            j += 1;
+            continue;
+        }
+        // A one-sample spike, or the first of two.
+        let found = (1..=2)
+            .filter(|w| j + w < n)
+            .find_map(|w| spike_at(x, j, w, s));
+        match found {
+            Some(spike) => {
+                j = spike.index + spike.width + 1;
+                out.push(spike);
+            }
+            None => j += 1,
+        }
+    }
+    out
+}
+
+/// The run of `w` samples from `i` as a spike against the scale `s`, if it
+/// is one.
+fn spike_at(x: &[f64], i: usize, w: usize, s: f64) -> Option<Spike> {
+    let (before, after) = (x[i - 1], x[i + w]);
+    let line = |j: usize| before + (after - before) * (j - i + 1) as f64 / (w + 1) as f64;
+    let d: Vec<f64> = (i..i + w).map(|j| x[j] - line(j)).collect();
+    let least = d.iter().map(|v| v.abs()).fold(f64::INFINITY, f64::min);
+    let same_side = d.iter().all(|v| v.signum() == d[0].signum());
+    if !(least > THRESHOLD * s && same_side && (after - before).abs() < least) {
+        return None;
+    }
+    let (k, far) = d
+        .iter()
+        .enumerate()
+        .max_by(|a, b| a.1.abs().total_cmp(&b.1.abs()))
+        .expect("w >= 1");
+    Some(Spike {
+        index: i,
+        width: w,
+        value: x[i + k],
+        before,
+        after,
+        ratio: far.abs() / s,
+    })
+}
+
+/// `x` with each spike replaced by the straight line between its
+/// neighbours.
+pub fn interpolate(x: &mut [f64], spikes: &[Spike]) {
+    for s in spikes {
+        let step = (s.after - s.before) / (s.width + 1) as f64;
+        for (k, v) in x[s.index..s.index + s.width].iter_mut().enumerate() {
+            *v = s.before + step * (k + 1) as f64;
+        }
+    }
+}
+
+/// The local scale of each block of `x` (see the module's rule).
+fn local_scales(x: &[f64]) -> Vec<f64> {
+    let n = x.len();
+    let departure = |j: usize| {
+        if j == 0 || j + 1 == n {
+            0.0
+        } else {
+            (x[j] - 0.5 * (x[j - 1] + x[j + 1])).abs()
+        }
+    };
+    // One block's departures at a time: a copy of the whole channel's was
+    // as large as the channel.
+    let mut block = Vec::with_capacity(BLOCK);
+    let medians: Vec<f64> = (0..n.div_ceil(BLOCK))
+        .map(|b| {
+            block.clear();
+            block.extend((b * BLOCK..((b + 1) * BLOCK).min(n)).map(departure));
+            let mid = block.len() / 2;
+            *block.select_nth_unstable_by(mid, f64::total_cmp).1
+        })
+        .collect();
+    let mut sorted = medians.clone();
+    let mid = sorted.len() / 2;
+    let typical = *sorted.select_nth_unstable_by(mid, f64::total_cmp).1;
+    let peak = x.iter().map(|v| v.abs()).fold(0.0, f64::max);
+    let step = x
+        .windows(2)
+        .map(|w| (w[1] - w[0]).abs())
+        .filter(|d| *d > 0.0)
+        .fold(f64::INFINITY, f64::min);
+    let step = if step.is_finite() { step } else { 0.0 };
+    let floor = typical.max(step).max(1e-12 * peak);
+    (0..medians.len())
+        .map(|b| {
+            let lo = b.saturating_sub(1);
+            let hi = (b + 2).min(medians.len());
+            medians[lo..hi].iter().copied().fold(floor, f64::max)
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn sweep(n: usize) -> Vec<f64> {
+        (0..n)
+            .map(|i| {
+                let t = i as f64 / 1000.0;
+                0.004 * (2.0 * std::f64::consts::PI * (0.1 * t + 0.3 * t * t)).sin()
+            })
+            .collect()
+    }
+
+    /// One flipped sample in a sweep is found where it is, with its
+    /// neighbours; interpolated, the record is the sweep again.
+    #[test]
+    fn a_single_bad_sample_is_found_and_repaired() {
+        let clean = sweep(20_000);
+        assert!(find(&clean).is_empty());
+        let mut bad = clean.clone();
+        bad[12_345] = -3.725;
+        let spikes = find(&bad);
+        assert_eq!(spikes.len(), 1, "{spikes:?}");
+        let s = &spikes[0];
+        assert_eq!((s.index, s.width, s.value), (12_345, 1, -3.725));
+        assert_eq!((s.before, s.after), (clean[12_344], clean[12_346]));
+        interpolate(&mut bad, &spikes);
+        // The line through the neighbours differs from the sweep by its
+        // curvature over two samples.
+        assert!((bad[12_345] - clean[12_345]).abs() < 1e-5);
+    }
+
+    /// Two bad samples in a row are one spike; a step is none.
+    #[test]
+    fn two_samples_are_one_spike_and_a_step_is_none() {
+        let mut x = sweep(10_000);
+        x[5000] += 0.5;
+        x[5001] += 0.6;
+        let spikes = find(&x);
+        assert_eq!(spikes.len(), 1, "{spikes:?}");
+        assert_eq!((spikes[0].index, spikes[0].width), (5000, 2));
+        let mut step = sweep(10_000);
+        for v in &mut step[6000..] {
+            *v += 0.5;
+        }
+        assert!(find(&step).is_empty());
+    }
+}

@@ -1,0 +1,263 @@
+//! A lab's first night, as the docs tell it to run one: `servoid init` on
+//! its logs, the placeholders filled with what only the lab knows (the
+//! rig's name, each run's P gain and specimen) and nothing else, `servoid
+//! check`, `servoid run`. Simulated campaigns of the paper's rig (a
+//! no-specimen run and its two springs, quadratic chirps 0.1-35 Hz of
+//! 4 mm, 2 um of LVDT noise, 18-bit converters) of 20, 60 and 170 s, the
+//! sweep at rest at the record's ends or cut in motion, and a rich one
+//! (a 150 Hz spool mode, sensor delays, offsets and drift): the rig the
+//! defaults give against the one simulated.
+
+use std::path::Path;
+
+use serde_json::Value;
+
+use crate::util::{scratch, servoid};
+
+const TRUTH: [(&str, f64); 4] = [
+    ("beta1", 267.0),
+    ("a1b0", 2.412e9),
+    ("a2", 7.881e5),
+    ("a3", 16.118),
+];
+
+/// A simulation manifest: `duration_s` of record at `fs`, at rest for a
+/// second at each end or not, with the rich rig's extras when `rich`.
+fn simulation(duration_s: f64, at_rest: bool, fs: f64, rich: bool, seed: u64) -> String {
+    let (lead, body) = if at_rest {
+        (1.0, duration_s - 2.0)
+    } else {
+        (0.0, duration_s)
+    };
+    let (unmodelled, sensor) = if rich {
+        (
+            "[rig.unmodelled]\nvalve_mode = { natural_frequency_hz = 150.0, damping_ratio = 0.7 }\n",
+            "delay_s = 0.0006\noffset = 0.15\ndrift_per_s = 0.0004\n",
+        )
+    } else {
+        ("", "")
+    };
+    format!(
+        r#"schema_version = 1
+
+[simulation]
+name = "first-night"
+sample_rate_hz = {fs:?}
+seed = {seed}
+log_format = "parquet"
+
+[rig]
+name = "the paper's rig, simulated"
+
+[rig.parameters]
+beta1_per_s = 267.0
+a1b0_n_per_m_s2 = 2.412e9
+a2_n_per_m = 7.881e5
+a3_per_s = 16.118
+
+{unmodelled}
+[excitation]
+kind = "chirp"
+law = "quadratic"
+f0_hz = 0.1
+f1_hz = 35.0
+duration_s = {body:?}
+amplitude_m = 0.004
+lead_in_s = {lead:?}
+lead_out_s = {lead:?}
+
+[instrument.command]
+unit = "mm"
+quantization = {{ bits = 18, full_scale = 50.0 }}
+
+[instrument.displacement]
+unit = "mm"
+noise_rms = 0.002
+{sensor}quantization = {{ bits = 18, full_scale = 50.0 }}
+
+[instrument.force]
+unit = "kN"
+noise_rms = 0.001
+quantization = {{ bits = 18, full_scale = 5.0 }}
+
+[identification]
+band_hz = [0.5, 30.0]
+
+[[runs]]
+id = "no-specimen"
+role = "no_specimen"
+p_gain = 1.0
+
+[[runs]]
+id = "spring-k1"
+role = "spring"
+p_gain = 1.0
+specimen = {{ stiffness_n_per_m = 116640.0 }}
+
+[[runs]]
+id = "spring-k2"
+role = "spring"
+p_gain = 1.0
+specimen = {{ stiffness_n_per_m = 88540.0 }}
+"#
+    )
+}
+
+fn toml_of(path: &Path) -> toml::Table {
+    toml::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
+}
+
+/// The first night of `sim`'s logs: simulated into `dir/sim`, `init` on
+/// them, filled from the simulation's own campaign (the lab's knowledge),
+/// checked and run. The night's results.json.
+pub fn first_night(dir: &Path, sim: &str) -> Value {
+    std::fs::write(dir.join("sim.toml"), sim).unwrap();
+    let o = servoid(dir, &["simulate", "sim.toml", "--out", "sim"]);
+    assert_eq!(o.code, 0, "{}", o.stderr);
+    let o = servoid(dir, &["init", "sim/logs", "--out", "night.toml"]);
+    assert_eq!(o.code, 0, "{}", o.stderr);
+    let reference = toml_of(&dir.join("sim/campaign.toml"));
+    let mut night = toml_of(&dir.join("night.toml"));
+    // init leaves the FRF settings to servoid: nothing of them is written.
+    assert!(
+        night["identification"].get("frf").is_none(),
+        "{}",
+        night["identification"]
+    );
+    night["rig"]["name"] = reference["rig"]["name"].clone();
+    let known = reference["runs"].as_array().unwrap().clone();
+    for r in night["runs"].as_array_mut().unwrap() {
+        let id = r["id"].as_str().unwrap().to_string();
+        let want = known
+            .iter()
+            .find(|x| x["id"].as_str() == Some(id.as_str()))
+            .unwrap_or_else(|| panic!("run {id} in the simulation"));
+        let r = r.as_table_mut().unwrap();
+        assert_eq!(r["role"], want["role"], "{id}: the role from its name");
+        r.insert("p_gain".into(), want["p_gain"].clone());
+        if let Some(s) = want.get("specimen") {
+            r.insert("specimen".into(), s.clone());
+        }
+    }
+    std::fs::write(dir.join("night.toml"), toml::to_string(&night).unwrap()).unwrap();
+    let o = servoid(dir, &["check", "night.toml"]);
+    assert_eq!(o.code, 0, "{}", o.stderr);
+    let o = servoid(dir, &["run", "night.toml", "--out", "night"]);
+    assert_eq!(o.code, 0, "{}\n{}", o.stdout, o.stderr);
+    // One line per run says what its FRF settings are and why.
+    assert_eq!(o.stdout.matches("      FRF: ").count(), 3, "{}", o.stdout);
+    serde_json::from_slice(&std::fs::read(dir.join("night/results.json")).unwrap()).unwrap()
+}
+
+/// Each rig parameter's relative error and error in stated stds.
+fn errors(results: &Value) -> Vec<(&'static str, f64, f64)> {
+    let rig = &results["rig"];
+    TRUTH
+        .iter()
+        .map(|&(name, truth)| {
+            let value = rig[name]["value"].as_f64().unwrap();
+            let std = rig[name]["std"].as_f64().unwrap();
+            (name, value / truth - 1.0, (value - truth) / std)
+        })
+        .collect()
+}
+
+/// The rig's errors in per cent and in stated stds, in a line.
+fn summary(results: &Value) -> String {
+    errors(results)
+        .iter()
+        .map(|(name, rel, z)| format!("{name} {:+.4} % ({z:+.2} std)", 100.0 * rel))
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
+/// Every warning of the night: the campaign's and its runs'.
+fn warnings(results: &Value) -> Vec<String> {
+    let mut out: Vec<String> = results["warnings"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|w| w.as_str().unwrap().to_string())
+        .collect();
+    for run in results["runs"].as_array().unwrap() {
+        out.extend(
+            run["warnings"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .map(|w| w.as_str().unwrap().to_string()),
+        );
+    }
+    out
+}
+
+/// Clean logs of 20, 60 and 170 s, at rest at their ends and cut in
+/// motion: every rig parameter within 3 of its stated stds and within 1 %
+/// of the truth (0.1 % from 60 s up), with the choice of each run's FRF
+/// settings stated and right for its ends, and no warning.
+#[test]
+fn the_defaults_give_the_rig_on_the_first_night() {
+    for (duration, fs) in [(20.0, 1000.0), (60.0, 1000.0), (170.0, 2048.0)] {
+        for at_rest in [true, false] {
+            let dir = scratch();
+            let results = first_night(dir.path(), &simulation(duration, at_rest, fs, false, 2026));
+            let case = format!("{duration} s, at rest: {at_rest}");
+            let limit = if duration >= 60.0 { 1e-3 } else { 1e-2 };
+            eprintln!("{case}: {}", summary(&results));
+            for (name, rel, z) in errors(&results) {
+                assert!(
+                    rel.abs() < limit && z.abs() < 3.0,
+                    "{case}: {name} off by {:.4} % ({z:.2} stds)",
+                    100.0 * rel
+                );
+            }
+            for run in results["runs"].as_array().unwrap() {
+                let frf = &run["frf"];
+                assert_eq!(frf["chosen_by"], "auto", "{case}");
+                assert_eq!(frf["estimator"], "etfe", "{case}");
+                assert_eq!(frf["window"], "rectangular", "{case}");
+                assert_eq!(frf["transient"], true, "{case}: {frf}");
+                assert_eq!(
+                    frf["ends"] == "the record is at rest at both ends",
+                    at_rest,
+                    "{case}: {frf}"
+                );
+                assert_eq!(frf["excitation"], "sweep", "{case}: {frf}");
+                assert!(
+                    frf["reason"]
+                        .as_str()
+                        .unwrap()
+                        .starts_with("ETFE over the whole record"),
+                    "{case}: {frf}"
+                );
+            }
+            let w = warnings(&results);
+            assert!(w.is_empty(), "{case}: {w:#?}");
+        }
+    }
+}
+
+/// The rich rig (a 150 Hz spool mode in the loop, 0.6 ms of LVDT delay,
+/// an offset and a drift), 60 s cut in motion and 170 s at rest: each rig
+/// parameter within 1 % of the truth, or covered by 2 of its stated stds
+/// with a warning.
+#[test]
+fn a_rich_rig_is_right_or_covered_and_warned_on_the_first_night() {
+    for (duration, at_rest, fs) in [(60.0, false, 1000.0), (170.0, true, 2048.0)] {
+        let dir = scratch();
+        let results = first_night(dir.path(), &simulation(duration, at_rest, fs, true, 7));
+        let warned = !warnings(&results).is_empty();
+        eprintln!(
+            "rich, {duration} s, at rest: {at_rest}: {}; warnings: {:#?}",
+            summary(&results),
+            warnings(&results)
+        );
+        for (name, rel, z) in errors(&results) {
+            assert!(
+                rel.abs() < 1e-2 || (z.abs() <= 2.0 && warned),
+                "{duration} s, at rest: {at_rest}: {name} off by {:.3} % ({z:.2} stds), warned: {warned}",
+                100.0 * rel
+            );
+        }
+    }
+}
