@@ -10,12 +10,12 @@
 //! segments. The ETFE over the whole record with a rectangular window is
 //! exact where the record starts and ends at rest (Y = G U + V bin by bin);
 //! where it does not, or a sensor drifts, the leakage of the states at the
-//! ends is fitted beside each run's model (`fit::transient`). A level
-//! difference between the ends of a few hundredths of the signal's RMS (a
-//! drift of 0.4 um/s over 170 s) leaks tens of times the noise into the
-//! band's lowest bins, so the transient is fitted whatever the ends look
-//! like: where there is none its columns take nothing, and cost the model's
-//! stds 0.2 % or less. The local polynomial method (`lpm`) cannot do this
+//! ends is fitted beside each run's model (`fit::transient`). Whether the
+//! ends rest is judged against each signal's own noise, not its size: a
+//! level difference of a few hundredths of the signal's RMS (a drift of
+//! 0.4 um/s over 170 s) leaks tens of times the noise into the band's
+//! lowest bins. Where a transient is fitted that is not there its columns
+//! take nothing, and cost the model's stds 0.2 % or less. The local polynomial method (`lpm`) cannot do this
 //! where a sweep's phase turns by a whole turn per bin (its end) or hardly
 //! at all (its start): there G U and the transient are both smooth across
 //! its few bins (on 60 s sweeps cut in motion a1b0 came out 11 stds high
@@ -26,7 +26,9 @@
 //! bins without excitation: their length resolves the band's lowest
 //! frequency twice over, and the record holds at least two of them.
 
-use super::{Detrend, Estimator, FrfError, FrfPlan, MIN_SEGMENT_LENGTH, Window, ends_in_motion};
+use super::{
+    Detrend, Estimator, FrfError, FrfPlan, MIN_SEGMENT_LENGTH, Window, ends_against_noise,
+};
 
 /// The Welch settings an explicit estimator gets for what the manifest
 /// leaves out.
@@ -74,8 +76,8 @@ impl From<FrfPlan> for FrfRequest {
 }
 
 /// How a record's ends stand: for the command and the displacement, the
-/// end that is not at rest and by how much ([`ends_in_motion`]), or None
-/// at rest.
+/// end that is not at rest and by how many times the signal's noise
+/// ([`ends_against_noise`]), or None where it rests at one level.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Ends {
     pub command: Option<(&'static str, f64)>,
@@ -85,8 +87,8 @@ pub struct Ends {
 impl Ends {
     pub fn of(u: &[f64], y: &[f64]) -> Self {
         Self {
-            command: ends_in_motion(u),
-            displacement: ends_in_motion(y),
+            command: ends_against_noise(u),
+            displacement: ends_against_noise(y),
         }
     }
 
@@ -99,8 +101,8 @@ impl Ends {
         let part = |name: &str, e: Option<(&str, f64)>| {
             e.map(|(end, ratio)| {
                 format!(
-                    "the {name} is not at rest at the record's {end} ({:.0} % of its RMS)",
-                    100.0 * ratio
+                    "the {name} is not at rest at the record's {end} ({} times its noise)",
+                    crate::units::format_number(ratio, 2)
                 )
             })
         };
@@ -160,8 +162,9 @@ impl FrfRequest {
     /// sampled at `sample_rate_hz`, fitted over `band_hz`. An explicit
     /// estimator keeps the manifest's settings; `auto` takes the ETFE with
     /// a rectangular window (a window the manifest names is kept), the
-    /// record's transient fitted beside the model and the noise level read
-    /// from what that fit leaves, and Welch segments for the coherence of
+    /// record's transient fitted beside the model unless both signals rest
+    /// at one level at both ends within their noise, the noise level read
+    /// from what a first fit leaves, and Welch segments for the coherence of
     /// the power of two nearest above twice the samples in a period of the
     /// band's lowest frequency, at most half the record.
     pub fn resolve(
@@ -204,13 +207,20 @@ impl FrfRequest {
             overlap: self.overlap.unwrap_or(DEFAULT_OVERLAP),
             window: self.window.unwrap_or(Window::Rectangular),
             detrend: self.detrend.unwrap_or(Detrend::Mean),
-            transient: Some(band_hz.1),
+            transient: (!ends.at_rest()).then_some(band_hz.1),
             model_noise: true,
         };
-        let why = format!(
-            "{}; the record's transient (its states' leakage, a drift's) is fitted beside the model and taken out, and the noise level read from what that fit leaves",
-            ends.describe()
-        );
+        let why = if plan.transient.is_some() {
+            format!(
+                "{}: its transient (the states' leakage, a drift's) is fitted beside the model and taken out; the noise level read from what a first fit leaves",
+                ends.describe()
+            )
+        } else {
+            format!(
+                "{}, within their noise: Y = G U holds bin by bin; the noise level read from what a first fit leaves",
+                ends.describe()
+            )
+        };
         Ok(FrfChoice {
             reason: format!("{} (auto: {why})", describe(&plan)),
             plan,

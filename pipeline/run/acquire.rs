@@ -206,8 +206,10 @@ pub enum AcquireError {
         hint: String,
     },
     #[error(
-        "{}: the no-specimen run's static gain x1/u is {gain:.4}, where an actuator under P control follows its command at rest (1): the displacement reads {gain:.3} times the command{hint}",
-        path.display()
+        "{}: the no-specimen run's static gain x1/u is {}, where an actuator under P control follows its command at rest (1): the displacement reads {} times the command{hint}",
+        path.display(),
+        crate::units::format_number(*gain, 3),
+        crate::units::format_number(*gain, 3)
     )]
     StaticGain {
         path: PathBuf,
@@ -339,14 +341,20 @@ fn refined_fit(
     let u = h.input_dft.clone().filter(|_| plan.transient.is_some());
     let (bins, variance) = FitData::usable(h, mask);
     let data = FitData::at(h, &bins, variance, plan);
-    let nuisance = FitOptions {
-        delay: match opts.delay {
-            DelayPlan::None => DelayPlan::Fit { max_s: max_delay_s },
-            given => given,
-        },
-        ..opts.clone()
+    let first = if opts.delay == DelayPlan::None {
+        // The delay from 0, the rest from the fit without it or the
+        // transient: a delay of a few ms is well inside the band's phase,
+        // where the search needs no grid.
+        let nuisance = FitOptions {
+            delay: DelayPlan::Fit { max_s: max_delay_s },
+            ..opts.clone()
+        };
+        let mut start = fit::fit(&data.input(), opts)?.params;
+        start.push(0.0);
+        fit_at(&data, &bins, u.as_deref(), &nuisance, Some(&start))?
+    } else {
+        fit_at(&data, &bins, u.as_deref(), opts, None)?
     };
-    let first = fit_at(&data, &bins, u.as_deref(), &nuisance, None)?;
     if let Some(t) = &first.transient {
         h.without_transient(|f, u| t.at(f, u));
     }
