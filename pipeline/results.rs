@@ -451,6 +451,13 @@ pub struct RunResult {
     /// The FRF settings the run got and why, when it has a log.
     #[serde(default)]
     pub frf: Option<FrfUsed>,
+    /// Whether the rig answered the run's sweep linearly, when its command
+    /// is a sweep.
+    #[serde(default)]
+    pub linearity: Option<LinearityResult>,
+    /// A spring run's force against its displacement, when it logs a force.
+    #[serde(default)]
+    pub spring_force: Option<SpringForceResult>,
     /// A run table row's cells in the lab's own columns (a `notes`, an
     /// `operator`), by column; absent when there are none.
     #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
@@ -470,6 +477,54 @@ pub struct LogInfo {
     /// `repair = "interpolate"` asked.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub repairs: Vec<crate::ingest::Repaired>,
+}
+
+/// Whether the rig answered a sweep linearly (`frf::harmonics`): harmonics
+/// of the command in the response beyond what a linear rig gives.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+pub struct LinearityResult {
+    /// Blocks of the sweep the check read.
+    pub blocks_checked: usize,
+    /// False when a signal holds harmonics in at least 3 blocks.
+    pub linear: bool,
+    /// Harmonics in the displacement beyond the command's.
+    pub displacement: Option<HarmonicsFound>,
+    /// Harmonics in the force beyond the displacement's.
+    pub force: Option<HarmonicsFound>,
+    /// In words.
+    pub note: String,
+}
+
+/// A spring's force against its displacement (`frf::linearity::spring_force`):
+/// f = k x + k3 x^3 + c x' + m x'' + f0 over the record.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+pub struct SpringForceResult {
+    /// The stiffness the force and displacement give, and the manifest's
+    /// (N/m).
+    pub stiffness_n_per_m: f64,
+    pub stated_n_per_m: f64,
+    /// The cubic term (N/m^3) and its t statistic.
+    pub cubic_n_per_m3: f64,
+    pub cubic_t: f64,
+    /// The largest displacement from the mean (m), and the secant
+    /// stiffness there over k, less 1.
+    pub amplitude_m: f64,
+    pub stiffening: f64,
+    /// False when the spring stiffens beyond 0.5 % at the test's
+    /// amplitude, t beyond 10.
+    pub linear: bool,
+}
+
+/// Harmonics found in one signal.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+pub struct HarmonicsFound {
+    /// Blocks with a harmonic.
+    pub blocks: usize,
+    /// The largest harmonic's amplitude over the fundamental's, its order
+    /// (2 or 3) and the fundamental's frequency there (Hz).
+    pub largest_ratio: f64,
+    pub order: usize,
+    pub at_hz: f64,
 }
 
 /// The FRF settings a run got and why (`frf::FrfRequest::resolve`).

@@ -56,12 +56,36 @@ fn assert_flagged(code: i32, stderr: &str, results: &Value, page: &str, paramete
     assert_eq!(check["consistent"], false, "{check}");
     assert!(check["p_value"].as_f64().unwrap() < 1e-3, "{check}");
     let causes = c["likely_causes"].as_array().unwrap();
-    for cause in ["stiffness typed wrong", "swapped", "unit", "leaves out"] {
+    // First what the runs found: a spring whose own force and displacement
+    // give another stiffness than the manifest states; then what the
+    // manifest may hold wrong. Not the dynamics the model leaves out: the
+    // runs' force shows the stiffness is the manifest's.
+    assert!(
+        causes[0]
+            .as_str()
+            .unwrap()
+            .contains("the spring's stiffness the manifest states, which its force and displacement contradict"),
+        "{causes:?}"
+    );
+    for cause in ["stiffness typed wrong", "swapped", "unit"] {
         assert!(
             causes.iter().any(|s| s.as_str().unwrap().contains(cause)),
             "{cause}: {causes:?}"
         );
     }
+    assert!(
+        !causes
+            .iter()
+            .any(|s| s.as_str().unwrap().contains("leaves out")),
+        "{causes:?}"
+    );
+    assert!(
+        results["runs"]
+            .to_string()
+            .contains("the spring's force against its displacement gives a stiffness of"),
+        "{:#}",
+        results["runs"]
+    );
     // On the command line, in results.json's warnings, and on the page.
     assert!(
         stderr.contains("warning: rig: the 2 springs disagree"),

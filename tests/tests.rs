@@ -11,6 +11,7 @@ mod cli_conventions;
 mod consistency;
 mod corpus;
 mod csi;
+mod diagnosis;
 mod disk_full;
 mod docs;
 mod drift;

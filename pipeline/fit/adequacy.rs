@@ -126,6 +126,14 @@ impl Adequacy {
     /// `cause` is the likely cause with its remedy, which depends on the
     /// FRF estimator (`Estimator::overstated_noise` says it per estimator).
     pub fn overstated(&self, cause: &str) -> Option<String> {
+        self.overstated_because(cause, None)
+    }
+
+    /// [`Self::overstated`], with the cause already `known` (a run's FRF
+    /// settings the log contradicts, a rig found not linear) said in place
+    /// of `cause`.
+    pub fn overstated_because(&self, cause: &str, known: Option<&str>) -> Option<String> {
+        let cause = known.unwrap_or(cause);
         let mut parts = Vec::new();
         if self.cost_z < -Z_LIMIT {
             parts.push(format!(
@@ -162,6 +170,18 @@ impl Adequacy {
     /// `noise_cause` the likely cause of a noise the variances understate,
     /// which depends on the FRF estimator (`Estimator::understated_noise`).
     pub fn diagnosis(&self, add_delay: Option<&str>, noise_cause: &str) -> Option<String> {
+        self.diagnosis_because(add_delay, noise_cause, None)
+    }
+
+    /// [`Self::diagnosis`], with the cause already `known` (a run's FRF
+    /// settings the log contradicts, a rig found not linear) said in place
+    /// of the one the failures would point at.
+    pub fn diagnosis_because(
+        &self,
+        add_delay: Option<&str>,
+        noise_cause: &str,
+        known: Option<&str>,
+    ) -> Option<String> {
         let failures = self.failures();
         if failures.is_empty() {
             return None;
@@ -190,7 +210,9 @@ impl Adequacy {
                 p.z
             ));
         }
-        let cause = if failures.contains(&Failure::LinearPhase) {
+        let cause = if let Some(known) = known {
+            format!("likely cause: {known}")
+        } else if failures.contains(&Failure::LinearPhase) {
             match add_delay {
                 None => "likely cause: a delay beyond the fitted one's bound; widen identification.delay.max_s".to_string(),
                 Some(key) => format!("likely cause: a delay the model lacks; {key}"),

@@ -17,6 +17,7 @@ use std::sync::Arc;
 use realfft::{RealFftPlanner, RealToComplex};
 
 mod choice;
+pub mod linearity;
 mod lpm;
 mod settings;
 mod synthesis;
@@ -25,6 +26,7 @@ pub use choice::{
     DEFAULT_OVERLAP, DEFAULT_SEGMENT_LENGTH, Ends, Excitation, FrfChoice, FrfRequest, MIN_PERIODS,
     describe, excitation,
 };
+pub use linearity::{Linearity, SpringForce, linearity, spring_force};
 pub use settings::{Detrend, Estimator, FrfPlan, Window};
 pub use synthesis::{EtfeSpectra, EtfeSynthesis, Unsynthesizable};
 

@@ -230,12 +230,16 @@ fn causes(loo: &[LeaveOneOut]) -> Vec<String> {
             "a spring's stiffness typed wrong in the manifest or the run table (stiffness_n_per_m)",
             "the logs of two runs swapped (each run's log = ... names the file it analyses)",
             "a channel in the wrong unit or scale in one run (its [channels] or the DAQ's range)",
-            "dynamics the model leaves out: a spring's own mass or a stiff spring beyond the paper's massless, linearised assumption, friction, the servo-valve's higher modes",
+            DYNAMICS_CAUSE,
         ]
         .map(String::from),
     );
     out
 }
+
+/// The likely cause of springs that disagree which the model, not the
+/// manifest, would be to blame for.
+pub const DYNAMICS_CAUSE: &str = "dynamics the model leaves out: a spring's own mass or a stiff spring beyond the paper's massless, linearised assumption, friction, the servo-valve's higher modes";
 
 #[cfg(test)]
 mod tests {

@@ -14,6 +14,7 @@ use crate::manifest::{Campaign, IdentificationPlan, Role, RunPlan, RunSource};
 use crate::report::Measured;
 use crate::report::figures::catalogue;
 use crate::results::TfSource;
+use crate::simulate::specimen::SpecimenModel;
 
 /// What the first stage gives for each run: its own transfer function, and
 /// the log's signals and spectra when it has a log.
@@ -80,6 +81,16 @@ pub struct LogStage {
     pub choice: FrfChoice,
     /// What its command holds.
     pub excitation: frf::Excitation,
+    /// Whether the rig answered a sweep linearly (None: not a sweep, or
+    /// too short to tell).
+    pub linearity: Option<frf::Linearity>,
+    /// A spring run's force against its displacement, when it logs a
+    /// force.
+    pub spring: Option<frf::SpringForce>,
+    /// What the run's own warnings already found wrong (FRF settings the
+    /// log contradicts, a rig not linear): what any misfit of its fit is
+    /// then put down to, rather than dynamics the model lacks.
+    pub cause: Option<String>,
     /// Command to displacement (with the record's transient out, when the
     /// run's fit took it out).
     pub frf: Frf,
@@ -501,14 +512,14 @@ fn band_power_fraction(h: &Frf, (lo, hi): (f64, f64)) -> f64 {
 /// The warning for an explicit ETFE or Welch estimate of a command not at
 /// rest at the record's ends, whose transient it counts as noise (`auto`
 /// fits it, the LPM takes it out).
-fn motion_warning(choice: &FrfChoice) -> Option<String> {
+fn motion_warning(choice: &FrfChoice, command: &[f64]) -> Option<String> {
     let plan = &choice.plan;
     if choice.chosen || plan.estimator == frf::Estimator::Lpm {
         return None;
     }
-    let (end, ratio) = choice.ends.command?;
+    let (end, ratio) = frf::ends_in_motion(command)?;
     Some(format!(
-        "the command is not at rest at the record's {end} (over the first or last {:.1} % of the record, or between its ends, it moves by {:.0} % of its RMS): the {} counts the transient's leakage as noise, and the fits' stds come out too large (1.5 to 7 times on sweeps cut in motion); the default estimator (identification.frf.estimator left out, \"auto\") fits the transient beside the model and takes it out",
+        "identification.frf: the command is not at rest at the record's {end} (over the first or last {:.1} % of the record, or between its ends, it moves by {:.0} % of its RMS): the {} counts the transient's leakage as noise, and the fits' stds come out too large (1.5 to 7 times on sweeps cut in motion); the default estimator (identification.frf.estimator left out, \"auto\") fits the transient beside the model and takes it out",
         100.0 * frf::REST_END_FRACTION,
         100.0 * ratio,
         match plan.estimator {
@@ -628,6 +639,89 @@ fn static_gain_check(
         hint,
     })
 }
+
+/// The warning for a rig that did not answer the sweep linearly.
+fn nonlinearity_warning(l: &frf::Linearity) -> Option<String> {
+    l.nonlinear().then(|| {
+        format!(
+            "{}: the rig is not linear at this amplitude ({}); a linear model's fit and the rig from it are an equivalent linear rig's at this amplitude, with an error their stds do not include: test again at another amplitude to see how far it moves",
+            linearity_note(l),
+            NONLINEAR_CAUSES
+        )
+    })
+}
+
+/// The linearity check in words, as the run's page says it.
+pub(super) fn linearity_note(l: &frf::Linearity) -> String {
+    if !l.nonlinear() {
+        return format!(
+            "no harmonics of the command beyond a linear rig's in the {} blocks of the sweep checked",
+            l.checked
+        );
+    }
+    let what = |name: &str, beyond: &str, f: &frf::linearity::Found| {
+        format!(
+            "the {name} holds harmonics of the command beyond the {beyond}'s in {} of {} blocks of the sweep (the largest, the {}, {:.2} % of the fundamental at {:.1} Hz)",
+            f.blocks,
+            l.checked,
+            if f.order == 2 { "second" } else { "third" },
+            100.0 * f.largest,
+            f.at_hz
+        )
+    };
+    let mut parts = Vec::new();
+    if let Some(f) = l
+        .displacement
+        .filter(|f| f.blocks >= frf::linearity::MIN_BLOCKS)
+    {
+        parts.push(what("displacement", "command", &f));
+    }
+    if let Some(f) = l.force.filter(|f| f.blocks >= frf::linearity::MIN_BLOCKS) {
+        parts.push(what("force", "displacement", &f));
+    }
+    parts.join("; ")
+}
+
+/// Beyond this the stiffness a spring's force and displacement give and the
+/// one the manifest states disagree: a load cell is good to a fraction of
+/// a per cent, and the rig's a1b0 moves with k (Eq. 19).
+pub const STIFFNESS_MISMATCH: f64 = 0.02;
+
+/// The warning for a spring whose force and displacement give another
+/// stiffness than the manifest's.
+fn stiffness_warning(s: &frf::SpringForce, stated: f64) -> Option<String> {
+    let off = s.stiffness_n_per_m / stated - 1.0;
+    (off.abs() > STIFFNESS_MISMATCH).then(|| {
+        format!(
+            "the spring's force against its displacement gives a stiffness of {} N/m, {:+.1} % from the {} N/m the manifest states (specimen.stiffness_n_per_m): a stiffness typed wrong, another run's log, or the load cell's scale? Eqs. 18-20 take the stated one as exact",
+            crate::units::format_number(s.stiffness_n_per_m, 5),
+            100.0 * off,
+            crate::units::format_number(stated, 6)
+        )
+    })
+}
+
+/// The warning for a spring that stiffens at the test's amplitude.
+fn stiffening_warning(s: &frf::SpringForce) -> Option<String> {
+    s.stiffens().then(|| {
+        format!(
+            "the spring's force grows faster than its displacement: its stiffness at the test's {} mm is {:+.2} % from its stiffness at rest (a cubic term of {:e} N/m^3, t = {:.0}): the rig is not linear at this amplitude (a stiffening spring); Eqs. 18-20 take one stiffness, so the rig carries an error its stds do not include: test at a smaller amplitude, or with a spring that stays linear",
+            crate::units::format_number(1e3 * s.amplitude_m, 3),
+            100.0 * s.stiffening,
+            s.cubic_n_per_m3,
+            s.cubic_t
+        )
+    })
+}
+
+/// A run's misfit put down to its FRF settings, or to the rig's
+/// nonlinearity, when its warnings found either.
+pub const SETTINGS_CAUSE: &str = "the FRF settings the log contradicts (identification.frf: the warning above names them and what the default would use)";
+pub const NONLINEAR_CAUSE: &str = "the rig is not linear at this amplitude (the warning above says how): no linear structure holds it";
+pub const STIFFNESS_CAUSE: &str = "the spring's stiffness the manifest states, which its force and displacement contradict (the warning above)";
+
+/// What a response's harmonics point at, in a few words.
+pub const NONLINEAR_CAUSES: &str = "seal friction puts odd harmonics into the displacement, a stiffening spring its third into the force";
 
 /// The fewest Welch segments a record must hold for their averages.
 const MIN_WELCH_SEGMENTS: usize = 8;
@@ -753,7 +847,7 @@ pub fn log_stage_from(
         return Err(tf_err(RunTfError::NoExcitation { lo, hi, fraction }));
     }
     let mask = frf::band_mask(&h, run.band_hz, ident.coherence_min);
-    warnings.extend(motion_warning(&choice));
+    warnings.extend(motion_warning(&choice, &log.command_m));
 
     let fit = if matches!(run.role, Role::NoSpecimen | Role::Spring | Role::Fit) {
         let (fit, data) =
@@ -771,18 +865,52 @@ pub fn log_stage_from(
     }
     let periodogram = (h.n_averages == 1).then_some(h.suu.as_slice());
     let excitation = frf::excitation(&log.command_m, fs, periodogram);
-    warnings.extend(settings_warning(
-        run,
-        ident,
-        &choice,
-        excitation,
-        &log,
-        fit.as_ref(),
-    ));
+    let linearity = matches!(excitation, frf::Excitation::Sweep { .. })
+        .then(|| {
+            frf::linearity(
+                &log.command_m,
+                &log.displacement_m,
+                log.force_n.as_deref(),
+                fs,
+            )
+        })
+        .flatten();
+    let spring = match (&run.specimen, &log.force_n) {
+        (SpecimenModel::Spring { .. }, Some(f)) => frf::spring_force(&log.displacement_m, f, fs),
+        _ => None,
+    };
+    let stated_k = match run.specimen {
+        SpecimenModel::Spring { stiffness_n_per_m } => Some(stiffness_n_per_m),
+        _ => None,
+    };
+    let mistyped = spring
+        .as_ref()
+        .zip(stated_k)
+        .and_then(|(s, k)| stiffness_warning(s, k));
+    let nonlinear = linearity
+        .as_ref()
+        .and_then(nonlinearity_warning)
+        .or_else(|| spring.as_ref().and_then(stiffening_warning));
+    warnings.extend(mistyped.clone());
+    warnings.extend(nonlinear.clone());
+    let contradicted = settings_warning(run, ident, &choice, excitation, &log, fit.as_ref());
+    let cause = if contradicted.is_some() {
+        Some(SETTINGS_CAUSE.to_string())
+    } else if mistyped.is_some() {
+        Some(STIFFNESS_CAUSE.to_string())
+    } else if nonlinear.is_some() {
+        Some(NONLINEAR_CAUSE.to_string())
+    } else {
+        None
+    };
+    warnings.extend(contradicted);
     Ok(LogStage {
         log,
         choice,
         excitation,
+        linearity,
+        spring,
+        cause,
         frf: h,
         force_frf,
         mask,

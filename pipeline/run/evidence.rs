@@ -34,6 +34,9 @@ pub(super) struct Evidence {
     /// Its own fit's adequacy tests.
     pub adequacy: Option<Adequacy>,
     pub sample_rate_hz: Option<f64>,
+    /// What its own warnings found wrong (`acquire::LogStage::cause`).
+    #[serde(default)]
+    pub cause: Option<String>,
 }
 
 /// What a validation run gives the joint fit: the band's bins of its x1/u

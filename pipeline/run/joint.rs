@@ -96,6 +96,7 @@ pub(super) fn joint(
     validation: &[(&RunPlan, &ValidationEvidence)],
     start: &RigParams,
     sequential: &RigEstimates,
+    known: Option<&str>,
     warnings: &mut Vec<String>,
 ) -> Option<JointResult> {
     let (fitted, identification_frfs) = fitted_frfs(evidence, validation)?;
@@ -137,7 +138,7 @@ pub(super) fn joint(
     let seq_chi2 = sequential_chi2(evidence);
     let mut result = describe(
         &sel,
-        misfit.as_ref(),
+        (misfit.as_ref(), known),
         &ids,
         campaign,
         sequential,
@@ -297,9 +298,11 @@ fn explain(sel: &Selection) -> String {
 }
 
 /// The result table and the use decision.
+/// `known` is what the runs' own warnings or the springs' agreement already
+/// found wrong, which the misfit is put down to.
 fn describe(
     sel: &Selection,
-    misfit: Option<&RunSpread>,
+    (misfit, known): (Option<&RunSpread>, Option<&str>),
     ids: &[String],
     campaign: &Campaign,
     sequential: &RigEstimates,
@@ -332,7 +335,7 @@ fn describe(
     });
     result.parameters = parameters(fit, sequential, spread.as_ref(), misfit);
     if let Some(m) = misfit {
-        let text = misfit_note(fit, m);
+        let text = misfit_note(fit, m, known);
         warnings.push(format!("rig: {text}"));
         result.misfit = Some(text);
     }
@@ -355,7 +358,7 @@ fn describe(
             adequacy: a.clone(),
         })
         .collect();
-    adequacy_warnings(fit, campaign, warnings);
+    adequacy_warnings(fit, campaign, known, warnings);
     // `select` has judged convergence and physical sense already.
     let unusable = chosen.and_then(|c| c.unusable.clone());
     (result.used, result.use_note) = use_decision(fit, campaign, unusable, seq_chi2, warnings);
@@ -424,19 +427,28 @@ fn table(
 
 /// The chosen fit's adequacy, said where the lab reads: residuals the
 /// model does not explain, or noise the FRF's variance overstates.
-fn adequacy_warnings(fit: &JointFit, campaign: &Campaign, warnings: &mut Vec<String>) {
+fn adequacy_warnings(
+    fit: &JointFit,
+    campaign: &Campaign,
+    known: Option<&str>,
+    warnings: &mut Vec<String>,
+) {
     let structure = key_value(fit.structure);
     let estimator = campaign.identification.frf.estimator;
-    if let Some(d) = fit.adequacy.diagnosis(
+    if let Some(d) = fit.adequacy.diagnosis_because(
         (fit.structure == Structure::Plain)
             .then_some("set identification.joint.structure = \"auto\" (or \"delay\")"),
         estimator.understated_noise(),
+        known,
     ) {
         warnings.push(format!(
             "rig: the joint fit (structure \"{structure}\"): {d}"
         ));
     }
-    if let Some(o) = fit.adequacy.overstated(estimator.overstated_noise()) {
+    if let Some(o) = fit
+        .adequacy
+        .overstated_because(estimator.overstated_noise(), known)
+    {
         warnings.push(format!(
             "rig: the joint fit (structure \"{structure}\"): {o}"
         ));
@@ -595,8 +607,9 @@ fn settle(fit: &JointFit, spread: &StructureSpread) -> Vec<&'static str> {
 }
 
 /// The warning when the chosen structure fails its adequacy tests and the
-/// runs pull the rig apart.
-fn misfit_note(fit: &JointFit, m: &RunSpread) -> String {
+/// runs pull the rig apart: put down to `known` when the runs found it,
+/// else to what no candidate holds.
+fn misfit_note(fit: &JointFit, m: &RunSpread, known: Option<&str>) -> String {
     const NAMES: [&str; 4] = ["beta1", "a1b0", "a2", "a3"];
     let spread: Vec<String> = (0..4)
         .map(|k| {
@@ -607,8 +620,12 @@ fn misfit_note(fit: &JointFit, m: &RunSpread) -> String {
             )
         })
         .collect();
+    let cause = match known {
+        Some(known) => format!("the likely cause is {known}"),
+        None => "the rig has something none of the structures holds (friction, a nonlinear specimen, two modes at once)".to_string(),
+    };
     format!(
-        "no candidate structure explains the data: the chosen \"{}\" fails its adequacy tests, so the rig has something none of the structures holds (friction, a nonlinear specimen, two modes at once) and its parameters carry an error no std here bounds. Refitted without each of the {} FRFs in turn the rig moves by (jackknife std) {}; the stds include what of that spread statistics do not explain (misfit_std in results.json), but not an error every run shares, which on simulated rigs with piston friction or two modes was 5 to 18 times larger (docs/accuracy.md). Use the rig as approximate: the difference from the sequential estimate (the model-error term) shows its scale, and the per-run adequacy table shows which runs the misfit weighs on",
+        "no candidate structure explains the data: the chosen \"{}\" fails its adequacy tests, so {cause}, and its parameters carry an error no std here bounds. Refitted without each of the {} FRFs in turn the rig moves by (jackknife std) {}; the stds include what of that spread statistics do not explain (misfit_std in results.json), but not an error every run shares, which on simulated rigs with piston friction or two modes was 5 to 18 times larger (docs/accuracy.md). Use the rig as approximate: the difference from the sequential estimate (the model-error term) shows its scale, and the per-run adequacy table shows which runs the misfit weighs on",
         key_value(fit.structure),
         m.refits,
         spread.join(", ")

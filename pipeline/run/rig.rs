@@ -7,6 +7,7 @@ use std::sync::Arc;
 
 use super::acquire::AcquireError;
 use super::evidence::{Evidence, RigInput, ValidationEvidence};
+use crate::identify::consistency::Consistency;
 use crate::identify::{self, Estimate, IdentifyError, SecondOrder, SpringRun, TfEstimate};
 use crate::manifest::{Campaign, Role, RunPlan};
 use crate::model::RigParams;
@@ -70,8 +71,21 @@ pub(super) fn establish<'a>(
         };
     }
     let runs = Gathered::of(campaign, inputs)?;
-    let ident = identify::identify_rig(&runs.no_spec, &runs.springs)?;
+    let mut ident = identify::identify_rig(&runs.no_spec, &runs.springs)?;
+    // What a run's own warnings already found wrong, named with the run.
+    let run_cause = runs
+        .evidence
+        .iter()
+        .find_map(|(p, e)| e.cause.as_ref().map(|c| format!("run {}: {c}", p.id)));
+    narrow_causes(&mut ident.consistency, &runs, run_cause.as_deref());
     identification_warnings(campaign, &ident, warnings);
+    // What the joint fit's misfit, if any, is put down to.
+    let known = run_cause.or_else(|| {
+        (ident.consistency.consistent == Some(false)).then(|| {
+            "the springs' disagreement (the warning above: a stiffness, a log or a unit the manifest gives)"
+                .to_string()
+        })
+    });
     let sequential = RigEstimates {
         beta1: ident.beta1,
         a1b0: ident.a1b0,
@@ -86,6 +100,7 @@ pub(super) fn establish<'a>(
         &runs.validation,
         &ident.params(),
         &sequential,
+        known.as_deref(),
         warnings,
     );
     let (source, chosen) = match joint.as_ref().and_then(super::joint::used_estimates) {
@@ -187,6 +202,34 @@ impl<'a> Gathered<'a> {
             true => Ok(g),
             false => Err(RigError::RunsFailed(failed)),
         }
+    }
+}
+
+/// The springs' likely causes of disagreement narrowed by what the runs
+/// show: a run's own finding (FRF settings, a stiffness its force
+/// contradicts, a rig not linear) first, and then not the dynamics the
+/// model leaves out; nor those where every spring run's own fit passes its
+/// adequacy tests, as they would show there as misfit.
+fn narrow_causes(c: &mut Consistency, runs: &Gathered<'_>, run_cause: Option<&str>) {
+    if c.consistent != Some(false) {
+        return;
+    }
+    let drop_dynamics = |c: &mut Consistency| {
+        c.likely_causes
+            .retain(|cause| !cause.starts_with(identify::consistency::DYNAMICS_CAUSE));
+    };
+    if let Some(cause) = run_cause {
+        drop_dynamics(c);
+        c.likely_causes.insert(0, cause.to_string());
+        return;
+    }
+    let springs_adequate = runs
+        .evidence
+        .iter()
+        .filter(|(p, _)| p.role == Role::Spring)
+        .all(|(_, e)| e.adequacy.as_ref().is_some_and(|a| a.passed()));
+    if springs_adequate {
+        drop_dynamics(c);
     }
 }
 

@@ -25,8 +25,8 @@ use crate::report::figures::catalogue::{self, ForceBins, OverlayRun, Prediction}
 use crate::report::tables::RunTables;
 use crate::report::{FigureSpec, Measured};
 use crate::results::{
-    DelayTestResult, FitSummary, FrfUsed, LogInfo, RunResult, RunTracking, Status, TfResult,
-    TfSource,
+    DelayTestResult, FitSummary, FrfUsed, HarmonicsFound, LinearityResult, LogInfo, RunResult,
+    RunTracking, SpringForceResult, Status, TfResult, TfSource,
 };
 use crate::sensitivity::{self, NoiseProfile};
 use crate::simulate::specimen::SpecimenModel;
@@ -208,6 +208,7 @@ pub(super) fn without_rig(
         data: stage.as_ref().and_then(|st| st.fit_data.clone()),
         adequacy: result.fit.as_ref().and_then(|f| f.adequacy.clone()),
         sample_rate_hz: stage.as_ref().map(|st| st.log.sample_rate_hz),
+        cause: stage.as_ref().and_then(|st| st.cause.clone()),
     });
     let mut kept = Kept {
         estimate,
@@ -341,6 +342,26 @@ pub(super) fn validation(
     out.warnings = acq.warnings.clone();
     out.log = log_info(plan, acq.stage.as_deref());
     out.frf = acq.stage.as_deref().map(frf_used);
+    out.linearity = acq
+        .stage
+        .as_deref()
+        .and_then(|st| st.linearity.as_ref())
+        .map(linearity_result);
+    out.spring_force = acq.stage.as_deref().and_then(|st| {
+        let s = st.spring?;
+        let SpecimenModel::Spring { stiffness_n_per_m } = plan.specimen else {
+            return None;
+        };
+        Some(SpringForceResult {
+            stiffness_n_per_m: s.stiffness_n_per_m,
+            stated_n_per_m: stiffness_n_per_m,
+            cubic_n_per_m3: s.cubic_n_per_m3,
+            cubic_t: s.cubic_t,
+            amplitude_m: s.amplitude_m,
+            stiffening: s.stiffening,
+            linear: !s.stiffens(),
+        })
+    });
     let stage = acq.stage.as_deref();
     let (rig_at_p, rig_cov) = match rig {
         Ok((r, cov)) => at_p_gain(r, cov.as_ref(), plan.p_gain),
@@ -493,6 +514,8 @@ fn new_result(plan: &RunPlan) -> RunResult {
         tracking: None,
         log: None,
         frf: None,
+        linearity: None,
+        spring_force: None,
         annotations: plan.annotations.clone(),
     }
 }
@@ -756,6 +779,27 @@ fn frf_used(st: &LogStage) -> FrfUsed {
     }
 }
 
+/// The share of a fit's excess cost (its reduced chi-square above 1) a
+/// delay must explain for the run's warning to name it.
+const DELAY_EXPLAINS: f64 = 0.5;
+
+/// The linearity check as results.json states it.
+fn linearity_result(l: &frf::Linearity) -> LinearityResult {
+    let found = |f: &frf::linearity::Found| HarmonicsFound {
+        blocks: f.blocks,
+        largest_ratio: f.largest,
+        order: f.order,
+        at_hz: f.at_hz,
+    };
+    LinearityResult {
+        blocks_checked: l.checked,
+        linear: !l.nonlinear(),
+        displacement: l.displacement.as_ref().map(found),
+        force: l.force.as_ref().map(found),
+        note: super::acquire::linearity_note(l),
+    }
+}
+
 /// A run marked failed with its error.
 fn failed(mut out: RunResult, e: RunError) -> RunResult {
     out.status = Status::Failed;
@@ -802,7 +846,17 @@ fn fitted(
         && let Some(fit) = &st.fit
     {
         let summary = fit_summary(ident, plan, st, fit);
-        if let Some(t) = summary.delay_test.as_ref().filter(|t| t.supported) {
+        // The delay is named as the cause only where it explains most of
+        // what the fit leaves beyond the noise: a nonlinearity or the FRF
+        // settings can make a delay of a hundredth of a sample significant
+        // on a long record, explaining a few per cent of the misfit.
+        if let Some(t) = summary.delay_test.as_ref().filter(|t| {
+            t.supported
+                && st.cause.is_none()
+                && t.reduced_chi2.is_some_and(|with| {
+                    summary.reduced_chi2 - with >= DELAY_EXPLAINS * (summary.reduced_chi2 - 1.0)
+                })
+        }) {
             out.warnings.push(format!(
                 "the run's own fit: {}; with a delay of {:.3} ms its reduced chi-square is {:.3} (without, {:.3}); set identification.delay = {{ mode = \"fit\" }}",
                 t.note,
@@ -812,18 +866,20 @@ fn fitted(
             ));
         }
         if let Some(d) = summary.adequacy.as_ref().and_then(|a| {
-            a.diagnosis(
+            a.diagnosis_because(
                 (!fit.shape.fit_delay).then_some("set identification.delay = \"fit\""),
                 st.choice.plan.estimator.understated_noise(),
+                st.cause.as_deref(),
             )
         }) {
             out.warnings.push(format!("the run's own fit: {d}"));
         }
-        if let Some(o) = summary
-            .adequacy
-            .as_ref()
-            .and_then(|a| a.overstated(st.choice.plan.estimator.overstated_noise()))
-        {
+        if let Some(o) = summary.adequacy.as_ref().and_then(|a| {
+            a.overstated_because(
+                st.choice.plan.estimator.overstated_noise(),
+                st.cause.as_deref(),
+            )
+        }) {
             out.warnings.push(format!("the run's own fit: {o}"));
         }
         // A model that explains under half of the measured response is not
