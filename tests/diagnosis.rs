@@ -16,7 +16,7 @@ use servoid::results::Results;
 use servoid::run::analyse;
 use servoid::run::simulate::simulate_campaign;
 
-use crate::util::scratch;
+use crate::util::{PaperSweep, scratch};
 
 /// What a message can name as the cause.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
@@ -126,85 +126,17 @@ const BASE: Case = Case {
 };
 
 fn simulation(case: &Case, seed: u64) -> String {
-    let (lead, body) = if case.at_rest {
-        (1.0, case.duration_s - 2.0)
-    } else {
-        (0.0, case.duration_s)
-    };
-    let [k1, k2] = case.springs.unwrap_or([
-        "{ stiffness_n_per_m = 116640.0 }",
-        "{ stiffness_n_per_m = 88540.0 }",
-    ]);
-    let unmodelled = if case.unmodelled.is_empty() {
-        String::new()
-    } else {
-        format!("[rig.unmodelled]\n{}\n", case.unmodelled)
-    };
-    format!(
-        r#"schema_version = 1
-
-[simulation]
-name = "diagnosis"
-sample_rate_hz = 1000.0
-seed = {seed}
-log_format = "csv"
-
-[rig]
-name = "the paper's rig, simulated"
-
-[rig.parameters]
-beta1_per_s = 267.0
-a1b0_n_per_m_s2 = 2.412e9
-a2_n_per_m = 7.881e5
-a3_per_s = 16.118
-
-{unmodelled}
-[excitation]
-kind = "chirp"
-law = "quadratic"
-f0_hz = 0.1
-f1_hz = 35.0
-duration_s = {body:?}
-amplitude_m = 0.004
-lead_in_s = {lead:?}
-lead_out_s = {lead:?}
-
-[instrument.command]
-unit = "mm"
-quantization = {{ bits = 18, full_scale = 50.0 }}
-
-[instrument.displacement]
-unit = "mm"
-noise_rms = 0.002
-{sensor}quantization = {{ bits = 18, full_scale = 50.0 }}
-
-[instrument.force]
-unit = "kN"
-noise_rms = 0.001
-quantization = {{ bits = 18, full_scale = 5.0 }}
-
-[identification]
-band_hz = [0.5, 30.0]
-
-[[runs]]
-id = "no-specimen"
-role = "no_specimen"
-p_gain = 1.0
-
-[[runs]]
-id = "spring-k1"
-role = "spring"
-p_gain = 1.0
-specimen = {k1}
-
-[[runs]]
-id = "spring-k2"
-role = "spring"
-p_gain = 1.0
-specimen = {k2}
-"#,
-        sensor = case.sensor,
-    )
+    PaperSweep {
+        duration_s: case.duration_s,
+        at_rest: case.at_rest,
+        seed,
+        log_format: "csv",
+        unmodelled: case.unmodelled,
+        sensor: case.sensor,
+        springs: case.springs.unwrap_or(PaperSweep::default().springs),
+        ..PaperSweep::default()
+    }
+    .text()
 }
 
 /// Every message of a campaign: the runs' errors, then the campaign's

@@ -12,96 +12,7 @@ use std::path::Path;
 
 use serde_json::Value;
 
-use crate::util::{scratch, servoid};
-
-const TRUTH: [(&str, f64); 4] = [
-    ("beta1", 267.0),
-    ("a1b0", 2.412e9),
-    ("a2", 7.881e5),
-    ("a3", 16.118),
-];
-
-/// A simulation manifest: `duration_s` of record at `fs`, at rest for a
-/// second at each end or not, with the rich rig's extras when `rich`.
-fn simulation(duration_s: f64, at_rest: bool, fs: f64, rich: bool, seed: u64) -> String {
-    let (lead, body) = if at_rest {
-        (1.0, duration_s - 2.0)
-    } else {
-        (0.0, duration_s)
-    };
-    let (unmodelled, sensor) = if rich {
-        (
-            "[rig.unmodelled]\nvalve_mode = { natural_frequency_hz = 150.0, damping_ratio = 0.7 }\n",
-            "delay_s = 0.0006\noffset = 0.15\ndrift_per_s = 0.0004\n",
-        )
-    } else {
-        ("", "")
-    };
-    format!(
-        r#"schema_version = 1
-
-[simulation]
-name = "first-night"
-sample_rate_hz = {fs:?}
-seed = {seed}
-log_format = "parquet"
-
-[rig]
-name = "the paper's rig, simulated"
-
-[rig.parameters]
-beta1_per_s = 267.0
-a1b0_n_per_m_s2 = 2.412e9
-a2_n_per_m = 7.881e5
-a3_per_s = 16.118
-
-{unmodelled}
-[excitation]
-kind = "chirp"
-law = "quadratic"
-f0_hz = 0.1
-f1_hz = 35.0
-duration_s = {body:?}
-amplitude_m = 0.004
-lead_in_s = {lead:?}
-lead_out_s = {lead:?}
-
-[instrument.command]
-unit = "mm"
-quantization = {{ bits = 18, full_scale = 50.0 }}
-
-[instrument.displacement]
-unit = "mm"
-noise_rms = 0.002
-{sensor}quantization = {{ bits = 18, full_scale = 50.0 }}
-
-[instrument.force]
-unit = "kN"
-noise_rms = 0.001
-quantization = {{ bits = 18, full_scale = 5.0 }}
-
-[identification]
-band_hz = [0.5, 30.0]
-
-[[runs]]
-id = "no-specimen"
-role = "no_specimen"
-p_gain = 1.0
-
-[[runs]]
-id = "spring-k1"
-role = "spring"
-p_gain = 1.0
-specimen = {{ stiffness_n_per_m = 116640.0 }}
-
-[[runs]]
-id = "spring-k2"
-role = "spring"
-p_gain = 1.0
-specimen = {{ stiffness_n_per_m = 88540.0 }}
-"#
-    )
-}
+use crate::util::{PAPER_TRUTH, PaperSweep, scratch, servoid};
 
 fn toml_of(path: &Path) -> toml::Table {
     toml::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
@@ -152,7 +63,7 @@ pub fn first_night(dir: &Path, sim: &str) -> Value {
 /// Each rig parameter's relative error and error in stated stds.
 fn errors(results: &Value) -> Vec<(&'static str, f64, f64)> {
     let rig = &results["rig"];
-    TRUTH
+    PAPER_TRUTH
         .iter()
         .map(|&(name, truth)| {
             let value = rig[name]["value"].as_f64().unwrap();
@@ -200,7 +111,13 @@ fn the_defaults_give_the_rig_on_the_first_night() {
     for (duration, fs) in [(20.0, 1000.0), (60.0, 1000.0), (170.0, 2048.0)] {
         for at_rest in [true, false] {
             let dir = scratch();
-            let results = first_night(dir.path(), &simulation(duration, at_rest, fs, false, 2026));
+            let sim = PaperSweep {
+                duration_s: duration,
+                at_rest,
+                sample_rate_hz: fs,
+                ..PaperSweep::default()
+            };
+            let results = first_night(dir.path(), &sim.text());
             let case = format!("{duration} s, at rest: {at_rest}");
             let limit = if duration >= 60.0 { 1e-3 } else { 1e-2 };
             eprintln!("{case}: {}", summary(&results));
@@ -245,7 +162,16 @@ fn the_defaults_give_the_rig_on_the_first_night() {
 fn a_rich_rig_is_right_or_covered_and_warned_on_the_first_night() {
     for (duration, at_rest, fs) in [(60.0, false, 1000.0), (170.0, true, 2048.0)] {
         let dir = scratch();
-        let results = first_night(dir.path(), &simulation(duration, at_rest, fs, true, 7));
+        let sim = PaperSweep {
+            duration_s: duration,
+            at_rest,
+            sample_rate_hz: fs,
+            seed: 7,
+            unmodelled: "valve_mode = { natural_frequency_hz = 150.0, damping_ratio = 0.7 }",
+            sensor: "delay_s = 0.0006\noffset = 0.15\ndrift_per_s = 0.0004\n",
+            ..PaperSweep::default()
+        };
+        let results = first_night(dir.path(), &sim.text());
         let warned = !warnings(&results).is_empty();
         // The drift leaves the displacement's ends apart by far more than
         // its noise, at rest or not: its leakage is fitted and taken out.
