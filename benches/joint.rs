@@ -1,10 +1,10 @@
-//! The joint grey-box fit (issue 14) of a seven-run campaign: the paper's
+//! The joint grey-box fit of a seven-run campaign: the paper's
 //! no-specimen run, springs k1 and k2 and Exp1-Exp4 (Table 2, Exp2 and
 //! Exp4 at P = 2), each with the bins of a 170 s ETFE at 2048 Hz over
 //! 0.5-30 Hz (0.0058 Hz apart, 5,075 bins), their x1/u from the model with
 //! the hold, a 2-sample delay and a 120 Hz valve mode, and 0.1 % noise.
 //! From the paper's rig 10 % off, with the delay and valve mode fitted.
-//! Target: under 100 ms beyond the per-run FRFs (issue 23; 50 ms before).
+//! Target: under 100 ms beyond the per-run FRFs (50 ms before).
 //! Measured on two cores: one delay-and-valve fit 15.6-17.8 ms on this
 //! machine (10.9 ms on an earlier one; 22 ms before the solver was given the
 //! cost with the normal equations in one pass, 78 ms when it was given the
@@ -12,9 +12,7 @@
 //! delay, the piston and a mode in the loop or the command path, each mode
 //! from a grid of starts raced on a quarter of the bins, every fit taken
 //! to that quarter's optimum and then to all the bins', the F tests and
-//! Akaike weights) 71-79 ms over three runs; the three structures before
-//! issue 23 took 57.4 ms on the same machine the same day (37.5 ms on the
-//! earlier one, 305 ms at first). Each Levenberg-Marquardt trial is one
+//! Akaike weights) 71-79 ms over three runs. Each Levenberg-Marquardt trial is one
 //! pass over the bins for r^T r, J^T J and J^T r.
 //!
 //! `cargo bench --bench joint`

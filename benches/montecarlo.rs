@@ -1,4 +1,4 @@
-//! The stiffness sensitivity's Monte Carlo (issue 13): 20 stiffnesses x 50
+//! The stiffness sensitivity's Monte Carlo: 20 stiffnesses x 50
 //! seeds = 1,000 identifications, each a no-specimen run and a spring run
 //! of 120 s at 1 kHz (a quadratic chirp 0.1-35 Hz over 118 s with a second
 //! of rest either side, 4 mm, as the bundled default's command) simulated
@@ -21,7 +21,7 @@ use std::time::Instant;
 use servoid::fit::{DelayPlan, Intersample};
 use servoid::frf::{Detrend, Estimator, FrfPlan, Window};
 use servoid::manifest::IdentificationPlan;
-use servoid::run::montecarlo::{McInput, monte_carlo};
+use servoid::sensitivity::draws::{McInput, monte_carlo};
 use servoid::simulate::{ChirpLaw, Excitation, Padding, generate};
 
 const FS_HZ: f64 = 1000.0;

@@ -165,6 +165,9 @@ pub enum Command {
     /// Print servoid's man page (roff), e.g. `servoid man > servoid.1;
     /// man -l servoid.1`.
     Man,
+    /// Print the manifests' key reference (markdown): every key with its
+    /// value, default and meaning, from the JSON Schemas (docs/keys.md).
+    Keys,
 }
 
 /// `--log-format`: how a job reports its progress (not a data log's format,
@@ -311,6 +314,10 @@ fn dispatch(command: Command) -> u8 {
             clap_complete::generate(shell, &mut cmd, "servoid", &mut script);
             print_bytes(&script, "the completion script")
         }
+        Command::Keys => print_bytes(
+            crate::manifest::keys::key_reference().as_bytes(),
+            "the key reference",
+        ),
         Command::Man => {
             let cmd = <Cli as clap::CommandFactory>::command();
             let mut page = Vec::new();

@@ -267,7 +267,7 @@ pub fn balance(a: &DMatrix<f64>) -> DMatrix<f64> {
 /// comparable row and column norms (Parlett & Reinsch 1969, as LAPACK's
 /// dgebal). A row or column whose norm is not finite is left alone: an
 /// infinite norm has no balancing power (dividing it by 4 never ends: a
-/// hang on finite but extreme manifest numbers, issue 24).
+/// hang on finite but extreme manifest numbers).
 pub fn balancing_diagonal(a: &DMatrix<f64>) -> Vec<f64> {
     let n = a.nrows();
     let mut b = a.clone();
@@ -330,12 +330,31 @@ pub fn characteristic_polynomial(a: &DMatrix<f64>) -> Vec<f64> {
     coeffs
 }
 
+/// Complex numbers as [re, im] pairs, for serde (`#[serde(with =
+/// "complex_vec")]`): the run cache keeps FRF bins this way.
+pub mod complex_vec {
+    use nalgebra::Complex;
+    use serde::{Deserialize, Deserializer, Serializer};
+
+    pub fn serialize<S: Serializer>(v: &[Complex<f64>], s: S) -> Result<S::Ok, S::Error> {
+        s.collect_seq(v.iter().map(|c| [c.re, c.im]))
+    }
+
+    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<Vec<Complex<f64>>, D::Error> {
+        let pairs = Vec::<[f64; 2]>::deserialize(d)?;
+        Ok(pairs
+            .into_iter()
+            .map(|[re, im]| Complex::new(re, im))
+            .collect())
+    }
+}
+
 #[cfg(test)]
 mod tests {
     #[test]
     fn balancing_a_matrix_with_an_infinite_norm_ends_and_leaves_it() {
         // Row 1's column norm is infinite: the old loop divided it by 4
-        // forever (issue 24's hang). Both rows are left unscaled.
+        // forever. Both rows are left unscaled.
         let a = DMatrix::from_row_slice(2, 2, &[0.0, f64::INFINITY, 1.0, 0.0]);
         assert_eq!(balancing_diagonal(&a), vec![1.0, 1.0]);
         // And a finite, badly scaled one is balanced to within a factor of

@@ -2,7 +2,7 @@
 //! natural velocity feedback and P controller (the hydraulic transfer system)
 //! coupled to a specimen. Owns the state space of Eq. 10, the transfer
 //! functions of Eqs. 11-17 and 45, and the controllable canonical form of
-//! Eqs. 34-35, with the signs of MODEL.md.
+//! Eqs. 34-35, with the signs checked (docs/model.md).
 //!
 //! Units are SI throughout: x1 (m), x2 [m/s], f (N), r [N/s], u (m).
 
@@ -186,7 +186,7 @@ pub fn state_space(rig: &RigParams, specimen: &LinearSpecimen) -> StateSpace {
 /// An error when a coefficient leaves f64's range: finite but extreme
 /// inputs (a specimen mass of 1e-300 kg, a stiffness of 1e300 N/m, a rig
 /// fitted from such published coefficients) overflow the products of Eqs.
-/// 12-17. The caller names the run and its keys (issue 24).
+/// 12-17. The caller names the run and its keys.
 pub fn tf_x1_u(rig: &RigParams, specimen: &LinearSpecimen) -> Result<TransferFunction, LtiError> {
     let (b1, a1b0, a2, a3) = (
         rig.beta1_per_s,
@@ -323,7 +323,7 @@ impl Specimen for LinearSdof {
 }
 
 /// The coefficients C1-C5 of the controllable canonical form (Eq. 35, signs of
-/// MODEL.md): x4' = C1 u - C1 x1 + C2 x2 + C3 x3 + C4 x4 + C5 f + Cn.
+/// docs/model.md): x4' = C1 u - C1 x1 + C2 x2 + C3 x3 + C4 x4 + C5 f + Cn.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[allow(non_snake_case)]
 pub struct CcfCoefficients {

@@ -175,8 +175,7 @@ pub const SCHUR_SWEEPS_PER_EIGENVALUE: usize = 30;
 /// [`SCHUR_SWEEPS_PER_EIGENVALUE`] sweeps per eigenvalue, or gives a
 /// non-finite value. nalgebra's `complex_eigenvalues` iterates without a
 /// bound, and on a matrix with an infinite entry (finite but extreme
-/// manifest numbers overflow a model's coefficients) never returned: the
-/// hang of issue 24.
+/// manifest numbers overflow a model's coefficients) never returned.
 pub fn eigenvalues(m: &DMatrix<f64>) -> Option<Vec<Complex<f64>>> {
     if m.iter().any(|v| !v.is_finite()) {
         return None;

@@ -15,6 +15,7 @@ use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
 use crate::drift::Check;
+use crate::fit::joint::Structure;
 use crate::identify::{Estimate, PerSpring};
 use crate::lti::TransferFunction;
 use crate::manifest::simulation::UnmodelledSpec;
@@ -148,17 +149,17 @@ pub struct RigEstimates {
 }
 
 /// The joint grey-box fit of the rig across the identification runs
-/// (issue 14): the structures tried, the one chosen and why, its rig with
+///: the structures tried, the one chosen and why, its rig with
 /// the sequential one beside it, and the adequacy tests.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 pub struct JointResult {
     /// The structure whose estimate is reported (null when none could be
     /// fitted).
-    pub structure: Option<JointStructureName>,
+    pub structure: Option<Structure>,
     /// "data" (the F tests) or "manifest" (identification.joint.structure).
     pub chosen_by: String,
     /// What the data choose, with or without the manifest.
-    pub data_choose: Option<JointStructureName>,
+    pub data_choose: Option<Structure>,
     /// Why this structure, in a sentence.
     pub explanation: String,
     /// Every structure tried, smallest first.
@@ -193,40 +194,10 @@ pub struct JointResult {
     pub use_note: String,
 }
 
-/// A structure of the joint fit.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
-#[serde(rename_all = "snake_case")]
-pub enum JointStructureName {
-    None,
-    Delay,
-    /// A delay and a mode in the position loop.
-    DelayValve,
-    /// A delay and a mode in the command path.
-    DelayCommand,
-    /// A delay and a mode in the displacement's measurement path.
-    DelayMeasurement,
-    /// A delay and the piston's mass.
-    DelayPiston,
-}
-
-impl JointStructureName {
-    /// As the manifest and results.json spell it.
-    pub fn as_str(self) -> &'static str {
-        match self {
-            JointStructureName::None => "none",
-            JointStructureName::Delay => "delay",
-            JointStructureName::DelayValve => "delay_valve",
-            JointStructureName::DelayCommand => "delay_command",
-            JointStructureName::DelayMeasurement => "delay_measurement",
-            JointStructureName::DelayPiston => "delay_piston",
-        }
-    }
-}
-
 /// One row of the structure table.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 pub struct JointCandidate {
-    pub structure: JointStructureName,
+    pub structure: Structure,
     /// Where its second-order mode sits: "loop", "command path",
     /// "measurement path", or "in series" (command or measurement path,
     /// which only force FRFs tell apart); "actuator (piston mass)" for the
@@ -256,7 +227,7 @@ pub struct JointCandidate {
 /// An extra-sum-of-squares F test.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 pub struct FTestResult {
-    pub against: JointStructureName,
+    pub against: Structure,
     pub f: f64,
     pub p_value: f64,
     /// p below 0.001.
@@ -606,7 +577,7 @@ pub struct FitSummary {
     #[serde(default)]
     pub adequacy: Option<crate::fit::adequacy::Adequacy>,
     /// For a fit made without a delay: whether the data support one
-    /// (`fit::delay_test`).
+    /// (`fit::delay_significance`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub delay_test: Option<DelayTestResult>,
 }
@@ -627,7 +598,7 @@ pub struct DelayTestResult {
     pub note: String,
 }
 
-/// The controllable canonical form of one run (Eqs. 34-35, signs of MODEL.md).
+/// The controllable canonical form of one run (Eqs. 34-35, signs checked in docs/model.md).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[allow(non_snake_case)]
 pub struct CcfResult {
@@ -713,23 +684,4 @@ pub struct TruthRun {
     pub log: String,
     pub log_sha256: String,
     pub n_samples: usize,
-}
-
-/// Complex numbers as [re, im] pairs, for serde (`#[serde(with =
-/// "complex_vec")]`): the run cache keeps FRF bins this way.
-pub mod complex_vec {
-    use nalgebra::Complex;
-    use serde::{Deserialize, Deserializer, Serializer};
-
-    pub fn serialize<S: Serializer>(v: &[Complex<f64>], s: S) -> Result<S::Ok, S::Error> {
-        s.collect_seq(v.iter().map(|c| [c.re, c.im]))
-    }
-
-    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<Vec<Complex<f64>>, D::Error> {
-        let pairs = Vec::<[f64; 2]>::deserialize(d)?;
-        Ok(pairs
-            .into_iter()
-            .map(|[re, im]| Complex::new(re, im))
-            .collect())
-    }
 }

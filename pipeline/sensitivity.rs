@@ -10,6 +10,7 @@
 //! paper, Sec. 3.1), which this analysis cannot show: it only bounds the soft
 //! end.
 
+pub mod draws;
 pub mod montecarlo;
 
 use schemars::JsonSchema;

@@ -546,7 +546,7 @@ fn verify_reruns_the_recorded_analysis_and_names_what_differs() {
 }
 
 /// With `--log-format json` a night's log parser sees everything the text
-/// output says (issue 24): a failed run's error in its `run_failed` event,
+/// output says: a failed run's error in its `run_failed` event,
 /// each warning as an event naming its run, and a job that wrote nothing
 /// (a manifest error) as an `error` event with its exit code, not only on
 /// stderr.

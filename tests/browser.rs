@@ -130,7 +130,7 @@ fn paper_report_renders_without_errors() {
     // The comparisons list every reference of the manifest; the flagged rows
     // are Table 3's C1-C3 for each of the four experiments (3 x 4 = 12):
     // they do not follow from the paper's own equations with m = 3.8 kg
-    // (MODEL.md), while every other published number agrees.
+    // (docs/model.md), while every other published number agrees.
     let flagged = b
         .evaluate(
             "Array.from(document.querySelectorAll('#comparisons + table tr.flag'))\

@@ -1,4 +1,4 @@
-//! The command line's conventions (issue 26, item 4): shell completions and
+//! The command line's conventions: shell completions and
 //! a man page generated from the clap definitions, `--version` naming the
 //! commit, and `NO_COLOR` honoured.
 

@@ -158,7 +158,7 @@ fn the_springs_agree_as_simulated_and_not_after_a_typo_or_a_swap() {
     assert_flagged(code, &stderr, &results, &page, "a1b0");
 }
 
-/// A check that cannot be made is said where the lab reads (issue 24):
+/// A check that cannot be made is said where the lab reads:
 /// with one spring the springs' agreement is not tested, and the night
 /// says so on the command line and the page, naming the spring run, not
 /// only in results.json. The paper's published transfer functions carry

@@ -1,4 +1,4 @@
-//! The bad-input corpus (issue 15): every folder under `tests/bad/` is one
+//! The bad-input corpus: every folder under `tests/bad/` is one
 //! case, a hostile but realistic input with what servoid must answer.
 //!
 //! A case's `case.toml`:

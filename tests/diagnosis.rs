@@ -1,4 +1,4 @@
-//! Warnings that name the true cause (issue 38, item 4): simulated
+//! Warnings that name the true cause: simulated
 //! campaigns of the paper's rig (a no-specimen run and two springs, 60 s
 //! quadratic chirps 0.1-35 Hz at 1 kHz, 2 um of LVDT noise, 18-bit
 //! converters, default identification settings), each with one thing

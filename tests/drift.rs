@@ -213,7 +213,7 @@ fn a_stable_rig_never_raises_it_and_a_rerun_adds_nothing() {
 }
 
 /// A history that cannot be read is the night's failure, not a line in
-/// results.json (issue 24, defect 4): before, a truncated table gave exit
+/// results.json: before, a truncated table gave exit
 /// 0, nothing on stderr, a warning naming the deleted work folder, and no
 /// update ever again (the drift alarm off for good). Each update keeps the
 /// table it replaces as `history.parquet.prev`, which the message names
@@ -294,7 +294,7 @@ fn an_unreadable_history_fails_the_night_and_says_how_to_recover() {
 
 /// A rig renamed by accident (`frame B` -> `Frame B`) starts a new history,
 /// and its drift goes unchecked against the old one: the night says so,
-/// naming the close name (issue 24). A rig of another name says nothing.
+/// naming the close name. A rig of another name says nothing.
 #[test]
 fn a_renamed_rig_is_told_it_starts_a_new_history() {
     let dir = scratch();

@@ -94,7 +94,7 @@ fn figures_without_run_and_an_unknown_choice_are_usage_errors() {
 }
 
 /// A run named `identification` keeps its FRF figure beside the campaign's
-/// (issue 24): run figures are `frf-<run>`, and the campaign's was
+///: run figures are `frf-<run>`, and the campaign's was
 /// `frf-identification`, which such a run overwrote. Now the campaign's is
 /// `identification-frf`, and no campaign figure starts as a run's does.
 #[test]
@@ -151,7 +151,7 @@ fn listed(out: &Path, folder: &str) -> Vec<String> {
 }
 
 /// A rerun into the same folder holds what this job wrote and nothing an
-/// earlier job left in servoid's own folders (issue 24: figures stayed
+/// earlier job left in servoid's own folders (figures stayed
 /// after `--figures none`, and a renamed run's pages, figures and tables
 /// stayed beside the new ones); the lab's own files stay.
 #[test]

@@ -1,4 +1,4 @@
-//! The fuzz targets' inputs replayed on the stable toolchain (issue 15):
+//! The fuzz targets' inputs replayed on the stable toolchain:
 //! every file under `fuzz/corpus/<target>/` (the seeds) and
 //! `fuzz/regressions/<target>/` (inputs that once crashed a reader) goes
 //! through the same target body the fuzzer runs (`fuzz/src/targets.rs`).
@@ -50,7 +50,7 @@ fn fuzz_seeds_and_regressions_replay_without_a_panic() {
 
 /// Every numeric key of the paper's campaign and of a small campaign with
 /// logs, each set in turn to the ends of f64's range (and i64's, for an
-/// integer key), then analysed (issue 24, defect 1): an answer or a
+/// integer key), then analysed: an answer or a
 /// refusal, never a panic. The fuzz target `manifest_numbers` draws the
 /// same edits at random, several at once.
 #[test]
@@ -96,8 +96,8 @@ fn no_finite_number_in_a_manifest_panics() {
             }
         }
     }
-    // A hang is a failure too (issue 24 found one in the eigenvalues'
-    // balancing): a watchdog names the cases still in flight after five
+    // A hang is a failure too (the eigenvalues' balancing once
+    // had one): a watchdog names the cases still in flight after five
     // minutes (the whole set takes seconds) and ends the test binary.
     let in_flight = std::sync::Mutex::new(std::collections::BTreeSet::new());
     let done = std::sync::atomic::AtomicBool::new(false);

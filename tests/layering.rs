@@ -34,8 +34,12 @@ const LAYERS: &[&[&str]] = &[
 
 /// Uses inside one layer that run one way (from, to).
 const WITHIN_LAYER: &[(&str, &str)] = &[
+    ("identify", "frf"),
+    ("identify", "fit"),
     ("sensitivity", "identify"),
     ("sensitivity", "fit"),
+    ("sensitivity", "frf"),
+    ("sensitivity", "simulate"),
     ("validate", "simulate"),
     ("tracking", "validate"),
     ("tracking", "simulate"),
@@ -276,7 +280,7 @@ fn find_circle(
 }
 
 /// Inside every folder of `pipeline/`, the files' uses of one another form
-/// no circle (issue 25: acquire, figures and tables used each other through
+/// no circle (acquire, figures and tables used each other through
 /// the plot limits; joint and rig through `Evidence`; canvas and text through
 /// `Outline`). A folder's `mod.rs`, which declares and re-exports its
 /// children, and whole files of tests are left out.

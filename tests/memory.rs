@@ -1,4 +1,4 @@
-//! Memory on one very long log (issue 15): a CSV log of over 1 GB is
+//! Memory on one very long log: a CSV log of over 1 GB is
 //! analysed, figures and all, in at most twice its size.
 //!
 //! The log is the bundled simulation's no-specimen run made 7,000 s long

@@ -277,7 +277,7 @@ fn eq10_sdof(rig: [f64; 4], (m, c, k): (f64, f64, f64)) -> [Vec<Vec<f64>>; 4] {
     ]
 }
 
-/// Eqs. 34-35 (signs of MODEL.md) with f = m x3 + c x2 + k x1 substituted
+/// Eqs. 34-35 (signs checked in docs/model.md) with f = m x3 + c x2 + k x1 substituted
 /// and Cn = h'' = -(c x4 + k x3)/m (h = -(c x2 + k x1)/m) kept or dropped.
 fn eq35(rig: [f64; 4], (m, c, k): (f64, f64, f64), cn: bool) -> [Vec<Vec<f64>>; 4] {
     let [b1, a1b0, a2, a3] = rig;
@@ -590,7 +590,7 @@ fn every_number_in_scipy(python: &Path, out: &Path, results: &Value) {
 
 /// Each validation run's compensator as models.mat gives it, evaluated by
 /// scipy.signal on the plant x1/u it was designed for: the tracking over
-/// the band results.json states, and issue 27's targets on the bundled
+/// the band results.json states, and the compensator's targets on the bundled
 /// default (delay under one sample, amplitude within 1 %), which the plant
 /// alone misses by far.
 fn compensators_in_scipy(runs: &[Value], want_runs: &[Value]) {

@@ -284,7 +284,7 @@ fn the_mts_logs_fit_as_an_independent_computation_does() {
             "{id}: {windows:?}"
         );
 
-        // Which structure the data support (issue 14): the fit made again
+        // Which structure the data support: the fit made again
         // with a delay. On 1A the delay is supported: the F statistic is
         // the one the two reduced chi-squares and the bin count give
         // (recomputed here), far past p = 0.001, and the delay lowers the

@@ -1,4 +1,4 @@
-//! Outputs as a set (issue 15): a rerun killed with SIGKILL at any point
+//! Outputs as a set: a rerun killed with SIGKILL at any point
 //! leaves the output folder holding the previous run's files, byte for
 //! byte, or the new run's, never a mix; the next run completes and removes
 //! what the killed one left behind.
@@ -264,7 +264,7 @@ fn two_jobs(
     (pid, first, second)
 }
 
-/// Two jobs into one output folder at once (issue 24, defect 3): before,
+/// Two jobs into one output folder at once: before,
 /// both carried the same previous set and the later one's exchange dropped
 /// the earlier one's history entry, both exiting 0. Now the second waits
 /// for the first's lock, says so on stderr naming the first's pid, and

@@ -1,6 +1,6 @@
 //! The paper reproduced from its published numbers: `servoid run
 //! experiments/maghareh2018/paper.toml`. Expected values are the paper's own
-//! (Sec. 3.1, Tables 2-3) and MODEL.md's independent recomputation of
+//! (Sec. 3.1, Tables 2-3) and an independent recomputation (docs/model.md) of
 //! Table 3 with m = 3.8 kg.
 
 use serde_json::Value;
@@ -70,7 +70,7 @@ fn controllable_canonical_form_and_natural_frequencies() {
     let ccf = r["ccf"].as_array().unwrap();
     let ids: Vec<&str> = ccf.iter().map(|c| c["run"].as_str().unwrap()).collect();
     assert_eq!(ids, ["exp1", "exp2", "exp3", "exp4"]);
-    // MODEL.md, with the signs checked: C1 = a1b0/m (6.347e8 at P = 1),
+    // Eq. 35 with the signs checked (docs/model.md): C1 = a1b0/m (6.347e8 at P = 1),
     // C2 = -6.50e7 (k = 129,400) / -6.17e7 (k = 84,340), C3 = -2.078e5,
     // C4 = -283.118, C5 = -1.133e3.
     let want = [

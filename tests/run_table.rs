@@ -526,7 +526,7 @@ fn dates_are_checked_and_normalised_in_both_places() {
 }
 
 /// A lab's own columns (`notes`, `operator`) are carried, not refused
-/// (issue 24): each row's cells reach its run in results.json and on its
+///: each row's cells reach its run in results.json and on its
 /// page, a `description` column is the run's description, and editing a
 /// note redoes no work. A column named like one of servoid's (a typo) is
 /// still a problem with a suggestion: a misspelt stiffness must not

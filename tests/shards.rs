@@ -175,7 +175,7 @@ fn a_campaign_fitting_its_validation_runs_into_the_rig_is_not_sharded() {
     assert_eq!(o.code, 0, "{}", o.stderr);
 }
 
-/// A merge draws what its shards drew (issue 24: with another `--figures`
+/// A merge draws what its shards drew (with another `--figures`
 /// it redid every run's log work, silently, as the figure choice is in
 /// each run's cache key): by default the shards' choice, and another is
 /// refused naming both. `--shard` is not a merge's (it was accepted and

@@ -1,6 +1,6 @@
 //! `servoid simulate` end to end: a closed loop through `servoid run`, the
 //! same bytes for the same seed whatever the thread count, fresh noise for a
-//! new seed, and the bad inputs of issue 3, each refused with exit code 2, a
+//! new seed, and bad inputs, each refused with exit code 2, a
 //! message naming the file and the key, and nothing written.
 
 use std::path::Path;
@@ -50,7 +50,7 @@ fn csv_column(path: &Path, name: &str) -> Vec<f64> {
         .collect()
 }
 
-/// simulate then run: truth.json holds the transfer functions of MODEL.md's
+/// simulate then run: truth.json holds the transfer functions of docs/model.md's
 /// table (Eqs. 11-17, computed here from the four parameters), the generated
 /// manifest runs, and the identified rig comes back close to the truth.
 #[test]

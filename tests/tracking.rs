@@ -1,4 +1,4 @@
-//! Tracking measures end to end (issue 27): every run of the bundled
+//! Tracking measures end to end: every run of the bundled
 //! default, the rich campaign and the MTS logs has its measured tracking in
 //! results.json and on its page; every validation run also the tracking the
 //! identified model predicts for its command, beside the measured one.
@@ -208,8 +208,7 @@ fn tracking_table_matches_results(out: &Path, r: &Value) {
     assert_eq!(meets.iter().flatten().filter(|m| *m).count(), validation);
 }
 
-/// A validation run's compensator on the bundled default (issue 27's
-/// stated check): over the band 0.5-30 Hz the compensated plant is under
+/// A validation run's compensator on the bundled default: over the band 0.5-30 Hz the compensated plant is under
 /// one sample late and within 1 % of amplitude, where the plant alone is
 /// over 20 samples late and loses most of its amplitude; on the run's own
 /// command the predicted tracking says the same in the time domain (delay

@@ -1,4 +1,4 @@
-//! Whether a fitted model explains its FRF (issue 14, item 3): three tests
+//! Whether a fitted model explains its FRF: three tests
 //! on the weighted residuals e_k = (h_k - h_model,k) / sqrt(E|dH_k|^2 / 2),
 //! whose real and imaginary parts each have unit variance when the model is
 //! right and the variances are honest.

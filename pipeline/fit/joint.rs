@@ -1,8 +1,8 @@
-//! The joint grey-box estimator of the rig (issue 14): beta1, a1b0 (at a reference P gain), a2 and a3
+//! The joint grey-box estimator of the rig: beta1, a1b0 (at a reference P gain), a2 and a3
 //! fitted together and directly to the FRFs of several runs, each run's
 //! model the exact x1/u of its specimen at its P gain, with nuisance
 //! dynamics shared by every run: the command's hold, a pure delay and,
-//! optionally, a second-order mode at one of three places (issue 23): in
+//! optionally, a second-order mode at one of three places: in
 //! the position loop (the servo-valve spool's), in the command path ahead
 //! of the loop, or in the measurement path of the logged displacement.
 //!
@@ -52,6 +52,8 @@ use super::settings::Intersample;
 use super::{FitError, covariance, covariance_from_normal};
 use crate::model::{LinearSpecimen, RigParams};
 use rayon::prelude::*;
+use schemars::JsonSchema;
+use serde::{Deserialize, Serialize};
 
 /// What a run's FRF measures over the command.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -82,23 +84,31 @@ pub struct JointRun<'a> {
     pub lag: usize,
 }
 
-/// The nuisance dynamics the fit includes besides the hold.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+/// The joint fit's nuisance dynamics besides the command's hold: as the
+/// manifest fixes it (`identification.joint.structure`) and as the results
+/// name the one used.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
+#[serde(rename_all = "snake_case")]
+#[schemars(rename = "JointStructure")]
 pub enum Structure {
     /// The paper's model alone.
+    #[serde(rename = "none")]
     Plain,
     /// And a pure delay.
     Delay,
-    /// And a delay and a second-order mode in the loop (the servo-valve's).
+    /// And a delay and a second-order mode in the position loop (the
+    /// servo-valve spool's).
     DelayValve,
-    /// And a delay and a second-order mode in the command path, outside the
-    /// loop: on x1/u and f/u alike.
+    /// And a delay and a second-order mode in the command path, ahead of
+    /// the loop (a command filter or valve driver): displacement and force
+    /// follow it.
     DelayCommand,
-    /// And a delay and a second-order mode in the measurement path of the
-    /// displacement: on x1/u, not on f/u.
+    /// And a delay and a second-order mode in the displacement's
+    /// measurement path (a sensor or logging filter outside the loop): the
+    /// force does not follow it.
     DelayMeasurement,
-    /// And a delay and the piston's mass (with the oil column's stiffness
-    /// a2, the actuator's own mode): Q = (s + a3)(S + m_p s^2) + a2 s.
+    /// And a delay and the piston's mass on the oil column (the actuator's
+    /// own mode): Q = (s + a3)(S + m_p s^2) + a2 s.
     DelayPiston,
 }
 
@@ -116,6 +126,27 @@ pub enum Place {
 }
 
 impl Structure {
+    pub const ALL: [Structure; 6] = [
+        Structure::Plain,
+        Structure::Delay,
+        Structure::DelayValve,
+        Structure::DelayCommand,
+        Structure::DelayMeasurement,
+        Structure::DelayPiston,
+    ];
+
+    /// As the manifest and results.json spell it (serde's names above).
+    pub const fn as_str(self) -> &'static str {
+        match self {
+            Structure::Plain => "none",
+            Structure::Delay => "delay",
+            Structure::DelayValve => "delay_valve",
+            Structure::DelayCommand => "delay_command",
+            Structure::DelayMeasurement => "delay_measurement",
+            Structure::DelayPiston => "delay_piston",
+        }
+    }
+
     fn n_params(self) -> usize {
         match self {
             Structure::Plain => 4,

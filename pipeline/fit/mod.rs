@@ -13,7 +13,7 @@
 
 pub mod adequacy;
 pub mod band;
-pub mod delay_test;
+pub mod delay_significance;
 pub mod joint;
 pub mod linear;
 pub mod lm;
@@ -716,7 +716,7 @@ pub fn covariance_from_normal(a: &DMatrix<f64>, scale: f64) -> Option<DMatrix<f6
     }
     let scaled = DMatrix::from_fn(p, p, |i, j| a[(i, j)] / (norms[i] * norms[j]));
     // nalgebra's `symmetric_eigen` iterates without a bound: a non-finite
-    // entry would never converge (issue 24). LAPACK's 30 sweeps per
+    // entry would never converge. LAPACK's 30 sweeps per
     // eigenvalue bound it.
     if scaled.iter().any(|v| !v.is_finite()) {
         return None;

@@ -409,6 +409,11 @@ pub fn detrend(x: &[f64], kind: Detrend) -> Vec<f64> {
     out
 }
 
+/// The highest frequency (Hz) a run's FRFs keep beyond its band: the
+/// paper's figures show up to 35 Hz (Figs. 7-9, 16-17), and the results'
+/// tables and figures show what the analysis kept, never more.
+pub const KEPT_MAX_HZ: f64 = 35.0;
+
 /// Bins [`h_variance_at`] reads beyond the last bin it is asked for: the
 /// moving average's S and the local polynomial's R (ETFE), plus one.
 pub const VARIANCE_REACH_BINS: usize = ETFE_NOISE_SMOOTH_HALF_WIDTH + ETFE_LOCAL_HALF_WIDTH + 1;

@@ -21,7 +21,7 @@ pub struct FrfPlan {
     /// reach, where the transient is fitted and taken out.
     pub transient: Option<f64>,
     /// Whether the run's fit reads its bins' noise level from what a first
-    /// fit leaves (`run::acquire::fit_run`) rather than from the FRF
+    /// fit leaves (`identify::fit_run`) rather than from the FRF
     /// itself, as `auto` does: the ETFE's local polynomials then follow
     /// only the model's smooth misfit, not the plant's own curvature,
     /// which over the wide bins of a short record they cannot (the noise

@@ -1,5 +1,5 @@
 //! The ETFE of a simulated run assembled in the frequency domain, for the
-//! stiffness sensitivity's Monte Carlo (issue 25, item 7): a thousand
+//! stiffness sensitivity's Monte Carlo: a thousand
 //! identifications replay one command, and each differs from the others
 //! only by its noise.
 //!
@@ -23,7 +23,7 @@
 //! independently of the other segments' and of the whole record's. The
 //! coherence only decides which bins the fit uses (its limit against the
 //! estimate); the Monte Carlo's test compares the two ways on a rig near
-//! the coherence limit (`run::montecarlo`'s tests).
+//! the coherence limit (`sensitivity::draws`' tests).
 
 use nalgebra::Complex;
 

@@ -8,6 +8,11 @@
 //! shared no-specimen run correlates the springs (J is taken over everything).
 
 pub mod consistency;
+mod run_fit;
+mod settings;
+
+pub use run_fit::{FitData, RunTfError, fit_options, fit_run};
+pub use settings::IdentificationPlan;
 
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};

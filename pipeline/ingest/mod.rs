@@ -1110,7 +1110,7 @@ fn assemble(plan: &LogPlan, sha256: String, raw: Raw<'_>) -> Result<Log, IngestE
      -> Result<Vec<f64>, IngestError> {
         // A finite but absurd sample (one 9.9e37 in a log) passed before
         // and gave an NRMSE of inf and an "offset removed" of 4.8e300 m
-        // (issue 24): beyond the instrument's range (the manifest's), or
+        //: beyond the instrument's range (the manifest's), or
         // beyond what any test reaches, it is the line's error.
         let (default, _, said) = physical_range(channel);
         let (lo, hi) = given.map_or((-default, default), |(r, _)| r);

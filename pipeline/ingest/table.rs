@@ -465,7 +465,7 @@ mod tests {
     }
 
     /// Dates, timestamps and decimals as pandas and loggers write them
-    /// (issue 24: refused as damaged or unreadable): dates and timestamps
+    /// (refused as damaged or unreadable): dates and timestamps
     /// as ISO 8601 text, decimals as their digits. The expected texts are
     /// written by hand from the values.
     #[test]

@@ -550,7 +550,7 @@ fn parquet_round_trip_is_bit_exact_by_name_and_by_index() {
 }
 
 /// A logger's timestamps as the time column (`timestamp[us]`, as pandas
-/// and many DAQs write Parquet; issue 24: refused as "not numbers"): the
+/// and many DAQs write Parquet, once refused as "not numbers"): the
 /// seconds since the first sample, so the rate is the samples' own. At
 /// 1 kHz in microseconds every step is exactly 1000 ticks, so the rate is
 /// exactly 1000 Hz.

@@ -13,7 +13,7 @@ use super::checks::{
     positive,
 };
 use super::document::{Document, read};
-use super::identification::{IdentificationPlan, check_identification};
+use super::identification::check_identification;
 use super::keypath::KeyPath;
 use super::problem::{ManifestError, Problem, TablePlace};
 use super::raw::{
@@ -23,6 +23,7 @@ use super::raw::{
 };
 use super::table::{CheckedTable, RowKey, RunTableInfo, TableRun, check_table};
 use crate::drift::{MIN_HISTORY, Rule};
+use crate::identify::IdentificationPlan;
 use crate::ingest::{self, ChannelPlan, Channels, LogFormat, LogPlan, TimePlan};
 use crate::lti::{LtiError, TransferFunction};
 use crate::model::RigParams;
@@ -461,7 +462,7 @@ fn check_history(
             bad(path.key("file"), "must not be empty".into());
         } else if let Some(why) = not_a_file_path(&base_dir.join(f), f) {
             // /dev/null, `.` or a folder took every night's entry without
-            // a word, and the drift alarm was off for good (issue 24).
+            // a word, and the drift alarm was off for good.
             bad(path.key("file"), why);
         }
     }
@@ -601,7 +602,7 @@ fn check_header(partial: &Partial, bad: &mut impl FnMut(KeyPath, String)) {
 
 /// Run ids are unique across `[[runs]]` and the run table, also when
 /// letter case is ignored (`K1` and `k1` name one file on a
-/// case-insensitive disk, issue 24), and the campaign has runs. A duplicate in the table is a problem of its row (in
+/// case-insensitive disk), and the campaign has runs. A duplicate in the table is a problem of its row (in
 /// `table_problems`), naming where the id was first used.
 fn check_run_ids(
     partial: &Partial,

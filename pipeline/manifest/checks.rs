@@ -149,7 +149,7 @@ pub(super) fn check_date(
 }
 
 /// The range of a physical quantity a servo-hydraulic test can have
-/// (issue 24): wide enough for any lab (a milligram to a 10,000 t mass, a
+///: wide enough for any lab (a milligram to a 10,000 t mass, a
 /// spring from a rubber band's to a steel block's 1e10 N/m with margin, a P
 /// gain from 1e-6 to 1e6), narrow enough that the model's products (Eqs.
 /// 12-17, with a1b0 ~ 1e9-1e12) stay far inside f64. Beyond it a number is

@@ -19,6 +19,7 @@ mod checks;
 mod document;
 mod identification;
 mod keypath;
+pub mod keys;
 mod problem;
 mod raw;
 pub mod scaffold;
@@ -27,15 +28,15 @@ mod table;
 
 use std::path::Path;
 
+pub use crate::identify::IdentificationPlan;
 pub use campaign::{Campaign, Quantity, ReferencePlan, RunPlan, RunSource, load, load_str};
-pub use identification::IdentificationPlan;
 pub use keypath::{KeyPath, Seg};
 pub use problem::{ManifestError, Problem, TablePlace};
 pub use raw::{
     BoucWenParams, CampaignInfo, Channel, Channels, CompareMode, CompensatorSettings, DelayMode,
-    DelaySettings, FrfSettings, Identification, JointRig, JointSettings, JointStructure, Manifest,
-    ModelOrders, MonteCarloSettings, PublishedTf, Reference, Rig, Role, Run, RunData, RunTable,
-    SCHEMA_VERSION, SensitivitySettings, Specimen, SpecimenKind, TimeChannel, manifest_schema,
+    DelaySettings, FrfSettings, Identification, JointRig, JointSettings, Manifest, ModelOrders,
+    MonteCarloSettings, PublishedTf, Reference, Rig, Role, Run, RunData, RunTable, SCHEMA_VERSION,
+    SensitivitySettings, Specimen, SpecimenKind, TimeChannel, manifest_schema,
 };
 pub use simulation::{SimulationPlan, load_simulation, simulation_schema};
 pub use table::RunTableInfo;

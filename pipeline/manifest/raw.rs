@@ -287,6 +287,7 @@ pub struct CampaignInfo {
     /// Short name; also the default output folder under `reports/`
     /// (letters, digits, `.`, `_` and `-`).
     pub name: String,
+    /// Free-form description, shown on the report.
     #[serde(default)]
     pub description: String,
     /// Set when the logs are synthetic: how they were made (shown as a banner
@@ -299,6 +300,7 @@ pub struct CampaignInfo {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[schemars(deny_unknown_fields)]
 pub struct Rig {
+    /// The rig's name: the history and the drift alarm follow a rig by it.
     pub name: String,
     /// Free-form notes: actuator, servo-valve, controller, sensors.
     #[serde(default)]
@@ -337,8 +339,10 @@ pub struct Channel {
     pub column: Column,
     /// Unit of the scaled value.
     pub unit: Unit,
+    /// Factor from the log's number to `unit`: value = scale x logged + offset.
     #[serde(default = "one")]
     pub scale: f64,
+    /// Added after `scale`, in `unit`.
     #[serde(default)]
     pub offset: f64,
     /// The instrument's range `[min, max]` in `unit` (after `scale` and
@@ -406,7 +410,7 @@ pub struct Identification {
 #[schemars(deny_unknown_fields)]
 pub struct JointSettings {
     #[serde(default)]
-    pub structure: JointStructure,
+    pub structure: crate::fit::joint::Choice,
     #[serde(default)]
     pub rig: JointRig,
     /// Also fit the validation runs, whose m, c and k the manifest gives:
@@ -414,34 +418,6 @@ pub struct JointSettings {
     /// logs are then read twice, once for the rig and once to validate it.
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     pub include_validation: bool,
-}
-
-/// The joint fit's nuisance dynamics besides the command's hold.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
-#[serde(rename_all = "snake_case")]
-pub enum JointStructure {
-    /// Chosen by the data among those below (nested F tests; among the
-    /// modes at different places, the lowest cost).
-    #[default]
-    Auto,
-    /// The paper's model alone.
-    None,
-    /// And a pure delay.
-    Delay,
-    /// And a delay and a second-order mode in the position loop (the
-    /// servo-valve spool's).
-    DelayValve,
-    /// And a delay and a second-order mode in the command path, ahead of
-    /// the loop (a command filter or valve driver): displacement and force
-    /// follow it.
-    DelayCommand,
-    /// And a delay and a second-order mode in the displacement's
-    /// measurement path (a sensor or logging filter outside the loop): the
-    /// force does not follow it.
-    DelayMeasurement,
-    /// And a delay and the piston's mass on the oil column (the actuator's
-    /// own mode).
-    DelayPiston,
 }
 
 /// Which rig CCF, validation and the sensitivity use.
@@ -534,8 +510,10 @@ pub enum DelayMode {
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
 #[schemars(deny_unknown_fields)]
 pub struct ModelOrders {
+    /// Order of the numerator n(s).
     #[serde(default)]
     pub numerator: usize,
+    /// Order of the denominator d(s).
     #[serde(default = "two")]
     pub denominator: usize,
 }
@@ -556,6 +534,7 @@ pub struct Run {
     /// Unique id (letters, digits, `.`, `_` and `-`).
     pub id: String,
     pub role: Role,
+    /// Free-form description, shown on the run's page.
     #[serde(default)]
     pub description: String,
     /// When the run was made (ISO 8601: `YYYY-MM-DD` or
@@ -616,8 +595,10 @@ pub struct Specimen {
     /// Specimen model; `linear` unless a nonlinear model is named.
     #[serde(default)]
     pub model: SpecimenKind,
+    /// Specimen mass m [kg].
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub mass_kg: Option<f64>,
+    /// Specimen damping c [N s/m].
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub damping_ns_per_m: Option<f64>,
     /// Linear (or, for Bouc-Wen, initial elastic) stiffness.
@@ -664,7 +645,9 @@ pub struct BoucWenParams {
     pub alpha: f64,
     /// A, the initial slope dz/dx1.
     pub a: f64,
+    /// beta [1/m^n] of the Bouc-Wen law.
     pub beta_per_m_pow_n: f64,
+    /// gamma [1/m^n] of the Bouc-Wen law.
     pub gamma_per_m_pow_n: f64,
     /// n >= 1, sharpness of the transition.
     pub n: f64,
@@ -695,8 +678,11 @@ pub struct RunData {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[schemars(deny_unknown_fields)]
 pub struct PublishedTf {
+    /// Numerator coefficients, highest power of s first.
     pub num: Vec<f64>,
+    /// Denominator coefficients, highest power of s first.
     pub den: Vec<f64>,
+    /// Pure delay [s] in front of num/den.
     #[serde(default)]
     pub delay_s: f64,
     /// Where it was published (e.g. "Eq. 36").
@@ -713,6 +699,7 @@ pub struct Reference {
     /// `runs.<run>.{a1b0,natural_frequency_hz,nrmse_pct,nae_pct}`,
     /// `ccf.<run>.{C1,C2,C3,C4,C5}`.
     pub quantity: String,
+    /// The published value, in the quantity's SI unit.
     pub published: f64,
     /// Where it was published (e.g. "Table 3").
     #[serde(default)]

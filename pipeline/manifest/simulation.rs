@@ -45,6 +45,7 @@ pub struct SimulationManifest {
     /// Identification options written into the generated analysis manifest.
     #[serde(default)]
     pub identification: Identification,
+    /// The runs to simulate, each written as a log.
     pub runs: Vec<SimRun>,
     /// Published values copied into the generated analysis manifest.
     #[serde(default)]
@@ -62,6 +63,7 @@ pub struct SimulationInfo {
     /// Name of the simulated campaign (letters, digits, `.`, `_`, `-`); also
     /// the default output folder under `reports/`.
     pub name: String,
+    /// Free-form description, shown on the report.
     #[serde(default)]
     pub description: String,
     /// Sampling rate of the logs and of the D/A converter (Hz).
@@ -106,6 +108,7 @@ pub struct IntegratorSpec {
     /// Dormand-Prince relative and absolute tolerances.
     #[serde(default = "default_rtol")]
     pub rtol: f64,
+    /// Absolute tolerance of the ODE integrator.
     #[serde(default = "default_atol")]
     pub atol: f64,
 }
@@ -136,7 +139,9 @@ pub enum IntegratorMethod {
 #[derive(Debug, Clone, Serialize, Deserialize, JsonSchema)]
 #[schemars(deny_unknown_fields)]
 pub struct SimRig {
+    /// The rig's name in the generated analysis manifest.
     pub name: String,
+    /// Free-form notes.
     #[serde(default)]
     pub notes: String,
     /// The true parameters (Eq. 10), a1b0 at `p_gain`.
@@ -175,7 +180,9 @@ pub struct UnmodelledSpec {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[schemars(deny_unknown_fields)]
 pub struct ActuatorFrictionSpec {
+    /// Coulomb friction force of the actuator's seals [N].
     pub coulomb_force_n: f64,
+    /// Velocity [m/s] over which the friction's sign is smoothed (tanh).
     pub smoothing_velocity_m_per_s: f64,
 }
 
@@ -183,7 +190,9 @@ pub struct ActuatorFrictionSpec {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[schemars(deny_unknown_fields)]
 pub struct ValveModeSpec {
+    /// Natural frequency [Hz] of the second-order mode.
     pub natural_frequency_hz: f64,
+    /// Damping ratio of the second-order mode.
     pub damping_ratio: f64,
 }
 
@@ -195,14 +204,16 @@ pub struct ExcitationSpec {
     /// Chirp law (default quadratic, as the paper's).
     #[serde(default)]
     pub law: Option<ChirpLawSpec>,
-    /// Chirp start and end frequencies (Hz).
+    /// Chirp start frequency (Hz).
     #[serde(default)]
     pub f0_hz: Option<f64>,
+    /// Chirp end frequency (Hz).
     #[serde(default)]
     pub f1_hz: Option<f64>,
-    /// Band of a multisine or band-limited random signal (Hz).
+    /// Lower edge of a multisine's or band-limited random signal's band (Hz).
     #[serde(default)]
     pub f_min_hz: Option<f64>,
+    /// Upper edge of a multisine's or band-limited random signal's band (Hz).
     #[serde(default)]
     pub f_max_hz: Option<f64>,
     /// Length of the excitation (s), without lead-in and lead-out.
@@ -259,10 +270,13 @@ pub struct Instrument {
 #[derive(Debug, Clone, Serialize, Deserialize, JsonSchema)]
 #[schemars(deny_unknown_fields)]
 pub struct SimRun {
+    /// Unique id (letters, digits, `.`, `_` and `-`); the log's file name.
     pub id: String,
     pub role: Role,
+    /// Free-form description.
     #[serde(default)]
     pub description: String,
+    /// Proportional gain of the analog controller in this run.
     pub p_gain: f64,
     #[serde(default)]
     pub specimen: Option<Specimen>,

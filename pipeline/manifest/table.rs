@@ -727,7 +727,7 @@ fn expected_log(m: &Matched, id: &str) -> PathBuf {
 }
 
 /// The unused logs a warning names one by one; past them, one line says
-/// how many more (a folder of old logs matched 20,000, issue 24).
+/// how many more (a folder of old logs matched 20,000).
 pub const UNUSED_LOGS_LISTED: usize = 10;
 
 /// A warning for each folder link the walk did not follow (a loop); for
@@ -897,7 +897,7 @@ logs = "LOGS"
 
     #[test]
     fn a_recursive_glob_through_two_folder_loops_ends_and_names_them() {
-        // Issue 24: `logs/**/*.csv` through two links back to ancestors ran
+        // `logs/**/*.csv` through two links back to ancestors ran
         // until memory ran out (3 GB in 2 minutes).
         let dir = tempfile::tempdir().unwrap();
         let d = dir.path();

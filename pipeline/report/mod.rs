@@ -319,7 +319,7 @@ pub const OWN_FOLDERS: [&str; 3] = ["figures", "runs", "tables"];
 /// relative to `out_dir`, `/`-separated. The set starts as a copy of the
 /// previous one, so without this a run dropped from the campaign, a figure
 /// format no longer drawn (`--figures none`) or a table a run no longer
-/// writes would stay beside the new outputs (issue 24).
+/// writes would stay beside the new outputs.
 pub fn prune(out_dir: &Path, keep: &std::collections::BTreeSet<String>) -> Result<(), WriteError> {
     for folder in OWN_FOLDERS {
         let dir = out_dir.join(folder);

@@ -19,7 +19,7 @@
 //! job into the same folder (two runs, a run and a merge) waits for the
 //! first with a message on stderr, then starts from the set the first put
 //! in place. Without it both carried the same previous set and the later
-//! exchange dropped the earlier job's history entry (issue 24).
+//! exchange dropped the earlier job's history entry.
 //!
 //! A work folder is locked (flock) while its job lives. One left by a
 //! killed job is unlocked, and the next job beside it removes it, as it

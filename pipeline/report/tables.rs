@@ -20,8 +20,9 @@ use crate::fit::Intersample;
 use crate::lti::TransferFunction;
 use crate::results::RunResult;
 
-/// Highest frequency a table holds, unless the fit band reaches higher.
-pub const TABLE_MAX_HZ: f64 = 35.0;
+/// Highest frequency a table holds, unless the fit band reaches higher:
+/// all the analysis keeps.
+pub const TABLE_MAX_HZ: f64 = crate::frf::KEPT_MAX_HZ;
 
 /// The files of one run's tables, relative to the output folder.
 fn names(id: &str) -> [String; 2] {

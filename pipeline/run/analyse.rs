@@ -307,7 +307,7 @@ impl FirstPass {
     fn rig_input(&self) -> RigInput {
         match self {
             FirstPass::Waiting(read) => read.clone(),
-            FirstPass::Done(d) => match (&d.acquire_error, &d.kept.estimate) {
+            FirstPass::Done(d) => match (&d.log_error, &d.kept.estimate) {
                 (Some(e), _) => RigInput::Failed(e.clone()),
                 (None, Some(e)) => RigInput::Estimate(Box::new(e.clone())),
                 (None, None) => RigInput::Nothing,
@@ -383,7 +383,7 @@ fn second_pass(
         FirstPass::Done(done) => *done,
     };
     let rig_at_p = rig.as_ref().ok().map(|(r, _)| r.at_p_gain(plan.p_gain));
-    if done.acquire_error.is_some() {
+    if done.log_error.is_some() {
         done.kept.result.a1b0 = rig_at_p.map(|r| r.a1b0_n_per_m_s2);
     } else if let Some(spec) = step::with_rig(&mut done.kept, plan, rig_at_p.as_ref(), wants) {
         let (f, w) = sink.figures(std::slice::from_ref(&spec))?;

@@ -4,8 +4,9 @@
 
 use std::sync::Arc;
 
-use super::acquire::{AcquireError, FitData};
+use super::log_stage::LogStageError;
 use crate::fit::adequacy::Adequacy;
+use crate::identify::FitData;
 use crate::lti::TransferFunction;
 
 /// What a run gives the rig's identification.
@@ -14,7 +15,7 @@ pub(super) enum RigInput {
     /// Its model and what its fit was given.
     Estimate(Box<Evidence>),
     /// Its first stage failed.
-    Failed(Arc<AcquireError>),
+    Failed(Arc<LogStageError>),
     /// A validation run's FRFs, for the joint fit
     /// (`identification.joint.include_validation`).
     Validation(Box<ValidationEvidence>),
@@ -34,7 +35,7 @@ pub(super) struct Evidence {
     /// Its own fit's adequacy tests.
     pub adequacy: Option<Adequacy>,
     pub sample_rate_hz: Option<f64>,
-    /// What its own warnings found wrong (`acquire::LogStage::cause`).
+    /// What its own warnings found wrong (`log_stage::LogStage::cause`).
     #[serde(default)]
     pub cause: Option<String>,
 }

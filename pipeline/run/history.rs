@@ -45,7 +45,7 @@ struct Extra {
 
 /// A history table that exists and cannot be read (damaged, or not a
 /// servoid history): the night's failure, not a warning, for the drift
-/// alarm is off until someone looks (issue 24).
+/// alarm is off until someone looks.
 #[derive(Debug)]
 pub(super) struct Unreadable {
     pub path: PathBuf,

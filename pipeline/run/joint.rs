@@ -1,4 +1,4 @@
-//! The joint grey-box fit in the campaign (issue 14): the identification
+//! The joint grey-box fit in the campaign: the identification
 //! runs' FRFs to `fit::joint::select`, its outcome beside the sequential
 //! estimate, and the decision which of the two the campaign uses.
 //!
@@ -11,7 +11,6 @@
 //! shows that the physical model is not what limits the fit: the noise
 //! estimate or something neither model has is.
 
-use super::acquire::FitData;
 use super::evidence::{Evidence, ValidationEvidence};
 use crate::fit::adequacy::Adequacy;
 use crate::fit::joint::{
@@ -19,38 +18,17 @@ use crate::fit::joint::{
     RunSpread, Selection, Structure, StructureSpread,
 };
 use crate::identify::Estimate;
-use crate::manifest::{Campaign, IdentificationPlan, JointRig, JointStructure, Role, RunPlan};
+use crate::identify::FitData;
+use crate::identify::IdentificationPlan;
+use crate::manifest::{Campaign, JointRig, Role, RunPlan};
 use crate::model::RigParams;
 use crate::results::{
-    FTestResult, JointCandidate, JointParameter, JointResult, JointStructureName, RigEstimates,
-    RunAdequacy,
+    FTestResult, JointCandidate, JointParameter, JointResult, RigEstimates, RunAdequacy,
 };
 
 /// How much worse than the sequential fits' pooled reduced chi-square the
 /// joint fit's may be and still count as adequate.
 const AS_GOOD_AS_SEQUENTIAL: f64 = 1.1;
-
-fn name(s: Structure) -> JointStructureName {
-    match s {
-        Structure::Plain => JointStructureName::None,
-        Structure::Delay => JointStructureName::Delay,
-        Structure::DelayValve => JointStructureName::DelayValve,
-        Structure::DelayCommand => JointStructureName::DelayCommand,
-        Structure::DelayMeasurement => JointStructureName::DelayMeasurement,
-        Structure::DelayPiston => JointStructureName::DelayPiston,
-    }
-}
-
-fn key_value(s: Structure) -> &'static str {
-    match s {
-        Structure::Plain => "none",
-        Structure::Delay => "delay",
-        Structure::DelayValve => "delay_valve",
-        Structure::DelayCommand => "delay_command",
-        Structure::DelayMeasurement => "delay_measurement",
-        Structure::DelayPiston => "delay_piston",
-    }
-}
 
 /// Where a structure's mode sits, in words; `split` when the force FRFs
 /// tell the command path from the measurement path (without them the
@@ -70,17 +48,17 @@ fn place(s: Structure, split: bool) -> Option<&'static str> {
 /// A structure as the ambiguity warning names it.
 fn described(s: Structure, split: bool) -> String {
     match place(s, split) {
-        Some("loop") => format!("\"{}\" (a mode in the loop)", key_value(s)),
+        Some("loop") => format!("\"{}\" (a mode in the loop)", s.as_str()),
         Some("in series") => format!(
             "\"{}\" (a mode in series, in the command or the measurement path)",
-            key_value(s)
+            s.as_str()
         ),
         Some(_) if s.piston() => {
-            format!("\"{}\" (the piston's mass on the oil column)", key_value(s))
+            format!("\"{}\" (the piston's mass on the oil column)", s.as_str())
         }
-        Some(p) => format!("\"{}\" (a mode in the {p})", key_value(s)),
+        Some(p) => format!("\"{}\" (a mode in the {p})", s.as_str()),
         None if s == Structure::Delay => "\"delay\" (a delay alone)".into(),
-        None => format!("\"{}\" (the paper's model alone)", key_value(s)),
+        None => format!("\"{}\" (the paper's model alone)", s.as_str()),
     }
 }
 
@@ -121,7 +99,7 @@ pub(super) fn joint(
         })
         .collect();
     let opts = options(&campaign.identification, start, fs);
-    let choice = choice(campaign.joint.structure);
+    let choice = campaign.joint.structure;
     let band_top = fitted.iter().map(|(p, ..)| p.band_hz.1).fold(0.0, f64::max);
     let sel = joint::select(&runs, start, &opts, choice, band_top);
     let misfit = joint::run_spread(&runs, &sel, &opts);
@@ -208,19 +186,6 @@ fn options(ident: &IdentificationPlan, start: &RigParams, fs: f64) -> JointOptio
     }
 }
 
-/// The manifest's structure: fixed, or the data's choice.
-fn choice(structure: JointStructure) -> Choice {
-    match structure {
-        JointStructure::Auto => Choice::Auto,
-        JointStructure::None => Choice::Fixed(Structure::Plain),
-        JointStructure::Delay => Choice::Fixed(Structure::Delay),
-        JointStructure::DelayValve => Choice::Fixed(Structure::DelayValve),
-        JointStructure::DelayCommand => Choice::Fixed(Structure::DelayCommand),
-        JointStructure::DelayMeasurement => Choice::Fixed(Structure::DelayMeasurement),
-        JointStructure::DelayPiston => Choice::Fixed(Structure::DelayPiston),
-    }
-}
-
 /// The per-run fits' pooled reduced chi-square (their costs over their
 /// degrees of freedom), which the joint fit is compared with.
 fn sequential_chi2(evidence: &[(&RunPlan, &Evidence)]) -> Option<f64> {
@@ -243,7 +208,7 @@ fn row(
 ) -> JointCandidate {
     let fit = c.fit.as_ref().ok();
     JointCandidate {
-        structure: name(c.structure),
+        structure: c.structure,
         place: place(c.structure, split).map(String::from),
         parameters: fit.map_or(c.structure.names().len(), |f| f.params.len()),
         cost: fit.map(|f| f.cost),
@@ -252,7 +217,7 @@ fn row(
         cost_z: fit.map(|f| f.adequacy.cost_z),
         bic: c.bic(),
         f_test: c.f_test.map(|t| FTestResult {
-            against: name(t.against),
+            against: t.against,
             f: t.f,
             p_value: t.p_value,
             significant: t.p_value < P_SIGNIFICANT,
@@ -275,8 +240,8 @@ fn explain(sel: &Selection) -> String {
         let Some(t) = c.f_test else { continue };
         parts.push(format!(
             "{} against {}: F = {:.3e}, p = {:.2e} ({})",
-            key_value(c.structure),
-            key_value(t.against),
+            c.structure.as_str(),
+            t.against.as_str(),
             t.f,
             t.p_value,
             if t.p_value < P_SIGNIFICANT {
@@ -293,7 +258,7 @@ fn explain(sel: &Selection) -> String {
     };
     format!(
         "the data choose \"{}\" by extra-sum-of-squares F tests between nested structures and, among the modes the tests take at different places (the same parameter count), the lowest weighted cost: {tests}",
-        key_value(auto)
+        auto.as_str()
     )
 }
 
@@ -389,13 +354,13 @@ fn table(
     if let Choice::Fixed(s) = sel.choice {
         explanation = format!(
             "identification.joint.structure = \"{}\" fixes it; {explanation}",
-            key_value(s)
+            s.as_str()
         );
         if let Some(auto) = sel.auto.filter(|a| *a != s) {
             warnings.push(format!(
                 "rig: identification.joint.structure = \"{}\" is kept, but the data reject it: they choose \"{}\" (F tests in the report); remove the key to let the data choose",
-                key_value(s),
-                key_value(auto)
+                s.as_str(),
+                auto.as_str()
             ));
         }
     }
@@ -404,12 +369,12 @@ fn table(
         .and_then(|s| sel.candidate(s))
         .and_then(|c| c.fit.as_ref().ok());
     JointResult {
-        structure: fit.map(|f| name(f.structure)),
+        structure: fit.map(|f| f.structure),
         chosen_by: match sel.choice {
             Choice::Auto => "data".into(),
             Choice::Fixed(_) => "manifest".into(),
         },
-        data_choose: sel.auto.map(name),
+        data_choose: sel.auto,
         explanation,
         candidates,
         parameters: Vec::new(),
@@ -433,7 +398,7 @@ fn adequacy_warnings(
     known: Option<&str>,
     warnings: &mut Vec<String>,
 ) {
-    let structure = key_value(fit.structure);
+    let structure = fit.structure.as_str();
     let estimator = campaign.identification.frf.estimator;
     if let Some(d) = fit.adequacy.diagnosis_because(
         (fit.structure == Structure::Plain)
@@ -464,7 +429,7 @@ fn use_decision(
     seq_chi2: Option<f64>,
     warnings: &mut Vec<String>,
 ) -> (bool, String) {
-    let structure = key_value(fit.structure);
+    let structure = fit.structure.as_str();
     let reduced = fit.cost / fit.dof as f64;
     let as_good = seq_chi2.is_some_and(|s| reduced <= AS_GOOD_AS_SEQUENTIAL * s);
     match (campaign.joint.rig, &unusable) {
@@ -626,7 +591,7 @@ fn misfit_note(fit: &JointFit, m: &RunSpread, known: Option<&str>) -> String {
     };
     format!(
         "no candidate structure explains the data: the chosen \"{}\" fails its adequacy tests, so {cause}, and its parameters carry an error no std here bounds. Refitted without each of the {} FRFs in turn the rig moves by (jackknife std) {}; the stds include what of that spread statistics do not explain (misfit_std in results.json), but not an error every run shares, which on simulated rigs with piston friction or two modes was 5 to 18 times larger (docs/accuracy.md). Use the rig as approximate: the difference from the sequential estimate (the model-error term) shows its scale, and the per-run adequacy table shows which runs the misfit weighs on",
-        key_value(fit.structure),
+        fit.structure.as_str(),
         m.refits,
         spread.join(", ")
     )

@@ -5,7 +5,6 @@
 //! outputs (through `report`, which also decides what each figure shows). It never prints: each entry point returns what it did,
 //! or a [`JobError`] that says why nothing was written, for `cli` to report.
 
-pub mod acquire;
 mod analyse;
 mod cache;
 mod compare;
@@ -13,7 +12,7 @@ mod evidence;
 mod history;
 pub mod init;
 mod joint;
-pub mod montecarlo;
+pub mod log_stage;
 mod rig;
 mod sensitivity;
 mod shard;
@@ -367,7 +366,7 @@ pub fn merge(
     let shards = shard::check(dirs)?;
     let first = &shards[0].1;
     // The shards' figures are in each run's cache key: another choice
-    // would redo every run's log work here, silently (issue 24).
+    // would redo every run's log work here, silently.
     if let Some(asked) = merge.figures
         && asked != first.figures
     {
@@ -649,7 +648,7 @@ fn set_files(
 
 /// Start the output set in `out_dir`, refusing, before any computing, a
 /// folder whose cache place is taken by a file: the job would compute for
-/// nothing and fail writing its first cache entry (issue 24).
+/// nothing and fail writing its first cache entry.
 fn begin(out_dir: &Path) -> Result<OutputFolder, WriteError> {
     if let Some(taken) = cache::taken_place(out_dir) {
         return Err(WriteError::OutFolder {

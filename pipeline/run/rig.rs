@@ -5,8 +5,8 @@
 use std::fmt;
 use std::sync::Arc;
 
-use super::acquire::AcquireError;
 use super::evidence::{Evidence, RigInput, ValidationEvidence};
+use super::log_stage::LogStageError;
 use crate::identify::consistency::Consistency;
 use crate::identify::{self, Estimate, IdentifyError, SecondOrder, SpringRun, TfEstimate};
 use crate::manifest::{Campaign, Role, RunPlan};
@@ -33,7 +33,7 @@ pub enum FailedRun {
     /// The run itself failed.
     Failed {
         run: String,
-        error: Arc<AcquireError>,
+        error: Arc<LogStageError>,
     },
     /// Its model is not the second-order form Eqs. 18-19 need.
     NotSecondOrder { run: String, error: IdentifyError },
@@ -255,7 +255,7 @@ fn identification_warnings(
         ));
     }
     // A check that could not be made is said where the lab reads, not only
-    // in results.json (issue 24): unless the springs are published
+    // in results.json: unless the springs are published
     // transfer functions, which carry no covariance by what they are.
     if let Some(why) = ident.consistency.untested
         && why != identify::consistency::Untested::NoCovariance

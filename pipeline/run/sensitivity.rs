@@ -1,20 +1,21 @@
 //! The campaign's stiffness sensitivity (paper Sec. 2.3): the analytic
 //! sweep from the campaign's own noise (or an assumed precision without a
 //! log), the recommendation, and, when the manifest asks, the Monte Carlo
-//! (`montecarlo`) compared with the sweep. The Monte Carlo is cached under
+//! (`sensitivity::draws`) compared with the sweep. The Monte Carlo is cached under
 //! a key of everything that decides it (the rig to the last bit, the noise
 //! profile, the no-specimen log's hash, the identification and Monte Carlo
 //! settings), so a rerun with the same rig does not repeat it.
 
-use super::acquire::{self, replayed_command};
 use super::cache::{self, Cache};
-use super::montecarlo::{McInput, monte_carlo};
+use super::log_stage::replayed_command;
 use crate::frf::FrfPlan;
+use crate::identify;
 use crate::ingest::IngestError;
 use crate::manifest::{Campaign, MonteCarloSettings, Role, RunSource};
 use crate::model::RigParams;
 use crate::report::WriteError;
 use crate::results::{AnalyticSensitivity, Results, SensitivityResult};
+use crate::sensitivity::draws::{McInput, monte_carlo};
 use crate::sensitivity::montecarlo::{MonteCarlo, compare};
 use crate::sensitivity::{
     CoefficientNoise, NoiseProfile, StiffnessSensitivity, log_grid, recommend, stiffness_sweep,
@@ -104,7 +105,7 @@ fn analytic(
     // FRF variance through the fit's Jacobian (Sec. 2.3's analysis with
     // the lab's noise, not an assumed one).
     if let Some(NoiseSource { profile, frf }) = noise {
-        let opts = acquire::fit_options(&campaign.identification, frf, profile.sample_rate_hz);
+        let opts = identify::fit_options(&campaign.identification, frf, profile.sample_rate_hz);
         let measured = CoefficientNoise::Measured {
             profile,
             opts: &opts,
@@ -264,7 +265,7 @@ fn run_monte_carlo(
     let frequency_domain = input.in_frequency_domain();
     let mut points = monte_carlo(&input, &ks, mc.seeds);
     // The analytic prediction at exactly these stiffnesses.
-    let opts = acquire::fit_options(&campaign.identification, frf, fs);
+    let opts = identify::fit_options(&campaign.identification, frf, fs);
     let at_points = stiffness_sweep(
         rig,
         range,

@@ -57,7 +57,7 @@ pub(super) struct Done {
     /// The run's tables as written (relative to the output folder).
     pub tables: Vec<String>,
     /// Why its log could not be read or analysed (never from the cache).
-    pub acquire_error: Option<std::sync::Arc<super::acquire::AcquireError>>,
+    pub log_error: Option<std::sync::Arc<super::log_stage::LogStageError>>,
     pub seconds: f64,
     pub cached: bool,
 }
@@ -70,7 +70,7 @@ impl Done {
             kept: s.kept,
             figures: s.figures,
             figure_warnings: s.figure_warnings,
-            acquire_error: None,
+            log_error: None,
             seconds: 0.0,
             cached: true,
         }
@@ -156,7 +156,7 @@ impl Sink<'_> {
             figures,
             figure_warnings,
             tables,
-            acquire_error: output.acquire_error,
+            log_error: output.log_error,
             seconds: 0.0,
             cached: false,
         })

@@ -1,20 +1,21 @@
 //! One run's work, pure: from its plan (and its log's bytes, when the cache
 //! read them on the way) to what the campaign keeps of it and what is to be
 //! written for it (figure specs, tables), nothing written here. The log is
-//! read (by `ingest`, through `acquire`) and dropped inside each step; the
+//! read (by `ingest`, through `log_stage`) and dropped inside each step; the
 //! writing is `sink`'s, as each run's output arrives.
 
 use std::sync::Arc;
 
 use nalgebra::Complex;
 
-use super::acquire::{AcquireError, Acquired, FitData, LogStage, acquire_with, fit_options};
 use super::evidence::{Evidence, RigInput, ValidationEvidence};
+use super::log_stage::{LogStage, LogStageError, OwnTf, own_tf_with};
 use super::rig::RigError;
 use super::sensitivity::NoiseSource;
 use crate::fit::adequacy::{self, Adequacy, Residuals};
 use crate::fit::{self, DelayPlan, Intersample, TfFit};
 use crate::frf::{self, Frf};
+use crate::identify::{FitData, fit_options};
 use crate::ingest::{IngestError, Log, LogFile};
 use crate::lti::TransferFunction;
 use crate::manifest::{
@@ -43,13 +44,13 @@ const POOR_FIT_PERCENT: f64 = 50.0;
 #[derive(Debug, thiserror::Error)]
 pub enum RunError {
     #[error(transparent)]
-    Acquire(#[from] Arc<AcquireError>),
+    Acquire(#[from] Arc<LogStageError>),
     #[error("the rig parameters are unavailable: {0}")]
     NoRig(Arc<RigError>),
     #[error("time-domain validation: {0}")]
     Validation(#[from] ValidateError),
     /// The rig with the run's specimen and P gain gives a model beyond
-    /// f64's range (finite but extreme manifest numbers, issue 24).
+    /// f64's range (finite but extreme manifest numbers).
     #[error(
         "the model of the rig (beta1 {beta1:.4e} 1/s, a1b0 {a1b0:.4e} N/(m s^2) at p_gain = {p_gain}, a2 {a2:.4e} N/m, a3 {a3:.4e} 1/s) with the specimen (mass_kg = {m}, damping_ns_per_m = {c}, stiffness_n_per_m = {k}) leaves f64's range ({source}): check this run's specimen and p_gain, and the identification runs' published or measured data"
     )]
@@ -143,19 +144,19 @@ pub(super) struct Output {
     pub tables: Option<RunTables>,
     /// Why its log could not be read or analysed: such a run is not cached
     /// (the next job reads the log again) and gives the rig nothing.
-    pub acquire_error: Option<Arc<AcquireError>>,
+    pub log_error: Option<Arc<LogStageError>>,
     /// Whether the outcome may be cached.
     pub cacheable: bool,
 }
 
 impl Output {
     /// A run whose log could not be read or analysed.
-    fn unread(result: RunResult, error: Arc<AcquireError>) -> Self {
+    fn unread(result: RunResult, error: Arc<LogStageError>) -> Self {
         Self {
             kept: Kept::of(failed(result, error.clone().into())),
             figures: Vec::new(),
             tables: None,
-            acquire_error: Some(error),
+            log_error: Some(error),
             cacheable: false,
         }
     }
@@ -173,7 +174,7 @@ impl Output {
             kept: Kept::of(result),
             figures,
             tables: None,
-            acquire_error: None,
+            log_error: None,
             cacheable: false,
         }
     }
@@ -196,7 +197,7 @@ pub(super) fn without_rig(
     file: Option<LogFile>,
     wants: Wants,
 ) -> Output {
-    let acq = match acquire_with(campaign, plan, file) {
+    let acq = match own_tf_with(campaign, plan, file) {
         Ok(a) => a,
         Err(e) => return Output::unread(new_result(plan), Arc::new(e)),
     };
@@ -239,7 +240,7 @@ pub(super) fn without_rig(
         tables: tables(&kept.result, measured.as_ref(), wants),
         kept,
         figures,
-        acquire_error: None,
+        log_error: None,
         cacheable: true,
     }
 }
@@ -301,11 +302,11 @@ fn read_validation_log(
     plan: &RunPlan,
     fitted: Option<&str>,
     file: Option<LogFile>,
-) -> Result<Acquired, AcquireError> {
-    let acq = acquire_with(campaign, plan, file)?;
+) -> Result<OwnTf, LogStageError> {
+    let acq = own_tf_with(campaign, plan, file)?;
     match (fitted, &acq.stage) {
         (Some(before), Some(st)) if st.log.sha256 != before => {
-            Err(AcquireError::Ingest(IngestError::Changed {
+            Err(LogStageError::Ingest(IngestError::Changed {
                 path: st.log.path.clone(),
                 before: format!("SHA-256 {before} when the joint fit read it"),
                 after: format!("SHA-256 {} when its run was validated", st.log.sha256),
@@ -489,7 +490,7 @@ fn validated(
             ..Kept::of(out)
         },
         figures,
-        acquire_error: None,
+        log_error: None,
         cacheable: true,
     }
 }
@@ -528,7 +529,7 @@ pub(super) fn validation_evidence(campaign: &Campaign, plan: &RunPlan) -> RigInp
     if !matches!(plan.source, RunSource::Log(_)) {
         return RigInput::Nothing;
     }
-    let Ok(Some(st)) = acquire_with(campaign, plan, None).map(|a| a.stage) else {
+    let Ok(Some(st)) = own_tf_with(campaign, plan, None).map(|a| a.stage) else {
         return RigInput::Nothing;
     };
     let coherence_min = campaign.identification.coherence_min;
@@ -796,7 +797,7 @@ fn linearity_result(l: &frf::Linearity) -> LinearityResult {
         linear: !l.nonlinear(),
         displacement: l.displacement.as_ref().map(found),
         force: l.force.as_ref().map(found),
-        note: super::acquire::linearity_note(l),
+        note: super::log_stage::linearity_note(l),
     }
 }
 
@@ -816,7 +817,7 @@ fn fitted(
     ident: &IdentificationPlan,
     plan: &RunPlan,
     mut out: RunResult,
-    acq: Acquired,
+    acq: OwnTf,
 ) -> (
     RunResult,
     Option<Box<LogStage>>,
@@ -988,7 +989,7 @@ fn delay_test(ident: &IdentificationPlan, st: &LogStage, fit: &TfFit) -> Option<
     }
     let data = st.fit_data.as_ref()?;
     let opts = fit_options(ident, &st.choice.plan, st.log.sample_rate_hz);
-    let t = fit::delay_test::delay_test(&data.input(), &opts, fit, ident.max_delay_s);
+    let t = fit::delay_significance::delay_test(&data.input(), &opts, fit, ident.max_delay_s);
     let with = t.with_delay.as_ref().ok();
     let converged = with.filter(|w| w.converged && w.stable);
     let note = match (&t.with_delay, t.f_test) {

@@ -1,9 +1,8 @@
-//! The Monte Carlo side of the stiffness sensitivity (paper Sec. 2.3,
-//! issue 13 part 2): what the simulated identifications gave at each
-//! stiffness, the white noise level they were drawn with, and how their
-//! spread compares with the first-order (analytic) prediction. The
-//! simulations themselves are the orchestrator's (`run::montecarlo`); this
-//! module is the pure arithmetic on their outcomes.
+//! The Monte Carlo side of the stiffness sensitivity (paper Sec. 2.3): what
+//! the simulated identifications gave at each stiffness, the white noise
+//! level they were drawn with, and how their spread compares with the
+//! first-order (analytic) prediction. The simulations themselves are
+//! `draws`'; this module is the pure arithmetic on their outcomes.
 
 use std::collections::BTreeMap;
 

@@ -63,7 +63,7 @@ pub(crate) fn phi_gamma(
 
 /// exp(M) through a power-of-two diagonal similarity; NaN throughout for
 /// an M with a non-finite entry (nalgebra's scaling and squaring would
-/// square u64::MAX times: a hang, issue 24).
+/// square u64::MAX times: a hang).
 pub(crate) fn expm_balanced(m: &DMatrix<f64>) -> DMatrix<f64> {
     if m.iter().any(|v| !v.is_finite()) {
         return DMatrix::from_element(m.nrows(), m.ncols(), f64::NAN);

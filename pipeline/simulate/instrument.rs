@@ -44,7 +44,9 @@ pub struct Sensor {
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[schemars(rename = "QuantizationSpec", deny_unknown_fields)]
 pub struct Quantization {
+    /// Bits of the converter, sign included.
     pub bits: u32,
+    /// Full scale of the converter, in the channel's SI unit (m or N).
     pub full_scale: f64,
 }
 

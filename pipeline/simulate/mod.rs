@@ -65,7 +65,7 @@ pub enum SimError {
         eigenvalues: String,
     },
     /// The state matrix has a non-finite entry, or its eigenvalues do not
-    /// converge (finite but extreme parameters, issue 24).
+    /// converge (finite but extreme parameters).
     #[error(
         "the {what}'s eigenvalues cannot be computed (its state matrix has an entry beyond f64's range): check the rig parameters, the specimen and the p_gain"
     )]

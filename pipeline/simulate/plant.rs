@@ -6,7 +6,7 @@
 //!
 //! - with inertia (a specimen mass or a piston mass): x1, x2, f, r;
 //!   massless rig (no specimen or a spring, no piston mass): x1, r, with
-//!   f = k x1 and x1' = (r - a3 k x1) / (k + a2) (MODEL.md);
+//!   f = k x1 and x1' = (r - a3 k x1) / (k + a2) (docs/model.md);
 //! - a servo-valve mode: v, w (v' = w);
 //! - a command-path mode: p, p' (the command shaped ahead of the loop);
 //! - a measurement-path mode: q, q' (the logged displacement filtered);
@@ -417,7 +417,7 @@ impl OdeSystem for NonlinearPlant<'_> {
         let z = &x[self.internal..];
         let g = self.spec.specimen.restoring_force_n(x1, x2, z);
         if self.total_mass_kg == 0.0 {
-            // Massless (MODEL.md's massless rig with a spring g(x1)): f = g
+            // Massless (docs/model.md's massless rig with a spring g(x1)): f = g
             // at all times, so f' = g'(x1) x1' = -a2 x1' - a3 f + r gives
             // x1' = (r - a3 g) / (g'(x1) + a2); x2 is not a state here and
             // stays at zero, f follows g.

@@ -248,7 +248,7 @@ impl Compensator {
     }
 }
 
-/// The targets issue 27 sets for the compensated plant over the band: a
+/// The targets for the compensated plant over the band: a
 /// delay under one sample and an amplitude within 1 %.
 pub const TARGET_DELAY_SAMPLES: f64 = 1.0;
 pub const TARGET_AMPLITUDE_PCT: f64 = 1.0;
@@ -288,7 +288,7 @@ impl BandTracking {
             .max(self.delay_samples_max.abs())
     }
 
-    /// Issue 27's targets: under one sample, within 1 %.
+    /// The targets: under one sample, within 1 %.
     pub fn meets_target(&self) -> bool {
         self.max_abs_delay_samples() < TARGET_DELAY_SAMPLES
             && self.max_amplitude_error_pct < TARGET_AMPLITUDE_PCT
@@ -490,7 +490,7 @@ pub struct CompensatorOutcome {
     /// The held plant alone and with the compensator, over the band.
     pub uncompensated: BandTracking,
     pub compensated: Option<BandTracking>,
-    /// Whether the compensated plant meets issue 27's targets over the
+    /// Whether the compensated plant meets the targets over the
     /// band: a delay under one sample, an amplitude within 1 %.
     pub meets_target: Option<bool>,
     /// The tracking measures of the displacement the plant with the

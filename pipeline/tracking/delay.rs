@@ -1,4 +1,4 @@
-//! The actuator's time delay, two ways (issue 27):
+//! The actuator's time delay, two ways:
 //!
 //! - [`xcorr_delay`]: the lag that maximises the cross-correlation of the
 //!   command and the displacement, refined below a sample on the
@@ -348,4 +348,71 @@ pub fn phase_slope_delay(
         return Err(DelayNote::TooFewBins);
     }
     Ok(-sxy / sxx)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{BLOCK, integer_lags};
+
+    /// The sums [`integer_lags`] defines, term by term.
+    fn naive(u: &[f64], x: &[f64], mu: f64, mx: f64, limit: usize) -> (Vec<f64>, Vec<f64>, f64) {
+        let (start, end) = (limit, u.len() - limit);
+        let mut r = Vec::new();
+        let mut e = Vec::new();
+        for lag in -(limit as i64)..=limit as i64 {
+            let at = |t: usize| (t as i64 - lag) as usize;
+            r.push((start..end).map(|t| (x[t] - mx) * (u[at(t)] - mu)).sum());
+            e.push((start..end).map(|t| (u[at(t)] - mu).powi(2)).sum());
+        }
+        let ex = (start..end).map(|t| (x[t] - mx).powi(2)).sum();
+        (r, e, ex)
+    }
+
+    /// A reproducible record with a mean, uniform on [-1, 1) plus `offset`.
+    fn record(n: usize, seed: u64, offset: f64) -> Vec<f64> {
+        let mut s = seed;
+        (0..n)
+            .map(|_| {
+                s = s
+                    .wrapping_mul(6364136223846793005)
+                    .wrapping_add(1442695040888963407);
+                offset + 2.0 * (s >> 11) as f64 / (1u64 << 53) as f64 - 1.0
+            })
+            .collect()
+    }
+
+    /// The block FFTs against the sums themselves, over lengths within one
+    /// block, at its edge and over several, and lags from none to many.
+    #[test]
+    fn the_block_correlation_is_the_sum_it_defines() {
+        for n in [200, 4_099, BLOCK, BLOCK + 37, 2 * BLOCK + 1_000] {
+            for limit in [0, 1, 7, 60] {
+                let u = record(n, 1 + n as u64, 0.3);
+                let x = record(n, 7 + limit as u64, -1.2);
+                let (mu, mx) = (0.25, -1.1);
+                let (r, e, ex) = integer_lags(&u, &x, mu, mx, limit);
+                let (rn, en, exn) = naive(&u, &x, mu, mx, limit);
+                // Each sum's terms are O(1) and there are about n of them:
+                // the FFT's rounding is some 1e-12 of n.
+                let tol = 1e-9 * n as f64;
+                assert_eq!(r.len(), 2 * limit + 1);
+                for (k, (a, b)) in r.iter().zip(&rn).enumerate() {
+                    assert!(
+                        (a - b).abs() < tol,
+                        "n {n}, limit {limit}, r[{k}]: {a} vs {b}"
+                    );
+                }
+                for (k, (a, b)) in e.iter().zip(&en).enumerate() {
+                    assert!(
+                        (a - b).abs() < tol,
+                        "n {n}, limit {limit}, E[{k}]: {a} vs {b}"
+                    );
+                }
+                assert!(
+                    (ex - exn).abs() < tol,
+                    "n {n}, limit {limit}: {ex} vs {exn}"
+                );
+            }
+        }
+    }
 }

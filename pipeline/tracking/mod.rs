@@ -1,4 +1,4 @@
-//! How well the actuator follows its command (issue 27): the tracking
+//! How well the actuator follows its command: the tracking
 //! measures an RTHS lab reads of a run, each from the command and the
 //! measured (or predicted) displacement alone, so that the same function
 //! gives the measured tracking of a log and the tracking the identified

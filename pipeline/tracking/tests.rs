@@ -212,7 +212,7 @@ fn hold(f: f64, fs: f64) -> Complex<f64> {
     Complex::from_polar(x.sin() / x, -x)
 }
 
-/// Issue 27's target on the bundled default: with the compensator, the
+/// The compensator's target on the bundled default: with the compensator, the
 /// plant (Exp1, driven by held samples at 2048 Hz) follows its command
 /// within 1 % of amplitude and under one sample of delay over the fitted
 /// band, 0.5-30 Hz; without the lead, the low-pass and the hold leave a

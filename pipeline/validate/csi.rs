@@ -213,7 +213,7 @@ mod tests {
     use super::*;
     use approx::assert_relative_eq;
 
-    /// The paper's rig (Table 1 values in MODEL.md) and an SDOF specimen.
+    /// The paper's rig (Table 1 values) and an SDOF specimen.
     fn rig() -> RigParams {
         RigParams {
             beta1_per_s: 267.0,

@@ -85,7 +85,7 @@ pub struct ValidationMetrics {
 
 /// The paper's simplified canonical form (Cn dropped "for a linear
 /// specimen", Sec. 3) checked on a validation run. Dropping Cn moves the
-/// poles (MODEL.md); at some rig parameters it moves the specimen's pair into
+/// poles (docs/model.md); at some rig parameters it moves the specimen's pair into
 /// the right half-plane, and a simulation of it then grows without bound, so
 /// it is only simulated when stable and otherwise says so.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
@@ -427,7 +427,7 @@ mod tests {
     /// Exp1 of Table 2 at the paper's rig: with Cn dropped the canonical
     /// form's characteristic polynomial is s^4 - C4 s^3 - (C3 + C5 m) s^2 -
     /// (C2 + C5 c) s + (C1 - C5 k). Its roots, computed separately with
-    /// numpy.roots from Table 3's parameters (C1..C5 by MODEL.md's Eq. 35),
+    /// numpy.roots from Table 3's parameters (C1..C5 by Eq. 35 with the signs checked),
     /// are -290.85, -12.52 and 10.125 +/- 463.11j rad/s: unstable. The run
     /// must say so and not report errors of a diverging simulation, while
     /// the full model reproduces its own noise-free log.

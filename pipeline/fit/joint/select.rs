@@ -1,4 +1,4 @@
-//! The model structure chosen by the data (issue 14, item 2; issue 23).
+//! The model structure chosen by the data.
 //!
 //! The candidates: the paper's model (4 parameters), with a delay (5), with
 //! a delay and the piston's mass (6: the actuator's own mode, the piston on
@@ -78,6 +78,8 @@
 //! bench where three took 57 ms; `cargo bench --bench joint`).
 
 use rayon::prelude::*;
+use schemars::JsonSchema;
+use serde::{Deserialize, Deserializer, Serialize, Serializer};
 use statrs::distribution::{ContinuousCDF, FisherSnedecor};
 
 use super::{
@@ -89,14 +91,73 @@ use crate::model::RigParams;
 /// The p-value below which a larger structure is taken.
 pub const P_SIGNIFICANT: f64 = 1e-3;
 
-/// How the structure is chosen.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+/// How the structure is chosen: `identification.joint.structure`, "auto"
+/// or one of [`Structure`]'s names.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub enum Choice {
     /// By the F tests above.
+    #[default]
     Auto,
     /// As the manifest fixes it; flagged when the data would choose another
     /// or reject it.
     Fixed(Structure),
+}
+
+impl Choice {
+    /// Every value the manifest accepts, as it spells them.
+    const NAMES: [&'static str; 7] = [
+        "auto",
+        Structure::Plain.as_str(),
+        Structure::Delay.as_str(),
+        Structure::DelayValve.as_str(),
+        Structure::DelayCommand.as_str(),
+        Structure::DelayMeasurement.as_str(),
+        Structure::DelayPiston.as_str(),
+    ];
+}
+
+impl Serialize for Choice {
+    fn serialize<S: Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        match self {
+            Choice::Auto => s.serialize_str(Choice::NAMES[0]),
+            Choice::Fixed(structure) => structure.serialize(s),
+        }
+    }
+}
+
+impl<'de> Deserialize<'de> for Choice {
+    fn deserialize<D: Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        let name = String::deserialize(d)?;
+        if name == Choice::NAMES[0] {
+            return Ok(Choice::Auto);
+        }
+        Structure::ALL
+            .into_iter()
+            .find(|s| s.as_str() == name)
+            .map(Choice::Fixed)
+            .ok_or_else(|| serde::de::Error::unknown_variant(&name, &Choice::NAMES))
+    }
+}
+
+impl JsonSchema for Choice {
+    fn schema_name() -> std::borrow::Cow<'static, str> {
+        "JointStructureChoice".into()
+    }
+
+    fn json_schema(generator: &mut schemars::SchemaGenerator) -> schemars::Schema {
+        let fixed = generator.subschema_for::<Structure>();
+        schemars::json_schema!({
+            "description": "How the joint fit's structure is chosen: by the data, or fixed.",
+            "anyOf": [
+                {
+                    "description": "Chosen by the data among the structures (nested F tests; among the modes at different places, the lowest cost).",
+                    "type": "string",
+                    "const": "auto"
+                },
+                fixed
+            ]
+        })
+    }
 }
 
 /// The F test of a structure against the one chosen before it.
@@ -485,7 +546,7 @@ fn f_test(small: &JointFit, big: &JointFit) -> FTest {
 /// makes (rich and clean campaigns, the coverage seeds): wherever the two
 /// starts, each run to the end, reach optima that differ, the race picked
 /// the start of the lower one, but once, where neither converged (a clean
-/// campaign, whose data have no valve mode to find). Since issue 23 the
+/// campaign, whose data have no valve mode to find). The
 /// race and the leg after it run on the grid's quarter of the bins, and
 /// only the last leg on every bin; the rule is the same for each place.
 const RACE_ITERATIONS: u64 = 3;

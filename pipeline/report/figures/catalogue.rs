@@ -20,10 +20,10 @@ use crate::fit::band::response_std;
 use crate::fit::{Intersample, hold_response};
 use crate::frf::Estimator;
 use crate::lti::TransferFunction;
+use crate::lti::complex_vec;
 use crate::manifest::Role;
 use crate::model::{LinearSpecimen, RigParams, x1_u_std};
 use crate::report::{FigureSpec, Measured};
-use crate::results::complex_vec;
 use crate::results::{RunResult, SensitivityResult, TfResult};
 use crate::sensitivity::montecarlo::{MonteCarlo, MonteCarloPoint, PerParameter};
 use crate::tracking::compensator;
@@ -33,8 +33,11 @@ use crate::validate::csi::Csi;
 /// Frequency (Hz) where the paper's FRF figures stop.
 pub const FRF_MAX_HZ: f64 = 30.0;
 
-/// Frequency (Hz) where the force path's bins (Figs. 16-17, Eq. 45) stop.
-pub const FORCE_FRF_MAX_HZ: f64 = 35.0;
+/// Frequency (Hz) where the force path's bins (Figs. 16-17, Eq. 45) stop:
+/// all the analysis keeps.
+pub const FORCE_FRF_MAX_HZ: f64 = crate::frf::KEPT_MAX_HZ;
+
+const _: () = assert!(FRF_MAX_HZ <= crate::frf::KEPT_MAX_HZ);
 
 /// A run's figures that do not depend on the rig, drawn as soon as its log
 /// is analysed: the FRF (for a validation run the caller passes the
@@ -650,7 +653,7 @@ pub fn subspace_figure(
 /// Points of the compensator's frequency-response figure.
 const COMPENSATOR_POINTS: usize = 300;
 
-/// A validation run's compensator (issue 27): the predicted FRF of the
+/// A validation run's compensator: the predicted FRF of the
 /// held plant `plant` (x1/u with the run's specimen) with and without it,
 /// from the band's bottom to past the low-pass's cut-off; and how the
 /// compensated tracking degrades when the specimen's stiffness differs
@@ -828,7 +831,7 @@ fn overlay_figure(runs: &[OverlayRun]) -> FigureSpec {
     };
     FigureSpec {
         // Not `frf-identification`: run figures are `frf-<run>`, and a run
-        // named `identification` overwrote it (issue 24). Campaign figures
+        // named `identification` overwrote it. Campaign figures
         // start as a run's do (`frf-`, `force-`, `time-`, `residual-`).
         id: "identification-frf".into(),
         title: "All identification runs".into(),
@@ -974,7 +977,7 @@ pub fn history_figure(entries: &[crate::drift::Entry]) -> Option<FigureSpec> {
     })
 }
 
-/// The Monte Carlo (issue 13): each parameter's spread against k, solid,
+/// The Monte Carlo: each parameter's spread against k, solid,
 /// beside the analytic prediction at the same stiffnesses, dashed, in the
 /// same colour; and each parameter's bias against k.
 fn monte_carlo_figures(mc: &MonteCarlo, springs: &[f64]) -> Vec<FigureSpec> {

@@ -1,4 +1,4 @@
-//! Whether a run's data support a pure delay its fit lacks (issue 14: the
+//! Whether a run's data support a pure delay its fit lacks (the
 //! structure the data support, asked of every per-run fit made without a
 //! delay, which covers runs the joint fit cannot, such as a press driving
 //! an unknown specimen).

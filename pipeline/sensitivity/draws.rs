@@ -1,11 +1,10 @@
-//! The stiffness sensitivity by Monte Carlo (paper Sec. 2.3, issue 13
-//! part 2): at each stiffness, a no-specimen run and a spring run simulated
+//! The stiffness sensitivity's Monte Carlo draws (paper Sec. 2.3): at each stiffness, a no-specimen run and a spring run simulated
 //! from the identified rig (Eq. 10, exactly: zero-order hold and the
 //! campaign's delay, `simulate::discrete`), driven by the campaign's own
 //! measured command, their displacement read with white noise of the level
 //! the campaign's FRF variance implies and rounded to its converter's grid;
 //! each pair identified by the function that identifies a run
-//! (`acquire::fit_run`: the campaign's own FRF and fit settings, refused as
+//! (`identify::fit_run`: the campaign's own FRF and fit settings, refused as
 //! `servoid run` refuses a run: too few bins, unstable, not converged), and
 //! Eqs. 18-20. The bias and spread of beta1, a1b0, a2 and a3 against k.
 //!
@@ -24,13 +23,13 @@
 use rand_distr::{Distribution, Normal, StandardNormal};
 use rayon::prelude::*;
 
-use super::acquire::{RunTfError, fit_run};
+use super::montecarlo::{MonteCarloPoint, point};
 use crate::frf::{self, EtfeSpectra, EtfeSynthesis, Frf, FrfPlan};
-use crate::identify::{self, SecondOrder, SpringRun, TfEstimate, identify_rig};
+use crate::identify::{
+    self, IdentificationPlan, RunTfError, SecondOrder, SpringRun, TfEstimate, fit_run, identify_rig,
+};
 use crate::lti::LtiError;
-use crate::manifest::IdentificationPlan;
 use crate::model::{LinearSpecimen, RigParams, tf_x1_u};
-use crate::sensitivity::montecarlo::{MonteCarloPoint, point};
 use crate::simulate::{SimError, discrete::simulate_linear, seeded_rng};
 
 /// What the simulated runs are made of.
@@ -226,7 +225,7 @@ fn clean(
 
 /// One identification: the two noiseless responses `(none, spring)` read
 /// with noise from stream (i, seed), each identified as `servoid
-/// run` identifies a run (`acquire::fit_run`), and Eqs. 18-20.
+/// run` identifies a run (`identify::fit_run`), and Eqs. 18-20.
 fn identify_once(
     input: &McInput<'_>,
     reading: &Reading,
@@ -299,7 +298,7 @@ mod tests {
     use super::*;
     use crate::fit::{DelayPlan, Intersample};
     use crate::frf::{Detrend, Estimator, FrfPlan, Window};
-    use crate::run::acquire::{FitData, fit_options};
+    use crate::identify::{FitData, fit_options};
     use crate::sensitivity::{CoefficientNoise, NoiseProfile, stiffness_sweep};
 
     /// A linear chirp 0.5-40 Hz over 20 s at 1 kHz, 3 mm, with a second of

@@ -1,0 +1,287 @@
+//! A run's transfer function from its FRF: the bins the fit is given, the
+//! fit's options from the campaign's settings, and the fit itself, refused
+//! where `servoid run` refuses it (too few bins, no convergence, unstable).
+//! With `auto`'s plan the record's transient and the bins' noise level are
+//! fitted first (`fit::transient`), then the model on what they leave.
+
+use crate::fit::{self, DelayPlan, FitError, FitInput, FitOptions, TfFit};
+use crate::frf::{self, Frf, FrfError, FrfPlan};
+
+use super::IdentificationPlan;
+
+/// What the fit is given from an FRF: the bins of `mask` whose variance is
+/// defined, their frequencies, estimates and E|dH|^2.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct FitData {
+    pub freq_hz: Vec<f64>,
+    #[serde(with = "crate::lti::complex_vec")]
+    pub h: Vec<nalgebra::Complex<f64>>,
+    pub variance: Vec<f64>,
+    /// The input's one-sided auto-spectral density at those bins
+    /// (unit^2/Hz), which turns the variance into a noise level.
+    pub suu: Vec<f64>,
+    /// The FRF's grid spacing (Hz).
+    pub bin_hz: f64,
+    /// The lag in bins from which the FRF's errors are independent
+    /// (`FrfPlan::independent_lag` of the run's settings).
+    pub lag: usize,
+}
+
+impl FitData {
+    /// The bins of `mask`, of an FRF `plan` made.
+    pub fn of(h: &Frf, mask: &[bool], plan: &FrfPlan) -> Self {
+        let (bins, variance) = Self::usable(h, mask);
+        Self::at(h, &bins, variance, plan)
+    }
+
+    /// The bins of `mask` whose variance is defined, and E|dH|^2 there.
+    fn usable(h: &Frf, mask: &[bool]) -> (Vec<usize>, Vec<f64>) {
+        let masked: Vec<usize> = (0..h.freq_hz.len()).filter(|&i| mask[i]).collect();
+        // frf gives the variance of Re(H) and of Im(H) each; fit wants
+        // E|dH|^2, their sum. A bin whose variance is undefined (no noise
+        // information around it) carries no weight and is left out.
+        masked
+            .iter()
+            .zip(frf::h_variance_at(h, &masked))
+            .filter(|(_, v)| v.is_finite())
+            .map(|(&i, v)| (i, 2.0 * v))
+            .unzip()
+    }
+
+    /// `h` at `bins`, with their variances.
+    fn at(h: &Frf, bins: &[usize], variance: Vec<f64>, plan: &FrfPlan) -> Self {
+        Self {
+            freq_hz: bins.iter().map(|&i| h.freq_hz[i]).collect(),
+            h: bins.iter().map(|&i| h.h[i]).collect(),
+            variance,
+            suu: bins.iter().map(|&i| h.suu[i]).collect(),
+            bin_hz: h.resolution_hz,
+            lag: plan.independent_lag(),
+        }
+    }
+
+    pub fn input(&self) -> FitInput<'_> {
+        FitInput {
+            freq_hz: &self.freq_hz,
+            h: &self.h,
+            variance: &self.variance,
+        }
+    }
+}
+
+/// The fewest band bins a fit may use: one per parameter, at least three
+/// (each bin gives two real equations, a margin over the bare minimum).
+fn bins_needed(ident: &IdentificationPlan) -> usize {
+    let n_params = ident.numerator_order
+        + 1
+        + ident.denominator_order
+        + usize::from(matches!(ident.delay, DelayPlan::Fit { .. }));
+    n_params.max(3)
+}
+
+/// The fit options of a campaign's identification settings for a run
+/// whose FRF was made by `plan` from a log sampled at `sample_rate_hz`.
+pub fn fit_options(ident: &IdentificationPlan, plan: &FrfPlan, sample_rate_hz: f64) -> FitOptions {
+    let mut opts = FitOptions::new(
+        ident.numerator_order,
+        ident.denominator_order,
+        sample_rate_hz,
+    );
+    opts.intersample = ident.intersample;
+    opts.delay = ident.delay;
+    opts.max_iterations = fit::RUN_MAX_ITERATIONS;
+    opts.independent_lag = plan.independent_lag();
+    opts
+}
+
+/// Why a run's FRF gives no transfer function: the one refusal `servoid
+/// run` and the Monte Carlo's simulated runs share.
+#[derive(Debug, thiserror::Error)]
+pub enum RunTfError {
+    #[error("FRF: {0}")]
+    Frf(#[from] FrfError),
+    #[error("the command has no energy in the fit band {lo}-{hi} Hz ({fraction:.2e} of its power)")]
+    NoExcitation { lo: f64, hi: f64, fraction: f64 },
+    #[error(
+        "only {n} bins in {lo}-{hi} Hz have coherence >= {coherence_min}; the fit needs at least {need} (lower identification.coherence_min or widen the band)"
+    )]
+    TooFewBins {
+        n: usize,
+        need: usize,
+        lo: f64,
+        hi: f64,
+        coherence_min: f64,
+    },
+    #[error("transfer-function fit: {0}")]
+    Fit(#[from] FitError),
+    #[error("the fit did not converge ({termination}); refusing a model that is not an optimum")]
+    NotConverged { termination: String },
+    #[error(
+        "the fitted model is unstable (poles {poles}); refusing it. Swapped command and displacement columns give this: check the channels' columns"
+    )]
+    Unstable { poles: String },
+}
+
+impl RunTfError {
+    /// What kind of refusal this is, in a few words: how the Monte Carlo
+    /// counts its failed draws.
+    pub fn kind(&self) -> &'static str {
+        match self {
+            RunTfError::Frf(_) => "the FRF failed",
+            RunTfError::NoExcitation { .. } => "no excitation in the band",
+            RunTfError::TooFewBins { .. } => "too few bins pass the coherence limit",
+            RunTfError::Fit(_) => "the fit failed",
+            RunTfError::NotConverged { .. } => "a fit that did not converge",
+            RunTfError::Unstable { .. } => "an unstable fit",
+        }
+    }
+}
+
+/// A run's transfer function fitted to its FRF `h` (made by `plan`) on the
+/// bins of `mask` (the band's, coherent enough), refused as `servoid run`
+/// refuses a run: too few bins for the model, a fit that fails, is
+/// unstable or did not converge. The fit's own warnings are in
+/// `TfFit::warnings`.
+///
+/// With `plan.transient` the record's transient is fitted beside the model
+/// (`fit::transient`) and taken out of `h`; the bins' variances are then
+/// estimated again from `h` without it (the ETFE's local noise level
+/// counts a transient as noise) and the model fitted once more with them.
+pub fn fit_run(
+    h: &mut Frf,
+    mask: &[bool],
+    band_hz: (f64, f64),
+    ident: &IdentificationPlan,
+    plan: &FrfPlan,
+    sample_rate_hz: f64,
+) -> Result<(TfFit, FitData), RunTfError> {
+    let used = mask.iter().filter(|m| **m).count();
+    let need = bins_needed(ident);
+    if used < need {
+        return Err(RunTfError::TooFewBins {
+            n: used,
+            need,
+            lo: band_hz.0,
+            hi: band_hz.1,
+            coherence_min: ident.coherence_min,
+        });
+    }
+    let opts = fit_options(ident, plan, sample_rate_hz);
+    let (fit, data) = if plan.model_noise {
+        refined_fit(h, mask, plan, &opts, ident.max_delay_s)?
+    } else {
+        let data = FitData::of(h, mask, plan);
+        (fit::fit(&data.input(), &opts)?, data)
+    };
+    if !fit.stable {
+        let poles = fit
+            .tf
+            .poles()
+            .iter()
+            .map(|p| format!("{:.4}{:+.4}j", p.re, p.im))
+            .collect::<Vec<_>>()
+            .join(", ");
+        return Err(RunTfError::Unstable { poles });
+    }
+    if !fit.converged {
+        return Err(RunTfError::NotConverged {
+            termination: fit.termination.clone(),
+        });
+    }
+    Ok((fit, data))
+}
+
+/// [`fit_run`]'s fit as `auto` makes it (`plan.model_noise`). First what
+/// is not the model: the record's transient (when `plan.transient`) and
+/// the bins' noise level, from a fit of the model with a delay (up to
+/// `max_delay_s`, whatever the manifest's delay: a sensor's delay the
+/// model lacks would leave the transient's columns wrong and its misfit
+/// in the noise); the transient is taken out of `h` and the noise level
+/// read from what that fit leaves. Then the manifest's model, fitted to
+/// `h` on those variances. The data returned are `h` at its bins with the
+/// variances the model was weighted by, so that its cost is theirs.
+fn refined_fit(
+    h: &mut Frf,
+    mask: &[bool],
+    plan: &FrfPlan,
+    opts: &FitOptions,
+    max_delay_s: f64,
+) -> Result<(TfFit, FitData), FitError> {
+    let u = h.input_dft.clone().filter(|_| plan.transient.is_some());
+    let (bins, variance) = FitData::usable(h, mask);
+    let data = FitData::at(h, &bins, variance, plan);
+    let first = if opts.delay == DelayPlan::None {
+        // The delay from 0, the rest from the fit without it or the
+        // transient: a delay of a few ms is well inside the band's phase,
+        // where the search needs no grid.
+        let nuisance = FitOptions {
+            delay: DelayPlan::Fit { max_s: max_delay_s },
+            ..opts.clone()
+        };
+        let mut start = fit::fit(&data.input(), opts)?.params;
+        start.push(0.0);
+        fit_at(&data, &bins, u.as_deref(), &nuisance, Some(&start))?
+    } else {
+        fit_at(&data, &bins, u.as_deref(), opts, None)?
+    };
+    if let Some(t) = &first.transient {
+        h.without_transient(|f, u| t.at(f, u));
+    }
+    let (bins, variance) = residual_noise(h, mask, &first, opts);
+    let data = FitData::at(h, &bins, variance, plan);
+    let start = &first.params[..first.shape.n_rational()];
+    let start: Vec<f64> = match opts.delay {
+        DelayPlan::Fit { .. } => first.params.clone(),
+        _ => start.to_vec(),
+    };
+    let fit = fit::fit_from(&data.input(), opts, &start)?;
+    Ok((fit, data))
+}
+
+/// One fit of `data` (at the FRF's `bins`), with the record's transient
+/// when the command's DFT `u` is given, from `start` when given.
+fn fit_at(
+    data: &FitData,
+    bins: &[usize],
+    u: Option<&[nalgebra::Complex<f64>]>,
+    opts: &FitOptions,
+    start: Option<&[f64]>,
+) -> Result<TfFit, FitError> {
+    match (u, start) {
+        (Some(u), _) => {
+            let at: Vec<_> = bins.iter().map(|&k| u[k]).collect();
+            fit::fit_with_transient(&data.input(), &at, opts, start)
+        }
+        (None, Some(start)) => fit::fit_from(&data.input(), opts, start),
+        (None, None) => fit::fit(&data.input(), opts),
+    }
+}
+
+/// The bins of `mask` with a defined noise level and E|dH|^2 there, read
+/// (as the ETFE reads it, `frf::h_variance_at`) from `h` less `fit`'s model
+/// with the hold: the local polynomials then only follow the model's
+/// misfit, which is smooth, where on `h` itself they must follow the
+/// plant's curvature.
+fn residual_noise(
+    h: &Frf,
+    mask: &[bool],
+    fit: &TfFit,
+    opts: &FitOptions,
+) -> (Vec<usize>, Vec<f64>) {
+    // The bins the mask holds and the noise estimate's reach beyond them.
+    let top = h
+        .freq_hz
+        .iter()
+        .zip(mask)
+        .filter(|(_, m)| **m)
+        .map(|(f, _)| *f)
+        .fold(0.0, f64::max);
+    let mut residual = h.head(top, frf::VARIANCE_REACH_BINS);
+    for (hk, &f) in residual.h.iter_mut().zip(&h.freq_hz) {
+        if f > 0.0 {
+            *hk -= fit.tf.freq_response(f)
+                * fit::hold_response(opts.intersample, opts.sample_rate_hz, f);
+        }
+    }
+    FitData::usable(&residual, &mask[..residual.h.len()])
+}
