@@ -25,6 +25,7 @@
 use std::hint::black_box;
 
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
+use servoid::analysis::log_stage::log_stage;
 use servoid::fit::fit;
 use servoid::frf;
 use servoid::frf::FrfRequest;
@@ -32,7 +33,6 @@ use servoid::identify::{FitData, fit_options, fit_run};
 use servoid::ingest::LogFormat;
 use servoid::manifest::simulation::load_simulation_str;
 use servoid::manifest::{RunSource, load};
-use servoid::run::log_stage::log_stage;
 use servoid::run::simulate::simulate_campaign;
 
 fn bench_identify(c: &mut Criterion) {
@@ -74,7 +74,7 @@ fn bench_identify(c: &mut Criterion) {
         b.iter(|| log_stage(black_box(run), black_box(log_plan), ident).unwrap())
     });
 
-    // The FRF and the fit alone, as run/log_stage.rs calls them.
+    // The FRF and the fit alone, as analysis/log_stage.rs calls them.
     group.throughput(Throughput::Elements(u.len() as u64));
     group.bench_function("frf_only", |b| {
         b.iter(|| frf::estimate(black_box(&u), black_box(&y), fs, plan).unwrap())

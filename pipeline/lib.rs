@@ -11,12 +11,15 @@
 //!
 //! 1. `cli`: parses arguments, prints, decides the exit code.
 //! 2. `run`: the only orchestrator. It loads either kind of manifest,
-//!    analyses, draws the figures and writes the outputs.
+//!    schedules the analysis, draws the figures and writes the outputs.
 //! 3. `report`: writes results.json, figures, the page and logs.
-//! 4. `results`: the output contract (results.json, truth.json).
-//! 5. `manifest`: reads and checks the manifests, and builds each stage's
+//! 4. `analysis`: a campaign's identification: each run's log stage, the
+//!    rig (sequential and joint), the comparisons; checked plans in,
+//!    results out.
+//! 5. `results`: the output contract (results.json, truth.json).
+//! 6. `manifest`: reads and checks the manifests, and builds each stage's
 //!    own settings.
-//! 6. The stages, each owning its settings type: `ingest` (the only module
+//! 7. The stages, each owning its settings type: `ingest` (the only module
 //!    that reads data files), `frf`, `fit`, `identify` (Eqs. 18-20),
 //!    `validate` (Eqs. 47-48), `sensitivity`, `simulate`, `drift` (the rig's
 //!    history and its alarm rule), `tracking` (how the actuator follows its
@@ -28,15 +31,16 @@
 //!    `simulate`'s exact discretisation and integrators, and `tracking`
 //!    measures in `validate`'s windows of a sweep and drives the
 //!    compensated plant with `simulate`'s discretisation.
-//! 7. `model`: the plant of Eq. 10 and its canonical form (Eqs. 34-35).
-//! 8. `lti`: transfer functions and state spaces.
-//! 9. `poly` (real polynomials) and `units` (physical units and their SI
-//!    factors).
+//! 8. `model`: the plant of Eq. 10 and its canonical form (Eqs. 34-35).
+//! 9. `lti`: transfer functions and state spaces.
+//! 10. `poly` (real polynomials) and `units` (physical units and their SI
+//!     factors).
 //!
-//! The numerical core (layers 6-9) is pure: data in, typed results out, the
+//! The numerical core (layers 7-10) is pure: data in, typed results out, the
 //! same bits whatever the thread count. Errors are typed per stage and reach
 //! `run::RunError` through `#[from]`.
 
+pub mod analysis;
 pub mod cli;
 pub mod drift;
 pub mod fit;

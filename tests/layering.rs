@@ -14,6 +14,7 @@ const LAYERS: &[&[&str]] = &[
     &["cli"],
     &["run"],
     &["report"],
+    &["analysis"],
     &["results"],
     &["manifest"],
     &[

@@ -116,6 +116,19 @@ pub struct Measured<'a> {
     pub fit: Option<&'a crate::fit::TfFit>,
 }
 
+impl<'a> Measured<'a> {
+    /// A log stage as its figures and tables show it.
+    pub fn of(stage: &'a crate::analysis::log_stage::LogStage) -> Self {
+        Self {
+            sample_rate_hz: stage.log.sample_rate_hz,
+            frf: &stage.frf,
+            force_frf: stage.force_frf.as_ref(),
+            mask: &stage.mask,
+            fit: stage.fit.as_ref(),
+        }
+    }
+}
+
 /// Which figure files a run writes beside its pages, which show them from
 /// there (PNG where there is one, else SVG). The command line's `--figures`
 /// takes the same names (lowercase), with these lines as its help.

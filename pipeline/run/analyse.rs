@@ -24,12 +24,12 @@ use std::time::Instant;
 
 use rayon::prelude::*;
 
-use super::compare::compare;
-use super::evidence::RigInput;
-use super::rig;
 use super::sensitivity::NoiseSource;
 use super::sink::{Done, Probed, Sink};
 use super::step::{self, Output, RigOutcome};
+use crate::analysis::compare::compare;
+use crate::analysis::evidence::RigInput;
+use crate::analysis::rig;
 use crate::ingest::LogFile;
 use crate::manifest::{Campaign, Role, RunPlan};
 use crate::model::{self, CnTerm, LinearSdof, RigParams};

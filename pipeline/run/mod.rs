@@ -7,13 +7,8 @@
 
 mod analyse;
 mod cache;
-mod compare;
-mod evidence;
 mod history;
 pub mod init;
-mod joint;
-pub mod log_stage;
-mod rig;
 mod sensitivity;
 mod shard;
 pub mod simulate;
@@ -23,8 +18,8 @@ mod verify;
 
 use std::path::{Path, PathBuf};
 
+pub use crate::analysis::{FailedRun, RigError};
 pub use analyse::{Event, Observer, RunError, Unobserved, analyse};
-pub use rig::{FailedRun, RigError};
 pub use shard::{MergeError, Shard, ShardInfo};
 pub use verify::{Difference, FileDifference, LogDifference, Verification, VerifyError};
 

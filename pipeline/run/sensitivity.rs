@@ -7,7 +7,7 @@
 //! settings), so a rerun with the same rig does not repeat it.
 
 use super::cache::{self, Cache};
-use super::log_stage::replayed_command;
+use crate::analysis::log_stage::replayed_command;
 use crate::frf::FrfPlan;
 use crate::identify;
 use crate::ingest::IngestError;

@@ -57,7 +57,7 @@ pub(super) struct Done {
     /// The run's tables as written (relative to the output folder).
     pub tables: Vec<String>,
     /// Why its log could not be read or analysed (never from the cache).
-    pub log_error: Option<std::sync::Arc<super::log_stage::LogStageError>>,
+    pub log_error: Option<std::sync::Arc<crate::analysis::log_stage::LogStageError>>,
     pub seconds: f64,
     pub cached: bool,
 }

@@ -8,10 +8,10 @@ use std::sync::Arc;
 
 use nalgebra::Complex;
 
-use super::evidence::{Evidence, RigInput, ValidationEvidence};
-use super::log_stage::{LogStage, LogStageError, OwnTf, own_tf_with};
-use super::rig::RigError;
 use super::sensitivity::NoiseSource;
+use crate::analysis::evidence::{Evidence, RigInput, ValidationEvidence};
+use crate::analysis::log_stage::{LogStage, LogStageError, OwnTf, own_tf_with};
+use crate::analysis::rig::RigError;
 use crate::fit::adequacy::{self, Adequacy, Residuals};
 use crate::fit::{self, DelayPlan, Intersample, TfFit};
 use crate::frf::{self, Frf};
@@ -166,7 +166,7 @@ impl Output {
     fn unfinished(result: RunResult, stage: Option<&LogStage>, wants: Wants) -> Self {
         let figures = match stage {
             Some(st) if wants.figures => {
-                catalogue::log_figures(&result, &st.measured(), None, wants.intersample, None).0
+                catalogue::log_figures(&result, &Measured::of(st), None, wants.intersample, None).0
             }
             _ => Vec::new(),
         };
@@ -216,7 +216,7 @@ pub(super) fn without_rig(
         ..Kept::of(result)
     };
     let mut figures = Vec::new();
-    let measured = stage.as_deref().map(LogStage::measured);
+    let measured = stage.as_deref().map(Measured::of);
     if let (Some(st), Some(m)) = (&stage, &measured) {
         kept.force = ForceBins::of(m);
         if plan.role == Role::NoSpecimen {
@@ -442,7 +442,7 @@ fn validated(
         predicted,
         compensator,
     });
-    let measured = st.measured();
+    let measured = Measured::of(st);
     let bins = ForceBins::of(&measured);
     let csi = linear.and_then(|lin| {
         validate::csi::csi(&plan.id, rig_at_p, &lin, bins.as_ref().map(ForceBins::bins))
@@ -797,7 +797,7 @@ fn linearity_result(l: &frf::Linearity) -> LinearityResult {
         linear: !l.nonlinear(),
         displacement: l.displacement.as_ref().map(found),
         force: l.force.as_ref().map(found),
-        note: super::log_stage::linearity_note(l),
+        note: crate::analysis::log_stage::linearity_note(l),
     }
 }
 

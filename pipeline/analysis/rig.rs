@@ -59,7 +59,7 @@ fn join(failed: &[FailedRun]) -> String {
 /// The rig: identified when the campaign can (Fig. 6), else given. A given
 /// rig beside an identifying campaign is reported in `warnings`. `inputs`
 /// follow the campaign's runs.
-pub(super) fn establish<'a>(
+pub fn establish<'a>(
     campaign: &'a Campaign,
     inputs: impl Iterator<Item = &'a RigInput>,
     warnings: &mut Vec<String>,

@@ -11,7 +11,7 @@ use crate::lti::TransferFunction;
 
 /// What a run gives the rig's identification.
 #[derive(Debug, Clone)]
-pub(super) enum RigInput {
+pub enum RigInput {
     /// Its model and what its fit was given.
     Estimate(Box<Evidence>),
     /// Its first stage failed.
@@ -25,7 +25,7 @@ pub(super) enum RigInput {
 
 /// A run's model, and what the joint fit needs of it.
 #[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
-pub(super) struct Evidence {
+pub struct Evidence {
     /// Its transfer function, with the covariance of (n0, d1, d0) when
     /// fitted.
     pub tf: TransferFunction,
@@ -44,7 +44,7 @@ pub(super) struct Evidence {
 /// and, with a force channel, of its f/u (each with the coherence test the
 /// identification runs pass).
 #[derive(Debug, Clone)]
-pub(super) struct ValidationEvidence {
+pub struct ValidationEvidence {
     pub displacement: FitData,
     pub force: Option<FitData>,
     pub sample_rate_hz: f64,

@@ -13,7 +13,6 @@ use crate::identify::{FitData, RunTfError, fit_run};
 use crate::ingest::{self, IngestError, Log, LogFile, LogPlan, Needs};
 use crate::lti::TransferFunction;
 use crate::manifest::{Campaign, Role, RunPlan, RunSource};
-use crate::report::Measured;
 use crate::results::TfSource;
 use crate::simulate::specimen::SpecimenModel;
 
@@ -104,19 +103,6 @@ pub struct LogStage {
     /// no-specimen run reads its variance from here.
     pub fit_data: Option<FitData>,
     pub warnings: Vec<String>,
-}
-
-impl LogStage {
-    /// The stage as its figures and tables show it.
-    pub fn measured(&self) -> Measured<'_> {
-        Measured {
-            sample_rate_hz: self.log.sample_rate_hz,
-            frf: &self.frf,
-            force_frf: self.force_frf.as_ref(),
-            mask: &self.mask,
-            fit: self.fit.as_ref(),
-        }
-    }
 }
 
 /// Why a log stage failed; the message names the run's file.
@@ -376,7 +362,7 @@ fn nonlinearity_warning(l: &frf::Linearity) -> Option<String> {
 }
 
 /// The linearity check in words, as the run's page says it.
-pub(super) fn linearity_note(l: &frf::Linearity) -> String {
+pub fn linearity_note(l: &frf::Linearity) -> String {
     if !l.nonlinear() {
         return format!(
             "no harmonics of the command beyond a linear rig's in the {} blocks of the sweep checked",

@@ -56,7 +56,7 @@ fn lookup(q: &Quantity, r: &Results) -> Option<f64> {
     }
 }
 
-pub(super) fn compare(campaign: &Campaign, results: &Results) -> Vec<Comparison> {
+pub fn compare(campaign: &Campaign, results: &Results) -> Vec<Comparison> {
     campaign
         .references
         .iter()

@@ -68,7 +68,7 @@ fn described(s: Structure, split: bool) -> String {
 /// uses it. Warnings (a failed or inadequate fit, a manifest structure the
 /// data reject) go to `warnings`. None when no run has bins to fit
 /// (published models only).
-pub(super) fn joint(
+pub fn joint(
     campaign: &Campaign,
     evidence: &[(&RunPlan, &Evidence)],
     validation: &[(&RunPlan, &ValidationEvidence)],
@@ -667,7 +667,7 @@ fn r1(rig: &RigParams, cov: &[[f64; 4]; 4]) -> Estimate {
 
 /// The joint estimate as the rig's estimates (a1b0 at the reference P
 /// gain), when the campaign uses it.
-pub(super) fn used_estimates(r: &JointResult) -> Option<RigEstimates> {
+pub fn used_estimates(r: &JointResult) -> Option<RigEstimates> {
     if !r.used {
         return None;
     }

@@ -1,0 +1,15 @@
+//! A campaign's identification, run by run and together: each log read,
+//! checked and its FRFs estimated and fitted (`log_stage`), what each run
+//! gives the rig (`evidence`), the rig by the paper's procedure (`rig`,
+//! Fig. 6, Eqs. 18-20) and by the joint grey-box fit (`joint`), and the
+//! published numbers beside the recomputed ones (`compare`). Pure: a
+//! checked campaign and its logs' bytes in, typed results out; `run`
+//! schedules it and writes what it gives.
+
+pub mod compare;
+pub mod evidence;
+pub mod joint;
+pub mod log_stage;
+pub mod rig;
+
+pub use rig::{FailedRun, RigError};
