@@ -1,4 +1,4 @@
-//! The commands the README and docs/ give run as written (issue 25, item
+//! The commands the README and docs/ give run as written (item
 //! 6). Each fenced `sh` block's commands are read (a `\` continues a line):
 //!
 //! - `cargo run --release -- ARGS` and `servoid ARGS` whose manifest is in
@@ -14,7 +14,12 @@
 //! - every `cargo bench --bench NAME` written anywhere in them names a
 //!   bench Cargo.toml declares;
 //! - every fenced `toml` block passes `servoid check`: the complete
-//!   manifest as written, each fragment merged into it.
+//!   manifest as written, each fragment merged into it;
+//! - the worked night's commands (docs/manifest.md, on
+//!   `experiments/nightly/`) depend on each other (tonight's logs, one
+//!   history): they run in order, as written, in a copy of the example, and
+//!   the nights' exit codes, alarm and history are checked against the
+//!   simulated truth.
 //!
 //! `cargo test` is this test's own command; other shell lines (`case`,
 //! `cargo install`) are the reader's.
@@ -153,6 +158,10 @@ fn every_command_in_the_readme_and_docs_runs_as_written() {
                 }
                 continue;
             };
+            if args.get(1).is_some_and(|m| m.starts_with(WORKED_NIGHT)) {
+                // Run in order by the_worked_night_runs_as_written_and_alarms_on_the_drifted_night.
+                continue;
+            }
             let manifest = args.get(1).map(|m| root().join(m));
             match manifest {
                 Some(m) if m.is_file() => {
@@ -255,8 +264,7 @@ fn merge(base: &mut toml::Table, fragment: toml::Table) {
     }
 }
 
-/// Every manifest example in the docs passes `servoid check` (issue 25,
-/// item 6): the complete one as written, and each fragment (`[history]`,
+/// Every manifest example in the docs passes `servoid check`: the complete one as written, and each fragment (`[history]`,
 /// `[run_table]`, `[identification.joint]`, `[sensitivity]`) merged into
 /// it. A run table's file is written for the check, with one row, as the
 /// fragment names it. The complete example is the first block that has
@@ -328,4 +336,251 @@ fn toml_blocks_are_read_with_their_indentation_taken_off() {
         toml::to_string(&base).unwrap(),
         "[a]\nb = 1\nc = 3\n\n[d]\ne = 4\n"
     );
+}
+
+/// The worked night's folder (docs/manifest.md, "A worked night"): the
+/// commands on its files run together, in order.
+const WORKED_NIGHT: &str = "experiments/nightly/";
+
+/// Copy the folder `from` into `to`, but for what the walkthrough writes
+/// (`incoming/`, its lock): a checkout that tried the example copies as a
+/// fresh one.
+fn copy_example(from: &Path, to: &Path) {
+    std::fs::create_dir_all(to).unwrap();
+    for e in std::fs::read_dir(from).unwrap() {
+        let e = e.unwrap();
+        let name = e.file_name();
+        if name.to_string_lossy().contains("incoming") {
+            continue;
+        }
+        let target = to.join(name);
+        if e.file_type().unwrap().is_dir() {
+            copy_example(&e.path(), &target);
+        } else {
+            std::fs::copy(e.path(), &target).unwrap();
+        }
+    }
+}
+
+/// A simulation manifest's true rig as the history states it: beta1, a1b0
+/// at P = 1, a2, a3.
+fn simulated_rig(path: &Path) -> Vec<(&'static str, f64)> {
+    let text = std::fs::read_to_string(path).unwrap();
+    let sim: toml::Table = toml::from_str(&text).unwrap();
+    let p = &sim["rig"]["parameters"];
+    let num = |k: &str| p[k].as_float().unwrap_or_else(|| panic!("{path:?}: {k}"));
+    let p_gain = p
+        .get("p_gain")
+        .and_then(toml::Value::as_float)
+        .unwrap_or(1.0);
+    vec![
+        ("beta1", num("beta1_per_s")),
+        ("a1b0", num("a1b0_n_per_m_s2") / p_gain),
+        ("a2", num("a2_n_per_m")),
+        ("a3", num("a3_per_s")),
+    ]
+}
+
+/// The median (the mean of the middle two for an even count); None for
+/// none.
+fn median(v: &[f64]) -> Option<f64> {
+    let mut s = v.to_vec();
+    s.sort_by(f64::total_cmp);
+    let n = s.len();
+    match n {
+        0 => None,
+        _ if n % 2 == 1 => Some(s[n / 2]),
+        _ => Some(0.5 * (s[n / 2 - 1] + s[n / 2])),
+    }
+}
+
+/// How close each night's identified rig is to its truth: the simulator's
+/// own tolerance for these logs (the `tolerance_pct = 0.5` of the
+/// references it writes into its campaign.toml). A drift of a few percent
+/// is several times this.
+const TRUTH_TOLERANCE: f64 = 0.005;
+
+/// docs/manifest.md, "A worked night": the commands on
+/// `experiments/nightly/` run as written, in order, from the root of a
+/// copy of the example (the repository gets neither logs nor reports):
+/// `simulate` leaves tonight's logs, `run` reads them into one folder. The
+/// expectations come from the simulation manifests, not from the output: a
+/// night whose true rig is the first night's exits 0 without an alarm; a
+/// night whose truth moved exits 3 with one alarm per moved parameter,
+/// naming it, its deviation the truth's move (it needs `MIN_HISTORY`
+/// earlier nights, which the walkthrough must give it). history.parquet
+/// then holds every night once, in order, each within 0.5 % of its truth.
+#[test]
+fn the_worked_night_runs_as_written_and_alarms_on_the_drifted_night() {
+    use servoid::drift::MIN_HISTORY;
+    use servoid::ingest::{TableFormat, read_table};
+
+    let mut commands = Vec::new();
+    let mut doc = None;
+    for file in documents() {
+        let text = std::fs::read_to_string(&file).unwrap();
+        for command in sh_commands(&text) {
+            let Some(args) = servoid_args(&command) else {
+                continue;
+            };
+            if args.get(1).is_some_and(|m| m.starts_with(WORKED_NIGHT)) {
+                assert_eq!(
+                    *doc.get_or_insert_with(|| file.clone()),
+                    file,
+                    "the worked night's commands are in two documents: one walkthrough, one order"
+                );
+                commands.push((command, args));
+            }
+        }
+    }
+    let doc = doc.expect("docs/ walk through experiments/nightly/");
+    let example = root().join(WORKED_NIGHT);
+
+    // The manifest and run table the walkthrough shows are the files.
+    let text = std::fs::read_to_string(&doc).unwrap();
+    for (file, lang) in [("night.toml", "toml"), ("runs.csv", "csv")] {
+        let bytes = std::fs::read_to_string(example.join(file)).unwrap();
+        let as_file: String = bytes
+            .lines()
+            .map(|l| format!("{}\n", l.trim_end()))
+            .collect();
+        assert!(
+            fenced_blocks(&text, lang).contains(&as_file),
+            "{}: no `{lang}` block is {WORKED_NIGHT}{file} as it is:\n{as_file}",
+            doc.display()
+        );
+    }
+    let night: toml::Table =
+        toml::from_str(&std::fs::read_to_string(example.join("night.toml")).unwrap()).unwrap();
+    let rig = night["rig"]["name"].as_str().unwrap().to_string();
+
+    let dir = scratch();
+    copy_example(&example, &dir.path().join(WORKED_NIGHT));
+    // Each night's truth, in order; whether tonight's logs are new.
+    let mut truths: Vec<Vec<(&str, f64)>> = Vec::new();
+    let mut fresh = false;
+    let mut out = None;
+    let mut alarmed = 0;
+    for (command, args) in &commands {
+        eprintln!("{}: running `{command}`", doc.display());
+        let refs: Vec<&str> = args.iter().map(String::as_str).collect();
+        let o = servoid(dir.path(), &refs);
+        match args[0].as_str() {
+            "simulate" => {
+                assert_eq!(o.code, 0, "`{command}`:\n{}", o.stderr);
+                truths.push(simulated_rig(&dir.path().join(&args[1])));
+                fresh = true;
+            }
+            "run" => {
+                assert!(fresh, "`{command}` runs no new night's logs");
+                fresh = false;
+                let at = args.iter().position(|a| a == "--out");
+                let given = Path::new(&args[at.expect("the nights' folder is given") + 1]);
+                assert!(
+                    given.is_relative(),
+                    "`{command}`: --out inside the checkout"
+                );
+                let folder = dir.path().join(given);
+                assert_eq!(
+                    *out.get_or_insert_with(|| folder.clone()),
+                    folder,
+                    "every night runs into one folder"
+                );
+                let n = truths.len();
+                let tonight = &truths[n - 1];
+                let earlier = &truths[..n - 1];
+                // Parameters whose truth tonight is not the earlier nights'
+                // (their median, as the rule takes), with how far.
+                let moved: Vec<(&str, f64)> = tonight
+                    .iter()
+                    .enumerate()
+                    .filter_map(|(k, &(name, value))| {
+                        let past: Vec<f64> = earlier.iter().map(|t| t[k].1).collect();
+                        let by = value - median(&past)?;
+                        (by.abs() > 1e-9 * value.abs()).then_some((name, by))
+                    })
+                    .collect();
+                let results: serde_json::Value =
+                    serde_json::from_slice(&std::fs::read(folder.join("results.json")).unwrap())
+                        .unwrap();
+                let drift = &results["drift"];
+                assert_eq!(
+                    drift["earlier_entries"],
+                    earlier.len(),
+                    "night {n}: one entry a night"
+                );
+                let alarms = drift["alarms"].as_array().unwrap();
+                if moved.is_empty() {
+                    assert_eq!(o.code, 0, "night {n}, the rig as before:\n{}", o.stderr);
+                    assert!(alarms.is_empty(), "night {n}: {alarms:?}");
+                    continue;
+                }
+                assert!(
+                    earlier.len() >= MIN_HISTORY,
+                    "night {n} moves {moved:?} with {} nights before it: the alarm needs {MIN_HISTORY}",
+                    earlier.len()
+                );
+                assert_eq!(o.code, 3, "night {n} moved {moved:?}:\n{}", o.stderr);
+                assert_eq!(
+                    alarms.len(),
+                    moved.len(),
+                    "night {n} moved {moved:?}: {alarms:?}"
+                );
+                for (name, by) in &moved {
+                    let line = format!("ALARM: rig `{rig}`: {name} = ");
+                    assert!(
+                        o.stderr.contains(&line),
+                        "night {n}: no `{line}`:\n{}",
+                        o.stderr
+                    );
+                    let check = drift["checks"]
+                        .as_array()
+                        .unwrap()
+                        .iter()
+                        .find(|c| c["parameter"] == *name)
+                        .unwrap();
+                    assert_eq!(check["alarm"], true, "{check}");
+                    let deviation = check["deviation"].as_f64().unwrap();
+                    let value = tonight.iter().find(|t| t.0 == *name).unwrap().1;
+                    assert!(
+                        (deviation - by).abs() < TRUTH_TOLERANCE * value.abs(),
+                        "night {n}: {name} moved {deviation} from the median, the truth {by}"
+                    );
+                }
+                alarmed += 1;
+            }
+            _ => assert_eq!(o.code, 0, "`{command}`:\n{}", o.stderr),
+        }
+    }
+    assert!(alarmed > 0, "the walkthrough's nights raise no alarm");
+
+    // The history: every night once, in order, each near its own truth.
+    let history = out
+        .expect("the walkthrough runs a night")
+        .join("history.parquet");
+    let table = read_table(&history, TableFormat::Parquet).unwrap();
+    assert_eq!(table.rows.len(), truths.len(), "one history row a night");
+    let cell = |row: &[Option<String>], name: &str| -> String {
+        let k = table
+            .column(name)
+            .unwrap_or_else(|| panic!("no column {name}"));
+        row[k].clone().unwrap_or_else(|| panic!("{name} is empty"))
+    };
+    for (n, (row, truth)) in table.rows.iter().zip(&truths).enumerate() {
+        assert_eq!(cell(row, "rig"), rig, "row {n}");
+        let p_gain: f64 = cell(row, "p_gain").parse().unwrap();
+        for &(name, value) in truth {
+            let mut got: f64 = cell(row, name).parse().unwrap();
+            if name == "a1b0" {
+                got /= p_gain;
+            }
+            assert!(
+                (got - value).abs() <= TRUTH_TOLERANCE * value.abs(),
+                "night {}: {name} = {got}, the truth {value}",
+                n + 1
+            );
+        }
+        let delay: f64 = cell(row, "delay_s").parse().unwrap();
+        assert!(delay > 0.0, "night {}: delay {delay}", n + 1);
+    }
 }
