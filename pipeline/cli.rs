@@ -221,41 +221,13 @@ fn warn(line: &str) {
 
 fn dispatch(command: Command) -> u8 {
     match command {
-        Command::Run { manifest, args } => {
-            let watch = Watch::new(&args.job);
-            let settings = settings(&args.job, args.figures);
-            let code = match args.shard {
-                Some(shard) => match run::run_shard(&manifest, &settings, shard, &watch) {
-                    Ok(outcome) => watch.shard(&outcome),
-                    Err(e) => job_failed(&e, watch.json),
-                },
-                None => match run::run_campaign(&manifest, &settings, &watch) {
-                    Ok(outcome) => watch.campaign(&outcome),
-                    Err(e) => job_failed(&e, watch.json),
-                },
-            };
-            watch.done();
-            code
-        }
+        Command::Run { manifest, args } => cmd_run(&manifest, &args),
         Command::Merge {
             shards,
             args,
             figures,
             manifest,
-        } => {
-            let watch = Watch::new(&args);
-            let merge = run::MergeSettings {
-                job: settings(&args, FigureFormats::All),
-                figures,
-                manifest,
-            };
-            let code = match run::merge(&shards, &merge, &watch) {
-                Ok(outcome) => watch.campaign(&outcome),
-                Err(e) => job_failed(&e, watch.json),
-            };
-            watch.done();
-            code
-        }
+        } => cmd_merge(&shards, &args, figures, manifest),
         Command::Simulate {
             manifest,
             run,
@@ -267,80 +239,138 @@ fn dispatch(command: Command) -> u8 {
             manifest,
             jobs,
         } => cmd_verify(&results, manifest.as_deref(), capped(jobs)),
-        Command::Check { manifest } => match run::check(&manifest) {
-            Ok(checked) => {
-                say(&format!("{}: ok ({checked})", manifest.display()));
-                for (run, log) in &checked.missing_logs {
-                    warn(&format!(
-                        "warning: run {run}: log file not found: {}; the run will fail alone when the campaign runs",
-                        log.display()
-                    ));
-                }
-                for w in &checked.warnings {
-                    warn(&format!("warning: {w}"));
-                }
-                EXIT_OK
-            }
-            Err(e) => {
-                warn(&format!("error: {e}"));
-                EXIT_USAGE
-            }
-        },
-        Command::Init { logs, out, table } => {
-            match run::init::init(&logs, &out, table.as_deref()) {
-                Ok(done) => {
-                    let table = done
-                        .table
-                        .map(|t| format!(" (runs from the table {})", t.display()))
-                        .unwrap_or_default();
-                    say(&format!(
-                        "wrote {} for {} log(s){table}: {} placeholder(s) to fill; `servoid check {}` names them",
-                        done.manifest.display(),
-                        done.logs,
-                        done.placeholders,
-                        done.manifest.display()
-                    ));
-                    EXIT_OK
-                }
-                Err(e) => {
-                    warn(&format!("error: {e}"));
-                    EXIT_USAGE
-                }
-            }
-        }
-        Command::Completions { shell } => {
-            let mut cmd = <Cli as clap::CommandFactory>::command();
-            let mut script = Vec::new();
-            clap_complete::generate(shell, &mut cmd, "servoid", &mut script);
-            print_bytes(&script, "the completion script")
-        }
+        Command::Check { manifest } => cmd_check(&manifest),
+        Command::Init { logs, out, table } => cmd_init(&logs, &out, table.as_deref()),
+        Command::Completions { shell } => cmd_completions(shell),
         Command::Keys => print_bytes(
             crate::manifest::keys::key_reference().as_bytes(),
             "the key reference",
         ),
-        Command::Man => {
-            let cmd = <Cli as clap::CommandFactory>::command();
-            let mut page = Vec::new();
-            match clap_mangen::Man::new(cmd).render(&mut page) {
-                Ok(()) => print_bytes(&page, "the man page"),
-                Err(e) => {
-                    warn(&format!("error: the man page could not be made: {e}"));
-                    EXIT_FAILED
-                }
-            }
-        }
-        Command::Schema { out_dir } => match run::write_schemas(&out_dir) {
-            Ok(paths) => {
-                for p in paths {
-                    say(&format!("wrote {}", p.display()));
-                }
-                EXIT_OK
-            }
-            Err(e) => {
-                warn(&format!("error: {e}"));
-                EXIT_FAILED
-            }
+        Command::Man => cmd_man(),
+        Command::Schema { out_dir } => cmd_schema(&out_dir),
+    }
+}
+
+/// `servoid run`: the whole campaign, or one shard of it.
+fn cmd_run(manifest: &Path, args: &RunArgs) -> u8 {
+    let watch = Watch::new(&args.job);
+    let settings = settings(&args.job, args.figures);
+    let code = match args.shard {
+        Some(shard) => match run::run_shard(manifest, &settings, shard, &watch) {
+            Ok(outcome) => watch.shard(&outcome),
+            Err(e) => job_failed(&e, watch.json),
         },
+        None => match run::run_campaign(manifest, &settings, &watch) {
+            Ok(outcome) => watch.campaign(&outcome),
+            Err(e) => job_failed(&e, watch.json),
+        },
+    };
+    watch.done();
+    code
+}
+
+/// `servoid merge`: the shards' folders into the campaign's results.
+fn cmd_merge(
+    shards: &[PathBuf],
+    args: &JobArgs,
+    figures: Option<FigureFormats>,
+    manifest: Option<PathBuf>,
+) -> u8 {
+    let watch = Watch::new(args);
+    let merge = run::MergeSettings {
+        job: settings(args, FigureFormats::All),
+        figures,
+        manifest,
+    };
+    let code = match run::merge(shards, &merge, &watch) {
+        Ok(outcome) => watch.campaign(&outcome),
+        Err(e) => job_failed(&e, watch.json),
+    };
+    watch.done();
+    code
+}
+
+/// `servoid check`: the manifest's problems, or ok with its warnings.
+fn cmd_check(manifest: &Path) -> u8 {
+    match run::check(manifest) {
+        Ok(checked) => {
+            say(&format!("{}: ok ({checked})", manifest.display()));
+            for (run, log) in &checked.missing_logs {
+                warn(&format!(
+                    "warning: run {run}: log file not found: {}; the run will fail alone when the campaign runs",
+                    log.display()
+                ));
+            }
+            for w in &checked.warnings {
+                warn(&format!("warning: {w}"));
+            }
+            EXIT_OK
+        }
+        Err(e) => {
+            warn(&format!("error: {e}"));
+            EXIT_USAGE
+        }
+    }
+}
+
+/// `servoid init`: a manifest proposed from the logs.
+fn cmd_init(logs: &[PathBuf], out: &Path, table: Option<&Path>) -> u8 {
+    match run::init::init(logs, out, table) {
+        Ok(done) => {
+            let table = done
+                .table
+                .map(|t| format!(" (runs from the table {})", t.display()))
+                .unwrap_or_default();
+            say(&format!(
+                "wrote {} for {} log(s){table}: {} placeholder(s) to fill; `servoid check {}` names them",
+                done.manifest.display(),
+                done.logs,
+                done.placeholders,
+                done.manifest.display()
+            ));
+            EXIT_OK
+        }
+        Err(e) => {
+            warn(&format!("error: {e}"));
+            EXIT_USAGE
+        }
+    }
+}
+
+/// `servoid completions`: the shell's completion script.
+fn cmd_completions(shell: clap_complete::Shell) -> u8 {
+    let mut cmd = <Cli as clap::CommandFactory>::command();
+    let mut script = Vec::new();
+    clap_complete::generate(shell, &mut cmd, "servoid", &mut script);
+    print_bytes(&script, "the completion script")
+}
+
+/// `servoid man`: the man page.
+fn cmd_man() -> u8 {
+    let cmd = <Cli as clap::CommandFactory>::command();
+    let mut page = Vec::new();
+    match clap_mangen::Man::new(cmd).render(&mut page) {
+        Ok(()) => print_bytes(&page, "the man page"),
+        Err(e) => {
+            warn(&format!("error: the man page could not be made: {e}"));
+            EXIT_FAILED
+        }
+    }
+}
+
+/// `servoid schema`: the JSON Schemas, written into `out_dir`.
+fn cmd_schema(out_dir: &Path) -> u8 {
+    match run::write_schemas(out_dir) {
+        Ok(paths) => {
+            for p in paths {
+                say(&format!("wrote {}", p.display()));
+            }
+            EXIT_OK
+        }
+        Err(e) => {
+            warn(&format!("error: {e}"));
+            EXIT_FAILED
+        }
     }
 }
 

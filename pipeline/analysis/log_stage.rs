@@ -493,34 +493,119 @@ pub fn log_stage_from(
     ident: &IdentificationPlan,
     file: LogFile,
 ) -> Result<LogStage, LogStageError> {
-    let path = plan.path.clone();
+    let path = &plan.path;
     let (log, mut warnings) = checked_log(plan, ident, file)?;
+    check_band_below_nyquist(run, &log, path)?;
     let fs = log.sample_rate_hz;
-    // The manifest cannot know the rate of a log that carries its own (a
-    // time column, a DAQ header), so the band is checked against it here.
-    if run.band_hz.1 >= 0.5 * fs {
-        // A time column in milliseconds read as seconds: a thousand times
-        // too slow a rate, which a band in Hz then lies above.
-        let hint = match log.timing {
-            ingest::Timing::Measured { .. } if 500.0 * fs > run.band_hz.1 => format!(
-                ": the time column steps {:.4} per sample; were it milliseconds (channels.time.unit = \"ms\"), the rate would be {} Hz",
-                1.0 / fs,
-                1000.0 * fs
-            ),
-            _ => String::new(),
-        };
-        return Err(LogStageError::BandAboveNyquist {
-            path,
-            hi: run.band_hz.1,
-            nyquist: 0.5 * fs,
-            hint,
-        });
-    }
-    let tf_err = |source: RunTfError| LogStageError::Tf {
-        path: path.clone(),
-        source,
+    let (choice, mut h, force_frf) = estimate_frfs(run, ident, &log, path)?;
+    let mask = frf::band_mask(&h, run.band_hz, ident.coherence_min);
+    warnings.extend(motion_warning(&choice, &log.command_m));
+
+    let fit = if matches!(run.role, Role::NoSpecimen | Role::Spring | Role::Fit) {
+        let (fit, data) = fit_run(&mut h, &mask, run.band_hz, ident, &choice.plan, fs)
+            .map_err(|source| tf_error(path, source))?;
+        warnings.extend(fit.warnings.iter().cloned());
+        Some((fit, data))
+    } else {
+        None
     };
-    let frf_err = |source: FrfError| tf_err(RunTfError::Frf(source));
+    let (fit, fit_data) = fit.unzip();
+    if run.role == Role::NoSpecimen
+        && let Some(f) = &fit
+    {
+        warnings.extend(static_gain_check(path, plan, f)?);
+    }
+    let periodogram = (h.n_averages == 1).then_some(h.suu.as_slice());
+    let excitation = frf::excitation(&log.command_m, fs, periodogram);
+    let linearity = matches!(excitation, frf::Excitation::Sweep { .. })
+        .then(|| {
+            frf::linearity(
+                &log.command_m,
+                &log.displacement_m,
+                log.force_n.as_deref(),
+                fs,
+            )
+        })
+        .flatten();
+    let spring = match (&run.specimen, &log.force_n) {
+        (SpecimenModel::Spring { .. }, Some(f)) => frf::spring_force(&log.displacement_m, f, fs),
+        _ => None,
+    };
+    let contradicted = settings_warning(run, ident, &choice, excitation, &log, fit.as_ref());
+    let cause = findings(
+        run,
+        linearity.as_ref(),
+        spring.as_ref(),
+        contradicted,
+        &mut warnings,
+    );
+    Ok(LogStage {
+        log,
+        choice,
+        excitation,
+        linearity,
+        spring,
+        cause,
+        frf: h,
+        force_frf,
+        mask,
+        fit,
+        fit_data,
+        warnings,
+    })
+}
+
+/// A fit's failure, named by the run's file.
+fn tf_error(path: &std::path::Path, source: RunTfError) -> LogStageError {
+    LogStageError::Tf {
+        path: path.to_path_buf(),
+        source,
+    }
+}
+
+/// Refuse a fit band at or above the log's Nyquist frequency.
+///
+/// The manifest cannot know the rate of a log that carries its own (a time
+/// column, a DAQ header), so the band is checked against it here.
+fn check_band_below_nyquist(
+    run: &RunPlan,
+    log: &Log,
+    path: &std::path::Path,
+) -> Result<(), LogStageError> {
+    let fs = log.sample_rate_hz;
+    if run.band_hz.1 < 0.5 * fs {
+        return Ok(());
+    }
+    // A time column in milliseconds read as seconds: a thousand times too
+    // slow a rate, which a band in Hz then lies above.
+    let hint = match log.timing {
+        ingest::Timing::Measured { .. } if 500.0 * fs > run.band_hz.1 => format!(
+            ": the time column steps {:.4} per sample; were it milliseconds (channels.time.unit = \"ms\"), the rate would be {} Hz",
+            1.0 / fs,
+            1000.0 * fs
+        ),
+        _ => String::new(),
+    };
+    Err(LogStageError::BandAboveNyquist {
+        path: path.to_path_buf(),
+        hi: run.band_hz.1,
+        nyquist: 0.5 * fs,
+        hint,
+    })
+}
+
+/// The FRF settings the run gets, its command-to-displacement FRF and,
+/// when the log has a force, its command-to-force FRF, each kept up to
+/// what is read of it; refused when the band holds too little of the
+/// command's power.
+fn estimate_frfs(
+    run: &RunPlan,
+    ident: &IdentificationPlan,
+    log: &Log,
+    path: &std::path::Path,
+) -> Result<(FrfChoice, Frf, Option<Frf>), LogStageError> {
+    let fs = log.sample_rate_hz;
+    let frf_err = |source: FrfError| tf_error(path, RunTfError::Frf(source));
     let choice = ident
         .frf
         .resolve(&log.command_m, &log.displacement_m, fs, run.band_hz)
@@ -551,56 +636,37 @@ pub fn log_stage_from(
         None => None,
     };
     if fraction < MIN_BAND_POWER_FRACTION {
-        return Err(tf_err(RunTfError::NoExcitation { lo, hi, fraction }));
+        return Err(tf_error(
+            path,
+            RunTfError::NoExcitation { lo, hi, fraction },
+        ));
     }
-    let mask = frf::band_mask(&h, run.band_hz, ident.coherence_min);
-    warnings.extend(motion_warning(&choice, &log.command_m));
+    Ok((choice, h, force_frf))
+}
 
-    let fit = if matches!(run.role, Role::NoSpecimen | Role::Spring | Role::Fit) {
-        let (fit, data) =
-            fit_run(&mut h, &mask, run.band_hz, ident, &choice.plan, fs).map_err(tf_err)?;
-        warnings.extend(fit.warnings.iter().cloned());
-        Some((fit, data))
-    } else {
-        None
-    };
-    let (fit, fit_data) = fit.unzip();
-    if run.role == Role::NoSpecimen
-        && let Some(f) = &fit
-    {
-        warnings.extend(static_gain_check(&path, plan, f)?);
-    }
-    let periodogram = (h.n_averages == 1).then_some(h.suu.as_slice());
-    let excitation = frf::excitation(&log.command_m, fs, periodogram);
-    let linearity = matches!(excitation, frf::Excitation::Sweep { .. })
-        .then(|| {
-            frf::linearity(
-                &log.command_m,
-                &log.displacement_m,
-                log.force_n.as_deref(),
-                fs,
-            )
-        })
-        .flatten();
-    let spring = match (&run.specimen, &log.force_n) {
-        (SpecimenModel::Spring { .. }, Some(f)) => frf::spring_force(&log.displacement_m, f, fs),
-        _ => None,
-    };
+/// Warn of what the log shows wrong (a stiffness the spring's force
+/// contradicts, a rig not linear, FRF settings the log contradicts), in
+/// that order, and name what any misfit of the run's fit is put down to:
+/// the first of the settings, the stiffness and the nonlinearity found.
+fn findings(
+    run: &RunPlan,
+    linearity: Option<&frf::Linearity>,
+    spring: Option<&frf::SpringForce>,
+    contradicted: Option<String>,
+    warnings: &mut Vec<String>,
+) -> Option<String> {
     let stated_k = match run.specimen {
         SpecimenModel::Spring { stiffness_n_per_m } => Some(stiffness_n_per_m),
         _ => None,
     };
     let mistyped = spring
-        .as_ref()
         .zip(stated_k)
         .and_then(|(s, k)| stiffness_warning(s, k));
     let nonlinear = linearity
-        .as_ref()
         .and_then(nonlinearity_warning)
-        .or_else(|| spring.as_ref().and_then(stiffening_warning));
+        .or_else(|| spring.and_then(stiffening_warning));
     warnings.extend(mistyped.clone());
     warnings.extend(nonlinear.clone());
-    let contradicted = settings_warning(run, ident, &choice, excitation, &log, fit.as_ref());
     let cause = if contradicted.is_some() {
         Some(SETTINGS_CAUSE.to_string())
     } else if mistyped.is_some() {
@@ -611,18 +677,5 @@ pub fn log_stage_from(
         None
     };
     warnings.extend(contradicted);
-    Ok(LogStage {
-        log,
-        choice,
-        excitation,
-        linearity,
-        spring,
-        cause,
-        frf: h,
-        force_frf,
-        mask,
-        fit,
-        fit_data,
-        warnings,
-    })
+    cause
 }

@@ -226,35 +226,7 @@ pub fn identify_rig(
         .flatten()
         .collect();
     let values = compute(&theta, no_spec, springs, p_ref);
-
-    // Physical checks, naming the run responsible.
-    for run in no_spec {
-        for (q, v) in [("beta1 = d1/d2", run.tf.d1), ("R1 = d0/d2", run.tf.d0)] {
-            if v.is_nan() || v <= 0.0 {
-                return Err(IdentifyError::NonPhysical {
-                    run: run.run.clone(),
-                    quantity: q,
-                    value: v,
-                    hint: "",
-                });
-            }
-        }
-    }
-    for (j, spring) in springs.iter().enumerate() {
-        let o = HEAD + PER_SPRING * j;
-        let names = ["R2", "R3", "a1b0", "a2", "a3"];
-        for (i, name) in names.iter().enumerate() {
-            let v = values[o + i];
-            if !(v.is_finite() && v > 0.0) {
-                return Err(IdentifyError::NonPhysical {
-                    run: spring.estimate.run.clone(),
-                    quantity: name,
-                    value: v,
-                    hint: " (Eq. 19 needs d0/n0 > 1 and 1/n0 > 1/R1: the spring must lower the static gain and the high-frequency gain; a too soft spring or noisy fit breaks this)",
-                });
-            }
-        }
-    }
+    check_physical(no_spec, springs, &values)?;
 
     // The algebra's Jacobian and the runs' covariances, once: every std and
     // covariance below is first-order propagation through them (None when
@@ -284,7 +256,61 @@ pub fn identify_rig(
         value: values[i],
         std: stds.as_ref().map(|s| s[i]),
     };
-    let per_spring = springs
+    Ok(RigIdentification {
+        p_gain: p_ref,
+        beta1: est(0),
+        r1: est(1),
+        a1b0: est(2),
+        a2: est(3),
+        a3: est(4),
+        per_spring: per_spring(springs, &est),
+        consistency,
+        covariance,
+    })
+}
+
+/// Physical checks of the runs' coefficients and of [`compute`]'s
+/// `values`, naming the run responsible: each no-specimen run's beta1 and
+/// R1, each spring's R2, R3, a1b0, a2 and a3 positive.
+fn check_physical(
+    no_spec: &[TfEstimate],
+    springs: &[SpringRun],
+    values: &[f64],
+) -> Result<(), IdentifyError> {
+    for run in no_spec {
+        for (q, v) in [("beta1 = d1/d2", run.tf.d1), ("R1 = d0/d2", run.tf.d0)] {
+            if v.is_nan() || v <= 0.0 {
+                return Err(IdentifyError::NonPhysical {
+                    run: run.run.clone(),
+                    quantity: q,
+                    value: v,
+                    hint: "",
+                });
+            }
+        }
+    }
+    for (j, spring) in springs.iter().enumerate() {
+        let o = HEAD + PER_SPRING * j;
+        let names = ["R2", "R3", "a1b0", "a2", "a3"];
+        for (i, name) in names.iter().enumerate() {
+            let v = values[o + i];
+            if !(v.is_finite() && v > 0.0) {
+                return Err(IdentifyError::NonPhysical {
+                    run: spring.estimate.run.clone(),
+                    quantity: name,
+                    value: v,
+                    hint: " (Eq. 19 needs d0/n0 > 1 and 1/n0 > 1/R1: the spring must lower the static gain and the high-frequency gain; a too soft spring or noisy fit breaks this)",
+                });
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Each spring run's own R2, R3, a1b0, a2 and a3, `est` giving the output
+/// of [`compute`] at an index.
+fn per_spring(springs: &[SpringRun], est: &dyn Fn(usize) -> Estimate) -> Vec<PerSpring> {
+    springs
         .iter()
         .enumerate()
         .map(|(j, s)| {
@@ -299,18 +325,7 @@ pub fn identify_rig(
                 a3: est(o + 4),
             }
         })
-        .collect();
-    Ok(RigIdentification {
-        p_gain: p_ref,
-        beta1: est(0),
-        r1: est(1),
-        a1b0: est(2),
-        a2: est(3),
-        a3: est(4),
-        per_spring,
-        consistency,
-        covariance,
-    })
+        .collect()
 }
 
 /// Standard deviations of the `m` outputs of [`compute`] by first-order

@@ -58,14 +58,13 @@ pub(super) fn read<'a>(
     };
     let (header, names) = read_header(path, &mut lines)?;
     let names_line = lines.no;
-    let display = || path.display();
     let mut warnings = Vec::new();
     if let Some(size) = header.header_size
         && size != names_line
     {
         warnings.push(format!(
             "{}: the header says `Header Size: {size}` but the column names are on line {names_line}",
-            display()
+            path.display()
         ));
     }
     let want = wanted(plan);
@@ -85,7 +84,7 @@ pub(super) fn read<'a>(
     {
         warnings.push(format!(
             "{}: the header says `Sample Count: {count}` but the file has {} data lines{}",
-            display(),
+            path.display(),
             data.rows,
             if data.rows < count {
                 " (truncated?)"
@@ -94,14 +93,31 @@ pub(super) fn read<'a>(
             }
         ));
     }
+    let header_hz = header_rate(&header, path, &mut warnings);
+    let mut it = data.columns.into_iter();
+    let time = time_base(plan, &mut it, header_hz, path, &mut warnings)?;
+    let command = it.next().expect("command wanted");
+    let displacement = it.next().expect("displacement wanted");
+    let force = it.next();
+    Ok(Raw {
+        time,
+        command,
+        displacement,
+        force,
+        locate: line_locator(data.first_line, data.blanks),
+        warnings,
+    })
+}
 
-    // Time base.
-    let header_hz = match (header.rate_hz, header.interval_s) {
+/// The rate the header gives: its `Sampling Rate`, else 1 / its `Sampling
+/// Interval`; a warning when it gives both and they disagree.
+fn header_rate(header: &Header, path: &Path, warnings: &mut Vec<String>) -> Option<f64> {
+    match (header.rate_hz, header.interval_s) {
         (Some(hz), Some(dt)) => {
             if ((hz * dt) - 1.0).abs() > 1e-9 {
                 warnings.push(format!(
                     "{}: the header's `Sampling Rate: {hz}` and `Sampling Interval: {dt}` disagree; the rate is used",
-                    display()
+                    path.display()
                 ));
             }
             Some(hz)
@@ -109,11 +125,22 @@ pub(super) fn read<'a>(
         (Some(hz), None) => Some(hz),
         (None, Some(dt)) => Some(1.0 / dt),
         (None, None) => None,
-    };
-    let mut it = data.columns.into_iter();
-    let time = match &plan.channels.time {
+    }
+}
+
+/// The time base the plan asks for: the next of `columns` (the time
+/// column, when it is wanted), the manifest's rate (a warning when it
+/// overrides the header's) or the header's rate.
+fn time_base(
+    plan: &LogPlan,
+    columns: &mut impl Iterator<Item = Vec<f64>>,
+    header_hz: Option<f64>,
+    path: &Path,
+    warnings: &mut Vec<String>,
+) -> Result<RawTime, IngestError> {
+    Ok(match &plan.channels.time {
         TimePlan::Column { column, to_s } => RawTime::Column {
-            raw: it.next().expect("time wanted"),
+            raw: columns.next().expect("time wanted"),
             to_s: *to_s,
             column: column.to_string(),
         },
@@ -123,7 +150,7 @@ pub(super) fn read<'a>(
             {
                 warnings.push(format!(
                     "{}: the manifest's sampling rate {hz} Hz overrides the header's {h} Hz",
-                    display()
+                    path.display()
                 ));
             }
             RawTime::Rate {
@@ -135,26 +162,19 @@ pub(super) fn read<'a>(
             hz: header_hz.ok_or_else(|| IngestError::format(path, FormatProblem::NoHeaderRate))?,
             from: "DAQ header",
         },
-    };
-    let command = it.next().expect("command wanted");
-    let displacement = it.next().expect("displacement wanted");
-    let force = it.next();
-    let (first_line, blanks) = (data.first_line, data.blanks);
-    let locate = Box::new(move |i: usize| {
+    })
+}
+
+/// Where sample `i` sits: its data line, counting the blank lines skipped
+/// before it (`blanks`: rows read before each run of blanks, and how many).
+fn line_locator(first_line: usize, blanks: Vec<(usize, usize)>) -> Box<dyn Fn(usize) -> At + Send> {
+    Box::new(move |i: usize| {
         let skipped: usize = blanks
             .iter()
             .take_while(|(r, _)| *r <= i)
             .map(|(_, k)| k)
             .sum();
         At::Line(first_line + i + skipped)
-    });
-    Ok(Raw {
-        time,
-        command,
-        displacement,
-        force,
-        locate,
-        warnings,
     })
 }
 

@@ -5,10 +5,10 @@
 use std::io::Cursor;
 use std::path::Path;
 
-use polars::prelude::{DataType, ParquetReader, SerReader};
+use polars::prelude::{DataFrame, DataType, ParquetReader, SerReader};
 
 use super::plan::{Column, LogPlan};
-use super::{At, FormatProblem, IngestError, Raw, list, raw_from_table, wanted};
+use super::{At, FormatProblem, IngestError, Raw, Wanted, list, raw_from_table, wanted};
 
 /// What a damaged Parquet file declares that it does not hold: found by
 /// servoid's checks before polars reads (and would reserve for) it.
@@ -109,8 +109,34 @@ pub(super) fn read<'a>(
         .map_err(|source| format(FormatProblem::ParquetMetadata { source }))?;
 
     let want = wanted(plan);
+    let index = column_indices(path, &want, &names)?;
+    let mut projection = index.clone();
+    projection.sort_unstable();
+    projection.dedup();
+    let df = super::guard_reader(|| reader.with_projection(Some(projection)).finish())
+        .map_err(damaged)?
+        .map_err(|source| format(FormatProblem::ParquetRead { source }))?;
+    if df.height() == 0 {
+        return Err(IngestError::HeaderOnly {
+            path: path.to_path_buf(),
+            what: "a schema but no rows".into(),
+        });
+    }
+    let mut columns = Vec::with_capacity(want.len());
+    for (w, &i) in want.iter().zip(&index) {
+        columns.push(column_values(path, plan, w, &names[i], &df)?);
+    }
+    raw_from_table(path, plan, columns, Box::new(|i| At::Row(i + 1)))
+}
+
+/// Where each wanted column is among the file's `names`, by name or index.
+fn column_indices(
+    path: &Path,
+    want: &[Wanted<'_>],
+    names: &[String],
+) -> Result<Vec<usize>, IngestError> {
     let mut index = Vec::with_capacity(want.len());
-    for w in &want {
+    for w in want {
         let found = match w.column {
             Column::Name(n) => names.iter().position(|c| c == n),
             Column::Index(i) => (*i < names.len()).then_some(*i),
@@ -127,76 +153,72 @@ pub(super) fn read<'a>(
             ),
         })?);
     }
-    let mut projection = index.clone();
-    projection.sort_unstable();
-    projection.dedup();
-    let df = super::guard_reader(|| reader.with_projection(Some(projection)).finish())
-        .map_err(damaged)?
-        .map_err(|source| format(FormatProblem::ParquetRead { source }))?;
-    if df.height() == 0 {
-        return Err(IngestError::HeaderOnly {
+    Ok(index)
+}
+
+/// The wanted column `w` (named `name` in the file) of `df` as f64: any
+/// numeric type converted, a logger's timestamps as seconds since the
+/// first, a null refused.
+fn column_values(
+    path: &Path,
+    plan: &LogPlan,
+    w: &Wanted<'_>,
+    name: &str,
+    df: &DataFrame,
+) -> Result<Vec<f64>, IngestError> {
+    let format = |problem| IngestError::format(path, problem);
+    let col = df.column(name).map_err(|source| {
+        format(FormatProblem::ColumnLost {
+            column: name.to_string(),
+            source,
+        })
+    })?;
+    let elapsed;
+    let col = match (w.channel, col.dtype(), &plan.channels.time) {
+        // A logger's timestamps (`timestamp[us]`): the time channel is
+        // the seconds since the first sample, in the channel's unit.
+        ("time", DataType::Datetime(unit, _), super::plan::TimePlan::Column { to_s, .. }) => {
+            elapsed = seconds_since_first(col, *unit, *to_s).ok_or_else(|| {
+                format(FormatProblem::NotNumeric {
+                    column: name.to_string(),
+                    channel: w.channel,
+                    dtype: Box::new(col.dtype().clone()),
+                })
+            })?;
+            &elapsed
+        }
+        _ => col,
+    };
+    if !col.dtype().is_primitive_numeric() {
+        return Err(format(FormatProblem::NotNumeric {
+            column: name.to_string(),
+            channel: w.channel,
+            dtype: Box::new(col.dtype().clone()),
+        }));
+    }
+    let not_f64 = |source| {
+        format(FormatProblem::NotF64 {
+            column: name.to_string(),
+            source,
+        })
+    };
+    let col = col.cast(&DataType::Float64).map_err(not_f64)?;
+    let ca = col.f64().map_err(not_f64)?;
+    if ca.null_count() > 0 {
+        let row = ca.iter().position(|v| v.is_none()).expect("a null exists");
+        return Err(IngestError::MissingValue {
             path: path.to_path_buf(),
-            what: "a schema but no rows".into(),
+            at: At::Row(row + 1),
+            channel: w.channel,
+            column: w.column.to_string(),
+            detail: "null".into(),
         });
     }
-
-    let mut columns = Vec::with_capacity(want.len());
-    for (w, &i) in want.iter().zip(&index) {
-        let name = &names[i];
-        let col = df.column(name).map_err(|source| {
-            format(FormatProblem::ColumnLost {
-                column: name.clone(),
-                source,
-            })
-        })?;
-        let elapsed;
-        let col = match (w.channel, col.dtype(), &plan.channels.time) {
-            // A logger's timestamps (`timestamp[us]`): the time channel is
-            // the seconds since the first sample, in the channel's unit.
-            ("time", DataType::Datetime(unit, _), super::plan::TimePlan::Column { to_s, .. }) => {
-                elapsed = seconds_since_first(col, *unit, *to_s).ok_or_else(|| {
-                    format(FormatProblem::NotNumeric {
-                        column: name.clone(),
-                        channel: w.channel,
-                        dtype: Box::new(col.dtype().clone()),
-                    })
-                })?;
-                &elapsed
-            }
-            _ => col,
-        };
-        if !col.dtype().is_primitive_numeric() {
-            return Err(format(FormatProblem::NotNumeric {
-                column: name.clone(),
-                channel: w.channel,
-                dtype: Box::new(col.dtype().clone()),
-            }));
-        }
-        let not_f64 = |source| {
-            format(FormatProblem::NotF64 {
-                column: name.clone(),
-                source,
-            })
-        };
-        let col = col.cast(&DataType::Float64).map_err(not_f64)?;
-        let ca = col.f64().map_err(not_f64)?;
-        if ca.null_count() > 0 {
-            let row = ca.iter().position(|v| v.is_none()).expect("a null exists");
-            return Err(IngestError::MissingValue {
-                path: path.to_path_buf(),
-                at: At::Row(row + 1),
-                channel: w.channel,
-                column: w.column.to_string(),
-                detail: "null".into(),
-            });
-        }
-        let mut v = Vec::with_capacity(ca.len());
-        for chunk in ca.downcast_iter() {
-            v.extend_from_slice(chunk.values());
-        }
-        columns.push(v);
+    let mut v = Vec::with_capacity(ca.len());
+    for chunk in ca.downcast_iter() {
+        v.extend_from_slice(chunk.values());
     }
-    raw_from_table(path, plan, columns, Box::new(|i| At::Row(i + 1)))
+    Ok(v)
 }
 
 /// Checks a Parquet file's footer before polars reads it: every length its

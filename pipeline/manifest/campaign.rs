@@ -235,6 +235,8 @@ struct RunContext<'a> {
     max_log_bytes: u64,
 }
 
+/// Every check of the sections, the runs and what ties them together; the
+/// campaign when none found a problem.
 fn validate(
     partial: Partial,
     file: &Path,
@@ -254,10 +256,10 @@ fn validate(
     let history = check_history(partial.history.as_ref(), base_dir, &mut bad);
     let sensitivity = check_sensitivity(partial.sensitivity.as_ref(), &mut bad);
     let compensator = check_compensator(partial.compensator.as_ref(), &mut bad);
-    let default_channels = partial.channels.clone().unwrap_or_default();
-    check_channels(&default_channels, &root.key("channels"), &mut bad);
-    let ident = partial.identification.clone().unwrap_or_default();
-    let ident_plan = check_identification(&ident, &root.key("identification"), &mut bad);
+    let channels = partial.channels.clone().unwrap_or_default();
+    check_channels(&channels, &root.key("channels"), &mut bad);
+    let identification = partial.identification.clone().unwrap_or_default();
+    let ident_plan = check_identification(&identification, &root.key("identification"), &mut bad);
 
     // A run table that failed to read is already a problem: not also "no runs".
     let table_unread = partial.run_table_given && table.info.is_none();
@@ -269,41 +271,86 @@ fn validate(
         &mut bad,
         &mut table_problems,
     );
-    let limits = partial.limits.clone().unwrap_or_default();
+    let ctx = RunContext {
+        default_channels: &channels,
+        ident: &ident_plan,
+        base_dir,
+        max_log_bytes: check_limits(partial.limits.as_ref(), &mut bad),
+    };
+    let runs = check_runs(&partial.runs, &table.runs, &ctx, &mut bad);
+    let given_rig = partial.rig.as_ref().and_then(|r| r.parameters);
+    let references = check_across_runs(&partial, &table.keys, given_rig.is_some(), &mut bad);
+    problems.extend(table_problems);
+
+    if !problems.is_empty() {
+        return None;
+    }
+    let checked = Checked {
+        channels,
+        identification,
+        ident_plan,
+        given_rig,
+        runs,
+        references,
+        table,
+        history,
+        sensitivity,
+        compensator,
+    };
+    campaign_of(partial, checked, file, bytes)
+}
+
+/// `[limits]`: at least one MiB a log. Returns `max_log_mib` in bytes.
+fn check_limits(limits: Option<&Limits>, bad: &mut impl FnMut(KeyPath, String)) -> u64 {
+    let limits = limits.cloned().unwrap_or_default();
     if limits.max_log_mib == 0 {
         bad(
-            root.key("limits").key("max_log_mib"),
+            KeyPath::root().key("limits").key("max_log_mib"),
             "must be at least 1 (MiB)".into(),
         );
     }
-    let ctx = RunContext {
-        default_channels: &default_channels,
-        ident: &ident_plan,
-        base_dir,
-        max_log_bytes: limits.max_log_mib.saturating_mul(1 << 20),
-    };
-    let mut runs: Vec<RunPlan> = partial
-        .runs
+    limits.max_log_mib.saturating_mul(1 << 20)
+}
+
+/// Each run's plan: the `[[runs]]` that read, then the run table's rows
+/// that passed their checks, numbered after them.
+fn check_runs(
+    runs: &[Option<Run>],
+    table_runs: &[TableRun],
+    ctx: &RunContext<'_>,
+    bad: &mut impl FnMut(KeyPath, String),
+) -> Vec<RunPlan> {
+    let root = KeyPath::root();
+    let mut plans: Vec<RunPlan> = runs
         .iter()
         .enumerate()
         .filter_map(|(i, run)| {
             let run = run.as_ref()?;
-            check_run(run, i, &root.key("runs").index(i), &ctx, &mut bad)
+            check_run(run, i, &root.key("runs").index(i), ctx, bad)
         })
         .collect();
-    let first = partial.runs.len();
-    runs.extend(
-        table
-            .runs
+    let first = runs.len();
+    plans.extend(
+        table_runs
             .iter()
             .enumerate()
-            .filter_map(|(k, t)| table_run_plan(t, first + k, &ctx, &mut bad)),
+            .filter_map(|(k, t)| table_run_plan(t, first + k, ctx, bad)),
     );
-    let given_rig = partial.rig.as_ref().and_then(|r| r.parameters);
+    plans
+}
+
+/// What the runs together must give: the rig's source, and a run of the
+/// right kind for each reference. Returns the references' plans.
+fn check_across_runs(
+    partial: &Partial,
+    rows: &[RowKey],
+    given_rig: bool,
+    bad: &mut impl FnMut(KeyPath, String),
+) -> Vec<ReferencePlan> {
     let roles: Vec<Option<Role>> = (partial.raw_run_roles.iter().copied())
-        .chain(table.keys.iter().map(|k| k.role))
+        .chain(rows.iter().map(|k| k.role))
         .collect();
-    check_rig_source(&roles, given_rig.is_some(), &mut bad);
+    check_rig_source(&roles, given_rig, bad);
     // Runs listed but unread (a type error in them, already a problem):
     // a reference to one is not also "a run the campaign does not have".
     let listed: BTreeSet<&str> = partial
@@ -312,24 +359,40 @@ fn validate(
         .flatten()
         .map(String::as_str)
         .collect();
-    let references = check_references(
-        &run_roles(&partial.runs, &table.keys),
+    check_references(
+        &run_roles(&partial.runs, rows),
         &listed,
         &partial.references,
-        &mut bad,
-    );
-    problems.extend(table_problems);
+        bad,
+    )
+}
 
-    if !problems.is_empty() {
-        return None;
-    }
+/// What the checks made of the sections, kept for the campaign.
+struct Checked {
+    /// The default channels, as the manifest gives them.
+    channels: RawChannels,
+    identification: Identification,
+    ident_plan: IdentificationPlan,
+    given_rig: Option<RigParams>,
+    runs: Vec<RunPlan>,
+    references: Vec<ReferencePlan>,
+    table: CheckedTable,
+    history: HistoryPlan,
+    sensitivity: SensitivityPlan,
+    compensator: CompensatorSettings,
+}
+
+/// The campaign from sections that passed every check; None when a
+/// required section is missing (its problem is already recorded).
+fn campaign_of(partial: Partial, checked: Checked, file: &Path, bytes: &[u8]) -> Option<Campaign> {
     let campaign = partial.campaign?;
     let rig = partial.rig?;
+    let ident = checked.identification;
     let manifest = Manifest {
         schema_version: partial.schema_version?,
         campaign: campaign.clone(),
         rig: rig.clone(),
-        channels: default_channels,
+        channels: checked.channels,
         identification: ident.clone(),
         runs: partial.runs.into_iter().flatten().collect(),
         references: partial.references.into_iter().flatten().collect(),
@@ -346,16 +409,16 @@ fn validate(
         description: campaign.description,
         rig_name: rig.name,
         rig_notes: rig.notes,
-        given_rig,
-        identification: ident_plan,
-        runs,
-        references,
+        given_rig: checked.given_rig,
+        identification: checked.ident_plan,
+        runs: checked.runs,
+        references: checked.references,
         manifest,
-        run_table: table.info,
-        warnings: table.warnings,
-        history,
-        sensitivity,
-        compensator,
+        run_table: checked.table.info,
+        warnings: checked.table.warnings,
+        history: checked.history,
+        sensitivity: checked.sensitivity,
+        compensator: checked.compensator,
         joint: ident.joint,
     })
 }

@@ -304,6 +304,8 @@ pub(super) fn check_band(band: [f64; 2], path: &KeyPath, bad: &mut impl FnMut(Ke
     }
 }
 
+/// The specimen a run of `role` needs, from the keys given: each value in
+/// its range, each model's keys only with it, and the keys the role takes.
 pub(super) fn check_specimen(
     role: Role,
     spec: Option<&Specimen>,
@@ -311,6 +313,35 @@ pub(super) fn check_specimen(
     bad: &mut impl FnMut(KeyPath, String),
 ) -> Option<SpecimenModel> {
     let s = spec.cloned().unwrap_or_default();
+    let mut ok = check_linear_values(&s, path, bad);
+    ok &= check_model_keys(&s, path, bad);
+    if s.model != SpecimenKind::Linear && matches!(role, Role::NoSpecimen | Role::Spring) {
+        bad(
+            path.key("model"),
+            format!(
+                "a {} run identifies the rig with a linear specimen (Eqs. 18-19); nonlinear specimens are for validation and fit runs",
+                role.as_str()
+            ),
+        );
+        return None;
+    }
+    match role {
+        Role::NoSpecimen => no_specimen(&s, path, bad),
+        Role::Spring => spring_specimen(&s, ok, path, bad),
+        Role::Validation | Role::Fit if s.model == SpecimenKind::Linear => {
+            linear_specimen(&s, path, bad).filter(|_| ok)
+        }
+        Role::Validation | Role::Fit => nonlinear_specimen(&s, ok, path, bad),
+    }
+}
+
+/// The mass, stiffness and damping, where given, in their plausible
+/// ranges (the mass and stiffness positive, the damping not negative).
+fn check_linear_values(
+    s: &Specimen,
+    path: &KeyPath,
+    bad: &mut impl FnMut(KeyPath, String),
+) -> bool {
     let mut ok = true;
     for (k, v, range) in [
         ("mass_kg", s.mass_kg, MASS_RANGE),
@@ -331,7 +362,11 @@ pub(super) fn check_specimen(
             ok &= plausible(c, DAMPING_RANGE, &path.key("damping_ns_per_m"), bad);
         }
     }
-    // Keys that belong to one nonlinear model only.
+    ok
+}
+
+/// Keys that belong to one nonlinear model only, given only with it.
+fn check_model_keys(s: &Specimen, path: &KeyPath, bad: &mut impl FnMut(KeyPath, String)) -> bool {
     let model_keys: [(&str, bool, SpecimenKind); 4] = [
         (
             "cubic_stiffness_n_per_m3",
@@ -350,6 +385,7 @@ pub(super) fn check_specimen(
         ),
         ("bouc_wen", s.bouc_wen.is_some(), SpecimenKind::BoucWen),
     ];
+    let mut ok = true;
     for (key, given, owner) in model_keys {
         if given && s.model != owner {
             let name = serde_json::to_value(owner)
@@ -360,6 +396,15 @@ pub(super) fn check_specimen(
             ok = false;
         }
     }
+    ok
+}
+
+/// A no-specimen run's specimen: none, so no mass, damping or stiffness.
+fn no_specimen(
+    s: &Specimen,
+    path: &KeyPath,
+    bad: &mut impl FnMut(KeyPath, String),
+) -> Option<SpecimenModel> {
     let given: Vec<&str> = [
         ("mass_kg", s.mass_kg.is_some()),
         ("damping_ns_per_m", s.damping_ns_per_m.is_some()),
@@ -369,54 +414,44 @@ pub(super) fn check_specimen(
     .filter(|(_, g)| *g)
     .map(|(k, _)| *k)
     .collect();
-    if s.model != SpecimenKind::Linear && matches!(role, Role::NoSpecimen | Role::Spring) {
+    if !given.is_empty() {
         bad(
-            path.key("model"),
+            path.clone(),
             format!(
-                "a {} run identifies the rig with a linear specimen (Eqs. 18-19); nonlinear specimens are for validation and fit runs",
-                role.as_str()
+                "a no_specimen run has no specimen; remove {}",
+                given.join(", ")
             ),
         );
         return None;
     }
-    match role {
-        Role::NoSpecimen => {
-            if !given.is_empty() {
-                bad(
-                    path.clone(),
-                    format!(
-                        "a no_specimen run has no specimen; remove {}",
-                        given.join(", ")
-                    ),
-                );
-                return None;
-            }
-            Some(SpecimenModel::None)
-        }
-        Role::Spring => {
-            let Some(k) = s.stiffness_n_per_m else {
-                bad(
-                    path.key("stiffness_n_per_m"),
-                    "a spring run needs the spring's stiffness".into(),
-                );
-                return None;
-            };
-            if s.mass_kg.is_some() || s.damping_ns_per_m.is_some() {
-                bad(
-                    path.clone(),
-                    "a spring run is massless and undamped in the paper's model (Sec. 3.1); give only stiffness_n_per_m, or use role `validation` for a specimen with mass".into(),
-                );
-                return None;
-            }
-            ok.then_some(SpecimenModel::Spring {
-                stiffness_n_per_m: k,
-            })
-        }
-        Role::Validation | Role::Fit if s.model == SpecimenKind::Linear => {
-            linear_specimen(&s, path, bad).filter(|_| ok)
-        }
-        Role::Validation | Role::Fit => nonlinear_specimen(&s, ok, path, bad),
+    Some(SpecimenModel::None)
+}
+
+/// A spring run's specimen: its stiffness alone; `ok` is whether the
+/// values passed their checks.
+fn spring_specimen(
+    s: &Specimen,
+    ok: bool,
+    path: &KeyPath,
+    bad: &mut impl FnMut(KeyPath, String),
+) -> Option<SpecimenModel> {
+    let Some(k) = s.stiffness_n_per_m else {
+        bad(
+            path.key("stiffness_n_per_m"),
+            "a spring run needs the spring's stiffness".into(),
+        );
+        return None;
+    };
+    if s.mass_kg.is_some() || s.damping_ns_per_m.is_some() {
+        bad(
+            path.clone(),
+            "a spring run is massless and undamped in the paper's model (Sec. 3.1); give only stiffness_n_per_m, or use role `validation` for a specimen with mass".into(),
+        );
+        return None;
     }
+    ok.then_some(SpecimenModel::Spring {
+        stiffness_n_per_m: k,
+    })
 }
 
 /// A linear specimen of a validation or fit run, by the keys given: none, a

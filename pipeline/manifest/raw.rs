@@ -595,10 +595,10 @@ pub struct Specimen {
     /// Specimen model; `linear` unless a nonlinear model is named.
     #[serde(default)]
     pub model: SpecimenKind,
-    /// Specimen mass m [kg].
+    /// Specimen mass m (kg).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub mass_kg: Option<f64>,
-    /// Specimen damping c [N s/m].
+    /// Specimen damping c (N s/m).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub damping_ns_per_m: Option<f64>,
     /// Linear (or, for Bouc-Wen, initial elastic) stiffness.
@@ -645,9 +645,9 @@ pub struct BoucWenParams {
     pub alpha: f64,
     /// A, the initial slope dz/dx1.
     pub a: f64,
-    /// beta [1/m^n] of the Bouc-Wen law.
+    /// beta (1/m^n) of the Bouc-Wen law.
     pub beta_per_m_pow_n: f64,
-    /// gamma [1/m^n] of the Bouc-Wen law.
+    /// gamma (1/m^n) of the Bouc-Wen law.
     pub gamma_per_m_pow_n: f64,
     /// n >= 1, sharpness of the transition.
     pub n: f64,
@@ -682,7 +682,7 @@ pub struct PublishedTf {
     pub num: Vec<f64>,
     /// Denominator coefficients, highest power of s first.
     pub den: Vec<f64>,
-    /// Pure delay [s] in front of num/den.
+    /// Pure delay (s) in front of num/den.
     #[serde(default)]
     pub delay_s: f64,
     /// Where it was published (e.g. "Eq. 36").

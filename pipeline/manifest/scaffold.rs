@@ -143,6 +143,22 @@ pub fn manifest_text(
     runs: &Runs<'_>,
 ) -> String {
     let mut out = String::new();
+    write_preamble(&mut out, name, logs);
+    write_channels(&mut out, logs, channels);
+    out.push_str(
+        "\n# The band fitted. The FRF settings are left to servoid, which chooses\n\
+         # them for each log from its length, its ends and the band (the\n\
+         # default, estimator = \"auto\"; each run's choice is in results.json\n\
+         # and on its page); see docs/manifest.md.\n\
+         [identification]\nband_hz = [0.5, 30.0]\ncoherence_min = 0.8\n",
+    );
+    write_runs(&mut out, logs, runs);
+    out
+}
+
+/// The manifest's opening comment, `[campaign]` and `[rig]`, and the first
+/// log's columns listed for the channels below.
+fn write_preamble(out: &mut String, name: &str, logs: &[FoundLog]) {
     let _ = writeln!(
         out,
         "# A campaign manifest proposed by `servoid init` from {} log(s).\n\
@@ -172,10 +188,15 @@ pub fn manifest_text(
             let _ = writeln!(out, "#   {}{unit}", quoted(&c.name));
         }
     }
+}
+
+/// `[channels]`: the time base (a column, the rate the file states, or a
+/// rate to fill), then the command, displacement and force.
+fn write_channels(out: &mut String, logs: &[FoundLog], channels: &ProposedChannels) {
     out.push_str("[channels]\n");
     let rate = logs.first().and_then(|l| l.inspected.rate_hz);
     match (&channels.time.column, rate) {
-        (Some(_), _) => channel_line(&mut out, "time", &channels.time, "s or ms", false),
+        (Some(_), _) => channel_line(out, "time", &channels.time, "s or ms", false),
         (None, Some(hz)) => {
             let _ = writeln!(
                 out,
@@ -191,32 +212,23 @@ pub fn manifest_text(
             );
         }
     }
+    channel_line(out, "command", &channels.command, "m, cm, mm or in", false);
     channel_line(
-        &mut out,
-        "command",
-        &channels.command,
-        "m, cm, mm or in",
-        false,
-    );
-    channel_line(
-        &mut out,
+        out,
         "displacement",
         &channels.displacement,
         "m, cm, mm or in",
         false,
     );
-    channel_line(&mut out, "force", &channels.force, "N, kN or lbf", true);
-    out.push_str(
-        "\n# The band fitted. The FRF settings are left to servoid, which chooses\n\
-         # them for each log from its length, its ends and the band (the\n\
-         # default, estimator = \"auto\"; each run's choice is in results.json\n\
-         # and on its page); see docs/manifest.md.\n\
-         [identification]\nband_hz = [0.5, 30.0]\ncoherence_min = 0.8\n",
-    );
+    channel_line(out, "force", &channels.force, "N, kN or lbf", true);
+}
+
+/// The runs: a `[[runs]]` block per log, or the `[run_table]`.
+fn write_runs(out: &mut String, logs: &[FoundLog], runs: &Runs<'_>) {
     match runs {
         Runs::Blocks(read) => {
             for (log, back) in logs.iter().zip(*read) {
-                run_block(&mut out, log, back);
+                run_block(out, log, back);
             }
         }
         Runs::Table {
@@ -240,7 +252,6 @@ pub fn manifest_text(
             );
         }
     }
-    out
 }
 
 /// The run table's columns as `servoid init --table` writes them.

@@ -180,9 +180,9 @@ pub struct UnmodelledSpec {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[schemars(deny_unknown_fields)]
 pub struct ActuatorFrictionSpec {
-    /// Coulomb friction force of the actuator's seals [N].
+    /// Coulomb friction force of the actuator's seals (N).
     pub coulomb_force_n: f64,
-    /// Velocity [m/s] over which the friction's sign is smoothed (tanh).
+    /// Velocity (m/s) over which the friction's sign is smoothed (tanh).
     pub smoothing_velocity_m_per_s: f64,
 }
 
@@ -190,7 +190,7 @@ pub struct ActuatorFrictionSpec {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[schemars(deny_unknown_fields)]
 pub struct ValveModeSpec {
-    /// Natural frequency [Hz] of the second-order mode.
+    /// Natural frequency (Hz) of the second-order mode.
     pub natural_frequency_hz: f64,
     /// Damping ratio of the second-order mode.
     pub damping_ratio: f64,

@@ -404,6 +404,53 @@ fn check_row(
     let id = row.cell("id").filter(|c| !c.starts_with(PLACEHOLDER));
     // A cell `servoid init --table` left to fill: that is the row's problem
     // until it is filled (its other checks would only repeat it).
+    if report_placeholders(row, id, problems) {
+        let role = row
+            .cell("role")
+            .and_then(|r| Role::ALL.into_iter().find(|x| x.as_str() == r));
+        let key = RowKey {
+            row: row.number,
+            id: id.map(str::to_string),
+            role,
+            has_mass: false,
+        };
+        return (key, None);
+    }
+    let before = problems.len();
+    let cells = read_cells(row, id, problems);
+    let key = RowKey {
+        row: row.number,
+        id: id.map(str::to_string),
+        role: cells.role,
+        has_mass: cells.mass.flatten().is_some(),
+    };
+    let specimen = row_specimen(row, id, &cells, problems);
+    let log = cells
+        .role
+        .and_then(|role| row_log(row, id, role, table_dir, source, predict, problems));
+    let run = match (cells.id, cells.role, cells.p_gain, specimen, log) {
+        (Some(id), Some(role), Some(p_gain), Some(specimen), Some(log))
+            if problems.len() == before =>
+        {
+            Some(TableRun {
+                id: id.to_string(),
+                role,
+                p_gain,
+                specimen,
+                date: cells.date,
+                log,
+                description: row.cell("description").unwrap_or_default().to_string(),
+                annotations: row_annotations(row),
+            })
+        }
+        _ => None,
+    };
+    (key, run)
+}
+
+/// Report each cell `servoid init --table` left to fill, in column order;
+/// whether there was one.
+fn report_placeholders(row: &Row<'_>, id: Option<&str>, problems: &mut Vec<Problem>) -> bool {
     let mut left = false;
     let mut in_order: Vec<(&&str, &usize)> = row.columns.iter().collect();
     in_order.sort_by_key(|(_, i)| **i);
@@ -424,19 +471,26 @@ fn check_row(
             left = true;
         }
     }
-    if left {
-        let role = row
-            .cell("role")
-            .and_then(|r| Role::ALL.into_iter().find(|x| x.as_str() == r));
-        let key = RowKey {
-            row: row.number,
-            id: id.map(str::to_string),
-            role,
-            has_mass: false,
-        };
-        return (key, None);
-    }
-    let before = problems.len();
+    left
+}
+
+/// A row's cells as values, each None where it is empty or did not read;
+/// the numbers `Some(None)` when empty, None when they did not read (as
+/// [`number`] gives them).
+struct Cells<'a> {
+    id: Option<&'a str>,
+    role: Option<Role>,
+    p_gain: Option<f64>,
+    mass: Option<Option<f64>>,
+    damping: Option<Option<f64>>,
+    stiffness: Option<Option<f64>>,
+    date: Option<String>,
+}
+
+/// Read and check each cell of the row on its own: the required ones
+/// there, the id a slug, the role known, the numbers numbers, the date a
+/// date.
+fn read_cells<'a>(row: &'a Row<'_>, id: Option<&str>, problems: &mut Vec<Problem>) -> Cells<'a> {
     let mut bad = |column: &str, message: String| {
         problems.push(row.problem(id, Some(column), message));
     };
@@ -478,54 +532,52 @@ fn check_row(
             .map_err(|e| bad("date", e.to_string()))
             .ok()
     });
-    let key = RowKey {
-        row: row.number,
-        id: id.map(str::to_string),
+    Cells {
+        id: id_cell,
         role,
-        has_mass: mass.flatten().is_some(),
+        p_gain,
+        mass,
+        damping,
+        stiffness,
+        date,
+    }
+}
+
+/// The specimen the row's role needs, checked. It is judged only from
+/// cells that read as numbers: an unreadable stiffness is one problem, not
+/// also a missing one.
+fn row_specimen(
+    row: &Row<'_>,
+    id: Option<&str>,
+    cells: &Cells<'_>,
+    problems: &mut Vec<Problem>,
+) -> Option<SpecimenModel> {
+    let (Some(role), Some(mass_kg), Some(damping_ns_per_m), Some(stiffness_n_per_m)) =
+        (cells.role, cells.mass, cells.damping, cells.stiffness)
+    else {
+        return None;
     };
-    // The specimen is judged only from cells that read as numbers: an
-    // unreadable stiffness is one problem, not also a missing one.
-    let specimen = match (role, mass, damping, stiffness) {
-        (Some(role), Some(mass_kg), Some(damping_ns_per_m), Some(stiffness_n_per_m)) => {
-            let s = Specimen {
-                mass_kg,
-                damping_ns_per_m,
-                stiffness_n_per_m,
-                ..Specimen::default()
-            };
-            check_specimen(role, Some(&s), &KeyPath::root(), &mut |p, m| {
-                problems.push(row.problem(id, specimen_column(&p), m));
-            })
-        }
-        _ => None,
+    let s = Specimen {
+        mass_kg,
+        damping_ns_per_m,
+        stiffness_n_per_m,
+        ..Specimen::default()
     };
-    let log = role.and_then(|role| row_log(row, id, role, table_dir, source, predict, problems));
-    let run = match (id_cell, role, p_gain, specimen, log) {
-        (Some(id), Some(role), Some(p_gain), Some(specimen), Some(log))
-            if problems.len() == before =>
-        {
-            Some(TableRun {
-                id: id.to_string(),
-                role,
-                p_gain,
-                specimen,
-                date,
-                log,
-                description: row.cell("description").unwrap_or_default().to_string(),
-                annotations: row
-                    .annotations
-                    .iter()
-                    .filter_map(|(name, i)| {
-                        let cell = row.cells.get(*i)?.as_deref()?;
-                        Some((name.clone(), cell.to_string()))
-                    })
-                    .collect(),
-            })
-        }
-        _ => None,
-    };
-    (key, run)
+    check_specimen(role, Some(&s), &KeyPath::root(), &mut |p, m| {
+        problems.push(row.problem(id, specimen_column(&p), m));
+    })
+}
+
+/// The row's cells in the lab's own columns, by column, empty cells left
+/// out.
+fn row_annotations(row: &Row<'_>) -> BTreeMap<String, String> {
+    row.annotations
+        .iter()
+        .filter_map(|(name, i)| {
+            let cell = row.cells.get(*i)?.as_deref()?;
+            Some((name.clone(), cell.to_string()))
+        })
+        .collect()
 }
 
 /// The column a specimen check names (its key path's last key); None for a

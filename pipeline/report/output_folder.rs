@@ -69,48 +69,14 @@ impl OutputFolder {
             why,
         };
         let existing = std::fs::metadata(target).ok();
-        if existing.as_ref().is_some_and(|m| !m.is_dir()) {
-            return Err(bad(
-                "the output folder (--out) is a file; give a folder, or remove the file".into(),
-            ));
-        }
-        let abs = std::path::absolute(target)
-            .map_err(|e| bad(format!("cannot resolve the output folder (--out): {e}")))?;
-        // A symbolic link (reports/latest -> reports/2026-11-23) keeps
-        // pointing where it did: the folder it names is what is replaced.
-        let resolved = match &existing {
-            Some(_) => std::fs::canonicalize(&abs)
-                .map_err(|e| bad(format!("cannot resolve the output folder (--out): {e}")))?,
-            None => abs,
-        };
+        let resolved = resolve_target(target, existing.as_ref()).map_err(bad)?;
         let (Some(parent), Some(name)) = (resolved.parent(), resolved.file_name()) else {
             return Err(bad(
                 "the output folder (--out) cannot be a file system's root; give a folder of its own"
                     .into(),
             ));
         };
-        if let Ok(cwd) = std::env::current_dir().and_then(std::fs::canonicalize)
-            && existing.is_some()
-            && cwd.starts_with(&resolved)
-        {
-            return Err(bad(
-                "the output folder (--out) holds the current folder, and servoid replaces its output folder as a whole; give a folder of its own, such as reports/<name>"
-                    .into(),
-            ));
-        }
-        // Named as given: the user wrote `f/out`, not its absolute path.
-        if let Some(file) = target
-            .ancestors()
-            .skip(1)
-            .filter(|a| !a.as_os_str().is_empty())
-            .find(|a| std::fs::symlink_metadata(a).is_ok())
-            .filter(|a| !a.is_dir())
-        {
-            return Err(bad(format!(
-                "{} is a file, so the output folder (--out) cannot be made under it; give a folder elsewhere, or remove the file",
-                file.display()
-            )));
-        }
+        check_room(target, &resolved, existing.is_some()).map_err(bad)?;
         std::fs::create_dir_all(parent)
             .map_err(|e| bad(format!("cannot create the output folder (--out): {e}")))?;
         if existing.is_some() {
@@ -130,28 +96,7 @@ impl OutputFolder {
             drop(target_lock);
             return Self::begin(target);
         }
-        let work = parent.join(format!(".{name}{WORK}{}", std::process::id()));
-        // A folder of this name is a dead job's whose pid came round again
-        // (sweep found it unlocked), or a live one in this process.
-        if work.exists() {
-            return Err(bad(format!(
-                "{} is in use by another job of this process",
-                work.display()
-            )));
-        }
-        std::fs::create_dir(&work).map_err(|e| {
-            bad(format!(
-                "cannot write beside the output folder (--out): {e}"
-            ))
-        })?;
-        let lock = File::open(&work).and_then(|f| f.try_lock().map(|()| f).map_err(Into::into));
-        let lock = match lock {
-            Ok(f) => f,
-            Err(e) => {
-                let _ = std::fs::remove_dir_all(&work);
-                return Err(bad(format!("cannot lock the work folder: {e}")));
-            }
-        };
+        let (work, lock) = start_work(parent, &name).map_err(bad)?;
         let set = Self {
             resolved,
             target: target.to_path_buf(),
@@ -255,6 +200,80 @@ pub fn fault(point: &str) {
         }
         #[cfg(not(unix))]
         std::process::abort();
+    }
+}
+
+/// The output folder to replace: `target` absolute, and, when it exists
+/// (`existing`), its symbolic links resolved; refused when it is a file.
+/// The error is why, for [`WriteError::OutFolder`].
+fn resolve_target(target: &Path, existing: Option<&std::fs::Metadata>) -> Result<PathBuf, String> {
+    if existing.is_some_and(|m| !m.is_dir()) {
+        return Err(
+            "the output folder (--out) is a file; give a folder, or remove the file".into(),
+        );
+    }
+    let abs = std::path::absolute(target)
+        .map_err(|e| format!("cannot resolve the output folder (--out): {e}"))?;
+    // A symbolic link (reports/latest -> reports/2026-11-23) keeps
+    // pointing where it did: the folder it names is what is replaced.
+    match existing {
+        Some(_) => std::fs::canonicalize(&abs)
+            .map_err(|e| format!("cannot resolve the output folder (--out): {e}")),
+        None => Ok(abs),
+    }
+}
+
+/// Whether the output folder has room of its own: it does not hold the
+/// current folder (which replacing it would pull away), and no file stands
+/// where a folder above it must be. The error is why, for
+/// [`WriteError::OutFolder`].
+fn check_room(target: &Path, resolved: &Path, exists: bool) -> Result<(), String> {
+    if let Ok(cwd) = std::env::current_dir().and_then(std::fs::canonicalize)
+        && exists
+        && cwd.starts_with(resolved)
+    {
+        return Err(
+            "the output folder (--out) holds the current folder, and servoid replaces its output folder as a whole; give a folder of its own, such as reports/<name>"
+                .into(),
+        );
+    }
+    // Named as given: the user wrote `f/out`, not its absolute path.
+    if let Some(file) = target
+        .ancestors()
+        .skip(1)
+        .filter(|a| !a.as_os_str().is_empty())
+        .find(|a| std::fs::symlink_metadata(a).is_ok())
+        .filter(|a| !a.is_dir())
+    {
+        return Err(format!(
+            "{} is a file, so the output folder (--out) cannot be made under it; give a folder elsewhere, or remove the file",
+            file.display()
+        ));
+    }
+    Ok(())
+}
+
+/// This job's work folder beside the output folder `name` in `parent`,
+/// made and locked. The error is why, for [`WriteError::OutFolder`].
+fn start_work(parent: &Path, name: &str) -> Result<(PathBuf, File), String> {
+    let work = parent.join(format!(".{name}{WORK}{}", std::process::id()));
+    // A folder of this name is a dead job's whose pid came round again
+    // (sweep found it unlocked), or a live one in this process.
+    if work.exists() {
+        return Err(format!(
+            "{} is in use by another job of this process",
+            work.display()
+        ));
+    }
+    std::fs::create_dir(&work)
+        .map_err(|e| format!("cannot write beside the output folder (--out): {e}"))?;
+    let lock = File::open(&work).and_then(|f| f.try_lock().map(|()| f).map_err(Into::into));
+    match lock {
+        Ok(f) => Ok((work, f)),
+        Err(e) => {
+            let _ = std::fs::remove_dir_all(&work);
+            Err(format!("cannot lock the work folder: {e}"))
+        }
     }
 }
 

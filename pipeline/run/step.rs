@@ -828,70 +828,13 @@ fn fitted(
     out.frf = acq.stage.as_deref().map(frf_used);
     let stage = acq.stage;
     let fit = stage.as_ref().and_then(|s| s.fit.as_ref());
-    out.tf = acq.tf.as_ref().map(|tf| {
-        let mut t = TfResult::new(tf, acq.source);
-        if let Some(fit) = fit {
-            t.std = Some(fit.std.clone());
-            t.rel_std = Some(
-                fit.std
-                    .iter()
-                    .zip(&fit.params)
-                    .map(|(s, p)| s / p.abs())
-                    .collect(),
-            );
-        }
-        t
-    });
+    out.tf = acq.tf.as_ref().map(|tf| tf_result(tf, acq.source, fit));
     let mut time = None;
     if let Some(st) = &stage
         && let Some(fit) = &st.fit
     {
         let summary = fit_summary(ident, plan, st, fit);
-        // The delay is named as the cause only where it explains most of
-        // what the fit leaves beyond the noise: a nonlinearity or the FRF
-        // settings can make a delay of a hundredth of a sample significant
-        // on a long record, explaining a few per cent of the misfit.
-        if let Some(t) = summary.delay_test.as_ref().filter(|t| {
-            t.supported
-                && st.cause.is_none()
-                && t.reduced_chi2.is_some_and(|with| {
-                    summary.reduced_chi2 - with >= DELAY_EXPLAINS * (summary.reduced_chi2 - 1.0)
-                })
-        }) {
-            out.warnings.push(format!(
-                "the run's own fit: {}; with a delay of {:.3} ms its reduced chi-square is {:.3} (without, {:.3}); set identification.delay = {{ mode = \"fit\" }}",
-                t.note,
-                1e3 * t.delay_s.unwrap_or(f64::NAN),
-                t.reduced_chi2.unwrap_or(f64::NAN),
-                summary.reduced_chi2
-            ));
-        }
-        if let Some(d) = summary.adequacy.as_ref().and_then(|a| {
-            a.diagnosis_because(
-                (!fit.shape.fit_delay).then_some("set identification.delay = \"fit\""),
-                st.choice.plan.estimator.understated_noise(),
-                st.cause.as_deref(),
-            )
-        }) {
-            out.warnings.push(format!("the run's own fit: {d}"));
-        }
-        if let Some(o) = summary.adequacy.as_ref().and_then(|a| {
-            a.overstated_because(
-                st.choice.plan.estimator.overstated_noise(),
-                st.cause.as_deref(),
-            )
-        }) {
-            out.warnings.push(format!("the run's own fit: {o}"));
-        }
-        // A model that explains under half of the measured response is not
-        // a rig's: the likely causes are in the log's mapping, not in the
-        // model (swapped command and displacement columns measured 31 %).
-        if summary.fit_percent < POOR_FIT_PERCENT {
-            out.warnings.push(format!(
-                "the model explains only {:.0} % of the measured response (fit percent below {POOR_FIT_PERCENT:.0}); likely cause: the channels' columns (command and displacement swapped, or another run's log)",
-                summary.fit_percent
-            ));
-        }
+        out.warnings.extend(own_fit_warnings(&summary, st, fit));
         out.fit = Some(summary);
         match validate::fitted_run(&fit.tf, &record(&st.log)) {
             Ok(t) => {
@@ -915,6 +858,76 @@ fn fitted(
         });
     }
     (out, stage, time)
+}
+
+/// A run's transfer function as results.json states it, with the fit's
+/// stds (absolute and relative) when it was fitted here.
+fn tf_result(tf: &TransferFunction, source: TfSource, fit: Option<&TfFit>) -> TfResult {
+    let mut t = TfResult::new(tf, source);
+    if let Some(fit) = fit {
+        t.std = Some(fit.std.clone());
+        t.rel_std = Some(
+            fit.std
+                .iter()
+                .zip(&fit.params)
+                .map(|(s, p)| s / p.abs())
+                .collect(),
+        );
+    }
+    t
+}
+
+/// What the run's own fit says is wrong with it, in this order: a delay it
+/// lacks, its misfit's diagnosis, stds it overstates, a model that
+/// explains too little of the response.
+fn own_fit_warnings(summary: &FitSummary, st: &LogStage, fit: &TfFit) -> Vec<String> {
+    let mut warnings = Vec::new();
+    // The delay is named as the cause only where it explains most of what
+    // the fit leaves beyond the noise: a nonlinearity or the FRF settings
+    // can make a delay of a hundredth of a sample significant on a long
+    // record, explaining a few per cent of the misfit.
+    if let Some(t) = summary.delay_test.as_ref().filter(|t| {
+        t.supported
+            && st.cause.is_none()
+            && t.reduced_chi2.is_some_and(|with| {
+                summary.reduced_chi2 - with >= DELAY_EXPLAINS * (summary.reduced_chi2 - 1.0)
+            })
+    }) {
+        warnings.push(format!(
+            "the run's own fit: {}; with a delay of {:.3} ms its reduced chi-square is {:.3} (without, {:.3}); set identification.delay = {{ mode = \"fit\" }}",
+            t.note,
+            1e3 * t.delay_s.unwrap_or(f64::NAN),
+            t.reduced_chi2.unwrap_or(f64::NAN),
+            summary.reduced_chi2
+        ));
+    }
+    if let Some(d) = summary.adequacy.as_ref().and_then(|a| {
+        a.diagnosis_because(
+            (!fit.shape.fit_delay).then_some("set identification.delay = \"fit\""),
+            st.choice.plan.estimator.understated_noise(),
+            st.cause.as_deref(),
+        )
+    }) {
+        warnings.push(format!("the run's own fit: {d}"));
+    }
+    if let Some(o) = summary.adequacy.as_ref().and_then(|a| {
+        a.overstated_because(
+            st.choice.plan.estimator.overstated_noise(),
+            st.cause.as_deref(),
+        )
+    }) {
+        warnings.push(format!("the run's own fit: {o}"));
+    }
+    // A model that explains under half of the measured response is not a
+    // rig's: the likely causes are in the log's mapping, not in the model
+    // (swapped command and displacement columns measured 31 %).
+    if summary.fit_percent < POOR_FIT_PERCENT {
+        warnings.push(format!(
+            "the model explains only {:.0} % of the measured response (fit percent below {POOR_FIT_PERCENT:.0}); likely cause: the channels' columns (command and displacement swapped, or another run's log)",
+            summary.fit_percent
+        ));
+    }
+    warnings
 }
 
 /// The adequacy tests of a run's own fit on the bins it was given, its

@@ -204,35 +204,54 @@ pub fn linear_state_space(spec: &PlantSpec) -> Option<StateSpace> {
 
 /// The linear plant for a specimen (m, c, k) (m = 0: massless).
 fn build_linear(rig: &RigParams, m: f64, c: f64, k: f64, un: &Unmodelled) -> StateSpace {
-    let (b1, a1b0, a2, a3) = (
-        rig.beta1_per_s,
-        rig.a1b0_n_per_m_s2,
-        rig.a2_n_per_m,
-        rig.a3_per_s,
-    );
     let mp = un.piston_mass_kg.unwrap_or(0.0);
     if un.mode_states() == 0 && mp == 0.0 {
-        let specimen = if m > 0.0 {
-            LinearSpecimen::Sdof {
-                mass_kg: m,
-                damping_ns_per_m: c,
-                stiffness_n_per_m: k,
-            }
-        } else if k != 0.0 {
-            LinearSpecimen::Spring {
-                stiffness_n_per_m: k,
-            }
-        } else {
-            LinearSpecimen::None
-        };
-        return model::state_space(rig, &specimen);
+        return model::state_space(rig, &linear_specimen(m, c, k));
     }
-    let total = m + mp;
-    let mech = if total > 0.0 { 4 } else { 2 };
+    let mech = if m + mp > 0.0 { 4 } else { 2 };
     let n = mech + un.mode_states();
-    let mut a = DMatrix::<f64>::zeros(n, n);
-    let mut b = DVector::<f64>::zeros(n);
-    let mut cm = DMatrix::<f64>::zeros(2, n);
+    let mut ss = StateSpace {
+        a: DMatrix::<f64>::zeros(n, n),
+        b: DVector::<f64>::zeros(n),
+        c: DMatrix::<f64>::zeros(2, n),
+        d: DVector::zeros(2),
+    };
+    mechanical_states(&mut ss, rig, (m, c, k), mp, mech);
+    unmodelled_modes(&mut ss, rig.a1b0_n_per_m_s2, un, mech);
+    ss
+}
+
+/// The paper's specimen for (m, c, k): an SDOF with a mass, a spring
+/// without, none without either.
+fn linear_specimen(m: f64, c: f64, k: f64) -> LinearSpecimen {
+    if m > 0.0 {
+        LinearSpecimen::Sdof {
+            mass_kg: m,
+            damping_ns_per_m: c,
+            stiffness_n_per_m: k,
+        }
+    } else if k != 0.0 {
+        LinearSpecimen::Spring {
+            stiffness_n_per_m: k,
+        }
+    } else {
+        LinearSpecimen::None
+    }
+}
+
+/// The first `mech` states: x1, x2 and f with a mass (specimen `mck` and
+/// piston `mp`), x1 alone without, then r; and the load cell's output row.
+/// The valve is driven by nothing yet ([`unmodelled_modes`] closes the loop).
+fn mechanical_states(
+    ss: &mut StateSpace,
+    rig: &RigParams,
+    (m, c, k): (f64, f64, f64),
+    mp: f64,
+    mech: usize,
+) {
+    let (b1, a2, a3) = (rig.beta1_per_s, rig.a2_n_per_m, rig.a3_per_s);
+    let (a, cm) = (&mut ss.a, &mut ss.c);
+    let total = m + mp;
     let (ix1, ir) = (0, mech - 1);
     if total > 0.0 {
         let (ix2, iff) = (1, 2);
@@ -253,14 +272,14 @@ fn build_linear(rig: &RigParams, m: f64, c: f64, k: f64, un: &Unmodelled) -> Sta
         cm[(1, ix1)] = k;
     }
     a[(ir, ir)] = -b1;
-    // A mode's two states (y, y'), driven by wm^2 (input), start at `at`.
-    let mode = |a: &mut DMatrix<f64>, at: usize, vm: ValveMode| {
-        let wm = 2.0 * std::f64::consts::PI * vm.natural_frequency_hz;
-        a[(at, at + 1)] = 1.0;
-        a[(at + 1, at)] = -wm * wm;
-        a[(at + 1, at + 1)] = -2.0 * vm.damping_ratio * wm;
-        wm * wm
-    };
+}
+
+/// The unmodelled modes' states after the first `mech` (in the loop, in
+/// the command path, in the measurement path, each where it is given), and
+/// the loop closed through them: the command in, x1 out.
+fn unmodelled_modes(ss: &mut StateSpace, a1b0: f64, un: &Unmodelled, mech: usize) {
+    let (a, b, cm) = (&mut ss.a, &mut ss.b, &mut ss.c);
+    let (ix1, ir) = (0, mech - 1);
     let mut next = mech;
     let iv = un.valve_mode.map(|_| {
         next += 2;
@@ -279,14 +298,14 @@ fn build_linear(rig: &RigParams, m: f64, c: f64, k: f64, un: &Unmodelled) -> Sta
     let (drive, gain) = match (un.valve_mode, iv) {
         (Some(vm), Some(iv)) => {
             a[(ir, iv)] = a1b0;
-            (iv + 1, mode(&mut a, iv, vm))
+            (iv + 1, mode_block(a, iv, vm))
         }
         _ => (ir, a1b0),
     };
     a[(drive, ix1)] -= gain;
     match (un.command_mode, ip) {
         (Some(pm), Some(ip)) => {
-            let wp2 = mode(&mut a, ip, pm);
+            let wp2 = mode_block(a, ip, pm);
             b[ip + 1] = wp2;
             a[(drive, ip)] += gain;
         }
@@ -294,18 +313,22 @@ fn build_linear(rig: &RigParams, m: f64, c: f64, k: f64, un: &Unmodelled) -> Sta
     }
     match (un.measurement_mode, iq) {
         (Some(qm), Some(iq)) => {
-            let wq2 = mode(&mut a, iq, qm);
+            let wq2 = mode_block(a, iq, qm);
             a[(iq + 1, ix1)] = wq2;
             cm[(0, iq)] = 1.0;
         }
         _ => cm[(0, ix1)] = 1.0,
     }
-    StateSpace {
-        a,
-        b,
-        c: cm,
-        d: DVector::zeros(2),
-    }
+}
+
+/// A mode's two states (y, y') starting at `at`; returns wm^2, the gain its
+/// input drives it with.
+fn mode_block(a: &mut DMatrix<f64>, at: usize, vm: ValveMode) -> f64 {
+    let wm = 2.0 * std::f64::consts::PI * vm.natural_frequency_hz;
+    a[(at, at + 1)] = 1.0;
+    a[(at + 1, at)] = -wm * wm;
+    a[(at + 1, at + 1)] = -2.0 * vm.damping_ratio * wm;
+    wm * wm
 }
 
 /// A plant with a specimen that has a mass (every nonlinear one), as an ODE

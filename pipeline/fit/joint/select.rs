@@ -83,8 +83,8 @@ use serde::{Deserialize, Deserializer, Serialize, Serializer};
 use statrs::distribution::{ContinuousCDF, FisherSnedecor};
 
 use super::{
-    FitError, JointFit, JointOptions, JointRun, Leg, Output, Structure, finish, joint_fit,
-    joint_fit_staged, problem, rig_theta, solver,
+    FitError, JointFit, JointOptions, JointProblem, JointRun, Leg, Output, Structure, finish,
+    joint_fit, joint_fit_staged, problem, rig_theta, solver,
 };
 use crate::model::RigParams;
 
@@ -367,22 +367,59 @@ pub fn select(
     choice: Choice,
     band_top_hz: f64,
 ) -> Selection {
-    let assess = |structure: Structure, fit: Result<JointFit, FitError>| {
-        let unusable = match &fit {
-            Err(_) => None,
-            Ok(f) if !f.converged => Some(format!(
-                "Levenberg-Marquardt stopped after {} iterations without converging",
-                f.iterations
-            )),
-            Ok(f) => f.unphysical(band_top_hz, opts.max_delay_s),
-        };
-        Candidate {
-            structure,
-            fit,
-            unusable,
-            f_test: None,
-        }
+    let mut candidates = fit_candidates(runs, start, opts, choice, band_top_hz);
+    flag_local_optima(&mut candidates);
+    let base = choose_nested(&mut candidates);
+    let auto = choose_mode(&mut candidates, base).or(base);
+    let auto = auto.map(|i| candidates[i].structure);
+    let chosen = match choice {
+        Choice::Auto => auto,
+        Choice::Fixed(s) => candidates
+            .iter()
+            .find(|c| c.structure == s && c.fit.is_ok())
+            .map(|c| c.structure),
     };
+    Selection {
+        candidates,
+        auto,
+        chosen,
+        choice,
+    }
+}
+
+/// `fit` as a candidate, with why it is unusable although it ran.
+fn assess(
+    structure: Structure,
+    fit: Result<JointFit, FitError>,
+    band_top_hz: f64,
+    max_delay_s: f64,
+) -> Candidate {
+    let unusable = match &fit {
+        Err(_) => None,
+        Ok(f) if !f.converged => Some(format!(
+            "Levenberg-Marquardt stopped after {} iterations without converging",
+            f.iterations
+        )),
+        Ok(f) => f.unphysical(band_top_hz, max_delay_s),
+    };
+    Candidate {
+        structure,
+        fit,
+        unusable,
+        f_test: None,
+    }
+}
+
+/// Every candidate's fit, in the order the choice reads them: the paper's
+/// model, the delay, then the piston and each place of a mode.
+fn fit_candidates(
+    runs: &[JointRun<'_>],
+    start: &RigParams,
+    opts: &JointOptions,
+    choice: Choice,
+    band_top_hz: f64,
+) -> Vec<Candidate> {
+    let assess = |structure, fit| assess(structure, fit, band_top_hz, opts.max_delay_s);
     let with = |structure: Structure| JointOptions {
         structure,
         delay_start_s: 0.0,
@@ -434,10 +471,17 @@ pub fn select(
     };
     let mut candidates = vec![plain, delay];
     candidates.extend(extensions);
-    // Every larger structure holds the paper's model and the delay (module
-    // docs), so at its optimum it fits at least as well as they do; one
-    // that stopped above either's cost stopped at a local optimum, and its
-    // rig is not that structure's answer.
+    candidates
+}
+
+/// Mark unusable each larger structure that stopped above the cost of a
+/// structure it holds.
+///
+/// Every larger structure holds the paper's model and the delay (module
+/// docs), so at its optimum it fits at least as well as they do; one that
+/// stopped above either's cost stopped at a local optimum, and its rig is
+/// not that structure's answer.
+fn flag_local_optima(candidates: &mut [Candidate]) {
     for i in 1..candidates.len() {
         let nested_best = candidates[..i.min(2)]
             .iter()
@@ -455,8 +499,12 @@ pub fn select(
             ));
         }
     }
-    // Forward through the nested chain: the delay against the paper's
-    // model, then each mode against what that chose.
+}
+
+/// The index of the paper's model or the delay, whichever the F test
+/// takes: forward through the nested chain, the delay against the paper's
+/// model. None when neither is usable.
+fn choose_nested(candidates: &mut [Candidate]) -> Option<usize> {
     let mut auto: Option<usize> = None;
     for i in 0..2 {
         if candidates[i].usable().is_none() {
@@ -475,7 +523,13 @@ pub fn select(
             auto = Some(i);
         }
     }
-    let base = auto;
+    auto
+}
+
+/// The index of the mode or piston taken over `base` (the nested chain's
+/// choice) by the F test, the lowest AIC among those taken; None when the
+/// test takes none.
+fn choose_mode(candidates: &mut [Candidate], base: Option<usize>) -> Option<usize> {
     let mut best_mode: Option<usize> = None;
     for i in 2..candidates.len() {
         // Akaike's criterion with the noise known: the cost plus twice the
@@ -504,23 +558,7 @@ pub fn select(
             best_mode = Some(i);
         }
     }
-    if best_mode.is_some() {
-        auto = best_mode;
-    }
-    let auto = auto.map(|i| candidates[i].structure);
-    let chosen = match choice {
-        Choice::Auto => auto,
-        Choice::Fixed(s) => candidates
-            .iter()
-            .find(|c| c.structure == s && c.fit.is_ok())
-            .map(|c| c.structure),
-    };
-    Selection {
-        candidates,
-        auto,
-        chosen,
-        choice,
-    }
+    best_mode
 }
 
 /// The extra-sum-of-squares F test of `big` against the nested `small`.
@@ -585,40 +623,91 @@ fn fit_mode(
     };
     let prob = problem(runs, &base)?;
     let coarse = prob.every(GRID_STRIDE);
-    let fs = opts.sample_rate_hz;
-    let rig_theta = rig_theta(&rig, opts.p_ref);
-    let mut scored: Vec<ValveStart> = Vec::new();
-    let mut score = |theta: Vec<f64>, start: ValveStart| {
-        let cost = coarse.cost(&theta);
-        if cost.is_finite() {
-            scored.push(ValveStart { cost, ..start });
-        }
-    };
+    let with_force = coarse.force_delay.is_some();
+    let mut grid = Vec::new();
     if structure.piston() {
-        // The piston's mode over the same range, sqrt(a2 / m_p) from 1.5
-        // to 12 times the band's top; the delays as the delay fit has them.
-        for i in 0..6 {
+        grid.extend(piston_starts(
+            &rig,
+            delay_s,
+            force_delay_s,
+            opts,
+            band_top_hz,
+            with_force,
+        ));
+    }
+    if structure.place().is_some() {
+        grid.extend(mode_starts(
+            &rig,
+            delay_s,
+            force_delay_s,
+            opts,
+            band_top_hz,
+            structure,
+            with_force,
+        ));
+    }
+    let mut scored: Vec<ValveStart> = grid
+        .into_iter()
+        .filter_map(|(theta, start)| {
+            let cost = coarse.cost(&theta);
+            cost.is_finite().then_some(ValveStart { cost, ..start })
+        })
+        .collect();
+    scored.sort_by(|a, b| a.cost.total_cmp(&b.cost));
+    race(&prob, &coarse, &rig, &base, &scored)
+}
+
+/// The piston's starts: its mode over the same range as a mode's,
+/// sqrt(a2 / m_p) from 1.5 to 12 times the band's top; the delays as the
+/// delay fit has them. Each with its theta, the cost not yet scored.
+fn piston_starts(
+    rig: &RigParams,
+    delay_s: f64,
+    force_delay_s: f64,
+    opts: &JointOptions,
+    band_top_hz: f64,
+    with_force: bool,
+) -> Vec<(Vec<f64>, ValveStart)> {
+    let fs = opts.sample_rate_hz;
+    let rig_theta = rig_theta(rig, opts.p_ref);
+    (0..6)
+        .map(|i| {
             let w = 2.0 * std::f64::consts::PI * 1.5 * band_top_hz * 8f64.powf(i as f64 / 5.0);
             let mp = rig.a2_n_per_m / (w * w);
             let mut theta = rig_theta.to_vec();
             theta.extend([delay_s * fs, mp.ln()]);
-            if coarse.force_delay.is_some() {
+            if with_force {
                 theta.push(force_delay_s * fs);
             }
-            score(
-                theta,
-                ValveStart {
-                    cost: 0.0,
-                    hz: 0.0,
-                    zeta: 0.0,
-                    piston_kg: mp,
-                    delay_s,
-                    force_delay_s,
-                },
-            );
-        }
-    }
-    for i in (0..6).filter(|_| structure.place().is_some()) {
+            let start = ValveStart {
+                cost: 0.0,
+                hz: 0.0,
+                zeta: 0.0,
+                piston_kg: mp,
+                delay_s,
+                force_delay_s,
+            };
+            (theta, start)
+        })
+        .collect()
+}
+
+/// A mode's starts at `structure`'s place: frequencies from 1.5 to 12
+/// times the band's top, dampings 0.3, 0.55 and 0.8, the delays less the
+/// mode's lag. Each with its theta, the cost not yet scored.
+fn mode_starts(
+    rig: &RigParams,
+    delay_s: f64,
+    force_delay_s: f64,
+    opts: &JointOptions,
+    band_top_hz: f64,
+    structure: Structure,
+    with_force: bool,
+) -> Vec<(Vec<f64>, ValveStart)> {
+    let fs = opts.sample_rate_hz;
+    let rig_theta = rig_theta(rig, opts.p_ref);
+    let mut starts = Vec::new();
+    for i in 0..6 {
         let hz = 1.5 * band_top_hz * 8f64.powf(i as f64 / 5.0);
         for zeta in [0.3, 0.55, 0.8] {
             let w = 2.0 * std::f64::consts::PI * hz;
@@ -634,40 +723,50 @@ fn fit_mode(
             let d = lag(delay_s);
             let mut theta = rig_theta.to_vec();
             theta.extend([d * fs, w.ln(), zeta.ln()]);
-            if coarse.force_delay.is_some() {
+            if with_force {
                 theta.push(d_force * fs);
             }
-            score(
-                theta,
-                ValveStart {
-                    cost: 0.0,
-                    hz,
-                    zeta,
-                    piston_kg: 0.0,
-                    delay_s: d,
-                    force_delay_s: d_force,
-                },
-            );
+            let start = ValveStart {
+                cost: 0.0,
+                hz,
+                zeta,
+                piston_kg: 0.0,
+                delay_s: d,
+                force_delay_s: d_force,
+            };
+            starts.push((theta, start));
         }
     }
-    scored.sort_by(|a, b| a.cost.total_cmp(&b.cost));
+    starts
+}
+
+/// The fit from the best of the `scored` starts (sorted by cost), raced on
+/// `coarse` and finished on every bin of `prob`.
+///
+/// Levenberg-Marquardt from the two best starts side by side, on the
+/// quarter of the bins the grid was scored on, for a few iterations; then
+/// only the one with the lower cost (the first on a tie) goes on to that
+/// problem's optimum, and from there on every bin to the optimum of all of
+/// them, which alone is finished (covariance, adequacy). The quarter's
+/// optimum is within its noise of the whole's, so the last leg takes a few
+/// iterations where a start from the grid takes a dozen.
+fn race(
+    prob: &JointProblem,
+    coarse: &JointProblem,
+    rig: &RigParams,
+    base: &JointOptions,
+    scored: &[ValveStart],
+) -> Result<JointFit, FitError> {
     let options = |v: &ValveStart| JointOptions {
         valve_start: (v.hz, v.zeta),
         piston_start_kg: v.piston_kg,
         delay_start_s: v.delay_s,
         force_delay_start_s: v.force_delay_s,
-        ..base
+        ..*base
     };
-    // Levenberg-Marquardt from the two best starts side by side, on the
-    // quarter of the bins the grid was scored on, for a few iterations;
-    // then only the one with the lower cost (the first on a tie) goes on to
-    // that problem's optimum, and from there on every bin to the optimum
-    // of all of them, which alone is finished (covariance, adequacy). The
-    // quarter's optimum is within its noise of the whole's, so the last leg
-    // takes a few iterations where a start from the grid takes a dozen.
-    let race = RACE_ITERATIONS.min(opts.max_iterations);
-    let leg = |v: &ValveStart| Leg::from(&coarse, &rig, &options(v), race);
-    let (start, leg) = match scored.as_slice() {
+    let race = RACE_ITERATIONS.min(base.max_iterations);
+    let leg = |v: &ValveStart| Leg::from(coarse, rig, &options(v), race);
+    let (start, leg) = match scored {
         [] => return Err(FitError::NoSolution),
         [one] => (one, leg(one)),
         [a, b, ..] => match rayon::join(|| leg(a), || leg(b)) {
@@ -677,18 +776,18 @@ fn fit_mode(
         },
     };
     let leg = leg?;
-    let more = opts.max_iterations.saturating_sub(leg.optimum.iterations);
-    let near = leg.go_on(&coarse, more)?.optimum.theta;
+    let more = base.max_iterations.saturating_sub(leg.optimum.iterations);
+    let near = leg.go_on(coarse, more)?.optimum.theta;
     let full = options(start);
     let leg = Leg::run(
-        &prob,
-        solver(&prob, &full)?,
+        prob,
+        solver(prob, &full)?,
         near,
         None,
-        opts.max_iterations,
+        base.max_iterations,
         0,
     )?;
-    finish(&prob, leg.optimum, &full)
+    finish(prob, leg.optimum, &full)
 }
 
 /// The rig's spread over the runs, for a fit its adequacy tests reject.

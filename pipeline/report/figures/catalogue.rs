@@ -26,7 +26,7 @@ use crate::model::{LinearSpecimen, RigParams, x1_u_std};
 use crate::report::{FigureSpec, Measured};
 use crate::results::{RunResult, SensitivityResult, TfResult};
 use crate::sensitivity::montecarlo::{MonteCarlo, MonteCarloPoint, PerParameter};
-use crate::tracking::compensator;
+use crate::tracking::compensator::{self, Compensator, CompensatorOutcome, StiffnessPoint};
 use crate::validate::TimeStage;
 use crate::validate::csi::Csi;
 
@@ -313,6 +313,33 @@ pub fn force_figure(
     intersample: Intersample,
     csi: Option<&Csi>,
 ) -> FigureSpec {
+    let mut fig = force_bode(run, measured, model, intersample);
+    let mut notes = String::new();
+    if let Some(c) = csi {
+        mark_notches(&mut fig, c);
+        notes = notch_note(c);
+    }
+    FigureSpec {
+        id: format!("force-{}", run.id),
+        title: format!("{}: frequency response, command to force", run.id),
+        caption: format!(
+            "Counterpart of the paper's Figs. 16-17: the specimen's poles are zeros of the force path (Eq. 45){}.",
+            run.natural_frequency_hz
+                .map(|f| format!("; its natural frequency is {f:.1} Hz"))
+                .unwrap_or_default()
+        ) + &notes,
+        size: fig.recommended_size(),
+        figure: Figure::Bode(fig),
+    }
+}
+
+/// The measured command-to-force FRF beside Eq. 45's, 5-35 Hz.
+fn force_bode(
+    run: &RunResult,
+    measured: &ForceBins,
+    model: &TfResult,
+    intersample: Intersample,
+) -> BodeFigure {
     let freq = measured.freq_hz.clone();
     let (h, coh) = (measured.h.clone(), measured.coherence.clone());
     let hm = model_response(
@@ -321,7 +348,7 @@ pub fn force_figure(
         measured.sample_rate_hz,
         &freq,
     );
-    let fig = BodeFigure {
+    BodeFigure {
         title: format!("{}: command to force", run.id),
         series: vec![
             BodeSeries {
@@ -349,72 +376,63 @@ pub fn force_figure(
         coherence: false,
         log_frequency: false,
         mag_label: "Force/command (dB re 1 N/m)".into(),
+    }
+}
+
+/// The notches of the measured (series 0) and modelled (series 1) curves
+/// marked as vertical strokes over the magnitude panel, from 10 dB under
+/// the lower notch to 10 dB over the top of both curves in view.
+fn mark_notches(fig: &mut BodeFigure, c: &Csi) {
+    let level = |h: &[Complex<f64>]| {
+        fig.series[0]
+            .freq_hz
+            .iter()
+            .zip(h)
+            .filter(|(f, _)| (5.0..=35.0).contains(*f))
+            .map(|(_, h)| 20.0 * h.norm().log10())
+            .filter(|v| v.is_finite())
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), v| {
+                (lo.min(v), hi.max(v))
+            })
     };
-    let mut fig = fig;
-    let mut notes = String::new();
-    if let Some(c) = csi {
-        // The notches marked as vertical strokes over the magnitude panel,
-        // from 10 dB under the lower notch to 10 dB over the top of the
-        // measured and modelled curves in view.
-        let level = |h: &[Complex<f64>]| {
-            fig.series[0]
-                .freq_hz
-                .iter()
-                .zip(h)
-                .filter(|(f, _)| (5.0..=35.0).contains(*f))
-                .map(|(_, h)| 20.0 * h.norm().log10())
-                .filter(|v| v.is_finite())
-                .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), v| {
-                    (lo.min(v), hi.max(v))
-                })
-        };
-        let (lo_m, hi_m) = level(&fig.series[0].h);
-        let (lo_s, hi_s) = level(&fig.series[1].h);
-        let (lo, hi) = (lo_m.min(lo_s) - 10.0, hi_m.max(hi_s) + 10.0);
-        for (notch, label, slot) in [
-            (c.notch_measured, "measured notch", 0),
-            (c.notch_model, "model notch", 1),
-        ] {
-            if let Some(n) = notch {
-                fig.series.push(BodeSeries {
-                    label: format!(
-                        "{label} {:.2} Hz, {:.0} dB deep",
-                        n.frequency_hz, n.depth_db
-                    ),
-                    freq_hz: vec![n.frequency_hz; 2],
-                    h: [lo, hi]
-                        .iter()
-                        .map(|db| Complex::new(10f64.powf(db / 20.0), 0.0))
-                        .collect(),
-                    coherence: None,
-                    trace: Trace::Reference,
-                    palette_index: Some(slot),
-                    band: None,
-                });
-            }
+    let (lo_m, hi_m) = level(&fig.series[0].h);
+    let (lo_s, hi_s) = level(&fig.series[1].h);
+    let (lo, hi) = (lo_m.min(lo_s) - 10.0, hi_m.max(hi_s) + 10.0);
+    for (notch, label, slot) in [
+        (c.notch_measured, "measured notch", 0),
+        (c.notch_model, "model notch", 1),
+    ] {
+        if let Some(n) = notch {
+            fig.series.push(BodeSeries {
+                label: format!(
+                    "{label} {:.2} Hz, {:.0} dB deep",
+                    n.frequency_hz, n.depth_db
+                ),
+                freq_hz: vec![n.frequency_hz; 2],
+                h: [lo, hi]
+                    .iter()
+                    .map(|db| Complex::new(10f64.powf(db / 20.0), 0.0))
+                    .collect(),
+                coherence: None,
+                trace: Trace::Reference,
+                palette_index: Some(slot),
+                band: None,
+            });
         }
-        notes = format!(
-            " The notches of |f/u| are marked (Sec. 3.2.1): measured {} and modelled {}.",
-            c.notch_measured
-                .map(|n| format!("{:.2} Hz", n.frequency_hz))
-                .unwrap_or_else(|| "not found".into()),
-            c.notch_model
-                .map(|n| format!("{:.2} Hz", n.frequency_hz))
-                .unwrap_or_else(|| "not found".into()),
-        );
     }
-    FigureSpec {
-        id: format!("force-{}", run.id),
-        title: format!("{}: frequency response, command to force", run.id),
-        caption: format!(
-            "Counterpart of the paper's Figs. 16-17: the specimen's poles are zeros of the force path (Eq. 45){}.",
-            run.natural_frequency_hz
-                .map(|f| format!("; its natural frequency is {f:.1} Hz"))
-                .unwrap_or_default()
-        ) + &notes,
-        size: fig.recommended_size(),
-        figure: Figure::Bode(fig),
-    }
+}
+
+/// The caption's sentence on the notches.
+fn notch_note(c: &Csi) -> String {
+    format!(
+        " The notches of |f/u| are marked (Sec. 3.2.1): measured {} and modelled {}.",
+        c.notch_measured
+            .map(|n| format!("{:.2} Hz", n.frequency_hz))
+            .unwrap_or_else(|| "not found".into()),
+        c.notch_model
+            .map(|n| format!("{:.2} Hz", n.frequency_hz))
+            .unwrap_or_else(|| "not found".into()),
+    )
 }
 
 /// Figs. 9, 12, 14 and 19-22: the paper's four windows, measured against
@@ -422,24 +440,43 @@ pub fn force_figure(
 /// when it was stable enough to simulate). None when the sweep reaches no
 /// window.
 fn time_figure(run: &RunResult, time: &TimeStage, fs: f64) -> Option<FigureSpec> {
-    let n = time.x1_measured.len().min(time.x1_simulated.len());
-    // Each panel holds its window's samples only (two beyond each edge, more
-    // than the renderer's one for lines entering the panel), not the whole
-    // record: four copies of a 14 M-sample record were 460 MB.
-    // The first sample k (of n, at k / fs) whose time is not `before` the
-    // edge: partition_point over times computed, not stored.
-    let first_not = |before: &dyn Fn(f64) -> bool| {
-        let (mut lo, mut hi) = (0, n);
-        while lo < hi {
-            let mid = lo + (hi - lo) / 2;
-            if before(mid as f64 / fs) {
-                lo = mid + 1;
-            } else {
-                hi = mid;
-            }
-        }
-        lo
+    let panels = time_panels(run, time, fs);
+    if panels.is_empty() {
+        return None;
+    }
+    let fig = PanelsFigure {
+        title: format!("{}: measured and simulated displacement", run.id),
+        panels,
+        columns: 2,
     };
+    let m = &time.metrics;
+    // The windows the sweep reaches (a sweep that stops short of 35 Hz has
+    // fewer than the paper's four).
+    let windows = time
+        .windows
+        .iter()
+        .map(|w| format!("{} ({:.1}-{:.1} s)", w.label, w.start_s, w.end_s))
+        .collect::<Vec<_>>()
+        .join(", ");
+    Some(FigureSpec {
+        id: format!("time-{}", run.id),
+        title: format!("{}: time-domain comparison", run.id),
+        caption: format!(
+            "Counterpart of the paper's Figs. 9, 12, 14 and 19-22: {} driven by the measured command, in the windows of the sweep {windows}. Whole record: NRMSE {:.2} %, NAE {:.2} % (Eqs. 47-48).",
+            m.model, m.nrmse_pct, m.nae_pct
+        ),
+        size: fig.recommended_size(),
+        figure: Figure::Panels(fig),
+    })
+}
+
+/// One panel per window, lettered (a)-(d).
+///
+/// Each panel holds its window's samples only (two beyond each edge, more
+/// than the renderer's one for lines entering the panel), not the whole
+/// record: four copies of a 14 M-sample record were 460 MB.
+fn time_panels(run: &RunResult, time: &TimeStage, fs: f64) -> Vec<TimePanel> {
+    let n = time.x1_measured.len().min(time.x1_simulated.len());
     let simplified = time.x1_simplified.as_ref().filter(|x| x.len() >= n);
     let simulated_label = if run.role == Role::Validation {
         "Simulated"
@@ -447,13 +484,14 @@ fn time_figure(run: &RunResult, time: &TimeStage, fs: f64) -> Option<FigureSpec>
         "Identified model"
     };
     let letters = ["(a)", "(b)", "(c)", "(d)"];
-    let panels: Vec<TimePanel> = time
-        .windows
+    time.windows
         .iter()
         .enumerate()
         .map(|(k, w)| {
-            let i0 = first_not(&|t| t < w.start_s).saturating_sub(2);
-            let i1 = (first_not(&|t| t <= w.end_s) + 2).min(n).max(i0);
+            let i0 = first_sample_not(n, fs, &|t| t < w.start_s).saturating_sub(2);
+            let i1 = (first_sample_not(n, fs, &|t| t <= w.end_s) + 2)
+                .min(n)
+                .max(i0);
             let t: Arc<[f64]> = (i0..i1).map(|k| k as f64 / fs).collect::<Vec<_>>().into();
             let cm = |x: &[f64]| -> Arc<[f64]> {
                 x[i0..i1]
@@ -499,34 +537,22 @@ fn time_figure(run: &RunResult, time: &TimeStage, fs: f64) -> Option<FigureSpec>
                 y_range: None,
             }
         })
-        .collect();
-    if panels.is_empty() {
-        return None;
+        .collect()
+}
+
+/// The first sample k (of n, at k / fs) whose time is not `before` the
+/// edge: a partition point over times computed, not stored.
+fn first_sample_not(n: usize, fs: f64, before: &dyn Fn(f64) -> bool) -> usize {
+    let (mut lo, mut hi) = (0, n);
+    while lo < hi {
+        let mid = lo + (hi - lo) / 2;
+        if before(mid as f64 / fs) {
+            lo = mid + 1;
+        } else {
+            hi = mid;
+        }
     }
-    let fig = PanelsFigure {
-        title: format!("{}: measured and simulated displacement", run.id),
-        panels,
-        columns: 2,
-    };
-    let m = &time.metrics;
-    // The windows the sweep reaches (a sweep that stops short of 35 Hz has
-    // fewer than the paper's four).
-    let windows = time
-        .windows
-        .iter()
-        .map(|w| format!("{} ({:.1}-{:.1} s)", w.label, w.start_s, w.end_s))
-        .collect::<Vec<_>>()
-        .join(", ");
-    Some(FigureSpec {
-        id: format!("time-{}", run.id),
-        title: format!("{}: time-domain comparison", run.id),
-        caption: format!(
-            "Counterpart of the paper's Figs. 9, 12, 14 and 19-22: {} driven by the measured command, in the windows of the sweep {windows}. Whole record: NRMSE {:.2} %, NAE {:.2} % (Eqs. 47-48).",
-            m.model, m.nrmse_pct, m.nae_pct
-        ),
-        size: fig.recommended_size(),
-        figure: Figure::Panels(fig),
-    })
+    lo
 }
 
 /// Measured minus simulated displacement over the whole record, min/max
@@ -665,6 +691,19 @@ pub fn compensator_figures(run: &RunResult, plant: &TransferFunction) -> Vec<Fig
     let Some(c) = &outcome.design else {
         return Vec::new();
     };
+    let mut figures = vec![compensator_bode_figure(run, outcome, c, plant)];
+    figures.extend(compensator_stiffness_figure(run, &outcome.stiffness));
+    figures
+}
+
+/// The held plant's predicted FRF without and with the compensator `c`,
+/// beside perfect tracking.
+fn compensator_bode_figure(
+    run: &RunResult,
+    outcome: &CompensatorOutcome,
+    c: &Compensator,
+    plant: &TransferFunction,
+) -> FigureSpec {
     let fs = c.sample_rate_hz;
     let lo = outcome.band_hz[0];
     let hi = (2.0 * c.cutoff_hz).min(0.45 * fs);
@@ -711,7 +750,7 @@ pub fn compensator_figures(run: &RunResult, plant: &TransferFunction) -> Vec<Fig
         log_frequency: true,
         mag_label: String::new(),
     };
-    let mut figures = vec![FigureSpec {
+    FigureSpec {
         id: format!("compensator-{}", run.id),
         title: format!("{}: model-based compensator", run.id),
         caption: format!(
@@ -724,65 +763,70 @@ pub fn compensator_figures(run: &RunResult, plant: &TransferFunction) -> Vec<Fig
         ),
         size: bode.recommended_size(),
         figure: Figure::Bode(bode),
-    }];
-    let points = &outcome.stiffness;
-    if points.len() >= 2 {
-        let k: Vec<f64> = points.iter().map(|p| p.stiffness_n_per_m).collect();
-        let mut lines = vec![
-            XySeries {
-                label: "worst amplitude error over the band (%)".into(),
-                x: k.clone(),
-                y: points
-                    .iter()
-                    .map(|p| p.compensated.max_amplitude_error_pct)
-                    .collect(),
-                trace: Trace::Model,
-                palette_index: Some(1),
-            },
-            XySeries {
-                label: "worst delay or lead over the band (samples)".into(),
-                x: k.clone(),
-                y: points
-                    .iter()
-                    .map(|p| p.compensated.max_abs_delay_samples())
-                    .collect(),
-                trace: Trace::Model,
-                palette_index: Some(2),
-            },
-            XySeries {
-                label: "target (1 % and 1 sample)".into(),
-                x: vec![k[0], k[k.len() - 1]],
-                y: vec![1.0, 1.0],
-                trace: Trace::Reference,
-                palette_index: None,
-            },
-        ];
-        let own = run.specimen.linear_mck().map_or(0.0, |(_, _, k)| k);
-        if own > 0.0 {
-            mark_springs(&mut lines, &[own]);
-            if let Some(l) = lines.last_mut() {
-                l.label = "designed for".into();
-            }
-        }
-        figures.push(FigureSpec {
-            id: format!("compensator-stiffness-{}", run.id),
-            title: format!("{}: the compensator on other specimens", run.id),
-            caption: "The compensator designed for this specimen, on the identified plant with the specimen's stiffness changed over the sensitivity analysis's range (mass and damping kept): the worst amplitude error and delay over the band, predicted from the model.".into(),
-            figure: Figure::Lines(LinesFigure {
-                title: format!("{}: compensated tracking against specimen stiffness", run.id),
-                x_label: "Specimen stiffness k (N/m)".into(),
-                y_label: "Error (% or samples)".into(),
-                series: lines,
-                x_range: None,
-                y_range: None,
-                log_x: true,
-                log_y: true,
-                zero_line: false,
-            }),
-            size: (1200, 600),
-        });
     }
-    figures
+}
+
+/// The compensated tracking's worst amplitude error and delay against the
+/// specimen's stiffness, the run's own marked; None with fewer than two
+/// stiffnesses.
+fn compensator_stiffness_figure(run: &RunResult, points: &[StiffnessPoint]) -> Option<FigureSpec> {
+    if points.len() < 2 {
+        return None;
+    }
+    let k: Vec<f64> = points.iter().map(|p| p.stiffness_n_per_m).collect();
+    let mut lines = vec![
+        XySeries {
+            label: "worst amplitude error over the band (%)".into(),
+            x: k.clone(),
+            y: points
+                .iter()
+                .map(|p| p.compensated.max_amplitude_error_pct)
+                .collect(),
+            trace: Trace::Model,
+            palette_index: Some(1),
+        },
+        XySeries {
+            label: "worst delay or lead over the band (samples)".into(),
+            x: k.clone(),
+            y: points
+                .iter()
+                .map(|p| p.compensated.max_abs_delay_samples())
+                .collect(),
+            trace: Trace::Model,
+            palette_index: Some(2),
+        },
+        XySeries {
+            label: "target (1 % and 1 sample)".into(),
+            x: vec![k[0], k[k.len() - 1]],
+            y: vec![1.0, 1.0],
+            trace: Trace::Reference,
+            palette_index: None,
+        },
+    ];
+    let own = run.specimen.linear_mck().map_or(0.0, |(_, _, k)| k);
+    if own > 0.0 {
+        mark_springs(&mut lines, &[own]);
+        if let Some(l) = lines.last_mut() {
+            l.label = "designed for".into();
+        }
+    }
+    Some(FigureSpec {
+        id: format!("compensator-stiffness-{}", run.id),
+        title: format!("{}: the compensator on other specimens", run.id),
+        caption: "The compensator designed for this specimen, on the identified plant with the specimen's stiffness changed over the sensitivity analysis's range (mass and damping kept): the worst amplitude error and delay over the band, predicted from the model.".into(),
+        figure: Figure::Lines(LinesFigure {
+            title: format!("{}: compensated tracking against specimen stiffness", run.id),
+            x_label: "Specimen stiffness k (N/m)".into(),
+            y_label: "Error (% or samples)".into(),
+            series: lines,
+            x_range: None,
+            y_range: None,
+            log_x: true,
+            log_y: true,
+            zero_line: false,
+        }),
+        size: (1200, 600),
+    })
 }
 
 /// An identification run's FRF kept for Fig. 15.

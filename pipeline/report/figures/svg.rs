@@ -4,8 +4,10 @@
 
 use std::fmt::Write;
 
+use plotters_backend::BackendCoord;
+
 use super::canvas::{self, Op, Rgba};
-use super::geometry::{Outline, Pt};
+use super::geometry::{Outline, Pt, Seg};
 use super::text;
 
 /// The SVG document for `ops` on a `size` canvas; `title` becomes `<title>`.
@@ -24,28 +26,7 @@ pub(crate) fn write(ops: &[Op], size: (u32, u32), title: &str) -> String {
     while i < ops.len() {
         match &ops[i] {
             Op::Stroke { width, colour, .. } => {
-                // Consecutive strokes of one style (a dashed line is one
-                // stroke per dash) share a <path> element.
-                let mut d = PathData::default();
-                while let Some(Op::Stroke {
-                    points,
-                    width: w2,
-                    colour: c2,
-                }) = ops.get(i)
-                {
-                    if w2 != width || c2 != colour {
-                        break;
-                    }
-                    canvas::polyline(points, &mut d);
-                    i += 1;
-                }
-                let _ = writeln!(
-                    s,
-                    "<path d=\"{}\" fill=\"none\" stroke=\"{}\"{} stroke-width=\"{width}\" stroke-linecap=\"round\" stroke-linejoin=\"round\"/>",
-                    d.0,
-                    hex(colour),
-                    opacity("stroke-opacity", colour)
-                );
+                i += write_strokes(&mut s, &ops[i..], *width, colour);
                 continue;
             }
             Op::FillRect {
@@ -54,79 +35,120 @@ pub(crate) fn write(ops: &[Op], size: (u32, u32), title: &str) -> String {
                 x1,
                 y1,
                 colour,
-            } => {
-                let _ = writeln!(
-                    s,
-                    "<rect x=\"{x0}\" y=\"{y0}\" width=\"{}\" height=\"{}\" fill=\"{}\"{}/>",
-                    x1 - x0,
-                    y1 - y0,
-                    hex(colour),
-                    opacity("fill-opacity", colour)
-                );
-            }
-            Op::Polygon { points, colour } => {
-                let mut d = PathData::default();
-                canvas::polyline(points, &mut d);
-                d.close();
-                let _ = writeln!(
-                    s,
-                    "<path d=\"{}\" fill=\"{}\"{}/>",
-                    d.0,
-                    hex(colour),
-                    opacity("fill-opacity", colour)
-                );
-            }
+            } => write_rect(&mut s, (*x0, *y0), (*x1, *y1), colour),
+            Op::Polygon { points, colour } => write_polygon(&mut s, points, colour),
             Op::Circle {
                 centre,
                 radius,
                 colour,
                 fill,
-            } => {
-                let paint = if *fill {
-                    format!(
-                        "fill=\"{}\"{}",
-                        hex(colour),
-                        opacity("fill-opacity", colour)
-                    )
-                } else {
-                    format!(
-                        "fill=\"none\" stroke=\"{}\"{}",
-                        hex(colour),
-                        opacity("stroke-opacity", colour)
-                    )
-                };
-                let (cx, cy) = canvas::centre(*centre);
-                let _ = writeln!(
-                    s,
-                    "<circle cx=\"{}\" cy=\"{}\" r=\"{radius}\" {paint}/>",
-                    num(cx),
-                    num(cy)
-                );
-            }
+            } => write_circle(&mut s, *centre, *radius, colour, *fill),
             Op::Text {
                 text,
                 glyphs,
                 colour,
-            } => {
-                let _ = writeln!(
-                    s,
-                    "<g aria-label=\"{}\" fill=\"{}\"{}>",
-                    escape(text),
-                    hex(colour),
-                    opacity("fill-opacity", colour)
-                );
-                for glyph in glyphs {
-                    let mut d = PathData::default();
-                    text::trace_glyph(glyph, &mut d);
-                    let _ = writeln!(s, "<path d=\"{}\"/>", d.0);
-                }
-                s.push_str("</g>\n");
-            }
+            } => write_text(&mut s, text, glyphs, colour),
         }
         i += 1;
     }
     s.push_str("</svg>\n");
     s
+}
+
+/// The strokes at the start of `ops` of one style (`width`, `colour`) as
+/// one `<path>` element; returns how many ops it took. A dashed line is one
+/// stroke per dash, so this keeps it one element.
+fn write_strokes(s: &mut String, ops: &[Op], width: u32, colour: &Rgba) -> usize {
+    let mut d = PathData::default();
+    let mut n = 0;
+    while let Some(Op::Stroke {
+        points,
+        width: w2,
+        colour: c2,
+    }) = ops.get(n)
+    {
+        if *w2 != width || c2 != colour {
+            break;
+        }
+        canvas::polyline(points, &mut d);
+        n += 1;
+    }
+    let _ = writeln!(
+        s,
+        "<path d=\"{}\" fill=\"none\" stroke=\"{}\"{} stroke-width=\"{width}\" stroke-linecap=\"round\" stroke-linejoin=\"round\"/>",
+        d.0,
+        hex(colour),
+        opacity("stroke-opacity", colour)
+    );
+    n
+}
+
+/// Pixels x0..x1, y0..y1 filled, as a `<rect>`.
+fn write_rect(s: &mut String, (x0, y0): (i32, i32), (x1, y1): (i32, i32), colour: &Rgba) {
+    let _ = writeln!(
+        s,
+        "<rect x=\"{x0}\" y=\"{y0}\" width=\"{}\" height=\"{}\" fill=\"{}\"{}/>",
+        x1 - x0,
+        y1 - y0,
+        hex(colour),
+        opacity("fill-opacity", colour)
+    );
+}
+
+/// A filled polygon as a closed `<path>`.
+fn write_polygon(s: &mut String, points: &[BackendCoord], colour: &Rgba) {
+    let mut d = PathData::default();
+    canvas::polyline(points, &mut d);
+    d.close();
+    let _ = writeln!(
+        s,
+        "<path d=\"{}\" fill=\"{}\"{}/>",
+        d.0,
+        hex(colour),
+        opacity("fill-opacity", colour)
+    );
+}
+
+/// A circle, filled or stroked, as a `<circle>`.
+fn write_circle(s: &mut String, centre: BackendCoord, radius: u32, colour: &Rgba, fill: bool) {
+    let paint = if fill {
+        format!(
+            "fill=\"{}\"{}",
+            hex(colour),
+            opacity("fill-opacity", colour)
+        )
+    } else {
+        format!(
+            "fill=\"none\" stroke=\"{}\"{}",
+            hex(colour),
+            opacity("stroke-opacity", colour)
+        )
+    };
+    let (cx, cy) = canvas::centre(centre);
+    let _ = writeln!(
+        s,
+        "<circle cx=\"{}\" cy=\"{}\" r=\"{radius}\" {paint}/>",
+        num(cx),
+        num(cy)
+    );
+}
+
+/// Text as a group of filled glyph paths, the string kept as its
+/// aria-label.
+fn write_text(s: &mut String, text: &str, glyphs: &[Vec<Seg>], colour: &Rgba) {
+    let _ = writeln!(
+        s,
+        "<g aria-label=\"{}\" fill=\"{}\"{}>",
+        escape(text),
+        hex(colour),
+        opacity("fill-opacity", colour)
+    );
+    for glyph in glyphs {
+        let mut d = PathData::default();
+        text::trace_glyph(glyph, &mut d);
+        let _ = writeln!(s, "<path d=\"{}\"/>", d.0);
+    }
+    s.push_str("</g>\n");
 }
 
 fn hex(c: &Rgba) -> String {
