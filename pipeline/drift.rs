@@ -251,6 +251,7 @@ mod tests {
         for n in 0..nights.len() {
             let checks = check(&nights[..n], &nights[n], rule);
             assert!(checks.iter().all(|c| !c.alarm), "night {n}: {checks:?}");
+            // Exact: the entries' a1b0 is 2.4e9 at P = 1, referred to P = 1.
             assert_eq!(checks[1].value, 2.4e9, "a1b0 at P = 1");
         }
         // Too little history: no check at all.

@@ -356,6 +356,7 @@ mod tests {
         // Row 1's column norm is infinite: the old loop divided it by 4
         // forever. Both rows are left unscaled.
         let a = DMatrix::from_row_slice(2, 2, &[0.0, f64::INFINITY, 1.0, 0.0]);
+        // Exact: an unscaled row keeps the factor 1.
         assert_eq!(balancing_diagonal(&a), vec![1.0, 1.0]);
         // And a finite, badly scaled one is balanced to within a factor of
         // two, rows against columns.
@@ -363,6 +364,7 @@ mod tests {
         let d = balancing_diagonal(&b);
         let bal = balance(&b);
         assert!((bal[(0, 1)] / bal[(1, 0)]).abs() < 4.0, "{bal}");
+        // Exact: balancing scales by powers of two, which multiply exactly.
         assert_eq!(bal[(0, 1)], 1e8 * d[1] / d[0]);
     }
 
@@ -372,6 +374,7 @@ mod tests {
     #[test]
     fn new_normalises_and_rejects_bad_coefficients() {
         let tf = TransferFunction::new(&[6.0], &[2.0, 4.0, 6.0]).unwrap();
+        // Exact: small integers divided by 2.
         assert_eq!(tf.den, vec![1.0, 2.0, 3.0]);
         assert_eq!(tf.num, vec![3.0]);
         assert_eq!(

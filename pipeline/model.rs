@@ -651,6 +651,7 @@ mod tests {
     fn p_gain_scales_a1b0_only() {
         let rig = PAPER_RIG.at_p_gain(2.0);
         assert_relative_eq!(rig.a1b0_n_per_m_s2, 4.824e9, max_relative = 1e-12);
+        // Exact: a2 does not depend on the P gain and is copied.
         assert_eq!(rig.a2_n_per_m, 7.881e5);
         assert_relative_eq!(rig.r1(), 2.0 * 2.412e9 / 7.881e5, max_relative = 1e-12);
     }

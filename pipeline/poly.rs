@@ -243,6 +243,7 @@ mod tests {
 
     #[test]
     fn add_aligns_constant_terms() {
+        // Exact: sums and products of small integers.
         assert_eq!(add(&[1.0, 2.0, 3.0], &[10.0]), vec![1.0, 2.0, 13.0]);
         assert_eq!(derivative(&[3.0, 2.0, 1.0]), vec![6.0, 2.0]);
         assert_relative_eq!(eval_real(&[1.0, 0.0, -4.0], 2.0), 0.0);

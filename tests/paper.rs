@@ -137,6 +137,7 @@ fn results_json_keeps_its_contract() {
         }
         assert_eq!(run["status"], "ok");
         let tf = &run["tf"];
+        // Exact: the denominator is divided by its leading coefficient.
         assert_eq!(num(&tf["den"][0]), 1.0, "den[0] must be 1: {tf}");
         assert!(tf["num"].is_array() && tf["delay_s"].is_number());
     }

@@ -184,6 +184,7 @@ fn the_papers_campaign_gets_a_recommendation_a_lab_can_act_on() {
     let manifest = crate::util::root().join("experiments/maghareh2018/paper.toml");
     let r = run(dir.path(), &manifest);
     let s = &r["sensitivity"];
+    // Exact: a setting read back as written.
     assert_eq!(s["analytic"]["coefficient_rel_std"], 1e-3);
     let rec = &s["recommendation"];
     assert_eq!(rec["target_rel_std"], 0.01);
@@ -268,6 +269,7 @@ fn where_the_noise_is_large_the_report_says_they_disagree_and_why() {
     let points = mc["points"].as_array().unwrap();
     assert_eq!(points.len(), 6);
     let soft = &points[0];
+    // Exact: the grid's first point is the range's lower end as written.
     assert_eq!(soft["stiffness_n_per_m"], 3e3);
     assert!(
         soft["analytic_rel_std"]["a2"].as_f64().unwrap() > 0.05,

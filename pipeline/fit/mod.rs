@@ -791,7 +791,6 @@ fn check_param_count(
     })
 }
 
-/// Levenberg-Marquardt from `start` (scaled), then the covariance and report.
 /// Where Levenberg-Marquardt ended: its best parameters, why it stopped and
 /// after how many iterations.
 struct Solved {
@@ -832,96 +831,35 @@ where
     })
 }
 
+/// Levenberg-Marquardt from `start` (scaled), then the covariance and report.
 fn refine(prep: &Prepared, opts: &FitOptions, start: Vec<f64>) -> Result<TfFit, FitError> {
     let problem = &prep.problem;
     let shape = problem.shape;
     let p = shape.n_params();
-    let w0 = prep.scaling.w0_rad_per_s;
-    let mut solver = LevenbergMarquardt::new();
-    if let Some(max_s) = prep.max_delay_s {
-        let mut lower = DVector::from_element(p, f64::NEG_INFINITY);
-        let mut upper = DVector::from_element(p, f64::INFINITY);
-        lower[p - 1] = 0.0;
-        upper[p - 1] = max_s * w0;
-        solver = solver.with_bounds(lower, upper)?;
-    }
     let Solved {
         theta,
         reason,
         iterations,
-    } = solve(problem.clone(), solver, start, opts.max_iterations)?;
+    } = solve(
+        problem.clone(),
+        delay_bounded_solver(prep)?,
+        start,
+        opts.max_iterations,
+    )?;
     let converged = reason == TerminationReason::SolverConverged;
 
-    let n = problem.n_bins();
-    let jac = problem.jacobian_matrix(&theta);
-    let chi2 = problem.residuals(&theta).norm_squared();
-    // The transient's coefficients are parameters too (eliminated).
-    let eliminated = problem.projector.as_ref().map_or(0, |q| q.rank());
-    let dof = (2 * n).saturating_sub(p + eliminated).max(1);
-    let reduced_chi2 = chi2 / dof as f64;
-    let mut cov_scaled = covariance(&jac, reduced_chi2)
-        .map_err(|e| not_identifiable(prep, e, "Jacobian at the optimum (J^T W J)"))?;
-    if opts.independent_lag > 1 && reduced_chi2 > 0.0 {
-        // Neighbouring bins share data: the sandwich over their range.
-        let r = problem.residuals(&theta);
-        let scores = DMatrix::from_fn(n, p, |i, k| jac[(i, k)] * r[i] + jac[(n + i, k)] * r[n + i]);
-        let step = problem
-            .s
-            .windows(2)
-            .map(|w| w[1].im - w[0].im)
-            .filter(|d| *d > 0.0)
-            .fold(f64::INFINITY, f64::min);
-        let position: Vec<(usize, f64)> = problem.s.iter().map(|s| (0, s.im / step)).collect();
-        cov_scaled = correlated_covariance(
-            &scores,
-            &position,
-            &[(opts.independent_lag - 1) as f64],
-            &(&cov_scaled / reduced_chi2),
-            2 * n,
-            dof,
-        );
-    }
+    let (reduced_chi2, cov_scaled) = scaled_covariance(prep, opts, &theta)?;
     let factors = prep.scaling.factors(&shape);
     let covariance = DMatrix::from_fn(p, p, |i, j| cov_scaled[(i, j)] * factors[i] * factors[j]);
     let std: Vec<f64> = (0..p).map(|i| covariance[(i, i)].sqrt()).collect();
     let params = prep.scaling.to_physical(&shape, &theta);
-
-    let m = shape.numerator_order;
-    let tau_s = if shape.fit_delay {
-        params[p - 1]
-    } else {
-        prep.fixed_delay_s
-    };
-    let mut den = vec![1.0];
-    den.extend_from_slice(&params[m + 1..shape.n_rational()]);
-    let tf = TransferFunction::with_delay(&params[..=m], &den, tau_s)?;
-
+    let (tf, tau_s) = fitted_tf(prep, &params)?;
     let transient = prep
         .transient
         .as_ref()
         .zip(problem.projector.as_ref())
         .map(|(t, q)| t.found(prep, q, &theta));
-    // The response the model is compared with: the transient out.
-    let h: Vec<Complex<f64>> = match &transient {
-        Some(t) => problem
-            .h
-            .iter()
-            .zip(&prep.transient.as_ref().expect("with the transient").u)
-            .zip(&problem.s)
-            .map(|((h, u), s)| h - t.at(s.im * w0 / (2.0 * std::f64::consts::PI), *u))
-            .collect(),
-        None => problem.h.clone(),
-    };
-    let model = problem.model(&theta);
-    let mean = h.iter().sum::<Complex<f64>>() / n as f64;
-    let err = h
-        .iter()
-        .zip(model.iter())
-        .map(|(h, hm)| (h - hm).norm_sqr())
-        .sum::<f64>()
-        .sqrt();
-    let spread = h.iter().map(|h| (h - mean).norm_sqr()).sum::<f64>().sqrt();
-    let fit_percent = 100.0 * (1.0 - err / spread);
+    let fit_percent = fit_percent(prep, &theta, transient.as_ref());
 
     let termination = reason.text().to_string();
     let mut warnings = Vec::new();
@@ -932,19 +870,10 @@ fn refine(prep: &Prepared, opts: &FitOptions, start: Vec<f64>) -> Result<TfFit, 
     }
     let stable = tf.is_stable();
     if !stable {
-        let poles: Vec<String> = tf.poles().iter().map(|p| format!("{p:.4}")).collect();
-        warnings.push(format!(
-            "the fitted model is unstable: poles outside the open left half-plane among [{}] (rad/s)",
-            poles.join(", ")
-        ));
+        warnings.push(unstable_warning(&tf));
     }
-    // Compared in scaled units, where the solver clamps exactly.
-    if let Some(max_s) = prep.max_delay_s
-        && (theta[p - 1] <= 0.0 || theta[p - 1] >= max_s * w0)
-    {
-        warnings.push(format!(
-            "the fitted delay {tau_s} s is at a bound of [0, {max_s}] s; its standard deviation assumes an interior optimum"
-        ));
+    if let Some(w) = delay_bound_warning(prep, &theta, tau_s) {
+        warnings.push(w);
     }
     Ok(TfFit {
         tf,
@@ -959,8 +888,151 @@ fn refine(prep: &Prepared, opts: &FitOptions, start: Vec<f64>) -> Result<TfFit, 
         termination,
         converged,
         stable,
-        n_bins: n,
+        n_bins: problem.n_bins(),
         warnings,
         transient,
+    })
+}
+
+/// A Levenberg-Marquardt solver, its delay held to [0, max] (scaled) when
+/// the delay is fitted.
+fn delay_bounded_solver(prep: &Prepared) -> Result<LevenbergMarquardt, FitError> {
+    let solver = LevenbergMarquardt::new();
+    let Some(max_s) = prep.max_delay_s else {
+        return Ok(solver);
+    };
+    let p = prep.problem.shape.n_params();
+    let mut lower = DVector::from_element(p, f64::NEG_INFINITY);
+    let mut upper = DVector::from_element(p, f64::INFINITY);
+    lower[p - 1] = 0.0;
+    upper[p - 1] = max_s * prep.scaling.w0_rad_per_s;
+    Ok(solver.with_bounds(lower, upper)?)
+}
+
+/// The reduced chi-square at the optimum `theta` (scaled) and the
+/// covariance of the scaled parameters: (J^T W J)^-1 times it, or the
+/// sandwich over the bins' shared data when they share it.
+fn scaled_covariance(
+    prep: &Prepared,
+    opts: &FitOptions,
+    theta: &[f64],
+) -> Result<(f64, DMatrix<f64>), FitError> {
+    let problem = &prep.problem;
+    let p = problem.shape.n_params();
+    let n = problem.n_bins();
+    let jac = problem.jacobian_matrix(theta);
+    let chi2 = problem.residuals(theta).norm_squared();
+    // The transient's coefficients are parameters too (eliminated).
+    let eliminated = problem.projector.as_ref().map_or(0, |q| q.rank());
+    let dof = (2 * n).saturating_sub(p + eliminated).max(1);
+    let reduced_chi2 = chi2 / dof as f64;
+    let cov_scaled = covariance(&jac, reduced_chi2)
+        .map_err(|e| not_identifiable(prep, e, "Jacobian at the optimum (J^T W J)"))?;
+    if opts.independent_lag > 1 && reduced_chi2 > 0.0 {
+        // Neighbouring bins share data: the sandwich over their range.
+        let a_inv = &cov_scaled / reduced_chi2;
+        let cov = shared_bins_covariance(problem, &jac, theta, opts.independent_lag, &a_inv, dof);
+        return Ok((reduced_chi2, cov));
+    }
+    Ok((reduced_chi2, cov_scaled))
+}
+
+/// [`correlated_covariance`] for one FRF whose bins share data with those
+/// fewer than `independent_lag` bins away: the scores from the Jacobian
+/// `jac` and residuals at `theta`, each bin placed by its frequency in
+/// bin steps. `a_inv` is (J^T J)^-1.
+fn shared_bins_covariance(
+    problem: &FrfProblem,
+    jac: &DMatrix<f64>,
+    theta: &[f64],
+    independent_lag: usize,
+    a_inv: &DMatrix<f64>,
+    dof: usize,
+) -> DMatrix<f64> {
+    let n = problem.n_bins();
+    let p = problem.shape.n_params();
+    let r = problem.residuals(theta);
+    let scores = DMatrix::from_fn(n, p, |i, k| jac[(i, k)] * r[i] + jac[(n + i, k)] * r[n + i]);
+    let step = problem
+        .s
+        .windows(2)
+        .map(|w| w[1].im - w[0].im)
+        .filter(|d| *d > 0.0)
+        .fold(f64::INFINITY, f64::min);
+    let position: Vec<(usize, f64)> = problem.s.iter().map(|s| (0, s.im / step)).collect();
+    correlated_covariance(
+        &scores,
+        &position,
+        &[(independent_lag - 1) as f64],
+        a_inv,
+        2 * n,
+        dof,
+    )
+}
+
+/// The fitted plant from physical `params`: n(s) / d(s) with d monic, and
+/// the delay (s), fitted or fixed.
+fn fitted_tf(prep: &Prepared, params: &[f64]) -> Result<(TransferFunction, f64), FitError> {
+    let shape = prep.problem.shape;
+    let m = shape.numerator_order;
+    let tau_s = if shape.fit_delay {
+        params[shape.n_params() - 1]
+    } else {
+        prep.fixed_delay_s
+    };
+    let mut den = vec![1.0];
+    den.extend_from_slice(&params[m + 1..shape.n_rational()]);
+    let tf = TransferFunction::with_delay(&params[..=m], &den, tau_s)?;
+    Ok((tf, tau_s))
+}
+
+/// [`TfFit::fit_percent`] of the model at `theta` (scaled), compared with
+/// the measured response less the `transient` fitted beside it.
+fn fit_percent(prep: &Prepared, theta: &[f64], transient: Option<&transient::Transient>) -> f64 {
+    let problem = &prep.problem;
+    let n = problem.n_bins();
+    let w0 = prep.scaling.w0_rad_per_s;
+    let h: Vec<Complex<f64>> = match transient {
+        Some(t) => problem
+            .h
+            .iter()
+            .zip(&prep.transient.as_ref().expect("with the transient").u)
+            .zip(&problem.s)
+            .map(|((h, u), s)| h - t.at(s.im * w0 / (2.0 * std::f64::consts::PI), *u))
+            .collect(),
+        None => problem.h.clone(),
+    };
+    let model = problem.model(theta);
+    let mean = h.iter().sum::<Complex<f64>>() / n as f64;
+    let err = h
+        .iter()
+        .zip(model.iter())
+        .map(|(h, hm)| (h - hm).norm_sqr())
+        .sum::<f64>()
+        .sqrt();
+    let spread = h.iter().map(|h| (h - mean).norm_sqr()).sum::<f64>().sqrt();
+    100.0 * (1.0 - err / spread)
+}
+
+/// The warning for a model with a pole outside the open left half-plane.
+fn unstable_warning(tf: &TransferFunction) -> String {
+    let poles: Vec<String> = tf.poles().iter().map(|p| format!("{p:.4}")).collect();
+    format!(
+        "the fitted model is unstable: poles outside the open left half-plane among [{}] (rad/s)",
+        poles.join(", ")
+    )
+}
+
+/// The warning for a fitted delay `tau_s` at a bound of its range, where
+/// its standard deviation no longer holds.
+fn delay_bound_warning(prep: &Prepared, theta: &[f64], tau_s: f64) -> Option<String> {
+    let max_s = prep.max_delay_s?;
+    let tau_scaled = theta[prep.problem.shape.n_params() - 1];
+    // Compared in scaled units, where the solver clamps exactly.
+    let at_bound = tau_scaled <= 0.0 || tau_scaled >= max_s * prep.scaling.w0_rad_per_s;
+    at_bound.then(|| {
+        format!(
+            "the fitted delay {tau_s} s is at a bound of [0, {max_s}] s; its standard deviation assumes an interior optimum"
+        )
     })
 }

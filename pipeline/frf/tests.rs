@@ -500,6 +500,7 @@ fn hann_and_hamming_match_their_closed_forms_and_are_periodic() {
     );
     assert_abs_diff_eq!(bh[32], 1.0, epsilon = 1e-15);
     assert!(window(Window::Rectangular, 5).iter().all(|&v| v == 1.0));
+    // Exact: a one-sample window is its peak.
     assert_eq!(window(Window::Hann, 1), vec![1.0]);
     assert!(window(Window::Hann, 0).is_empty());
 }

@@ -344,6 +344,7 @@ mod tests {
         assert_eq!(c.consistent, None);
         assert!(c.note.contains("no covariance"), "{}", c.note);
         assert_eq!(c.leave_one_out.len(), 2);
+        // Exact: with two springs, leaving one out leaves the other's value.
         assert_eq!(c.leave_one_out[0].a1b0, 1.5);
     }
 }

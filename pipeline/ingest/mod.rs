@@ -1085,8 +1085,8 @@ fn physical_range(channel: &str) -> (f64, &'static str, &'static str) {
     }
 }
 
-/// Scale, check finiteness, the physical range and monotonic time, and
-/// measure the timing.
+/// Scale, check finiteness, the physical range and monotonic time, measure
+/// the timing, and refuse or repair isolated spikes.
 fn assemble(plan: &LogPlan, sha256: String, raw: Raw<'_>) -> Result<Log, IngestError> {
     let path = &plan.path;
     let n = raw.command.len();
@@ -1096,137 +1096,233 @@ fn assemble(plan: &LogPlan, sha256: String, raw: Raw<'_>) -> Result<Log, IngestE
             what: "the channels are empty".into(),
         });
     }
-    let locate = &raw.locate;
-    // Each column is converted to SI where it lies: a copy of a 14 M-row
-    // log's columns was a third of its reading's peak memory. A zero offset
-    // is not added, so that -0 stays -0 and a log written in SI reads back
-    // bit for bit.
-    // `given` is the manifest's range in SI with the channel's unit.
-    let to_si = |channel: &'static str,
-                 column: String,
-                 given: Option<((f64, f64), crate::units::Unit)>,
-                 mut v: Vec<f64>,
-                 si: &dyn Fn(f64) -> f64|
-     -> Result<Vec<f64>, IngestError> {
-        // A finite but absurd sample (one 9.9e37 in a log) passed before
-        // and gave an NRMSE of inf and an "offset removed" of 4.8e300 m
-        //: beyond the instrument's range (the manifest's), or
-        // beyond what any test reaches, it is the line's error.
-        let (default, _, said) = physical_range(channel);
-        let (lo, hi) = given.map_or((-default, default), |(r, _)| r);
-        for (i, x) in v.iter_mut().enumerate() {
-            let raw = *x;
-            *x = si(raw);
-            if !x.is_finite() {
-                return Err(IngestError::NonFinite {
-                    path: path.clone(),
-                    at: locate(i),
-                    channel,
-                    column: column.to_string(),
-                    raw,
-                    si: *x,
-                });
-            }
-            if !(lo..=hi).contains(x) {
-                let range = match given {
-                    Some((_, unit)) => format!(
-                        "its range [{}, {}] {} ([channels.{channel}] range)",
-                        lo / unit.to_si(),
-                        hi / unit.to_si(),
-                        unit.symbol()
-                    ),
-                    None => format!("the {said} no servo-hydraulic test reaches"),
-                };
-                return Err(IngestError::BeyondRange {
-                    path: path.clone(),
-                    at: locate(i),
-                    channel,
-                    column: column.clone(),
-                    si: *x,
-                    range,
-                });
-            }
-        }
-        Ok(v)
+    let Raw {
+        time,
+        command,
+        displacement,
+        force,
+        locate,
+        mut warnings,
+    } = raw;
+    let site = Site {
+        path,
+        locate: &*locate,
     };
-    let scale = |channel: &'static str, plan: &ChannelPlan, v: Vec<f64>| {
-        let column = plan.column.to_string();
-        let given = plan.range.map(|r| (r, plan.unit));
-        if plan.offset == 0.0 {
-            to_si(channel, column, given, v, &|r| r * plan.gain)
-        } else {
-            to_si(channel, column, given, v, &|r| r * plan.gain + plan.offset)
-        }
+    let (timing, sample_rate_hz, t0_s) = time_base(site, time)?;
+    let ch = &plan.channels;
+    let mut repairs = Vec::new();
+    let dt_s = 1.0 / sample_rate_hz;
+    let command_m = channel_samples(site, dt_s, "command", &ch.command, command, &mut repairs)?;
+    let displacement_m = channel_samples(
+        site,
+        dt_s,
+        "displacement",
+        &ch.displacement,
+        displacement,
+        &mut repairs,
+    )?;
+    let force_n = match (&ch.force, force) {
+        (Some(p), Some(v)) => Some(channel_samples(site, dt_s, "force", p, v, &mut repairs)?),
+        _ => None,
     };
-    let (timing, sample_rate_hz, t0_s) = match raw.time {
+    push_repair_warnings(path, &repairs, &mut warnings);
+    Ok(Log {
+        path: path.clone(),
+        sha256,
+        format: plan.format,
+        sample_rate_hz,
+        t0_s,
+        command_m,
+        displacement_m,
+        force_n,
+        n_rows: n,
+        timing,
+        warnings,
+        repairs,
+    })
+}
+
+/// Where a log's samples sit, for messages: its file, and each sample's
+/// place in that file.
+#[derive(Clone, Copy)]
+struct Site<'a> {
+    path: &'a PathBuf,
+    locate: &'a dyn Fn(usize) -> At,
+}
+
+/// The time base: time stamps converted to seconds and measured, or a
+/// stated rate checked. Gives the timing, the sample rate (Hz) and the
+/// first sample's time (s).
+fn time_base(site: Site<'_>, time: RawTime) -> Result<(Timing, f64, f64), IngestError> {
+    match time {
         RawTime::Column { raw, to_s, column } => {
-            let t = to_si("time", column.to_string(), None, raw, &|r| r * to_s)?;
-            let timing = measure_timing(path, &t, locate)?;
-            (timing, 1.0 / timing.dt_s(), t[0])
+            let t = to_si(site, "time", column, None, raw, &|r| r * to_s)?;
+            let timing = measure_timing(site.path, &t, site.locate)?;
+            Ok((timing, 1.0 / timing.dt_s(), t[0]))
         }
         RawTime::Rate { hz, from } => {
             if !(hz.is_finite() && hz > 0.0) {
                 return Err(IngestError::BadRate {
-                    path: path.clone(),
+                    path: site.path.clone(),
                     hz,
                     from,
                 });
             }
-            (Timing::Exact { dt_s: 1.0 / hz }, hz, 0.0)
+            Ok((Timing::Exact { dt_s: 1.0 / hz }, hz, 0.0))
         }
-    };
-    let ch = &plan.channels;
-    let mut repairs = Vec::new();
-    let dt_s = 1.0 / sample_rate_hz;
-    let mut despiked = |channel: &'static str, plan: &ChannelPlan, mut v: Vec<f64>| {
-        let found = spikes::find(&v);
-        let Some(first) = found.first() else {
-            return Ok(v);
-        };
-        let (unit, si) = (plan.unit.symbol(), plan.unit.to_si());
-        if plan.repair == Repair::None {
-            return Err(IngestError::Spike(Box::new(SpikeFound {
-                path: path.clone(),
-                at: locate(first.index),
-                sample: first.index,
-                time_s: first.index as f64 * dt_s,
+    }
+}
+
+/// One channel's samples in SI, checked against its range, with isolated
+/// spikes refused or repaired as its plan says (each repair added to
+/// `repairs`). `dt_s` is the sample interval.
+fn channel_samples(
+    site: Site<'_>,
+    dt_s: f64,
+    channel: &'static str,
+    plan: &ChannelPlan,
+    v: Vec<f64>,
+    repairs: &mut Vec<Repaired>,
+) -> Result<Vec<f64>, IngestError> {
+    let v = channel_to_si(site, channel, plan, v)?;
+    despiked(site, dt_s, channel, plan, v, repairs)
+}
+
+/// A channel's raw samples times its gain plus its offset, checked against
+/// the manifest's range for it, or the physical one when none is given.
+fn channel_to_si(
+    site: Site<'_>,
+    channel: &'static str,
+    plan: &ChannelPlan,
+    v: Vec<f64>,
+) -> Result<Vec<f64>, IngestError> {
+    let column = plan.column.to_string();
+    let given = plan.range.map(|r| (r, plan.unit));
+    // A zero offset is not added, so that -0 stays -0 and a log written in
+    // SI reads back bit for bit.
+    if plan.offset == 0.0 {
+        to_si(site, channel, column, given, v, &|r| r * plan.gain)
+    } else {
+        to_si(site, channel, column, given, v, &|r| {
+            r * plan.gain + plan.offset
+        })
+    }
+}
+
+/// Convert `v` to SI with `si` in place (a copy of a 14 M-row log's columns
+/// is a third of its reading's peak memory) and refuse the first sample
+/// that is not finite or lies outside the range: `given` is the manifest's
+/// range in SI with the channel's unit, else the channel's physical range
+/// applies.
+fn to_si(
+    site: Site<'_>,
+    channel: &'static str,
+    column: String,
+    given: Option<((f64, f64), crate::units::Unit)>,
+    mut v: Vec<f64>,
+    si: &dyn Fn(f64) -> f64,
+) -> Result<Vec<f64>, IngestError> {
+    // A finite but absurd sample (say 9.9e37) would give an NRMSE of inf
+    // and an "offset removed" of some 1e300 m: beyond the instrument's range
+    // (the manifest's), or beyond what any test reaches, it is the line's
+    // error.
+    let (default, _, said) = physical_range(channel);
+    let (lo, hi) = given.map_or((-default, default), |(r, _)| r);
+    for (i, x) in v.iter_mut().enumerate() {
+        let raw = *x;
+        *x = si(raw);
+        if !x.is_finite() {
+            return Err(IngestError::NonFinite {
+                path: site.path.clone(),
+                at: (site.locate)(i),
                 channel,
-                column: plan.column.to_string(),
-                value: first.value / si,
-                before: first.before / si,
-                after: first.after / si,
-                unit,
-                ratio: first.ratio,
-            })));
+                column: column.to_string(),
+                raw,
+                si: *x,
+            });
         }
-        spikes::interpolate(&mut v, &found);
-        repairs.extend(found.iter().map(|s| Repaired {
-            channel: channel.to_string(),
-            at: locate(s.index).to_string(),
-            sample: s.index,
-            time_s: s.index as f64 * dt_s,
-            width: s.width,
-            value: s.value,
-            before: s.before,
-            after: s.after,
-        }));
-        Ok(v)
+        if !(lo..=hi).contains(x) {
+            return Err(IngestError::BeyondRange {
+                path: site.path.clone(),
+                at: (site.locate)(i),
+                channel,
+                column: column.clone(),
+                si: *x,
+                range: range_in_words(channel, given.map(|(_, unit)| unit), (lo, hi), said),
+            });
+        }
+    }
+    Ok(v)
+}
+
+/// The range a sample fell outside, as a message says it: the manifest's
+/// `[lo, hi]` (SI) in the channel's `unit` when it gave one, else the
+/// physical range `said`.
+fn range_in_words(
+    channel: &str,
+    unit: Option<crate::units::Unit>,
+    (lo, hi): (f64, f64),
+    said: &str,
+) -> String {
+    match unit {
+        Some(unit) => format!(
+            "its range [{}, {}] {} ([channels.{channel}] range)",
+            lo / unit.to_si(),
+            hi / unit.to_si(),
+            unit.symbol()
+        ),
+        None => format!("the {said} no servo-hydraulic test reaches"),
+    }
+}
+
+/// A channel in SI without its isolated spikes: refused when the channel's
+/// `repair` is not set, else replaced by their neighbours' line and
+/// recorded in `repairs`. `dt_s` is the sample interval.
+fn despiked(
+    site: Site<'_>,
+    dt_s: f64,
+    channel: &'static str,
+    plan: &ChannelPlan,
+    mut v: Vec<f64>,
+    repairs: &mut Vec<Repaired>,
+) -> Result<Vec<f64>, IngestError> {
+    let found = spikes::find(&v);
+    let Some(first) = found.first() else {
+        return Ok(v);
     };
-    let command_m = despiked(
-        "command",
-        &ch.command,
-        scale("command", &ch.command, raw.command)?,
-    )?;
-    let displacement_m = despiked(
-        "displacement",
-        &ch.displacement,
-        scale("displacement", &ch.displacement, raw.displacement)?,
-    )?;
-    let force_n = match (&ch.force, raw.force) {
-        (Some(p), Some(v)) => Some(despiked("force", p, scale("force", p, v)?)?),
-        _ => None,
-    };
-    let mut warnings = raw.warnings;
+    let (unit, si) = (plan.unit.symbol(), plan.unit.to_si());
+    if plan.repair == Repair::None {
+        return Err(IngestError::Spike(Box::new(SpikeFound {
+            path: site.path.clone(),
+            at: (site.locate)(first.index),
+            sample: first.index,
+            time_s: first.index as f64 * dt_s,
+            channel,
+            column: plan.column.to_string(),
+            value: first.value / si,
+            before: first.before / si,
+            after: first.after / si,
+            unit,
+            ratio: first.ratio,
+        })));
+    }
+    spikes::interpolate(&mut v, &found);
+    repairs.extend(found.iter().map(|s| Repaired {
+        channel: channel.to_string(),
+        at: (site.locate)(s.index).to_string(),
+        sample: s.index,
+        time_s: s.index as f64 * dt_s,
+        width: s.width,
+        value: s.value,
+        before: s.before,
+        after: s.after,
+    }));
+    Ok(v)
+}
+
+/// One warning per channel whose spikes were repaired: how many, and the
+/// first.
+fn push_repair_warnings(path: &Path, repairs: &[Repaired], warnings: &mut Vec<String>) {
     for channel in ["command", "displacement", "force"] {
         let mut these = repairs.iter().filter(|r| r.channel == channel);
         if let Some(first) = these.next() {
@@ -1242,20 +1338,6 @@ fn assemble(plan: &LogPlan, sha256: String, raw: Raw<'_>) -> Result<Log, IngestE
             ));
         }
     }
-    Ok(Log {
-        path: path.clone(),
-        sha256,
-        format: plan.format,
-        sample_rate_hz,
-        t0_s,
-        command_m,
-        displacement_m,
-        force_n,
-        n_rows: n,
-        timing,
-        warnings,
-        repairs,
-    })
 }
 
 /// Mean interval and jitter of time stamps `t` (s); refuses time that does not

@@ -166,6 +166,7 @@ mod tests {
         let spikes = find(&bad);
         assert_eq!(spikes.len(), 1, "{spikes:?}");
         let s = &spikes[0];
+        // Exact: the sample's value as it was set.
         assert_eq!((s.index, s.width, s.value), (12_345, 1, -3.725));
         assert_eq!((s.before, s.after), (clean[12_344], clean[12_346]));
         interpolate(&mut bad, &spikes);

@@ -449,6 +449,7 @@ fn csv_with_decimal_commas() {
             ..CsvOptions::default()
         };
         let log = read_log(&p).unwrap_or_else(|e| panic!("{file}: {e}"));
+        // Exact: each value is parsed once and scaled by 1 (the unit is m).
         assert_eq!(log.command_m, vec![1.5, -0.125, 1e-3], "{file}");
         assert_eq!(log.displacement_m, vec![-2.25, 3.0, 0.045], "{file}");
         assert_relative_eq!(log.sample_rate_hz, 2.0, max_relative = 1e-15);
@@ -491,6 +492,7 @@ fn csv_quoted_fields_may_hold_the_delimiter_in_either_reader() {
         let mut p = plan_by_name(&path, LogFormat::Csv);
         p.channels.force = None;
         let log = read_log(&p).unwrap_or_else(|e| panic!("{file}: {e}"));
+        // Exact: halves and integers, parsed and scaled by 1.
         assert_eq!(log.command_m, vec![1.0, 1.5, 1.0], "{file}");
         assert_eq!(log.displacement_m, vec![2.0, 2.5, 2.0], "{file}");
         let mut by_index = p.clone();
@@ -585,6 +587,7 @@ fn parquet_timestamps_are_the_time_since_the_first_sample() {
         .unwrap();
     let log = read_log(&plan_by_name(&path, LogFormat::Parquet)).unwrap();
     assert_eq!(log.n_rows, n);
+    // Exact: 1 ms steps in microseconds are 1000 ticks each.
     assert_eq!(log.sample_rate_hz, 1000.0);
     assert_same_bits(&log.command_m, &u);
     assert_same_bits(&log.displacement_m, &x);

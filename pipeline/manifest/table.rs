@@ -943,6 +943,7 @@ logs = "LOGS"
         assert_eq!(info.file, "night/runs.csv");
         assert_eq!(info.sha256, sha256_hex(table.as_bytes()));
         assert_eq!(info.rows, 2);
+        // Exact: the table's cells parsed as written.
         assert_eq!(c.runs[3].p_gain, 1.0);
         assert_eq!(c.runs[4].p_gain, 2.0);
     }

@@ -310,6 +310,7 @@ mod tests {
                 other => panic!("{name}: {other:?}"),
             }
         };
+        // Exact: the values written, read back bit for bit.
         assert_eq!(get("A"), (vec![2, 3], vec![1.0, 4.0, 2.0, 5.0, 3.0, 6.0]));
         assert_eq!(get("num"), (vec![1, 1], vec![3060.0]));
         assert_eq!(get("den"), (vec![1, 3], vec![1.0, 267.0, 3060.0]));

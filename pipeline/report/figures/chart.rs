@@ -1149,6 +1149,7 @@ mod tests {
 
     #[test]
     fn log_ticks_are_decades_or_1_2_5() {
+        // Exact: decades from 1 are integers.
         assert_eq!(log_ticks(1.0, 1000.0, 8), vec![1.0, 10.0, 100.0, 1000.0]);
         let t = log_ticks(1.0, 10.0, 8);
         assert_eq!(t.len(), 4);

@@ -307,16 +307,35 @@ fn render_bode(
     formats: Formats,
 ) -> Result<Rendered, FigureError> {
     let name = figure_name(&fig.title);
-    check_size(&name, size)?;
-    let (f0, f1) = check_range(&name, "freq_range_hz", fig.freq_range_hz, fig.log_frequency)?;
+    let (f0, f1) = check_bode(&name, fig, size)?;
+    let m = Metrics::new(size);
+    let traces = BodeTraces::new(fig, (f0, f1), &m);
+    let stack = bode_stack(fig, &traces, (f0, f1), &m);
+    let legend = bode_legend(fig, &traces, (f0, f1));
+    if !stack.iter().any(|(p, _)| p.has_data()) {
+        return Err(FigureError::Empty { figure: name });
+    }
+    let sheet = Sheet {
+        title: fig.title.clone(),
+        legend,
+        arrangement: Arrangement::Stack(stack),
+    };
+    render_sheet(&name, size, sheet, &m, formats)
+}
+
+/// Check a Bode figure's size, ranges and series lengths; gives its
+/// frequency range (Hz).
+fn check_bode(name: &str, fig: &BodeFigure, size: (u32, u32)) -> Result<(f64, f64), FigureError> {
+    check_size(name, size)?;
+    let range = check_range(name, "freq_range_hz", fig.freq_range_hz, fig.log_frequency)?;
     if let Some(r) = fig.mag_range_db {
-        check_range(&name, "mag_range_db", r, false)?;
+        check_range(name, "mag_range_db", r, false)?;
     }
     for s in &fig.series {
-        check_len(&name, &s.label, "h", s.h.len(), "freq_hz", s.freq_hz.len())?;
+        check_len(name, &s.label, "h", s.h.len(), "freq_hz", s.freq_hz.len())?;
         if let Some(c) = &s.coherence {
             check_len(
-                &name,
+                name,
                 &s.label,
                 "coherence",
                 c.len(),
@@ -325,25 +344,48 @@ fn render_bode(
             )?;
         }
     }
-    let m = Metrics::new(size);
+    Ok(range)
+}
 
-    let mag: Vec<Vec<f64>> = fig
-        .series
-        .iter()
-        .map(|s| s.h.iter().map(|h| 20.0 * h.norm().log10()).collect())
-        .collect();
-    let phase: Vec<Vec<f64>> = fig
-        .series
-        .iter()
-        .map(|s| unwrap_phase(&s.freq_hz, &s.h, f0, f1))
-        .collect();
-    let styles: Vec<Style> = fig
-        .series
-        .iter()
-        .enumerate()
-        .map(|(i, s)| style_for(s.trace, i, s.palette_index, &m))
-        .collect();
+/// Each series' magnitude (dB), unwrapped phase (rad) and line style, in
+/// the figure's order.
+struct BodeTraces {
+    mag: Vec<Vec<f64>>,
+    phase: Vec<Vec<f64>>,
+    styles: Vec<Style>,
+}
 
+impl BodeTraces {
+    fn new(fig: &BodeFigure, (f0, f1): (f64, f64), m: &Metrics) -> Self {
+        let mag = fig
+            .series
+            .iter()
+            .map(|s| s.h.iter().map(|h| 20.0 * h.norm().log10()).collect())
+            .collect();
+        let phase = fig
+            .series
+            .iter()
+            .map(|s| unwrap_phase(&s.freq_hz, &s.h, f0, f1))
+            .collect();
+        let styles = fig
+            .series
+            .iter()
+            .enumerate()
+            .map(|(i, s)| style_for(s.trace, i, s.palette_index, m))
+            .collect();
+        BodeTraces { mag, phase, styles }
+    }
+}
+
+/// The panels from the top, each with its share of the height: magnitude,
+/// then phase and coherence when shown. Only the bottom panel labels the
+/// frequency axis.
+fn bode_stack<'a>(
+    fig: &'a BodeFigure,
+    traces: &'a BodeTraces,
+    (f0, f1): (f64, f64),
+    m: &Metrics,
+) -> Vec<(Panel<'a>, f64)> {
     let show_phase = fig.phase;
     let show_coh = fig.shows_coherence();
     let n_panels = 1 + usize::from(show_phase) + usize::from(show_coh);
@@ -356,95 +398,122 @@ fn render_bode(
             k + 1 == n_panels,
         )
     };
+    let mut stack = vec![(
+        magnitude_panel(fig, traces, x_axis(0)),
+        if show_coh { 1.0 } else { 1.2 },
+    )];
+    if show_phase {
+        stack.push((phase_panel(fig, traces, x_axis(1)), 1.0));
+    }
+    if show_coh {
+        let p = coherence_panel(fig, &traces.styles, m, x_axis(n_panels - 1));
+        stack.push((p, 0.55));
+    }
+    stack
+}
 
+/// The magnitude panel: fixed limits when the figure gives them, else
+/// fitted to the data; bands where the series have them.
+fn magnitude_panel<'a>(fig: &'a BodeFigure, traces: &'a BodeTraces, x: Axis) -> Panel<'a> {
     let mag_label = if fig.mag_label.is_empty() {
         "Magnitude (dB)"
     } else {
         fig.mag_label.as_str()
     };
     let (m0, m1) = fig.mag_range_db.unwrap_or((0.0, 1.0));
-    let mut mag_panel = Panel::new(
+    let mut p = Panel::new(
         None,
-        x_axis(0),
+        x,
         Axis::new(m0, m1, false, mag_label, true),
         fig.mag_range_db.is_none(),
-        raw_curves(&fig.series, &mag, &styles),
+        raw_curves(&fig.series, &traces.mag, &traces.styles),
     );
-    // +-2 std about each series that has a band.
-    let bands = |values: &[Vec<f64>], std_of: &dyn Fn(&BodeBand) -> &[f64]| {
-        fig.series
-            .iter()
-            .zip(values)
-            .zip(&styles)
-            .filter_map(|((s, v), st)| {
-                let sd = std_of(s.band.as_ref()?);
-                let at = |sign: f64| v.iter().zip(sd).map(|(v, d)| v + sign * 2.0 * d).collect();
-                Some(RawBand::new(&s.freq_hz, at(-1.0), at(1.0), st.rgb))
-            })
-            .collect::<Vec<_>>()
-    };
-    mag_panel.bands = bands(&mag, &|b| &b.magnitude_db);
-    let mut stack = vec![(mag_panel, if show_coh { 1.0 } else { 1.2 })];
-    if show_phase {
-        let mut p = Panel::new(
-            None,
-            x_axis(1),
-            Axis::new(0.0, 1.0, false, "Phase (rad)", true),
-            true,
-            raw_curves(&fig.series, &phase, &styles),
-        );
-        p.bands = bands(&phase, &|b| &b.phase_rad);
-        stack.push((p, 1.0));
-    }
-    if show_coh {
-        let raw: Vec<RawCurve<'_>> = fig
-            .series
-            .iter()
-            .zip(&styles)
-            .filter_map(|(s, st)| {
-                s.coherence.as_ref().map(|c| {
-                    let style = Style {
-                        dash: Dash::Solid,
-                        width: m.thin_w,
-                        ..*st
-                    };
-                    RawCurve::new(&s.freq_hz, c, style)
-                })
-            })
-            .collect();
-        let p = Panel::new(
-            None,
-            x_axis(n_panels - 1),
-            Axis::new(0.0, 1.0, false, "Coherence (-)", true),
-            false,
-            raw,
-        );
-        stack.push((p, 0.55));
-    }
+    p.bands = bode_bands(fig, &traces.mag, &traces.styles, &|b| &b.magnitude_db);
+    p
+}
 
-    // Legend: series with something inside the frequency range.
+/// The phase panel, its limits fitted to the data; bands where the series
+/// have them.
+fn phase_panel<'a>(fig: &'a BodeFigure, traces: &'a BodeTraces, x: Axis) -> Panel<'a> {
+    let mut p = Panel::new(
+        None,
+        x,
+        Axis::new(0.0, 1.0, false, "Phase (rad)", true),
+        true,
+        raw_curves(&fig.series, &traces.phase, &traces.styles),
+    );
+    p.bands = bode_bands(fig, &traces.phase, &traces.styles, &|b| &b.phase_rad);
+    p
+}
+
+/// The coherence panel, 0 to 1: a thin solid line in each series' colour
+/// for the series that have coherence.
+fn coherence_panel<'a>(fig: &'a BodeFigure, styles: &[Style], m: &Metrics, x: Axis) -> Panel<'a> {
+    let raw: Vec<RawCurve<'_>> = fig
+        .series
+        .iter()
+        .zip(styles)
+        .filter_map(|(s, st)| {
+            s.coherence.as_ref().map(|c| {
+                let style = Style {
+                    dash: Dash::Solid,
+                    width: m.thin_w,
+                    ..*st
+                };
+                RawCurve::new(&s.freq_hz, c, style)
+            })
+        })
+        .collect();
+    Panel::new(
+        None,
+        x,
+        Axis::new(0.0, 1.0, false, "Coherence (-)", true),
+        false,
+        raw,
+    )
+}
+
+/// +-2 std about each series that has a band: `values` are the series'
+/// (magnitude or phase) and `std_of` picks the matching std from a band.
+fn bode_bands<'a>(
+    fig: &'a BodeFigure,
+    values: &[Vec<f64>],
+    styles: &[Style],
+    std_of: &dyn Fn(&BodeBand) -> &[f64],
+) -> Vec<RawBand<'a>> {
+    fig.series
+        .iter()
+        .zip(values)
+        .zip(styles)
+        .filter_map(|((s, v), st)| {
+            let sd = std_of(s.band.as_ref()?);
+            let at = |sign: f64| v.iter().zip(sd).map(|(v, d)| v + sign * 2.0 * d).collect();
+            Some(RawBand::new(&s.freq_hz, at(-1.0), at(1.0), st.rgb))
+        })
+        .collect()
+}
+
+/// The legend: the series with a magnitude or phase point inside the
+/// frequency range, each (label, style) once.
+fn bode_legend(
+    fig: &BodeFigure,
+    traces: &BodeTraces,
+    (f0, f1): (f64, f64),
+) -> Vec<(String, Style)> {
     let mut legend = Vec::new();
     for (i, s) in fig.series.iter().enumerate() {
         let in_range = |y: &[f64]| {
-            RawCurve::new(&s.freq_hz, y, styles[i]).has_points_in(
+            RawCurve::new(&s.freq_hz, y, traces.styles[i]).has_points_in(
                 (f0, f1),
                 fig.log_frequency,
                 false,
             )
         };
-        if in_range(&mag[i]) || in_range(&phase[i]) {
-            push_legend(&mut legend, &s.label, styles[i]);
+        if in_range(&traces.mag[i]) || in_range(&traces.phase[i]) {
+            push_legend(&mut legend, &s.label, traces.styles[i]);
         }
     }
-    if !stack.iter().any(|(p, _)| p.has_data()) {
-        return Err(FigureError::Empty { figure: name });
-    }
-    let sheet = Sheet {
-        title: fig.title.clone(),
-        legend,
-        arrangement: Arrangement::Stack(stack),
-    };
-    render_sheet(&name, size, sheet, &m, formats)
+    legend
 }
 
 /// Time panels in a grid. Each panel shows its window of the records

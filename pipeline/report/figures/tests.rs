@@ -844,6 +844,7 @@ fn png_and_svg_are_the_same_picture() {
         // average, no pixel by more than a quarter of the range.
         let (mean, far) = difference(&png, &svg, 64);
         assert!(mean < 0.1, "mean difference {mean}");
+        // Exact: a count of pixels, as a fraction.
         assert_eq!(far, 0.0, "pixels differ by more than 64 levels");
         // And the ink lands in the same places: of the pixels dark in
         // either picture (a quarter of the way to black), 99.5 % are dark
