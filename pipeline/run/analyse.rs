@@ -42,7 +42,7 @@ use crate::simulate::specimen::SpecimenModel;
 use crate::validate::csi::Csi;
 use crate::validate::{self, ValidationMetrics};
 
-pub use super::step::RunError;
+pub use crate::analysis::run_result::RunError;
 
 /// What happens as a campaign runs, for whoever watches it (a progress bar,
 /// an event log). Called from the worker threads.
@@ -326,7 +326,7 @@ fn first_pass(
     if plan.role == Role::Validation {
         let read = campaign.joint.include_validation && campaign.identifies_rig();
         return Ok(FirstPass::Waiting(match read {
-            true => step::validation_evidence(campaign, plan),
+            true => crate::analysis::run_result::validation_evidence(campaign, plan),
             false => RigInput::Nothing,
         }));
     }
