@@ -27,7 +27,7 @@ use std::sync::Arc;
 
 /// Below this fit percent (MATLAB tfest's FitPercent, [`crate::fit::TfFit`])
 /// a run's model gets a warning naming the log's mapping.
-pub const POOR_FIT_PERCENT: f64 = 50.0;
+const POOR_FIT_PERCENT: f64 = 50.0;
 
 /// Why one run failed; recorded in that run's result.
 #[derive(Debug, thiserror::Error)]
@@ -58,7 +58,7 @@ pub enum RunError {
 
 impl RunError {
     /// [`RunError::Model`] for `rig` (at the run's P gain) and `specimen`.
-    pub fn model(rig: &RigParams, specimen: &LinearSpecimen, source: crate::lti::LtiError) -> Self {
+    fn model(rig: &RigParams, specimen: &LinearSpecimen, source: crate::lti::LtiError) -> Self {
         let (m, c, k) = specimen.mck();
         RunError::Model {
             beta1: rig.beta1_per_s,
@@ -201,7 +201,7 @@ pub fn measured_tracking(st: &LogStage, windows: Option<&[validate::Window]>) ->
 /// displacement, and the phase over the bins the measured FRF kept of the
 /// plant as it was simulated, driven through the hold (times `comp` when
 /// given).
-pub fn predicted_tracking_of(
+fn predicted_tracking_of(
     st: &LogStage,
     windows: &[validate::Window],
     displacement: &[f64],
@@ -363,7 +363,7 @@ pub fn frf_used(st: &LogStage) -> FrfUsed {
 
 /// The share of a fit's excess cost (its reduced chi-square above 1) a
 /// delay must explain for the run's warning to name it.
-pub const DELAY_EXPLAINS: f64 = 0.5;
+const DELAY_EXPLAINS: f64 = 0.5;
 
 /// The linearity check as results.json states it.
 pub fn linearity_result(l: &frf::Linearity) -> LinearityResult {
@@ -443,7 +443,7 @@ pub fn fitted(
 
 /// A run's transfer function as results.json states it, with the fit's
 /// stds (absolute and relative) when it was fitted here.
-pub fn tf_result(tf: &TransferFunction, source: TfSource, fit: Option<&TfFit>) -> TfResult {
+fn tf_result(tf: &TransferFunction, source: TfSource, fit: Option<&TfFit>) -> TfResult {
     let mut t = TfResult::new(tf, source);
     if let Some(fit) = fit {
         t.std = Some(fit.std.clone());
@@ -461,7 +461,7 @@ pub fn tf_result(tf: &TransferFunction, source: TfSource, fit: Option<&TfFit>) -
 /// What the run's own fit says is wrong with it, in this order: a delay it
 /// lacks, its misfit's diagnosis, stds it overstates, a model that
 /// explains too little of the response.
-pub fn own_fit_warnings(summary: &FitSummary, st: &LogStage, fit: &TfFit) -> Vec<String> {
+fn own_fit_warnings(summary: &FitSummary, st: &LogStage, fit: &TfFit) -> Vec<String> {
     let mut warnings = Vec::new();
     // The delay is named as the cause only where it explains most of what
     // the fit leaves beyond the noise: a nonlinearity or the FRF settings
@@ -513,7 +513,7 @@ pub fn own_fit_warnings(summary: &FitSummary, st: &LogStage, fit: &TfFit) -> Vec
 
 /// The adequacy tests of a run's own fit on the bins it was given, its
 /// model with the hold and delay.
-pub fn fit_adequacy(ident: &IdentificationPlan, st: &LogStage, fit: &TfFit) -> Option<Adequacy> {
+fn fit_adequacy(ident: &IdentificationPlan, st: &LogStage, fit: &TfFit) -> Option<Adequacy> {
     let data = st.fit_data.as_ref()?;
     let fs = st.log.sample_rate_hz;
     let model: Vec<_> = data
@@ -534,7 +534,7 @@ pub fn fit_adequacy(ident: &IdentificationPlan, st: &LogStage, fit: &TfFit) -> O
     ))
 }
 
-pub fn fit_summary(
+fn fit_summary(
     ident: &IdentificationPlan,
     plan: &RunPlan,
     st: &LogStage,
@@ -577,11 +577,7 @@ pub fn fit_summary(
 
 /// For a fit made without a delay (`identification.delay` none): the same
 /// fit with one, up to the default bound, and whether the data support it.
-pub fn delay_test(
-    ident: &IdentificationPlan,
-    st: &LogStage,
-    fit: &TfFit,
-) -> Option<DelayTestResult> {
+fn delay_test(ident: &IdentificationPlan, st: &LogStage, fit: &TfFit) -> Option<DelayTestResult> {
     if ident.delay != DelayPlan::None {
         return None;
     }

@@ -806,3 +806,25 @@ fn the_data_choose_the_place_the_mode_was_made_at() {
         assert!(spread.rivals.is_empty(), "{want:?}: {:?}", spread.rivals);
     }
 }
+
+/// `Structure::as_str` is the name serde gives each structure, and the
+/// manifest's `Choice` reads back every name it writes ("auto" and each
+/// structure) and refuses any other, naming the ones it accepts.
+#[test]
+fn structure_names_are_serdes_and_a_choice_reads_back() {
+    for s in Structure::ALL {
+        assert_eq!(serde_json::to_value(s).unwrap(), s.as_str());
+        let fixed = Choice::Fixed(s);
+        let written = serde_json::to_value(fixed).unwrap();
+        assert_eq!(written, s.as_str());
+        assert_eq!(serde_json::from_value::<Choice>(written).unwrap(), fixed);
+    }
+    let auto = serde_json::to_value(Choice::Auto).unwrap();
+    assert_eq!(auto, "auto");
+    assert_eq!(
+        serde_json::from_value::<Choice>(auto).unwrap(),
+        Choice::Auto
+    );
+    let e = serde_json::from_value::<Choice>("delay_valv".into()).unwrap_err();
+    assert!(e.to_string().contains("`delay_valve`"), "{e}");
+}
