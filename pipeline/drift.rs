@@ -34,6 +34,29 @@ pub const PARAMETERS: [&str; 5] = ["beta1", "a1b0", "a2", "a3", "delay"];
 /// tuned to (tens of milliseconds for the paper's actuator).
 pub const DELAY_FLOOR_S: f64 = 0.25e-3;
 
+/// The history table's columns, in order: those of [`Entry`].
+pub const TABLE_COLUMNS: [&str; 15] = [
+    "rig",
+    "campaign",
+    "date",
+    "inputs_sha256",
+    "results_sha256",
+    "p_gain",
+    "beta1",
+    "beta1_std",
+    "a1b0",
+    "a1b0_std",
+    "a2",
+    "a2_std",
+    "a3",
+    "a3_std",
+    "servoid_version",
+];
+
+/// Columns written after those, which a table written before them lacks
+/// (read as absent).
+pub const OPTIONAL_TABLE_COLUMNS: [&str; 1] = ["delay_s"];
+
 /// One campaign's rig in the history.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 pub struct Entry {

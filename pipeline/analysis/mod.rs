@@ -1,17 +1,21 @@
-//! A campaign's identification, run by run and together: each log read,
-//! checked and its FRFs estimated and fitted (`log_stage`), what each run
-//! gives the rig (`evidence`), the rig by the paper's procedure (`rig`,
-//! Fig. 6, Eqs. 18-20) and by the joint grey-box fit (`joint`), each run's
-//! result from its stage and the rig (`run_result`), and the published
-//! numbers beside the recomputed ones (`compare`). Pure: a
-//! checked campaign and its logs' bytes in, typed results out; `run`
-//! schedules it and writes what it gives.
+//! A campaign's identification, run by run and together, and what else
+//! needs the checked manifest: each log read, checked and its FRFs
+//! estimated and fitted (`log_stage`), what each run gives the rig
+//! (`evidence`), the rig by the paper's procedure (`rig`, Fig. 6, Eqs.
+//! 18-20) and by the joint grey-box fit (`joint`), each run's result from
+//! its stage and the rig (`run_result`), the published numbers beside the
+//! recomputed ones (`compare`), the campaign's place in its rig's history
+//! (`history`) and a simulated campaign from its manifest (`simulated`).
+//! Pure: a checked campaign and its logs' bytes in, typed results out;
+//! `run` schedules it and writes what it gives.
 
 pub mod compare;
 pub mod evidence;
+pub mod history;
 pub mod joint;
 pub mod log_stage;
 pub mod rig;
 pub mod run_result;
+pub mod simulated;
 
 pub use rig::{FailedRun, RigError};

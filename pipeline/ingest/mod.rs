@@ -15,10 +15,14 @@
 //!
 //! [`read_table`] reads a side table (a campaign's run table, CSV or
 //! Parquet) as text cells for the manifest to check.
+//!
+//! [`collect`] finds the logs `servoid init` is given (files, folders,
+//! globs) and tells them from the run tables among them.
 
 mod arrays;
 mod csv;
 mod daq;
+mod discover;
 mod fields;
 mod hdf5;
 mod inspect;
@@ -42,6 +46,7 @@ use sha2::{Digest, Sha256};
 
 use crate::units::format_number;
 
+pub use discover::{DiscoverError, Found, collect};
 pub use inspect::{Inspected, inspect};
 pub use plan::{
     ChannelPlan, Channels, Column, CsvOptions, DEFAULT_MAX_LOG_MIB, LogFormat, LogPlan, Repair,

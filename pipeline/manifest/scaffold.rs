@@ -6,12 +6,20 @@
 //! mass and damping, the P gain, a unit no column gives, a role no name
 //! gives) is written as a [`PLACEHOLDER`] string that `servoid check`
 //! reports by key until it is filled. Pure: the logs come inspected
-//! (`ingest::inspect`), the text goes back to `run` to write.
+//! (`ingest::inspect`) and the run table read (`ingest::read_table`); the
+//! plans to read the logs back with ([`log_plan`]) go to `run` to read,
+//! and the text goes back to `run` to write.
 
+use std::collections::BTreeSet;
 use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
 
-use crate::ingest::Inspected;
 pub use crate::ingest::naming::{Proposed, ProposedChannels, propose};
+use crate::ingest::{
+    ChannelPlan, Channels, Column, CsvOptions, DEFAULT_MAX_LOG_MIB, Inspected, LogFormat, LogPlan,
+    Repair, Table, TimePlan,
+};
+use crate::units::{TimeUnit, Unit};
 
 /// The prefix of a value the lab must fill in: `servoid check` names every
 /// key that still holds one.
@@ -407,6 +415,205 @@ fn run_block(out: &mut String, log: &FoundLog, back: &ReadBack) {
             let _ = writeln!(out, "data = {{ log = {} }}", quoted(&log.path));
         }
     }
+}
+
+/// The folder a file is in (`.` for a bare name): where the paths a
+/// manifest or run table names start from.
+pub fn folder_of(file: &Path) -> PathBuf {
+    match file.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+        _ => PathBuf::from("."),
+    }
+}
+
+/// How many names a comment lists before it counts the rest.
+const LISTED: usize = 10;
+
+/// The first [`LISTED`] of `names`, comma-separated, and how many more
+/// there are: a comment stays a line however many logs there are.
+fn listed(names: &[String]) -> String {
+    let mut s = names
+        .iter()
+        .take(LISTED)
+        .cloned()
+        .collect::<Vec<_>>()
+        .join(", ");
+    if names.len() > LISTED {
+        s.push_str(&format!(" and {} more", names.len() - LISTED));
+    }
+    s
+}
+
+/// What a run table found among the logs says about them: its rows, the
+/// rows whose log is not among them, the logs no row names. A row's `log`
+/// cell is relative to the table's folder; a row without one names its log
+/// by its id, as the file's stem.
+pub fn table_comments(table: &Table, logs: &[&Path]) -> Vec<String> {
+    let (Some(id_col), log_col) = (table.column("id"), table.column("log")) else {
+        return vec![];
+    };
+    let dir = folder_of(&table.path);
+    let key = |p: &Path| std::path::absolute(p).unwrap_or_else(|_| p.to_path_buf());
+    let have: BTreeSet<PathBuf> = logs.iter().map(|p| key(p)).collect();
+    let mut used = BTreeSet::new();
+    let mut missing = Vec::new();
+    let mut rows = 0;
+    for cells in &table.rows {
+        let Some(id) = cells.get(id_col).cloned().flatten() else {
+            continue;
+        };
+        rows += 1;
+        let cell = log_col.and_then(|c| cells.get(c).cloned().flatten());
+        let hit = match cell {
+            Some(c) => Some(key(&dir.join(c))).filter(|p| have.contains(p)),
+            None => logs
+                .iter()
+                .find(|p| p.file_stem().is_some_and(|s| s.to_string_lossy() == id))
+                .map(|p| key(p)),
+        };
+        match hit {
+            Some(p) => {
+                used.insert(p);
+            }
+            None => missing.push(id),
+        }
+    }
+    let unused: Vec<String> = logs
+        .iter()
+        .filter(|p| !used.contains(&key(p)))
+        .map(|p| p.display().to_string())
+        .collect();
+    let mut out = vec![format!(
+        "{}: {rows} row(s); {} find their log among the {} found",
+        table.path.display(),
+        rows - missing.len(),
+        logs.len()
+    )];
+    if !missing.is_empty() {
+        out.push(format!(
+            "rows whose log is not there (their runs fail alone until it is): {}",
+            listed(&missing)
+        ));
+    }
+    if !unused.is_empty() {
+        out.push(format!(
+            "logs no row names (`servoid check` warns of them): {}",
+            listed(&unused)
+        ));
+    }
+    out
+}
+
+/// What reading each log with the proposed channels gave, in a few lines.
+pub fn read_comments(logs: &[FoundLog], read: &[ReadBack]) -> Vec<String> {
+    let mut rates = Vec::new();
+    let mut seconds = Vec::new();
+    let mut failed = Vec::new();
+    for (log, back) in logs.iter().zip(read) {
+        match back {
+            ReadBack::Read {
+                sample_rate_hz,
+                n_samples,
+            } => {
+                rates.push(*sample_rate_hz);
+                seconds.push(*n_samples as f64 / sample_rate_hz);
+            }
+            ReadBack::Failed(why) => failed.push(format!("{} ({why})", log.path)),
+            ReadBack::NotRead => {}
+        }
+    }
+    let range = |v: &[f64], digits: usize| {
+        let (lo, hi) = v
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &x| {
+                (a.min(x), b.max(x))
+            });
+        if format!("{lo:.digits$}") == format!("{hi:.digits$}") {
+            format!("{lo:.digits$}")
+        } else {
+            format!("{lo:.digits$} to {hi:.digits$}")
+        }
+    };
+    let mut out = Vec::new();
+    if !rates.is_empty() {
+        out.push(format!(
+            "{} log(s) read with these channels: {} Hz, {} s long",
+            rates.len(),
+            range(&rates, 6),
+            range(&seconds, 1)
+        ));
+    }
+    if !failed.is_empty() {
+        out.push(format!(
+            "{} log(s) do not read with these channels: {}",
+            failed.len(),
+            listed(&failed)
+        ));
+    }
+    if logs
+        .iter()
+        .any(|l| l.inspected.csv_delimiter.is_some_and(|d| d != ','))
+    {
+        out.push(
+            "some CSV logs are split on another delimiter than a comma, which a run table's rows cannot say: give them [[runs]] tables with data.csv.delimiter".into(),
+        );
+    }
+    out
+}
+
+/// The plan that reads the log at `path` with the proposed channels (each
+/// in its proposed unit, no offset, range or repair), so that `init` can
+/// say the log's rate and length before the lab fills anything in; `None`
+/// ([`ReadBack::NotRead`]) while the time, command or displacement channel,
+/// or its unit, is still a placeholder.
+pub fn log_plan(
+    path: &Path,
+    format: LogFormat,
+    log: &FoundLog,
+    p: &ProposedChannels,
+) -> Option<LogPlan> {
+    let length = |c: &Proposed| -> Option<ChannelPlan> {
+        let unit: Unit = serde_json::from_value(serde_json::json!(c.unit?)).ok()?;
+        Some(ChannelPlan {
+            column: Column::Name(c.column.clone()?),
+            unit,
+            gain: unit.to_si(),
+            offset: 0.0,
+            range: None,
+            repair: Repair::None,
+        })
+    };
+    let time = match (&p.time.column, p.time.unit, log.inspected.rate_hz) {
+        (Some(c), Some(u), _) => {
+            let unit = serde_json::from_value::<TimeUnit>(serde_json::json!(u)).ok()?;
+            TimePlan::Column {
+                column: Column::Name(c.clone()),
+                to_s: unit.to_si(),
+            }
+        }
+        (None, _, Some(_)) => TimePlan::FromLog,
+        _ => return None,
+    };
+    let (Some(command), Some(displacement)) = (length(&p.command), length(&p.displacement)) else {
+        return None;
+    };
+    let csv = CsvOptions {
+        delimiter: log.inspected.csv_delimiter.unwrap_or(',').to_string(),
+        ..CsvOptions::default()
+    };
+    Some(LogPlan {
+        path: path.to_path_buf(),
+        format,
+        csv,
+        sha256: None,
+        channels: Channels {
+            time,
+            command,
+            displacement,
+            force: length(&p.force),
+        },
+        max_bytes: DEFAULT_MAX_LOG_MIB << 20,
+    })
 }
 
 #[cfg(test)]

@@ -12,29 +12,6 @@ use super::columns::{ColumnWriteError, frame_bytes};
 use super::write_atomic;
 use crate::drift::Entry;
 
-/// The table's columns, in order: those of [`Entry`].
-pub const COLUMNS: [&str; 15] = [
-    "rig",
-    "campaign",
-    "date",
-    "inputs_sha256",
-    "results_sha256",
-    "p_gain",
-    "beta1",
-    "beta1_std",
-    "a1b0",
-    "a1b0_std",
-    "a2",
-    "a2_std",
-    "a3",
-    "a3_std",
-    "servoid_version",
-];
-
-/// Columns written after those, which a table written before them lacks
-/// (read as absent).
-pub const OPTIONAL_COLUMNS: [&str; 1] = ["delay_s"];
-
 /// Write the history atomically: readers see the old table or the new.
 /// `extra` are columns of the lab's own (name, a cell per entry), written
 /// after servoid's as text. `before`, the bytes the table holds now, is
