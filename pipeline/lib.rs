@@ -14,8 +14,9 @@
 //!    schedules the analysis, draws the figures and writes the outputs.
 //! 3. `report`: writes results.json, figures, the page and logs.
 //! 4. `analysis`: a campaign's identification: each run's log stage, the
-//!    rig (sequential and joint), the comparisons; checked plans in,
-//!    results out.
+//!    rig (sequential and joint), the comparisons, the campaign's place in
+//!    its rig's history, a simulated campaign; checked plans in, results
+//!    out.
 //! 5. `results`: the output contract (results.json, truth.json).
 //! 6. `manifest`: reads and checks the manifests, and builds each stage's
 //!    own settings.
