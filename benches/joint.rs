@@ -97,6 +97,7 @@ fn bench_joint(c: &mut Criterion) {
             variance: &var,
             bin_hz: f[1] - f[0],
             lag: 1,
+            amplitude_m: None,
         })
         .collect();
     let start = RigParams {
@@ -117,6 +118,8 @@ fn bench_joint(c: &mut Criterion) {
         delay_start_s: 0.0,
         max_delay_s: 0.05,
         force_delay_start_s: 0.0,
+        friction: false,
+        friction_start_n: 0.0,
     };
     // Fail loudly rather than time a fit that does not work.
     let fit = joint_fit(&runs, &start, &opts).unwrap();

@@ -76,6 +76,7 @@ struct Record {
     lead_s: f64,
     /// LVDT noise RMS, mm.
     noise_mm: f64,
+    /// The FRF estimator the manifest names, or "" for servoid's default.
     estimator: &'static str,
 }
 
@@ -182,7 +183,7 @@ quantization = {{ bits = 18, full_scale = 5000.0 }}
 {joint}band_hz = [0.5, 30.0]
 coherence_min = 0.8
 command_intersample = "sample_and_hold"
-frf = {{ estimator = "{estimator}", segment_length = 8192, overlap = 0.5, window = "rectangular", detrend = "mean" }}
+{frf}
 
 {runs}
 "#,
@@ -198,7 +199,14 @@ frf = {{ estimator = "{estimator}", segment_length = 8192, overlap = 0.5, window
         duration = rec.duration_s,
         lead = rec.lead_s,
         noise = rec.noise_mm,
-        estimator = rec.estimator,
+        frf = if rec.estimator.is_empty() {
+            String::new()
+        } else {
+            format!(
+                "frf = {{ estimator = \"{}\", segment_length = 8192, overlap = 0.5, window = \"rectangular\", detrend = \"mean\" }}",
+                rec.estimator
+            )
+        },
     )
 }
 
@@ -870,22 +878,14 @@ fn the_mismatch_suite_is_right_or_warned() {
     assert!(coverage >= 0.9, "coverage {coverage}");
 }
 
-/// Beyond the candidates: rigs with what no structure holds, Coulomb
-/// friction on the piston and two modes at once (in the loop and in the
-/// command path). Their errors are not covered by the stated stds (the
+/// Beyond the candidates: rigs with what no structure holds, two modes at
+/// once (in the loop and in the command path) and springs that stiffen. Their errors are not covered by the stated stds (the
 /// docs/accuracy.md's table says by how much); what the test asserts is that the
 /// campaign says so: the chosen structure fails its adequacy tests and the
 /// misfit warning names it.
 #[test]
 fn beyond_the_candidates_the_campaign_says_so() {
     let beyond = [
-        Mismatch {
-            name: "piston 2 kg with 20 N Coulomb friction",
-            extras: Extras {
-                unmodelled: "piston_mass_kg = 2.0\nactuator_friction = { coulomb_force_n = 20.0, smoothing_velocity_m_per_s = 0.001 }\n",
-                ..base(None, None, None, 0.0, 0.0, 0.0)
-            },
-        },
         Mismatch {
             name: "modes in the loop (150 Hz) and the command path (90 Hz)",
             extras: base(Some((150.0, 0.5)), Some((90.0, 0.6)), None, 1.0, 0.0, 0.0),
@@ -1102,5 +1102,79 @@ fn records_not_at_rest_are_calibrated_with_the_lpm() {
             "etfe {name}: spread {}",
             summary[0][k].0
         );
+    }
+}
+
+/// The paper's rig with 0.5 kg of piston and 8 N of Coulomb seal friction
+/// (tanh(v / 2 mm/s)), the 120 s campaign at 1 kHz with servoid's default
+/// FRF settings: the joint fit finds the friction from the displacement's
+/// harmonics, fits it with the rig, and gives every rig parameter within
+/// 1 % and the friction within 10 % of the 8 N it was simulated with (a
+/// linear model's fit is 4.7 % off, docs/accuracy.md). The same campaign on
+/// the rig without friction is given none.
+#[test]
+fn seal_friction_is_fitted_with_the_rig() {
+    const FRICTION: &str = "piston_mass_kg = 0.5\nactuator_friction = { coulomb_force_n = 8.0, smoothing_velocity_m_per_s = 0.002 }\n";
+    for (unmodelled, friction) in [(FRICTION, true), ("piston_mass_kg = 0.5\n", false)] {
+        for seed in 0..2u64 {
+            let x = Extras {
+                unmodelled,
+                record: Record {
+                    estimator: "",
+                    ..Record::default()
+                },
+                ..base(None, None, None, 0.0, 0.0, 0.0)
+            };
+            let text = manifest(700 + seed, &PAPER, &x) + &sdof_validation_runs([1.0; 3]);
+            let results = identify(&text);
+            let r = results.rig.as_ref().unwrap();
+            let joint = r.joint.as_ref().unwrap();
+            let err = errors(&results, &PAPER);
+            let found = joint
+                .parameters
+                .iter()
+                .find(|p| p.name == "coulomb_friction_n");
+            eprintln!(
+                "friction {friction}, seed {seed}: {:?}, errors {:+.3?} %, friction {:?}",
+                joint.structure,
+                err.map(|e| 100.0 * e),
+                found.map(|p| (p.value, p.std))
+            );
+            assert_eq!(r.source, RigSource::Joint, "{}", joint.use_note);
+            for (name, e) in ["beta1", "a1b0", "a2", "a3"].iter().zip(err) {
+                assert!(e.abs() < 0.01, "{name} {:+.3} % off", 100.0 * e);
+            }
+            if !friction {
+                assert!(found.is_none(), "a rig without friction given {found:?}");
+                continue;
+            }
+            let f = found.expect("the friction is fitted");
+            assert!((f.value / 8.0 - 1.0).abs() < 0.1, "friction {} N", f.value);
+            assert!(
+                results.warnings.iter().any(|w| w.contains("seal friction")),
+                "{:#?}",
+                results.warnings
+            );
+        }
+    }
+    // Another rig, a heavier piston and more friction (20 N on 2 kg,
+    // tanh(v / 1 mm/s)), three springs.
+    let heavy = Mismatch {
+        name: "piston 2 kg with 20 N Coulomb friction",
+        extras: Extras {
+            unmodelled: "piston_mass_kg = 2.0\nactuator_friction = { coulomb_force_n = 20.0, smoothing_velocity_m_per_s = 0.001 }\n",
+            ..base(None, None, None, 0.0, 0.0, 0.0)
+        },
+    };
+    for seed in 0..2u64 {
+        let o = run_mismatch(&heavy, 400 + seed);
+        for (name, e) in ["beta1", "a1b0", "a2", "a3"].iter().zip(o.err) {
+            assert!(
+                e.abs() < 0.01,
+                "{}: {name} {:+.3} % off",
+                heavy.name,
+                100.0 * e
+            );
+        }
     }
 }

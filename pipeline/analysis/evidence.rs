@@ -38,6 +38,10 @@ pub struct Evidence {
     /// What its own warnings found wrong (`log_stage::LogStage::cause`).
     #[serde(default)]
     pub cause: Option<String>,
+    /// Whether its displacement showed seal friction's harmonics
+    /// (`log_stage::LogStage::friction_signature`).
+    #[serde(default)]
+    pub friction_signature: bool,
 }
 
 /// What a validation run gives the joint fit: the band's bins of its x1/u

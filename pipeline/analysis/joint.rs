@@ -96,9 +96,11 @@ pub fn joint(
             variance: &d.variance,
             bin_hz: d.bin_hz,
             lag: d.lag,
+            amplitude_m: d.amplitude_m.as_deref(),
         })
         .collect();
-    let opts = options(&campaign.identification, start, fs);
+    let mut opts = options(&campaign.identification, start, fs);
+    opts.friction = evidence.iter().any(|(_, e)| e.friction_signature);
     let choice = campaign.joint.structure;
     let band_top = fitted.iter().map(|(p, ..)| p.band_hz.1).fold(0.0, f64::max);
     let sel = joint::select(&runs, start, &opts, choice, band_top);
@@ -183,6 +185,8 @@ fn options(ident: &IdentificationPlan, start: &RigParams, fs: f64) -> JointOptio
         delay_start_s: 0.0,
         force_delay_start_s: 0.0,
         max_delay_s: ident.max_delay_s,
+        friction: false,
+        friction_start_n: 0.0,
     }
 }
 
@@ -262,6 +266,22 @@ fn explain(sel: &Selection) -> String {
     )
 }
 
+/// What a fit with the piston's friction leaves unexplained.
+const FRICTION_HARMONICS: &str = "the seal friction's harmonics of the command, which the FRFs' variances count as noise (the friction itself is fitted)";
+
+/// The friction the fit found, in words: its force with its std, and what
+/// that means for the rig at other amplitudes.
+fn friction_note(fit: &JointFit, ids: &[String]) -> Option<String> {
+    let f = fit.friction_n?;
+    let k = fit.names.iter().position(|n| *n == joint::FRICTION)?;
+    Some(format!(
+        "seal friction: the rig is not linear at this amplitude, its displacement holding odd harmonics of the command (friction's signature), so the joint fit models the piston seals' Coulomb friction by its describing function at each bin's amplitude, over {}: F = {:.3} +- {:.3} N. The rig's parameters are the actuator's with that friction; its linear response at another amplitude differs (the friction acts as a damper 4 F / (pi V) at velocity amplitude V), and a small command is tracked worse than the model without friction predicts",
+        ids.join(", "),
+        f,
+        fit.std[k]
+    ))
+}
+
 /// The result table and the use decision.
 /// `known` is what the runs' own warnings or the springs' agreement already
 /// found wrong, which the misfit is put down to.
@@ -299,6 +319,13 @@ fn describe(
         })
     });
     result.parameters = parameters(fit, sequential, spread.as_ref(), misfit);
+    // With the friction fitted, its harmonics are what remains unexplained.
+    let known = if let Some(note) = friction_note(fit, ids) {
+        warnings.push(format!("rig: {note}"));
+        Some(FRICTION_HARMONICS)
+    } else {
+        known
+    };
     if let Some(m) = misfit {
         let text = misfit_note(fit, m, known);
         warnings.push(format!("rig: {text}"));

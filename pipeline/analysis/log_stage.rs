@@ -105,6 +105,17 @@ pub struct LogStage {
     pub warnings: Vec<String>,
 }
 
+impl LogStage {
+    /// Whether the displacement holds harmonics of the command (seal
+    /// friction's signature, `frf::linearity`): the joint fit then fits
+    /// the friction.
+    pub fn friction_signature(&self) -> bool {
+        self.linearity
+            .and_then(|l| l.displacement)
+            .is_some_and(|f| f.blocks >= frf::linearity::MIN_BLOCKS)
+    }
+}
+
 /// Why a log stage failed; the message names the run's file.
 #[derive(Debug, thiserror::Error)]
 pub enum LogStageError {
@@ -527,6 +538,7 @@ pub fn log_stage_from(
             )
         })
         .flatten();
+    let fit_data = fit_data.map(|d| with_sweep_amplitude(d, excitation, &log));
     let spring = match (&run.specimen, &log.force_n) {
         (SpecimenModel::Spring { .. }, Some(f)) => frf::spring_force(&log.displacement_m, f, fs),
         _ => None,
@@ -553,6 +565,19 @@ pub fn log_stage_from(
         fit_data,
         warnings,
     })
+}
+
+/// A run's bins with the displacement's amplitude along its sweep: seal
+/// friction's describing function depends on it, should the joint fit
+/// find friction in any run (`LogStage::friction_signature`).
+fn with_sweep_amplitude(data: FitData, excitation: frf::Excitation, log: &Log) -> FitData {
+    match matches!(excitation, frf::Excitation::Sweep { .. })
+        .then(|| frf::sweep_amplitude(&log.command_m, log.sample_rate_hz))
+        .flatten()
+    {
+        Some(sweep) => data.with_amplitude(&sweep),
+        None => data,
+    }
 }
 
 /// A fit's failure, named by the run's file.

@@ -82,6 +82,10 @@ pub struct JointRun<'a> {
     /// correlation test pairs its bins this far apart, and bins closer
     /// share data in the sandwich covariance.
     pub lag: usize,
+    /// The displacement's amplitude (m) at each bin, from a sweep
+    /// (`frf::sweep_amplitude`), where the run's seal friction is fitted:
+    /// its describing function depends on it.
+    pub amplitude_m: Option<&'a [f64]>,
 }
 
 /// The joint fit's nuisance dynamics besides the command's hold: as the
@@ -221,6 +225,15 @@ impl Structure {
 /// its sensor; a delay in the command path shows as the two alike).
 pub const FORCE_DELAY: &str = "force_delay_s";
 
+/// The name of the piston's Coulomb seal friction (N), the last parameter
+/// when it is fitted. On a slow sweep friction F sign(x1') acts at each
+/// frequency as its describing function, a damper 4 F / (pi V) at the
+/// velocity amplitude V the sweep drove there (V = w X, X the
+/// displacement's amplitude), which adds 4 F / (pi X) j to the piston's
+/// load S(s) in Q = (s + a3) S + a2 s: linear in F. The load cell, on the
+/// rod's side of the seals, does not read it.
+pub const FRICTION: &str = "coulomb_friction_n";
+
 /// How to fit.
 #[derive(Debug, Clone, Copy)]
 pub struct JointOptions {
@@ -240,6 +253,11 @@ pub struct JointOptions {
     /// Where the force FRFs' delay starts (s), when there is one; its bound
     /// is the delay's.
     pub force_delay_start_s: f64,
+    /// Whether the piston's Coulomb seal friction is fitted (on the runs
+    /// with amplitudes), as the last parameter [`FRICTION`], and where it
+    /// starts (N).
+    pub friction: bool,
+    pub friction_start_n: f64,
 }
 
 /// The joint estimate.
@@ -257,6 +275,8 @@ pub struct JointFit {
     /// The force FRFs' own delay (s), when force FRFs were fitted with a
     /// structure that has a delay.
     pub force_delay_s: Option<f64>,
+    /// The piston's Coulomb seal friction (N), when fitted.
+    pub friction_n: Option<f64>,
     /// beta1, a1b0, a2, a3, then delay (s), valve frequency (Hz) and
     /// damping as the structure has them, then the force FRFs' delay.
     pub params: Vec<f64>,
@@ -319,6 +339,16 @@ impl JointFit {
                 ));
             }
         }
+        if let (Some(f), Some(k)) = (
+            self.friction_n,
+            self.names.iter().position(|n| *n == FRICTION),
+        ) && f < -2.0 * self.std[k]
+        {
+            return Some(format!(
+                "{FRICTION} = {f:.3} N with std {:.3}: friction that drives the piston",
+                self.std[k]
+            ));
+        }
         if let Some((hz, zeta)) = self.mode {
             if !(0.05..=5.0).contains(&zeta) {
                 return Some(format!("mode damping {zeta:.3} outside 0.05-5"));
@@ -348,6 +378,9 @@ struct Bin {
     weight: f64,
     /// Index into `JointProblem::runs`.
     run: usize,
+    /// Coulomb friction's describing function per newton at the bin's
+    /// amplitude, j 4 / (pi X) (0 where none is fitted).
+    coulomb: Complex<f64>,
 }
 
 /// A run's specimen polynomial S(s) = m s^2 + c s + k and its P / P_ref.
@@ -370,6 +403,8 @@ struct JointProblem {
     structure: Structure,
     /// Where the force FRFs' delay is in theta, when it is fitted.
     force_delay: Option<usize>,
+    /// Where the friction is in theta, when it is fitted.
+    friction: Option<usize>,
     /// The sample period (s): the delay's unit in theta.
     period_s: f64,
 }
@@ -380,9 +415,9 @@ struct BinEval {
     grad: [Complex<f64>; MAX_PARAMS],
 }
 
-/// The most parameters a fit has: the valve structure's seven and the
-/// force FRFs' delay.
-const MAX_PARAMS: usize = 8;
+/// The most parameters a fit has: the valve structure's seven, the force
+/// FRFs' delay and the friction.
+const MAX_PARAMS: usize = 9;
 
 /// The physical values at a point theta, computed once per pass over the
 /// bins.
@@ -400,6 +435,8 @@ struct Point {
     mode: Option<(f64, f64)>,
     /// The piston's mass (kg), 0 when not fitted.
     mp: f64,
+    /// The Coulomb friction (N), 0 when not fitted.
+    fc: f64,
 }
 
 /// Bins per chunk of a parallel pass: each chunk's sums are formed on one
@@ -409,13 +446,18 @@ const CHUNK: usize = 2048;
 
 impl JointProblem {
     fn n_params(&self) -> usize {
-        self.structure.n_params() + usize::from(self.force_delay.is_some())
+        self.structure.n_params()
+            + usize::from(self.force_delay.is_some())
+            + usize::from(self.friction.is_some())
     }
 
     fn names(&self) -> Vec<&'static str> {
         let mut names = self.structure.names().to_vec();
         if self.force_delay.is_some() {
             names.push(FORCE_DELAY);
+        }
+        if self.friction.is_some() {
+            names.push(FRICTION);
         }
         names
     }
@@ -439,6 +481,7 @@ impl JointProblem {
             lag: self.lag.clone(),
             structure: self.structure,
             force_delay: self.force_delay,
+            friction: self.friction,
             period_s: self.period_s,
         }
     }
@@ -464,6 +507,7 @@ impl JointProblem {
             } else {
                 0.0
             },
+            fc: self.friction.map_or(0.0, |k| theta[k]),
         }
     }
 
@@ -474,11 +518,12 @@ impl JointProblem {
         let s = bin.s;
         let run = self.runs[bin.run];
         // The moving mass on the piston: the specimen's S(s) plus m_p s^2.
+        // and the seals' friction as its describing function.
         let sp = if x.mp == 0.0 {
             bin.sp
         } else {
             bin.sp + s * s * x.mp
-        };
+        } + bin.coulomb * x.fc;
         let q = (s + x.a3) * sp + s * x.a2;
         let a = x.a1b0 * run.p_ratio;
         let one = Complex::new(1.0, 0.0);
@@ -535,6 +580,9 @@ impl JointProblem {
             }
             if self.structure.piston() {
                 grad[5] = -h_d * sb * (s + x.a3) * s * s * x.mp;
+            }
+            if let Some(k) = self.friction {
+                grad[k] = -h_d * sb * (s + x.a3) * bin.coulomb;
             }
             if let (Some((wv, zeta)), Some(place)) = (x.mode, place) {
                 // wv dV/dwv / V and zeta dV/dzeta / V, times the
@@ -609,6 +657,7 @@ impl JointProblem {
             6 => self.normal_p::<6>(theta),
             7 => self.normal_p::<7>(theta),
             8 => self.normal_p::<8>(theta),
+            9 => self.normal_p::<9>(theta),
             p => unreachable!("{p} parameters"),
         }
     }
@@ -774,6 +823,12 @@ fn problem(runs: &[JointRun<'_>], opts: &JointOptions) -> Result<JointProblem, F
             let (m, c, k) = models[r].mck;
             let sp = s * s * m + s * c + k;
             let hold = hold_response(opts.intersample, opts.sample_rate_hz, f);
+            let coulomb = match run.amplitude_m {
+                Some(a) if opts.friction && a[i] > 0.0 => {
+                    Complex::new(0.0, 4.0 / (std::f64::consts::PI * a[i]))
+                }
+                _ => Complex::default(),
+            };
             bins.push(Bin {
                 s,
                 sp,
@@ -785,18 +840,23 @@ fn problem(runs: &[JointRun<'_>], opts: &JointOptions) -> Result<JointProblem, F
                 force: run.output == Output::Force,
                 weight: (2.0 / v).sqrt(),
                 run: r,
+                coulomb,
             });
         }
     }
     let has_force = runs.iter().any(|r| r.output == Output::Force);
+    let force_delay =
+        (has_force && opts.structure != Structure::Plain).then(|| opts.structure.n_params());
+    let friction = (opts.friction && runs.iter().any(|r| r.amplitude_m.is_some()))
+        .then(|| opts.structure.n_params() + usize::from(force_delay.is_some()));
     Ok(JointProblem {
         bins,
         runs: models,
         bin_hz,
         lag,
         structure: opts.structure,
-        force_delay: (has_force && opts.structure != Structure::Plain)
-            .then(|| opts.structure.n_params()),
+        force_delay,
+        friction,
         period_s: 1.0 / opts.sample_rate_hz,
     })
 }
@@ -911,6 +971,9 @@ impl Leg {
         }
         if problem.force_delay.is_some() {
             theta0.push(delay(opts.force_delay_start_s));
+        }
+        if problem.friction.is_some() {
+            theta0.push(opts.friction_start_n);
         }
         if !theta0.iter().all(|t| t.is_finite()) {
             return Err(FitError::NoSolution);
@@ -1040,6 +1103,10 @@ fn finish(
         params.push(theta[k] * problem.period_s);
         factors.push(problem.period_s);
     }
+    if let Some(k) = problem.friction {
+        params.push(theta[k]);
+        factors.push(1.0);
+    }
     let covariance = DMatrix::from_fn(p, p, |i, j| cov_theta[(i, j)] * factors[i] * factors[j]);
     let std = (0..p).map(|i| covariance[(i, i)].sqrt()).collect();
     let (adequacy, per_run) = problem.adequacy(&theta);
@@ -1060,6 +1127,7 @@ fn finish(
         mode: opts.structure.place().map(|_| (params[5], params[6])),
         piston_mass_kg: opts.structure.piston().then(|| params[5]),
         force_delay_s: problem.force_delay.map(|k| params[k]),
+        friction_n: problem.friction.map(|k| params[k]),
         params,
         names,
         covariance,

@@ -20,6 +20,7 @@ mod choice;
 pub mod linearity;
 mod lpm;
 mod settings;
+mod sweep;
 mod synthesis;
 
 pub use choice::{
@@ -28,6 +29,7 @@ pub use choice::{
 };
 pub use linearity::{Linearity, SpringForce, linearity, spring_force};
 pub use settings::{Detrend, Estimator, FrfPlan, Window};
+pub use sweep::{SweepAmplitude, sweep_amplitude};
 pub use synthesis::{EtfeSpectra, EtfeSynthesis, Unsynthesizable};
 
 /// Shortest Welch segment accepted (the manifest enforces the same bound).

@@ -25,6 +25,10 @@ pub struct FitData {
     /// The lag in bins from which the FRF's errors are independent
     /// (`FrfPlan::independent_lag` of the run's settings).
     pub lag: usize,
+    /// The displacement's amplitude at those bins along a sweep
+    /// (`Self::with_amplitude`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub amplitude_m: Option<Vec<f64>>,
 }
 
 impl FitData {
@@ -57,7 +61,21 @@ impl FitData {
             suu: bins.iter().map(|&i| h.suu[i]).collect(),
             bin_hz: h.resolution_hz,
             lag: plan.independent_lag(),
+            amplitude_m: None,
         }
+    }
+
+    /// With the displacement's amplitude at each bin: the FRF's gain there
+    /// times the command's amplitude `sweep` gives.
+    pub fn with_amplitude(mut self, sweep: &frf::SweepAmplitude) -> Self {
+        self.amplitude_m = Some(
+            self.freq_hz
+                .iter()
+                .zip(&self.h)
+                .map(|(&f, h)| h.norm() * sweep.at(f))
+                .collect(),
+        );
+        self
     }
 
     pub fn input(&self) -> FitInput<'_> {

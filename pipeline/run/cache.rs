@@ -210,10 +210,8 @@ pub(super) fn merge_stamps(out_dir: &Path, dirs: &[PathBuf]) -> Result<(), Write
 /// What a run's outcome holds, counted up whenever a change between
 /// releases adds to it or computes it differently: the version alone
 /// would let an older build's entries stand in for outcomes this build
-/// computes otherwise. 2: the per-run fit's delay test; 3: what a run
-/// keeps stored apart from the files it wrote; 4: the fit's covariance;
-/// 5: the run's tracking measures; 6: the validation runs' compensator.
-const OUTCOME_FORMAT: u32 = 7;
+/// computes otherwise.
+const OUTCOME_FORMAT: u32 = 8;
 
 /// A key from the text of what decides a run's outcome. The plan's Debug
 /// text holds every setting with its floats to the last bit; a rebuild that

@@ -144,6 +144,7 @@ pub(super) fn without_rig(
         adequacy: result.fit.as_ref().and_then(|f| f.adequacy.clone()),
         sample_rate_hz: stage.as_ref().map(|st| st.log.sample_rate_hz),
         cause: stage.as_ref().and_then(|st| st.cause.clone()),
+        friction_signature: stage.as_ref().is_some_and(|st| st.friction_signature()),
     });
     let mut kept = Kept {
         estimate,

@@ -616,7 +616,13 @@ fn fit_mode(
     band_top_hz: f64,
     structure: Structure,
 ) -> Result<JointFit, FitError> {
-    let base = JointOptions { structure, ..*opts };
+    // The friction, when fitted, starts where the delay fit put it.
+    let friction_start_n = delay_fit.and_then(|f| f.friction_n).unwrap_or(0.0);
+    let base = JointOptions {
+        structure,
+        friction_start_n,
+        ..*opts
+    };
     let (rig, delay_s, force_delay_s) = match delay_fit {
         Some(f) => (f.rig, f.delay_s, f.force_delay_s.unwrap_or(f.delay_s)),
         None => (*start, 0.0, 0.0),
@@ -645,6 +651,11 @@ fn fit_mode(
             structure,
             with_force,
         ));
+    }
+    if coarse.friction.is_some() {
+        for (theta, _) in &mut grid {
+            theta.push(friction_start_n);
+        }
     }
     let mut scored: Vec<ValveStart> = grid
         .into_iter()

@@ -76,6 +76,8 @@ fn options(structure: Structure) -> JointOptions {
         delay_start_s: 0.0,
         max_delay_s: 0.05,
         force_delay_start_s: 0.0,
+        friction: false,
+        friction_start_n: 0.0,
     }
 }
 
@@ -131,6 +133,7 @@ impl Campaign {
                 variance: &self.var,
                 bin_hz: 0.05,
                 lag: 1,
+                amplitude_m: None,
             })
             .collect()
     }
@@ -173,6 +176,51 @@ fn the_jacobian_is_the_residuals_derivative() {
             let err = (&fd - col).norm() / col.norm();
             assert!(err < 1e-6, "{structure:?} column {j}: {err:e}");
         }
+    }
+}
+
+/// With the piston's mass and its seals' friction fitted, the analytic
+/// Jacobian is the residuals' derivative too, the friction's column
+/// included (its describing function at each bin's amplitude).
+#[test]
+fn the_friction_column_is_the_residuals_derivative() {
+    let c = Campaign::with(Unmodelled::default(), 0.002);
+    let amplitude: Vec<f64> = c.f.iter().map(|f| 0.004 / (1.0 + f / 10.0)).collect();
+    let runs: Vec<JointRun<'_>> = c
+        .runs()
+        .into_iter()
+        .map(|r| JointRun {
+            amplitude_m: Some(&amplitude),
+            ..r
+        })
+        .collect();
+    let opts = JointOptions {
+        friction: true,
+        ..options(Structure::DelayPiston)
+    };
+    let p = problem(&runs, &opts).unwrap();
+    let r = rig();
+    let theta = vec![
+        r.beta1_per_s.ln() + 0.1,
+        r.a1b0_n_per_m_s2.ln() - 0.05,
+        r.a2_n_per_m.ln() + 0.03,
+        r.a3_per_s.ln() - 0.2,
+        1.7,
+        0.5_f64.ln(),
+        6.0,
+    ];
+    assert_eq!(p.n_params(), theta.len());
+    let jac = p.jacobian_matrix(&theta);
+    for j in 0..theta.len() {
+        let hstep = 1e-6;
+        let mut up = theta.clone();
+        let mut down = theta.clone();
+        up[j] += hstep;
+        down[j] -= hstep;
+        let fd = (p.residuals(&up) - p.residuals(&down)) / (2.0 * hstep);
+        let col = jac.column(j);
+        let err = (&fd - col).norm() / col.norm();
+        assert!(err < 1e-6, "column {j}: {err:e}");
     }
 }
 
@@ -367,6 +415,7 @@ fn a_validation_runs_displacement_and_force_join_the_fit() {
             variance: var,
             bin_hz: 0.05,
             lag: 1,
+            amplitude_m: None,
         });
     }
     let opts = options(Structure::DelayValve);
@@ -467,6 +516,7 @@ fn a_run_at_another_p_gain_scales_a1b0() {
             variance: &var,
             bin_hz: 0.05,
             lag: 1,
+            amplitude_m: None,
         },
         JointRun {
             specimen: LinearSpecimen::Spring {
@@ -479,6 +529,7 @@ fn a_run_at_another_p_gain_scales_a1b0() {
             variance: &var,
             bin_hz: 0.05,
             lag: 1,
+            amplitude_m: None,
         },
     ];
     let start = RigParams {
@@ -666,6 +717,7 @@ impl WithForce {
                 variance: var,
                 bin_hz: 0.05,
                 lag: 1,
+                amplitude_m: None,
             });
         }
         runs
