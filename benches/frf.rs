@@ -60,6 +60,12 @@ fn bench_frf(c: &mut Criterion) {
     group.bench_function("welch_h1/348160_samples/seg8192", |b| {
         b.iter(|| frf::estimate(black_box(&u), black_box(&y), FS_HZ, &plan).unwrap())
     });
+    // The command's amplitude along the sweep, which every sweep run's
+    // bins carry for the friction's describing function.
+    assert!(frf::sweep_amplitude(&u, FS_HZ).is_some());
+    group.bench_function("sweep_amplitude/348160_samples", |b| {
+        b.iter(|| frf::sweep_amplitude(black_box(&u), FS_HZ).unwrap())
+    });
     group.finish();
 }
 
