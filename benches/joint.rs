@@ -101,6 +101,7 @@ fn bench_joint(c: &mut Criterion) {
             bin_hz: f[1] - f[0],
             lag: 1,
             amplitude_m: None,
+            spring_cubic_n_per_m3: None,
         })
         .collect();
     let start = RigParams {

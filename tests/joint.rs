@@ -878,35 +878,17 @@ fn the_mismatch_suite_is_right_or_warned() {
     assert!(coverage >= 0.9, "coverage {coverage}");
 }
 
-/// Beyond the candidates: rigs with what no structure holds, two modes at
-/// once (in the loop and in the command path) and springs that stiffen. Their errors are not covered by the stated stds (the
+/// Beyond the candidates: a rig with what no structure holds, two modes at
+/// once (in the loop and in the command path). Their errors are not covered by the stated stds (the
 /// docs/accuracy.md's table says by how much); what the test asserts is that the
 /// campaign says so: the chosen structure fails its adequacy tests and the
 /// misfit warning names it.
 #[test]
 fn beyond_the_candidates_the_campaign_says_so() {
-    let beyond = [
-        Mismatch {
-            name: "modes in the loop (150 Hz) and the command path (90 Hz)",
-            extras: base(Some((150.0, 0.5)), Some((90.0, 0.6)), None, 1.0, 0.0, 0.0),
-        },
-        // The springs analysed as linear (Eqs. 18-19 take each k as exact)
-        // while each is a Duffing spring: no structure holds that.
-        Mismatch {
-            name: "springs 2 % stiffer at 4 mm (Duffing), loop mode 110 Hz",
-            extras: Extras {
-                spring_cubic: 0.02,
-                ..base(Some((110.0, 0.6)), None, None, 1.0, 0.0, 0.0)
-            },
-        },
-        Mismatch {
-            name: "springs 5 % stiffer at 4 mm (Duffing), loop mode 110 Hz",
-            extras: Extras {
-                spring_cubic: 0.05,
-                ..base(Some((110.0, 0.6)), None, None, 1.0, 0.0, 0.0)
-            },
-        },
-    ];
+    let beyond = [Mismatch {
+        name: "modes in the loop (150 Hz) and the command path (90 Hz)",
+        extras: base(Some((150.0, 0.5)), Some((90.0, 0.6)), None, 1.0, 0.0, 0.0),
+    }];
     for (i, rig) in beyond.iter().enumerate() {
         for seed in 0..2u64 {
             let o = run_mismatch(rig, 400 + 10 * i as u64 + seed);
@@ -1174,6 +1156,60 @@ fn seal_friction_is_fitted_with_the_rig() {
                 "{}: {name} {:+.3} % off",
                 heavy.name,
                 100.0 * e
+            );
+        }
+    }
+}
+
+/// Springs that stiffen (each k x1 + k3 x1^3, its secant stiffness 2 or
+/// 5 % above k at the chirp's 4 mm) while the manifest states the linear
+/// k, on a rig with a 110 Hz loop mode, default settings: each spring's
+/// force against its displacement gives its cubic term, and the joint fit
+/// takes the spring at its describing function k + 3/4 k3 X^2 at each
+/// bin's amplitude. Every rig parameter within 0.2 % (taking each k as
+/// exact they were up to 1.7 % off at 4 to 9 stds, docs/accuracy.md) and
+/// within 3 total stds, and the rig's warnings say how the springs were
+/// taken.
+#[test]
+fn stiffening_springs_are_taken_at_their_amplitude() {
+    for (i, cubic) in [0.02, 0.05].into_iter().enumerate() {
+        let rig = Mismatch {
+            name: "springs stiffer at 4 mm (Duffing), loop mode 110 Hz",
+            extras: Extras {
+                spring_cubic: cubic,
+                ..base(Some((110.0, 0.6)), None, None, 1.0, 0.0, 0.0)
+            },
+        };
+        for seed in 0..2u64 {
+            let text = manifest(420 + 10 * i as u64 + seed, &OTHER, &rig.extras)
+                + &sdof_validation_runs([1.0; 3]);
+            let results = identify(&text);
+            let r = results.rig.as_ref().unwrap();
+            let err = errors(&results, &OTHER);
+            let truth = [OTHER.beta1, OTHER.a1b0, OTHER.a2, OTHER.a3];
+            let std = [&r.beta1, &r.a1b0, &r.a2, &r.a3].map(|e| e.std.unwrap());
+            eprintln!(
+                "{} % stiffer, seed {seed}: errors {:+.3?} %",
+                100.0 * cubic,
+                err.map(|e| 100.0 * e)
+            );
+            assert_eq!(r.source, RigSource::Joint);
+            for k in 0..4 {
+                let z = err[k] * truth[k] / std[k];
+                assert!(
+                    err[k].abs() < 0.002 && z.abs() < 3.0,
+                    "{} % stiffer: parameter {k} {:+.3} % ({z:+.2} total stds)",
+                    100.0 * cubic,
+                    100.0 * err[k]
+                );
+            }
+            assert!(
+                results
+                    .warnings
+                    .iter()
+                    .any(|w| w.contains("stiffening springs")),
+                "{:#?}",
+                results.warnings
             );
         }
     }

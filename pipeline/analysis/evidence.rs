@@ -42,6 +42,10 @@ pub struct Evidence {
     /// (`log_stage::LogStage::friction_signature`).
     #[serde(default)]
     pub friction_signature: bool,
+    /// A spring that stiffens (`frf::SpringForce::stiffens`): the cubic
+    /// term (N/m^3) its force against its displacement gives.
+    #[serde(default)]
+    pub spring_cubic_n_per_m3: Option<f64>,
 }
 
 /// What a validation run gives the joint fit: the band's bins of its x1/u

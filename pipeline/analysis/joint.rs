@@ -87,7 +87,7 @@ pub fn joint(
     }
     let runs: Vec<JointRun<'_>> = fitted
         .iter()
-        .map(|(p, output, d, _)| JointRun {
+        .map(|(p, output, d, _, cubic)| JointRun {
             specimen: p.specimen.linear().expect("filtered"),
             p_gain: p.p_gain,
             output: *output,
@@ -97,6 +97,7 @@ pub fn joint(
             bin_hz: d.bin_hz,
             lag: d.lag,
             amplitude_m: d.amplitude_m.as_deref(),
+            spring_cubic_n_per_m3: *cubic,
         })
         .collect();
     let mut opts = options(&campaign.identification, start, fs);
@@ -104,6 +105,29 @@ pub fn joint(
     let choice = campaign.joint.structure;
     let band_top = fitted.iter().map(|(p, ..)| p.band_hz.1).fold(0.0, f64::max);
     let sel = joint::select(&runs, start, &opts, choice, band_top);
+    // A spring's stiffening is read from its force; the data then choose
+    // whether the fit holds better with it or with the stated k (a load
+    // cell's delay against the LVDT's can mimic a cubic term).
+    let (runs, sel) = if runs.iter().any(|r| r.spring_cubic_n_per_m3.is_some()) {
+        let stated: Vec<JointRun<'_>> = runs
+            .iter()
+            .map(|r| JointRun {
+                spring_cubic_n_per_m3: None,
+                ..*r
+            })
+            .collect();
+        let linear = joint::select(&stated, start, &opts, choice, band_top);
+        match (sel.fit().map(schwarz), linear.fit().map(schwarz)) {
+            (Some(with), Some(without)) if without <= with => {
+                warnings.push(STIFFENING_REJECTED.into());
+                (stated, linear)
+            }
+            (None, Some(_)) => (stated, linear),
+            _ => (runs, sel),
+        }
+    } else {
+        (runs, sel)
+    };
     let misfit = joint::run_spread(&runs, &sel, &opts);
     // An identification run is named by its id; a validation run's two
     // FRFs by what each measures.
@@ -116,6 +140,14 @@ pub fn joint(
         })
         .collect();
     let seq_chi2 = sequential_chi2(evidence);
+    let stiffening: Vec<(String, f64)> = ids
+        .iter()
+        .zip(&runs)
+        .filter_map(|(id, r)| Some((id.clone(), r.spring_cubic_n_per_m3?)))
+        .collect();
+    if let Some(note) = stiffening_note(&stiffening) {
+        warnings.push(format!("rig: {note}"));
+    }
     let mut result = describe(
         &sel,
         (misfit.as_ref(), known),
@@ -139,11 +171,15 @@ pub fn joint(
 /// validation runs' (their count is the second value). None when no
 /// identification run has bins to fit.
 #[allow(clippy::type_complexity)]
+/// An FRF the joint fit is given: its run, what it measures, its bins, the
+/// log's sample rate and a stiffening spring's cubic term (N/m^3).
+type Fitted<'a> = (&'a RunPlan, Output, &'a FitData, f64, Option<f64>);
+
 fn fitted_frfs<'a>(
     evidence: &[(&'a RunPlan, &'a Evidence)],
     validation: &[(&'a RunPlan, &'a ValidationEvidence)],
-) -> Option<(Vec<(&'a RunPlan, Output, &'a FitData, f64)>, usize)> {
-    let mut fitted: Vec<(&RunPlan, Output, &FitData, f64)> = evidence
+) -> Option<(Vec<Fitted<'a>>, usize)> {
+    let mut fitted: Vec<Fitted<'a>> = evidence
         .iter()
         .filter_map(|(p, e)| {
             Some((
@@ -151,6 +187,7 @@ fn fitted_frfs<'a>(
                 Output::Displacement,
                 e.data.as_ref()?,
                 e.sample_rate_hz?,
+                e.spring_cubic_n_per_m3,
             ))
         })
         .filter(|(p, ..)| p.specimen.linear().is_some())
@@ -163,9 +200,15 @@ fn fitted_frfs<'a>(
         if p.specimen.linear().is_none() {
             continue;
         }
-        fitted.push((p, Output::Displacement, &v.displacement, v.sample_rate_hz));
+        fitted.push((
+            p,
+            Output::Displacement,
+            &v.displacement,
+            v.sample_rate_hz,
+            None,
+        ));
         if let Some(force) = &v.force {
-            fitted.push((p, Output::Force, force, v.sample_rate_hz));
+            fitted.push((p, Output::Force, force, v.sample_rate_hz, None));
         }
     }
     Some((fitted, identification_frfs))
@@ -279,6 +322,30 @@ fn friction_note(fit: &JointFit, ids: &[String]) -> Option<String> {
         ids.join(", "),
         f,
         fit.std[k]
+    ))
+}
+
+/// Where the springs' forces show a cubic term the FRFs do not bear out.
+const STIFFENING_REJECTED: &str = "rig: the springs' force against their displacement shows a cubic term (the spring runs' warnings), but the joint fit holds better with each stated k than with the springs stiffening, so it takes the stated k: a delay between the load cell and the LVDT, or the rig's own dynamics in the force, can mimic a cubic term; a spring that truly stiffens shows it in its FRF too";
+
+/// A fit's Schwarz criterion, cost + p ln(2N) over its 2N residuals.
+fn schwarz(fit: &JointFit) -> f64 {
+    let p = fit.params.len();
+    fit.cost + p as f64 * ((fit.dof + p) as f64).ln()
+}
+
+/// How the joint fit took the springs that stiffen, (run, k3) each.
+fn stiffening_note(springs: &[(String, f64)]) -> Option<String> {
+    if springs.is_empty() {
+        return None;
+    }
+    let each: Vec<String> = springs
+        .iter()
+        .map(|(id, k3)| format!("{id} (k3 = {k3:.4e} N/m^3)"))
+        .collect();
+    Some(format!(
+        "stiffening springs: the rig is not linear at this amplitude, its springs stiffening, so the joint fit takes each of {} at its describing function k + 3/4 k3 X^2 at each bin's amplitude X, k3 from its force against its displacement: the joint rig holds their stiffening, while the sequential estimate (Eqs. 18-20) takes each stated k as exact",
+        each.join(", ")
     ))
 }
 

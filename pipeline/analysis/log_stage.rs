@@ -426,7 +426,7 @@ fn stiffness_warning(s: &frf::SpringForce, stated: f64) -> Option<String> {
 fn stiffening_warning(s: &frf::SpringForce) -> Option<String> {
     s.stiffens().then(|| {
         format!(
-            "the spring's force grows faster than its displacement: its stiffness at the test's {} mm is {:+.2} % from its stiffness at rest (a cubic term of {:e} N/m^3, t = {:.0}): the rig is not linear at this amplitude (a stiffening spring); Eqs. 18-20 take one stiffness, so the rig carries an error its stds do not include: test at a smaller amplitude, or with a spring that stays linear",
+            "the spring's force grows faster than its displacement: its stiffness at the test's {} mm is {:+.2} % from its stiffness at rest (a cubic term of {:e} N/m^3, t = {:.0}): the rig is not linear at this amplitude (a stiffening spring); Eqs. 18-20 take one stiffness, so the sequential rig carries an error its stds do not include; the joint fit takes the spring at its amplitude (the rig's warnings say so). To use the paper's method, test at a smaller amplitude or with a spring that stays linear",
             crate::units::format_number(1e3 * s.amplitude_m, 3),
             100.0 * s.stiffening,
             s.cubic_n_per_m3,

@@ -86,6 +86,11 @@ pub struct JointRun<'a> {
     /// (`frf::sweep_amplitude`), where the run's seal friction is fitted:
     /// its describing function depends on it.
     pub amplitude_m: Option<&'a [f64]>,
+    /// A spring that stiffens, its cubic term k3 (N/m^3) from its force
+    /// against its displacement: at each bin its describing function
+    /// k + 3/4 k3 X^2 at the bin's amplitude X stands for its k (where the
+    /// run has amplitudes).
+    pub spring_cubic_n_per_m3: Option<f64>,
 }
 
 /// The joint fit's nuisance dynamics besides the command's hold: as the
@@ -821,7 +826,11 @@ fn problem(runs: &[JointRun<'_>], opts: &JointOptions) -> Result<JointProblem, F
             }
             let s = Complex::new(0.0, 2.0 * std::f64::consts::PI * f);
             let (m, c, k) = models[r].mck;
-            let sp = s * s * m + s * c + k;
+            let stiffening = match (run.spring_cubic_n_per_m3, run.amplitude_m) {
+                (Some(k3), Some(a)) => 0.75 * k3 * a[i] * a[i],
+                _ => 0.0,
+            };
+            let sp = s * s * m + s * c + (k + stiffening);
             let hold = hold_response(opts.intersample, opts.sample_rate_hz, f);
             let coulomb = match run.amplitude_m {
                 Some(a) if opts.friction && a[i] > 0.0 => {

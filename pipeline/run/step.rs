@@ -145,6 +145,11 @@ pub(super) fn without_rig(
         sample_rate_hz: stage.as_ref().map(|st| st.log.sample_rate_hz),
         cause: stage.as_ref().and_then(|st| st.cause.clone()),
         friction_signature: stage.as_ref().is_some_and(|st| st.friction_signature()),
+        spring_cubic_n_per_m3: stage
+            .as_ref()
+            .and_then(|st| st.spring)
+            .filter(|s| s.stiffens())
+            .map(|s| s.cubic_n_per_m3),
     });
     let mut kept = Kept {
         estimate,

@@ -134,6 +134,7 @@ impl Campaign {
                 bin_hz: 0.05,
                 lag: 1,
                 amplitude_m: None,
+                spring_cubic_n_per_m3: None,
             })
             .collect()
     }
@@ -416,6 +417,7 @@ fn a_validation_runs_displacement_and_force_join_the_fit() {
             bin_hz: 0.05,
             lag: 1,
             amplitude_m: None,
+            spring_cubic_n_per_m3: None,
         });
     }
     let opts = options(Structure::DelayValve);
@@ -517,6 +519,7 @@ fn a_run_at_another_p_gain_scales_a1b0() {
             bin_hz: 0.05,
             lag: 1,
             amplitude_m: None,
+            spring_cubic_n_per_m3: None,
         },
         JointRun {
             specimen: LinearSpecimen::Spring {
@@ -530,6 +533,7 @@ fn a_run_at_another_p_gain_scales_a1b0() {
             bin_hz: 0.05,
             lag: 1,
             amplitude_m: None,
+            spring_cubic_n_per_m3: None,
         },
     ];
     let start = RigParams {
@@ -718,6 +722,7 @@ impl WithForce {
                 bin_hz: 0.05,
                 lag: 1,
                 amplitude_m: None,
+                spring_cubic_n_per_m3: None,
             });
         }
         runs
