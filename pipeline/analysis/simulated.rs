@@ -212,30 +212,25 @@ fn analysis_runs(plan: &SimulationPlan, truth: &Truth) -> Vec<Run> {
     plan.runs
         .iter()
         .zip(&truth.runs)
-        .map(|(r, t)| Run {
-            id: r.id.clone(),
-            role: r.role,
-            description: m
-                .runs
-                .iter()
-                .find(|x| x.id == r.id)
-                .map(|x| x.description.clone())
-                .unwrap_or_default(),
-            date: None,
-            p_gain: r.p_gain,
-            specimen: m
-                .runs
-                .iter()
-                .find(|x| x.id == r.id)
-                .and_then(|x| x.specimen.clone())
-                .map(|s| analysed_as(r.role, s)),
-            data: Some(RunData {
-                log: Some(t.log.clone()),
-                sha256: Some(t.log_sha256.clone()),
-                ..RunData::default()
-            }),
-            channels: None,
-            band_hz: None,
+        .map(|(r, t)| {
+            let stated = m.runs.iter().find(|x| x.id == r.id);
+            Run {
+                id: r.id.clone(),
+                role: r.role,
+                description: stated.map(|x| x.description.clone()).unwrap_or_default(),
+                date: None,
+                p_gain: r.p_gain,
+                specimen: stated
+                    .and_then(|x| x.specimen.clone())
+                    .map(|s| analysed_as(r.role, s)),
+                data: Some(RunData {
+                    log: Some(t.log.clone()),
+                    sha256: Some(t.log_sha256.clone()),
+                    ..RunData::default()
+                }),
+                channels: None,
+                band_hz: None,
+            }
         })
         .collect()
 }

@@ -522,13 +522,15 @@ impl JointProblem {
     fn eval_at<const GRAD: bool>(&self, bin: &Bin, x: &Point) -> BinEval {
         let s = bin.s;
         let run = self.runs[bin.run];
-        // The moving mass on the piston: the specimen's S(s) plus m_p s^2.
-        // and the seals' friction as its describing function.
-        let sp = if x.mp == 0.0 {
-            bin.sp
-        } else {
-            bin.sp + s * s * x.mp
-        } + bin.coulomb * x.fc;
+        // The piston's load: the specimen's S(s), plus m_p s^2 for the
+        // moving mass and the seals' friction as its describing function.
+        let mut sp = bin.sp;
+        if x.mp != 0.0 {
+            sp += s * s * x.mp;
+        }
+        if x.fc != 0.0 {
+            sp += bin.coulomb * x.fc;
+        }
         let q = (s + x.a3) * sp + s * x.a2;
         let a = x.a1b0 * run.p_ratio;
         let one = Complex::new(1.0, 0.0);

@@ -140,6 +140,28 @@ impl Campaign {
     }
 }
 
+/// The residuals' derivative along theta[j], by central differences.
+fn central_difference(p: &JointProblem, theta: &[f64], j: usize) -> DVector<f64> {
+    let hstep = 1e-6;
+    let mut up = theta.to_vec();
+    let mut down = theta.to_vec();
+    up[j] += hstep;
+    down[j] -= hstep;
+    (p.residuals(&up) - p.residuals(&down)) / (2.0 * hstep)
+}
+
+/// Each column of the analytic Jacobian at `theta` agrees with the central
+/// differences to 1e-6 of its size.
+fn assert_jacobian(p: &JointProblem, theta: &[f64], what: &str) {
+    let jac = p.jacobian_matrix(theta);
+    for j in 0..theta.len() {
+        let fd = central_difference(p, theta, j);
+        let col = jac.column(j);
+        let err = (&fd - col).norm() / col.norm();
+        assert!(err < 1e-6, "{what} column {j}: {err:e}");
+    }
+}
+
 /// The analytic Jacobian is the derivative of the residuals: central
 /// differences agree to 1e-6 of the column's size, for every structure.
 #[test]
@@ -165,18 +187,7 @@ fn the_jacobian_is_the_residuals_derivative() {
             theta.push((2.0 * std::f64::consts::PI * 120.0_f64).ln());
             theta.push(0.6_f64.ln());
         }
-        let jac = p.jacobian_matrix(&theta);
-        for j in 0..theta.len() {
-            let hstep = 1e-6;
-            let mut up = theta.clone();
-            let mut down = theta.clone();
-            up[j] += hstep;
-            down[j] -= hstep;
-            let fd = (p.residuals(&up) - p.residuals(&down)) / (2.0 * hstep);
-            let col = jac.column(j);
-            let err = (&fd - col).norm() / col.norm();
-            assert!(err < 1e-6, "{structure:?} column {j}: {err:e}");
-        }
+        assert_jacobian(&p, &theta, &format!("{structure:?}"));
     }
 }
 
@@ -211,18 +222,7 @@ fn the_friction_column_is_the_residuals_derivative() {
         6.0,
     ];
     assert_eq!(p.n_params(), theta.len());
-    let jac = p.jacobian_matrix(&theta);
-    for j in 0..theta.len() {
-        let hstep = 1e-6;
-        let mut up = theta.clone();
-        let mut down = theta.clone();
-        up[j] += hstep;
-        down[j] -= hstep;
-        let fd = (p.residuals(&up) - p.residuals(&down)) / (2.0 * hstep);
-        let col = jac.column(j);
-        let err = (&fd - col).norm() / col.norm();
-        assert!(err < 1e-6, "column {j}: {err:e}");
-    }
+    assert_jacobian(&p, &theta, "with friction");
 }
 
 /// The one pass the solver is given, r^T r, J^T J and J^T r summed bin by
@@ -444,12 +444,7 @@ fn a_validation_runs_displacement_and_force_join_the_fit() {
         .collect();
     let n = p.bins.len();
     for j in 0..theta.len() {
-        let hstep = 1e-6;
-        let mut up = theta.clone();
-        let mut down = theta.clone();
-        up[j] += hstep;
-        down[j] -= hstep;
-        let fd = (p.residuals(&up) - p.residuals(&down)) / (2.0 * hstep);
+        let fd = central_difference(&p, &theta, j);
         let (mut num, mut den) = (0.0, 0.0);
         for &i in &force_rows {
             for row in [i, n + i] {
@@ -803,18 +798,7 @@ fn each_place_has_its_model_and_recovers_its_rig() {
             want.extend([110.0, 0.6]);
         }
         theta.push(0.9);
-        let jac = p.jacobian_matrix(&theta);
-        for j in 0..theta.len() {
-            let hstep = 1e-6;
-            let mut up = theta.clone();
-            let mut down = theta.clone();
-            up[j] += hstep;
-            down[j] -= hstep;
-            let fd = (p.residuals(&up) - p.residuals(&down)) / (2.0 * hstep);
-            let col = jac.column(j);
-            let err = (&fd - col).norm() / col.norm();
-            assert!(err < 1e-6, "{structure:?} column {j}: {err:e}");
-        }
+        assert_jacobian(&p, &theta, &format!("{structure:?}"));
         let fit = joint_fit(&runs, &off(&r), &opts).unwrap();
         assert!(fit.converged, "{structure:?}");
         for (i, &want) in want.iter().enumerate() {
