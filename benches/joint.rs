@@ -9,14 +9,15 @@
 //! machine (10.9 ms on an earlier one; 22 ms before the solver was given the
 //! cost with the normal equations in one pass, 78 ms when it was given the
 //! tall Jacobian); what the campaign runs (`select`: the paper's model, the
-//! delay, the piston and a mode in the loop or the command path, each mode
+//! delay, the piston, a mode in the loop or the command path, and the
+//! loop's mode with the piston's mass from those two fits, each mode
 //! from a grid of starts raced on a quarter of the bins, every fit taken
 //! to that quarter's optimum and then to all the bins', the F tests and
 //! Akaike weights) 71-79 ms over three runs. Each Levenberg-Marquardt trial is one
 //! pass over the bins for r^T r, J^T J and J^T r. With the seals' friction
 //! in every structure (a campaign whose runs show its harmonics), the
-//! selection's cost is `seven_runs_select_with_friction`: 53.0 ms against
-//! 48.8 ms without, on this machine on 27 November 2026.
+//! selection's cost is `seven_runs_select_with_friction`: 64.2 ms against
+//! 61.2 ms without, on this machine on 28 November 2026.
 //!
 //! `cargo bench --bench joint`
 

@@ -201,7 +201,8 @@ pub struct JointCandidate {
     /// Where its second-order mode sits: "loop", "command path",
     /// "measurement path", or "in series" (command or measurement path,
     /// which only force FRFs tell apart); "actuator (piston mass)" for the
-    /// piston's; null without a mode.
+    /// piston's, "loop and actuator (piston mass)" for both; null without a
+    /// mode.
     pub place: Option<String>,
     pub parameters: usize,
     /// Null with `error` when the fit failed outright.

@@ -34,4 +34,5 @@ mod sensitivity;
 mod shards;
 mod simulate;
 mod slurm;
+mod time_domain;
 mod tracking;

@@ -34,6 +34,9 @@ const AS_GOOD_AS_SEQUENTIAL: f64 = 1.1;
 /// tell the command path from the measurement path (without them the
 /// command-path fit stands for both).
 fn place(s: Structure, split: bool) -> Option<&'static str> {
+    if s == Structure::DelayValvePiston {
+        return Some("loop and actuator (piston mass)");
+    }
     if s.piston() {
         return Some("actuator (piston mass)");
     }
@@ -49,6 +52,10 @@ fn place(s: Structure, split: bool) -> Option<&'static str> {
 fn described(s: Structure, split: bool) -> String {
     match place(s, split) {
         Some("loop") => format!("\"{}\" (a mode in the loop)", s.as_str()),
+        Some(_) if s == Structure::DelayValvePiston => format!(
+            "\"{}\" (a mode in the loop and the piston's mass)",
+            s.as_str()
+        ),
         Some("in series") => format!(
             "\"{}\" (a mode in series, in the command or the measurement path)",
             s.as_str()

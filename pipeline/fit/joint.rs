@@ -119,6 +119,9 @@ pub enum Structure {
     /// And a delay and the piston's mass on the oil column (the actuator's
     /// own mode): Q = (s + a3)(S + m_p s^2) + a2 s.
     DelayPiston,
+    /// And a delay, the servo-valve's mode in the loop and the piston's
+    /// mass: a rig with both.
+    DelayValvePiston,
 }
 
 /// Where a structure's second-order mode sits.
@@ -135,13 +138,14 @@ pub enum Place {
 }
 
 impl Structure {
-    pub const ALL: [Structure; 6] = [
+    pub const ALL: [Structure; 7] = [
         Structure::Plain,
         Structure::Delay,
         Structure::DelayValve,
         Structure::DelayCommand,
         Structure::DelayMeasurement,
         Structure::DelayPiston,
+        Structure::DelayValvePiston,
     ];
 
     /// As the manifest and results.json spell it (serde's names above).
@@ -153,6 +157,7 @@ impl Structure {
             Structure::DelayCommand => "delay_command",
             Structure::DelayMeasurement => "delay_measurement",
             Structure::DelayPiston => "delay_piston",
+            Structure::DelayValvePiston => "delay_valve_piston",
         }
     }
 
@@ -161,20 +166,26 @@ impl Structure {
             Structure::Plain => 4,
             Structure::Delay => 5,
             Structure::DelayPiston => 6,
+            Structure::DelayValvePiston => 8,
             _ => 7,
         }
     }
 
     /// Whether it fits the piston's mass.
     pub fn piston(self) -> bool {
-        self == Structure::DelayPiston
+        matches!(self, Structure::DelayPiston | Structure::DelayValvePiston)
+    }
+
+    /// The piston mass's index among the parameters (after the mode's).
+    fn piston_index(self) -> usize {
+        if self.place().is_some() { 7 } else { 5 }
     }
 
     /// Where its mode sits, when it has one.
     pub fn place(self) -> Option<Place> {
         match self {
             Structure::Plain | Structure::Delay | Structure::DelayPiston => None,
-            Structure::DelayValve => Some(Place::Loop),
+            Structure::DelayValve | Structure::DelayValvePiston => Some(Place::Loop),
             Structure::DelayCommand => Some(Place::Command),
             Structure::DelayMeasurement => Some(Place::Measurement),
         }
@@ -210,6 +221,16 @@ impl Structure {
                 "delay_s",
                 "valve_hz",
                 "valve_damping",
+            ],
+            Structure::DelayValvePiston => &[
+                "beta1_per_s",
+                "a1b0_n_per_m_s2",
+                "a2_n_per_m",
+                "a3_per_s",
+                "delay_s",
+                "valve_hz",
+                "valve_damping",
+                "piston_mass_kg",
             ],
             Structure::DelayCommand | Structure::DelayMeasurement => &[
                 "beta1_per_s",
@@ -331,7 +352,7 @@ impl JointFit {
             ));
         }
         if let Some(mp) = self.piston_mass_kg {
-            let sd = self.std[5];
+            let sd = self.std[self.structure.piston_index()];
             if !(mp.is_finite() && mp > 0.0 && sd.is_finite() && sd < mp) {
                 return Some(format!(
                     "piston_mass_kg = {mp:.4e} with std {sd:.3e}: not determined by the data"
@@ -422,7 +443,7 @@ struct BinEval {
 
 /// The most parameters a fit has: the valve structure's seven, the force
 /// FRFs' delay and the friction.
-const MAX_PARAMS: usize = 9;
+const MAX_PARAMS: usize = 10;
 
 /// The physical values at a point theta, computed once per pass over the
 /// bins.
@@ -508,7 +529,7 @@ impl JointProblem {
                 .place()
                 .map(|_| (theta[5].exp(), theta[6].exp())),
             mp: if self.structure.piston() {
-                theta[5].exp()
+                theta[self.structure.piston_index()].exp()
             } else {
                 0.0
             },
@@ -586,7 +607,7 @@ impl JointProblem {
                 grad[k] = -s * self.period_s * h;
             }
             if self.structure.piston() {
-                grad[5] = -h_d * sb * (s + x.a3) * s * s * x.mp;
+                grad[self.structure.piston_index()] = -h_d * sb * (s + x.a3) * s * s * x.mp;
             }
             if let Some(k) = self.friction {
                 grad[k] = -h_d * sb * (s + x.a3) * bin.coulomb;
@@ -1107,8 +1128,9 @@ fn finish(
         factors.push(theta[6].exp());
     }
     if opts.structure.piston() {
-        params.push(theta[5].exp());
-        factors.push(theta[5].exp());
+        let mp = theta[opts.structure.piston_index()].exp();
+        params.push(mp);
+        factors.push(mp);
     }
     if let Some(k) = problem.force_delay {
         params.push(theta[k] * problem.period_s);
@@ -1136,7 +1158,10 @@ fn finish(
             params[4]
         },
         mode: opts.structure.place().map(|_| (params[5], params[6])),
-        piston_mass_kg: opts.structure.piston().then(|| params[5]),
+        piston_mass_kg: opts
+            .structure
+            .piston()
+            .then(|| params[opts.structure.piston_index()]),
         force_delay_s: problem.force_delay.map(|k| params[k]),
         friction_n: problem.friction.map(|k| params[k]),
         params,
@@ -1177,6 +1202,14 @@ fn solver(problem: &JointProblem, opts: &JointOptions) -> Result<LevenbergMarqua
     for k in std::iter::once(4).chain(problem.force_delay) {
         lower[k] = 0.0;
         upper[k] = opts.max_delay_s * opts.sample_rate_hz;
+    }
+    if opts.structure == Structure::DelayValvePiston {
+        // On a rig with the valve's mode alone the piston's mass runs
+        // towards zero; a ten-thousandth of its start puts its mode
+        // sqrt(a2 / m_p) a hundred times higher, where no data see it, and
+        // the bound stops the fit there rather than after every iteration
+        // it is allowed.
+        lower[problem.structure.piston_index()] = (1e-4 * opts.piston_start_kg).ln();
     }
     Ok(solver.with_bounds(lower, upper)?)
 }

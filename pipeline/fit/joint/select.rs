@@ -105,7 +105,7 @@ pub enum Choice {
 
 impl Choice {
     /// Every value the manifest accepts, as it spells them.
-    const NAMES: [&'static str; 7] = [
+    const NAMES: [&'static str; 8] = [
         "auto",
         Structure::Plain.as_str(),
         Structure::Delay.as_str(),
@@ -113,6 +113,7 @@ impl Choice {
         Structure::DelayCommand.as_str(),
         Structure::DelayMeasurement.as_str(),
         Structure::DelayPiston.as_str(),
+        Structure::DelayValvePiston.as_str(),
     ];
 }
 
@@ -469,9 +470,49 @@ fn fit_candidates(
             })
             .collect()
     };
+    let usable = |s: Structure| {
+        extensions
+            .iter()
+            .find(|c| c.structure == s)
+            .and_then(|c| c.usable())
+    };
+    let both = assess(
+        Structure::DelayValvePiston,
+        fit_valve_piston(
+            runs,
+            usable(Structure::DelayValve),
+            usable(Structure::DelayPiston),
+            opts,
+        ),
+    );
     let mut candidates = vec![plain, delay];
     candidates.extend(extensions);
+    candidates.push(both);
     candidates
+}
+
+/// The servo-valve's mode and the piston's mass together, from the fits
+/// that hold each alone: the valve fit's optimum with the piston fit's
+/// mass (or the piston's default start).
+fn fit_valve_piston(
+    runs: &[JointRun<'_>],
+    valve: Option<&JointFit>,
+    piston: Option<&JointFit>,
+    opts: &JointOptions,
+) -> Result<JointFit, FitError> {
+    let valve = valve.ok_or(FitError::NoSolution)?;
+    let both = JointOptions {
+        structure: Structure::DelayValvePiston,
+        valve_start: valve.mode.ok_or(FitError::NoSolution)?,
+        piston_start_kg: piston
+            .and_then(|p| p.piston_mass_kg)
+            .unwrap_or(opts.piston_start_kg),
+        delay_start_s: valve.delay_s,
+        force_delay_start_s: valve.force_delay_s.unwrap_or(valve.delay_s),
+        friction_start_n: valve.friction_n.unwrap_or(opts.friction_start_n),
+        ..*opts
+    };
+    joint_fit_staged(runs, &valve.rig, &both, GRID_STRIDE)
 }
 
 /// Mark unusable each larger structure that stopped above the cost of a
@@ -540,7 +581,14 @@ fn choose_mode(candidates: &mut [Candidate], base: Option<usize>) -> Option<usiz
         else {
             continue;
         };
-        let taken = match base {
+        // The valve-and-piston fit is tested against whichever of the two it
+        // holds fits better.
+        let against = if candidates[i].structure == Structure::DelayValvePiston {
+            nested_extension(candidates).or(base)
+        } else {
+            base
+        };
+        let taken = match against {
             Some(a) => {
                 let test = f_test(
                     candidates[a].usable().expect("usable"),
@@ -559,6 +607,17 @@ fn choose_mode(candidates: &mut [Candidate], base: Option<usize>) -> Option<usiz
         }
     }
     best_mode
+}
+
+/// The index of the usable valve or piston fit with the lower cost.
+fn nested_extension(candidates: &[Candidate]) -> Option<usize> {
+    candidates
+        .iter()
+        .enumerate()
+        .filter(|(_, c)| matches!(c.structure, Structure::DelayValve | Structure::DelayPiston))
+        .filter_map(|(i, c)| c.usable().map(|f| (i, f.cost)))
+        .min_by(|a, b| a.1.total_cmp(&b.1))
+        .map(|(i, _)| i)
 }
 
 /// The extra-sum-of-squares F test of `big` against the nested `small`.
