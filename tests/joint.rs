@@ -8,8 +8,8 @@
 //! in the unit tests of `fit::joint`).
 
 use servoid::fit::joint::Structure;
-use servoid::manifest::load;
 use servoid::manifest::simulation::load_simulation_str;
+use servoid::manifest::{Campaign, load};
 use servoid::results::{Results, RigSource};
 use servoid::run::analyse;
 use servoid::run::simulate::simulate_campaign;
@@ -211,6 +211,12 @@ command_intersample = "sample_and_hold"
 }
 
 fn identify(text: &str) -> Results {
+    simulated(text).2
+}
+
+/// The campaign `text` simulates, analysed: the folder its logs are in,
+/// the campaign and its results (every run without error).
+fn simulated(text: &str) -> (tempfile::TempDir, Campaign, Results) {
     let dir = scratch();
     let plan = load_simulation_str(text, &dir.path().join("sim.toml")).expect("a valid simulation");
     let sim = simulate_campaign(&plan, dir.path()).expect("simulates");
@@ -219,7 +225,33 @@ fn identify(text: &str) -> Results {
     for r in &results.runs {
         assert!(r.error.is_none(), "run {} failed: {:?}", r.id, r.error);
     }
-    results
+    (dir, campaign, results)
+}
+
+/// `[rig.unmodelled]`'s lines for a piston of `mass_kg` with Coulomb
+/// friction `force_n`, tanh(v / 2 mm/s).
+fn friction_lines(mass_kg: f64, force_n: f64) -> &'static str {
+    Box::leak(
+        format!(
+            "piston_mass_kg = {mass_kg}\nactuator_friction = {{ coulomb_force_n = {force_n}, smoothing_velocity_m_per_s = 0.002 }}\n"
+        )
+        .into_boxed_str(),
+    )
+}
+
+/// Prints a suite's table (its `header` row, then `rows`) and how many of
+/// its parameters lie within 2 total stds; returns that fraction.
+fn print_suite(name: &str, header: &str, rows: &[String], covered: usize, total: usize) -> f64 {
+    eprintln!("{header}");
+    for row in rows {
+        eprintln!("{row}");
+    }
+    let coverage = covered as f64 / total as f64;
+    eprintln!(
+        "{name} coverage: {covered} of {total} within 2 total stds ({:.1} %)",
+        100.0 * coverage
+    );
+    coverage
 }
 
 /// Relative errors of the rig the campaign uses, against `rig`.
@@ -896,16 +928,12 @@ fn the_mismatch_suite_is_right_or_warned() {
             rows.push(o.row);
         }
     }
-    eprintln!(
-        "| rig | seed | structure chosen | error % (beta1, a1b0, a2, a3) | error in total stds | warning |"
-    );
-    for row in &rows {
-        eprintln!("{row}");
-    }
-    let coverage = covered as f64 / total as f64;
-    eprintln!(
-        "suite coverage: {covered} of {total} within 2 total stds ({:.1} %)",
-        100.0 * coverage
+    let coverage = print_suite(
+        "suite",
+        "| rig | seed | structure chosen | error % (beta1, a1b0, a2, a3) | error in total stds | warning |",
+        &rows,
+        covered,
+        total,
     );
     assert!(misses.is_empty(), "{misses:#?}");
     assert!(coverage >= 0.9, "coverage {coverage}");
@@ -1129,8 +1157,10 @@ fn records_not_at_rest_are_calibrated_with_the_lpm() {
 /// the rig without friction is given none.
 #[test]
 fn seal_friction_is_fitted_with_the_rig() {
-    const FRICTION: &str = "piston_mass_kg = 0.5\nactuator_friction = { coulomb_force_n = 8.0, smoothing_velocity_m_per_s = 0.002 }\n";
-    for (unmodelled, friction) in [(FRICTION, true), ("piston_mass_kg = 0.5\n", false)] {
+    for (unmodelled, friction) in [
+        (friction_lines(0.5, 8.0), true),
+        ("piston_mass_kg = 0.5\n", false),
+    ] {
         for seed in 0..2u64 {
             let x = Extras {
                 unmodelled,
@@ -1221,21 +1251,14 @@ fn the_nonlinear_suite_is_right_or_warned() {
         /// Where the describing function falls short (a light piston).
         short: bool,
     }
-    let friction = |name, mass: f64, force: f64, valve| {
-        Case {
+    let friction = |name, mass: f64, force: f64, valve| Case {
         name,
         extras: Extras {
-            unmodelled: Box::leak(
-                format!(
-                    "piston_mass_kg = {mass}\nactuator_friction = {{ coulomb_force_n = {force}, smoothing_velocity_m_per_s = 0.002 }}\n"
-                )
-                .into_boxed_str(),
-            ),
+            unmodelled: friction_lines(mass, force),
             ..base(valve, None, None, 1.0, 0.0, 0.0)
         },
         friction_n: Some(force),
         short: mass < 0.1,
-    }
     };
     let loop_mode = Some((110.0, 0.6));
     let springs = |name, cubic| Case {
@@ -1359,16 +1382,12 @@ fn the_nonlinear_suite_is_right_or_warned() {
             }
         }
     }
-    eprintln!(
-        "| rig | seed | structure chosen | error % (beta1, a1b0, a2, a3) | error in total stds | structure warning | friction found (N) | truth (N) |"
-    );
-    for row in &rows {
-        eprintln!("{row}");
-    }
-    let coverage = covered as f64 / total as f64;
-    eprintln!(
-        "nonlinear suite coverage: {covered} of {total} within 2 total stds ({:.1} %)",
-        100.0 * coverage
+    let coverage = print_suite(
+        "nonlinear suite",
+        "| rig | seed | structure chosen | error % (beta1, a1b0, a2, a3) | error in total stds | structure warning | friction found (N) | truth (N) |",
+        &rows,
+        covered,
+        total,
     );
     assert!(misses.is_empty(), "{misses:#?}");
     assert!(coverage >= 0.8, "coverage {coverage}");
@@ -1393,14 +1412,8 @@ fn friction_routes_compared() {
     use crate::time_domain::{TimeRun, TimeStart, time_domain_fit};
     use servoid::manifest::RunSource;
     for (mass, force) in [(0.5, 8.0), (0.5, 20.0), (0.05, 8.0)] {
-        let unmodelled: &'static str = Box::leak(
-            format!(
-                "piston_mass_kg = {mass}\nactuator_friction = {{ coulomb_force_n = {force}, smoothing_velocity_m_per_s = 0.002 }}\n"
-            )
-            .into_boxed_str(),
-        );
         let x = Extras {
-            unmodelled,
+            unmodelled: friction_lines(mass, force),
             record: Record {
                 estimator: "",
                 ..Record::default()
@@ -1408,11 +1421,8 @@ fn friction_routes_compared() {
             ..base(None, None, None, 0.0, 0.0, 0.0)
         };
         let text = manifest(700, &PAPER, &x) + &sdof_validation_runs([1.0; 3]);
-        let dir = scratch();
-        let plan = load_simulation_str(&text, &dir.path().join("sim.toml")).unwrap();
-        let sim = simulate_campaign(&plan, dir.path()).unwrap();
-        let campaign = load(&sim.manifest).unwrap();
-        let results = analyse(&campaign);
+        // The folder stays while the logs are read again below.
+        let (_dir, campaign, results) = simulated(&text);
         let r = results.rig.as_ref().unwrap();
         let joint = r.joint.as_ref().unwrap();
         let get = |n: &str| {

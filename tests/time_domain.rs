@@ -21,6 +21,7 @@ use argmin::core::{Error, Executor, Jacobian, Operator, State, TerminationReason
 use nalgebra::{DMatrix, DVector};
 
 use servoid::fit::lm::LevenbergMarquardt;
+use servoid::frf::{Detrend, detrend};
 use servoid::model::{LinearSpecimen, RigParams};
 use servoid::simulate::ode::Integrator;
 use servoid::simulate::plant::{ActuatorFriction, PlantSpec, Unmodelled, simulate};
@@ -119,18 +120,7 @@ impl Problem<'_> {
             p_gain: self.start.rig.p_gain,
         }
         .at_p_gain(run.p_gain);
-        PlantSpec {
-            rig,
-            specimen: specimen_model(run.specimen),
-            unmodelled: Unmodelled {
-                piston_mass_kg: Some(p[4]),
-                actuator_friction: Some(ActuatorFriction {
-                    coulomb_force_n: p[5],
-                    smoothing_velocity_m_per_s: p[6],
-                }),
-                ..Unmodelled::default()
-            },
-        }
+        plant_spec(rig, run.specimen, [p[4], p[5], p[6]])
     }
 
     /// Every run's residuals (logged less simulated, each run's line in
@@ -161,14 +151,13 @@ impl Problem<'_> {
                 Integrator::default(),
             )
             .map_err(|e| e.to_string())?;
-            let mut r: Vec<f64> = run
+            let r: Vec<f64> = run
                 .displacement_m
                 .iter()
                 .zip(&sim.x1_m)
                 .map(|(y, s)| y - s)
                 .collect();
-            remove_line(&mut r);
-            out.extend(r);
+            out.extend(detrend(&r, Detrend::Linear));
         }
         if out.iter().any(|v| !v.is_finite()) {
             return Err("the simulation diverged".into());
@@ -177,20 +166,20 @@ impl Problem<'_> {
     }
 }
 
-/// Takes the least-squares line a + b k out of `r`.
-fn remove_line(r: &mut [f64]) {
-    let n = r.len() as f64;
-    let mean_k = (n - 1.0) / 2.0;
-    let mean = r.iter().sum::<f64>() / n;
-    let (mut skr, mut skk) = (0.0, 0.0);
-    for (k, v) in r.iter().enumerate() {
-        let d = k as f64 - mean_k;
-        skr += d * (v - mean);
-        skk += d * d;
-    }
-    let slope = if skk > 0.0 { skr / skk } else { 0.0 };
-    for (k, v) in r.iter_mut().enumerate() {
-        *v -= mean + slope * (k as f64 - mean_k);
+/// The plant with the piston's mass, friction and its zero-crossing width
+/// `[m_p, F, v0]` (kg, N, m/s).
+fn plant_spec(rig: RigParams, specimen: LinearSpecimen, piston: [f64; 3]) -> PlantSpec {
+    PlantSpec {
+        rig,
+        specimen: specimen_model(specimen),
+        unmodelled: Unmodelled {
+            piston_mass_kg: Some(piston[0]),
+            actuator_friction: Some(ActuatorFriction {
+                coulomb_force_n: piston[1],
+                smoothing_velocity_m_per_s: piston[2],
+            }),
+            ..Unmodelled::default()
+        },
     }
 }
 
@@ -408,18 +397,7 @@ mod tests {
         let logged: Vec<Vec<f64>> = specimens
             .iter()
             .map(|&specimen| {
-                let spec = PlantSpec {
-                    rig: PAPER_RIG,
-                    specimen: specimen_model(specimen),
-                    unmodelled: Unmodelled {
-                        piston_mass_kg: Some(truth[4]),
-                        actuator_friction: Some(ActuatorFriction {
-                            coulomb_force_n: truth[5],
-                            smoothing_velocity_m_per_s: truth[6],
-                        }),
-                        ..Unmodelled::default()
-                    },
-                };
+                let spec = plant_spec(PAPER_RIG, specimen, [truth[4], truth[5], truth[6]]);
                 let x = simulate(&spec, &u, 1000.0, [0.001, 0.0], Integrator::default())
                     .expect("simulates")
                     .x1_m;

@@ -195,16 +195,21 @@ impl Structure {
     /// adds [`FORCE_DELAY`] last when force FRFs are fitted): the mode in
     /// the loop is the servo-valve's; outside it the mode's own.
     pub fn names(self) -> &'static [&'static str] {
-        const RIG: [&str; 5] = [
+        // The rig's four, the delay, the loop's mode and the piston: each
+        // structure in the loop's line takes a prefix.
+        const VALVE_PISTON: [&str; 8] = [
             "beta1_per_s",
             "a1b0_n_per_m_s2",
             "a2_n_per_m",
             "a3_per_s",
             "delay_s",
+            "valve_hz",
+            "valve_damping",
+            "piston_mass_kg",
         ];
         match self {
-            Structure::Plain => &RIG[..4],
-            Structure::Delay => &RIG,
+            Structure::Plain => &VALVE_PISTON[..4],
+            Structure::Delay => &VALVE_PISTON[..5],
             Structure::DelayPiston => &[
                 "beta1_per_s",
                 "a1b0_n_per_m_s2",
@@ -213,25 +218,8 @@ impl Structure {
                 "delay_s",
                 "piston_mass_kg",
             ],
-            Structure::DelayValve => &[
-                "beta1_per_s",
-                "a1b0_n_per_m_s2",
-                "a2_n_per_m",
-                "a3_per_s",
-                "delay_s",
-                "valve_hz",
-                "valve_damping",
-            ],
-            Structure::DelayValvePiston => &[
-                "beta1_per_s",
-                "a1b0_n_per_m_s2",
-                "a2_n_per_m",
-                "a3_per_s",
-                "delay_s",
-                "valve_hz",
-                "valve_damping",
-                "piston_mass_kg",
-            ],
+            Structure::DelayValve => &VALVE_PISTON[..7],
+            Structure::DelayValvePiston => &VALVE_PISTON,
             Structure::DelayCommand | Structure::DelayMeasurement => &[
                 "beta1_per_s",
                 "a1b0_n_per_m_s2",

@@ -18,6 +18,8 @@
 use nalgebra::Complex;
 use rustfft::FftPlanner;
 
+use super::{Detrend, detrend};
+
 /// Windows the record is cut into.
 const WINDOWS: usize = 256;
 /// The fewest samples in a window.
@@ -69,7 +71,7 @@ pub fn sweep_amplitude(u: &[f64], sample_rate_hz: f64) -> Option<SweepAmplitude>
     if n < WINDOWS * MIN_WINDOW || sample_rate_hz.is_nan() || sample_rate_hz <= 0.0 {
         return None;
     }
-    let ua = analytic(&detrended(u));
+    let ua = analytic(&detrend(u, Detrend::Linear));
     let w = n / WINDOWS;
     let median = |v: &mut Vec<f64>| {
         let mid = v.len() / 2;
@@ -101,24 +103,6 @@ pub fn sweep_amplitude(u: &[f64], sample_rate_hz: f64) -> Option<SweepAmplitude>
     kept.sort_by(|a, b| a.0.total_cmp(&b.0));
     let (freq_hz, amplitude) = kept.into_iter().unzip();
     Some(SweepAmplitude { freq_hz, amplitude })
-}
-
-/// `v` less its least-squares line (an LVDT's offset and drift).
-fn detrended(v: &[f64]) -> Vec<f64> {
-    let n = v.len() as f64;
-    let tm = (n - 1.0) / 2.0;
-    let vm = v.iter().sum::<f64>() / n;
-    let (mut stt, mut stv) = (0.0, 0.0);
-    for (i, y) in v.iter().enumerate() {
-        let t = i as f64 - tm;
-        stt += t * t;
-        stv += t * (y - vm);
-    }
-    let slope = if stt > 0.0 { stv / stt } else { 0.0 };
-    v.iter()
-        .enumerate()
-        .map(|(i, y)| y - vm - slope * (i as f64 - tm))
-        .collect()
 }
 
 /// The analytic signal v + i H[v]: the spectrum's negative frequencies

@@ -162,6 +162,35 @@ fn assert_jacobian(p: &JointProblem, theta: &[f64], what: &str) {
     }
 }
 
+/// The test rig's four log parameters, each moved off it (beta1 +0.1,
+/// a1b0 -0.05, a2 +0.03, a3 -0.2 in the log).
+fn rig_theta_off() -> Vec<f64> {
+    let r = rig();
+    vec![
+        r.beta1_per_s.ln() + 0.1,
+        r.a1b0_n_per_m_s2.ln() - 0.05,
+        r.a2_n_per_m.ln() + 0.03,
+        r.a3_per_s.ln() - 0.2,
+    ]
+}
+
+/// A point of `structure`'s parameters off the test rig: the delay at 1.7
+/// samples, a mode at 120 Hz with damping 0.6, a piston of 0.5 kg.
+fn theta_at(structure: Structure) -> Vec<f64> {
+    let mut theta = rig_theta_off();
+    if structure != Structure::Plain {
+        theta.push(1.7);
+    }
+    if structure.place().is_some() {
+        theta.push((2.0 * std::f64::consts::PI * 120.0_f64).ln());
+        theta.push(0.6_f64.ln());
+    }
+    if structure.piston() {
+        theta.push(0.5_f64.ln());
+    }
+    theta
+}
+
 /// The analytic Jacobian is the derivative of the residuals: central
 /// differences agree to 1e-6 of the column's size, for every structure.
 #[test]
@@ -173,20 +202,7 @@ fn the_jacobian_is_the_residuals_derivative() {
     let c = Campaign::new(Some(valve), 0.002);
     for structure in [Structure::Plain, Structure::Delay, Structure::DelayValve] {
         let p = problem(&c.runs(), &options(structure)).unwrap();
-        let r = rig();
-        let mut theta = vec![
-            r.beta1_per_s.ln() + 0.1,
-            r.a1b0_n_per_m_s2.ln() - 0.05,
-            r.a2_n_per_m.ln() + 0.03,
-            r.a3_per_s.ln() - 0.2,
-        ];
-        if structure != Structure::Plain {
-            theta.push(1.7);
-        }
-        if structure == Structure::DelayValve {
-            theta.push((2.0 * std::f64::consts::PI * 120.0_f64).ln());
-            theta.push(0.6_f64.ln());
-        }
+        let theta = theta_at(structure);
         assert_jacobian(&p, &theta, &format!("{structure:?}"));
     }
 }
@@ -211,16 +227,8 @@ fn the_friction_column_is_the_residuals_derivative() {
         ..options(Structure::DelayPiston)
     };
     let p = problem(&runs, &opts).unwrap();
-    let r = rig();
-    let theta = vec![
-        r.beta1_per_s.ln() + 0.1,
-        r.a1b0_n_per_m_s2.ln() - 0.05,
-        r.a2_n_per_m.ln() + 0.03,
-        r.a3_per_s.ln() - 0.2,
-        1.7,
-        0.5_f64.ln(),
-        6.0,
-    ];
+    let mut theta = theta_at(Structure::DelayPiston);
+    theta.push(6.0);
     assert_eq!(p.n_params(), theta.len());
     assert_jacobian(&p, &theta, "with friction");
 }
@@ -238,20 +246,7 @@ fn the_normal_pass_is_the_formed_jacobians_product() {
     let c = Campaign::new(Some(valve), 0.002);
     for structure in [Structure::Plain, Structure::Delay, Structure::DelayValve] {
         let p = problem(&c.runs(), &options(structure)).unwrap();
-        let r = rig();
-        let mut theta = vec![
-            r.beta1_per_s.ln() + 0.1,
-            r.a1b0_n_per_m_s2.ln() - 0.05,
-            r.a2_n_per_m.ln() + 0.03,
-            r.a3_per_s.ln() - 0.2,
-        ];
-        if structure != Structure::Plain {
-            theta.push(1.7);
-        }
-        if structure == Structure::DelayValve {
-            theta.push((2.0 * std::f64::consts::PI * 120.0_f64).ln());
-            theta.push(0.6_f64.ln());
-        }
+        let theta = theta_at(structure);
         let n = p.normal(&theta);
         let res = p.residuals(&theta);
         let jac = p.jacobian_matrix(&theta);
@@ -423,16 +418,13 @@ fn a_validation_runs_displacement_and_force_join_the_fit() {
     let opts = options(Structure::DelayValve);
     let p = problem(&runs, &opts).unwrap();
     let r = rig();
-    let theta = vec![
-        r.beta1_per_s.ln() + 0.1,
-        r.a1b0_n_per_m_s2.ln() - 0.05,
-        r.a2_n_per_m.ln() + 0.03,
-        r.a3_per_s.ln() - 0.2,
+    let mut theta = rig_theta_off();
+    theta.extend([
         1.2,
         (2.0 * std::f64::consts::PI * 120.0_f64).ln(),
         0.6_f64.ln(),
         0.9,
-    ];
+    ]);
     assert_eq!(p.names().last(), Some(&FORCE_DELAY));
     let jac = p.jacobian_matrix(&theta);
     let force_rows: Vec<usize> = p
@@ -783,13 +775,8 @@ fn each_place_has_its_model_and_recovers_its_rig() {
         let opts = options(structure);
         let p = problem(&runs, &opts).unwrap();
         let r = rig();
-        let mut theta = vec![
-            r.beta1_per_s.ln() + 0.1,
-            r.a1b0_n_per_m_s2.ln() - 0.05,
-            r.a2_n_per_m.ln() + 0.03,
-            r.a3_per_s.ln() - 0.2,
-            1.2,
-        ];
+        let mut theta = rig_theta_off();
+        theta.push(1.2);
         let mut want = vec![
             r.beta1_per_s,
             r.a1b0_n_per_m_s2,
