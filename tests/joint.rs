@@ -1238,9 +1238,11 @@ fn seal_friction_is_fitted_with_the_rig() {
 /// (the issue's bar), and each friction within 10 %; except on the light
 /// piston, where the describing function falls short (the piston sticks
 /// at each reversal: docs/accuracy.md): there within 1.5 %, its errors
-/// beyond its stds. 84 % of the parameters are within 2 total stds (the
-/// issue asks 90 %; the test holds the 80 % reached). The table it prints
-/// is docs/accuracy.md's.
+/// beyond its stds. Every parameter beyond 2 total stds is warned: by the
+/// structure's ambiguity or misfit, or, where no piston mass is resolved,
+/// by the friction warning's saying the stds are a lower bound. 84 % of the
+/// parameters are within 2 total stds (the issue asks 90 %; the test holds
+/// the 80 % reached). The table it prints is docs/accuracy.md's.
 #[test]
 fn the_nonlinear_suite_is_right_or_warned() {
     struct Case {
@@ -1337,9 +1339,16 @@ fn the_nonlinear_suite_is_right_or_warned() {
                 .warnings
                 .iter()
                 .any(|w| w.contains("seal friction") || w.contains("stiffening springs"));
+            // The friction warning where no piston mass is resolved says
+            // the stds are a lower bound there.
+            let lower_bound = o
+                .warnings
+                .iter()
+                .any(|w| w.contains("Take the stds as a lower bound"));
             rows.push(format!(
-                "{} {} | {} |",
+                "{} {} | {} | {} |",
                 o.row,
+                if lower_bound { "yes" } else { "no" },
                 o.friction
                     .map_or("none".into(), |(f, s)| format!("{f:.2} +- {s:.2}")),
                 case.friction_n.map_or("none".into(), |f| format!("{f}"))
@@ -1370,9 +1379,10 @@ fn the_nonlinear_suite_is_right_or_warned() {
                 } else {
                     o.err[k].abs() < 0.01 || o.z[k].abs() <= 2.0
                 };
-                if !right {
+                let warned = o.warned || lower_bound;
+                if !right || (o.z[k].abs() > 2.0 && !warned) {
                     misses.push(format!(
-                        "{} seed {seed}: {} {:+.3} % ({:+.2} total stds), friction or springs named {named}",
+                        "{} seed {seed}: {} {:+.3} % ({:+.2} total stds), friction or springs named {named}, warned {warned}",
                         case.name,
                         ["beta1", "a1b0", "a2", "a3"][k],
                         100.0 * o.err[k],
@@ -1384,7 +1394,7 @@ fn the_nonlinear_suite_is_right_or_warned() {
     }
     let coverage = print_suite(
         "nonlinear suite",
-        "| rig | seed | structure chosen | error % (beta1, a1b0, a2, a3) | error in total stds | structure warning | friction found (N) | truth (N) |",
+        "| rig | seed | structure chosen | error % (beta1, a1b0, a2, a3) | error in total stds | structure warning | stds a lower bound | friction found (N) | truth (N) |",
         &rows,
         covered,
         total,

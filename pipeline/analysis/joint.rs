@@ -324,13 +324,24 @@ const FRICTION_HARMONICS: &str = "the seal friction's harmonics of the command, 
 fn friction_note(fit: &JointFit, ids: &[String]) -> Option<String> {
     let f = fit.friction_n?;
     let k = fit.names.iter().position(|n| *n == joint::FRICTION)?;
+    let unresolved = if fit.structure.piston() {
+        ""
+    } else {
+        UNRESOLVED_PISTON
+    };
     Some(format!(
-        "seal friction: the rig is not linear at this amplitude, its displacement holding odd harmonics of the command (friction's signature), so the joint fit models the piston seals' Coulomb friction by its describing function at each bin's amplitude, over {}: F = {:.3} +- {:.3} N. The rig's parameters are the actuator's with that friction; its linear response at another amplitude differs (the friction acts as a damper 4 F / (pi V) at velocity amplitude V), and a small command is tracked worse than the model without friction predicts",
+        "seal friction: the rig is not linear at this amplitude, its displacement holding odd harmonics of the command (friction's signature), so the joint fit models the piston seals' Coulomb friction by its describing function at each bin's amplitude, over {}: F = {:.3} +- {:.3} N. The rig's parameters are the actuator's with that friction; its linear response at another amplitude differs (the friction acts as a damper 4 F / (pi V) at velocity amplitude V), and a small command is tracked worse than the model without friction predicts{unresolved}",
         ids.join(", "),
         f,
         fit.std[k]
     ))
 }
+
+/// What friction leaves unbounded where the data resolve no piston mass: a
+/// light piston sticks at each reversal, which the describing function
+/// (a sinusoidal velocity) does not hold, and how far it sticks depends on
+/// the mass the data cannot see (docs/accuracy.md, "The nonlinear suite").
+const UNRESOLVED_PISTON: &str = ". The data resolve no piston mass (its mode lies above the band), and a light piston sticks at each reversal, which the describing function does not hold: on simulated rigs with a 0.05 kg piston the rig's parameters came out 0.1-0.3 % off with friction of 0.5-2 % of the springs' force and up to 1.3 % with 5 %, beyond their stds, and simulating the identified rig with 0.005, 0.05 or 0.2 kg of piston moves that error from -2.4 % to +0.03 % (docs/accuracy.md). Take the stds as a lower bound here; a sweep of larger amplitude makes the friction weigh less";
 
 /// Where the springs' forces show a cubic term the FRFs do not bear out.
 const STIFFENING_REJECTED: &str = "rig: the springs' force against their displacement shows a cubic term (the spring runs' warnings), but the joint fit holds better with each stated k than with the springs stiffening, so it takes the stated k: a delay between the load cell and the LVDT, or the rig's own dynamics in the force, can mimic a cubic term; a spring that truly stiffens shows it in its FRF too";
