@@ -218,6 +218,41 @@ pub fn tf_x1_u(rig: &RigParams, specimen: &LinearSpecimen) -> Result<TransferFun
     TransferFunction::new(&[n0], &den)
 }
 
+/// What the joint fit finds beyond Eq. 10's four parameters that a
+/// validation run's prediction carries: the piston seals' Coulomb friction
+/// and, where the data resolve it, the piston's mass.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[schemars(deny_unknown_fields)]
+pub struct Seals {
+    /// F (N): the friction force while the piston slides.
+    pub coulomb_friction_n: f64,
+    /// m_p (kg), when the chosen structure fits it.
+    pub piston_mass_kg: Option<f64>,
+}
+
+/// The factor the seals' friction puts on x1/u at `f_hz` where the piston
+/// moves with displacement amplitude `amplitude_m`. Its describing function
+/// 4 F / (pi X) j adds to the specimen's S(s) = m s^2 + c s + k
+/// (docs/model.md), so with D = (s + beta1)((s + a3) S + a2 s) + a1b0, the
+/// denominator of Eqs. 12-17, x1/u = a1b0 / D becomes
+/// a1b0 / (D + (s + beta1)(s + a3) 4 F j / (pi X)): the factor is D over
+/// that. It tends to 1 as X grows and the friction weighs less.
+pub fn friction_factor(
+    rig: &RigParams,
+    specimen: &LinearSpecimen,
+    coulomb_n: f64,
+    amplitude_m: f64,
+    f_hz: f64,
+) -> Complex<f64> {
+    let s = Complex::new(0.0, 2.0 * std::f64::consts::PI * f_hz);
+    let (m, c, k) = specimen.mck();
+    let sp = s * s * m + s * c + k;
+    let (b1, a3) = (rig.beta1_per_s, rig.a3_per_s);
+    let d = (s + b1) * ((s + a3) * sp + s * rig.a2_n_per_m) + rig.a1b0_n_per_m_s2;
+    let friction = Complex::new(0.0, 4.0 * coulomb_n / (std::f64::consts::PI * amplitude_m));
+    d / (d + (s + b1) * (s + a3) * friction)
+}
+
 /// f/u: a1b0 (m s^2 + c s + k) over the x1/u denominator (Eq. 45); for a
 /// massless spring f = k x1, and without a specimen f = 0.
 pub fn tf_f_u(rig: &RigParams, specimen: &LinearSpecimen) -> Result<TransferFunction, LtiError> {

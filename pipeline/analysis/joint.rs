@@ -21,7 +21,7 @@ use crate::identify::Estimate;
 use crate::identify::FitData;
 use crate::identify::IdentificationPlan;
 use crate::manifest::{Campaign, JointRig, Role, RunPlan};
-use crate::model::RigParams;
+use crate::model::{RigParams, Seals};
 use crate::results::{
     FTestResult, JointCandidate, JointParameter, JointResult, RigEstimates, RunAdequacy,
 };
@@ -796,5 +796,24 @@ pub fn used_estimates(r: &JointResult) -> Option<RigEstimates> {
         a3: est(3)?,
         R1: r.r1?,
         covariance: r.covariance,
+    })
+}
+
+/// The seals' friction (and the piston's mass with it) the joint fit found,
+/// when the campaign uses the joint estimate: what a validation run's
+/// prediction carries besides the rig.
+pub fn seals(r: &JointResult) -> Option<Seals> {
+    if !r.used {
+        return None;
+    }
+    let value = |name: &str| {
+        r.parameters
+            .iter()
+            .find(|p| p.name == name)
+            .map(|p| p.value)
+    };
+    Some(Seals {
+        coulomb_friction_n: value(joint::FRICTION)?,
+        piston_mass_kg: value("piston_mass_kg"),
     })
 }

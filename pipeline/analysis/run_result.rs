@@ -13,7 +13,7 @@ use crate::identify::{FitData, fit_options};
 use crate::ingest::Log;
 use crate::lti::TransferFunction;
 use crate::manifest::{Campaign, CompensatorSettings, IdentificationPlan, RunPlan, RunSource};
-use crate::model::{self, LinearSpecimen, RigParams};
+use crate::model::{self, LinearSpecimen, RigParams, Seals};
 use crate::results::{
     DelayTestResult, FitSummary, FrfUsed, HarmonicsFound, LinearityResult, LogInfo, RunResult,
     RunTracking, Status, TfResult, TfSource,
@@ -244,7 +244,7 @@ pub fn compensate(
     plan: &RunPlan,
     st: &LogStage,
     time: &validate::TimeStage,
-    rig_at_p: &RigParams,
+    (rig_at_p, seals): (&RigParams, Option<&Seals>),
     specimen: &LinearSpecimen,
     plant: &TransferFunction,
     design: &CompensatorPlan<'_>,
@@ -268,6 +268,7 @@ pub fn compensate(
                 peak_desired_m: None,
                 stiffness: Vec::new(),
                 target_stiffness_n_per_m: None,
+                seals: Vec::new(),
             };
         }
     };
@@ -292,6 +293,19 @@ pub fn compensate(
                 Some(format!("the compensated plant could not be simulated: {e}")),
             ),
         };
+    let peak_desired = st.log.command_m.iter().fold(0.0_f64, |m, v| m.max(v.abs()));
+    let seals = match seals {
+        Some(seals) if peak_desired > 0.0 => compensator::seals_tracking(
+            plant,
+            &c,
+            (rig_at_p, specimen),
+            seals.coulomb_friction_n,
+            &[peak_desired, peak_desired / 10.0, peak_desired / 100.0],
+            band,
+            fs,
+        ),
+        _ => Vec::new(),
+    };
     CompensatorOutcome {
         stiffness: compensator::stiffness_sweep(rig_at_p, specimen, &c, &design.stiffnesses, band),
         target_stiffness_n_per_m: compensator::target_stiffness(
@@ -309,7 +323,8 @@ pub fn compensate(
         compensated: Some(compensated),
         predicted,
         peak_command_m: peak,
-        peak_desired_m: Some(st.log.command_m.iter().fold(0.0_f64, |m, v| m.max(v.abs()))),
+        peak_desired_m: Some(peak_desired),
+        seals,
     }
 }
 

@@ -136,7 +136,10 @@ pub(super) fn analyse_with(
     drop(inputs);
     let rig_for_runs: RigOutcome = rig
         .as_ref()
-        .map(|(p, r)| (*p, r.covariance))
+        .map(|(p, r)| {
+            let seals = r.joint.as_ref().and_then(crate::analysis::joint::seals);
+            (*p, r.covariance, seals)
+        })
         .map_err(Arc::clone);
 
     let second: Vec<Done> = campaign
@@ -168,7 +171,7 @@ pub(super) fn analyse_with(
         warnings,
         manifest: campaign.manifest.clone(),
     };
-    let rig = rig_for_runs.ok().map(|(p, _)| p);
+    let rig = rig_for_runs.ok().map(|(p, ..)| p);
     let (results, campaign_figures) =
         campaign_level(campaign, results, rig, noise.as_ref(), &runs.overlay, sink)?;
     sink.finish()?;
@@ -355,12 +358,12 @@ fn second_pass(
                 RigInput::Validation(e) => Some(e.sha256.as_str()),
                 _ => None,
             };
-            // The key holds the rig at this run's P gain: a new rig redoes
-            // the run.
+            // The key holds the rig at this run's P gain and the seals'
+            // friction: a new rig redoes the run.
             let keyed = rig
                 .as_ref()
                 .ok()
-                .map(|(r, cov)| (r.at_p_gain(plan.p_gain), *cov));
+                .map(|(r, cov, seals)| (r.at_p_gain(plan.p_gain), *cov, *seals));
             // The compensator's settings and the stiffnesses it is swept
             // over decide the outcome too.
             let sweep = (
@@ -368,9 +371,18 @@ fn second_pass(
                 campaign.sensitivity.range_n_per_m,
                 campaign.sensitivity.points,
             );
-            let parts = keyed.as_ref().map(|(r, cov)| -> [&dyn std::fmt::Debug; 5] {
-                [&"validation", &campaign.identification, r, cov, &sweep]
-            });
+            let parts = keyed
+                .as_ref()
+                .map(|(r, cov, seals)| -> [&dyn std::fmt::Debug; 6] {
+                    [
+                        &"validation",
+                        &campaign.identification,
+                        r,
+                        cov,
+                        seals,
+                        &sweep,
+                    ]
+                });
             return run_once(
                 campaign,
                 plan,
@@ -382,7 +394,7 @@ fn second_pass(
         }
         FirstPass::Done(done) => *done,
     };
-    let rig_at_p = rig.as_ref().ok().map(|(r, _)| r.at_p_gain(plan.p_gain));
+    let rig_at_p = rig.as_ref().ok().map(|(r, ..)| r.at_p_gain(plan.p_gain));
     if done.log_error.is_some() {
         done.kept.result.a1b0 = rig_at_p.map(|r| r.a1b0_n_per_m_s2);
     } else if let Some(spec) = step::with_rig(&mut done.kept, plan, rig_at_p.as_ref(), wants) {

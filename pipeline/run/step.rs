@@ -18,7 +18,7 @@ use crate::fit::Intersample;
 use crate::ingest::{IngestError, LogFile};
 use crate::lti::TransferFunction;
 use crate::manifest::{Campaign, Role, RunPlan};
-use crate::model::RigParams;
+use crate::model::{RigParams, Seals};
 use crate::report::figures::catalogue::{self, ForceBins, OverlayRun, Prediction};
 use crate::report::tables::RunTables;
 use crate::report::{FigureSpec, Measured};
@@ -218,10 +218,10 @@ pub(super) fn with_rig(
     }
 }
 
-/// The rig as the validation runs read it: its parameters and the
-/// covariance of (beta1, a1b0, a2, a3) when identified, or why there is
-/// none.
-pub(super) type RigOutcome = Result<(RigParams, Option<Cov4>), Arc<RigError>>;
+/// The rig as the validation runs read it: its parameters, the covariance
+/// of (beta1, a1b0, a2, a3) when identified and the seals' friction when
+/// the joint fit found it, or why there is none.
+pub(super) type RigOutcome = Result<(RigParams, Option<Cov4>, Option<Seals>), Arc<RigError>>;
 
 /// A validation run's log, read for its own run. `fitted` is the SHA-256 of
 /// the log as the joint fit read it, when it did: the rig was fitted to
@@ -266,7 +266,7 @@ pub(super) fn validation(
             out.a1b0 = rig
                 .as_ref()
                 .ok()
-                .map(|(r, _)| r.at_p_gain(plan.p_gain).a1b0_n_per_m_s2);
+                .map(|(r, ..)| r.at_p_gain(plan.p_gain).a1b0_n_per_m_s2);
             return Output::unread(out, Arc::new(e));
         }
     };
@@ -294,8 +294,11 @@ pub(super) fn validation(
         })
     });
     let stage = acq.stage.as_deref();
-    let (rig_at_p, rig_cov) = match rig {
-        Ok((r, cov)) => at_p_gain(r, cov.as_ref(), plan.p_gain),
+    let (rig_at_p, rig_cov, seals) = match rig {
+        Ok((r, cov, seals)) => {
+            let (r, cov) = at_p_gain(r, cov.as_ref(), plan.p_gain);
+            (r, cov, *seals)
+        }
         Err(e) => return Output::unfinished(failed(out, e.clone().into()), stage, wants),
     };
     out.a1b0 = Some(rig_at_p.a1b0_n_per_m_s2);
@@ -317,7 +320,15 @@ pub(super) fn validation(
         range,
         stiffnesses: sensitivity::log_grid(range, campaign.sensitivity.points),
     };
-    validated(plan, out, st, &rig_at_p, rig_cov, &design, wants)
+    validated(
+        plan,
+        out,
+        st,
+        (&rig_at_p, seals.as_ref()),
+        rig_cov,
+        &design,
+        wants,
+    )
 }
 
 /// A validation run with its log and model: the time-domain validation
@@ -326,13 +337,13 @@ fn validated(
     plan: &RunPlan,
     mut out: RunResult,
     st: &LogStage,
-    rig_at_p: &RigParams,
+    (rig_at_p, seals): (&RigParams, Option<&Seals>),
     rig_cov: Option<Cov4>,
     design: &CompensatorPlan<'_>,
     wants: Wants,
 ) -> Output {
     let linear = plan.specimen.linear();
-    let time = match validate::validation_run(rig_at_p, &plan.specimen, &record(&st.log)) {
+    let time = match validate::validation_run(rig_at_p, &plan.specimen, seals, &record(&st.log)) {
         Ok(t) => {
             out.validation = Some(t.metrics.clone());
             Some(t)
@@ -353,7 +364,9 @@ fn validated(
         .as_ref()
         .map(|t| predicted_tracking(st, t, plant.as_ref()));
     let compensator = match (linear, &time, &plant) {
-        (Some(lin), Some(t), Some(g)) => Some(compensate(plan, st, t, rig_at_p, &lin, g, design)),
+        (Some(lin), Some(t), Some(g)) => {
+            Some(compensate(plan, st, t, (rig_at_p, seals), &lin, g, design))
+        }
         _ => None,
     };
     out.tracking = Some(RunTracking {
@@ -475,7 +488,7 @@ mod tests {
             panic!("the joint fit reads the validation run");
         };
         assert!(read.force.is_some() && !read.displacement.freq_hz.is_empty());
-        let rig = Ok((crate::model::PAPER_RIG, None));
+        let rig = Ok((crate::model::PAPER_RIG, None, None));
         let wants = Wants {
             figures: false,
             tables: false,

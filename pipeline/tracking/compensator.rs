@@ -305,10 +305,17 @@ pub fn band_tracking(
     band_hz: (f64, f64),
     fs: f64,
 ) -> BandTracking {
+    band_tracking_of(
+        |f| held_response(plant, f, fs) * comp.map_or(Complex::new(1.0, 0.0), |c| c.response(f)),
+        band_hz,
+        fs,
+    )
+}
+
+/// The tracking of the response `h` (of frequency, Hz) over `band_hz`, read
+/// as [`band_tracking`] reads a plant's.
+fn band_tracking_of(h: impl Fn(f64) -> Complex<f64>, band_hz: (f64, f64), fs: f64) -> BandTracking {
     let (lo, hi) = band_hz;
-    let h = |f: f64| {
-        held_response(plant, f, fs) * comp.map_or(Complex::new(1.0, 0.0), |c| c.response(f))
-    };
     let lead_in = (0..50).map(|i| lo * 0.01_f64.powf(1.0 - i as f64 / 50.0));
     let band = (0..BAND_POINTS).map(|i| lo * (hi / lo).powf(i as f64 / (BAND_POINTS - 1) as f64));
     let mut phase = 0.0_f64;
@@ -341,6 +348,48 @@ pub fn band_tracking(
         out.delay_samples_max = out.delay_samples_max.max(delay);
     }
     out
+}
+
+/// The compensated plant's tracking where the seals' friction acts at one
+/// amplitude.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, JsonSchema)]
+pub struct SealsTracking {
+    /// The displacement's amplitude (m) the friction's describing function
+    /// is taken at.
+    pub amplitude_m: f64,
+    pub compensated: BandTracking,
+}
+
+/// What the seals' friction `coulomb_n` leaves of the compensator's
+/// tracking at each of `amplitudes_m`: the compensator inverts the linear
+/// plant, and the friction multiplies x1/u by [`model::friction_factor`]
+/// (its describing function at that amplitude), which grows as the
+/// amplitude falls. Each point is the compensated plant's tracking over
+/// `band_hz` with that factor.
+pub fn seals_tracking(
+    plant: &TransferFunction,
+    comp: &Compensator,
+    (rig, specimen): (&RigParams, &LinearSpecimen),
+    coulomb_n: f64,
+    amplitudes_m: &[f64],
+    band_hz: (f64, f64),
+    fs: f64,
+) -> Vec<SealsTracking> {
+    amplitudes_m
+        .iter()
+        .map(|&a| SealsTracking {
+            amplitude_m: a,
+            compensated: band_tracking_of(
+                |f| {
+                    held_response(plant, f, fs)
+                        * comp.response(f)
+                        * model::friction_factor(rig, specimen, coulomb_n, a, f)
+                },
+                band_hz,
+                fs,
+            ),
+        })
+        .collect()
 }
 
 /// The compensator designed on the model of one specimen, on the plant of
@@ -508,4 +557,10 @@ pub struct CompensatorOutcome {
     /// compensator still meets the targets; null when it misses them on
     /// its own.
     pub target_stiffness_n_per_m: Option<[f64; 2]>,
+    /// Where the joint fit found the seals' friction: the compensated
+    /// tracking it leaves at the run's peak command and at a tenth and a
+    /// hundredth of it (the friction weighs more at small amplitudes, and
+    /// a linear compensator cannot remove it).
+    #[serde(default)]
+    pub seals: Vec<SealsTracking>,
 }

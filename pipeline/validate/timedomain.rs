@@ -15,11 +15,11 @@ use serde::{Deserialize, Serialize};
 
 use super::metrics::{self as validate, Errors, Window};
 use crate::lti::{StateSpace, TransferFunction};
-use crate::model::{self, CnTerm, LinearSdof, RigParams};
+use crate::model::{self, CnTerm, LinearSdof, RigParams, Seals};
 use crate::simulate::SimError;
 use crate::simulate::discrete::simulate_linear;
 use crate::simulate::ode::Integrator;
-use crate::simulate::plant::{self, PlantSpec, Unmodelled};
+use crate::simulate::plant::{self, ActuatorFriction, PlantSpec, Unmodelled};
 use crate::simulate::specimen::SpecimenModel;
 
 /// A run's measured signals in SI, uniformly sampled, as the time-domain
@@ -81,7 +81,33 @@ pub struct ValidationMetrics {
     /// Set when this run's errors are far above the campaign's other runs.
     pub outlier: bool,
     pub note: Option<String>,
+    /// The seals' friction the joint fit found, which the prediction above
+    /// carries, with the errors of the prediction without it; null when no
+    /// friction was found.
+    #[serde(default)]
+    pub seals: Option<SealsPrediction>,
 }
+
+/// A prediction with the seals' friction.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+pub struct SealsPrediction {
+    /// F (N), as the joint fit found it.
+    pub coulomb_friction_n: f64,
+    /// v0 (m/s): the simulation's friction is F tanh(x2 / v0).
+    pub smoothing_velocity_m_per_s: f64,
+    /// The piston's mass simulated with it (kg), when the fit resolved one.
+    pub piston_mass_kg: Option<f64>,
+    /// Measured against the prediction of the rig without the friction
+    /// (Eqs. 47-48).
+    pub without_friction: Errors,
+}
+
+/// v0 of the simulated seals' friction F tanh(x2 / v0). The describing
+/// function the joint fit uses holds a sign function, which an ODE solver
+/// cannot step across; 1 mm/s rounds it off below the velocities a sweep
+/// reaches over nearly all of its band (4 mm at 1 Hz is 25 mm/s), where
+/// its force is then within 0.5 % of F sign(x2) (tanh(3) = 0.995).
+pub const SEAL_SMOOTHING_M_PER_S: f64 = 1e-3;
 
 /// The paper's simplified canonical form (Cn dropped "for a linear
 /// specimen", Sec. 3) checked on a validation run. Dropping Cn moves the
@@ -159,10 +185,56 @@ fn compare(
     Some((whole, per_window, offset, centred))
 }
 
-/// A validation run: the identified rig at the run's P gain with its specimen.
+/// The identified rig with a linear specimen and the seals' friction: the
+/// nonlinear plant (docs/model.md) driven by u - u[0] from rest, plus the
+/// linear model's steady output under u[0] (as [`simulate`] does), so the
+/// friction's transient at the start is the rig's own. Outputs x1 and the
+/// load cell's force.
+fn simulate_with_seals(
+    rig_at_p: &RigParams,
+    specimen: &SpecimenModel,
+    seals: &Seals,
+    ss: &StateSpace,
+    rec: &Record<'_>,
+) -> Result<(Vec<f64>, Vec<f64>), SimError> {
+    let spec = PlantSpec {
+        rig: *rig_at_p,
+        specimen: *specimen,
+        unmodelled: Unmodelled {
+            piston_mass_kg: seals.piston_mass_kg,
+            actuator_friction: Some(ActuatorFriction {
+                coulomb_force_n: seals.coulomb_friction_n,
+                smoothing_velocity_m_per_s: SEAL_SMOOTHING_M_PER_S,
+            }),
+            ..Unmodelled::default()
+        },
+    };
+    let u0 = rec.command_m.first().copied().unwrap_or(0.0);
+    let u: Vec<f64> = rec.command_m.iter().map(|v| v - u0).collect();
+    let r = plant::simulate(
+        &spec,
+        &u,
+        rec.sample_rate_hz,
+        [0.0, 0.0],
+        Integrator::default(),
+    )?;
+    let dc = |i: usize| {
+        let g = ss.eval(i, nalgebra::Complex::new(0.0, 0.0)).re;
+        if g.is_finite() { g * u0 } else { 0.0 }
+    };
+    let (x_dc, f_dc) = (dc(model::OUT_X1), dc(model::OUT_FORCE));
+    Ok((
+        r.x1_m.iter().map(|v| v + x_dc).collect(),
+        r.force_n.iter().map(|v| v + f_dc).collect(),
+    ))
+}
+
+/// A validation run: the identified rig at the run's P gain with its
+/// specimen, and with the seals' friction when the joint fit found it.
 pub fn validation_run(
     rig_at_p: &RigParams,
     specimen: &SpecimenModel,
+    seals: Option<&Seals>,
     rec: &Record<'_>,
 ) -> Result<TimeStage, ValidateError> {
     let fs = rec.sample_rate_hz;
@@ -189,6 +261,26 @@ pub fn validation_run(
             (r.x1_m, r.force_n)
         }
     };
+    // With the seals' friction the prediction is the nonlinear plant's; the
+    // linear one stays for the canonical forms' check and the comparison.
+    let linear_x1 = x1;
+    let (x1, force, seals) = match (seals, specimen.linear()) {
+        (Some(seals), Some(lin)) => {
+            let ss = model::state_space(rig_at_p, &lin);
+            let (x, f) = simulate_with_seals(rig_at_p, specimen, seals, &ss, rec)?;
+            let without = compare(rec.displacement_m, &linear_x1, fs, &[])
+                .ok_or(ValidateError::ZeroDisplacement)?
+                .0;
+            let prediction = SealsPrediction {
+                coulomb_friction_n: seals.coulomb_friction_n,
+                smoothing_velocity_m_per_s: SEAL_SMOOTHING_M_PER_S,
+                piston_mass_kg: seals.piston_mass_kg,
+                without_friction: without,
+            };
+            (x, f, Some(prediction))
+        }
+        _ => (linear_x1.clone(), force, None),
+    };
     let (whole, per_window, offset, centred) =
         compare(rec.displacement_m, &x1, fs, &windows).ok_or(ValidateError::ZeroDisplacement)?;
     let force_errors = rec.force_n.and_then(|f| {
@@ -208,7 +300,7 @@ pub fn validation_run(
                 damping_ns_per_m,
                 stiffness_n_per_m,
             };
-            Some(canonical_forms(rig_at_p, &sdof, rec, &x1)?)
+            Some(canonical_forms(rig_at_p, &sdof, rec, &linear_x1)?)
         }
         _ => None,
     };
@@ -221,7 +313,10 @@ pub fn validation_run(
             nrmse_pct: whole.nrmse_pct,
             nae_pct: whole.nae_pct,
             fit_pct: whole.fit_pct,
-            model: "identified rig with the run's specimen (Eq. 10)".into(),
+            model: match &seals {
+                Some(_) => "identified rig with the run's specimen and the seals' friction (Eq. 10, friction F tanh(x2 / v0) on the piston)".into(),
+                None => "identified rig with the run's specimen (Eq. 10)".into(),
+            },
             offset_removed_m: offset,
             windows: per_window,
             force: force_errors,
@@ -229,6 +324,7 @@ pub fn validation_run(
             ccf_consistency: consistency,
             outlier: false,
             note: None,
+            seals,
         },
         windows,
         x1_measured: centred,
@@ -336,6 +432,7 @@ pub fn fitted_run(tf: &TransferFunction, rec: &Record<'_>) -> Result<TimeStage, 
             ccf_consistency: None,
             outlier: false,
             note: None,
+            seals: None,
         },
         windows,
         x1_measured: centred,
@@ -393,6 +490,7 @@ mod tests {
             ccf_consistency: None,
             outlier: false,
             note: None,
+            seals: None,
         }
     }
 
@@ -440,7 +538,7 @@ mod tests {
             stiffness_n_per_m: 129_400.0,
         };
         let signals = signals_of(&rig, &specimen);
-        let stage = validation_run(&rig, &specimen, &record(&signals)).unwrap();
+        let stage = validation_run(&rig, &specimen, None, &record(&signals)).unwrap();
         let m = &stage.metrics;
         assert!(m.nrmse_pct < 1e-6, "full model NRMSE {}", m.nrmse_pct);
         assert!(m.ccf_consistency.unwrap() < 1e-9);
@@ -473,7 +571,7 @@ mod tests {
             stiffness_n_per_m: 129_400.0,
         };
         let signals = signals_of(&rig, &specimen);
-        let stage = validation_run(&rig, &specimen, &record(&signals)).unwrap();
+        let stage = validation_run(&rig, &specimen, None, &record(&signals)).unwrap();
         let s = stage.metrics.simplified_ccf.as_ref().unwrap();
         assert!(s.stable);
         assert!(
