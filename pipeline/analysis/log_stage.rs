@@ -571,13 +571,17 @@ pub fn log_stage_from(
 /// friction's describing function depends on it, should the joint fit
 /// find friction in any run (`LogStage::friction_signature`).
 fn with_sweep_amplitude(data: FitData, excitation: frf::Excitation, log: &Log) -> FitData {
-    match matches!(excitation, frf::Excitation::Sweep { .. })
-        .then(|| frf::sweep_amplitude(&log.command_m, log.sample_rate_hz))
-        .flatten()
-    {
+    match sweep_of(excitation, log) {
         Some(sweep) => data.with_amplitude(&sweep),
         None => data,
     }
+}
+
+/// The command's amplitude along a sweep, when the log's command is one.
+pub fn sweep_of(excitation: frf::Excitation, log: &Log) -> Option<frf::SweepAmplitude> {
+    matches!(excitation, frf::Excitation::Sweep { .. })
+        .then(|| frf::sweep_amplitude(&log.command_m, log.sample_rate_hz))
+        .flatten()
 }
 
 /// A fit's failure, named by the run's file.

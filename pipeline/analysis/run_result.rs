@@ -145,9 +145,17 @@ pub fn validation_evidence(campaign: &Campaign, plan: &RunPlan) -> RigInput {
             &st.choice.plan,
         )
     };
+    // Both FRFs' bins carry the displacement's amplitude along a sweep,
+    // which the friction's describing function needs should the joint fit
+    // find friction.
+    let sweep = crate::analysis::log_stage::sweep_of(st.excitation, &st.log);
+    let with_amplitude = |d: FitData| match &sweep {
+        Some(sweep) => d.with_displacement_amplitude(&st.frf, sweep),
+        None => d,
+    };
     RigInput::Validation(Box::new(ValidationEvidence {
-        displacement: data(&st.frf),
-        force: st.force_frf.as_ref().map(data),
+        displacement: with_amplitude(data(&st.frf)),
+        force: st.force_frf.as_ref().map(data).map(with_amplitude),
         sample_rate_hz: st.log.sample_rate_hz,
         sha256: st.log.sha256.clone(),
     }))

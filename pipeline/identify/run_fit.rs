@@ -78,6 +78,27 @@ impl FitData {
         self
     }
 
+    /// With the displacement's amplitude at each bin read from `x1_u`, the
+    /// displacement's FRF on the same grid, times the command's amplitude
+    /// `sweep` gives: what a force FRF's bins need, since the friction's
+    /// describing function depends on the displacement's amplitude.
+    pub fn with_displacement_amplitude(mut self, x1_u: &Frf, sweep: &frf::SweepAmplitude) -> Self {
+        self.amplitude_m = Some(
+            self.freq_hz
+                .iter()
+                .map(|&f| {
+                    let i = x1_u.freq_hz.partition_point(|&g| g < f);
+                    let gain = match x1_u.freq_hz.get(i) {
+                        Some(&g) if g == f => x1_u.h[i].norm(),
+                        _ => 0.0,
+                    };
+                    gain * sweep.at(f)
+                })
+                .collect(),
+        );
+        self
+    }
+
     pub fn input(&self) -> FitInput<'_> {
         FitInput {
             freq_hz: &self.freq_hz,
