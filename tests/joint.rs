@@ -1608,3 +1608,48 @@ fn friction_routes_compared() {
         }
     }
 }
+
+/// Three rigs of the mismatch suite whose LVDT is not the load cell's twin
+/// (3 samples late with a 70 Hz loop mode; an 80 Hz filter on the logged
+/// displacement; 2 samples late, offset 0.5 mm and drifting 2 um/s), with
+/// linear springs: no spring run says its spring stiffens, and the rig
+/// needs no word on a cubic term the FRFs do not bear out. Fitted over the
+/// whole record at once, the force against the displacement read these as
+/// springs 0.6-1.0 % stiffer or softer at 3.5 mm, at t = 11 to 74.
+#[test]
+fn a_sensor_that_lags_or_drifts_is_not_a_stiffening_spring() {
+    let cases = [
+        (
+            "LVDT 3 samples late, loop mode 70 Hz",
+            base(Some((70.0, 0.3)), None, None, 3.0, 0.0, 0.0),
+        ),
+        (
+            "80 Hz filter on the LVDT",
+            base(None, None, Some((80.0, 0.7)), 0.0, 0.15, 4e-4),
+        ),
+        (
+            "LVDT 2 samples late, offset and drift",
+            base(Some((130.0, 0.5)), None, None, 2.0, 0.5, 2e-3),
+        ),
+    ];
+    for (name, extras) in cases {
+        let text = manifest(5000, &OTHER, &extras) + &sdof_validation_runs([1.0; 3]);
+        let results = identify(&text);
+        for r in &results.runs {
+            assert!(
+                !r.warnings.iter().any(|w| w.contains("grows faster")),
+                "{name}: run {} says its spring stiffens: {:#?}",
+                r.id,
+                r.warnings
+            );
+        }
+        assert!(
+            !results
+                .warnings
+                .iter()
+                .any(|w| w.contains("mimic") || w.contains("stiffening springs")),
+            "{name}: {:#?}",
+            results.warnings
+        );
+    }
+}
