@@ -13,11 +13,12 @@
 //! loop's mode with the piston's mass from those two fits, each mode
 //! from a grid of starts raced on a quarter of the bins, every fit taken
 //! to that quarter's optimum and then to all the bins', the F tests and
-//! Akaike weights) 71-79 ms over three runs. Each Levenberg-Marquardt trial is one
+//! Akaike weights) 62.9 ms (28 November 2026; the combined fit is tried
+//! since the data take both the loop's mode and the piston's mass here). Each Levenberg-Marquardt trial is one
 //! pass over the bins for r^T r, J^T J and J^T r. With the seals' friction
 //! in every structure (a campaign whose runs show its harmonics), the
-//! selection's cost is `seven_runs_select_with_friction`: 64.2 ms against
-//! 61.2 ms without, on this machine on 28 November 2026.
+//! selection's cost is `seven_runs_select_with_friction`: 67.0 ms against
+//! 62.9 ms without, on this machine on 28 November 2026.
 //!
 //! `cargo bench --bench joint`
 

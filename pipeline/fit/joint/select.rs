@@ -476,18 +476,29 @@ fn fit_candidates(
             .find(|c| c.structure == s)
             .and_then(|c| c.usable())
     };
-    let both = assess(
-        Structure::DelayValvePiston,
-        fit_valve_piston(
-            runs,
-            usable(Structure::DelayValve),
-            usable(Structure::DelayPiston),
-            opts,
-        ),
-    );
+    // The loop's mode with the piston's mass is tried where the data take
+    // each alone over the delay (or the manifest names it): a rig with
+    // both shows each, and a rig with neither need not pay for the fit.
+    let taken = |s: Structure| match (delay.usable(), usable(s)) {
+        (Some(small), Some(big)) => f_test(small, big).p_value < P_SIGNIFICANT,
+        _ => false,
+    };
+    let try_both = choice == Choice::Fixed(Structure::DelayValvePiston)
+        || (taken(Structure::DelayValve) && taken(Structure::DelayPiston));
+    let both = try_both.then(|| {
+        assess(
+            Structure::DelayValvePiston,
+            fit_valve_piston(
+                runs,
+                usable(Structure::DelayValve),
+                usable(Structure::DelayPiston),
+                opts,
+            ),
+        )
+    });
     let mut candidates = vec![plain, delay];
     candidates.extend(extensions);
-    candidates.push(both);
+    candidates.extend(both);
     candidates
 }
 
@@ -519,14 +530,27 @@ fn fit_valve_piston(
 /// structure it holds.
 ///
 /// Every larger structure holds the paper's model and the delay (module
-/// docs), so at its optimum it fits at least as well as they do; one that
-/// stopped above either's cost stopped at a local optimum, and its rig is
-/// not that structure's answer.
-fn flag_local_optima(candidates: &mut [Candidate]) {
+/// docs), and the loop's mode with the piston's mass holds each alone, so
+/// at its optimum it fits at least as well as they do; one that stopped
+/// above the cost of a structure it holds stopped at a local optimum, and
+/// its rig is not that structure's answer.
+pub(super) fn flag_local_optima(candidates: &mut [Candidate]) {
     for i in 1..candidates.len() {
-        let nested_best = candidates[..i.min(2)]
+        let holds = |c: &Candidate| match candidates[i].structure {
+            Structure::DelayValvePiston => matches!(
+                c.structure,
+                Structure::Plain
+                    | Structure::Delay
+                    | Structure::DelayValve
+                    | Structure::DelayPiston
+            ),
+            _ => false,
+        };
+        let nested_best = candidates[..i]
             .iter()
-            .filter_map(|c| c.usable().map(|f| (c.structure, f.cost)))
+            .enumerate()
+            .filter(|&(j, c)| j < 2 || holds(c))
+            .filter_map(|(_, c)| c.usable().map(|f| (c.structure, f.cost)))
             .min_by(|a, b| a.1.total_cmp(&b.1));
         let above = match (candidates[i].usable(), nested_best) {
             (Some(f), Some((s, cost))) => {

@@ -843,6 +843,45 @@ fn the_data_choose_the_place_the_mode_was_made_at() {
     }
 }
 
+/// The loop's mode with the piston's mass holds each alone: a fit of it
+/// that stopped above the cost of the valve fit (or the piston fit) stopped
+/// at a local optimum, and is marked unusable naming the structure it
+/// holds; at its own optimum, below both, it stays usable.
+#[test]
+fn a_combined_fit_above_a_structure_it_holds_is_a_local_optimum() {
+    let (want, unmodelled) = places()
+        .into_iter()
+        .find(|(s, _)| *s == Structure::DelayValvePiston)
+        .unwrap();
+    let w = WithForce::new(unmodelled, 1.0 / FS, 1e-8, 60);
+    let sel = select(&w.runs(), &off(&rig()), &options(want), Choice::Auto, 30.0);
+    let index = |s: Structure| {
+        sel.candidates
+            .iter()
+            .position(|c| c.structure == s)
+            .unwrap()
+    };
+    let (both, valve) = (
+        index(Structure::DelayValvePiston),
+        index(Structure::DelayValve),
+    );
+    let valve_cost = sel.candidates[valve].usable().unwrap().cost;
+    assert!(sel.candidates[both].usable().unwrap().cost < valve_cost);
+    let mut candidates = sel.candidates;
+    super::select::flag_local_optima(&mut candidates);
+    assert!(
+        candidates[both].unusable.is_none(),
+        "{:?}",
+        candidates[both].unusable
+    );
+    if let Ok(fit) = candidates[both].fit.as_mut() {
+        fit.cost = valve_cost * 1.01;
+    }
+    super::select::flag_local_optima(&mut candidates);
+    let why = candidates[both].unusable.as_deref().expect("flagged");
+    assert!(why.contains("DelayValve "), "{why}");
+}
+
 /// `Structure::as_str` is the name serde gives each structure, and the
 /// manifest's `Choice` reads back every name it writes ("auto" and each
 /// structure) and refuses any other, naming the ones it accepts.
