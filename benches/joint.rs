@@ -126,6 +126,7 @@ fn bench_joint(c: &mut Criterion) {
         force_delay_start_s: 0.0,
         friction: false,
         friction_start_n: 0.0,
+        friction_smoothing_m_per_s: None,
     };
     // Fail loudly rather than time a fit that does not work.
     let fit = joint_fit(&runs, &start, &opts).unwrap();

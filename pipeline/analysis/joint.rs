@@ -109,6 +109,7 @@ pub fn joint(
         .collect();
     let mut opts = options(&campaign.identification, start, fs);
     opts.friction = evidence.iter().any(|(_, e)| e.friction_signature);
+    opts.friction_smoothing_m_per_s = campaign.joint.friction_smoothing_m_per_s;
     let choice = campaign.joint.structure;
     let band_top = fitted.iter().map(|(p, ..)| p.band_hz.1).fold(0.0, f64::max);
     let sel = joint::select(&runs, start, &opts, choice, band_top);
@@ -237,6 +238,7 @@ fn options(ident: &IdentificationPlan, start: &RigParams, fs: f64) -> JointOptio
         max_delay_s: ident.max_delay_s,
         friction: false,
         friction_start_n: 0.0,
+        friction_smoothing_m_per_s: None,
     }
 }
 

@@ -248,6 +248,30 @@ pub const FORCE_DELAY: &str = "force_delay_s";
 /// rod's side of the seals, does not read it.
 pub const FRICTION: &str = "coulomb_friction_n";
 
+/// The describing function of F tanh(v / v0) over that of F sign(v), at
+/// velocity amplitude V = `ratio` v0: the fundamental of tanh(r sin t)
+/// against sin t, g(r) = (1/2) int_0^pi tanh(r sin t) sin t dt, which
+/// tends to 1 as r grows. Simpson's rule over [0, pi/2] (the integrand is
+/// symmetric about pi/2) where r < 20; beyond, 1 - pi^2 / (24 r^2), the
+/// leading term of the deficit (int_0^inf (1 - tanh u) u du = pi^2 / 24),
+/// within 1e-5 there.
+pub fn tanh_friction_gain(ratio: f64) -> f64 {
+    if ratio.is_nan() || ratio <= 0.0 {
+        return 0.0;
+    }
+    if ratio >= 20.0 {
+        return 1.0 - std::f64::consts::PI.powi(2) / (24.0 * ratio * ratio);
+    }
+    const N: usize = 128;
+    let h = std::f64::consts::FRAC_PI_2 / N as f64;
+    let f = |t: f64| (ratio * t.sin()).tanh() * t.sin();
+    let inner: f64 = (1..N)
+        .map(|k| if k % 2 == 1 { 4.0 } else { 2.0 } * f(k as f64 * h))
+        .sum();
+    // (1/2) * 2 * int_0^{pi/2}.
+    (f(0.0) + inner + f(std::f64::consts::FRAC_PI_2)) * h / 3.0
+}
+
 /// How to fit.
 #[derive(Debug, Clone, Copy)]
 pub struct JointOptions {
@@ -272,6 +296,9 @@ pub struct JointOptions {
     /// starts (N).
     pub friction: bool,
     pub friction_start_n: f64,
+    /// The friction's zero-crossing width v0 (m/s) when stated: its
+    /// describing function is then F tanh(v / v0)'s ([`tanh_friction_gain`]).
+    pub friction_smoothing_m_per_s: Option<f64>,
 }
 
 /// The joint estimate.
@@ -845,7 +872,10 @@ fn problem(runs: &[JointRun<'_>], opts: &JointOptions) -> Result<JointProblem, F
             let hold = hold_response(opts.intersample, opts.sample_rate_hz, f);
             let coulomb = match run.amplitude_m {
                 Some(a) if opts.friction && a[i] > 0.0 => {
-                    Complex::new(0.0, 4.0 / (std::f64::consts::PI * a[i]))
+                    let smooth = opts
+                        .friction_smoothing_m_per_s
+                        .map_or(1.0, |v0| tanh_friction_gain(s.im * a[i] / v0));
+                    Complex::new(0.0, 4.0 * smooth / (std::f64::consts::PI * a[i]))
                 }
                 _ => Complex::default(),
             };

@@ -54,6 +54,13 @@ pub(super) fn check_identification(
         DelayMode::Fit => DelayPlan::Fit { max_s: d.max_s },
     };
     positive(d.max_s, &path.key("delay").key("max_s"), bad);
+    if let Some(v0) = id.joint.friction_smoothing_m_per_s {
+        positive(
+            v0,
+            &path.key("joint").key("friction_smoothing_m_per_s"),
+            bad,
+        );
+    }
     if id.model.denominator == 0 || id.model.numerator > id.model.denominator {
         bad(
             path.key("model"),

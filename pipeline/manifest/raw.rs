@@ -406,7 +406,7 @@ pub struct Identification {
 
 /// The joint grey-box fit: which nuisance dynamics it includes, and
 /// whether its rig is the one the campaign uses downstream.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[schemars(deny_unknown_fields)]
 pub struct JointSettings {
     #[serde(default)]
@@ -418,6 +418,13 @@ pub struct JointSettings {
     /// logs are then read twice, once for the rig and once to validate it.
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     pub include_validation: bool,
+    /// The seals' friction's zero-crossing width v0 (m/s), for a rig whose
+    /// runs show friction: the joint fit then takes the friction as
+    /// F tanh(v / v0), whose describing function falls short of a sign
+    /// function's where the velocity amplitude is within a few v0 of zero.
+    /// Unset: a sign function (Coulomb friction with a sharp zero crossing).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub friction_smoothing_m_per_s: Option<f64>,
 }
 
 /// Which rig CCF, validation and the sensitivity use.
