@@ -1381,13 +1381,13 @@ fn validation_runs_in_the_fit_carry_the_friction() {
 /// states, with that mode; and three linear rigs. No linear rig is given
 /// friction or stiffening, and every nonlinear one is named in a warning.
 /// For every rig parameter: within 1 % of the truth, or within 2 total stds
-/// (the issue's bar), and each friction within 10 %; except on the light
+/// (the bar), and each friction within 10 %; except on the light
 /// piston, where the describing function falls short (the piston sticks
 /// at each reversal: docs/accuracy.md): there within 1.5 %, its errors
 /// beyond its stds. Every parameter beyond 2 total stds is warned: by the
 /// structure's ambiguity or misfit, or, where no piston mass is resolved,
 /// by the friction warning's saying the stds are a lower bound. 84 % of the
-/// parameters are within 2 total stds (the issue asks 90 %; the test holds
+/// parameters are within 2 total stds (90 % is aimed at; the test holds
 /// the 80 % reached). The table it prints is docs/accuracy.md's.
 #[test]
 fn the_nonlinear_suite_is_right_or_warned() {
