@@ -228,6 +228,25 @@ pub struct Seals {
     pub coulomb_friction_n: f64,
     /// m_p (kg), when the chosen structure fits it.
     pub piston_mass_kg: Option<f64>,
+    /// The friction's zero-crossing width v0 (m/s), when the manifest
+    /// states it (`identification.joint.friction_smoothing_m_per_s`).
+    pub smoothing_velocity_m_per_s: Option<f64>,
+}
+
+/// v0 of the seals' friction F tanh(x2 / v0) a prediction simulates where
+/// the manifest states none. The describing function the joint fit then
+/// uses holds a sign function, which an ODE solver cannot step across;
+/// 1 mm/s rounds it off below the velocities a sweep reaches over nearly
+/// all of its band (4 mm at 1 Hz is 25 mm/s), where its force is then
+/// within 0.5 % of F sign(x2) (tanh(3) = 0.995).
+pub const SEAL_SMOOTHING_M_PER_S: f64 = 1e-3;
+
+impl Seals {
+    /// v0 (m/s): the stated width, else [`SEAL_SMOOTHING_M_PER_S`].
+    pub fn smoothing(&self) -> f64 {
+        self.smoothing_velocity_m_per_s
+            .unwrap_or(SEAL_SMOOTHING_M_PER_S)
+    }
 }
 
 /// The factor the seals' friction puts on x1/u at `f_hz` where the piston

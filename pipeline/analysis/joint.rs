@@ -802,9 +802,10 @@ pub fn used_estimates(r: &JointResult) -> Option<RigEstimates> {
 }
 
 /// The seals' friction (and the piston's mass with it) the joint fit found,
-/// when the campaign uses the joint estimate: what a validation run's
-/// prediction carries besides the rig.
-pub fn seals(r: &JointResult) -> Option<Seals> {
+/// when the campaign uses the joint estimate, with the zero-crossing width
+/// `smoothing` the manifest states: what a validation run's prediction
+/// carries besides the rig.
+pub fn seals(r: &JointResult, smoothing: Option<f64>) -> Option<Seals> {
     if !r.used {
         return None;
     }
@@ -817,5 +818,6 @@ pub fn seals(r: &JointResult) -> Option<Seals> {
     Some(Seals {
         coulomb_friction_n: value(joint::FRICTION)?,
         piston_mass_kg: value("piston_mass_kg"),
+        smoothing_velocity_m_per_s: smoothing,
     })
 }

@@ -137,7 +137,11 @@ pub(super) fn analyse_with(
     let rig_for_runs: RigOutcome = rig
         .as_ref()
         .map(|(p, r)| {
-            let seals = r.joint.as_ref().and_then(crate::analysis::joint::seals);
+            let smoothing = campaign.joint.friction_smoothing_m_per_s;
+            let seals = r
+                .joint
+                .as_ref()
+                .and_then(|j| crate::analysis::joint::seals(j, smoothing));
             (*p, r.covariance, seals)
         })
         .map_err(Arc::clone);

@@ -102,12 +102,8 @@ pub struct SealsPrediction {
     pub without_friction: Errors,
 }
 
-/// v0 of the simulated seals' friction F tanh(x2 / v0). The describing
-/// function the joint fit uses holds a sign function, which an ODE solver
-/// cannot step across; 1 mm/s rounds it off below the velocities a sweep
-/// reaches over nearly all of its band (4 mm at 1 Hz is 25 mm/s), where
-/// its force is then within 0.5 % of F sign(x2) (tanh(3) = 0.995).
-pub const SEAL_SMOOTHING_M_PER_S: f64 = 1e-3;
+/// Why a validation run's prediction leaves the seals' friction out.
+const MASSLESS_SEALS: &str = "the seals' friction the joint fit found is not in this prediction: with a massless specimen and no piston mass resolved, nothing moves under the friction's force balance (the prediction is the linear rig's)";
 
 /// The paper's simplified canonical form (Cn dropped "for a linear
 /// specimen", Sec. 3) checked on a validation run. Dropping Cn moves the
@@ -204,7 +200,7 @@ fn simulate_with_seals(
             piston_mass_kg: seals.piston_mass_kg,
             actuator_friction: Some(ActuatorFriction {
                 coulomb_force_n: seals.coulomb_friction_n,
-                smoothing_velocity_m_per_s: SEAL_SMOOTHING_M_PER_S,
+                smoothing_velocity_m_per_s: seals.smoothing(),
             }),
             ..Unmodelled::default()
         },
@@ -264,7 +260,17 @@ pub fn validation_run(
     // With the seals' friction the prediction is the nonlinear plant's; the
     // linear one stays for the canonical forms' check and the comparison.
     let linear_x1 = x1;
+    // The friction's force balance needs a moving mass: the specimen's or
+    // the piston's.
+    let moving = |lin: &model::LinearSpecimen, seals: &Seals| {
+        lin.mck().0 + seals.piston_mass_kg.unwrap_or(0.0) > 0.0
+    };
+    let mut note = None;
     let (x1, force, seals) = match (seals, specimen.linear()) {
+        (Some(seals), Some(lin)) if !moving(&lin, seals) => {
+            note = Some(MASSLESS_SEALS.to_string());
+            (linear_x1.clone(), force, None)
+        }
         (Some(seals), Some(lin)) => {
             let ss = model::state_space(rig_at_p, &lin);
             let (x, f) = simulate_with_seals(rig_at_p, specimen, seals, &ss, rec)?;
@@ -273,7 +279,7 @@ pub fn validation_run(
                 .0;
             let prediction = SealsPrediction {
                 coulomb_friction_n: seals.coulomb_friction_n,
-                smoothing_velocity_m_per_s: SEAL_SMOOTHING_M_PER_S,
+                smoothing_velocity_m_per_s: seals.smoothing(),
                 piston_mass_kg: seals.piston_mass_kg,
                 without_friction: without,
             };
@@ -323,7 +329,7 @@ pub fn validation_run(
             simplified_ccf: simplified_check,
             ccf_consistency: consistency,
             outlier: false,
-            note: None,
+            note,
             seals,
         },
         windows,
@@ -529,6 +535,45 @@ mod tests {
     /// are -290.85, -12.52 and 10.125 +/- 463.11j rad/s: unstable. The run
     /// must say so and not report errors of a diverging simulation, while
     /// the full model reproduces its own noise-free log.
+    /// With the seals' friction a spring's validation run has nothing to
+    /// move under it unless a piston mass was resolved: the prediction is
+    /// the linear rig's, which its own noise-free log matches, and the note
+    /// says why the friction is left out. With a piston mass the friction
+    /// is simulated, and the prediction departs from the linear log.
+    #[test]
+    fn a_massless_run_is_predicted_without_the_seals_and_says_so() {
+        let rig = model::PAPER_RIG;
+        let specimen = SpecimenModel::Spring {
+            stiffness_n_per_m: 116_640.0,
+        };
+        let signals = signals_of(&rig, &specimen);
+        let mut seals = Seals {
+            coulomb_friction_n: 8.0,
+            piston_mass_kg: None,
+            smoothing_velocity_m_per_s: None,
+        };
+        let stage = validation_run(&rig, &specimen, Some(&seals), &record(&signals)).unwrap();
+        let m = &stage.metrics;
+        assert!(m.seals.is_none());
+        assert!(m.nrmse_pct < 1e-6, "{}", m.nrmse_pct);
+        assert!(
+            m.note.as_deref().is_some_and(|n| n.contains("massless")),
+            "{:?}",
+            m.note
+        );
+        seals.piston_mass_kg = Some(0.5);
+        let stage = validation_run(&rig, &specimen, Some(&seals), &record(&signals)).unwrap();
+        let m = &stage.metrics;
+        let with = m.seals.as_ref().expect("simulated with the friction");
+        assert_eq!(
+            with.smoothing_velocity_m_per_s,
+            model::SEAL_SMOOTHING_M_PER_S
+        );
+        assert!(with.without_friction.nrmse_pct < 1e-6);
+        assert!(m.nrmse_pct > 0.1, "{}", m.nrmse_pct);
+        assert!(m.note.is_none());
+    }
+
     #[test]
     fn the_simplified_ccf_is_reported_unstable_at_the_papers_exp1() {
         let rig = model::PAPER_RIG;
