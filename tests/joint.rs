@@ -10,7 +10,7 @@
 use servoid::fit::joint::Structure;
 use servoid::manifest::simulation::load_simulation_str;
 use servoid::manifest::{Campaign, load};
-use servoid::results::{Results, RigSource};
+use servoid::results::{JointResult, Results, RigSource};
 use servoid::run::analyse;
 use servoid::run::simulate::simulate_campaign;
 
@@ -237,6 +237,32 @@ fn friction_lines(mass_kg: f64, force_n: f64) -> &'static str {
         )
         .into_boxed_str(),
     )
+}
+
+/// The seal-friction tests' campaign: the paper's rig with `unmodelled`,
+/// the 120 s campaign with servoid's default FRF settings and `joint` in
+/// `identification.joint`, seed `seed`, three SDOF validation runs;
+/// analysed.
+fn paper_friction_campaign(unmodelled: &'static str, joint: &'static str, seed: u64) -> Results {
+    let x = Extras {
+        unmodelled,
+        joint,
+        record: Record {
+            estimator: "",
+            ..Record::default()
+        },
+        ..base(None, None, None, 0.0, 0.0, 0.0)
+    };
+    identify(&(manifest(seed, &PAPER, &x) + &sdof_validation_runs([1.0; 3])))
+}
+
+/// The seals' friction the joint fit found, (value, std) in N.
+fn friction_found(joint: &JointResult) -> Option<(f64, f64)> {
+    joint
+        .parameters
+        .iter()
+        .find(|p| p.name == "coulomb_friction_n")
+        .map(|p| (p.value, p.std))
 }
 
 /// Prints a suite's table (its `header` row, then `rows`) and how many of
@@ -785,12 +811,7 @@ fn run_mismatch(rig: &Mismatch, seed: u64) -> Outcome {
             eprintln!("    {note}");
         }
     }
-    let friction = joint.and_then(|j| {
-        j.parameters
-            .iter()
-            .find(|p| p.name == "coulomb_friction_n")
-            .map(|p| (p.value, p.std))
-    });
+    let friction = joint.and_then(friction_found);
     let stiffening = results
         .warnings
         .iter()
@@ -1166,28 +1187,15 @@ fn seal_friction_is_fitted_with_the_rig() {
         ("piston_mass_kg = 0.5\n", false),
     ] {
         for seed in 0..2u64 {
-            let x = Extras {
-                unmodelled,
-                record: Record {
-                    estimator: "",
-                    ..Record::default()
-                },
-                ..base(None, None, None, 0.0, 0.0, 0.0)
-            };
-            let text = manifest(700 + seed, &PAPER, &x) + &sdof_validation_runs([1.0; 3]);
-            let results = identify(&text);
+            let results = paper_friction_campaign(unmodelled, "", 700 + seed);
             let r = results.rig.as_ref().unwrap();
             let joint = r.joint.as_ref().unwrap();
             let err = errors(&results, &PAPER);
-            let found = joint
-                .parameters
-                .iter()
-                .find(|p| p.name == "coulomb_friction_n");
+            let found = friction_found(joint);
             eprintln!(
-                "friction {friction}, seed {seed}: {:?}, errors {:+.3?} %, friction {:?}",
+                "friction {friction}, seed {seed}: {:?}, errors {:+.3?} %, friction {found:?}",
                 joint.structure,
                 err.map(|e| 100.0 * e),
-                found.map(|p| (p.value, p.std))
             );
             assert_eq!(r.source, RigSource::Joint, "{}", joint.use_note);
             for (name, e) in ["beta1", "a1b0", "a2", "a3"].iter().zip(err) {
@@ -1248,8 +1256,8 @@ fn seal_friction_is_fitted_with_the_rig() {
                 assert!(found.is_none(), "a rig without friction given {found:?}");
                 continue;
             }
-            let f = found.expect("the friction is fitted");
-            assert!((f.value / 8.0 - 1.0).abs() < 0.1, "friction {} N", f.value);
+            let (f, _) = found.expect("the friction is fitted");
+            assert!((f / 8.0 - 1.0).abs() < 0.1, "friction {f} N");
             assert!(
                 results.warnings.iter().any(|w| w.contains("seal friction")),
                 "{:#?}",
@@ -1291,25 +1299,11 @@ fn a_stated_zero_crossing_width_is_the_frictions() {
     for seed in 0..2u64 {
         let mut friction = Vec::new();
         for joint in ["", "friction_smoothing_m_per_s = 0.002"] {
-            let x = Extras {
-                unmodelled: friction_lines(0.5, 8.0),
-                joint,
-                record: Record {
-                    estimator: "",
-                    ..Record::default()
-                },
-                ..base(None, None, None, 0.0, 0.0, 0.0)
-            };
-            let text = manifest(700 + seed, &PAPER, &x) + &sdof_validation_runs([1.0; 3]);
-            let results = identify(&text);
+            let results = paper_friction_campaign(friction_lines(0.5, 8.0), joint, 700 + seed);
             let r = results.rig.as_ref().unwrap();
             let joint_result = r.joint.as_ref().unwrap();
             let err = errors(&results, &PAPER);
-            let found = joint_result
-                .parameters
-                .iter()
-                .find(|p| p.name == "coulomb_friction_n")
-                .map(|p| (p.value, p.std));
+            let found = friction_found(joint_result);
             eprintln!(
                 "seed {seed} [{joint}]: {:?}, errors {:+.3?} %, friction {found:?}",
                 joint_result.structure,
@@ -1337,25 +1331,12 @@ fn a_stated_zero_crossing_width_is_the_frictions() {
 /// +4.1, +3.3, -0.6, -1.2 % and 0.59 N).
 #[test]
 fn validation_runs_in_the_fit_carry_the_friction() {
-    let x = Extras {
-        unmodelled: friction_lines(0.5, 8.0),
-        joint: "include_validation = true",
-        record: Record {
-            estimator: "",
-            ..Record::default()
-        },
-        ..base(None, None, None, 0.0, 0.0, 0.0)
-    };
-    let text = manifest(700, &PAPER, &x) + &sdof_validation_runs([1.0; 3]);
-    let results = identify(&text);
+    let results =
+        paper_friction_campaign(friction_lines(0.5, 8.0), "include_validation = true", 700);
     let r = results.rig.as_ref().unwrap();
     let joint = r.joint.as_ref().unwrap();
     let err = errors(&results, &PAPER);
-    let found = joint
-        .parameters
-        .iter()
-        .find(|p| p.name == "coulomb_friction_n")
-        .map(|p| (p.value, p.std));
+    let found = friction_found(joint);
     eprintln!(
         "with the validation runs: {:?}, errors {:+.3?} %, friction {found:?}; {}",
         joint.structure,

@@ -179,11 +179,12 @@ pub fn linearity(
     })
 }
 
-/// A spring's force against its displacement: f = k x + c x' + m x'' + f0
-/// by least squares over the record gives k (x' and x'' by central
-/// differences: the load cell's own delay against the LVDT's, the spring's
-/// damping and its mass take them). The cubic term k3 x^3 is fitted with
-/// those four, and a drift in time, taken apart in each of [`SEGMENTS`]
+/// A spring's force against its displacement: f = k x + k3 x^3 + c x' +
+/// m x'' + f0 by least squares over the record gives k, its stiffness at
+/// rest (x' and x'' by central differences: the load cell's own delay
+/// against the LVDT's, the spring's damping and its mass take them). The
+/// cubic term k3 itself is fitted with the other four, and a drift in time,
+/// taken apart in each of [`SEGMENTS`]
 /// stretches of the record: along a sweep each stretch holds a narrow band,
 /// where anything linear between the two signals (a sensor's delay or
 /// filter, whose gain and phase change across the sweep) is a constant
@@ -299,12 +300,10 @@ fn segmented_cubic(f: &[f64], n: usize, column: &dyn Fn(usize) -> [f64; 5]) -> O
     // Each column scaled to a unit diagonal: a slow stretch's x'' is some
     // 1e-7 of its x, which Cholesky would otherwise lose. A column that is
     // zero throughout (a stretch at rest) is dropped.
-    let scale: Vec<f64> = (0..p)
-        .map(|i| match ata[(i, i)] {
-            d if d > 0.0 => 1.0 / d.sqrt(),
-            _ => 0.0,
-        })
-        .collect();
+    let scale = nalgebra::DVector::from_fn(p, |i, _| match ata[(i, i)] {
+        d if d > 0.0 => 1.0 / d.sqrt(),
+        _ => 0.0,
+    });
     let mut scaled = ata.clone();
     for r in 0..p {
         for c in 0..p {
@@ -315,13 +314,13 @@ fn segmented_cubic(f: &[f64], n: usize, column: &dyn Fn(usize) -> [f64; 5]) -> O
         }
     }
     let chol = scaled.cholesky()?;
-    let rhs = nalgebra::DVector::from_iterator(p, (0..p).map(|i| atb[i] * scale[i]));
-    let theta = chol
-        .solve(&rhs)
-        .component_mul(&nalgebra::DVector::from_vec(scale.clone()));
+    let theta = chol.solve(&atb.component_mul(&scale)).component_mul(&scale);
     let rss = (btb - 2.0 * theta.dot(&atb) + theta.dot(&(&ata * &theta))).max(0.0);
     let sigma2 = rss / (rows as f64 - p as f64);
-    let var = chol.inverse()[(cubic, cubic)] * scale[cubic] * scale[cubic] * sigma2;
+    // The cubic's diagonal element of the inverse, from one solve.
+    let mut unit = nalgebra::DVector::<f64>::zeros(p);
+    unit[cubic] = 1.0;
+    let var = chol.solve(&unit)[cubic] * scale[cubic] * scale[cubic] * sigma2;
     Some((theta[cubic], theta[cubic] / var.sqrt()))
 }
 

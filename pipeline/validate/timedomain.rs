@@ -225,21 +225,18 @@ fn simulate_with_seals(
     ))
 }
 
-/// A validation run: the identified rig at the run's P gain with its
-/// specimen, and with the seals' friction when the joint fit found it.
-pub fn validation_run(
+/// The identified rig's x1 and force with the run's specimen: its linear
+/// model, or a nonlinear specimen's simulation.
+fn rig_response(
     rig_at_p: &RigParams,
     specimen: &SpecimenModel,
-    seals: Option<&Seals>,
     rec: &Record<'_>,
-) -> Result<TimeStage, ValidateError> {
-    let fs = rec.sample_rate_hz;
-    let windows = validate::locate_windows(rec.command_m, fs);
-    let (x1, force) = match specimen.linear() {
+) -> Result<(Vec<f64>, Vec<f64>), SimError> {
+    match specimen.linear() {
         Some(lin) => {
             let mut out = simulate(&model::state_space(rig_at_p, &lin), rec, 0.0)?;
             let f = out.pop().expect("two outputs");
-            (out.pop().expect("two outputs"), f)
+            Ok((out.pop().expect("two outputs"), f))
         }
         None => {
             let spec = PlantSpec {
@@ -250,45 +247,72 @@ pub fn validation_run(
             let r = plant::simulate(
                 &spec,
                 rec.command_m,
-                fs,
+                rec.sample_rate_hz,
                 [0.0, 0.0],
                 Integrator::Rk4 { substeps: 8 },
             )?;
-            (r.x1_m, r.force_n)
+            Ok((r.x1_m, r.force_n))
         }
+    }
+}
+
+/// A prediction with the seals' friction: x1, the force and what it
+/// records beside them.
+type WithSeals = (Vec<f64>, Vec<f64>, SealsPrediction);
+
+/// The prediction with the seals' friction, where there is one to make (a
+/// linear specimen and friction found), with the errors of the linear
+/// prediction `linear_x1` beside it; for a run with nothing to move under
+/// the friction, none and the note why.
+fn seals_response(
+    rig_at_p: &RigParams,
+    specimen: &SpecimenModel,
+    seals: Option<&Seals>,
+    linear_x1: &[f64],
+    rec: &Record<'_>,
+) -> Result<(Option<WithSeals>, Option<String>), ValidateError> {
+    let (Some(seals), Some(lin)) = (seals, specimen.linear()) else {
+        return Ok((None, None));
     };
-    // With the seals' friction the prediction is the nonlinear plant's; the
-    // linear one stays for the canonical forms' check and the comparison.
-    let linear_x1 = x1;
     // The friction's force balance needs a moving mass: the specimen's or
     // the piston's.
-    let moving = |lin: &model::LinearSpecimen, seals: &Seals| {
-        lin.mck().0 + seals.piston_mass_kg.unwrap_or(0.0) > 0.0
+    if lin.mck().0 + seals.piston_mass_kg.unwrap_or(0.0) <= 0.0 {
+        return Ok((None, Some(MASSLESS_SEALS.to_string())));
+    }
+    let ss = model::state_space(rig_at_p, &lin);
+    let (x, f) = simulate_with_seals(rig_at_p, specimen, seals, &ss, rec)?;
+    let without = compare(rec.displacement_m, linear_x1, rec.sample_rate_hz, &[])
+        .ok_or(ValidateError::ZeroDisplacement)?
+        .0;
+    let prediction = SealsPrediction {
+        coulomb_friction_n: seals.coulomb_friction_n,
+        smoothing_velocity_m_per_s: seals.smoothing(),
+        piston_mass_kg: seals.piston_mass_kg,
+        without_friction: without,
     };
-    let mut note = None;
-    let (x1, force, seals) = match (seals, specimen.linear()) {
-        (Some(seals), Some(lin)) if !moving(&lin, seals) => {
-            note = Some(MASSLESS_SEALS.to_string());
-            (linear_x1.clone(), force, None)
-        }
-        (Some(seals), Some(lin)) => {
-            let ss = model::state_space(rig_at_p, &lin);
-            let (x, f) = simulate_with_seals(rig_at_p, specimen, seals, &ss, rec)?;
-            let without = compare(rec.displacement_m, &linear_x1, fs, &[])
-                .ok_or(ValidateError::ZeroDisplacement)?
-                .0;
-            let prediction = SealsPrediction {
-                coulomb_friction_n: seals.coulomb_friction_n,
-                smoothing_velocity_m_per_s: seals.smoothing(),
-                piston_mass_kg: seals.piston_mass_kg,
-                without_friction: without,
-            };
-            (x, f, Some(prediction))
-        }
-        _ => (linear_x1.clone(), force, None),
+    Ok((Some((x, f, prediction)), None))
+}
+
+/// A validation run: the identified rig at the run's P gain with its
+/// specimen, and with the seals' friction when the joint fit found it.
+pub fn validation_run(
+    rig_at_p: &RigParams,
+    specimen: &SpecimenModel,
+    seals: Option<&Seals>,
+    rec: &Record<'_>,
+) -> Result<TimeStage, ValidateError> {
+    let fs = rec.sample_rate_hz;
+    let windows = validate::locate_windows(rec.command_m, fs);
+    // With the seals' friction the prediction is the nonlinear plant's; the
+    // linear one stays for the canonical forms' check and the comparison.
+    let (linear_x1, linear_force) = rig_response(rig_at_p, specimen, rec)?;
+    let (with_seals, note) = seals_response(rig_at_p, specimen, seals, &linear_x1, rec)?;
+    let (x1, force) = match &with_seals {
+        Some((x, f, _)) => (x.as_slice(), f.as_slice()),
+        None => (linear_x1.as_slice(), linear_force.as_slice()),
     };
     let (whole, per_window, offset, centred) =
-        compare(rec.displacement_m, &x1, fs, &windows).ok_or(ValidateError::ZeroDisplacement)?;
+        compare(rec.displacement_m, x1, fs, &windows).ok_or(ValidateError::ZeroDisplacement)?;
     let force_errors = rec.force_n.and_then(|f| {
         let n = f.len().min(force.len());
         let offset = (0..n).map(|k| f[k] - force[k]).sum::<f64>() / n.max(1) as f64;
@@ -313,6 +337,10 @@ pub fn validation_run(
     let (simplified_check, consistency, simplified) = match canonical {
         Some(c) => (Some(c.check), c.consistency, c.x1_simplified),
         None => (None, None, None),
+    };
+    let (x1, seals) = match with_seals {
+        Some((x, _, prediction)) => (x, Some(prediction)),
+        None => (linear_x1, None),
     };
     Ok(TimeStage {
         metrics: ValidationMetrics {
