@@ -249,17 +249,53 @@ impl Seals {
     }
 }
 
+/// The describing function of F tanh(v / v0) over that of F sign(v), at
+/// velocity amplitude V = `ratio` v0: the fundamental of tanh(r sin t)
+/// against sin t, g(r) = (1/2) int_0^pi tanh(r sin t) sin t dt, which
+/// tends to 1 as r grows. Simpson's rule over [0, pi/2] (the integrand is
+/// symmetric about pi/2) where r < 20; beyond, 1 - pi^2 / (24 r^2), the
+/// leading term of the deficit (int_0^inf (1 - tanh u) u du = pi^2 / 24),
+/// within 1e-5 there.
+pub fn tanh_friction_gain(ratio: f64) -> f64 {
+    if ratio.is_nan() || ratio <= 0.0 {
+        return 0.0;
+    }
+    if ratio >= 20.0 {
+        return 1.0 - std::f64::consts::PI.powi(2) / (24.0 * ratio * ratio);
+    }
+    const N: usize = 128;
+    let h = std::f64::consts::FRAC_PI_2 / N as f64;
+    let f = |t: f64| (ratio * t.sin()).tanh() * t.sin();
+    let inner: f64 = (1..N)
+        .map(|k| if k % 2 == 1 { 4.0 } else { 2.0 } * f(k as f64 * h))
+        .sum();
+    // (1/2) * 2 * int_0^{pi/2}.
+    (f(0.0) + inner + f(std::f64::consts::FRAC_PI_2)) * h / 3.0
+}
+
+/// Coulomb friction's describing function per newton of F, as the load it
+/// adds to the piston's S(s) at `f_hz` (imaginary: a damper) where the
+/// piston moves with displacement amplitude X = `amplitude_m`: 4 / (pi X)
+/// for F sign(x1'), times [`tanh_friction_gain`] at V = w X for
+/// F tanh(x1' / v0) with the width `smoothing_m_per_s` stated.
+pub fn coulomb_load_per_newton(f_hz: f64, amplitude_m: f64, smoothing_m_per_s: Option<f64>) -> f64 {
+    let w = 2.0 * std::f64::consts::PI * f_hz;
+    let gain = smoothing_m_per_s.map_or(1.0, |v0| tanh_friction_gain(w * amplitude_m / v0));
+    4.0 * gain / (std::f64::consts::PI * amplitude_m)
+}
+
 /// The factor the seals' friction puts on x1/u at `f_hz` where the piston
 /// moves with displacement amplitude `amplitude_m`. Its describing function
-/// 4 F / (pi X) j adds to the specimen's S(s) = m s^2 + c s + k
-/// (docs/model.md), so with D = (s + beta1)((s + a3) S + a2 s) + a1b0, the
-/// denominator of Eqs. 12-17, x1/u = a1b0 / D becomes
-/// a1b0 / (D + (s + beta1)(s + a3) 4 F j / (pi X)): the factor is D over
-/// that. It tends to 1 as X grows and the friction weighs less.
+/// ([`coulomb_load_per_newton`] times F, j) adds to the specimen's
+/// S(s) = m s^2 + c s + k (docs/model.md), so with
+/// D = (s + beta1)((s + a3) S + a2 s) + a1b0, the denominator of Eqs.
+/// 12-17, x1/u = a1b0 / D becomes a1b0 / (D + (s + beta1)(s + a3) j F N),
+/// N that load per newton: the factor is D over that. It tends to 1 as X
+/// grows and the friction weighs less.
 pub fn friction_factor(
     rig: &RigParams,
     specimen: &LinearSpecimen,
-    coulomb_n: f64,
+    seals: &Seals,
     amplitude_m: f64,
     f_hz: f64,
 ) -> Complex<f64> {
@@ -268,7 +304,11 @@ pub fn friction_factor(
     let sp = s * s * m + s * c + k;
     let (b1, a3) = (rig.beta1_per_s, rig.a3_per_s);
     let d = (s + b1) * ((s + a3) * sp + s * rig.a2_n_per_m) + rig.a1b0_n_per_m_s2;
-    let friction = Complex::new(0.0, 4.0 * coulomb_n / (std::f64::consts::PI * amplitude_m));
+    let friction = Complex::new(
+        0.0,
+        seals.coulomb_friction_n
+            * coulomb_load_per_newton(f_hz, amplitude_m, seals.smoothing_velocity_m_per_s),
+    );
     d / (d + (s + b1) * (s + a3) * friction)
 }
 

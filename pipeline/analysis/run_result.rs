@@ -307,7 +307,7 @@ pub fn compensate(
             plant,
             &c,
             (rig_at_p, specimen),
-            seals.coulomb_friction_n,
+            seals,
             &[peak_desired, peak_desired / 10.0, peak_desired / 100.0],
             band,
             fs,

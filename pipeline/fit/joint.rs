@@ -50,7 +50,7 @@ use super::lm::{LevenbergMarquardt, Normal};
 use super::problem::hold_response;
 use super::settings::Intersample;
 use super::{FitError, covariance, covariance_from_normal};
-use crate::model::{LinearSpecimen, RigParams};
+use crate::model::{self, LinearSpecimen, RigParams};
 use rayon::prelude::*;
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
@@ -248,30 +248,6 @@ pub const FORCE_DELAY: &str = "force_delay_s";
 /// rod's side of the seals, does not read it.
 pub const FRICTION: &str = "coulomb_friction_n";
 
-/// The describing function of F tanh(v / v0) over that of F sign(v), at
-/// velocity amplitude V = `ratio` v0: the fundamental of tanh(r sin t)
-/// against sin t, g(r) = (1/2) int_0^pi tanh(r sin t) sin t dt, which
-/// tends to 1 as r grows. Simpson's rule over [0, pi/2] (the integrand is
-/// symmetric about pi/2) where r < 20; beyond, 1 - pi^2 / (24 r^2), the
-/// leading term of the deficit (int_0^inf (1 - tanh u) u du = pi^2 / 24),
-/// within 1e-5 there.
-pub fn tanh_friction_gain(ratio: f64) -> f64 {
-    if ratio.is_nan() || ratio <= 0.0 {
-        return 0.0;
-    }
-    if ratio >= 20.0 {
-        return 1.0 - std::f64::consts::PI.powi(2) / (24.0 * ratio * ratio);
-    }
-    const N: usize = 128;
-    let h = std::f64::consts::FRAC_PI_2 / N as f64;
-    let f = |t: f64| (ratio * t.sin()).tanh() * t.sin();
-    let inner: f64 = (1..N)
-        .map(|k| if k % 2 == 1 { 4.0 } else { 2.0 } * f(k as f64 * h))
-        .sum();
-    // (1/2) * 2 * int_0^{pi/2}.
-    (f(0.0) + inner + f(std::f64::consts::FRAC_PI_2)) * h / 3.0
-}
-
 /// How to fit.
 #[derive(Debug, Clone, Copy)]
 pub struct JointOptions {
@@ -297,7 +273,8 @@ pub struct JointOptions {
     pub friction: bool,
     pub friction_start_n: f64,
     /// The friction's zero-crossing width v0 (m/s) when stated: its
-    /// describing function is then F tanh(v / v0)'s ([`tanh_friction_gain`]).
+    /// describing function is then F tanh(v / v0)'s
+    /// ([`model::coulomb_load_per_newton`]).
     pub friction_smoothing_m_per_s: Option<f64>,
 }
 
@@ -871,12 +848,10 @@ fn problem(runs: &[JointRun<'_>], opts: &JointOptions) -> Result<JointProblem, F
             let sp = s * s * m + s * c + (k + stiffening);
             let hold = hold_response(opts.intersample, opts.sample_rate_hz, f);
             let coulomb = match run.amplitude_m {
-                Some(a) if opts.friction && a[i] > 0.0 => {
-                    let smooth = opts
-                        .friction_smoothing_m_per_s
-                        .map_or(1.0, |v0| tanh_friction_gain(s.im * a[i] / v0));
-                    Complex::new(0.0, 4.0 * smooth / (std::f64::consts::PI * a[i]))
-                }
+                Some(a) if opts.friction && a[i] > 0.0 => Complex::new(
+                    0.0,
+                    model::coulomb_load_per_newton(f, a[i], opts.friction_smoothing_m_per_s),
+                ),
                 _ => Complex::default(),
             };
             bins.push(Bin {

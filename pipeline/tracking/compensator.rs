@@ -360,7 +360,7 @@ pub struct SealsTracking {
     pub compensated: BandTracking,
 }
 
-/// What the seals' friction `coulomb_n` leaves of the compensator's
+/// What the seals' friction leaves of the compensator's
 /// tracking at each of `amplitudes_m`: the compensator inverts the linear
 /// plant, and the friction multiplies x1/u by [`model::friction_factor`]
 /// (its describing function at that amplitude), which grows as the
@@ -370,7 +370,7 @@ pub fn seals_tracking(
     plant: &TransferFunction,
     comp: &Compensator,
     (rig, specimen): (&RigParams, &LinearSpecimen),
-    coulomb_n: f64,
+    seals: &model::Seals,
     amplitudes_m: &[f64],
     band_hz: (f64, f64),
     fs: f64,
@@ -383,7 +383,7 @@ pub fn seals_tracking(
                 |f| {
                     held_response(plant, f, fs)
                         * comp.response(f)
-                        * model::friction_factor(rig, specimen, coulomb_n, a, f)
+                        * model::friction_factor(rig, specimen, seals, a, f)
                 },
                 band_hz,
                 fs,

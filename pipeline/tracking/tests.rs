@@ -530,7 +530,12 @@ fn the_friction_factor_is_what_the_nonlinear_plant_gives_at_a_sine() {
             smoothing_velocity_m_per_s: 5e-5,
         }));
         let simulated = with / without;
-        let factor = model::friction_factor(&PAPER_RIG, &linear, 8.0, with.norm(), f);
+        let seals = model::Seals {
+            coulomb_friction_n: 8.0,
+            piston_mass_kg: None,
+            smoothing_velocity_m_per_s: None,
+        };
+        let factor = model::friction_factor(&PAPER_RIG, &linear, &seals, with.norm(), f);
         moved.push((Complex::new(1.0, 0.0) - simulated).norm());
         // What the describing function misses of the friction's effect.
         let missed = (factor - simulated).norm() / (Complex::new(1.0, 0.0) - simulated).norm();

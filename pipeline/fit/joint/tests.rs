@@ -923,9 +923,9 @@ fn the_tanh_frictions_gain_is_its_fundamental() {
             * 2.0
             / n as f64;
         let want = b1 * std::f64::consts::PI / 4.0;
-        let got = tanh_friction_gain(r);
+        let got = crate::model::tanh_friction_gain(r);
         assert!((got - want).abs() < 1e-5, "r = {r}: {got} against {want}");
     }
-    assert_eq!(tanh_friction_gain(0.0), 0.0);
-    assert!((tanh_friction_gain(1e6) - 1.0).abs() < 1e-12);
+    assert_eq!(crate::model::tanh_friction_gain(0.0), 0.0);
+    assert!((crate::model::tanh_friction_gain(1e6) - 1.0).abs() < 1e-12);
 }
