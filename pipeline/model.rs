@@ -231,6 +231,8 @@ pub struct Seals {
     /// The friction's zero-crossing width v0 (m/s), when the manifest
     /// states it (`identification.joint.friction_smoothing_m_per_s`).
     pub smoothing_velocity_m_per_s: Option<f64>,
+    /// The seals' viscous damping c_v (N s/m), when the data took it.
+    pub seal_damping_ns_per_m: Option<f64>,
 }
 
 /// v0 of the seals' friction F tanh(x2 / v0) a prediction simulates where
@@ -286,12 +288,13 @@ pub fn coulomb_load_per_newton(f_hz: f64, amplitude_m: f64, smoothing_m_per_s: O
 
 /// The factor the seals' friction puts on x1/u at `f_hz` where the piston
 /// moves with displacement amplitude `amplitude_m`. Its describing function
-/// ([`coulomb_load_per_newton`] times F, j) adds to the specimen's
-/// S(s) = m s^2 + c s + k (docs/model.md), so with
+/// ([`coulomb_load_per_newton`] times F, j) and its viscous part c_v s
+/// add to the specimen's S(s) = m s^2 + c s + k (docs/model.md), so with
 /// D = (s + beta1)((s + a3) S + a2 s) + a1b0, the denominator of Eqs.
-/// 12-17, x1/u = a1b0 / D becomes a1b0 / (D + (s + beta1)(s + a3) j F N),
-/// N that load per newton: the factor is D over that. It tends to 1 as X
-/// grows and the friction weighs less.
+/// 12-17, x1/u = a1b0 / D becomes a1b0 / (D + (s + beta1)(s + a3) L),
+/// L = j F N + c_v s with N that load per newton: the factor is D over
+/// that. Its Coulomb part tends to 1 as X grows and the friction weighs
+/// less.
 pub fn friction_factor(
     rig: &RigParams,
     specimen: &LinearSpecimen,
@@ -308,7 +311,7 @@ pub fn friction_factor(
         0.0,
         seals.coulomb_friction_n
             * coulomb_load_per_newton(f_hz, amplitude_m, seals.smoothing_velocity_m_per_s),
-    );
+    ) + s * seals.seal_damping_ns_per_m.unwrap_or(0.0);
     d / (d + (s + b1) * (s + a3) * friction)
 }
 

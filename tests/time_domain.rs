@@ -177,6 +177,7 @@ fn plant_spec(rig: RigParams, specimen: LinearSpecimen, piston: [f64; 3]) -> Pla
             actuator_friction: Some(ActuatorFriction {
                 coulomb_force_n: piston[1],
                 smoothing_velocity_m_per_s: piston[2],
+                viscous_ns_per_m: 0.0,
             }),
             ..Unmodelled::default()
         },

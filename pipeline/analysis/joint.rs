@@ -239,6 +239,7 @@ fn options(ident: &IdentificationPlan, start: &RigParams, fs: f64) -> JointOptio
         friction: false,
         friction_start_n: 0.0,
         friction_smoothing_m_per_s: None,
+        seal_damping: false,
     }
 }
 
@@ -331,8 +332,17 @@ fn friction_note(fit: &JointFit, ids: &[String]) -> Option<String> {
     } else {
         UNRESOLVED_PISTON
     };
+    let damping = fit
+        .seal_damping_ns_per_m
+        .zip(fit.names.iter().position(|n| *n == joint::SEAL_DAMPING))
+        .map_or(String::new(), |(c, k)| {
+            format!(
+                ", with the seals' viscous damping, which the data take: c_v = {c:.1} +- {:.1} N s/m",
+                fit.std[k]
+            )
+        });
     Some(format!(
-        "seal friction: the rig is not linear at this amplitude, its displacement holding odd harmonics of the command (friction's signature), so the joint fit models the piston seals' Coulomb friction by its describing function at each bin's amplitude, over {}: F = {:.3} +- {:.3} N. The rig's parameters are the actuator's with that friction; its linear response at another amplitude differs (the friction acts as a damper 4 F / (pi V) at velocity amplitude V), and a small command is tracked worse than the model without friction predicts{unresolved}",
+        "seal friction: the rig is not linear at this amplitude, its displacement holding odd harmonics of the command (friction's signature), so the joint fit models the piston seals' Coulomb friction by its describing function at each bin's amplitude, over {}: F = {:.3} +- {:.3} N{damping}. The rig's parameters are the actuator's with that friction; its linear response at another amplitude differs (the friction acts as a damper 4 F / (pi V) at velocity amplitude V), and a small command is tracked worse than the model without friction predicts{unresolved}",
         ids.join(", "),
         f,
         fit.std[k]
@@ -819,5 +829,6 @@ pub fn seals(r: &JointResult, smoothing: Option<f64>) -> Option<Seals> {
         coulomb_friction_n: value(joint::FRICTION)?,
         piston_mass_kg: value("piston_mass_kg"),
         smoothing_velocity_m_per_s: smoothing,
+        seal_damping_ns_per_m: value(joint::SEAL_DAMPING),
     })
 }

@@ -248,6 +248,12 @@ pub const FORCE_DELAY: &str = "force_delay_s";
 /// rod's side of the seals, does not read it.
 pub const FRICTION: &str = "coulomb_friction_n";
 
+/// The name of the seals' viscous damping (N s/m), fitted after the
+/// friction when the data take it: a force c_v x1' on the piston beside
+/// F sign(x1'), which adds c_v s to the piston's load S(s), like a
+/// specimen's damping shared by every run.
+pub const SEAL_DAMPING: &str = "seal_damping_ns_per_m";
+
 /// How to fit.
 #[derive(Debug, Clone, Copy)]
 pub struct JointOptions {
@@ -276,6 +282,8 @@ pub struct JointOptions {
     /// describing function is then F tanh(v / v0)'s
     /// ([`model::coulomb_load_per_newton`]).
     pub friction_smoothing_m_per_s: Option<f64>,
+    /// Whether the seals' viscous damping is fitted with the friction.
+    pub seal_damping: bool,
 }
 
 /// The joint estimate.
@@ -295,6 +303,8 @@ pub struct JointFit {
     pub force_delay_s: Option<f64>,
     /// The piston's Coulomb seal friction (N), when fitted.
     pub friction_n: Option<f64>,
+    /// The seals' viscous damping (N s/m), when fitted.
+    pub seal_damping_ns_per_m: Option<f64>,
     /// beta1, a1b0, a2, a3, then delay (s), valve frequency (Hz) and
     /// damping as the structure has them, then the force FRFs' delay.
     pub params: Vec<f64>,
@@ -323,6 +333,14 @@ impl JointFit {
     /// parametrisation), a delay at its upper bound, or a mode with
     /// damping outside 0.05-5 or far above the band (20 times its top),
     /// where it is only a delay.
+    /// The seals' viscous damping and its std where it is more than two
+    /// stds below zero: a force that feeds the piston's motion.
+    pub fn seal_damping_driving(&self) -> Option<(f64, f64)> {
+        let c = self.seal_damping_ns_per_m?;
+        let k = self.names.iter().position(|n| *n == SEAL_DAMPING)?;
+        (c < -2.0 * self.std[k]).then_some((c, self.std[k]))
+    }
+
     pub fn unphysical(&self, band_top_hz: f64, max_delay_s: f64) -> Option<String> {
         for (i, name) in self.structure.names().iter().enumerate().take(4) {
             let (v, sd) = (self.params[i], self.std[i]);
@@ -365,6 +383,11 @@ impl JointFit {
             return Some(format!(
                 "{FRICTION} = {f:.3} N with std {:.3}: friction that drives the piston",
                 self.std[k]
+            ));
+        }
+        if let Some((c, sd)) = self.seal_damping_driving() {
+            return Some(format!(
+                "{SEAL_DAMPING} = {c:.3} N s/m with std {sd:.3}: damping that drives the piston"
             ));
         }
         if let Some((hz, zeta)) = self.mode {
@@ -423,6 +446,8 @@ struct JointProblem {
     force_delay: Option<usize>,
     /// Where the friction is in theta, when it is fitted.
     friction: Option<usize>,
+    /// Where the seals' viscous damping is in theta, when it is fitted.
+    seal_damping: Option<usize>,
     /// The sample period (s): the delay's unit in theta.
     period_s: f64,
 }
@@ -433,9 +458,9 @@ struct BinEval {
     grad: [Complex<f64>; MAX_PARAMS],
 }
 
-/// The most parameters a fit has: the valve structure's seven, the force
-/// FRFs' delay and the friction.
-const MAX_PARAMS: usize = 10;
+/// The most parameters a fit has: the valve-and-piston structure's eight,
+/// the force FRFs' delay, the friction and the seals' damping.
+const MAX_PARAMS: usize = 11;
 
 /// The physical values at a point theta, computed once per pass over the
 /// bins.
@@ -455,6 +480,8 @@ struct Point {
     mp: f64,
     /// The Coulomb friction (N), 0 when not fitted.
     fc: f64,
+    /// The seals' viscous damping (N s/m), 0 when not fitted.
+    cv: f64,
 }
 
 /// Bins per chunk of a parallel pass: each chunk's sums are formed on one
@@ -467,6 +494,7 @@ impl JointProblem {
         self.structure.n_params()
             + usize::from(self.force_delay.is_some())
             + usize::from(self.friction.is_some())
+            + usize::from(self.seal_damping.is_some())
     }
 
     fn names(&self) -> Vec<&'static str> {
@@ -476,6 +504,9 @@ impl JointProblem {
         }
         if self.friction.is_some() {
             names.push(FRICTION);
+        }
+        if self.seal_damping.is_some() {
+            names.push(SEAL_DAMPING);
         }
         names
     }
@@ -500,6 +531,7 @@ impl JointProblem {
             structure: self.structure,
             force_delay: self.force_delay,
             friction: self.friction,
+            seal_damping: self.seal_damping,
             period_s: self.period_s,
         }
     }
@@ -526,6 +558,7 @@ impl JointProblem {
                 0.0
             },
             fc: self.friction.map_or(0.0, |k| theta[k]),
+            cv: self.seal_damping.map_or(0.0, |k| theta[k]),
         }
     }
 
@@ -543,6 +576,9 @@ impl JointProblem {
         }
         if x.fc != 0.0 {
             sp += bin.coulomb * x.fc;
+        }
+        if x.cv != 0.0 {
+            sp += s * x.cv;
         }
         let q = (s + x.a3) * sp + s * x.a2;
         let a = x.a1b0 * run.p_ratio;
@@ -603,6 +639,9 @@ impl JointProblem {
             }
             if let Some(k) = self.friction {
                 grad[k] = -h_d * sb * (s + x.a3) * bin.coulomb;
+            }
+            if let Some(k) = self.seal_damping {
+                grad[k] = -h_d * sb * (s + x.a3) * s;
             }
             if let (Some((wv, zeta)), Some(place)) = (x.mode, place) {
                 // wv dV/dwv / V and zeta dV/dzeta / V, times the
@@ -678,6 +717,8 @@ impl JointProblem {
             7 => self.normal_p::<7>(theta),
             8 => self.normal_p::<8>(theta),
             9 => self.normal_p::<9>(theta),
+            10 => self.normal_p::<10>(theta),
+            11 => self.normal_p::<11>(theta),
             p => unreachable!("{p} parameters"),
         }
     }
@@ -874,6 +915,7 @@ fn problem(runs: &[JointRun<'_>], opts: &JointOptions) -> Result<JointProblem, F
         (has_force && opts.structure != Structure::Plain).then(|| opts.structure.n_params());
     let friction = (opts.friction && runs.iter().any(|r| r.amplitude_m.is_some()))
         .then(|| opts.structure.n_params() + usize::from(force_delay.is_some()));
+    let seal_damping = friction.filter(|_| opts.seal_damping).map(|k| k + 1);
     Ok(JointProblem {
         bins,
         runs: models,
@@ -882,6 +924,7 @@ fn problem(runs: &[JointRun<'_>], opts: &JointOptions) -> Result<JointProblem, F
         structure: opts.structure,
         force_delay,
         friction,
+        seal_damping,
         period_s: 1.0 / opts.sample_rate_hz,
     })
 }
@@ -999,6 +1042,9 @@ impl Leg {
         }
         if problem.friction.is_some() {
             theta0.push(opts.friction_start_n);
+        }
+        if problem.seal_damping.is_some() {
+            theta0.push(0.0);
         }
         if !theta0.iter().all(|t| t.is_finite()) {
             return Err(FitError::NoSolution);
@@ -1133,6 +1179,10 @@ fn finish(
         params.push(theta[k]);
         factors.push(1.0);
     }
+    if let Some(k) = problem.seal_damping {
+        params.push(theta[k]);
+        factors.push(1.0);
+    }
     let covariance = DMatrix::from_fn(p, p, |i, j| cov_theta[(i, j)] * factors[i] * factors[j]);
     let std = (0..p).map(|i| covariance[(i, i)].sqrt()).collect();
     let (adequacy, per_run) = problem.adequacy(&theta);
@@ -1157,6 +1207,7 @@ fn finish(
             .then(|| params[opts.structure.piston_index()]),
         force_delay_s: problem.force_delay.map(|k| params[k]),
         friction_n: problem.friction.map(|k| params[k]),
+        seal_damping_ns_per_m: problem.seal_damping.map(|k| params[k]),
         params,
         names,
         covariance,

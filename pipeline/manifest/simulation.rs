@@ -184,6 +184,9 @@ pub struct ActuatorFrictionSpec {
     pub coulomb_force_n: f64,
     /// Velocity (m/s) over which the friction's sign is smoothed (tanh).
     pub smoothing_velocity_m_per_s: f64,
+    /// Viscous damping of the seals (N s/m), beside the Coulomb force.
+    #[serde(default)]
+    pub viscous_ns_per_m: f64,
 }
 
 /// A second-order servo-valve mode.
@@ -519,6 +522,12 @@ fn check_rig(r: &SimRig, bad: &mut impl FnMut(KeyPath, String)) {
             &fp.key("smoothing_velocity_m_per_s"),
             bad,
         );
+        if !(fr.viscous_ns_per_m.is_finite() && fr.viscous_ns_per_m >= 0.0) {
+            bad(
+                fp.key("viscous_ns_per_m"),
+                format!("must be zero or positive (got {})", fr.viscous_ns_per_m),
+            );
+        }
     }
     if let Some(m) = u.piston_mass_kg {
         positive(m, &up.key("piston_mass_kg"), bad);
@@ -709,6 +718,7 @@ fn unmodelled(u: Option<&UnmodelledSpec>) -> Unmodelled {
         actuator_friction: u.actuator_friction.as_ref().map(|f| ActuatorFriction {
             coulomb_force_n: f.coulomb_force_n,
             smoothing_velocity_m_per_s: f.smoothing_velocity_m_per_s,
+            viscous_ns_per_m: f.viscous_ns_per_m,
         }),
     }
 }

@@ -74,13 +74,21 @@ pub struct Unmodelled {
     pub actuator_friction: Option<ActuatorFriction>,
 }
 
-/// Coulomb friction on the piston, F tanh(x2 / v0) (the tanh keeps the ODE
-/// smooth, as the friction specimen's does).
+/// Friction on the piston, F tanh(x2 / v0) + c_v x2: Coulomb (the tanh
+/// keeps the ODE smooth, as the friction specimen's does) with a viscous
+/// part.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[schemars(deny_unknown_fields)]
 pub struct ActuatorFriction {
     pub coulomb_force_n: f64,
     pub smoothing_velocity_m_per_s: f64,
+    /// c_v (N s/m), the seals' viscous damping; none unless given.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub viscous_ns_per_m: f64,
+}
+
+fn is_zero(v: &f64) -> bool {
+    *v == 0.0
 }
 
 impl Unmodelled {
@@ -148,8 +156,9 @@ pub fn validate(spec: &PlantSpec) -> Result<(), SimError> {
             "smoothing_velocity_m_per_s",
             fr.smoothing_velocity_m_per_s,
         )?;
+        require_non_negative("actuator friction", "viscous_ns_per_m", fr.viscous_ns_per_m)?;
         // At rest the tanh is a viscous damper of slope F / v0.
-        c += fr.coulomb_force_n / fr.smoothing_velocity_m_per_s;
+        c += fr.coulomb_force_n / fr.smoothing_velocity_m_per_s + fr.viscous_ns_per_m;
     }
     if m + spec.unmodelled.piston_mass_kg.unwrap_or(0.0) == 0.0 && k + rig.a2_n_per_m <= 0.0 {
         // The massless model x1' = (r - a3 k x1) / (k + a2) is the limit of
@@ -409,6 +418,7 @@ impl<'a> NonlinearPlant<'a> {
     fn actuator_friction_n(&self, x2: f64) -> f64 {
         self.spec.unmodelled.actuator_friction.map_or(0.0, |fr| {
             fr.coulomb_force_n * (x2 / fr.smoothing_velocity_m_per_s).tanh()
+                + fr.viscous_ns_per_m * x2
         })
     }
 
@@ -993,6 +1003,7 @@ mod tests {
             actuator_friction: Some(ActuatorFriction {
                 coulomb_force_n: coulomb,
                 smoothing_velocity_m_per_s: v0,
+                viscous_ns_per_m: 0.0,
             }),
             ..Default::default()
         };

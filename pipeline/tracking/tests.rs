@@ -528,12 +528,14 @@ fn the_friction_factor_is_what_the_nonlinear_plant_gives_at_a_sine() {
         let with = run(Some(ActuatorFriction {
             coulomb_force_n: 8.0,
             smoothing_velocity_m_per_s: 5e-5,
+            viscous_ns_per_m: 0.0,
         }));
         let simulated = with / without;
         let seals = model::Seals {
             coulomb_friction_n: 8.0,
             piston_mass_kg: None,
             smoothing_velocity_m_per_s: None,
+            seal_damping_ns_per_m: None,
         };
         let factor = model::friction_factor(&PAPER_RIG, &linear, &seals, with.norm(), f);
         moved.push((Complex::new(1.0, 0.0) - simulated).norm());

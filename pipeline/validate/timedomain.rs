@@ -201,6 +201,8 @@ fn simulate_with_seals(
             actuator_friction: Some(ActuatorFriction {
                 coulomb_force_n: seals.coulomb_friction_n,
                 smoothing_velocity_m_per_s: seals.smoothing(),
+                // A damping fitted below zero within its noise is none.
+                viscous_ns_per_m: seals.seal_damping_ns_per_m.unwrap_or(0.0).max(0.0),
             }),
             ..Unmodelled::default()
         },
@@ -579,6 +581,7 @@ mod tests {
             coulomb_friction_n: 8.0,
             piston_mass_kg: None,
             smoothing_velocity_m_per_s: None,
+            seal_damping_ns_per_m: None,
         };
         let stage = validation_run(&rig, &specimen, Some(&seals), &record(&signals)).unwrap();
         let m = &stage.metrics;

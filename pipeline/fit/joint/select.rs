@@ -361,7 +361,64 @@ pub struct Moved {
 /// Fit the structures to `runs` from the sequential estimate `start` and
 /// choose among them. `opts` gives everything but the structure and the
 /// starts; `band_top_hz` bounds a physical mode.
+///
+/// Where the friction is fitted, the seals' viscous damping c_v is tried
+/// on the chosen structure, and where the data take it every structure is
+/// fitted and chosen again with it. Tried on every structure from the
+/// start, c_v takes over what the describing function leaves or a mode
+/// explains (on simulated rigs with 20 N of friction and no damping it
+/// came out 130 N s/m in the structures without the loop's mode, and they
+/// were chosen); tried only on the structure the undamped choice made, a
+/// rig that damps takes a mode for it first (docs/accuracy.md).
 pub fn select(
+    runs: &[JointRun<'_>],
+    start: &RigParams,
+    opts: &JointOptions,
+    choice: Choice,
+    band_top_hz: f64,
+) -> Selection {
+    let undamped = select_among(runs, start, opts, choice, band_top_hz);
+    if opts.seal_damping || !seal_damping_taken(runs, &undamped, opts) {
+        return undamped;
+    }
+    let damped = JointOptions {
+        seal_damping: true,
+        ..*opts
+    };
+    select_among(runs, start, &damped, choice, band_top_hz)
+}
+
+/// Whether the chosen fit with the seals' viscous damping freed, refitted
+/// from its optimum, has a damping that does not drive the piston and is
+/// taken by the extra-sum-of-squares F test
+/// (p < [`P_SIGNIFICANT`]). A fit without friction has none to free.
+fn seal_damping_taken(runs: &[JointRun<'_>], selection: &Selection, opts: &JointOptions) -> bool {
+    let Some(fit) = selection.fit().filter(|f| f.friction_n.is_some()) else {
+        return false;
+    };
+    let damped = JointOptions {
+        structure: fit.structure,
+        valve_start: fit.mode.unwrap_or(opts.valve_start),
+        piston_start_kg: fit.piston_mass_kg.unwrap_or(opts.piston_start_kg),
+        delay_start_s: fit.delay_s,
+        force_delay_start_s: fit.force_delay_s.unwrap_or(fit.delay_s),
+        friction_start_n: fit.friction_n.unwrap_or(opts.friction_start_n),
+        seal_damping: true,
+        ..*opts
+    };
+    // The refit's other parameters may leave the physical range or stall
+    // (a mode the damping makes redundant, its damping going to zero): that
+    // is for the choice among the damped structures to settle; here only
+    // the damping is judged. A refit stopped short of its optimum only
+    // understates what the damping explains.
+    let Ok(refit) = joint_fit(runs, &fit.rig, &damped) else {
+        return false;
+    };
+    refit.seal_damping_driving().is_none() && f_test(fit, &refit).p_value < P_SIGNIFICANT
+}
+
+/// [`select`] with the seals' viscous damping as `opts` says.
+fn select_among(
     runs: &[JointRun<'_>],
     start: &RigParams,
     opts: &JointOptions,
@@ -701,6 +758,9 @@ fn fit_mode(
 ) -> Result<JointFit, FitError> {
     // The friction, when fitted, starts where the delay fit put it.
     let friction_start_n = delay_fit.and_then(|f| f.friction_n).unwrap_or(0.0);
+    let seal_damping_start = delay_fit
+        .and_then(|f| f.seal_damping_ns_per_m)
+        .unwrap_or(0.0);
     let base = JointOptions {
         structure,
         friction_start_n,
@@ -738,6 +798,11 @@ fn fit_mode(
     if coarse.friction.is_some() {
         for (theta, _) in &mut grid {
             theta.push(friction_start_n);
+        }
+    }
+    if coarse.seal_damping.is_some() {
+        for (theta, _) in &mut grid {
+            theta.push(seal_damping_start);
         }
     }
     let mut scored: Vec<ValveStart> = grid

@@ -79,6 +79,7 @@ fn options(structure: Structure) -> JointOptions {
         friction: false,
         friction_start_n: 0.0,
         friction_smoothing_m_per_s: None,
+        seal_damping: false,
     }
 }
 
@@ -210,7 +211,8 @@ fn the_jacobian_is_the_residuals_derivative() {
 
 /// With the piston's mass and its seals' friction fitted, the analytic
 /// Jacobian is the residuals' derivative too, the friction's column
-/// included (its describing function at each bin's amplitude).
+/// included (its describing function at each bin's amplitude), and the
+/// seals' viscous damping's beside it.
 #[test]
 fn the_friction_column_is_the_residuals_derivative() {
     let c = Campaign::with(Unmodelled::default(), 0.002);
@@ -232,6 +234,29 @@ fn the_friction_column_is_the_residuals_derivative() {
     theta.push(6.0);
     assert_eq!(p.n_params(), theta.len());
     assert_jacobian(&p, &theta, "with friction");
+    // And with the seals' viscous damping beside the friction.
+    let opts = JointOptions {
+        seal_damping: true,
+        ..opts
+    };
+    let p = problem(&runs, &opts).unwrap();
+    theta.push(20.0);
+    assert_eq!(p.n_params(), theta.len());
+    // The damping's column is small per N s/m: central differences over
+    // 1e-3 N s/m, where the 1e-6 step of the others is lost in rounding.
+    let k = theta.len() - 1;
+    let (mut up, mut down) = (theta.clone(), theta.clone());
+    up[k] += 1e-3;
+    down[k] -= 1e-3;
+    let fd = (p.residuals(&up) - p.residuals(&down)) / 2e-3;
+    let jac = p.jacobian_matrix(&theta);
+    let err = (&fd - jac.column(k)).norm() / jac.column(k).norm();
+    assert!(err < 1e-6, "the damping's column: {err:e}");
+    for j in 0..k {
+        let fd = central_difference(&p, &theta, j);
+        let err = (&fd - jac.column(j)).norm() / jac.column(j).norm();
+        assert!(err < 1e-6, "with friction and damping column {j}: {err:e}");
+    }
 }
 
 /// The one pass the solver is given, r^T r, J^T J and J^T r summed bin by
