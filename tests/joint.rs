@@ -1452,13 +1452,13 @@ fn validation_runs_in_the_fit_carry_the_friction() {
 /// each friction within 10 % and each damping within 10 % or 2 stds;
 /// except on the light piston, where the describing function falls short
 /// (the piston sticks at each reversal: docs/accuracy.md): there within
-/// 1.5 %, its errors beyond its stds. Every parameter beyond 3 total stds
+/// 1.5 %, its errors beyond its stds at 8 and 20 N. Every parameter beyond 3 total stds
 /// is warned: by the structure's ambiguity or misfit, or, where no piston
 /// mass is resolved, by the friction warning's saying the stds are a lower
 /// bound; at most 5 % lie unwarned between 2 and 3, as chance leaves them.
-/// 86 % of the parameters are within 2 total stds (90 % is aimed at; the
-/// test holds the 80 % reached), 97 % within 1 % or 2 total stds. The
-/// table it prints is docs/accuracy.md's.
+/// At least 90 % of the parameters are within 2 total stds (90.6 %), and
+/// 97 % within 1 % or 2 total stds. The table it prints is
+/// docs/accuracy.md's.
 #[test]
 fn the_nonlinear_suite_is_right_or_warned() {
     struct Case {
@@ -1665,7 +1665,7 @@ fn the_nonlinear_suite_is_right_or_warned() {
     eprintln!("unwarned beyond 2 total stds (within 3): {chance} of {total}");
     assert!(misses.is_empty(), "{misses:#?}");
     assert!(20 * chance <= total, "{chance} unwarned beyond 2 stds");
-    assert!(coverage >= 0.8, "coverage {coverage}");
+    assert!(coverage >= 0.9, "coverage {coverage}");
 }
 
 /// The two routes for a rig with seal friction, compared on the same
