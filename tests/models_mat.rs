@@ -679,3 +679,53 @@ assert np.abs(y - x1).max() < 1e-9 * abs(gain), np.abs(y - x1).max()
         String::from_utf8_lossy(&o.stderr)
     );
 }
+
+/// A nonlinear specimen in models.mat: Exp4 made a Duffing specimen
+/// (k3 = 1e9 N/m^3). Its mass, damping and stiffness were `[]` and its
+/// cubic stiffness missing; now every parameter results.json gives it is
+/// in the run's `specimen` struct, read back by scipy, with its kind.
+#[test]
+fn a_nonlinear_specimen_keeps_every_parameter_in_models_mat() {
+    let Some(python) = python_with_scipy() else {
+        skip_unless_required(
+            "a_nonlinear_specimen_keeps_every_parameter_in_models_mat",
+            REQUIRE_SCIPY,
+            "needs Python with scipy (apt-get install -y python3-scipy, or pip install scipy)",
+        );
+        return;
+    };
+    let dir = scratch();
+    let sim = bundled_simulation(dir.path(), false);
+    let text = std::fs::read_to_string(&sim).unwrap();
+    let exp4 = "p_gain = 2.0\nspecimen = { mass_kg = 3.8, damping_ns_per_m = 5.0, stiffness_n_per_m = 84340.0 }";
+    assert!(text.contains(exp4), "Exp4 as the bundled default has it");
+    std::fs::write(
+        &sim,
+        text.replace(
+            exp4,
+            "p_gain = 2.0\nspecimen = { model = \"duffing\", mass_kg = 3.8, damping_ns_per_m = 5.0, stiffness_n_per_m = 84340.0, cubic_stiffness_n_per_m3 = 1e9 }",
+        ),
+    )
+    .unwrap();
+    let out = dir.path().join("out");
+    let o = servoid_into(dir.path(), "simulate", &sim, &out, &["--run"]);
+    assert_eq!(o.code, 0, "{}", o.stderr);
+    let results: Value =
+        serde_json::from_slice(&std::fs::read(out.join("results.json")).unwrap()).unwrap();
+    let want = &run_by_id(&results, "exp4")["specimen"];
+    assert_eq!(want["kind"], "duffing", "{want}");
+    let back = read_back(&python, &out);
+    let got = back["runs"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|r| r["id"] == "exp4")
+        .expect("exp4 in models.mat");
+    let spec = &got["specimen"];
+    assert_eq!(spec["kind"], "duffing specimen", "{spec}");
+    let fields = want.as_object().unwrap();
+    assert_eq!(fields.len(), 5, "kind and four parameters: {want}");
+    for (name, value) in fields.iter().filter(|(n, _)| *n != "kind") {
+        assert_eq!(scalar(&spec[name]), f(value), "{name}");
+    }
+}

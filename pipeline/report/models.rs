@@ -208,20 +208,29 @@ fn compensator(c: &CompensatorOutcome) -> MatValue {
     ])
 }
 
-/// The specimen's m, c, k; `[]` for what it does not have, and its kind.
+/// The specimen: its kind, its m, c, k (`[]` for what it does not have),
+/// then every other parameter its kind has (a Duffing spring's cubic
+/// stiffness, Bouc-Wen's, friction's), named as in results.json.
 fn specimen(s: &SpecimenModel) -> MatValue {
-    let (m, c, k) = s.linear_mck().map_or((None, None, None), |(m, c, k)| {
-        let sdof = matches!(s, SpecimenModel::LinearSdof { .. });
-        let spring = sdof || matches!(s, SpecimenModel::Spring { .. });
-        (sdof.then_some(m), sdof.then_some(c), spring.then_some(k))
-    });
+    const MCK: [&str; 3] = ["mass_kg", "damping_ns_per_m", "stiffness_n_per_m"];
+    // results.json's serialisation: one source for the names and values.
+    let fields = match serde_json::to_value(s) {
+        Ok(serde_json::Value::Object(map)) => map,
+        _ => serde_json::Map::new(),
+    };
     let num = |v: Option<f64>| v.map_or_else(MatValue::empty, MatValue::scalar);
-    MatValue::Struct(vec![
-        ("kind".into(), text(s.name())),
-        ("mass_kg".into(), num(m)),
-        ("damping_ns_per_m".into(), num(c)),
-        ("stiffness_n_per_m".into(), num(k)),
-    ])
+    let mut out = vec![("kind".to_string(), text(s.name()))];
+    out.extend(
+        MCK.iter()
+            .map(|&k| (k.to_string(), num(fields.get(k).and_then(|v| v.as_f64())))),
+    );
+    out.extend(
+        fields
+            .iter()
+            .filter(|(k, _)| !MCK.contains(&k.as_str()))
+            .filter_map(|(k, v)| Some((k.clone(), MatValue::scalar(v.as_f64()?)))),
+    );
+    MatValue::Struct(out)
 }
 
 /// x1/u with, for a fitted one, what the fit says of it.
