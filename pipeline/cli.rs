@@ -59,6 +59,11 @@ pub struct JobArgs {
     /// Print nothing but errors.
     #[arg(long, short)]
     quiet: bool,
+    /// Seconds to wait for another job writing the same output folder
+    /// before giving up (exit 2); the message names that job. Default:
+    /// 1800.
+    #[arg(long, value_name = "SECONDS")]
+    wait: Option<u64>,
 }
 
 /// How a campaign is run: a job, its figures, and its share.
@@ -456,6 +461,7 @@ fn settings(args: &JobArgs, figures: FigureFormats) -> Settings {
         jobs: capped(args.jobs),
         figures,
         force: args.force,
+        wait: args.wait.map(std::time::Duration::from_secs),
     }
 }
 

@@ -219,6 +219,18 @@ fn history_campaigns(out: &Path) -> Vec<String> {
     t.rows.iter().map(|r| r[c].clone().unwrap()).collect()
 }
 
+/// Until the lock file names `pid` as its holder (its first line).
+fn wait_for_holder(lock: &Path, pid: u32, start: Instant) {
+    while std::fs::read_to_string(lock)
+        .ok()
+        .and_then(|t| t.lines().next().map(str::to_string))
+        != Some(pid.to_string())
+    {
+        assert!(start.elapsed().as_secs() < 120, "job A never took the lock");
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+}
+
 /// Job A holds the output folder `out`'s lock (paused 15 s just after
 /// taking it); job B starts once A's pid is in the lock file (A has it),
 /// into the same folder. The pause is long enough for B to load its
@@ -243,10 +255,7 @@ fn two_jobs(
     let name = out.file_name().unwrap().to_string_lossy();
     let lock = out.with_file_name(format!(".{name}.servoid-lock"));
     let start = Instant::now();
-    while std::fs::read_to_string(&lock).ok().as_deref() != Some(pid.to_string().as_str()) {
-        assert!(start.elapsed().as_secs() < 120, "job A never took the lock");
-        std::thread::sleep(std::time::Duration::from_millis(20));
-    }
+    wait_for_holder(&lock, pid, start);
     let second = Command::new(env!("CARGO_BIN_EXE_servoid"))
         .args(b)
         .current_dir(dir)
@@ -303,8 +312,9 @@ fn two_jobs_into_one_folder_take_turns_and_keep_both_history_entries() {
     let said = String::from_utf8_lossy(&second.stderr);
     assert!(
         said.contains(&format!(
-            "is being written by another job (pid {pid}); waiting"
-        )),
+            "is being written by another job (pid {pid}, `{} run ",
+            env!("CARGO_BIN_EXE_servoid")
+        )) && said.contains("waiting up to 1800 s for it to finish (--wait)"),
         "{said}"
     );
     let names = history_campaigns(&out);
@@ -329,7 +339,7 @@ fn two_jobs_into_one_folder_take_turns_and_keep_both_history_entries() {
     merge.extend(shards.iter().map(|s| s.to_str().unwrap().to_string()));
     merge.extend(["--out", out.to_str().unwrap(), "--quiet"].map(String::from));
     let (_, _, second) = two_jobs(d, &out, &args(&ra), &args(&merge));
-    assert!(String::from_utf8_lossy(&second.stderr).contains("waiting for it to finish"));
+    assert!(String::from_utf8_lossy(&second.stderr).contains("for it to finish (--wait)"));
     let names = history_campaigns(&out);
     assert_eq!(names.len(), 3, "{names:?}");
     assert!(names[2].starts_with("c-"), "{names:?}");
@@ -345,4 +355,61 @@ fn two_jobs_into_one_folder_take_turns_and_keep_both_history_entries() {
     let o = servoid_into(d, "run", &b, &out, &["--quiet"]);
     assert_eq!(o.code, 0, "{}", o.stderr);
     assert!(!o.stderr.contains("waiting"), "{}", o.stderr);
+}
+
+/// A job stopped (SIGSTOP) while it holds the output folder would make
+/// every later job wait forever. A later job waits `--wait` seconds, then
+/// gives up with exit 2, naming the holder's pid and command and saying it
+/// is stopped; the holder, continued, finishes its set.
+#[test]
+fn a_stopped_holder_is_waited_for_then_named() {
+    let dir = scratch();
+    let d = dir.path();
+    let manifest = campaign(d);
+    let out = d.join("night");
+    let m = manifest.to_str().unwrap();
+    let o = out.to_str().unwrap();
+    let holder = Command::new(env!("CARGO_BIN_EXE_servoid"))
+        .args(["run", m, "--out", o, "--quiet"])
+        .current_dir(d)
+        .env("SERVOID_PAUSE_AT", "locked")
+        .env("SERVOID_PAUSE_MS", "3000")
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let pid = holder.id();
+    let lock = out.with_file_name(".night.servoid-lock");
+    wait_for_holder(&lock, pid, Instant::now());
+    let signal = |sig: &str| {
+        let done = Command::new("kill")
+            .args([sig, &pid.to_string()])
+            .status()
+            .unwrap();
+        assert!(done.success(), "kill {sig} {pid}");
+    };
+    signal("-STOP");
+    let clock = Instant::now();
+    let waiter = servoid_into(d, "run", &manifest, &out, &["--quiet", "--wait", "2"]);
+    let waited = clock.elapsed();
+    signal("-CONT");
+    assert_eq!(waiter.code, 2, "{}", waiter.stderr);
+    assert!(waited.as_secs_f64() >= 2.0, "gave up after {waited:?}");
+    for words in [
+        format!(
+            "(pid {pid}, `{} run {m} --out {o} --quiet`",
+            env!("CARGO_BIN_EXE_servoid")
+        ),
+        "stopped (SIGSTOP)".to_string(),
+        "still holds it after 2 s (--wait)".to_string(),
+    ] {
+        assert!(waiter.stderr.contains(&words), "{words}: {}", waiter.stderr);
+    }
+    let holder = holder.wait_with_output().unwrap();
+    assert!(
+        holder.status.success(),
+        "{}",
+        String::from_utf8_lossy(&holder.stderr)
+    );
+    assert!(out.join("results.json").is_file());
 }

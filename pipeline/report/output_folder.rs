@@ -17,8 +17,10 @@
 //! `.<name>.servoid-lock` beside it, released by the kernel when the job
 //! ends or dies, so a stale lock never blocks a later night): a second
 //! job into the same folder (two runs, a run and a merge) waits for the
-//! first with a message on stderr, then starts from the set the first put
-//! in place. Without it both carried the same previous set and the later
+//! first with a message on stderr naming it (pid, command, and whether it
+//! is stopped), then starts from the set the first put in place; it gives
+//! up after `--wait` ([`DEFAULT_WAIT`] unless given), so a hung or stopped
+//! holder cannot block every later night. Without it both carried the same previous set and the later
 //! exchange dropped the earlier job's history entry.
 //!
 //! A work folder is locked (flock) while its job lives. One left by a
@@ -33,8 +35,15 @@
 
 use std::fs::File;
 use std::path::{Path, PathBuf};
+use std::time::Duration;
 
 use super::{WriteError, settle};
+
+/// How long a job waits for another holding its output folder, unless
+/// `--wait` says: half an hour, longer than a night of hundreds of logs
+/// takes on two cores, and short enough that a stopped or hung holder is
+/// reported the same night.
+pub const DEFAULT_WAIT: Duration = Duration::from_secs(1800);
 
 /// The infix of work folders beside a target, `.<name>.servoid-<pid>`.
 const WORK: &str = ".servoid-";
@@ -63,7 +72,7 @@ impl OutputFolder {
     /// Check that `target` can take the outputs (it is not a file, its
     /// folder can be made and written), remove dead jobs' work folders
     /// beside it and start a work folder holding the previous set.
-    pub fn begin(target: &Path) -> Result<Self, WriteError> {
+    pub fn begin(target: &Path, wait: Duration) -> Result<Self, WriteError> {
         let bad = |why: String| WriteError::OutFolder {
             path: target.to_path_buf(),
             why,
@@ -84,7 +93,7 @@ impl OutputFolder {
                 .map_err(|e| bad(format!("cannot write in the output folder (--out): {e}")))?;
         }
         let name = name.to_string_lossy().into_owned();
-        let target_lock = lock_target(parent, &name, target).map_err(|e| {
+        let target_lock = lock_target(parent, &name, target, wait).map_err(|e| {
             bad(format!(
                 "cannot lock the output folder (--out) for this job: {e}"
             ))
@@ -94,7 +103,7 @@ impl OutputFolder {
             // The sweep put a previous set back (or a job this one waited
             // for put its set in): start again from it.
             drop(target_lock);
-            return Self::begin(target);
+            return Self::begin(target, wait);
         }
         let (work, lock) = start_work(parent, &name).map_err(bad)?;
         let set = Self {
@@ -277,10 +286,12 @@ fn start_work(parent: &Path, name: &str) -> Result<(PathBuf, File), String> {
     }
 }
 
-/// The lock of output folder `name` in `parent`, taken: at once, or after
-/// the job holding it ends (with a message naming it on stderr). The file
-/// stays (a later job reuses it); only the kernel's lock on it matters.
-fn lock_target(parent: &Path, name: &str, shown: &Path) -> std::io::Result<File> {
+/// The lock of output folder `name` in `parent`, taken: at once, or when
+/// the job holding it ends, waiting at most `wait` (with a message naming
+/// the holder on stderr). The file stays (a later job reuses it); only the
+/// kernel's lock on it matters. It holds the holder's pid and command line,
+/// so a job that waits can say who it waits for.
+fn lock_target(parent: &Path, name: &str, shown: &Path, wait: Duration) -> std::io::Result<File> {
     use std::io::{Read, Seek, Write};
     let path = parent.join(format!(".{name}{WORK}lock"));
     let mut file = File::options()
@@ -292,25 +303,95 @@ fn lock_target(parent: &Path, name: &str, shown: &Path) -> std::io::Result<File>
     match file.try_lock() {
         Ok(()) => {}
         Err(std::fs::TryLockError::WouldBlock) => {
-            let mut holder = String::new();
-            let _ = file.read_to_string(&mut holder);
+            let mut text = String::new();
+            let _ = file.read_to_string(&mut text);
+            let holder = Holder::from_lock(&text);
             eprintln!(
-                "servoid: the output folder {} is being written by another job ({}); waiting for it to finish",
+                "servoid: the output folder {} is being written by another job ({holder}); waiting up to {} s for it to finish (--wait)",
                 shown.display(),
-                match holder.trim() {
-                    "" => "pid unknown".to_string(),
-                    pid => format!("pid {pid}"),
-                }
+                wait.as_secs()
             );
-            file.lock()?;
+            if !wait_for_lock(&file, wait)? {
+                return Err(std::io::Error::other(format!(
+                    "another job ({holder}) still holds it after {} s (--wait); if that job is stopped or hung, end it, or give a longer --wait",
+                    wait.as_secs()
+                )));
+            }
         }
         Err(std::fs::TryLockError::Error(e)) => return Err(e),
     }
     file.set_len(0)?;
     file.rewind()?;
-    write!(file, "{}", std::process::id())?;
+    let command: Vec<String> = std::env::args().collect();
+    write!(file, "{}\n{}", std::process::id(), command.join(" "))?;
     fault("locked");
     Ok(file)
+}
+
+/// Whether `file`'s lock was taken within `wait`: tried every 50 ms, as
+/// flock has no timed wait.
+fn wait_for_lock(file: &File, wait: Duration) -> std::io::Result<bool> {
+    let until = std::time::Instant::now() + wait;
+    loop {
+        match file.try_lock() {
+            Ok(()) => return Ok(true),
+            Err(std::fs::TryLockError::WouldBlock) => {}
+            Err(std::fs::TryLockError::Error(e)) => return Err(e),
+        }
+        let now = std::time::Instant::now();
+        if now >= until {
+            return Ok(false);
+        }
+        std::thread::sleep(Duration::from_millis(50).min(until - now));
+    }
+}
+
+/// The job a lock file names: its pid, command line and, where the system
+/// says (Linux's /proc), whether it is stopped.
+struct Holder {
+    pid: Option<u32>,
+    command: Option<String>,
+}
+
+impl Holder {
+    fn from_lock(text: &str) -> Self {
+        let mut lines = text.lines();
+        Self {
+            pid: lines.next().and_then(|l| l.trim().parse().ok()),
+            command: lines.next().map(str::to_string).filter(|c| !c.is_empty()),
+        }
+    }
+
+    /// "T" (stopped) or "t" (traced) in /proc/<pid>/stat's state field.
+    fn stopped(&self) -> bool {
+        let Some(pid) = self.pid else {
+            return false;
+        };
+        std::fs::read_to_string(format!("/proc/{pid}/stat")).is_ok_and(|stat| {
+            stat.rsplit_once(')')
+                .and_then(|(_, rest)| rest.split_whitespace().next())
+                .is_some_and(|state| matches!(state, "T" | "t"))
+        })
+    }
+}
+
+impl std::fmt::Display for Holder {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self.pid {
+            Some(pid) => write!(f, "pid {pid}")?,
+            None => write!(f, "pid unknown")?,
+        }
+        if let Some(c) = &self.command {
+            write!(f, ", `{c}`")?;
+        }
+        if self.stopped() {
+            write!(
+                f,
+                ", stopped (SIGSTOP): it will not finish until it is continued"
+            )?;
+        }
+        Ok(())
+    }
 }
 
 /// Create and remove a file in `dir`: can this job write there?
@@ -486,7 +567,7 @@ mod tests {
         std::fs::write(target.join(".cache/runs/a.json"), "entry").unwrap();
         std::fs::write(target.join(".results.json.tmp-4242"), "half").unwrap();
 
-        let set = OutputFolder::begin(&target).unwrap();
+        let set = OutputFolder::begin(&target, DEFAULT_WAIT).unwrap();
         // The previous set is there to read (the cache), and its files are
         // shared, not copied.
         assert_eq!(
@@ -515,7 +596,7 @@ mod tests {
         let target = scratch.path().join("out");
         std::fs::create_dir(&target).unwrap();
         std::fs::write(target.join("results.json"), "old").unwrap();
-        let set = OutputFolder::begin(&target).unwrap();
+        let set = OutputFolder::begin(&target, DEFAULT_WAIT).unwrap();
         std::fs::write(set.dir().join("report.html"), "new").unwrap();
         let work = set.dir().to_path_buf();
         drop(set);
@@ -538,7 +619,7 @@ mod tests {
         }
         let held = File::open(&live).unwrap();
         held.lock().unwrap();
-        let set = OutputFolder::begin(&target).unwrap();
+        let set = OutputFolder::begin(&target, DEFAULT_WAIT).unwrap();
         assert!(!dead.exists());
         assert!(live.exists());
         assert!(other.exists(), "only servoid's own names are swept");
@@ -553,7 +634,7 @@ mod tests {
         let aside = scratch.path().join(".out.servoid-4242-old");
         std::fs::create_dir(&aside).unwrap();
         std::fs::write(aside.join("results.json"), "old").unwrap();
-        let set = OutputFolder::begin(&target).unwrap();
+        let set = OutputFolder::begin(&target, DEFAULT_WAIT).unwrap();
         assert!(!aside.exists());
         assert_eq!(
             tree(&target),
@@ -569,7 +650,7 @@ mod tests {
     fn a_path_under_the_work_folder_is_named_under_the_target() {
         let scratch = tempfile::tempdir().unwrap();
         let target = scratch.path().join("out");
-        let set = OutputFolder::begin(&target).unwrap();
+        let set = OutputFolder::begin(&target, DEFAULT_WAIT).unwrap();
         let inside = set.dir().join("figures/a.png");
         assert_eq!(set.final_path(&inside), target.join("figures/a.png"));
         assert_eq!(set.final_path(set.dir()), target);

@@ -42,6 +42,9 @@ pub struct Settings {
     pub figures: FigureFormats,
     /// Ignore the cache of earlier runs (it is refreshed).
     pub force: bool,
+    /// How long to wait for another job writing the same output folder
+    /// (None: [`crate::report::output_folder::DEFAULT_WAIT`]).
+    pub wait: Option<std::time::Duration>,
 }
 
 /// How shards are merged: the job's settings (its `figures` unused), the
@@ -211,7 +214,7 @@ pub fn run_campaign(
         .out
         .clone()
         .unwrap_or_else(|| PathBuf::from("reports").join(&campaign.name));
-    let set = begin(&out_dir)?;
+    let set = begin(&out_dir, settings.wait)?;
     let workers = pool(settings.jobs)?;
     let outcome = workers
         .install(|| write_campaign(&campaign, &set, settings, observer))
@@ -248,7 +251,7 @@ pub fn run_simulation(
         .unwrap_or_else(|| PathBuf::from("reports").join(&plan.manifest.simulation.name));
     // The logs and the campaign run on them are one set: a rerun never
     // leaves new logs beside the previous campaign's results.
-    let set = begin(&out_dir)?;
+    let set = begin(&out_dir, settings.wait)?;
     let workers = pool(settings.jobs)?;
     let relocate = |e: JobError| e.relocated(&set);
     let simulated = workers
@@ -310,7 +313,7 @@ pub fn run_shard(
             campaign.name, shard.index, shard.count
         ))
     });
-    let set = begin(&out_dir)?;
+    let set = begin(&out_dir, settings.wait)?;
     let share = shard.of(&campaign);
     let clock = std::time::Instant::now();
     let workers = pool(settings.jobs)?;
@@ -388,7 +391,7 @@ pub fn merge(
         .out
         .clone()
         .unwrap_or_else(|| PathBuf::from("reports").join(&first.campaign));
-    let set = begin(&out_dir)?;
+    let set = begin(&out_dir, settings.wait)?;
     let relocate = |e: JobError| e.relocated(&set);
     let shard_dirs: Vec<PathBuf> = shards.iter().map(|(d, _)| d.clone()).collect();
     let gathered = (|| {
@@ -644,7 +647,7 @@ fn set_files(
 /// Start the output set in `out_dir`, refusing, before any computing, a
 /// folder whose cache place is taken by a file: the job would compute for
 /// nothing and fail writing its first cache entry.
-fn begin(out_dir: &Path) -> Result<OutputFolder, WriteError> {
+fn begin(out_dir: &Path, wait: Option<std::time::Duration>) -> Result<OutputFolder, WriteError> {
     if let Some(taken) = cache::taken_place(out_dir) {
         return Err(WriteError::OutFolder {
             path: out_dir.to_path_buf(),
@@ -654,7 +657,10 @@ fn begin(out_dir: &Path) -> Result<OutputFolder, WriteError> {
             ),
         });
     }
-    OutputFolder::begin(out_dir)
+    OutputFolder::begin(
+        out_dir,
+        wait.unwrap_or(crate::report::output_folder::DEFAULT_WAIT),
+    )
 }
 
 /// How the cache names a log inside the work folder (a simulated
