@@ -58,3 +58,50 @@ with TdmsWriter("fuzz/corpus/log_tdms/waveforms.tdms") as w:
             ChannelObject("g", "f", f, properties=props("N")),
         ]
     )
+
+# What labs' files hold beside the channels: HDF5 (h5py's default,
+# old-style groups) with soft links at the root and in a group, one
+# dangling, text, boolean and complex datasets, and a second group.
+with h5py.File("fuzz/corpus/log_hdf5/links_and_text.h5", "w") as h:
+    h["t"] = t
+    h["u"] = u
+    h.create_dataset("run/x", data=x)
+    h["table"] = np.column_stack([u, x, f])
+    h["u_alias"] = h5py.SoftLink("/u")
+    h["gone"] = h5py.SoftLink("/nothing")
+    h["run/latest"] = h5py.SoftLink("/run/x")
+    h["note"] = np.array(["operator: A", "specimen: k1"], dtype=h5py.string_dtype())
+    h["valid"] = u > 0
+    h["phasor"] = (u + 1j * x).astype(np.complex128)
+    h.create_dataset("other/x", data=x)
+
+# MAT v7.3 with MATLAB text beside the channels.
+hdf5storage.savemat(
+    "fuzz/corpus/log_mat_v73/with_text.mat",
+    {
+        "t": t.reshape(-1, 1),
+        "u": u.reshape(-1, 1),
+        "log": {"x": x.reshape(-1, 1), "operator": "A. N. Other"},
+        "table": np.column_stack([u, x, f]),
+        "note": "run k1, 4 mm chirp",
+    },
+    format="7.3",
+    matlab_compatible=True,
+    store_python_metadata=False,
+)
+
+# TDMS as a logger appends it: the channels in four segments of 64
+# samples, and a second group.
+with TdmsWriter("fuzz/corpus/log_tdms/segments.tdms") as w:
+    props = lambda unit: {"wf_increment": 1e-3, "wf_start_offset": 0.0, "unit_string": unit}
+    for k in range(4):
+        s = slice(64 * k, 64 * (k + 1))
+        objects = [
+            GroupObject("g"),
+            ChannelObject("g", "u", u[s], properties=props("mm")),
+            ChannelObject("g", "x", x[s], properties=props("mm")),
+            ChannelObject("g", "f", f[s], properties=props("N")),
+        ]
+        if k == 0:
+            objects += [GroupObject("h"), ChannelObject("h", "temperature", 20.0 + 0.01 * t)]
+        w.write_segment(objects)

@@ -59,6 +59,32 @@ pub(super) trait Arrays {
     fn stated_unit(&self, _name: &str) -> Option<String> {
         None
     }
+
+    /// The variables the file holds that no channel can take (text,
+    /// booleans, links servoid does not follow), each with what it is, so a
+    /// plan that names one is told what it named rather than that it is
+    /// not there.
+    fn unusable(&self) -> &[Unusable] {
+        &[]
+    }
+
+    /// What the reader passed over that a plan might have meant, in words.
+    fn skipped(&self) -> Option<String> {
+        None
+    }
+}
+
+/// A variable in the file that is not a numeric array, and what it is
+/// (`a string dataset`, `a soft link`).
+#[derive(Debug, Clone, PartialEq)]
+pub(super) struct Unusable {
+    pub name: String,
+    pub what: String,
+}
+
+/// The last component of a grouped name: `x1` of `log/x1`.
+fn leaf(name: &str) -> &str {
+    name.rsplit_once('/').map_or(name, |(_, l)| l)
 }
 
 /// The vector variables and each 2-D variable's channels (`name:j`), with
@@ -211,22 +237,85 @@ fn column(
     arrays: &dyn Arrays,
     w: &Wanted<'_>,
 ) -> Result<(String, Vec<f64>), IngestError> {
-    let find = |name: &str| arrays.variables().iter().find(|v| v.name == name);
-    let missing = || IngestError::MissingColumn {
-        path: path.to_path_buf(),
-        channel: w.channel,
-        column: w.column.to_string(),
-        available: format!("variables: {}", list(arrays.variables())),
+    let format = |problem| IngestError::format(path, problem);
+    let missing = || {
+        let mut available = format!("variables: {}", list(arrays.variables()));
+        if !arrays.unusable().is_empty() {
+            available.push_str(&format!(
+                "; not numeric: {}",
+                list(
+                    arrays
+                        .unusable()
+                        .iter()
+                        .map(|u| format!("`{}` ({})", u.name, u.what))
+                )
+            ));
+        }
+        if let Some(skipped) = arrays.skipped() {
+            available.push_str(&format!("; skipped: {skipped}"));
+        }
+        IngestError::MissingColumn {
+            path: path.to_path_buf(),
+            channel: w.channel,
+            column: w.column.to_string(),
+            available,
+        }
+    };
+    let find = |name: &str| -> Result<Option<&MatVariable>, IngestError> {
+        if let Some(v) = arrays.variables().iter().find(|v| v.name == name) {
+            return Ok(Some(v));
+        }
+        if let Some(u) = arrays.unusable().iter().find(|u| u.name == name) {
+            return Err(format(FormatProblem::NotNumericVariable {
+                variable: u.name.clone(),
+                channel: w.channel,
+                what: u.what.clone(),
+            }));
+        }
+        // A bare name, as a manifest carried over from CSV logs gives it,
+        // is the grouped variable of that name where only one group holds
+        // it.
+        if name.contains('/') {
+            return Ok(None);
+        }
+        let grouped: Vec<&MatVariable> = arrays
+            .variables()
+            .iter()
+            .filter(|v| leaf(&v.name) == name)
+            .collect();
+        let others: Vec<&Unusable> = arrays
+            .unusable()
+            .iter()
+            .filter(|u| leaf(&u.name) == name)
+            .collect();
+        match (grouped.as_slice(), others.as_slice()) {
+            ([v], []) => Ok(Some(v)),
+            ([], [u]) => Err(format(FormatProblem::NotNumericVariable {
+                variable: u.name.clone(),
+                channel: w.channel,
+                what: u.what.clone(),
+            })),
+            ([], []) => Ok(None),
+            _ => Err(format(FormatProblem::AmbiguousName {
+                name: name.to_string(),
+                channel: w.channel,
+                found: grouped
+                    .iter()
+                    .map(|v| v.name.clone())
+                    .chain(others.iter().map(|u| u.name.clone()))
+                    .collect(),
+            })),
+        }
     };
     match w.column {
-        Column::Name(n) => match find(n) {
+        Column::Name(n) => match find(n)? {
             Some(v) => Ok((v.name.clone(), vector(path, arrays, &v.name, w.channel)?)),
             None => {
                 let (var, ch) = n
                     .rsplit_once(':')
                     .and_then(|(v, c)| Some((v, c.trim().parse::<usize>().ok()?)))
                     .ok_or_else(missing)?;
-                let v = find(var).ok_or_else(missing)?;
+                let v = find(var)?.ok_or_else(missing)?;
                 Ok((v.name.clone(), channel(path, arrays, v, ch, w.channel)?))
             }
         },

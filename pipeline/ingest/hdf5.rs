@@ -71,7 +71,9 @@ pub(super) fn columns(
 }
 
 fn open<'p>(path: &'p Path, bytes: &[u8], matlab: bool) -> Result<Hdf5<'p>, IngestError> {
-    let file = File::from_bytes(bytes.to_vec()).map_err(|e| unreadable(path, matlab, &e))?;
+    let mut owned = bytes.to_vec();
+    let links = skip_v1_links(&mut owned);
+    let file = File::from_bytes(owned).map_err(|e| unreadable(path, matlab, &e))?;
     let mut h = Hdf5 {
         path,
         bytes: bytes.len(),
@@ -79,6 +81,8 @@ fn open<'p>(path: &'p Path, bytes: &[u8], matlab: bool) -> Result<Hdf5<'p>, Inge
         matlab,
         variables: Vec::new(),
         datasets: Vec::new(),
+        unusable: Vec::new(),
+        links,
     };
     h.walk("", 0)?;
     if h.variables.is_empty() {
@@ -110,6 +114,10 @@ struct Hdf5<'p> {
     /// Each variable's dataset path in the file, and whether its values are
     /// row-major (a plain 2-D dataset) and must be put column-major.
     datasets: Vec<(String, bool)>,
+    /// The datasets that are not numeric arrays, with what they are.
+    unusable: Vec<arrays::Unusable>,
+    /// How many soft links the file's old-style groups hold (skipped).
+    links: usize,
 }
 
 impl Hdf5<'_> {
@@ -148,25 +156,23 @@ impl Hdf5<'_> {
     fn add(&mut self, full: &str) -> Result<(), IngestError> {
         let bad = |e: hdf5_pure::Error| unreadable(self.path, self.matlab, &e);
         let ds = self.file.dataset(full).map_err(bad)?;
-        let numeric = matches!(
-            ds.dtype().map_err(bad)?,
-            DType::F32
-                | DType::F64
-                | DType::I8
-                | DType::I16
-                | DType::I32
-                | DType::I64
-                | DType::U8
-                | DType::U16
-                | DType::U32
-                | DType::U64
-        );
+        let dtype = ds.dtype().map_err(bad)?;
         let attrs = ds.attrs().map_err(bad)?;
         let class = attrs.get("MATLAB_class").and_then(AttrValue::as_str);
         // MATLAB text is uint16 with class "char"; an empty variable stores
         // its dimensions as its data.
-        let text = class.is_some_and(|c| matches!(c, "char" | "cell" | "struct"));
-        if !numeric || text || attrs.contains_key("MATLAB_empty") {
+        let what = match (class, &dtype) {
+            (Some("char"), _) => Some("a MATLAB char array (text)".to_string()),
+            (Some("cell"), _) => Some("a MATLAB cell array".to_string()),
+            (Some("struct"), _) => Some("an empty MATLAB struct".to_string()),
+            _ if attrs.contains_key("MATLAB_empty") => Some("empty".to_string()),
+            _ => not_numeric(&dtype),
+        };
+        if let Some(what) = what {
+            self.unusable.push(arrays::Unusable {
+                name: self.name_of(full),
+                what,
+            });
             return Ok(());
         }
         let shape: Vec<usize> = ds
@@ -181,13 +187,19 @@ impl Hdf5<'_> {
             (true, s) => (s.iter().rev().copied().collect(), false),
             (false, s) => (s.to_vec(), s.len() == 2),
         };
-        let name = match self.matlab {
-            true => full.replace('/', "."),
-            false => full.to_string(),
-        };
+        let name = self.name_of(full);
         self.variables.push(MatVariable { name, size });
         self.datasets.push((full.to_string(), row_major));
         Ok(())
+    }
+
+    /// A dataset's name as a plan gives it: its path, or for MATLAB its
+    /// struct fields joined by dots.
+    fn name_of(&self, full: &str) -> String {
+        match self.matlab {
+            true => full.replace('/', "."),
+            false => full.to_string(),
+        }
     }
 
     fn dataset_of(&self, name: &str) -> (&str, bool, &MatVariable) {
@@ -244,6 +256,19 @@ impl Arrays for Hdf5<'_> {
             .collect())
     }
 
+    fn unusable(&self) -> &[arrays::Unusable] {
+        &self.unusable
+    }
+
+    fn skipped(&self) -> Option<String> {
+        (self.links > 0).then(|| {
+            format!(
+                "{} soft link(s), which servoid does not follow: name the dataset a link points to",
+                self.links
+            )
+        })
+    }
+
     fn stated_unit(&self, name: &str) -> Option<String> {
         let (full, ..) = self.dataset_of(name);
         let attrs = self.file.dataset(full).ok()?.attrs().ok()?;
@@ -264,4 +289,112 @@ pub(super) fn is_hdf5(bytes: &[u8]) -> bool {
         .map(|k| if k == 0 { 0 } else { 512usize << (k - 1) })
         .take_while(|&at| at + 8 <= bytes.len())
         .any(|at| &bytes[at..at + 8] == SIGNATURE)
+}
+
+/// What a dataset of type `dtype` is when it is not a real number array:
+/// h5py writes complex numbers as a compound of two floats, booleans as an
+/// enum of FALSE and TRUE, and text as strings.
+fn not_numeric(dtype: &DType) -> Option<String> {
+    let float = |d: &DType| matches!(d, DType::F32 | DType::F64);
+    Some(match dtype {
+        DType::F32
+        | DType::F64
+        | DType::I8
+        | DType::I16
+        | DType::I32
+        | DType::I64
+        | DType::U8
+        | DType::U16
+        | DType::U32
+        | DType::U64 => return None,
+        DType::Compound(fields) if fields.len() == 2 && fields.iter().all(|(_, d)| float(d)) => {
+            "complex".to_string()
+        }
+        DType::Enum(names)
+            if names.len() == 2 && names.iter().all(|n| matches!(n.as_str(), "FALSE" | "TRUE")) =>
+        {
+            "boolean".to_string()
+        }
+        DType::String | DType::VariableLengthString => "text (strings)".to_string(),
+        other => format!("of HDF5 type {other}"),
+    })
+}
+
+/// Drop the soft links from `bytes`' old-style groups, returning how many.
+///
+/// An old-style (version 1) group lists its members in symbol-table nodes
+/// (`SNOD`), where a soft link is an entry of cache type 2 with no object
+/// header (its address undefined). hdf5-pure parses every member's object
+/// header to list a group, so one such link, used or not, makes the group
+/// unreadable ("unexpected EOF: need 18446744073709551615 bytes"). servoid
+/// does not follow links: each node's link entries are removed and the
+/// rest moved up, the node's count lowered. A node is taken as one only
+/// when its version, count and every entry's cache type (0-2) are as the
+/// format has them, and only a link entry is removed, so data bytes that
+/// happen to spell `SNOD` are left alone.
+pub(super) fn skip_v1_links(bytes: &mut [u8]) -> usize {
+    let Some(offsets) = offset_size(bytes) else {
+        return 0;
+    };
+    let entry = 2 * offsets + 24;
+    let mut skipped = 0;
+    let mut at = 0;
+    while let Some(found) = memchr::memmem::find(&bytes[at..], b"SNOD") {
+        let node = at + found;
+        at = node + 4;
+        let Some(head) = bytes.get(node..node + 8) else {
+            break;
+        };
+        let count = usize::from(u16::from_le_bytes([head[6], head[7]]));
+        let body = node + 8;
+        if head[4] != 1 || body + count * entry > bytes.len() {
+            continue;
+        }
+        let cache = |b: &[u8], i: usize| {
+            let c = body + i * entry + 2 * offsets;
+            u32::from_le_bytes([b[c], b[c + 1], b[c + 2], b[c + 3]])
+        };
+        let address_undefined = |b: &[u8], i: usize| {
+            let a = body + i * entry + offsets;
+            b[a..a + offsets].iter().all(|&x| x == 0xff)
+        };
+        if (0..count).any(|i| cache(bytes, i) > 2) {
+            continue;
+        }
+        let keep: Vec<usize> = (0..count)
+            .filter(|&i| !(cache(bytes, i) == 2 && address_undefined(bytes, i)))
+            .collect();
+        if keep.len() == count {
+            continue;
+        }
+        let entries: Vec<Vec<u8>> = keep
+            .iter()
+            .map(|&i| bytes[body + i * entry..body + (i + 1) * entry].to_vec())
+            .collect();
+        for (j, e) in entries.iter().enumerate() {
+            bytes[body + j * entry..body + (j + 1) * entry].copy_from_slice(e);
+        }
+        bytes[body + keep.len() * entry..body + count * entry].fill(0);
+        let n = u16::try_from(keep.len()).expect("fewer than count");
+        bytes[node + 6..node + 8].copy_from_slice(&n.to_le_bytes());
+        skipped += count - keep.len();
+        at = body + count * entry;
+    }
+    skipped
+}
+
+/// The superblock's size of offsets (bytes), where the file has a
+/// superblock servoid knows (versions 0-3, at 0 or behind a user block).
+fn offset_size(bytes: &[u8]) -> Option<usize> {
+    const SIGNATURE: &[u8; 8] = b"\x89HDF\r\n\x1a\n";
+    let at = (0..)
+        .map(|k| if k == 0 { 0 } else { 512usize << (k - 1) })
+        .take_while(|&at| at + 16 <= bytes.len())
+        .find(|&at| &bytes[at..at + 8] == SIGNATURE)?;
+    let size = match bytes[at + 8] {
+        0 | 1 => bytes[at + 13],
+        2 | 3 => bytes[at + 9],
+        _ => return None,
+    };
+    matches!(size, 2 | 4 | 8).then_some(usize::from(size))
 }

@@ -529,6 +529,26 @@ pub enum FormatProblem {
         variable: String,
         channel: &'static str,
     },
+    /// The variable the plan names is in the file but holds no numbers a
+    /// channel can take (text, booleans, a link servoid does not follow).
+    #[error(
+        "variable `{variable}` ({channel} channel) is {what}; a log channel must be a real numeric vector"
+    )]
+    NotNumericVariable {
+        variable: String,
+        channel: &'static str,
+        what: String,
+    },
+    /// A bare channel name found in several groups.
+    #[error(
+        "the {channel} channel's `{name}` is in several groups ({}): name it with its group",
+        list(found.iter().map(|v| format!("`{v}`")))
+    )]
+    AmbiguousName {
+        name: String,
+        channel: &'static str,
+        found: Vec<String>,
+    },
     /// A variable addressed as a vector has several rows and columns.
     #[error(
         "variable `{variable}` ({channel} channel) is {}, not a vector; address one of its channels as \"{variable}:0\"",
