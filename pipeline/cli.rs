@@ -302,8 +302,9 @@ fn cmd_check(manifest: &Path) -> u8 {
             say(&format!("{}: ok ({checked})", manifest.display()));
             for (run, log) in &checked.missing_logs {
                 warn(&format!(
-                    "warning: run {run}: log file not found: {}; the run will fail alone when the campaign runs",
-                    log.display()
+                    "warning: run {run}: log file not found: {}{}; the run will fail alone when the campaign runs",
+                    log.display(),
+                    crate::ingest::backslash_hint(log)
                 ));
             }
             for w in &checked.warnings {
@@ -825,9 +826,21 @@ fn print_summary(r: &Results) {
         }
     }
     let flagged = r.comparisons.iter().filter(|c| c.flag).count();
+    // A comparison the campaign could not compute is neither agreeing nor
+    // flagged: "0 flagged" alone read as all agreeing when every run failed.
+    let not_computed = r
+        .comparisons
+        .iter()
+        .filter(|c| c.status == crate::results::ComparisonStatus::NotComputed)
+        .count();
     if !r.comparisons.is_empty() {
+        let missing = if not_computed > 0 {
+            format!(", {not_computed} not computed")
+        } else {
+            String::new()
+        };
         say(&format!(
-            "  comparisons: {} with published values, {flagged} flagged",
+            "  comparisons: {} with published values, {flagged} flagged{missing}",
             r.comparisons.len()
         ));
     }

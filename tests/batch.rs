@@ -621,3 +621,46 @@ fn json_events_carry_errors_warnings_and_manifest_problems() {
     );
     assert!(!dir.path().join("never").exists());
 }
+
+/// A night whose every run fails (its logs gone) computes none of its
+/// comparisons with published values: the summary said "0 flagged", which
+/// reads as all agreeing. It now counts those not computed, and the page
+/// says so beside the flagged count.
+#[test]
+fn comparisons_not_computed_are_not_reported_as_agreeing() {
+    let dir = scratch();
+    let d = dir.path();
+    let manifest = crate::shards::campaign(d);
+    let mut gone = 0;
+    for e in std::fs::read_dir(d.join("sim/logs")).unwrap().flatten() {
+        let p = e.path();
+        if p.extension().is_some_and(|x| x == "csv" || x == "parquet") {
+            std::fs::remove_file(&p).unwrap();
+            gone += 1;
+        }
+    }
+    assert!(gone >= 7, "the bundled default's logs: {gone}");
+    let out = d.join("out");
+    let o = servoid_into(d, "run", &manifest, &out, &["--figures", "none"]);
+    assert_eq!(o.code, 1, "{}", o.stderr);
+    let line = o
+        .stdout
+        .lines()
+        .find(|l| l.contains("comparisons:"))
+        .unwrap_or_else(|| panic!("no comparisons line in {}", o.stdout));
+    let results: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("results.json")).unwrap()).unwrap();
+    let all = results["comparisons"].as_array().unwrap();
+    let missing = all.iter().filter(|c| c["status"] == "not_computed").count();
+    assert!(
+        missing > 0,
+        "the bundled default compares its rig with the paper's"
+    );
+    assert!(
+        line.ends_with(&format!("0 flagged, {missing} not computed")),
+        "{line}"
+    );
+    let page = std::fs::read_to_string(out.join("report.html")).unwrap();
+    let count = format!("0 / {} ({missing} not computed)", all.len());
+    assert!(page.contains(&count), "the page's count: {count}");
+}

@@ -375,3 +375,53 @@ fn every_mts_run_has_its_measured_tracking() {
         assert!((0.0..0.05).contains(&d), "{id}: {d}");
     }
 }
+
+/// A stated cut-off the compensator cannot take: 1e9 Hz, above every
+/// log's 0.4 of its rate, designed nothing and warned nothing (each run
+/// kept a note); 1e-9 Hz, below the band, designed a compensator that
+/// removes the band it tracks. The first is a campaign warning naming the
+/// key and the runs, the second a warning `servoid check` already gives.
+#[test]
+fn a_stated_cutoff_the_compensator_cannot_use_is_warned() {
+    let dir = scratch();
+    let d = dir.path();
+    let manifest = crate::shards::campaign(d);
+    let text = std::fs::read_to_string(&manifest).unwrap();
+    assert!(
+        !text.contains("[compensator]"),
+        "the simulated manifest states no cut-off"
+    );
+    let with = |fc: &str| {
+        let path = d.join(format!("sim/cutoff-{fc}.toml"));
+        std::fs::write(&path, format!("{text}\n[compensator]\ncutoff_hz = {fc}\n")).unwrap();
+        path
+    };
+    let high = with("1e9");
+    let out = d.join("out");
+    let o = servoid_into(d, "run", &high, &out, &["--quiet", "--figures", "none"]);
+    assert_eq!(o.code, 0, "{}", o.stderr);
+    let r = results_of(&out);
+    let warned = r["warnings"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter_map(Value::as_str)
+        .find(|w| {
+            w.starts_with("compensator.cutoff_hz = 1000000000 Hz: no compensator was designed")
+        })
+        .unwrap_or_else(|| panic!("no cut-off warning in {}", r["warnings"]));
+    for id in ["exp1", "exp2", "exp3", "exp4"] {
+        assert!(warned.contains(&format!("run {id}")), "{warned}");
+    }
+    assert!(warned.contains("is not below"), "{warned}");
+    let low = with("1e-9");
+    let o = servoid(d, &["check", low.to_str().unwrap()]);
+    assert_eq!(o.code, 0, "{}", o.stderr);
+    assert!(
+        o.stderr.contains(
+            "compensator.cutoff_hz = 0.000000001 Hz is below the identification band's top"
+        ),
+        "{}",
+        o.stderr
+    );
+}

@@ -202,10 +202,24 @@ pub struct Needs {
 
 /// A read error as a lab engineer would say it: a log that is not there is
 /// "not found" (it may not have been copied yet), anything else verbatim.
-fn io_message(e: &std::io::Error) -> String {
+fn io_message(path: &Path, e: &std::io::Error) -> String {
     match e.kind() {
-        std::io::ErrorKind::NotFound => "log file not found".into(),
+        std::io::ErrorKind::NotFound => format!("log file not found{}", backslash_hint(path)),
         _ => format!("cannot read: {e}"),
+    }
+}
+
+/// What to say of a path not found that holds backslashes: on Linux and
+/// macOS a `\` is part of a file name, not a folder separator (a manifest
+/// written on Windows).
+pub fn backslash_hint(path: &Path) -> String {
+    if path.to_string_lossy().contains('\\') {
+        let fixed = path.to_string_lossy().replace('\\', "/");
+        format!(
+            " (its path holds `\\`, which here is part of a file name, not a folder separator: write it with `/`, as `{fixed}`)"
+        )
+    } else {
+        String::new()
     }
 }
 
@@ -221,7 +235,7 @@ pub enum IngestError {
         bytes: u64,
         max_bytes: u64,
     },
-    #[error("{}: {}", path.display(), io_message(source))]
+    #[error("{}: {}", path.display(), io_message(path, source))]
     Io {
         path: PathBuf,
         #[source]

@@ -402,6 +402,7 @@ fn campaign_of(partial: Partial, checked: Checked, file: &Path, bytes: &[u8]) ->
         compensator: partial.compensator,
         limits: partial.limits,
     };
+    let cutoff_warning = cutoff_below_band(&checked.compensator, checked.ident_plan.band_hz);
     Some(Campaign {
         file: file.to_path_buf(),
         manifest_sha256: ingest::sha256_hex(bytes),
@@ -415,7 +416,12 @@ fn campaign_of(partial: Partial, checked: Checked, file: &Path, bytes: &[u8]) ->
         references: checked.references,
         manifest,
         run_table: checked.table.info,
-        warnings: checked.table.warnings,
+        warnings: checked
+            .table
+            .warnings
+            .into_iter()
+            .chain(cutoff_warning)
+            .collect(),
         history: checked.history,
         sensitivity: checked.sensitivity,
         compensator: checked.compensator,
@@ -499,6 +505,18 @@ fn check_compensator(
         );
     }
     c
+}
+
+/// A stated cut-off below the identification band's top: the
+/// compensator's low-pass then removes the band it is to track, and its
+/// design succeeds all the same.
+fn cutoff_below_band(c: &CompensatorSettings, band_hz: (f64, f64)) -> Option<String> {
+    let fc = c.cutoff_hz.filter(|&fc| fc < band_hz.1)?;
+    Some(format!(
+        "compensator.cutoff_hz = {fc} Hz is below the identification band's top ({} Hz): the compensator's low-pass removes the band it is to track. Leave it out for {} times the band's top",
+        band_hz.1,
+        crate::tracking::compensator::CUTOFF_PER_BAND
+    ))
 }
 
 /// The history's settings: a window the rule can use and a positive

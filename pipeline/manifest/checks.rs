@@ -37,7 +37,7 @@ pub(super) fn check_slug(s: &str, path: &KeyPath, bad: &mut impl FnMut(KeyPath, 
         bad(
             path.clone(),
             format!(
-                "`{s}` may hold only letters, digits, `.`, `_` and `-`, and may not start with `.` (it names files and folders)"
+                "`{s}` may hold only ASCII letters (a-z, A-Z), digits, `.`, `_` and `-`, and may not start with `.` (it names files and folders)"
             ),
         );
     }

@@ -30,6 +30,12 @@ pub(super) fn read(path: &Path) -> Result<String, ManifestError> {
             file: path.to_path_buf(),
         });
     }
+    if let Some(encoding) = utf16(&bytes) {
+        return Err(failed(std::io::Error::new(
+            std::io::ErrorKind::InvalidData,
+            format!("{encoding} text; servoid reads manifests as UTF-8: save it as UTF-8"),
+        )));
+    }
     String::from_utf8(bytes).map_err(|e| {
         failed(std::io::Error::new(
             std::io::ErrorKind::InvalidData,
@@ -39,6 +45,36 @@ pub(super) fn read(path: &Path) -> Result<String, ManifestError> {
             ),
         ))
     })
+}
+
+/// The UTF-16 a manifest is in, in words, when it is: by its byte-order
+/// mark, or without one (Windows editors offer both) by the zero bytes
+/// its ASCII characters leave at every other place. Its UTF-16 without a
+/// mark is valid UTF-8 full of NULs, which TOML reads as keys with no
+/// value.
+fn utf16(bytes: &[u8]) -> Option<&'static str> {
+    match bytes {
+        [0xff, 0xfe, ..] => return Some("UTF-16 (little-endian, with a byte-order mark)"),
+        [0xfe, 0xff, ..] => return Some("UTF-16 (big-endian, with a byte-order mark)"),
+        _ => {}
+    }
+    let head = &bytes[..bytes.len().min(4096) & !1];
+    let pairs = head.len() / 2;
+    let zero_at = |odd: usize| {
+        head.iter()
+            .skip(odd)
+            .step_by(2)
+            .filter(|&&b| b == 0)
+            .count()
+    };
+    // Mostly ASCII text: one byte of each pair zero, the other not.
+    if pairs >= 4 && zero_at(1) * 10 >= pairs * 9 && zero_at(0) * 10 < pairs {
+        Some("UTF-16 (little-endian, without a byte-order mark)")
+    } else if pairs >= 4 && zero_at(0) * 10 >= pairs * 9 && zero_at(1) * 10 < pairs {
+        Some("UTF-16 (big-endian, without a byte-order mark)")
+    } else {
+        None
+    }
 }
 
 /// Whether the manifest text has the top-level key `key`, read leniently:

@@ -15,7 +15,7 @@ use std::collections::{BTreeMap, HashMap};
 use minijinja::value::Serde;
 use minijinja::{Environment, Value};
 
-use crate::results::{Results, RunResult, Status};
+use crate::results::{ComparisonStatus, Results, RunResult, Status};
 
 const CAMPAIGN_TEMPLATE: &str = include_str!("report.html");
 const RUN_TEMPLATE: &str = include_str!("run.html");
@@ -110,6 +110,11 @@ impl<'a> Pages<'a> {
             .filter(|r| r.status == Status::Failed)
             .count();
         let flagged = results.comparisons.iter().filter(|c| c.flag).count();
+        let not_computed = results
+            .comparisons
+            .iter()
+            .filter(|c| c.status == ComparisonStatus::NotComputed)
+            .count();
         let manifest_json =
             serde_json::to_string_pretty(&results.manifest).unwrap_or_else(|e| e.to_string());
         // Table 3 heads each run's column with its a1b0; looked up here once.
@@ -125,6 +130,7 @@ impl<'a> Pages<'a> {
             figures_note => self.figures_note,
             failed => failed,
             flagged => flagged,
+            not_computed => not_computed,
             a1b0_of => ser(&a1b0),
             manifest_json => manifest_json,
         };

@@ -227,11 +227,49 @@ fn campaign_level(
             .warnings
             .push(format!("sensitivity.monte_carlo: not run: {note}"));
     }
+    if let Some(w) = stated_cutoff_unused(campaign, &results) {
+        results.warnings.push(w);
+    }
     results.comparisons = compare(campaign, &results);
     let specs = catalogue::campaign_figures(overlay, results.sensitivity.as_ref());
     let (figures, figure_warnings) = sink.figures(&specs)?;
     results.warnings.extend(figure_warnings);
     Ok((results, figures))
+}
+
+/// A stated `compensator.cutoff_hz` no run's compensator could be designed
+/// with: each run's note says why, and the campaign says it once, naming
+/// the key.
+fn stated_cutoff_unused(campaign: &Campaign, results: &Results) -> Option<String> {
+    let fc = campaign.compensator.cutoff_hz?;
+    let notes: Vec<(&str, &str)> = results
+        .runs
+        .iter()
+        .filter_map(|r| {
+            let c = r.tracking.as_ref()?.compensator.as_ref()?;
+            Some((
+                r.id.as_str(),
+                c.note.as_deref().filter(|_| c.design.is_none())?,
+            ))
+        })
+        .collect();
+    let designed = results.runs.iter().any(|r| {
+        r.tracking
+            .as_ref()
+            .and_then(|t| t.compensator.as_ref())
+            .is_some_and(|c| c.design.is_some())
+    });
+    let (_, why) = notes.first()?;
+    (!designed).then(|| {
+        format!(
+            "compensator.cutoff_hz = {fc} Hz: no compensator was designed ({why}, for {})",
+            notes
+                .iter()
+                .map(|(id, _)| format!("run {id}"))
+                .collect::<Vec<_>>()
+                .join(", ")
+        )
+    })
 }
 
 /// The runs' outcomes gathered in manifest order.
