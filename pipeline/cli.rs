@@ -80,6 +80,29 @@ pub struct RunArgs {
     shard: Option<run::Shard>,
 }
 
+/// What `servoid history` does.
+#[derive(Debug, Subcommand)]
+pub enum HistoryAction {
+    /// Remove the entries of one date from a history (history.parquet in
+    /// an output folder, or the manifest's history.file): each is recorded
+    /// in `<file>.audit.jsonl` beside it, and the table as it was is kept
+    /// in `<file>.prev`.
+    Remove {
+        /// The history table.
+        history: PathBuf,
+        /// The night's date, as the history's `date` column has it.
+        #[arg(long)]
+        date: String,
+        /// The rig, where entries of that date are of several rigs.
+        #[arg(long)]
+        rig: Option<String>,
+        /// Seconds to wait for a job writing the output folder the history
+        /// is in. Default: 1800.
+        #[arg(long, value_name = "SECONDS")]
+        wait: Option<u64>,
+    },
+}
+
 #[derive(Debug, Subcommand)]
 pub enum Command {
     /// Run a campaign: identify the rig, predict and validate, write results.json.
@@ -134,6 +157,12 @@ pub enum Command {
     /// Propose a campaign manifest from a lab's logs: channels from the
     /// columns' names and units, roles from the files' names, and every
     /// value only the lab knows as a placeholder `servoid check` names.
+    /// Edit a rig history: remove a night's entry (a night run with a
+    /// wrong manifest), recorded in the history's audit file.
+    History {
+        #[command(subcommand)]
+        action: HistoryAction,
+    },
     Init {
         /// Logs: files, folders of logs, or globs.
         #[arg(required = true)]
@@ -246,6 +275,15 @@ fn dispatch(command: Command) -> u8 {
         } => cmd_verify(&results, manifest.as_deref(), capped(jobs)),
         Command::Check { manifest } => cmd_check(&manifest),
         Command::Init { logs, out, table } => cmd_init(&logs, &out, table.as_deref()),
+        Command::History {
+            action:
+                HistoryAction::Remove {
+                    history,
+                    date,
+                    rig,
+                    wait,
+                },
+        } => cmd_history_remove(&history, &date, rig.as_deref(), wait),
         Command::Completions { shell } => cmd_completions(shell),
         Command::Keys => print_bytes(
             crate::manifest::keys::key_reference().as_bytes(),
@@ -310,6 +348,33 @@ fn cmd_check(manifest: &Path) -> u8 {
             for w in &checked.warnings {
                 warn(&format!("warning: {w}"));
             }
+            EXIT_OK
+        }
+        Err(e) => {
+            warn(&format!("error: {e}"));
+            EXIT_USAGE
+        }
+    }
+}
+
+/// `servoid history remove`: a night's entries out of a history, recorded.
+fn cmd_history_remove(history: &Path, date: &str, rig: Option<&str>, wait: Option<u64>) -> u8 {
+    let wait = wait.map_or(
+        crate::report::output_folder::DEFAULT_WAIT,
+        std::time::Duration::from_secs,
+    );
+    match run::history::remove(history, date, rig, wait) {
+        Ok(done) => {
+            for e in &done.entries {
+                say(&format!(
+                    "removed the entry of rig `{}`, campaign `{}`, date {date} (inputs {}) from {}",
+                    e.rig,
+                    e.campaign,
+                    &e.inputs_sha256[..e.inputs_sha256.len().min(12)],
+                    history.display()
+                ));
+            }
+            say(&format!("recorded in {}", done.audit.display()));
             EXIT_OK
         }
         Err(e) => {

@@ -55,7 +55,7 @@ pub const TABLE_COLUMNS: [&str; 15] = [
 
 /// Columns written after those, which a table written before them lacks
 /// (read as absent).
-pub const OPTIONAL_TABLE_COLUMNS: [&str; 1] = ["delay_s"];
+pub const OPTIONAL_TABLE_COLUMNS: [&str; 2] = ["delay_s", "logs_sha256"];
 
 /// One campaign's rig in the history.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
@@ -89,6 +89,12 @@ pub struct Entry {
     /// servoid measured it, and for a night without logs.
     #[serde(default)]
     pub delay_s: Option<f64>,
+    /// SHA-256 over the night's log hashes, sorted (whatever the runs are
+    /// called): the same campaign's night analysed again on the same logs
+    /// (and date) with a corrected manifest replaces this entry. None for a night without logs and in
+    /// entries written before servoid kept it.
+    #[serde(default)]
+    pub logs_sha256: Option<String>,
 }
 
 impl Entry {
@@ -223,6 +229,7 @@ mod tests {
             a3: 16.1,
             a3_std: Some(0.01),
             delay_s: None,
+            logs_sha256: None,
         }
     }
 

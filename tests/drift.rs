@@ -385,3 +385,144 @@ fn a_delay_that_grows_raises_the_delay_alarm_on_the_night_the_rule_predicts() {
         1e3 * delays[0]
     ));
 }
+
+/// A night corrected. The bundled default's logs, dated 2026-11-20, run
+/// first with spring k1's stiffness mistyped (+5 %), then again with it
+/// right: both rows stayed in the history, the wrong one too, and nothing
+/// could drop it. Now the corrected night (same rig, campaign, date, logs)
+/// replaces the wrong row and says so, the audit file beside the history
+/// keeps what was replaced, and `servoid history remove --date` takes out
+/// a night's row, recorded there too.
+#[test]
+fn a_corrected_night_replaces_its_row_and_a_row_can_be_removed() {
+    let dir = scratch();
+    let d = dir.path();
+    let manifest = crate::shards::campaign(d);
+    let text = std::fs::read_to_string(&manifest).unwrap();
+    let dated = |date: &str, text: &str| {
+        text.replace(
+            "role = \"no_specimen\"\n",
+            &format!("role = \"no_specimen\"\ndate = \"{date}\"\n"),
+        )
+    };
+    let k1 = "stiffness_n_per_m = 116640.0";
+    assert!(text.contains(k1), "spring k1 as the bundled default has it");
+    let night = |name: &str, text: String| {
+        let path = d.join(format!("sim/{name}.toml"));
+        std::fs::write(&path, text).unwrap();
+        path
+    };
+    let wrong = night(
+        "wrong",
+        dated("2026-11-20", &text).replace(k1, "stiffness_n_per_m = 122472.0"),
+    );
+    let right = night("right", dated("2026-11-20", &text));
+    let next = night("next", dated("2026-11-21", &text));
+    let out = d.join("night");
+    let history = out.join("history.parquet");
+    let audit = out.join("history.parquet.audit.jsonl");
+    let run = |m: &Path| {
+        let o = servoid_into(d, "run", m, &out, &["--quiet", "--figures", "none"]);
+        assert!(o.code == 0 || o.code == 3, "{}", o.stderr);
+        let results: Value =
+            serde_json::from_slice(&std::fs::read(out.join("results.json")).unwrap()).unwrap();
+        results
+    };
+    let a1b0_of = |r: &Value| r["rig"]["a1b0"]["value"].as_f64().unwrap();
+    let first = run(&wrong);
+    assert!(!audit.exists());
+    let second = run(&right);
+    let said: Vec<&str> = second["warnings"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter_map(Value::as_str)
+        .filter(|w| w.starts_with("history: this night's logs were analysed before"))
+        .collect();
+    assert_eq!(said.len(), 1, "{}", second["warnings"]);
+    assert!(said[0].contains("date 2026-11-20"), "{}", said[0]);
+    // The table holds the corrected night alone.
+    let rows = history_rows(&history);
+    assert_eq!(rows.len(), 1, "{rows:?}");
+    assert_eq!(rows[0].1, a1b0_of(&second));
+    assert!(
+        (a1b0_of(&first) / a1b0_of(&second) - 1.0).abs() > 0.01,
+        "the typo moved a1b0"
+    );
+    // The audit keeps the wrong row.
+    let records: Vec<Value> = std::fs::read_to_string(&audit)
+        .unwrap()
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    assert_eq!(records.len(), 1);
+    assert_eq!(records[0]["action"], "replaced");
+    assert_eq!(
+        records[0]["entry"]["a1b0"].as_f64().unwrap(),
+        a1b0_of(&first)
+    );
+    // Rerun, the corrected night gives the same results, saying the same.
+    let bytes = std::fs::read(out.join("results.json")).unwrap();
+    run(&right);
+    assert!(std::fs::read(out.join("results.json")).unwrap() == bytes);
+    assert_eq!(std::fs::read_to_string(&audit).unwrap().lines().count(), 1);
+    // Another date is another night, kept beside it; then removed by date.
+    run(&next);
+    assert_eq!(history_rows(&history).len(), 2);
+    let o = crate::util::servoid(
+        d,
+        &[
+            "history",
+            "remove",
+            history.to_str().unwrap(),
+            "--date",
+            "2026-11-21",
+        ],
+    );
+    assert_eq!(o.code, 0, "{}", o.stderr);
+    assert!(
+        o.stdout.contains("removed the entry of rig"),
+        "{}",
+        o.stdout
+    );
+    let rows = history_rows(&history);
+    assert_eq!(rows.len(), 1);
+    assert_eq!(rows[0].0.as_deref(), Some("2026-11-20"));
+    let records = std::fs::read_to_string(&audit).unwrap();
+    let last: Value = serde_json::from_str(records.lines().last().unwrap()).unwrap();
+    assert_eq!(last["action"], "removed");
+    assert_eq!(last["entry"]["date"], "2026-11-21");
+    // A date with no entry removes nothing and says which dates there are.
+    let o = crate::util::servoid(
+        d,
+        &[
+            "history",
+            "remove",
+            history.to_str().unwrap(),
+            "--date",
+            "2026-12-01",
+        ],
+    );
+    assert_eq!(o.code, 2);
+    assert!(
+        o.stderr
+            .contains("no entry of date 2026-12-01 (its dates: 2026-11-20)"),
+        "{}",
+        o.stderr
+    );
+    assert_eq!(history_rows(&history).len(), 1);
+}
+
+/// The history's rows as (date, a1b0), read by polars.
+fn history_rows(path: &Path) -> Vec<(Option<String>, f64)> {
+    use polars::prelude::{ParquetReader, SerReader};
+    let file = std::fs::File::open(path).unwrap();
+    let df = ParquetReader::new(file).finish().unwrap();
+    let dates = df.column("date").unwrap().str().unwrap().clone();
+    let a1b0 = df.column("a1b0").unwrap().f64().unwrap().clone();
+    dates
+        .iter()
+        .zip(a1b0.iter())
+        .map(|(d, a)| (d.map(str::to_string), a.unwrap()))
+        .collect()
+}

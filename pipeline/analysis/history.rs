@@ -22,9 +22,14 @@ pub struct Extra {
 /// before that place in `results.drift`, and a warning when the rig starts
 /// a new history beside a rig of a close name. None without a rig. `history_file` is the table
 /// as results.json names it, `file_name` as the warning does.
+/// `replaced` are the audit file's corrections: each entry a night's
+/// analysis replaced, with the inputs' hash of the analysis that did, so a
+/// rerun of that analysis says what it replaced as the first run did
+/// (same inputs, same results).
 pub fn place(
     campaign: &Campaign,
     entries: &[Entry],
+    replaced: &[(String, Entry)],
     results: &mut Results,
     history_file: &str,
     file_name: &str,
@@ -34,7 +39,37 @@ pub fn place(
     let own = entries
         .iter()
         .position(|e| e.rig == entry.rig && e.inputs_sha256 == entry.inputs_sha256);
-    let slot = own.unwrap_or(entries.len());
+    // The same night analysed again (same rig, campaign, date and logs)
+    // with its manifest corrected or its runs renamed: it takes the earlier
+    // entry's place, which the audit file keeps. Another campaign on the
+    // same logs is another entry.
+    let corrected = own.is_none().then(|| {
+        entries.iter().position(|e| {
+            e.rig == entry.rig
+                && e.campaign == entry.campaign
+                && e.date == entry.date
+                && entry.logs_sha256.is_some()
+                && e.logs_sha256 == entry.logs_sha256
+        })
+    });
+    let corrected = corrected.flatten();
+    let was_replaced = corrected.map(|k| &entries[k]).or_else(|| {
+        own?;
+        replaced
+            .iter()
+            .rev()
+            .find(|(by, old)| *by == entry.inputs_sha256 && old.rig == entry.rig)
+            .map(|(_, old)| old)
+    });
+    if let Some(old) = was_replaced {
+        results.warnings.push(format!(
+            "history: this night's logs were analysed before by this campaign{} (inputs {}): this analysis replaces that entry of {file_name}, and the replaced row is kept in {}",
+            old.date.as_ref().map_or(String::new(), |d| format!(", date {d}")),
+            &old.inputs_sha256[..old.inputs_sha256.len().min(12)],
+            audit_name(file_name),
+        ));
+    }
+    let slot = own.or(corrected).unwrap_or(entries.len());
     let earlier: Vec<Entry> = entries[..slot]
         .iter()
         .filter(|e| e.rig == entry.rig)
@@ -70,6 +105,11 @@ pub fn place(
     Some((slot, entry))
 }
 
+/// The audit file beside history file `file_name`: `<name>.audit.jsonl`.
+pub fn audit_name(file_name: &str) -> String {
+    format!("{file_name}.audit.jsonl")
+}
+
 /// This campaign's entry: its rig's parameters with their stds.
 fn entry_of(campaign: &Campaign, results: &Results, rig: &RigResult) -> Entry {
     Entry {
@@ -89,6 +129,7 @@ fn entry_of(campaign: &Campaign, results: &Results, rig: &RigResult) -> Entry {
         a3: rig.a3.value,
         a3_std: rig.a3.std,
         delay_s: night_delay(results),
+        logs_sha256: logs_sha256(results),
     }
 }
 
@@ -174,6 +215,21 @@ fn inputs_sha256(results: &Results) -> String {
     ingest::sha256_hex(text.as_bytes())
 }
 
+/// SHA-256 over the night's log hashes, sorted: the same logs whatever the
+/// runs are called or the manifest says. None without logs.
+fn logs_sha256(results: &Results) -> Option<String> {
+    let mut hashes: Vec<&str> = results
+        .runs
+        .iter()
+        .filter_map(|r| r.log.as_ref().map(|l| l.sha256.as_str()))
+        .collect();
+    if hashes.is_empty() {
+        return None;
+    }
+    hashes.sort_unstable();
+    Some(ingest::sha256_hex(hashes.join("\n").as_bytes()))
+}
+
 /// Why a history table's rows do not read as entries.
 #[derive(Debug, thiserror::Error)]
 pub enum HistoryError {
@@ -219,6 +275,7 @@ fn servoid_entries(t: &Table) -> Result<Vec<Entry>, HistoryError> {
     let at = |k: usize| TABLE_COLUMNS[k];
     // Written since servoid measured the delay; an older table has none.
     let delay = t.column("delay_s");
+    let logs = t.column("logs_sha256");
     t.rows
         .iter()
         .enumerate()
@@ -272,6 +329,7 @@ fn servoid_entries(t: &Table) -> Result<Vec<Entry>, HistoryError> {
                         value: v.clone(),
                     })?),
                 },
+                logs_sha256: logs.and_then(|c| row[c].clone()),
             })
         })
         .collect()

@@ -49,6 +49,13 @@ pub fn write(
         Column::new("a3_std".into(), opt(|e| e.a3_std)),
         Column::new("servoid_version".into(), text(|e| &e.servoid_version)),
         Column::new("delay_s".into(), opt(|e| e.delay_s)),
+        Column::new(
+            "logs_sha256".into(),
+            entries
+                .iter()
+                .map(|e| e.logs_sha256.clone())
+                .collect::<Vec<_>>(),
+        ),
     ];
     cols.extend(
         extra
@@ -60,6 +67,23 @@ pub fn write(
         && std::fs::read(previous).ok().as_deref() != Some(before)
     {
         write_atomic(previous, before)?;
+    }
+    write_atomic(path, &bytes)?;
+    Ok(())
+}
+
+/// Append `records` (one JSON object each) to the history's audit file
+/// `path`, JSON lines: what a correction replaced and what a removal took
+/// out, so no row leaves the history unrecorded. Written whole and
+/// atomically, as the history is.
+pub fn append_audit(path: &Path, records: &[serde_json::Value]) -> Result<(), ColumnWriteError> {
+    if records.is_empty() {
+        return Ok(());
+    }
+    let mut bytes = std::fs::read(path).unwrap_or_default();
+    for r in records {
+        bytes.extend_from_slice(r.to_string().as_bytes());
+        bytes.push(b'\n');
     }
     write_atomic(path, &bytes)?;
     Ok(())

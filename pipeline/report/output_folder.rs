@@ -328,6 +328,24 @@ fn lock_target(parent: &Path, name: &str, shown: &Path, wait: Duration) -> std::
     Ok(file)
 }
 
+/// The lock of the output folder `path` is in, taken (waiting at most
+/// `wait`), when it is in one: a folder a job has written, whose lock file
+/// lies beside it. None for a file elsewhere.
+pub fn lock_if_output(path: &Path, wait: Duration) -> std::io::Result<Option<File>> {
+    let Some(folder) = path.parent().filter(|p| !p.as_os_str().is_empty()) else {
+        return Ok(None);
+    };
+    let folder = folder.canonicalize()?;
+    let (Some(parent), Some(name)) = (folder.parent(), folder.file_name()) else {
+        return Ok(None);
+    };
+    let name = name.to_string_lossy();
+    if !parent.join(format!(".{name}{WORK}lock")).is_file() {
+        return Ok(None);
+    }
+    lock_target(parent, &name, &folder, wait).map(Some)
+}
+
 /// Whether `file`'s lock was taken within `wait`: tried every 50 ms, as
 /// flock has no timed wait.
 fn wait_for_lock(file: &File, wait: Duration) -> std::io::Result<bool> {

@@ -23,6 +23,9 @@ pub(super) struct History {
     /// the end.
     slot: usize,
     entry: Entry,
+    /// The entry of the same night this campaign's corrects, when it
+    /// replaces one it is not a rerun of (its inputs differ): for the audit.
+    replaced: Option<Entry>,
 }
 
 /// The history file: the manifest's, else `history.parquet` in `out_dir`.
@@ -38,7 +41,7 @@ pub(super) fn path(campaign: &Campaign, out_dir: &Path) -> PathBuf {
 /// servoid history): the night's failure, not a warning, for the drift
 /// alarm is off until someone looks.
 #[derive(Debug)]
-pub(super) struct Unreadable {
+pub struct Unreadable {
     pub path: PathBuf,
     pub what: String,
 }
@@ -46,7 +49,7 @@ pub(super) struct Unreadable {
 impl Unreadable {
     /// What the night says, with `shown` the file as the user knows it:
     /// what is wrong and how to recover.
-    pub(super) fn message(&self, shown: &Path) -> String {
+    pub fn message(&self, shown: &Path) -> String {
         let prev = previous_copy(&self.path);
         let recover = if prev.is_file() {
             let shown_prev = previous_copy(shown);
@@ -108,16 +111,23 @@ pub(super) fn check(
     // where the folder is.
     let shown = super::relative_to(&path, out_dir).unwrap_or_else(|| path.display().to_string());
     let file_name = path.file_name().unwrap_or_default().to_string_lossy();
-    let Some((slot, entry)) = history::place(campaign, &entries, results, &shown, &file_name)
+    let replaced = corrections(&audit_path(&path));
+    let Some((slot, entry)) =
+        history::place(campaign, &entries, &replaced, results, &shown, &file_name)
     else {
         return Ok(None);
     };
+    let replaced = entries
+        .get(slot)
+        .filter(|old| old.inputs_sha256 != entry.inputs_sha256)
+        .cloned();
     Ok(Some(History {
         path,
         entries,
         extra,
         slot,
         entry,
+        replaced,
     }))
 }
 
@@ -138,6 +148,19 @@ impl History {
     /// copy an unreadable table's message points to.
     pub(super) fn write(mut self, results_json: &[u8]) -> Result<(), WriteError> {
         self.entry.results_sha256 = ingest::sha256_hex(results_json);
+        let audit: Vec<serde_json::Value> = self
+            .replaced
+            .iter()
+            .map(|old| {
+                serde_json::json!({
+                    "action": "replaced",
+                    "by_campaign": self.entry.campaign,
+                    "by_inputs_sha256": self.entry.inputs_sha256,
+                    "by_results_sha256": self.entry.results_sha256,
+                    "entry": old,
+                })
+            })
+            .collect();
         if self.slot == self.entries.len() {
             self.extra.rows.push(vec![None; self.extra.names.len()]);
         }
@@ -162,11 +185,41 @@ impl History {
             &self.entries,
             &columns,
         )
-        .map_err(|e| match e {
-            ColumnWriteError::Write(w) => w,
-            other => WriteError::Table(Box::new(other)),
-        })
+        .and_then(|()| report::history::append_audit(&audit_path(&self.path), &audit))
+        .map_err(table_error)
     }
+}
+
+/// The corrections the audit file at `path` records: each replaced entry
+/// with the inputs' hash of the analysis that replaced it. A line that does
+/// not read as one is passed over: the audit is a record, not an input the
+/// night depends on.
+fn corrections(path: &Path) -> Vec<(String, Entry)> {
+    let Ok(text) = std::fs::read_to_string(path) else {
+        return Vec::new();
+    };
+    text.lines()
+        .filter_map(|l| serde_json::from_str::<serde_json::Value>(l).ok())
+        .filter(|v| v["action"] == "replaced")
+        .filter_map(|v| {
+            let by = v["by_inputs_sha256"].as_str()?.to_string();
+            let entry = serde_json::from_value(v["entry"].clone()).ok()?;
+            Some((by, entry))
+        })
+        .collect()
+}
+
+fn table_error(e: ColumnWriteError) -> WriteError {
+    match e {
+        ColumnWriteError::Write(w) => w,
+        other => WriteError::Table(Box::new(other)),
+    }
+}
+
+/// The audit file beside the history at `path`.
+pub(super) fn audit_path(path: &Path) -> PathBuf {
+    let name = path.file_name().unwrap_or_default().to_string_lossy();
+    path.with_file_name(history::audit_name(&name))
 }
 
 fn put(entries: &mut Vec<Entry>, slot: usize, entry: Entry) {
@@ -175,4 +228,131 @@ fn put(entries: &mut Vec<Entry>, slot: usize, entry: Entry) {
     } else {
         entries.push(entry);
     }
+}
+
+/// What `servoid history remove` took out of a history.
+#[derive(Debug)]
+pub struct Removed {
+    pub entries: Vec<Entry>,
+    /// Where they are recorded.
+    pub audit: PathBuf,
+}
+
+/// Why `servoid history remove` removed nothing.
+#[derive(Debug, thiserror::Error)]
+pub enum RemoveError {
+    #[error("{}", .0.message(&.0.path))]
+    Unreadable(Unreadable),
+    #[error("{}: no entry of date {date}{} (its dates: {})", path.display(), rig.as_ref().map_or(String::new(), |r| format!(" for rig `{r}`")), if dates.is_empty() { "none".to_string() } else { dates.join(", ") })]
+    NoEntry {
+        path: PathBuf,
+        date: String,
+        rig: Option<String>,
+        dates: Vec<String>,
+    },
+    #[error("{}: the entries of date {date} are of several rigs ({}): give --rig", path.display(), rigs.join(", "))]
+    SeveralRigs {
+        path: PathBuf,
+        date: String,
+        rigs: Vec<String>,
+    },
+    #[error("{}: cannot lock the output folder it is in: {source}", path.display())]
+    Lock {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+    #[error("{}: no such history file", path.display())]
+    Missing { path: PathBuf },
+    #[error(transparent)]
+    Write(#[from] WriteError),
+}
+
+/// Remove the entries of `date` (of `rig`, or of the one rig that has
+/// entries that day) from the history at `path`, recording each in its
+/// audit file and keeping the table as it was in `<file>.prev`. Where the
+/// history is in an output folder, that folder's lock is held meanwhile
+/// (waiting at most `wait` for a job writing it).
+pub fn remove(
+    path: &Path,
+    date: &str,
+    rig: Option<&str>,
+    wait: std::time::Duration,
+) -> Result<Removed, RemoveError> {
+    let _lock =
+        report::output_folder::lock_if_output(path, wait).map_err(|source| RemoveError::Lock {
+            path: path.to_path_buf(),
+            source,
+        })?;
+    if !path.is_file() {
+        return Err(RemoveError::Missing {
+            path: path.to_path_buf(),
+        });
+    }
+    let (entries, mut extra) = read(path).map_err(RemoveError::Unreadable)?;
+    let that_day = |e: &Entry| e.date.as_deref() == Some(date) && rig.is_none_or(|r| e.rig == r);
+    let mut rigs: Vec<String> = entries
+        .iter()
+        .filter(|e| that_day(e))
+        .map(|e| e.rig.clone())
+        .collect();
+    rigs.dedup();
+    if rigs.is_empty() {
+        let mut dates: Vec<String> = entries.iter().filter_map(|e| e.date.clone()).collect();
+        dates.sort();
+        dates.dedup();
+        return Err(RemoveError::NoEntry {
+            path: path.to_path_buf(),
+            date: date.to_string(),
+            rig: rig.map(str::to_string),
+            dates,
+        });
+    }
+    if rigs.len() > 1 {
+        return Err(RemoveError::SeveralRigs {
+            path: path.to_path_buf(),
+            date: date.to_string(),
+            rigs,
+        });
+    }
+    let before = std::fs::read(path).ok();
+    let (mut kept, mut removed) = (Vec::new(), Vec::new());
+    let mut rows = Vec::new();
+    for (e, row) in entries.into_iter().zip(std::mem::take(&mut extra.rows)) {
+        if that_day(&e) {
+            removed.push(e);
+        } else {
+            kept.push(e);
+            rows.push(row);
+        }
+    }
+    extra.rows = rows;
+    let columns: Vec<(String, Vec<Option<String>>)> = extra
+        .names
+        .iter()
+        .enumerate()
+        .map(|(k, name)| {
+            (
+                name.clone(),
+                extra.rows.iter().map(|r| r[k].clone()).collect(),
+            )
+        })
+        .collect();
+    let audit = audit_path(path);
+    let records: Vec<serde_json::Value> = removed
+        .iter()
+        .map(|e| serde_json::json!({"action": "removed", "date": date, "entry": e}))
+        .collect();
+    report::history::write(
+        path,
+        &previous_copy(path),
+        before.as_deref(),
+        &kept,
+        &columns,
+    )
+    .and_then(|()| report::history::append_audit(&audit, &records))
+    .map_err(table_error)?;
+    Ok(Removed {
+        entries: removed,
+        audit,
+    })
 }

@@ -7,7 +7,7 @@
 
 mod analyse;
 mod cache;
-mod history;
+pub mod history;
 pub mod init;
 mod sensitivity;
 mod shard;
