@@ -263,3 +263,48 @@ fn a_merge_draws_what_the_shards_drew_and_finds_a_moved_manifest() {
     assert_eq!(summary(&o.stdout)["cached"], 7, "{}", o.stdout);
     assert_eq!(rig("merged-moved"), rig("merged"));
 }
+
+/// Two shards given the same `--out`: the second replaced the first
+/// without a word, and the merge then said a shard was missing without
+/// saying why. The second is refused (exit 2, naming the shard the folder
+/// holds), the folder keeps the first, and the first may run again there.
+#[test]
+fn two_shards_into_one_folder_are_refused() {
+    let dir = scratch();
+    let d = dir.path();
+    let manifest = campaign(d);
+    let out = d.join("shared");
+    let first = servoid_into(
+        d,
+        "run",
+        &manifest,
+        &out,
+        &["--shard", "0/2", "--quiet", "--figures", "none"],
+    );
+    assert_eq!(first.code, 0, "{}", first.stderr);
+    let second = servoid_into(
+        d,
+        "run",
+        &manifest,
+        &out,
+        &["--shard", "1/2", "--quiet", "--figures", "none"],
+    );
+    assert_eq!(second.code, 2, "{}", second.stderr);
+    assert!(
+        second.stderr.contains("holds shard 0/2 of campaign `maghareh2018-synthetic`, which this run of shard 1/2 would replace")
+            && second.stderr.contains("give each shard its own --out"),
+        "{}",
+        second.stderr
+    );
+    let info: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("shard.json")).unwrap()).unwrap();
+    assert_eq!(info["shard"]["index"], 0);
+    let again = servoid_into(
+        d,
+        "run",
+        &manifest,
+        &out,
+        &["--shard", "0/2", "--quiet", "--figures", "none"],
+    );
+    assert_eq!(again.code, 0, "{}", again.stderr);
+}

@@ -83,6 +83,18 @@ pub enum JobError {
     /// need every validation log.
     #[error("{}: identification.joint.include_validation fits every validation run's log into the rig, which a shard reading only its share cannot give; run the campaign without --shard, or set the key to false to share it out", file.display())]
     NotShardable { file: PathBuf },
+    /// A shard's `--out` holds another shard of the same campaign, which
+    /// this one would replace (the merge would then miss it).
+    #[error(
+        "{}: holds shard {}/{} of campaign `{campaign}`, which this run of shard {}/{} would replace, and the merge would miss it: give each shard its own --out",
+        out.display(), held.index, held.count, asked.index, asked.count
+    )]
+    ShardFolderTaken {
+        out: PathBuf,
+        campaign: String,
+        held: Shard,
+        asked: Shard,
+    },
 }
 
 impl JobError {
@@ -109,6 +121,7 @@ impl JobError {
                 | JobError::Verify(_)
                 | JobError::Merge(_)
                 | JobError::NotShardable { .. }
+                | JobError::ShardFolderTaken { .. }
         )
     }
 }
@@ -314,6 +327,19 @@ pub fn run_shard(
         ))
     });
     let set = begin(&out_dir, settings.wait)?;
+    // Under the folder's lock: the set in place is the one this run would
+    // replace.
+    if let Some(held) = shard::held(set.resolved())
+        .filter(|h| h.campaign == campaign.name && h.shard.count == shard.count)
+        .filter(|h| h.shard.index != shard.index)
+    {
+        return Err(JobError::ShardFolderTaken {
+            out: out_dir,
+            campaign: held.campaign,
+            held: held.shard,
+            asked: shard,
+        });
+    }
     let share = shard.of(&campaign);
     let clock = std::time::Instant::now();
     let workers = pool(settings.jobs)?;

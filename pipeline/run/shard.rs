@@ -158,6 +158,11 @@ pub enum MergeError {
     },
 }
 
+/// The shard a folder holds (its `shard.json`), when it holds one.
+pub fn held(dir: &Path) -> Option<ShardInfo> {
+    serde_json::from_slice(&std::fs::read(dir.join("shard.json")).ok()?).ok()
+}
+
 /// Write `shard.json` into a shard's folder.
 pub fn write_info(out_dir: &Path, info: &ShardInfo) -> Result<(), WriteError> {
     report::write_atomic(&out_dir.join("shard.json"), &report::json_bytes(info))
