@@ -274,21 +274,18 @@ fn two_shards_into_one_folder_are_refused() {
     let d = dir.path();
     let manifest = campaign(d);
     let out = d.join("shared");
-    let first = servoid_into(
-        d,
-        "run",
-        &manifest,
-        &out,
-        &["--shard", "0/2", "--quiet", "--figures", "none"],
-    );
+    let shard_into = |i: &str| {
+        servoid_into(
+            d,
+            "run",
+            &manifest,
+            &out,
+            &["--shard", i, "--quiet", "--figures", "none"],
+        )
+    };
+    let first = shard_into("0/2");
     assert_eq!(first.code, 0, "{}", first.stderr);
-    let second = servoid_into(
-        d,
-        "run",
-        &manifest,
-        &out,
-        &["--shard", "1/2", "--quiet", "--figures", "none"],
-    );
+    let second = shard_into("1/2");
     assert_eq!(second.code, 2, "{}", second.stderr);
     assert!(
         second.stderr.contains("holds shard 0/2 of campaign `maghareh2018-synthetic`, which this run of shard 1/2 would replace")
@@ -299,12 +296,6 @@ fn two_shards_into_one_folder_are_refused() {
     let info: serde_json::Value =
         serde_json::from_slice(&std::fs::read(out.join("shard.json")).unwrap()).unwrap();
     assert_eq!(info["shard"]["index"], 0);
-    let again = servoid_into(
-        d,
-        "run",
-        &manifest,
-        &out,
-        &["--shard", "0/2", "--quiet", "--figures", "none"],
-    );
+    let again = shard_into("0/2");
     assert_eq!(again.code, 0, "{}", again.stderr);
 }

@@ -43,16 +43,17 @@ pub fn place(
     // with its manifest corrected or its runs renamed: it takes the earlier
     // entry's place, which the audit file keeps. Another campaign on the
     // same logs is another entry.
-    let corrected = own.is_none().then(|| {
-        entries.iter().position(|e| {
-            e.rig == entry.rig
-                && e.campaign == entry.campaign
-                && e.date == entry.date
-                && entry.logs_sha256.is_some()
-                && e.logs_sha256 == entry.logs_sha256
-        })
-    });
-    let corrected = corrected.flatten();
+    let same_night = |e: &Entry| {
+        e.rig == entry.rig
+            && e.campaign == entry.campaign
+            && e.date == entry.date
+            && entry.logs_sha256.is_some()
+            && e.logs_sha256 == entry.logs_sha256
+    };
+    let corrected = match own {
+        Some(_) => None,
+        None => entries.iter().position(same_night),
+    };
     let was_replaced = corrected.map(|k| &entries[k]).or_else(|| {
         own?;
         replaced

@@ -237,76 +237,8 @@ fn column(
     arrays: &dyn Arrays,
     w: &Wanted<'_>,
 ) -> Result<(String, Vec<f64>), IngestError> {
-    let format = |problem| IngestError::format(path, problem);
-    let missing = || {
-        let mut available = format!("variables: {}", list(arrays.variables()));
-        if !arrays.unusable().is_empty() {
-            available.push_str(&format!(
-                "; not numeric: {}",
-                list(
-                    arrays
-                        .unusable()
-                        .iter()
-                        .map(|u| format!("`{}` ({})", u.name, u.what))
-                )
-            ));
-        }
-        if let Some(skipped) = arrays.skipped() {
-            available.push_str(&format!("; skipped: {skipped}"));
-        }
-        IngestError::MissingColumn {
-            path: path.to_path_buf(),
-            channel: w.channel,
-            column: w.column.to_string(),
-            available,
-        }
-    };
-    let find = |name: &str| -> Result<Option<&MatVariable>, IngestError> {
-        if let Some(v) = arrays.variables().iter().find(|v| v.name == name) {
-            return Ok(Some(v));
-        }
-        if let Some(u) = arrays.unusable().iter().find(|u| u.name == name) {
-            return Err(format(FormatProblem::NotNumericVariable {
-                variable: u.name.clone(),
-                channel: w.channel,
-                what: u.what.clone(),
-            }));
-        }
-        // A bare name, as a manifest carried over from CSV logs gives it,
-        // is the grouped variable of that name where only one group holds
-        // it.
-        if name.contains('/') {
-            return Ok(None);
-        }
-        let grouped: Vec<&MatVariable> = arrays
-            .variables()
-            .iter()
-            .filter(|v| leaf(&v.name) == name)
-            .collect();
-        let others: Vec<&Unusable> = arrays
-            .unusable()
-            .iter()
-            .filter(|u| leaf(&u.name) == name)
-            .collect();
-        match (grouped.as_slice(), others.as_slice()) {
-            ([v], []) => Ok(Some(v)),
-            ([], [u]) => Err(format(FormatProblem::NotNumericVariable {
-                variable: u.name.clone(),
-                channel: w.channel,
-                what: u.what.clone(),
-            })),
-            ([], []) => Ok(None),
-            _ => Err(format(FormatProblem::AmbiguousName {
-                name: name.to_string(),
-                channel: w.channel,
-                found: grouped
-                    .iter()
-                    .map(|v| v.name.clone())
-                    .chain(others.iter().map(|u| u.name.clone()))
-                    .collect(),
-            })),
-        }
-    };
+    let missing = || missing_column(path, arrays, w);
+    let find = |name: &str| find_variable(path, arrays, name, w.channel);
     match w.column {
         Column::Name(n) => match find(n)? {
             Some(v) => Ok((v.name.clone(), vector(path, arrays, &v.name, w.channel)?)),
@@ -345,6 +277,87 @@ fn column(
                 )),
             }
         }
+    }
+}
+
+/// The variable a plan names `name`: by its name, else, for a bare name,
+/// the grouped variable of that name where only one group holds it (as a
+/// manifest carried over from CSV logs names it). None when there is none;
+/// an error naming what the file holds when it is not numeric, or when
+/// several groups hold the bare name.
+fn find_variable<'a>(
+    path: &Path,
+    arrays: &'a dyn Arrays,
+    name: &str,
+    channel: &'static str,
+) -> Result<Option<&'a MatVariable>, IngestError> {
+    let not_numeric = |u: &Unusable| {
+        IngestError::format(
+            path,
+            FormatProblem::NotNumericVariable {
+                variable: u.name.clone(),
+                channel,
+                what: u.what.clone(),
+            },
+        )
+    };
+    if let Some(v) = arrays.variables().iter().find(|v| v.name == name) {
+        return Ok(Some(v));
+    }
+    if let Some(u) = arrays.unusable().iter().find(|u| u.name == name) {
+        return Err(not_numeric(u));
+    }
+    if name.contains('/') {
+        return Ok(None);
+    }
+    let grouped: Vec<&MatVariable> = arrays
+        .variables()
+        .iter()
+        .filter(|v| leaf(&v.name) == name)
+        .collect();
+    let others: Vec<&Unusable> = arrays
+        .unusable()
+        .iter()
+        .filter(|u| leaf(&u.name) == name)
+        .collect();
+    match (grouped.as_slice(), others.as_slice()) {
+        ([v], []) => Ok(Some(v)),
+        ([], [u]) => Err(not_numeric(u)),
+        ([], []) => Ok(None),
+        _ => Err(IngestError::format(
+            path,
+            FormatProblem::AmbiguousName {
+                name: name.to_string(),
+                channel,
+                found: grouped
+                    .iter()
+                    .map(|v| v.name.clone())
+                    .chain(others.iter().map(|u| u.name.clone()))
+                    .collect(),
+            },
+        )),
+    }
+}
+
+/// A wanted column that is not there, with what the file holds: its
+/// variables, those that are not numeric, and what the reader skipped.
+fn missing_column(path: &Path, arrays: &dyn Arrays, w: &Wanted<'_>) -> IngestError {
+    let mut available = format!("variables: {}", list(arrays.variables()));
+    if !arrays.unusable().is_empty() {
+        let unusable = arrays
+            .unusable()
+            .iter()
+            .map(|u| format!("`{}` ({})", u.name, u.what));
+        available.push_str(&format!("; not numeric: {}", list(unusable)));
+    }
+    if let Some(skipped) = arrays.skipped() {
+        available.push_str(&format!("; skipped: {skipped}"));
+    }
+    IngestError::MissingColumn {
+        path: path.to_path_buf(),
+        channel: w.channel,
+        column: w.column.to_string(),
+        available,
     }
 }
 

@@ -367,12 +367,9 @@ pub(super) fn skip_v1_links(bytes: &mut [u8]) -> usize {
         if keep.len() == count {
             continue;
         }
-        let entries: Vec<Vec<u8>> = keep
-            .iter()
-            .map(|&i| bytes[body + i * entry..body + (i + 1) * entry].to_vec())
-            .collect();
-        for (j, e) in entries.iter().enumerate() {
-            bytes[body + j * entry..body + (j + 1) * entry].copy_from_slice(e);
+        // Each kept entry moves up to its new place (j <= i).
+        for (j, &i) in keep.iter().enumerate() {
+            bytes.copy_within(body + i * entry..body + (i + 1) * entry, body + j * entry);
         }
         bytes[body + keep.len() * entry..body + count * entry].fill(0);
         let n = u16::try_from(keep.len()).expect("fewer than count");

@@ -39,6 +39,7 @@ use crate::results::{
     CampaignSummary, CcfResult, ComplexValue, RESULTS_SCHEMA_VERSION, Results, RunResult, Status,
 };
 use crate::simulate::specimen::SpecimenModel;
+use crate::tracking::compensator::CompensatorOutcome;
 use crate::validate::csi::Csi;
 use crate::validate::{self, ValidationMetrics};
 
@@ -242,34 +243,27 @@ fn campaign_level(
 /// the key.
 fn stated_cutoff_unused(campaign: &Campaign, results: &Results) -> Option<String> {
     let fc = campaign.compensator.cutoff_hz?;
-    let notes: Vec<(&str, &str)> = results
+    let outcomes: Vec<(&str, &CompensatorOutcome)> = results
         .runs
         .iter()
-        .filter_map(|r| {
-            let c = r.tracking.as_ref()?.compensator.as_ref()?;
-            Some((
-                r.id.as_str(),
-                c.note.as_deref().filter(|_| c.design.is_none())?,
-            ))
-        })
+        .filter_map(|r| Some((r.id.as_str(), r.tracking.as_ref()?.compensator.as_ref()?)))
         .collect();
-    let designed = results.runs.iter().any(|r| {
-        r.tracking
-            .as_ref()
-            .and_then(|t| t.compensator.as_ref())
-            .is_some_and(|c| c.design.is_some())
-    });
+    if outcomes.iter().any(|(_, c)| c.design.is_some()) {
+        return None;
+    }
+    let notes: Vec<(&str, &str)> = outcomes
+        .iter()
+        .filter_map(|(id, c)| Some((*id, c.note.as_deref()?)))
+        .collect();
     let (_, why) = notes.first()?;
-    (!designed).then(|| {
-        format!(
-            "compensator.cutoff_hz = {fc} Hz: no compensator was designed ({why}, for {})",
-            notes
-                .iter()
-                .map(|(id, _)| format!("run {id}"))
-                .collect::<Vec<_>>()
-                .join(", ")
-        )
-    })
+    Some(format!(
+        "compensator.cutoff_hz = {fc} Hz: no compensator was designed ({why}, for {})",
+        notes
+            .iter()
+            .map(|(id, _)| format!("run {id}"))
+            .collect::<Vec<_>>()
+            .join(", ")
+    ))
 }
 
 /// The runs' outcomes gathered in manifest order.

@@ -23,9 +23,6 @@ pub(super) struct History {
     /// the end.
     slot: usize,
     entry: Entry,
-    /// The entry of the same night this campaign's corrects, when it
-    /// replaces one it is not a rerun of (its inputs differ): for the audit.
-    replaced: Option<Entry>,
 }
 
 /// The history file: the manifest's, else `history.parquet` in `out_dir`.
@@ -117,17 +114,12 @@ pub(super) fn check(
     else {
         return Ok(None);
     };
-    let replaced = entries
-        .get(slot)
-        .filter(|old| old.inputs_sha256 != entry.inputs_sha256)
-        .cloned();
     Ok(Some(History {
         path,
         entries,
         extra,
         slot,
         entry,
-        replaced,
     }))
 }
 
@@ -148,9 +140,12 @@ impl History {
     /// copy an unreadable table's message points to.
     pub(super) fn write(mut self, results_json: &[u8]) -> Result<(), WriteError> {
         self.entry.results_sha256 = ingest::sha256_hex(results_json);
+        // The entry of the same night this one corrects, when it replaces
+        // one it is not a rerun of (its inputs differ): for the audit.
         let audit: Vec<serde_json::Value> = self
-            .replaced
-            .iter()
+            .entries
+            .get(self.slot)
+            .filter(|old| old.inputs_sha256 != self.entry.inputs_sha256)
             .map(|old| {
                 serde_json::json!({
                     "action": "replaced",
@@ -160,34 +155,46 @@ impl History {
                     "entry": old,
                 })
             })
+            .into_iter()
             .collect();
         if self.slot == self.entries.len() {
             self.extra.rows.push(vec![None; self.extra.names.len()]);
         }
         put(&mut self.entries, self.slot, self.entry);
-        let before = std::fs::read(&self.path).ok();
-        let columns: Vec<(String, Vec<Option<String>>)> = self
-            .extra
-            .names
-            .iter()
-            .enumerate()
-            .map(|(k, name)| {
-                (
-                    name.clone(),
-                    self.extra.rows.iter().map(|r| r[k].clone()).collect(),
-                )
-            })
-            .collect();
-        report::history::write(
-            &self.path,
-            &previous_copy(&self.path),
-            before.as_deref(),
-            &self.entries,
-            &columns,
-        )
-        .and_then(|()| report::history::append_audit(&audit_path(&self.path), &audit))
-        .map_err(table_error)
+        write_table(&self.path, &self.entries, &self.extra, &audit)
     }
+}
+
+/// Write `entries` with the lab's columns `extra` as the history at
+/// `path`, the table it replaces kept as `<file>.prev` when the update
+/// changes it, then append `audit` to its audit file.
+fn write_table(
+    path: &Path,
+    entries: &[Entry],
+    extra: &Extra,
+    audit: &[serde_json::Value],
+) -> Result<(), WriteError> {
+    let before = std::fs::read(path).ok();
+    let columns: Vec<(String, Vec<Option<String>>)> = extra
+        .names
+        .iter()
+        .enumerate()
+        .map(|(k, name)| {
+            (
+                name.clone(),
+                extra.rows.iter().map(|r| r[k].clone()).collect(),
+            )
+        })
+        .collect();
+    report::history::write(
+        path,
+        &previous_copy(path),
+        before.as_deref(),
+        entries,
+        &columns,
+    )
+    .and_then(|()| report::history::append_audit(&audit_path(path), audit))
+    .map_err(table_error)
 }
 
 /// The corrections the audit file at `path` records: each replaced entry
@@ -295,6 +302,7 @@ pub fn remove(
         .filter(|e| that_day(e))
         .map(|e| e.rig.clone())
         .collect();
+    rigs.sort();
     rigs.dedup();
     if rigs.is_empty() {
         let mut dates: Vec<String> = entries.iter().filter_map(|e| e.date.clone()).collect();
@@ -314,7 +322,6 @@ pub fn remove(
             rigs,
         });
     }
-    let before = std::fs::read(path).ok();
     let (mut kept, mut removed) = (Vec::new(), Vec::new());
     let mut rows = Vec::new();
     for (e, row) in entries.into_iter().zip(std::mem::take(&mut extra.rows)) {
@@ -326,31 +333,12 @@ pub fn remove(
         }
     }
     extra.rows = rows;
-    let columns: Vec<(String, Vec<Option<String>>)> = extra
-        .names
-        .iter()
-        .enumerate()
-        .map(|(k, name)| {
-            (
-                name.clone(),
-                extra.rows.iter().map(|r| r[k].clone()).collect(),
-            )
-        })
-        .collect();
-    let audit = audit_path(path);
     let records: Vec<serde_json::Value> = removed
         .iter()
         .map(|e| serde_json::json!({"action": "removed", "date": date, "entry": e}))
         .collect();
-    report::history::write(
-        path,
-        &previous_copy(path),
-        before.as_deref(),
-        &kept,
-        &columns,
-    )
-    .and_then(|()| report::history::append_audit(&audit, &records))
-    .map_err(table_error)?;
+    write_table(path, &kept, &extra, &records)?;
+    let audit = audit_path(path);
     Ok(Removed {
         entries: removed,
         audit,

@@ -397,14 +397,9 @@ fn seal_damping_taken(runs: &[JointRun<'_>], selection: &Selection, opts: &Joint
         return false;
     };
     let damped = JointOptions {
-        structure: fit.structure,
-        valve_start: fit.mode.unwrap_or(opts.valve_start),
-        piston_start_kg: fit.piston_mass_kg.unwrap_or(opts.piston_start_kg),
-        delay_start_s: fit.delay_s,
-        force_delay_start_s: fit.force_delay_s.unwrap_or(fit.delay_s),
         friction_start_n: fit.friction_n.unwrap_or(opts.friction_start_n),
         seal_damping: true,
-        ..*opts
+        ..from_optimum(fit, opts)
     };
     // The refit's other parameters may leave the physical range or stall
     // (a mode the damping makes redundant, its damping going to zero): that
@@ -415,6 +410,19 @@ fn seal_damping_taken(runs: &[JointRun<'_>], selection: &Selection, opts: &Joint
         return false;
     };
     refit.seal_damping_driving().is_none() && f_test(fit, &refit).p_value < P_SIGNIFICANT
+}
+
+/// `opts` for a refit of `fit`'s structure started at its optimum: its
+/// mode, piston mass and delays.
+fn from_optimum(fit: &JointFit, opts: &JointOptions) -> JointOptions {
+    JointOptions {
+        structure: fit.structure,
+        valve_start: fit.mode.unwrap_or(opts.valve_start),
+        piston_start_kg: fit.piston_mass_kg.unwrap_or(opts.piston_start_kg),
+        delay_start_s: fit.delay_s,
+        force_delay_start_s: fit.force_delay_s.unwrap_or(fit.delay_s),
+        ..*opts
+    }
 }
 
 /// [`select`] with the seals' viscous damping as `opts` says.
@@ -982,14 +990,7 @@ pub fn run_spread(
     if fit.adequacy.passed() || runs.len() < 2 {
         return None;
     }
-    let from = JointOptions {
-        structure: fit.structure,
-        valve_start: fit.mode.unwrap_or(opts.valve_start),
-        piston_start_kg: fit.piston_mass_kg.unwrap_or(opts.piston_start_kg),
-        delay_start_s: fit.delay_s,
-        force_delay_start_s: fit.force_delay_s.unwrap_or(fit.delay_s),
-        ..*opts
-    };
+    let from = from_optimum(fit, opts);
     let refits: Vec<Option<[f64; 4]>> = (0..runs.len())
         .map(|i| {
             let rest: Vec<JointRun<'_>> = runs
