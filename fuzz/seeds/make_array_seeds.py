@@ -32,6 +32,7 @@ hdf5storage.savemat(
         "table": np.column_stack([u, x, f]),
     },
     format="7.3",
+    truncate_existing=True,
     matlab_compatible=True,
     store_python_metadata=False,
 )
@@ -86,6 +87,7 @@ hdf5storage.savemat(
         "note": "run k1, 4 mm chirp",
     },
     format="7.3",
+    truncate_existing=True,
     matlab_compatible=True,
     store_python_metadata=False,
 )
@@ -105,3 +107,20 @@ with TdmsWriter("fuzz/corpus/log_tdms/segments.tdms") as w:
         if k == 0:
             objects += [GroupObject("h"), ChannelObject("h", "temperature", 20.0 + 0.01 * t)]
         w.write_segment(objects)
+
+# TDMS with a string channel and an integer channel among the numeric
+# ones, in two segments, the second repeating only the string channel's
+# index (npTDMS writes the others' as "same as before").
+with TdmsWriter("fuzz/corpus/log_tdms/strings.tdms") as w:
+    notes = np.array([f"s{i}" for i in range(len(t))])
+    for k in range(2):
+        s = slice(128 * k, 128 * (k + 1))
+        w.write_segment(
+            [
+                GroupObject("g"),
+                ChannelObject("g", "note", notes[s]),
+                ChannelObject("g", "u", u[s], properties={"wf_increment": 1e-3}),
+                ChannelObject("g", "x", x[s]),
+                ChannelObject("g", "f", (1000 * f[s]).astype(np.int32)),
+            ]
+        )

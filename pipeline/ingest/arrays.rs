@@ -72,6 +72,12 @@ pub(super) trait Arrays {
     fn skipped(&self) -> Option<String> {
         None
     }
+
+    /// What a reader that read the file has to say of it (a recording cut
+    /// short), each naming the file.
+    fn warnings(&self) -> Vec<String> {
+        Vec::new()
+    }
 }
 
 /// A variable in the file that is not a numeric array, and what it is
@@ -117,7 +123,7 @@ pub(super) fn read<'a>(
 ) -> Result<Raw<'a>, IngestError> {
     let format = |problem| IngestError::format(path, problem);
     let want = wanted(plan);
-    let mut warnings = Vec::new();
+    let mut warnings = arrays.warnings();
     let mut columns = Vec::with_capacity(want.len());
     for w in &want {
         let (variable, values) = column(path, arrays, w)?;

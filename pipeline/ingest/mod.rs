@@ -473,7 +473,7 @@ pub enum FormatProblem {
     /// does not know).
     #[error("not a readable {what} file ({why})")]
     Hdf5Unreadable { what: &'static str, why: String },
-    /// tedium cannot read the file.
+    /// The file is not TDMS as servoid reads it, or it is damaged.
     #[error("not a readable TDMS file ({why})")]
     TdmsUnreadable { why: String },
     /// The file states a channel's unit, and it is not the manifest's.
@@ -940,7 +940,7 @@ pub fn off_pool<R: Send>(f: impl FnOnce() -> R + Send) -> R {
 /// Calls into a third-party reader running now under [`guard_reader`].
 static GUARDED: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
 
-/// A panic inside a third-party reader (polars, tedium, hdf5-pure), caught
+/// A panic inside a third-party reader (polars, hdf5-pure), caught
 /// by `guard_reader`, with its message.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 #[error("{message}")]
@@ -949,8 +949,7 @@ pub struct ReaderPanic {
 }
 
 /// A call into a third-party reader that may panic on damaged input (the
-/// fuzz targets found index panics in polars' CSV and Parquet readers and
-/// a division by zero in tedium's TDMS reader): the panic becomes `Err`
+/// fuzz targets found index panics in polars' CSV and Parquet readers): the panic becomes `Err`
 /// with its message, and the reader reports the file as unreadable.
 pub(crate) fn guard_reader<R>(f: impl FnOnce() -> R) -> Result<R, ReaderPanic> {
     use std::sync::atomic::Ordering;
@@ -968,7 +967,7 @@ pub(crate) fn guard_reader<R>(f: impl FnOnce() -> R) -> Result<R, ReaderPanic> {
 
 /// The crates whose panics [`guard_reader`] catches, as their source paths
 /// name them.
-const GUARDED_CRATES: [&str; 3] = ["polars", "tedium", "hdf5-pure"];
+const GUARDED_CRATES: [&str; 2] = ["polars", "hdf5-pure"];
 
 /// Whether a panic is one `guard_reader` catches: raised in a guarded
 /// crate's code while a guarded call runs (a panic of servoid's own is

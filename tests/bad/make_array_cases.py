@@ -70,3 +70,45 @@ with TdmsWriter(case("log-tdms-bare-name-in-two-groups") + "a.tdms") as w:
         + [ChannelObject("log", n, v) for n, v in [("t", t), ("u", u), ("x", x)]]
         + [GroupObject("raw"), ChannelObject("raw", "x", x)]
     )
+
+# TDMS with a string channel beside the numeric ones (npTDMS and LabVIEW
+# read it): unused, and then named as the displacement.
+notes = np.array([f"sample {i}" for i in range(len(x))])
+with TdmsWriter(case("log-tdms-string-channel") + "a.tdms") as w:
+    w.write_segment(
+        [GroupObject("log")]
+        + [ChannelObject("log", n, v) for n, v in [("t", t), ("note", notes), ("u", u), ("x", x)]]
+    )
+with TdmsWriter(case("log-tdms-string-asked") + "a.tdms") as w:
+    w.write_segment(
+        [GroupObject("log")]
+        + [ChannelObject("log", n, v) for n, v in [("t", t), ("u", u), ("x", notes)]]
+    )
+
+# TDMS as a logger appends it, four segments of 2000 samples, the file cut
+# 1000 bytes before its end (a power loss during the fourth segment).
+path = case("log-tdms-last-segment-cut") + "a.tdms"
+with TdmsWriter(path) as w:
+    for k in range(4):
+        s = slice(2000 * k, 2000 * (k + 1))
+        w.write_segment(
+            [GroupObject("log")]
+            + [ChannelObject("log", n, v[s]) for n, v in [("t", t), ("u", u), ("x", x)]]
+        )
+data = open(path, "rb").read()
+open(path, "wb").write(data[:-1000])
+
+# TDMS whose displacement's declared count is corrupt (3e9 values in a
+# file of some 200 kB): the count is the u64 after the raw-data index's
+# length, type and dimension words that follow the channel's path.
+path = case("log-tdms-declared-count") + "a.tdms"
+with TdmsWriter(path) as w:
+    w.write_segment(
+        [GroupObject("log")] + [ChannelObject("log", n, v) for n, v in [("t", t), ("u", u), ("x", x)]]
+    )
+data = bytearray(open(path, "rb").read())
+name = b"/'log'/'x'"
+at = data.index(len(name).to_bytes(4, "little") + name) + 4 + len(name) + 12
+assert int.from_bytes(data[at : at + 8], "little") == len(x)
+data[at : at + 8] = (3_000_000_000).to_bytes(8, "little")
+open(path, "wb").write(bytes(data))
