@@ -388,6 +388,9 @@ fn cmd_history_remove(history: &Path, date: &str, rig: Option<&str>, wait: Optio
 fn cmd_init(logs: &[PathBuf], out: &Path, table: Option<&Path>) -> u8 {
     match run::init::init(logs, out, table) {
         Ok(done) => {
+            for w in &done.warnings {
+                warn(&format!("warning: {w}"));
+            }
             let table = done
                 .table
                 .map(|t| format!(" (runs from the table {})", t.display()))

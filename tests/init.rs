@@ -328,7 +328,7 @@ fn init_on_a_night_folder_names_its_run_table() {
         let text = std::fs::read_to_string(dir.path().join(&manifest)).unwrap();
         assert!(
             text.contains(&format!(
-                "{night}/specimens.csv: 7 row(s); 7 find their log among the 7 found"
+                "{night}/specimens.csv: 7 row(s); 7 of the 7 with an id find their log among the 7 found"
             )),
             "{text}"
         );
@@ -479,6 +479,117 @@ fn init_writes_a_run_table_to_fill_for_a_night_without_one() {
     fill_rig(&mut t, &reference);
     std::fs::write(dir.path().join("night.toml"), toml::to_string(&t).unwrap()).unwrap();
     let o = servoid(dir.path(), &["run", "night.toml", "--out", "filled"]);
+    assert_eq!(o.code, 0, "{}", o.stderr);
+    assert_eq!(
+        rig_of(&dir.path().join("filled/results.json")),
+        rig_of(&out.join("results.json")),
+        "the same rig as the hand-written manifest"
+    );
+}
+
+/// `init` on a folder as a lab's disk holds it: one spring log exported
+/// with German column names and units in other forms, the no-specimen log
+/// kept again as a `.tsv` export (the same run id twice), a name that is
+/// not UTF-8, a symbolic link to nothing and an empty file. Each skipped
+/// file and the renamed runs are warned, naming them; the German log gets
+/// its own channels; filled as the lab would (the second export dropped
+/// once warned), the campaign gives the hand-written manifest's rig to the
+/// last digit.
+#[test]
+fn init_on_a_real_folder_warns_what_it_skipped_and_renamed() {
+    use std::os::unix::ffi::OsStrExt;
+    let dir = scratch();
+    let (out, reference) = simulated(dir.path(), true);
+    let disk = dir.path().join("disk");
+    std::fs::create_dir(&disk).unwrap();
+    for e in std::fs::read_dir(out.join("logs")).unwrap() {
+        let p = e.unwrap().path();
+        std::fs::copy(&p, disk.join(p.file_name().unwrap())).unwrap();
+    }
+    let role_of = |r: &toml::Value| r["role"].as_str().unwrap().to_string();
+    let id_of = |r: &toml::Value| r["id"].as_str().unwrap().to_string();
+    let spring = runs(&reference)
+        .iter()
+        .find(|r| role_of(r) == "spring")
+        .map(id_of)
+        .unwrap();
+    let bare = runs(&reference)
+        .iter()
+        .find(|r| role_of(r) == "no_specimen")
+        .map(id_of)
+        .unwrap();
+    // The spring log's header in German.
+    let german = [
+        ("time", "Zeit [s]"),
+        ("command", "Soll [mm]"),
+        ("displacement", "Weg [mm]"),
+        ("force", "Kraft/kN"),
+    ];
+    let path = disk.join(format!("{spring}.csv"));
+    let text = std::fs::read_to_string(&path).unwrap();
+    let (header, body) = text.split_once('\n').unwrap();
+    let mut header = header.to_string();
+    for (ch, name) in german {
+        let column = reference["channels"][ch]["column"].as_str().unwrap();
+        header = header.replace(column, name);
+    }
+    std::fs::write(&path, format!("{header}\n{body}")).unwrap();
+    // The no-specimen log again as a tab-delimited export.
+    let text = std::fs::read_to_string(disk.join(format!("{bare}.csv"))).unwrap();
+    std::fs::write(disk.join(format!("{bare}.tsv")), text.replace(',', "\t")).unwrap();
+    // A name in Latin-1, a link to nothing, an empty file.
+    let latin1 = std::ffi::OsStr::from_bytes(b"exp\xe9.csv");
+    std::fs::copy(disk.join(format!("{bare}.csv")), disk.join(latin1)).unwrap();
+    std::os::unix::fs::symlink("/nonexistent/k9.csv", disk.join("k9.csv")).unwrap();
+    std::fs::write(disk.join("empty.csv"), "").unwrap();
+
+    let o = servoid(dir.path(), &["init", "disk", "--out", "proposed.toml"]);
+    assert_eq!(o.code, 0, "{}", o.stderr);
+    for said in [
+        "warning: skipped disk/k9.csv: a symbolic link to /nonexistent/k9.csv, which is not there"
+            .to_string(),
+        "its name is not UTF-8 (bytes \"exp\\xe9.csv\")".to_string(),
+        "warning: skipped disk/empty.csv".to_string(),
+        format!("disk/{bare}.csv as `{bare}_csv`, disk/{bare}.tsv as `{bare}_tsv`"),
+        format!("1 log(s) have other columns than the campaign's [channels]: disk/{spring}.csv"),
+    ] {
+        assert!(o.stderr.contains(&said), "{said}\n{}", o.stderr);
+    }
+    let mut t = toml_of(&dir.path().join("proposed.toml"));
+    assert_eq!(runs(&t).len(), 8);
+    let own = runs(&t).iter().find(|r| id_of(r) == spring).unwrap()["channels"].clone();
+    for (ch, name) in german {
+        assert_eq!(own[ch]["column"].as_str(), Some(name), "{ch}");
+        assert_eq!(own[ch]["unit"], reference["channels"][ch]["unit"], "{ch}");
+    }
+
+    // Filled: the second export dropped, the first given its id back.
+    fill_rig(&mut t, &reference);
+    let reference_runs = runs(&reference).clone();
+    let filled: Vec<toml::Value> = runs(&t)
+        .iter()
+        .filter(|r| id_of(r) != format!("{bare}_tsv"))
+        .map(|r| {
+            let mut r = r.as_table().unwrap().clone();
+            let id = id_of(&toml::Value::Table(r.clone())).replace(&format!("{bare}_csv"), &bare);
+            let want = reference_runs.iter().find(|x| id_of(x) == id).unwrap();
+            r.insert("id".into(), id.into());
+            r.insert("p_gain".into(), want["p_gain"].clone());
+            if let Some(s) = want.get("specimen") {
+                r.insert("specimen".into(), s.clone());
+            }
+            toml::Value::Table(r)
+        })
+        .collect();
+    t.insert("runs".into(), toml::Value::Array(filled));
+    std::fs::write(
+        dir.path().join("proposed.toml"),
+        toml::to_string(&t).unwrap(),
+    )
+    .unwrap();
+    let o = servoid(dir.path(), &["check", "proposed.toml"]);
+    assert_eq!(o.code, 0, "{}", o.stderr);
+    let o = servoid(dir.path(), &["run", "proposed.toml", "--out", "filled"]);
     assert_eq!(o.code, 0, "{}", o.stderr);
     assert_eq!(
         rig_of(&dir.path().join("filled/results.json")),

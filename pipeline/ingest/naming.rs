@@ -28,9 +28,22 @@ pub struct ProposedChannels {
 }
 
 /// The channel kinds, and the words that name each in a column (lowercase,
-/// whole words after splitting at non-letters and at a unit suffix).
-const TIME_WORDS: [&str; 6] = ["t", "time", "times", "timestamp", "seconds", "sec"];
-const COMMAND_WORDS: [&str; 9] = [
+/// whole words after splitting at what is not a letter or digit and at a
+/// unit suffix), in English and in the languages of the labs' exports
+/// seen (German `Zeit`, `Soll`, `Weg`, `Kraft`; French, Spanish, Italian).
+const TIME_WORDS: [&str; 10] = [
+    "t",
+    "time",
+    "times",
+    "timestamp",
+    "seconds",
+    "sec",
+    "zeit",
+    "temps",
+    "tiempo",
+    "tempo",
+];
+const COMMAND_WORDS: [&str; 17] = [
     "cmd",
     "command",
     "u",
@@ -40,8 +53,16 @@ const COMMAND_WORDS: [&str; 9] = [
     "sp",
     "demand",
     "drive",
+    "soll",
+    "sollwert",
+    "sollweg",
+    "vorgabe",
+    "consigne",
+    "comando",
+    "referencia",
+    "riferimento",
 ];
-const DISPLACEMENT_WORDS: [&str; 10] = [
+const DISPLACEMENT_WORDS: [&str; 22] = [
     "x",
     "x1",
     "disp",
@@ -52,8 +73,22 @@ const DISPLACEMENT_WORDS: [&str; 10] = [
     "stroke",
     "y",
     "feedback",
+    "weg",
+    "ist",
+    "istwert",
+    "istweg",
+    "hub",
+    "verschiebung",
+    "déplacement",
+    "deplacement",
+    "desplazamiento",
+    "posición",
+    "spostamento",
+    "posizione",
 ];
-const FORCE_WORDS: [&str; 6] = ["f", "force", "load", "lc", "loadcell", "fa"];
+const FORCE_WORDS: [&str; 11] = [
+    "f", "force", "load", "lc", "loadcell", "fa", "kraft", "last", "fuerza", "carga", "forza",
+];
 
 /// Units as columns write them, with the manifest's symbol.
 fn unit_symbol(word: &str) -> Option<&'static str> {
@@ -100,10 +135,12 @@ fn words_and_unit(name: &str) -> (Vec<String>, Option<&'static str>) {
             base = format!("{}{}", &name[..a], &name[b + 1..]);
         }
     }
+    // Letters beyond ASCII are letters (`Führung`, `déplacement`), not
+    // places to split.
     let mut words: Vec<String> = base
-        .split(|c: char| !c.is_ascii_alphanumeric())
+        .split(|c: char| !c.is_alphanumeric())
         .filter(|w| !w.is_empty())
-        .map(str::to_ascii_lowercase)
+        .map(str::to_lowercase)
         .collect();
     // A trailing unit word (`disp_mm`, `force kN`), unless it is the only
     // word (a column named `m` or `s` is not a unit).
@@ -280,6 +317,30 @@ mod tests {
         );
         assert!(p.displacement.how.contains("the unit the file states"));
         assert_eq!(p.time.column, None);
+
+        // A German export: words and units in other forms.
+        let p = propose(&cols(&["Zeit [s]", "Soll [mm]", "Weg [mm]", "Kraft/kN"]));
+        assert_eq!(
+            (p.time.column.as_deref(), p.time.unit),
+            (Some("Zeit [s]"), Some("s"))
+        );
+        assert_eq!(
+            (p.command.column.as_deref(), p.command.unit),
+            (Some("Soll [mm]"), Some("mm"))
+        );
+        assert_eq!(
+            (p.displacement.column.as_deref(), p.displacement.unit),
+            (Some("Weg [mm]"), Some("mm"))
+        );
+        assert_eq!(
+            (p.force.column.as_deref(), p.force.unit),
+            (Some("Kraft/kN"), Some("kN"))
+        );
+        // A letter beyond ASCII does not split a word (`Führung` is not
+        // `f` and `hrung`, a force).
+        let p = propose(&cols(&["Zeit_s", "Führungsgröße_mm", "Déplacement (mm)"]));
+        assert_eq!(p.force.column, None);
+        assert_eq!(p.displacement.column.as_deref(), Some("Déplacement (mm)"));
 
         // The DAQ's anonymous channels: nothing to go on.
         let p = propose(&cols(&["CHANNEL0", "CHANNEL1", "CHANNEL2"]));

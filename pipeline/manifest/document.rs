@@ -350,15 +350,22 @@ impl<'a> Document<'a> {
     /// lines and columns, in file order.
     pub fn finish<R>(mut self, result: Option<R>) -> Result<R, ManifestError> {
         // While `servoid init`'s placeholders are left (the manifest's, and
-        // a run table's cells), they are the only problems: the rest follow
-        // from them.
-        let cells: Vec<Problem> = self
-            .problems
-            .iter()
-            .filter(|p| p.placeholder)
-            .cloned()
-            .collect();
-        if !self.placeholders.is_empty() || !cells.is_empty() {
+        // a run table's cells), they are the problems, with the table's
+        // cells' own (an empty id, a number that does not read), which no
+        // placeholder causes: the rest follow from them.
+        let placeholder_cells = self.problems.iter().any(|p| p.placeholder);
+        if !self.placeholders.is_empty() || placeholder_cells {
+            let cells: Vec<Problem> = self
+                .problems
+                .iter()
+                .filter(|p| {
+                    p.placeholder
+                        || p.table
+                            .as_ref()
+                            .is_some_and(|t| t.row.is_some() && t.column.is_some())
+                })
+                .cloned()
+                .collect();
             self.problems = std::mem::take(&mut self.placeholders);
             self.problems.extend(cells);
         }

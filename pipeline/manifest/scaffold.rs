@@ -30,10 +30,14 @@ pub const PLACEHOLDER: &str = "FILL:";
 pub struct FoundLog {
     /// The path as the manifest will name it (relative to the manifest).
     pub path: String,
-    /// The file name without its extension: the run's id and role come
-    /// from it.
+    /// The file name without its extension: the run's role comes from it.
     pub stem: String,
+    /// The run's id: the stem as an id, made unique among the logs.
+    pub id: String,
     pub inspected: Inspected,
+    /// Its own channels, where its columns are not the campaign's
+    /// (`[[runs]]` block's `channels`).
+    pub channels: Option<ProposedChannels>,
 }
 
 /// What a log's reading with the proposed channels gave (or why it failed):
@@ -314,7 +318,7 @@ pub fn run_table_text(logs: &[FoundLog], log_cells: &[String]) -> String {
             ),
         };
         let row = [
-            manifest_name(&log.stem, "run"),
+            log.id.clone(),
             role.map(str::to_string).unwrap_or_else(|| {
                 filled("no_specimen, spring, validation or fit; the file's name does not say")
             }),
@@ -332,11 +336,7 @@ pub fn run_table_text(logs: &[FoundLog], log_cells: &[String]) -> String {
 }
 
 fn run_block(out: &mut String, log: &FoundLog, back: &ReadBack) {
-    let _ = writeln!(
-        out,
-        "\n[[runs]]\nid = {}",
-        quoted(&manifest_name(&log.stem, "run"))
-    );
+    let _ = writeln!(out, "\n[[runs]]\nid = {}", quoted(&log.id));
     match back {
         ReadBack::Read {
             sample_rate_hz,
@@ -402,6 +402,9 @@ fn run_block(out: &mut String, log: &FoundLog, back: &ReadBack) {
             );
         }
     }
+    if let Some(own) = &log.channels {
+        run_channels(out, log, own);
+    }
     match log.inspected.csv_delimiter.filter(|d| *d != ',') {
         Some(d) => {
             let _ = writeln!(
@@ -415,6 +418,50 @@ fn run_block(out: &mut String, log: &FoundLog, back: &ReadBack) {
             let _ = writeln!(out, "data = {{ log = {} }}", quoted(&log.path));
         }
     }
+}
+
+/// A run's own channels, where its log's columns are not the campaign's:
+/// each as `channels.<key>`, which replaces `[channels]`' for this run.
+fn run_channels(out: &mut String, log: &FoundLog, own: &ProposedChannels) {
+    let _ = writeln!(
+        out,
+        "# {}'s columns are not those [channels] names; its own:",
+        log.path
+    );
+    for c in &log.inspected.columns {
+        let _ = writeln!(out, "#   {}", quoted(&c.name));
+    }
+    match (&own.time.column, log.inspected.rate_hz) {
+        (Some(_), _) => channel_line(out, "channels.time", &own.time, "s or ms", false),
+        (None, Some(hz)) => {
+            let _ = writeln!(
+                out,
+                "channels.time = {{ sample_rate_hz = {hz} }}   # the file's own rate"
+            );
+        }
+        (None, None) => {
+            let _ = writeln!(
+                out,
+                "channels.time = {{ sample_rate_hz = {} }}",
+                fill("the sampling rate in Hz")
+            );
+        }
+    }
+    channel_line(
+        out,
+        "channels.command",
+        &own.command,
+        "m, cm, mm or in",
+        false,
+    );
+    channel_line(
+        out,
+        "channels.displacement",
+        &own.displacement,
+        "m, cm, mm or in",
+        false,
+    );
+    channel_line(out, "channels.force", &own.force, "N, kN or lbf", true);
 }
 
 /// The folder a file is in (`.` for a bare name): where the paths a
@@ -457,9 +504,11 @@ pub fn table_comments(table: &Table, logs: &[&Path]) -> Vec<String> {
     let have: BTreeSet<PathBuf> = logs.iter().map(|p| key(p)).collect();
     let mut used = BTreeSet::new();
     let mut missing = Vec::new();
+    let mut no_id = Vec::new();
     let mut rows = 0;
-    for cells in &table.rows {
+    for (n, cells) in table.rows.iter().enumerate() {
         let Some(id) = cells.get(id_col).cloned().flatten() else {
+            no_id.push((n + 1).to_string());
             continue;
         };
         rows += 1;
@@ -484,11 +533,18 @@ pub fn table_comments(table: &Table, logs: &[&Path]) -> Vec<String> {
         .map(|p| p.display().to_string())
         .collect();
     let mut out = vec![format!(
-        "{}: {rows} row(s); {} find their log among the {} found",
+        "{}: {} row(s); {} of the {rows} with an id find their log among the {} found",
         table.path.display(),
+        table.rows.len(),
         rows - missing.len(),
         logs.len()
     )];
+    if !no_id.is_empty() {
+        out.push(format!(
+            "row(s) {} have no id, and are no run until they have one (`servoid check` names them)",
+            listed(&no_id)
+        ));
+    }
     if !missing.is_empty() {
         out.push(format!(
             "rows whose log is not there (their runs fail alone until it is): {}",
@@ -639,6 +695,8 @@ mod tests {
         let log = |stem: &str| FoundLog {
             path: format!("logs/{stem}.csv"),
             stem: stem.into(),
+            id: manifest_name(stem, "run"),
+            channels: None,
             inspected: Inspected {
                 format: crate::ingest::LogFormat::Csv,
                 columns: cols(&["t", "u", "x"]),

@@ -41,6 +41,9 @@ pub struct Initialised {
     /// How many placeholders are left to fill (in the manifest and in a
     /// table `--table` wrote).
     pub placeholders: usize,
+    /// What the lab should know of what `init` did: files skipped, runs
+    /// renamed to keep their ids apart, logs given their own channels.
+    pub warnings: Vec<String>,
 }
 
 /// Propose a manifest for `logs` and write it to `out`. Where the logs
@@ -60,6 +63,7 @@ pub fn init(logs: &[PathBuf], out: &Path, table: Option<&Path>) -> Result<Initia
     let ingest::Found {
         logs: files,
         tables,
+        skipped: mut warnings,
     } = ingest::collect(logs)?;
     let found_table = match tables.as_slice() {
         [] => None,
@@ -76,20 +80,52 @@ pub fn init(logs: &[PathBuf], out: &Path, table: Option<&Path>) -> Result<Initia
             found: found.clone(),
         });
     }
+    let ids = unique_ids(&files, &mut warnings);
+    let proposed: Vec<ProposedChannels> = files
+        .iter()
+        .map(|(_, i)| scaffold::propose(&i.columns))
+        .collect();
+    let channels = most_common(&proposed).clone();
     let found: Vec<FoundLog> = files
         .iter()
-        .map(|(path, inspected)| FoundLog {
+        .zip(ids)
+        .zip(proposed)
+        .map(|(((path, inspected), id), own)| FoundLog {
             path: relative(path, &base),
             stem: stem(path),
+            id,
+            channels: (!reads_with(&channels, &inspected.columns)).then_some(own),
             inspected: inspected.clone(),
         })
         .collect();
-    let channels = scaffold::propose(&found[0].inspected.columns);
     let read: Vec<ReadBack> = files
         .iter()
         .zip(&found)
-        .map(|((path, i), log)| read_back(path, i.format, log, &channels))
+        .map(|((path, i), log)| {
+            read_back(
+                path,
+                i.format,
+                log,
+                log.channels.as_ref().unwrap_or(&channels),
+            )
+        })
         .collect();
+    let own: Vec<&str> = found
+        .iter()
+        .filter(|l| l.channels.is_some())
+        .map(|l| l.path.as_str())
+        .collect();
+    if !own.is_empty() {
+        warnings.push(format!(
+            "{} log(s) have other columns than the campaign's [channels]: {}; {}",
+            own.len(),
+            own.join(", "),
+            match (&found_table, table) {
+                (None, None) => "each run is given its own `channels`; check them",
+                _ => "a run table cannot give a run its own channels: give these runs [[runs]] tables with `channels`, or export the logs with the same columns",
+            }
+        ));
+    }
     let folder = base
         .canonicalize()
         .ok()
@@ -132,7 +168,87 @@ pub fn init(logs: &[PathBuf], out: &Path, table: Option<&Path>) -> Result<Initia
         table: found_table.or(table.map(Path::to_path_buf)),
         placeholders: text.matches(&quoted_fill).count()
             + table_text.matches(scaffold::PLACEHOLDER).count(),
+        warnings,
     })
+}
+
+/// Each log's run id: its stem as an id ([`scaffold::manifest_name`]);
+/// where several logs would share one (`bare.csv` beside `bare.mat`, the
+/// same name in two folders), each gets its extension and, if that is not
+/// enough, its folder, with a warning: they may be one run twice.
+fn unique_ids(files: &[(PathBuf, ingest::Inspected)], warnings: &mut Vec<String>) -> Vec<String> {
+    let id_of = |p: &Path| scaffold::manifest_name(&stem(p), "run");
+    let mut ids: Vec<String> = files.iter().map(|(p, _)| id_of(p)).collect();
+    let shared = |ids: &[String], i: usize| ids.iter().filter(|x| **x == ids[i]).count() > 1;
+    let clashes: Vec<usize> = (0..ids.len()).filter(|&i| shared(&ids, i)).collect();
+    if clashes.is_empty() {
+        return ids;
+    }
+    let part = |p: &Path, what: fn(&Path) -> Option<&std::ffi::OsStr>| {
+        what(p)
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_default()
+    };
+    for &i in &clashes {
+        let p = &files[i].0;
+        ids[i] =
+            scaffold::manifest_name(&format!("{}_{}", stem(p), part(p, Path::extension)), "run");
+    }
+    for &i in &clashes {
+        if shared(&ids, i) {
+            let p = &files[i].0;
+            let folder = folder_of(p);
+            ids[i] = scaffold::manifest_name(
+                &format!("{}_{}", part(&folder, Path::file_name), ids[i]),
+                "run",
+            );
+        }
+    }
+    let mut seen = BTreeSet::new();
+    for id in &mut ids {
+        if !seen.insert(id.clone()) {
+            let k = (2..)
+                .find(|k| !seen.contains(&format!("{id}_{k}")))
+                .expect("a free number");
+            *id = format!("{id}_{k}");
+            seen.insert(id.clone());
+        }
+    }
+    let named: Vec<String> = clashes
+        .iter()
+        .map(|&i| format!("{} as `{}`", files[i].0.display(), ids[i]))
+        .collect();
+    warnings.push(format!(
+        "logs whose names give the same run id are told apart by their extension or folder: {}; check they are different runs (one may be the other exported again)",
+        named.join(", ")
+    ));
+    ids
+}
+
+/// The channels most logs are proposed (the first of the most common).
+fn most_common(proposed: &[ProposedChannels]) -> &ProposedChannels {
+    proposed
+        .iter()
+        .max_by_key(|p| {
+            (
+                proposed.iter().filter(|q| q == p).count(),
+                std::cmp::Reverse(proposed.iter().position(|q| q == *p)),
+            )
+        })
+        .expect("at least one log")
+}
+
+/// Whether every column `channels` names is among `columns`.
+fn reads_with(channels: &ProposedChannels, columns: &[ingest::LogColumn]) -> bool {
+    [
+        &channels.time,
+        &channels.command,
+        &channels.displacement,
+        &channels.force,
+    ]
+    .iter()
+    .filter_map(|p| p.column.as_deref())
+    .all(|c| columns.iter().any(|x| x.name == c))
 }
 
 fn stem(path: &Path) -> String {
