@@ -71,6 +71,11 @@ pub(super) fn columns(
 }
 
 fn open<'p>(path: &'p Path, bytes: &[u8], matlab: bool) -> Result<Hdf5<'p>, IngestError> {
+    if !is_hdf5(bytes)
+        && let Some(problem) = super::other_kind(bytes, "an HDF5 file")
+    {
+        return Err(IngestError::format(path, problem));
+    }
     let mut owned = bytes.to_vec();
     let links = skip_v1_links(&mut owned);
     let file = File::from_bytes(owned).map_err(|e| unreadable(path, matlab, &e))?;
@@ -166,6 +171,11 @@ impl Hdf5<'_> {
             (Some("cell"), _) => Some("a MATLAB cell array".to_string()),
             (Some("struct"), _) => Some("an empty MATLAB struct".to_string()),
             _ if attrs.contains_key("MATLAB_empty") => Some("empty".to_string()),
+            // MATLAB keeps a struct array's field as references to each
+            // element's value.
+            (None, DType::ObjectReference) if self.matlab => Some(
+                "a field of a MATLAB struct array (a value per element; servoid reads a single struct's fields: save the run's signals as variables, or as a 1 x 1 struct)".to_string(),
+            ),
             _ => not_numeric(&dtype),
         };
         if let Some(what) = what {

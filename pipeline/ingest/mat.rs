@@ -42,11 +42,51 @@ fn is_v73(bytes: &[u8]) -> bool {
     bytes.starts_with(b"MATLAB 7.3") || super::hdf5::is_hdf5(bytes)
 }
 
+/// Whether `bytes` begin with a MATLAB level-4 matrix header: a type word
+/// MOPT (machine 0-4, 0, precision 0-5, text/sparse 0-2) in either byte
+/// order, non-negative rows and columns, an imaginary flag of 0 or 1, and
+/// a name of `namlen` bytes that ends in a NUL.
+pub(super) fn is_level4(bytes: &[u8]) -> bool {
+    let Some(head) = bytes.get(..20) else {
+        return false;
+    };
+    let word = |i: usize, be: bool| {
+        let b: [u8; 4] = head[4 * i..4 * i + 4].try_into().expect("4 bytes");
+        if be {
+            i32::from_be_bytes(b)
+        } else {
+            i32::from_le_bytes(b)
+        }
+    };
+    [false, true].into_iter().any(|be| {
+        let mopt = word(0, be);
+        let (m, o, p, t) = (mopt / 1000, mopt / 100 % 10, mopt / 10 % 10, mopt % 10);
+        let namlen = word(4, be);
+        (0..=4052).contains(&mopt)
+            && m <= 4
+            && o == 0
+            && p <= 5
+            && t <= 2
+            && word(1, be) >= 0
+            && word(2, be) >= 0
+            && matches!(word(3, be), 0 | 1)
+            && (2..=64).contains(&namlen)
+            && bytes.get(20..20 + namlen as usize).is_some_and(|name| {
+                name.last() == Some(&0)
+                    && name[..name.len() - 1]
+                        .iter()
+                        .all(|c| c.is_ascii_alphanumeric() || *c == b'_')
+            })
+    })
+}
+
 fn open<'p>(path: &'p Path, bytes: &[u8]) -> Result<Level5<'p>, IngestError> {
     let format = |problem| IngestError::format(path, problem);
     let endian = bytes.get(126..HEADER_LEN);
     if bytes.len() < HEADER_LEN || !matches!(endian, Some(b"IM" | b"MI")) {
-        return Err(format(FormatProblem::NotMat));
+        return Err(format(
+            super::other_kind(bytes, "a level-5 or v7.3 MAT-file").unwrap_or(FormatProblem::NotMat),
+        ));
     }
     if bytes.len() == HEADER_LEN {
         return Err(IngestError::HeaderOnly {
@@ -54,10 +94,10 @@ fn open<'p>(path: &'p Path, bytes: &[u8]) -> Result<Level5<'p>, IngestError> {
             what: "a MAT header and no variables".into(),
         });
     }
-    check_elements(path, bytes)?;
+    let unusable = check_elements(path, bytes)?;
     let mat =
         MatFile::parse(bytes).map_err(|source| format(FormatProblem::MatUnreadable { source }))?;
-    if mat.arrays().is_empty() {
+    if mat.arrays().is_empty() && unusable.is_empty() {
         return Err(IngestError::HeaderOnly {
             path: path.to_path_buf(),
             what: "no numeric variables".into(),
@@ -74,6 +114,7 @@ fn open<'p>(path: &'p Path, bytes: &[u8]) -> Result<Level5<'p>, IngestError> {
             })
             .collect(),
         mat,
+        unusable,
     })
 }
 
@@ -82,6 +123,8 @@ struct Level5<'p> {
     path: &'p Path,
     mat: MatFile,
     variables: Vec<MatVariable>,
+    /// The variables `matfile` passes over (text, cells, structs), named.
+    unusable: Vec<arrays::Unusable>,
 }
 
 impl Arrays for Level5<'_> {
@@ -93,12 +136,18 @@ impl Arrays for Level5<'_> {
         let a = self.mat.find_by_name(name).expect("a listed variable");
         real_f64(self.path, a, channel)
     }
+
+    fn unusable(&self) -> &[arrays::Unusable] {
+        &self.unusable
+    }
 }
 
 /// Walk the top-level elements' tags (type, byte count) and refuse a file
 /// cut short: `matfile` stops quietly at an element it cannot parse, which
-/// would lose the last variables without a word.
-fn check_elements(path: &Path, bytes: &[u8]) -> Result<(), IngestError> {
+/// would lose the last variables without a word. Returns the variables
+/// `matfile` leaves out (char, cell, struct, object and sparse arrays),
+/// each with what it is.
+fn check_elements(path: &Path, bytes: &[u8]) -> Result<Vec<arrays::Unusable>, IngestError> {
     let big_endian = &bytes[126..HEADER_LEN] == b"MI";
     let word = |at: usize| {
         let b: [u8; 4] = bytes[at..at + 4].try_into().expect("4 bytes");
@@ -109,6 +158,7 @@ fn check_elements(path: &Path, bytes: &[u8]) -> Result<(), IngestError> {
         }
     };
     let mut pos = HEADER_LEN;
+    let mut unusable = Vec::new();
     while pos < bytes.len() {
         let remain = bytes.len() - pos;
         let declared = if remain >= 8 {
@@ -127,6 +177,10 @@ fn check_elements(path: &Path, bytes: &[u8]) -> Result<(), IngestError> {
             ));
         }
         let size = declared.unwrap_or(0);
+        let body = &bytes[pos + 8..pos + 8 + size];
+        if let Some(u) = not_numeric(word(pos), body, big_endian) {
+            unusable.push(u);
+        }
         // miCOMPRESSED (15) elements are not padded; others are padded to
         // 8 bytes (the last one may lack its padding).
         let padded = if word(pos) == 15 {
@@ -136,7 +190,65 @@ fn check_elements(path: &Path, bytes: &[u8]) -> Result<(), IngestError> {
         };
         pos = (pos + 8 + padded).min(bytes.len());
     }
-    Ok(())
+    Ok(unusable)
+}
+
+/// A top-level element of type `kind` that is an array `matfile` does not
+/// read, with its name: an miMATRIX (14) read from its array flags and
+/// name sub-elements, an miCOMPRESSED (15) one from the first bytes it
+/// inflates to.
+fn not_numeric(kind: u32, body: &[u8], big_endian: bool) -> Option<arrays::Unusable> {
+    use std::io::Read as _;
+    let inflated;
+    let matrix = match kind {
+        14 => body,
+        15 => {
+            let mut head = Vec::new();
+            flate2::read::ZlibDecoder::new(body)
+                .take(1024)
+                .read_to_end(&mut head)
+                .ok()?;
+            inflated = head;
+            // The inflated element's own tag: miMATRIX and its size.
+            inflated.get(8..)?
+        }
+        _ => return None,
+    };
+    let word = |at: usize| -> Option<u32> {
+        let b: [u8; 4] = matrix.get(at..at + 4)?.try_into().ok()?;
+        Some(if big_endian {
+            u32::from_be_bytes(b)
+        } else {
+            u32::from_le_bytes(b)
+        })
+    };
+    // Array flags (tag, then the class in the low byte), then dimensions.
+    let class = (word(8)? & 0xFF) as u8;
+    let what = match class {
+        1 => "a MATLAB cell array",
+        2 => {
+            "a MATLAB struct (servoid reads a struct's fields in a v7.3 file: save with `-v7.3`, or save the fields as variables)"
+        }
+        3 => "a MATLAB object",
+        4 => "a MATLAB char array (text)",
+        5 => "a MATLAB sparse matrix",
+        _ => return None,
+    };
+    let dims = word(20)? as usize;
+    let at = 24 + dims.div_ceil(8) * 8;
+    let tag = word(at)?;
+    // The name: a small element (its size in the tag's upper half) or a
+    // normal one.
+    let name = if tag >> 16 != 0 {
+        matrix.get(at + 4..at + 4 + (tag >> 16) as usize)?
+    } else {
+        let n = word(at + 4)? as usize;
+        matrix.get(at + 8..at + 8 + n)?
+    };
+    Some(arrays::Unusable {
+        name: String::from_utf8_lossy(name).into_owned(),
+        what: what.to_string(),
+    })
 }
 
 /// The real values of `a` as f64, column-major.

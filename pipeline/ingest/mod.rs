@@ -488,6 +488,14 @@ pub enum FormatProblem {
     },
     #[error("not a level-5 MAT-file (no 128-byte header ending in the `IM`/`MI` endian mark)")]
     NotMat,
+    /// The file is another kind than its extension says, and servoid can
+    /// tell which (`sniff`).
+    #[error("this is {what}, not {expected}: {advice}")]
+    OtherKind {
+        what: &'static str,
+        expected: &'static str,
+        advice: &'static str,
+    },
     /// A data element runs past the end of the file.
     #[error(
         "the MAT-file is cut short: the data element at byte {at_byte} needs {} bytes but {remain} remain",
@@ -980,6 +988,56 @@ pub fn caught_reader_panic(info: &std::panic::PanicHookInfo<'_>) -> bool {
             .is_some_and(|l| GUARDED_CRATES.iter().any(|c| l.file().contains(c)))
 }
 
+/// What a file is by its first bytes, with what to do, where it is a
+/// kind labs save logs as by mistake or in another tool's format: a MAT
+/// level-5 file named `.h5`, MATLAB level 4, Octave's text format, and
+/// the other formats servoid reads under another name.
+fn sniff(bytes: &[u8]) -> Option<(&'static str, &'static str)> {
+    let head = &bytes[..bytes.len().min(512)];
+    Some(if head.starts_with(b"MATLAB 5.0 MAT-file") {
+        (
+            "a MATLAB level-5 MAT-file",
+            "name it `.mat`, or give the run `data.format = \"mat\"`",
+        )
+    } else if head.starts_with(b"# Created by Octave") {
+        (
+            "an Octave text file (Octave's default `save` format)",
+            "save it in Octave with `save -v7 log.mat` (a level-5 MAT-file) or `save -hdf5 log.h5`",
+        )
+    } else if mat::is_level4(bytes) {
+        (
+            "a MATLAB level-4 MAT-file (`save -v4`)",
+            "save it with `save -v7` (level 5) or `save -v7.3`",
+        )
+    } else if head.starts_with(b"PAR1") {
+        ("a Parquet file", "name it `.parquet`")
+    } else if head.starts_with(b"TDSm") {
+        ("an NI TDMS file", "name it `.tdms`")
+    } else if hdf5::is_hdf5(bytes) {
+        ("an HDF5 file", "name it `.h5` (or `.mat` for MATLAB v7.3)")
+    } else if std::str::from_utf8(head).is_ok_and(|t| {
+        t.chars()
+            .all(|c| !c.is_control() || c.is_ascii_whitespace())
+    }) {
+        (
+            "a text file",
+            "a delimited log is read named `.csv` or `.tsv`, a DAQ text export `.txt`",
+        )
+    } else {
+        return None;
+    })
+}
+
+/// [`FormatProblem::OtherKind`] for a file that is not `expected`, where
+/// [`sniff`] can tell what it is.
+fn other_kind(bytes: &[u8], expected: &'static str) -> Option<FormatProblem> {
+    sniff(bytes).map(|(what, advice)| FormatProblem::OtherKind {
+        what,
+        expected,
+        advice,
+    })
+}
+
 /// SHA-256 of `bytes` as lowercase hexadecimal.
 pub fn sha256_hex(bytes: &[u8]) -> String {
     format!("{:x}", Sha256::digest(bytes))
@@ -1445,7 +1503,7 @@ pub fn check_log(log: &Log, needs: &Needs) -> Result<Vec<String>, IngestError> {
             n: log.n_rows,
             min: needs.min_samples,
             need: "identification.frf.segment_length",
-            advice: "lower segment_length or give a longer log",
+            advice: "record this run longer, or leave segment_length out so that servoid chooses a segment for each log (a lower segment_length would change every run's FRF, and so the rig)",
         });
     }
     if let Timing::Measured {

@@ -708,6 +708,21 @@ mod matw {
         element(MI_MATRIX, &body)
     }
 
+    /// A 1 x n char variable (mxCHAR_CLASS = 4), its text as miUINT16
+    /// (type 4) characters, as MATLAB saves text.
+    pub fn char_array(name: &str, text: &str) -> Vec<u8> {
+        let mut body = element(
+            MI_UINT32,
+            &[4u32.to_le_bytes(), 0u32.to_le_bytes()].concat(),
+        );
+        let dims = [1i32.to_le_bytes(), (text.len() as i32).to_le_bytes()].concat();
+        body.extend(element(MI_INT32, &dims));
+        body.extend(element(MI_INT8, name.as_bytes()));
+        let chars: Vec<u8> = text.encode_utf16().flat_map(u16::to_le_bytes).collect();
+        body.extend(element(4, &chars));
+        element(MI_MATRIX, &body)
+    }
+
     pub fn compressed(matrix: &[u8]) -> Vec<u8> {
         use std::io::Write;
         let mut z = flate2::write::ZlibEncoder::new(Vec::new(), flate2::Compression::default());
@@ -871,6 +886,35 @@ fn mat_errors_name_the_file() {
     p.channels.time = TimePlan::SampleRate { hz: 10.0 };
     // u has 3 samples, data:1 has 2.
     assert_contains(&err(&p), &["short.mat", "command 3", "displacement 2"]);
+
+    // Text where a channel is asked for, stored plainly and compressed,
+    // with a name in a small element (`x`) and in a normal one: named as
+    // text, not as missing (the MAT reader passes char arrays over).
+    for compress in [false, true] {
+        for name in ["x", "displacement"] {
+            let mut file = matw::header();
+            let text = matw::char_array(name, "4 mm chirp");
+            file.extend(matw::matrix("u", 3, 1, &[1.0, 2.0, 3.0]));
+            file.extend(if compress {
+                matw::compressed(&text)
+            } else {
+                text
+            });
+            let path = write_file(dir.path(), "text.mat", &file);
+            let mut p = mat_plan(&path);
+            p.channels.force = None;
+            p.channels.time = TimePlan::SampleRate { hz: 10.0 };
+            p.channels.displacement.column = Column::Name(name.into());
+            assert_contains(
+                &err(&p),
+                &[
+                    "text.mat",
+                    &format!("`{name}`"),
+                    "is a MATLAB char array (text)",
+                ],
+            );
+        }
+    }
 }
 
 // ------------------------------------------------------------ bad files
@@ -1364,6 +1408,11 @@ fn mat_format_errors_word_for_word() {
         "not a readable MAT v7.3 (HDF5) file (HDF5 format error: HDF5 signature not found at any valid offset)",
     );
     let path = write_file(dir.path(), "text.mat", &[b'x'; 200]);
+    assert_refused(
+        &mat_plan(&path),
+        "this is a text file, not a level-5 or v7.3 MAT-file: a delimited log is read named `.csv` or `.tsv`, a DAQ text export `.txt`",
+    );
+    let path = write_file(dir.path(), "noise.mat", &[0xA5; 200]);
     assert_refused(
         &mat_plan(&path),
         "not a level-5 MAT-file (no 128-byte header ending in the `IM`/`MI` endian mark)",

@@ -112,3 +112,44 @@ at = data.index(len(name).to_bytes(4, "little") + name) + 4 + len(name) + 12
 assert int.from_bytes(data[at : at + 8], "little") == len(x)
 data[at : at + 8] = (3_000_000_000).to_bytes(8, "little")
 open(path, "wb").write(bytes(data))
+
+# Files of another kind than their name says, as labs meet them: a MATLAB
+# level-4 file (scipy writes `save -v4`'s layout), Octave's default text
+# format, a level-5 MAT-file named .h5, a v7.3 struct array whose field is
+# the displacement. Each is refused before its samples are read, so 200
+# samples keep the files small.
+import scipy.io
+
+t, u, x = t[:200], u[:200], x[:200]
+columns = {"t": t.reshape(-1, 1), "u": u.reshape(-1, 1), "x": x.reshape(-1, 1)}
+scipy.io.savemat(case("log-mat-level4") + "a.mat", columns, format="4")
+scipy.io.savemat(case("log-h5-is-mat-level5") + "a.h5", columns)
+with open(case("log-mat-octave-text") + "a.mat", "w") as f:
+    f.write("# Created by Octave 8.4.0, Sat Nov 28 10:00:00 2026 UTC <lab@rig>\n")
+    for n, v in [("t", t), ("u", u), ("x", x)]:
+        f.write(f"# name: {n}\n# type: matrix\n# rows: {len(v)}\n# columns: 1\n")
+        f.writelines(f" {a!r}\n" for a in v)
+        f.write("\n\n")
+runs = np.zeros((2, 1), dtype=[("x", object)])
+runs[0, 0]["x"], runs[1, 0]["x"] = x.reshape(-1, 1), x.reshape(-1, 1)
+hdf5storage.savemat(
+    case("log-mat-v73-struct-array") + "a.mat",
+    {"t": t.reshape(-1, 1), "u": u.reshape(-1, 1), "log": runs},
+    format="7.3",
+    matlab_compatible=True,
+    store_python_metadata=False,
+    truncate_existing=True,
+)
+
+# A level-5 MAT-file (compressed, as MATLAB's default -v7 saves) whose
+# displacement is text, beside a cell array.
+scipy.io.savemat(
+    case("log-mat-char") + "a.mat",
+    {
+        "t": t.reshape(-1, 1),
+        "u": u.reshape(-1, 1),
+        "x": "displacement in mm",
+        "notes": np.array([["run k1"], ["4 mm chirp"]], dtype=object),
+    },
+    do_compression=True,
+)

@@ -42,6 +42,11 @@ pub(super) fn columns(
 }
 
 fn open<'p, 'b>(path: &'p Path, bytes: &'b [u8]) -> Result<Tdms<'p, 'b>, IngestError> {
+    if !bytes.starts_with(b"TDSm")
+        && let Some(problem) = super::other_kind(bytes, "a TDMS file")
+    {
+        return Err(IngestError::format(path, problem));
+    }
     let layout = layout::layout(bytes).map_err(|why| unreadable(path, why))?;
     if layout.channels.is_empty() {
         return Err(IngestError::HeaderOnly {
