@@ -178,8 +178,17 @@ fn check_elements(path: &Path, bytes: &[u8]) -> Result<Vec<arrays::Unusable>, In
         }
         let size = declared.unwrap_or(0);
         let body = &bytes[pos + 8..pos + 8 + size];
-        if let Some(u) = not_numeric(word(pos), body, big_endian) {
-            unusable.push(u);
+        if let Some(head) = matrix_head(word(pos), body, big_endian) {
+            if !head.dims_hold() {
+                return Err(IngestError::format(
+                    path,
+                    FormatProblem::MatDimensions {
+                        variable: head.name,
+                        dims: head.dims,
+                    },
+                ));
+            }
+            unusable.extend(head.not_numeric());
         }
         // miCOMPRESSED (15) elements are not padded; others are padded to
         // 8 bytes (the last one may lack its padding).
@@ -193,11 +202,52 @@ fn check_elements(path: &Path, bytes: &[u8]) -> Result<Vec<arrays::Unusable>, In
     Ok(unusable)
 }
 
-/// A top-level element of type `kind` that is an array `matfile` does not
-/// read, with its name: an miMATRIX (14) read from its array flags and
-/// name sub-elements, an miCOMPRESSED (15) one from the first bytes it
-/// inflates to.
-fn not_numeric(kind: u32, body: &[u8], big_endian: bool) -> Option<arrays::Unusable> {
+/// What a top-level array element declares of itself: its class, its
+/// dimensions and its name.
+struct Head {
+    class: u8,
+    dims: Vec<i32>,
+    name: String,
+}
+
+impl Head {
+    /// What a variable of this class is, when `matfile` does not read it
+    /// (char, cell, struct, object and sparse arrays).
+    fn not_numeric(&self) -> Option<arrays::Unusable> {
+        let what = match self.class {
+            1 => "a MATLAB cell array",
+            2 => {
+                "a MATLAB struct (servoid reads a struct's fields in a v7.3 file: save with `-v7.3`, or save the fields as variables)"
+            }
+            3 => "a MATLAB object",
+            4 => "a MATLAB char array (text)",
+            5 => "a MATLAB sparse matrix",
+            _ => return None,
+        };
+        Some(arrays::Unusable {
+            name: self.name.clone(),
+            what: what.to_string(),
+        })
+    }
+
+    /// Whether its dimensions are ones a file can hold: none negative, and
+    /// their product within MATLAB's 32-bit count (`matfile` multiplies
+    /// them in i32).
+    fn dims_hold(&self) -> bool {
+        self.dims.iter().all(|&d| d >= 0)
+            && self
+                .dims
+                .iter()
+                .try_fold(1i32, |p, &d| p.checked_mul(d))
+                .is_some()
+    }
+}
+
+/// The head of a top-level element of type `kind`: an miMATRIX (14) read
+/// from its array flags, dimensions and name sub-elements, an miCOMPRESSED
+/// (15) one from the first bytes it inflates to; None for other elements
+/// or where the head does not read (`matfile` then says why).
+fn matrix_head(kind: u32, body: &[u8], big_endian: bool) -> Option<Head> {
     use std::io::Read as _;
     let inflated;
     let matrix = match kind {
@@ -224,18 +274,11 @@ fn not_numeric(kind: u32, body: &[u8], big_endian: bool) -> Option<arrays::Unusa
     };
     // Array flags (tag, then the class in the low byte), then dimensions.
     let class = (word(8)? & 0xFF) as u8;
-    let what = match class {
-        1 => "a MATLAB cell array",
-        2 => {
-            "a MATLAB struct (servoid reads a struct's fields in a v7.3 file: save with `-v7.3`, or save the fields as variables)"
-        }
-        3 => "a MATLAB object",
-        4 => "a MATLAB char array (text)",
-        5 => "a MATLAB sparse matrix",
-        _ => return None,
-    };
-    let dims = word(20)? as usize;
-    let at = 24 + dims.div_ceil(8) * 8;
+    let n = word(20)? as usize;
+    let dims = (0..n / 4)
+        .map(|k| word(24 + 4 * k).map(|d| d as i32))
+        .collect::<Option<Vec<i32>>>()?;
+    let at = 24 + n.div_ceil(8) * 8;
     let tag = word(at)?;
     // The name: a small element (its size in the tag's upper half) or a
     // normal one.
@@ -245,9 +288,10 @@ fn not_numeric(kind: u32, body: &[u8], big_endian: bool) -> Option<arrays::Unusa
         let n = word(at + 4)? as usize;
         matrix.get(at + 8..at + 8 + n)?
     };
-    Some(arrays::Unusable {
+    Some(Head {
+        class,
+        dims,
         name: String::from_utf8_lossy(name).into_owned(),
-        what: what.to_string(),
     })
 }
 

@@ -488,6 +488,11 @@ pub enum FormatProblem {
     },
     #[error("not a level-5 MAT-file (no 128-byte header ending in the `IM`/`MI` endian mark)")]
     NotMat,
+    /// A level-5 variable declares dimensions no file holds.
+    #[error(
+        "variable `{variable}` declares dimensions {dims:?}, more values than a MAT-file holds (the file is damaged)"
+    )]
+    MatDimensions { variable: String, dims: Vec<i32> },
     /// The file is another kind than its extension says, and servoid can
     /// tell which (`sniff`).
     #[error("this is {what}, not {expected}: {advice}")]

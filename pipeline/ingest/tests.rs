@@ -1412,6 +1412,26 @@ fn mat_format_errors_word_for_word() {
         &mat_plan(&path),
         "this is a text file, not a level-5 or v7.3 MAT-file: a delimited log is read named `.csv` or `.tsv`, a DAQ text export `.txt`",
     );
+    // Dimensions whose product overflows MATLAB's 32-bit count (fuzzing
+    // found matfile multiplying them in i32).
+    let mut body = matw::element(
+        matw::MI_UINT32,
+        &[matw::MX_DOUBLE_CLASS.to_le_bytes(), 0u32.to_le_bytes()].concat(),
+    );
+    let dims: Vec<u8> = [1i32 << 30, 4]
+        .iter()
+        .flat_map(|d| d.to_le_bytes())
+        .collect();
+    body.extend(matw::element(matw::MI_INT32, &dims));
+    body.extend(matw::element(matw::MI_INT8, b"big"));
+    body.extend(matw::element(matw::MI_DOUBLE, &[]));
+    let mut file = matw::header();
+    file.extend(matw::element(matw::MI_MATRIX, &body));
+    let path = write_file(dir.path(), "big.mat", &file);
+    assert_refused(
+        &mat_plan(&path),
+        "variable `big` declares dimensions [1073741824, 4], more values than a MAT-file holds (the file is damaged)",
+    );
     let path = write_file(dir.path(), "noise.mat", &[0xA5; 200]);
     assert_refused(
         &mat_plan(&path),
