@@ -73,6 +73,12 @@ pub(super) trait Arrays {
         None
     }
 
+    /// What `name`, not a variable, is when it is a link the reader does
+    /// not follow, in words.
+    fn link(&self, _name: &str) -> Option<String> {
+        None
+    }
+
     /// What a reader that read the file has to say of it (a recording cut
     /// short), each naming the file.
     fn warnings(&self) -> Vec<String> {
@@ -314,7 +320,13 @@ fn find_variable<'a>(
         return Err(not_numeric(u));
     }
     if name.contains('/') {
-        return Ok(None);
+        return match arrays.link(name) {
+            Some(what) => Err(not_numeric(&Unusable {
+                name: name.to_string(),
+                what,
+            })),
+            None => Ok(None),
+        };
     }
     let grouped: Vec<&MatVariable> = arrays
         .variables()
@@ -329,7 +341,13 @@ fn find_variable<'a>(
     match (grouped.as_slice(), others.as_slice()) {
         ([v], []) => Ok(Some(v)),
         ([], [u]) => Err(not_numeric(u)),
-        ([], []) => Ok(None),
+        ([], []) => match arrays.link(name) {
+            Some(what) => Err(not_numeric(&Unusable {
+                name: name.to_string(),
+                what,
+            })),
+            None => Ok(None),
+        },
         _ => Err(IngestError::format(
             path,
             FormatProblem::AmbiguousName {

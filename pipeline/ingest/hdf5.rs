@@ -70,7 +70,11 @@ pub(super) fn columns(
     })
 }
 
-fn open<'p>(path: &'p Path, bytes: &[u8], matlab: bool) -> Result<Hdf5<'p>, IngestError> {
+fn open<'p, 'b>(
+    path: &'p Path,
+    bytes: &'b [u8],
+    matlab: bool,
+) -> Result<Hdf5<'p, 'b>, IngestError> {
     if !is_hdf5(bytes)
         && let Some(problem) = super::other_kind(bytes, "an HDF5 file")
     {
@@ -81,7 +85,7 @@ fn open<'p>(path: &'p Path, bytes: &[u8], matlab: bool) -> Result<Hdf5<'p>, Inge
     let file = File::from_bytes(owned).map_err(|e| unreadable(path, matlab, &e))?;
     let mut h = Hdf5 {
         path,
-        bytes: bytes.len(),
+        raw: bytes,
         file,
         matlab,
         variables: Vec::new(),
@@ -109,10 +113,10 @@ fn unreadable(path: &Path, matlab: bool, e: &dyn std::fmt::Display) -> IngestErr
     )
 }
 
-struct Hdf5<'p> {
+struct Hdf5<'p, 'b> {
     path: &'p Path,
-    /// The file's length in bytes.
-    bytes: usize,
+    /// The file's bytes, as given (before the link pass).
+    raw: &'b [u8],
     file: File,
     matlab: bool,
     variables: Vec<MatVariable>,
@@ -125,7 +129,7 @@ struct Hdf5<'p> {
     links: usize,
 }
 
-impl Hdf5<'_> {
+impl Hdf5<'_, '_> {
     /// List the numeric datasets under group `prefix` (`""`: the root).
     fn walk(&mut self, prefix: &str, depth: usize) -> Result<(), IngestError> {
         let (path, matlab) = (self.path, self.matlab);
@@ -223,7 +227,7 @@ impl Hdf5<'_> {
     }
 }
 
-impl Arrays for Hdf5<'_> {
+impl Arrays for Hdf5<'_, '_> {
     fn variables(&self) -> &[MatVariable] {
         &self.variables
     }
@@ -237,7 +241,7 @@ impl Arrays for Hdf5<'_> {
         // about 1032 bytes into one, so no dataset of this file can hold
         // more values than that many bytes' worth.
         let declared = v.size.iter().try_fold(1usize, |a, &d| a.checked_mul(d));
-        let most = self.bytes.saturating_mul(1032) / 8;
+        let most = self.raw.len().saturating_mul(1032) / 8;
         if declared.is_none_or(|n| n > most) {
             return Err(unreadable(
                 self.path,
@@ -245,7 +249,7 @@ impl Arrays for Hdf5<'_> {
                 &format!(
                     "dataset `{name}` declares {} values, more than a file of {} bytes can hold even compressed",
                     super::dims(&v.size),
-                    self.bytes
+                    self.raw.len()
                 ),
             ));
         }
@@ -277,6 +281,10 @@ impl Arrays for Hdf5<'_> {
                 self.links
             )
         })
+    }
+
+    fn link(&self, name: &str) -> Option<String> {
+        link_named(self.raw, name.rsplit(['/', '.']).next().unwrap_or(name))
     }
 
     fn stated_unit(&self, name: &str) -> Option<String> {
@@ -328,6 +336,81 @@ fn not_numeric(dtype: &DType) -> Option<String> {
         DType::String | DType::VariableLengthString => "text (strings)".to_string(),
         other => format!("of HDF5 type {other}"),
     })
+}
+
+/// What a link named `name` in a new-style group is (a link message,
+/// version 1, in an object header or a dense group's heap), found in the
+/// file's bytes: hdf5-pure lists a new-style group's hard links only, so a
+/// channel named as a soft or external link would be "not there". The
+/// message's header is tried at every length its flags allow (name-length
+/// size, creation order, character set, link type) before each place the
+/// name occurs; only a soft (1) or external (64) link whose target reads
+/// is taken.
+fn link_named(bytes: &[u8], name: &str) -> Option<String> {
+    let key = name.as_bytes();
+    if key.is_empty() || key.len() > 255 {
+        return None;
+    }
+    for at in memchr::memmem::find_iter(bytes, key) {
+        for flags in 0u8..32 {
+            if flags & 0x08 == 0 {
+                // Without a link-type field the link is hard.
+                continue;
+            }
+            let len_size = 1usize << (flags & 3);
+            let head =
+                2 + 1 + usize::from(flags & 4 != 0) * 8 + usize::from(flags & 0x10 != 0) + len_size;
+            let Some(start) = at.checked_sub(head) else {
+                continue;
+            };
+            let h = &bytes[start..at];
+            let len_at = head - len_size;
+            let mut len = 0usize;
+            for (k, b) in h[len_at..].iter().enumerate() {
+                len |= usize::from(*b) << (8 * k);
+            }
+            if h[0] != 1 || h[1] != flags || len != key.len() {
+                continue;
+            }
+            let target = &bytes[at + key.len()..];
+            let Some(n) = target
+                .get(..2)
+                .map(|b| usize::from(u16::from_le_bytes([b[0], b[1]])))
+            else {
+                continue;
+            };
+            let Some(info) = target.get(2..2 + n) else {
+                continue;
+            };
+            let text = |b: &[u8]| {
+                std::str::from_utf8(b)
+                    .ok()
+                    .filter(|t| !t.is_empty() && !t.contains(char::is_control))
+                    .map(str::to_string)
+            };
+            match h[2] {
+                1 => {
+                    if let Some(to) = text(info) {
+                        return Some(format!(
+                            "a soft link to `{to}`, which servoid does not follow: name that dataset"
+                        ));
+                    }
+                }
+                64 => {
+                    let mut parts = info.get(1..)?.split(|&b| b == 0);
+                    if let (Some(file), Some(object)) =
+                        (parts.next().and_then(text), parts.next().and_then(text))
+                    {
+                        return Some(format!(
+                            "an external link to `{object}` in {file}, which servoid does not follow: give that file as the run's log"
+                        ));
+                    }
+                }
+                _ => {}
+            }
+        }
+    }
+    None
 }
 
 /// Drop the soft links from `bytes`' old-style groups, returning how many.

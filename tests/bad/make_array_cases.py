@@ -40,6 +40,17 @@ with h5py.File(case("log-hdf5-soft-link-asked") + "a.h5", "w") as h:
     h["t"], h["u"], h["x"] = t, u, x
     h["x_alias"] = h5py.SoftLink("/x")
 
+# New-style groups (h5py's libver="latest"), whose links are link
+# messages: the displacement named as a soft link, and as an external
+# link to another file.
+for name, link in [
+    ("log-hdf5-new-style-soft-link", h5py.SoftLink("/x")),
+    ("log-hdf5-external-link", h5py.ExternalLink("other.h5", "/x")),
+]:
+    with h5py.File(case(name) + "a.h5", "w", libver="latest") as h:
+        h["t"], h["u"], h["x"] = t, u, x
+        h["x_link"] = link
+
 # Non-numeric datasets where a channel is wanted: complex, boolean, text.
 for name, value in [
     ("log-hdf5-complex", x.astype(np.complex128)),
