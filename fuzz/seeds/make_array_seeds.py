@@ -1,9 +1,10 @@
-"""Seeds for the fuzz targets log_mat_v73, log_hdf5 and log_tdms, written by
-the libraries labs' own tools use (h5py and hdf5storage, as MATLAB lays out
-v7.3 files; npTDMS), not by servoid, so the readers are seeded with files
-they did not write. Run from the repository root:
+"""Seeds for the fuzz targets log_mat, log_mat_v73, log_hdf5 and log_tdms,
+written by the libraries labs' own tools use (scipy for level-5 MAT-files;
+h5py and hdf5storage, as MATLAB lays out v7.3 files; npTDMS), not by
+servoid, so the readers are seeded with files they did not write. Run from
+the repository root:
 
-    pip install h5py hdf5storage npTDMS
+    pip install scipy h5py hdf5storage npTDMS
     python3 fuzz/seeds/make_array_seeds.py
 
 Each holds 256 samples at 1 kHz of a command u (mm), a displacement x (mm)
@@ -124,3 +125,21 @@ with TdmsWriter("fuzz/corpus/log_tdms/strings.tdms") as w:
                 ChannelObject("g", "f", (1000 * f[s]).astype(np.int32)),
             ]
         )
+
+# MAT level 5 as MATLAB's default -v7 saves it (compressed): the signals
+# as variables and a table [u x f] beside text, a cell array and a struct, which the reader
+# passes over and names.
+import scipy.io
+
+scipy.io.savemat(
+    "fuzz/corpus/log_mat/with_text.mat",
+    {
+        "t": t.reshape(-1, 1),
+        "u": u.reshape(-1, 1),
+        "data": np.column_stack([u, x, f]),
+        "note": "run k1, 4 mm chirp",
+        "cells": np.array([["k1"], ["chirp"]], dtype=object),
+        "meta": {"rate_hz": 1000.0, "unit": "mm"},
+    },
+    do_compression=True,
+)
