@@ -221,7 +221,7 @@ pub const EXIT_USAGE: u8 = 2;
 pub const EXIT_ALARM: u8 = 3;
 
 pub fn main() -> ExitCode {
-    // A panic inside a log reader (polars, hdf5-pure) on a damaged
+    // A panic inside a log reader (polars, hdf5-pure, matfile) on a damaged
     // log is caught and reported as the run's error; its raw panic message
     // would only confuse the log.
     let default_hook = std::panic::take_hook();

@@ -34,7 +34,7 @@ pub const TARGETS: &[(&str, Target)] = &[
 ];
 
 /// Lets the panics `servoid::ingest` catches inside the readers it calls
-/// (polars, hdf5-pure) unwind to it:
+/// (polars, hdf5-pure, matfile) unwind to it:
 /// libFuzzer's hook aborts on every panic, which would report a damaged
 /// file that servoid handles as a crash. Every other panic still aborts.
 pub fn let_caught_panics_unwind() {

@@ -96,7 +96,9 @@ fn open<'p>(path: &'p Path, bytes: &[u8]) -> Result<Level5<'p>, IngestError> {
     }
     let unusable = check_elements(path, bytes)?;
     let mat =
-        MatFile::parse(bytes).map_err(|source| format(FormatProblem::MatUnreadable { source }))?;
+        super::guard_reader(|| MatFile::parse(bytes))
+            .map_err(|p| format(FormatProblem::MatReaderFailed { why: p.message }))?
+            .map_err(|source| format(FormatProblem::MatUnreadable { source }))?;
     if mat.arrays().is_empty() && unusable.is_empty() {
         return Err(IngestError::HeaderOnly {
             path: path.to_path_buf(),

@@ -518,6 +518,9 @@ pub enum FormatProblem {
         #[source]
         source: matfile::Error,
     },
+    /// matfile panicked on damaged bytes (caught by [`guard_reader`]).
+    #[error("not a readable level-5 MAT-file (its reader failed on damaged bytes: {why})")]
+    MatReaderFailed { why: String },
     /// A channel addressed by index, with no 2-D variable to index.
     #[error(
         "the {channel} channel is column #{index}, but no variable is a 2-D table (variables: {}); name a vector variable instead",
@@ -953,7 +956,7 @@ pub fn off_pool<R: Send>(f: impl FnOnce() -> R + Send) -> R {
 /// Calls into a third-party reader running now under [`guard_reader`].
 static GUARDED: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
 
-/// A panic inside a third-party reader (polars, hdf5-pure), caught
+/// A panic inside a third-party reader (polars, hdf5-pure, matfile), caught
 /// by `guard_reader`, with its message.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 #[error("{message}")]
@@ -962,7 +965,9 @@ pub struct ReaderPanic {
 }
 
 /// A call into a third-party reader that may panic on damaged input (the
-/// fuzz targets found index panics in polars' CSV and Parquet readers): the panic becomes `Err`
+/// fuzz targets found index panics in polars' CSV and Parquet readers and
+/// arithmetic overflows in matfile's, which a build with overflow checks
+/// raises): the panic becomes `Err`
 /// with its message, and the reader reports the file as unreadable.
 pub(crate) fn guard_reader<R>(f: impl FnOnce() -> R) -> Result<R, ReaderPanic> {
     use std::sync::atomic::Ordering;
@@ -980,7 +985,7 @@ pub(crate) fn guard_reader<R>(f: impl FnOnce() -> R) -> Result<R, ReaderPanic> {
 
 /// The crates whose panics [`guard_reader`] catches, as their source paths
 /// name them.
-const GUARDED_CRATES: [&str; 2] = ["polars", "hdf5-pure"];
+const GUARDED_CRATES: [&str; 3] = ["polars", "hdf5-pure", "matfile"];
 
 /// Whether a panic is one `guard_reader` catches: raised in a guarded
 /// crate's code while a guarded call runs (a panic of servoid's own is
