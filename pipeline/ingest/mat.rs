@@ -95,10 +95,9 @@ fn open<'p>(path: &'p Path, bytes: &[u8]) -> Result<Level5<'p>, IngestError> {
         });
     }
     let unusable = check_elements(path, bytes)?;
-    let mat =
-        super::guard_reader(|| MatFile::parse(bytes))
-            .map_err(|p| format(FormatProblem::MatReaderFailed { why: p.message }))?
-            .map_err(|source| format(FormatProblem::MatUnreadable { source }))?;
+    let mat = super::guard_reader(|| MatFile::parse(bytes))
+        .map_err(|p| format(FormatProblem::MatReaderFailed { why: p.message }))?
+        .map_err(|source| format(FormatProblem::MatUnreadable { source }))?;
     if mat.arrays().is_empty() && unusable.is_empty() {
         return Err(IngestError::HeaderOnly {
             path: path.to_path_buf(),
@@ -179,6 +178,18 @@ fn check_elements(path: &Path, bytes: &[u8]) -> Result<Vec<arrays::Unusable>, In
             ));
         }
         let size = declared.unwrap_or(0);
+        // A variable is an miMATRIX (14) or miCOMPRESSED (15) element;
+        // matfile prints anything else to stdout, where a night's JSON log
+        // lines go, before passing over it.
+        if !matches!(word(pos), 14 | 15) {
+            return Err(IngestError::format(
+                path,
+                FormatProblem::MatElement {
+                    at_byte: pos,
+                    kind: word(pos),
+                },
+            ));
+        }
         let body = &bytes[pos + 8..pos + 8 + size];
         if let Some(head) = matrix_head(word(pos), body, big_endian) {
             if !head.dims_hold() {

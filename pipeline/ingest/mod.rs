@@ -488,6 +488,11 @@ pub enum FormatProblem {
     },
     #[error("not a level-5 MAT-file (no 128-byte header ending in the `IM`/`MI` endian mark)")]
     NotMat,
+    /// A top-level element that is not a variable.
+    #[error(
+        "the element at byte {at_byte} is of MAT type {kind}, not a variable (miMATRIX or miCOMPRESSED): the file is damaged"
+    )]
+    MatElement { at_byte: usize, kind: u32 },
     /// A level-5 variable declares dimensions no file holds.
     #[error(
         "variable `{variable}` declares dimensions {dims:?}, more values than a MAT-file holds (the file is damaged)"

@@ -1432,6 +1432,15 @@ fn mat_format_errors_word_for_word() {
         &mat_plan(&path),
         "variable `big` declares dimensions [1073741824, 4], more values than a MAT-file holds (the file is damaged)",
     );
+    // A top-level element that is not a variable (matfile would print it
+    // to stdout and pass over it).
+    let mut file = matw::header();
+    file.extend(matw::element(matw::MI_DOUBLE, &1.5f64.to_le_bytes()));
+    let path = write_file(dir.path(), "loose.mat", &file);
+    assert_refused(
+        &mat_plan(&path),
+        "the element at byte 128 is of MAT type 9, not a variable (miMATRIX or miCOMPRESSED): the file is damaged",
+    );
     let path = write_file(dir.path(), "noise.mat", &[0xA5; 200]);
     assert_refused(
         &mat_plan(&path),
