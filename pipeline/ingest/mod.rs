@@ -523,7 +523,7 @@ pub enum FormatProblem {
         #[source]
         source: matfile::Error,
     },
-    /// matfile panicked on damaged bytes (caught by [`guard_reader`]).
+    /// matfile panicked on damaged bytes (caught by `guard_reader`).
     #[error("not a readable level-5 MAT-file (its reader failed on damaged bytes: {why})")]
     MatReaderFailed { why: String },
     /// A channel addressed by index, with no 2-D variable to index.
