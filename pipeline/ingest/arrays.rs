@@ -316,17 +316,19 @@ fn find_variable<'a>(
     if let Some(v) = arrays.variables().iter().find(|v| v.name == name) {
         return Ok(Some(v));
     }
+    // Not found: a link the reader does not follow is named as one.
+    let absent = || match arrays.link(name) {
+        Some(what) => Err(not_numeric(&Unusable {
+            name: name.to_string(),
+            what,
+        })),
+        None => Ok(None),
+    };
     if let Some(u) = arrays.unusable().iter().find(|u| u.name == name) {
         return Err(not_numeric(u));
     }
     if name.contains('/') {
-        return match arrays.link(name) {
-            Some(what) => Err(not_numeric(&Unusable {
-                name: name.to_string(),
-                what,
-            })),
-            None => Ok(None),
-        };
+        return absent();
     }
     let grouped: Vec<&MatVariable> = arrays
         .variables()
@@ -341,13 +343,7 @@ fn find_variable<'a>(
     match (grouped.as_slice(), others.as_slice()) {
         ([v], []) => Ok(Some(v)),
         ([], [u]) => Err(not_numeric(u)),
-        ([], []) => match arrays.link(name) {
-            Some(what) => Err(not_numeric(&Unusable {
-                name: name.to_string(),
-                what,
-            })),
-            None => Ok(None),
-        },
+        ([], []) => absent(),
         _ => Err(IngestError::format(
             path,
             FormatProblem::AmbiguousName {

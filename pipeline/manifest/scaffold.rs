@@ -207,32 +207,50 @@ fn write_preamble(out: &mut String, name: &str, logs: &[FoundLog]) {
 fn write_channels(out: &mut String, logs: &[FoundLog], channels: &ProposedChannels) {
     out.push_str("[channels]\n");
     let rate = logs.first().and_then(|l| l.inspected.rate_hz);
-    match (&channels.time.column, rate) {
-        (Some(_), _) => channel_line(out, "time", &channels.time, "s or ms", false),
-        (None, Some(hz)) => {
+    channel_lines(out, "", channels, rate);
+}
+
+/// The time base and the three channels' lines, each key after `prefix`
+/// (`""` for `[channels]`, `"channels."` for a run's own). Where the file
+/// states its rate and has no time column, `[channels]` leaves the time
+/// out (servoid reads the rate itself), while a run's own channels must
+/// give it, to replace `[channels]`' time column.
+fn channel_lines(out: &mut String, prefix: &str, p: &ProposedChannels, rate: Option<f64>) {
+    let key = |k: &str| format!("{prefix}{k}");
+    match (&p.time.column, rate) {
+        (Some(_), _) => channel_line(out, &key("time"), &p.time, "s or ms", false),
+        (None, Some(hz)) if prefix.is_empty() => {
             let _ = writeln!(
                 out,
                 "# time: no time column; the file states its rate, {hz} Hz, which servoid reads itself"
             );
         }
-        (None, None) => {
-            let _ = writeln!(out, "# {}", channels.time.how);
+        (None, Some(hz)) => {
             let _ = writeln!(
                 out,
-                "time = {{ sample_rate_hz = {} }}",
+                "{} = {{ sample_rate_hz = {hz} }}   # the file's own rate",
+                key("time")
+            );
+        }
+        (None, None) => {
+            let _ = writeln!(out, "# {}", p.time.how);
+            let _ = writeln!(
+                out,
+                "{} = {{ sample_rate_hz = {} }}",
+                key("time"),
                 fill("the sampling rate in Hz")
             );
         }
     }
-    channel_line(out, "command", &channels.command, "m, cm, mm or in", false);
+    channel_line(out, &key("command"), &p.command, "m, cm, mm or in", false);
     channel_line(
         out,
-        "displacement",
-        &channels.displacement,
+        &key("displacement"),
+        &p.displacement,
         "m, cm, mm or in",
         false,
     );
-    channel_line(out, "force", &channels.force, "N, kN or lbf", true);
+    channel_line(out, &key("force"), &p.force, "N, kN or lbf", true);
 }
 
 /// The runs: a `[[runs]]` block per log, or the `[run_table]`.
@@ -431,37 +449,7 @@ fn run_channels(out: &mut String, log: &FoundLog, own: &ProposedChannels) {
     for c in &log.inspected.columns {
         let _ = writeln!(out, "#   {}", quoted(&c.name));
     }
-    match (&own.time.column, log.inspected.rate_hz) {
-        (Some(_), _) => channel_line(out, "channels.time", &own.time, "s or ms", false),
-        (None, Some(hz)) => {
-            let _ = writeln!(
-                out,
-                "channels.time = {{ sample_rate_hz = {hz} }}   # the file's own rate"
-            );
-        }
-        (None, None) => {
-            let _ = writeln!(
-                out,
-                "channels.time = {{ sample_rate_hz = {} }}",
-                fill("the sampling rate in Hz")
-            );
-        }
-    }
-    channel_line(
-        out,
-        "channels.command",
-        &own.command,
-        "m, cm, mm or in",
-        false,
-    );
-    channel_line(
-        out,
-        "channels.displacement",
-        &own.displacement,
-        "m, cm, mm or in",
-        false,
-    );
-    channel_line(out, "channels.force", &own.force, "N, kN or lbf", true);
+    channel_lines(out, "channels.", own, log.inspected.rate_hz);
 }
 
 /// The folder a file is in (`.` for a bare name): where the paths a

@@ -65,39 +65,8 @@ pub fn init(logs: &[PathBuf], out: &Path, table: Option<&Path>) -> Result<Initia
         tables,
         skipped: mut warnings,
     } = ingest::collect(logs)?;
-    let found_table = match tables.as_slice() {
-        [] => None,
-        [one] => Some(one.clone()),
-        [first, second, ..] => {
-            return Err(InitError::TwoTables {
-                first: first.clone(),
-                second: second.clone(),
-            });
-        }
-    };
-    if let (Some(found), Some(_)) = (&found_table, table) {
-        return Err(InitError::TableFound {
-            found: found.clone(),
-        });
-    }
-    let ids = unique_ids(&files, &mut warnings);
-    let proposed: Vec<ProposedChannels> = files
-        .iter()
-        .map(|(_, i)| scaffold::propose(&i.columns))
-        .collect();
-    let channels = most_common(&proposed).clone();
-    let found: Vec<FoundLog> = files
-        .iter()
-        .zip(ids)
-        .zip(proposed)
-        .map(|(((path, inspected), id), own)| FoundLog {
-            path: relative(path, &base),
-            stem: stem(path),
-            id,
-            channels: (!reads_with(&channels, &inspected.columns)).then_some(own),
-            inspected: inspected.clone(),
-        })
-        .collect();
+    let found_table = the_table(&tables, table)?;
+    let (found, channels) = proposed_logs(&files, &base, &mut warnings);
     let read: Vec<ReadBack> = files
         .iter()
         .zip(&found)
@@ -170,6 +139,57 @@ pub fn init(logs: &[PathBuf], out: &Path, table: Option<&Path>) -> Result<Initia
             + table_text.matches(scaffold::PLACEHOLDER).count(),
         warnings,
     })
+}
+
+/// The run table the manifest names: the one found among the logs, if
+/// any. Two found, or one found beside `--table` (which writes one for logs
+/// without), are refused.
+fn the_table(tables: &[PathBuf], table: Option<&Path>) -> Result<Option<PathBuf>, InitError> {
+    let found = match tables {
+        [] => None,
+        [one] => Some(one.clone()),
+        [first, second, ..] => {
+            return Err(InitError::TwoTables {
+                first: first.clone(),
+                second: second.clone(),
+            });
+        }
+    };
+    if let (Some(found), Some(_)) = (&found, table) {
+        return Err(InitError::TableFound {
+            found: found.clone(),
+        });
+    }
+    Ok(found)
+}
+
+/// The logs as the manifest in `base` names them, each with its run id
+/// and, where its columns are not the campaign's, its own channels; and
+/// the campaign's channels (those most logs are proposed).
+fn proposed_logs(
+    files: &[(PathBuf, ingest::Inspected)],
+    base: &Path,
+    warnings: &mut Vec<String>,
+) -> (Vec<FoundLog>, ProposedChannels) {
+    let ids = unique_ids(files, warnings);
+    let proposed: Vec<ProposedChannels> = files
+        .iter()
+        .map(|(_, i)| scaffold::propose(&i.columns))
+        .collect();
+    let channels = most_common(&proposed).clone();
+    let found = files
+        .iter()
+        .zip(ids)
+        .zip(proposed)
+        .map(|(((path, inspected), id), own)| FoundLog {
+            path: relative(path, base),
+            stem: stem(path),
+            id,
+            channels: (!reads_with(&channels, &inspected.columns)).then_some(own),
+            inspected: inspected.clone(),
+        })
+        .collect();
+    (found, channels)
 }
 
 /// Each log's run id: its stem as an id ([`scaffold::manifest_name`]);
