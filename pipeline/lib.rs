@@ -44,6 +44,7 @@
 pub mod analysis;
 pub mod cli;
 pub mod drift;
+pub mod fft;
 pub mod fit;
 pub mod frf;
 pub mod identify;

@@ -30,7 +30,7 @@ const LAYERS: &[&[&str]] = &[
     ],
     &["model"],
     &["lti"],
-    &["poly", "units"],
+    &["fft", "poly", "units"],
 ];
 
 /// Uses inside one layer that run one way (from, to).

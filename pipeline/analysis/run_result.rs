@@ -20,9 +20,8 @@ use crate::results::{
 };
 use crate::simulate::specimen::SpecimenModel;
 use crate::tracking::compensator::{self, Compensator, CompensatorOutcome};
-use crate::tracking::{self, FrfBins, Tracking};
+use crate::tracking::{self, FrfBins, Reference, Tracking};
 use crate::validate::{self, Record, ValidateError};
-use nalgebra::Complex;
 use std::sync::Arc;
 
 /// Below this fit percent (MATLAB tfest's FitPercent, [`crate::fit::TfFit`])
@@ -187,14 +186,18 @@ pub fn models(
 /// The log's tracking, the FRF's phase slope over the fitted bins, in the
 /// paper's windows: those the time-domain check located when it ran (the
 /// same command, the same windows), else located here.
-pub fn measured_tracking(st: &LogStage, windows: Option<&[validate::Window]>) -> Tracking {
+pub fn measured_tracking(
+    reference: &Reference<'_>,
+    st: &LogStage,
+    windows: Option<&[validate::Window]>,
+) -> Tracking {
     let bins = FrfBins {
         freq_hz: &st.frf.freq_hz,
         h: &st.frf.h,
         keep: &st.mask,
     };
     tracking::measure(
-        &st.log.command_m,
+        reference,
         &st.log.displacement_m,
         st.log.sample_rate_hz,
         Some(bins),
@@ -210,6 +213,7 @@ pub fn measured_tracking(st: &LogStage, windows: Option<&[validate::Window]>) ->
 /// plant as it was simulated, driven through the hold (times `comp` when
 /// given).
 fn predicted_tracking_of(
+    reference: &Reference<'_>,
     st: &LogStage,
     windows: &[validate::Window],
     displacement: &[f64],
@@ -218,13 +222,8 @@ fn predicted_tracking_of(
 ) -> Tracking {
     let fs = st.log.sample_rate_hz;
     let h: Option<Vec<_>> = plant.map(|g| {
-        st.frf
-            .freq_hz
-            .iter()
-            .map(|&f| {
-                compensator::held_response(g, f, fs)
-                    * comp.map_or(Complex::new(1.0, 0.0), |c| c.response(f))
-            })
+        compensator::HeldGrid::new(st.frf.freq_hz.clone(), fs, comp)
+            .response(g)
             .collect()
     });
     let bins = h.as_ref().map(|h| FrfBins {
@@ -232,16 +231,24 @@ fn predicted_tracking_of(
         h,
         keep: &st.mask,
     });
-    tracking::measure(&st.log.command_m, displacement, fs, bins, windows)
+    tracking::measure(reference, displacement, fs, bins, windows)
 }
 
 /// The tracking the model predicts for the log's command, uncompensated.
 pub fn predicted_tracking(
+    reference: &Reference<'_>,
     st: &LogStage,
     time: &validate::TimeStage,
     plant: Option<&TransferFunction>,
 ) -> Tracking {
-    predicted_tracking_of(st, &time.windows, &time.x1_simulated, plant, None)
+    predicted_tracking_of(
+        reference,
+        st,
+        &time.windows,
+        &time.x1_simulated,
+        plant,
+        None,
+    )
 }
 
 /// The compensator for the run's specimen on the identified plant `plant`
@@ -250,7 +257,7 @@ pub fn predicted_tracking(
 /// plant's state space, and over the sensitivity's stiffnesses.
 pub fn compensate(
     plan: &RunPlan,
-    st: &LogStage,
+    (st, reference): (&LogStage, &Reference<'_>),
     time: &validate::TimeStage,
     (rig_at_p, seals): (&RigParams, Option<&Seals>),
     specimen: &LinearSpecimen,
@@ -286,6 +293,7 @@ pub fn compensate(
         match compensator::compensated_displacement(&ss, &c, &st.log.command_m) {
             Ok((x, peak)) => (
                 Some(predicted_tracking_of(
+                    reference,
                     st,
                     &time.windows,
                     &x,
@@ -455,7 +463,7 @@ pub fn fitted(
             .as_ref()
             .map(|t: &validate::TimeStage| t.windows.as_slice());
         out.tracking = Some(RunTracking {
-            measured: measured_tracking(st, windows),
+            measured: measured_tracking(&Reference::new(&st.log.command_m), st, windows),
             predicted: None,
             model_gap_s: None,
             compensator: None,

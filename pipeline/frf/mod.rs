@@ -14,7 +14,7 @@ use nalgebra::Complex;
 use rayon::prelude::*;
 use std::sync::Arc;
 
-use realfft::{RealFftPlanner, RealToComplex};
+use realfft::RealToComplex;
 
 mod choice;
 pub mod linearity;
@@ -985,14 +985,6 @@ const PAR_MIN_BINS: usize = 8192;
 const PAR_MIN_LOCAL_FITS: usize = 512;
 
 thread_local! {
-    // realfft keeps its plans by length; one planner per thread keeps them
-    // across calls. A campaign's runs share their lengths, and planning a
-    // long record's transform (2^12 x 3 x 29 samples for the bundled
-    // default) costs about as much as running it. Plans are deterministic,
-    // so which thread made one does not change a bit of the result.
-    static PLANNER: std::cell::RefCell<RealFftPlanner<f64>> =
-        std::cell::RefCell::new(RealFftPlanner::new());
-
     // The input and scratch buffers of the last transforms this thread ran,
     // kept for the next: a whole-record transform needs 16n bytes of them,
     // and touching that much fresh memory on every call cost as much as the
@@ -1015,7 +1007,7 @@ struct SegmentTransform {
 
 impl SegmentTransform {
     fn new(n: usize) -> Self {
-        let r2c = PLANNER.with(|p| p.borrow_mut().plan_fft_forward(n));
+        let r2c = crate::fft::real_forward(n);
         let (mut buf, mut scratch) = SPARE_BUFFERS.with(|s| std::mem::take(&mut *s.borrow_mut()));
         buf.resize(n, 0.0);
         scratch.resize(r2c.get_scratch_len(), Complex::new(0.0, 0.0));

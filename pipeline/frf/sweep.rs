@@ -16,7 +16,6 @@
 //! the ends by the nearest.
 
 use nalgebra::Complex;
-use rustfft::FftPlanner;
 
 use super::{Detrend, detrend};
 
@@ -110,8 +109,7 @@ pub fn sweep_amplitude(u: &[f64], sample_rate_hz: f64) -> Option<SweepAmplitude>
 fn analytic(v: &[f64]) -> Vec<Complex<f64>> {
     let n = v.len();
     let mut z: Vec<Complex<f64>> = v.iter().map(|&r| Complex::new(r, 0.0)).collect();
-    let mut planner = FftPlanner::new();
-    planner.plan_fft_forward(n).process(&mut z);
+    crate::fft::complex_forward(n).process(&mut z);
     let half = n.div_ceil(2);
     for (k, c) in z.iter_mut().enumerate() {
         let factor = if k == 0 || (n.is_multiple_of(2) && k == n / 2) {
@@ -123,7 +121,7 @@ fn analytic(v: &[f64]) -> Vec<Complex<f64>> {
         };
         *c *= factor / n as f64;
     }
-    planner.plan_fft_inverse(n).process(&mut z);
+    crate::fft::complex_inverse(n).process(&mut z);
     z
 }
 

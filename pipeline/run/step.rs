@@ -25,6 +25,7 @@ use crate::report::{FigureSpec, Measured};
 use crate::results::{RunResult, RunTracking, SpringForceResult};
 use crate::sensitivity::{self, NoiseProfile};
 use crate::simulate::specimen::SpecimenModel;
+use crate::tracking::Reference;
 use crate::validate;
 use crate::validate::csi::Csi;
 
@@ -355,18 +356,25 @@ fn validated(
     };
     // The log's own tracking stands whether or not the model could be
     // simulated.
-    let measured = measured_tracking(st, time.as_ref().map(|t| t.windows.as_slice()));
+    let reference = Reference::new(&st.log.command_m);
+    let measured = measured_tracking(&reference, st, time.as_ref().map(|t| t.windows.as_slice()));
     let plant = out
         .tf
         .as_ref()
         .and_then(|tf| TransferFunction::with_delay(&tf.num, &tf.den, tf.delay_s).ok());
     let predicted = time
         .as_ref()
-        .map(|t| predicted_tracking(st, t, plant.as_ref()));
+        .map(|t| predicted_tracking(&reference, st, t, plant.as_ref()));
     let compensator = match (linear, &time, &plant) {
-        (Some(lin), Some(t), Some(g)) => {
-            Some(compensate(plan, st, t, (rig_at_p, seals), &lin, g, design))
-        }
+        (Some(lin), Some(t), Some(g)) => Some(compensate(
+            plan,
+            (st, &reference),
+            t,
+            (rig_at_p, seals),
+            &lin,
+            g,
+            design,
+        )),
         _ => None,
     };
     out.tracking = Some(RunTracking {

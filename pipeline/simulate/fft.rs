@@ -3,13 +3,12 @@
 //! radix, Rader or Bluestein as the length needs).
 
 use nalgebra::Complex;
-use rustfft::FftPlanner;
 
 /// The unnormalised inverse DFT, x_j = sum_k X_k exp(+2 pi i j k / N).
 pub(crate) fn inverse_dft(spectrum: &[Complex<f64>]) -> Vec<Complex<f64>> {
     let mut x = spectrum.to_vec();
     if x.len() > 1 {
-        FftPlanner::new().plan_fft_inverse(x.len()).process(&mut x);
+        crate::fft::complex_inverse(x.len()).process(&mut x);
     }
     x
 }
@@ -20,7 +19,7 @@ pub(crate) fn inverse_dft(spectrum: &[Complex<f64>]) -> Vec<Complex<f64>> {
 pub(crate) fn forward_dft(signal: &[Complex<f64>]) -> Vec<Complex<f64>> {
     let mut x = signal.to_vec();
     if x.len() > 1 {
-        FftPlanner::new().plan_fft_forward(x.len()).process(&mut x);
+        crate::fft::complex_forward(x.len()).process(&mut x);
     }
     x
 }

@@ -262,9 +262,60 @@ const BAND_POINTS: usize = 200;
 /// test `sine_through_the_plant_has_the_sampled_frequency_response` in
 /// `simulate::discrete` sums them).
 pub fn held_response(plant: &TransferFunction, f_hz: f64, fs: f64) -> Complex<f64> {
+    plant.freq_response(f_hz) * hold(f_hz, fs)
+}
+
+/// The zero-order hold's response at `f_hz` sampled at `fs`:
+/// `sinc(w T / 2) exp(-i w T / 2)`.
+fn hold(f_hz: f64, fs: f64) -> Complex<f64> {
     let x = std::f64::consts::PI * f_hz / fs;
     let sinc = if x == 0.0 { 1.0 } else { x.sin() / x };
-    plant.freq_response(f_hz) * Complex::from_polar(sinc, -x)
+    Complex::from_polar(sinc, -x)
+}
+
+/// Frequencies at which held plants are read, with all that does not
+/// depend on the plant evaluated once: `s = i 2 pi f`, the hold's response
+/// and the compensator's. Reading a plant on it is then its rational
+/// function at each `s` (and its delay's phasor, when it has one): the
+/// stiffness sweep and the bisection for the target stiffness read dozens
+/// of plants on the same frequencies.
+#[derive(Debug, Clone)]
+pub struct HeldGrid {
+    pub freq_hz: Vec<f64>,
+    s: Vec<Complex<f64>>,
+    hold: Vec<Complex<f64>>,
+    comp: Option<Vec<Complex<f64>>>,
+}
+
+impl HeldGrid {
+    /// The grid at `freq_hz` for a controller at `fs`, with `comp`'s
+    /// response when given.
+    pub fn new(freq_hz: Vec<f64>, fs: f64, comp: Option<&Compensator>) -> Self {
+        Self {
+            s: freq_hz
+                .iter()
+                .map(|&f| Complex::new(0.0, 2.0 * std::f64::consts::PI * f))
+                .collect(),
+            hold: freq_hz.iter().map(|&f| hold(f, fs)).collect(),
+            comp: comp.map(|c| freq_hz.iter().map(|&f| c.response(f)).collect()),
+            freq_hz,
+        }
+    }
+
+    /// The held plant's response at each frequency ([`held_response`]),
+    /// times the compensator's when the grid has one.
+    pub fn response<'a>(
+        &'a self,
+        plant: &'a TransferFunction,
+    ) -> impl Iterator<Item = Complex<f64>> + 'a {
+        self.s.iter().enumerate().map(move |(i, &s)| {
+            let held = plant.eval(s) * self.hold[i];
+            match &self.comp {
+                Some(c) => held * c[i],
+                None => held,
+            }
+        })
+    }
 }
 
 /// How a plant, with or without the compensator, follows its command over
@@ -305,19 +356,34 @@ pub fn band_tracking(
     band_hz: (f64, f64),
     fs: f64,
 ) -> BandTracking {
-    band_tracking_of(
-        |f| held_response(plant, f, fs) * comp.map_or(Complex::new(1.0, 0.0), |c| c.response(f)),
-        band_hz,
-        fs,
-    )
+    band_tracking_on(&band_grid(band_hz, fs, comp), plant, fs)
 }
 
-/// The tracking of the response `h` (of frequency, Hz) over `band_hz`, read
-/// as [`band_tracking`] reads a plant's.
-fn band_tracking_of(h: impl Fn(f64) -> Complex<f64>, band_hz: (f64, f64), fs: f64) -> BandTracking {
+/// The points below the band that the phase is unwrapped along before it.
+const LEAD_IN_POINTS: usize = 50;
+
+/// The frequencies [`band_tracking`] reads a response at: [`LEAD_IN_POINTS`]
+/// from a hundredth of the band's bottom, then [`BAND_POINTS`] over it.
+fn band_grid(band_hz: (f64, f64), fs: f64, comp: Option<&Compensator>) -> HeldGrid {
     let (lo, hi) = band_hz;
-    let lead_in = (0..50).map(|i| lo * 0.01_f64.powf(1.0 - i as f64 / 50.0));
+    let lead_in =
+        (0..LEAD_IN_POINTS).map(|i| lo * 0.01_f64.powf(1.0 - i as f64 / LEAD_IN_POINTS as f64));
     let band = (0..BAND_POINTS).map(|i| lo * (hi / lo).powf(i as f64 / (BAND_POINTS - 1) as f64));
+    HeldGrid::new(lead_in.chain(band).collect(), fs, comp)
+}
+
+/// [`band_tracking`] of `plant` on a grid from [`band_grid`].
+fn band_tracking_on(grid: &HeldGrid, plant: &TransferFunction, fs: f64) -> BandTracking {
+    band_tracking_of(&grid.freq_hz, grid.response(plant), fs)
+}
+
+/// The tracking of the response values `h` at the frequencies `freq_hz` of
+/// a [`band_grid`], read as [`band_tracking`] reads a plant's.
+fn band_tracking_of(
+    freq_hz: &[f64],
+    h: impl Iterator<Item = Complex<f64>>,
+    fs: f64,
+) -> BandTracking {
     let mut phase = 0.0_f64;
     let mut prev: Option<f64> = None;
     let mut out = BandTracking {
@@ -325,8 +391,7 @@ fn band_tracking_of(h: impl Fn(f64) -> Complex<f64>, band_hz: (f64, f64), fs: f6
         delay_samples_min: f64::INFINITY,
         delay_samples_max: f64::NEG_INFINITY,
     };
-    for (i, f) in lead_in.chain(band).enumerate() {
-        let v = h(f);
+    for (i, (&f, v)) in freq_hz.iter().zip(h).enumerate() {
         let arg = v.arg();
         phase = match prev {
             None => arg,
@@ -337,7 +402,7 @@ fn band_tracking_of(h: impl Fn(f64) -> Complex<f64>, band_hz: (f64, f64), fs: f6
             }
         };
         prev = Some(arg);
-        if i < 50 {
+        if i < LEAD_IN_POINTS {
             continue;
         }
         let delay = -phase / (2.0 * std::f64::consts::PI * f) * fs;
@@ -375,17 +440,16 @@ pub fn seals_tracking(
     band_hz: (f64, f64),
     fs: f64,
 ) -> Vec<SealsTracking> {
+    let grid = band_grid(band_hz, fs, Some(comp));
     amplitudes_m
         .iter()
         .map(|&a| SealsTracking {
             amplitude_m: a,
             compensated: band_tracking_of(
-                |f| {
-                    held_response(plant, f, fs)
-                        * comp.response(f)
-                        * model::friction_factor(rig, specimen, seals, a, f)
-                },
-                band_hz,
+                &grid.freq_hz,
+                grid.response(plant)
+                    .zip(&grid.freq_hz)
+                    .map(|(h, &f)| h * model::friction_factor(rig, specimen, seals, a, f)),
                 fs,
             ),
         })
@@ -432,13 +496,17 @@ pub fn stiffness_sweep(
     band_hz: (f64, f64),
 ) -> Vec<StiffnessPoint> {
     let fs = comp.sample_rate_hz;
+    let (bare, with) = (
+        band_grid(band_hz, fs, None),
+        band_grid(band_hz, fs, Some(comp)),
+    );
     ks.iter()
         .filter_map(|&k| {
             let plant = model::tf_x1_u(rig, &with_stiffness(specimen, k)).ok()?;
             Some(StiffnessPoint {
                 stiffness_n_per_m: k,
-                uncompensated: band_tracking(&plant, None, band_hz, fs),
-                compensated: band_tracking(&plant, Some(comp), band_hz, fs),
+                uncompensated: band_tracking_on(&bare, &plant, fs),
+                compensated: band_tracking_on(&with, &plant, fs),
             })
         })
         .collect()
@@ -458,12 +526,13 @@ pub fn target_stiffness(
     band_hz: (f64, f64),
 ) -> Option<[f64; 2]> {
     let fs = comp.sample_rate_hz;
+    let grid = band_grid(band_hz, fs, Some(comp));
     let meets = |k: f64| {
         model::tf_x1_u(rig, &with_stiffness(specimen, k))
-            .is_ok_and(|g| band_tracking(&g, Some(comp), band_hz, fs).meets_target())
+            .is_ok_and(|g| band_tracking_on(&grid, &g, fs).meets_target())
     };
     let own = model::tf_x1_u(rig, specimen).ok()?;
-    if !band_tracking(&own, Some(comp), band_hz, fs).meets_target() {
+    if !band_tracking_on(&grid, &own, fs).meets_target() {
         return None;
     }
     let k0 = specimen.mck().2;

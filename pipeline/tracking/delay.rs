@@ -17,7 +17,8 @@
 //! lags its command.
 
 use nalgebra::Complex;
-use realfft::RealFftPlanner;
+
+use super::Reference;
 
 /// Why a delay could not be estimated: a note, not a number.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -36,7 +37,8 @@ pub enum DelayNote {
     TooFewBins,
 }
 
-/// The delay (s) by cross-correlation: the lag in +-`max_delay_s` at which
+/// The delay (s) by cross-correlation of `displacement` with the command
+/// `reference`: the lag in +-`max_delay_s` at which
 /// the normalised correlation `r(lag) / sqrt(E(lag))`, with
 /// `r(lag) = sum_t x[t] u[t - lag]` and `E(lag) = sum_t u[t - lag]^2`, is
 /// largest, each record less its mean and `t` over the same displacement
@@ -49,37 +51,38 @@ pub enum DelayNote {
 /// gain or lose as the command shifts (a 0.5-5 Hz multisine through a
 /// 2 ms lag measured 1.5 ms).
 ///
-/// The integer lags come from FFTs of blocks of the records (overlap-save),
-/// so that memory does not grow with the record (a 14 M-sample log). The
-/// refinement evaluates the same sum with the command interpolated between
-/// its samples (16-point Lagrange), on at most 2^20 of the displacement's
-/// samples evenly strided, and maximises it by golden-section search: the
+/// The integer lags come from the command's transform, which the frequency
+/// evaluation index reads too, and one transform of the displacement
+/// (`integer_lags`). The refinement evaluates the same sum with the command
+/// interpolated between its samples (16-point Lagrange) and maximises it by
+/// golden-section search, from sums gathered in one pass
+/// (`refinement_sums`): the
 /// three-point parabola, the usual refinement, is biased by a few
 /// hundredths of a sample, and the correlation's own trigonometric
 /// interpolant by the records' ends.
 pub fn xcorr_delay(
-    command: &[f64],
+    reference: &Reference<'_>,
     displacement: &[f64],
     sample_rate_hz: f64,
     max_delay_s: f64,
 ) -> Result<f64, DelayNote> {
-    let n = command.len().min(displacement.len());
+    let n = reference.samples.len().min(displacement.len());
     if n < MIN_SAMPLES {
         return Err(DelayNote::TooShort {
             needed: MIN_SAMPLES,
         });
     }
-    let (u, x) = (&command[..n], &displacement[..n]);
+    let reference = reference.first(n);
+    let (u, x) = (reference.samples, &displacement[..n]);
     if super::constant(u) {
         return Err(DelayNote::ConstantCommand);
     }
     if super::constant(x) {
         return Err(DelayNote::ConstantResponse);
     }
-    let mean = |v: &[f64]| v.iter().sum::<f64>() / n as f64;
-    let (mu, mx) = (mean(u), mean(x));
+    let (mu, mx) = (reference.mean, super::mean(x));
     let limit = ((max_delay_s * sample_rate_hz).round() as usize).clamp(1, n / 4);
-    let (r, e, ex) = integer_lags(u, x, mu, mx, limit);
+    let (r, e, ex) = integer_lags(u, x, mu, mx, limit, &reference.spectrum);
     let lim = limit as i64;
     let at = |lag: i64| (lag + lim) as usize;
     let score = |lag: i64| r[at(lag)] / e[at(lag)].sqrt();
@@ -99,32 +102,10 @@ pub fn xcorr_delay(
     // kept clear at either end.
     let first = limit + KERNEL_HALF + 1;
     let last = n - limit - KERNEL_HALF - 1;
-    let stride = (last - first).div_ceil(REFINE_SAMPLES).max(1);
-    // Every tau in [best - 1, best + 1] reads the command at the 2K + 1
-    // integer lags best - K ..= best + K, so one pass over the samples
-    // gathers what each evaluation needs: the displacement's products with
-    // the command at those lags (`rl`) and the command's with itself
-    // (`gram`). Then r(tau) = w . rl and E(tau) = w' gram w for the taps w
-    // of tau, the same sums as interpolating sample by sample.
     let half = KERNEL_HALF as i64;
     let lags = 2 * KERNEL_HALF + 1;
     let low = best - half;
-    let mut rl = vec![0.0; lags];
-    let mut gram = vec![0.0; lags * lags];
-    let mut v = vec![0.0; lags];
-    for t in (first..last).step_by(stride) {
-        for (o, vo) in v.iter_mut().enumerate() {
-            *vo = u[(t as i64 - low - o as i64) as usize] - mu;
-        }
-        let xt = x[t] - mx;
-        for a in 0..lags {
-            rl[a] += xt * v[a];
-            let row = &mut gram[a * lags..(a + 1) * lags];
-            for b in a..lags {
-                row[b] += v[a] * v[b];
-            }
-        }
-    }
+    let (rl, gram) = refinement_sums(u, x, mu, mx, low, first..last);
     let corr = |tau: f64| -> f64 {
         // tau = shift + frac: u(t - tau) = sum_j u[t - shift - j] L(j - frac),
         // j = 1 - K ..= K, the lag shift + j at offset shift + j - low.
@@ -145,66 +126,119 @@ pub fn xcorr_delay(
     Ok(tau / sample_rate_hz)
 }
 
-/// How many displacement samples the refinement sums over, at most.
-const REFINE_SAMPLES: usize = 1 << 20;
-
-/// The samples of displacement each FFT block of [`integer_lags`] takes.
-const BLOCK: usize = 1 << 16;
+/// What every evaluation of the refinement needs, for the 2K + 1 integer
+/// lags `low ..= low + 2K` (K = [`KERNEL_HALF`]) over the displacement's
+/// samples `t` in `ts`, each record less its mean: the displacement's
+/// products with the lagged command, `rl[a] = sum_t x[t] u[t - low - a]`,
+/// and the lagged command's with itself, `gram[a][b] = sum_t u[t - low - a]
+/// u[t - low - b]` (upper triangle, row-major). Then `r(tau) = w . rl` and
+/// `E(tau) = w' gram w` for the taps `w` of `tau`: the same sums as
+/// interpolating the command sample by sample.
+///
+/// The Gram matrix is Toeplitz but for the ends: entry (a, a + d) is
+/// `sum_s c_d(s)` with `c_d(s) = u[s] u[s - d]` over `s` in `ts` moved back
+/// by `low + a`, so each of the 2K + 1 differences `d` is summed once over
+/// the samples of row 0, and row `a` is row `a - 1` less the product that
+/// leaves the range at its end and plus the one that enters at its start.
+/// That is 2(2K + 1) products a sample, where forming each entry sample by
+/// sample took (2K + 1)(2K + 2)/2 = 153.
+fn refinement_sums(
+    u: &[f64],
+    x: &[f64],
+    mu: f64,
+    mx: f64,
+    low: i64,
+    ts: std::ops::Range<usize>,
+) -> (Vec<f64>, Vec<f64>) {
+    const LAGS: usize = 2 * KERNEL_HALF + 1;
+    let lags = LAGS;
+    // Command sample s = t - low - a, a in 0..lags, and t in ts.
+    let at = |t: usize, a: usize| (t as i64 - low - a as i64) as usize;
+    let uc = |s: usize| u[s] - mu;
+    let (mut rl, mut row0) = ([0.0; LAGS], [0.0; LAGS]);
+    for t in ts.clone() {
+        let xt = x[t] - mx;
+        let s0 = at(t, 0);
+        // u[s0 - a] is window[LAGS - 1 - a]: one bounds check a sample.
+        let window: &[f64; LAGS] = u[s0 + 1 - LAGS..=s0]
+            .try_into()
+            .expect("a window of LAGS samples");
+        let u0 = window[LAGS - 1] - mu;
+        for a in 0..LAGS {
+            let ua = window[LAGS - 1 - a] - mu;
+            rl[a] += xt * ua;
+            row0[a] += u0 * ua;
+        }
+    }
+    let mut gram = vec![0.0; lags * lags];
+    for d in 0..lags {
+        // Row 0 of difference d, then each next row by its ends.
+        let mut sum = row0[d];
+        gram[d] = sum;
+        for a in 1..lags - d {
+            let leaving = at(ts.end - 1, a - 1);
+            let entering = at(ts.start, a);
+            sum += uc(entering) * uc(entering - d) - uc(leaving) * uc(leaving - d);
+            gram[a * lags + a + d] = sum;
+        }
+    }
+    (rl.to_vec(), gram)
+}
 
 /// For every integer lag in +-`limit`, `r(lag) = sum_t x[t] u[t - lag]` and
 /// `E(lag) = sum_t u[t - lag]^2` over `t` in [limit, n - limit), each
 /// record less its mean (`mu`, `mx`), and `sum_t x[t]^2` over the same
-/// `t`. Block by block: each block of `BLOCK` displacement samples is
-/// correlated with the command samples it meets at the lags searched, by
-/// one FFT pair of a power of two at least `BLOCK + 2 limit` long.
-fn integer_lags(u: &[f64], x: &[f64], mu: f64, mx: f64, limit: usize) -> (Vec<f64>, Vec<f64>, f64) {
+/// `t`; `u_spectrum` is the one-sided DFT of `u - mu`.
+///
+/// The correlation is one transform of the displacement, zero outside
+/// [limit, n - limit), against the command's: for lags within +-limit the
+/// circular correlation of n points never wraps (t - lag stays in [0, n)),
+/// so it is the sum itself, `r(lag) = (1/n) sum_k X_k conj(U_k)
+/// e^{2 pi i k lag / n}`.
+fn integer_lags(
+    u: &[f64],
+    x: &[f64],
+    mu: f64,
+    mx: f64,
+    limit: usize,
+    u_spectrum: &[Complex<f64>],
+) -> (Vec<f64>, Vec<f64>, f64) {
     let n = u.len();
     let lags = 2 * limit + 1;
     let (start, end) = (limit, n - limit);
-    let m = (BLOCK.min(end - start) + 2 * limit).next_power_of_two();
-    let mut planner = RealFftPlanner::<f64>::new();
-    let forward = planner.plan_fft_forward(m);
-    let inverse = planner.plan_fft_inverse(m);
-    let (mut xb, mut ub, mut cb) = (vec![0.0; m], vec![0.0; m], vec![0.0; m]);
-    let (mut xs, mut us) = (forward.make_output_vec(), forward.make_output_vec());
-    let mut r = vec![0.0; lags];
+    let forward = crate::fft::real_forward(n);
+    let inverse = crate::fft::real_inverse(n);
+    let mut xb = vec![0.0; n];
     let mut ex = 0.0;
-    let mut b = start;
-    while b < end {
-        let len = BLOCK.min(end - b);
-        xb.fill(0.0);
-        ub.fill(0.0);
-        for (j, v) in x[b..b + len].iter().enumerate() {
-            xb[j] = v - mx;
-            ex += (v - mx) * (v - mx);
-        }
-        // The command from limit before the block to limit after it.
-        for (j, v) in u[b - limit..b + len + limit].iter().enumerate() {
-            ub[j] = v - mu;
-        }
-        forward
-            .process(&mut xb, &mut xs)
-            .expect("lengths come from the plan");
-        forward
-            .process(&mut ub, &mut us)
-            .expect("lengths come from the plan");
-        // c[d] = sum_j x_blk[j] u_seg[j + d]: the transform of conj(X) U.
-        for (a, c) in xs.iter_mut().zip(&us) {
-            *a = a.conj() * c;
-        }
-        xs[0].im = 0.0;
+    for t in start..end {
+        let v = x[t] - mx;
+        xb[t] = v;
+        ex += v * v;
+    }
+    let mut xs = forward.make_output_vec();
+    forward
+        .process(&mut xb, &mut xs)
+        .expect("lengths come from the plan");
+    for (a, c) in xs.iter_mut().zip(u_spectrum) {
+        *a *= c.conj();
+    }
+    // The bins whose imaginary parts a real signal's transform cannot
+    // have: DC, and Nyquist for an even length.
+    xs[0].im = 0.0;
+    if n.is_multiple_of(2) {
         let last = xs.len() - 1;
         xs[last].im = 0.0;
-        inverse
-            .process(&mut xs, &mut cb)
-            .expect("lengths come from the plan");
-        // u_seg[j + d] = u[b - limit + j + d] = u[t - lag] with t = b + j:
-        // lag = limit - d.
-        for (d, c) in cb[..lags].iter().enumerate() {
-            r[lags - 1 - d] += c / m as f64;
-        }
-        b += len;
     }
+    let mut c = xb;
+    inverse
+        .process(&mut xs, &mut c)
+        .expect("lengths come from the plan");
+    let r = (0..lags)
+        .map(|i| {
+            let lag = i as i64 - limit as i64;
+            c[lag.rem_euclid(n as i64) as usize] / n as f64
+        })
+        .collect();
     // E(lag) = sum over s in [start - lag, end - lag) of (u[s] - mu)^2: the
     // sum over [start, end) corrected at either end, where the samples a lag
     // adds or drops lie within `limit` of `start` and of `end` (prefix sums
@@ -352,7 +386,8 @@ pub fn phase_slope_delay(
 
 #[cfg(test)]
 mod tests {
-    use super::{BLOCK, integer_lags};
+    use super::{KERNEL_HALF, integer_lags, refinement_sums};
+    use crate::tracking::centred_spectrum;
 
     /// The sums [`integer_lags`] defines, term by term.
     fn naive(u: &[f64], x: &[f64], mu: f64, mx: f64, limit: usize) -> (Vec<f64>, Vec<f64>, f64) {
@@ -368,6 +403,38 @@ mod tests {
         (r, e, ex)
     }
 
+    /// The refinement's sums against forming each entry sample by sample,
+    /// at a lag far from zero either way and at zero.
+    #[test]
+    fn the_refinement_sums_are_the_sums_they_define() {
+        let n = 5_000;
+        let u = record(n, 3, 0.4);
+        let x = record(n, 11, -0.7);
+        let (mu, mx) = (0.35, -0.65);
+        let lags = 2 * KERNEL_HALF + 1;
+        for low in [-40_i64, -8, 0, 25] {
+            let ts = 60..n - 60;
+            let (rl, gram) = refinement_sums(&u, &x, mu, mx, low, ts.clone());
+            let lagged = |t: usize, a: usize| u[(t as i64 - low - a as i64) as usize] - mu;
+            for a in 0..lags {
+                let r: f64 = ts.clone().map(|t| (x[t] - mx) * lagged(t, a)).sum();
+                assert!(
+                    (rl[a] - r).abs() < 1e-9,
+                    "low {low}, rl[{a}]: {} vs {r}",
+                    rl[a]
+                );
+                for b in a..lags {
+                    let g: f64 = ts.clone().map(|t| lagged(t, a) * lagged(t, b)).sum();
+                    let got = gram[a * lags + b];
+                    assert!(
+                        (got - g).abs() < 1e-9,
+                        "low {low}, gram[{a}][{b}]: {got} vs {g}"
+                    );
+                }
+            }
+        }
+    }
+
     /// A reproducible record with a mean, uniform on [-1, 1) plus `offset`.
     fn record(n: usize, seed: u64, offset: f64) -> Vec<f64> {
         let mut s = seed;
@@ -381,16 +448,16 @@ mod tests {
             .collect()
     }
 
-    /// The block FFTs against the sums themselves, over lengths within one
-    /// block, at its edge and over several, and lags from none to many.
+    /// The transforms' correlation against the sums themselves, over even,
+    /// odd and prime lengths, and lags from none to many.
     #[test]
-    fn the_block_correlation_is_the_sum_it_defines() {
-        for n in [200, 4_099, BLOCK, BLOCK + 37, 2 * BLOCK + 1_000] {
+    fn the_transforms_correlation_is_the_sum_it_defines() {
+        for n in [200, 4_099, 65_536, 65_573, 132_072] {
             for limit in [0, 1, 7, 60] {
                 let u = record(n, 1 + n as u64, 0.3);
                 let x = record(n, 7 + limit as u64, -1.2);
                 let (mu, mx) = (0.25, -1.1);
-                let (r, e, ex) = integer_lags(&u, &x, mu, mx, limit);
+                let (r, e, ex) = integer_lags(&u, &x, mu, mx, limit, &centred_spectrum(&u, mu));
                 let (rn, en, exn) = naive(&u, &x, mu, mx, limit);
                 // Each sum's terms are O(1) and there are about n of them:
                 // the FFT's rounding is some 1e-12 of n.

@@ -24,7 +24,6 @@ pub mod delay;
 mod tests;
 
 use nalgebra::Complex;
-use realfft::RealFftPlanner;
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
@@ -69,7 +68,47 @@ pub enum FeiNote {
     TooShort,
 }
 
-/// The frequency evaluation index of `displacement` against `command`.
+/// A command prepared for the tracking measures of displacements against
+/// it: its mean and the one-sided DFT of it less its mean, transformed
+/// once. A run's measured, predicted and compensated displacements are
+/// measured against the same command, and the cross-correlation and the
+/// frequency evaluation index both read its transform.
+#[derive(Debug, Clone)]
+pub struct Reference<'a> {
+    samples: &'a [f64],
+    mean: f64,
+    spectrum: Vec<Complex<f64>>,
+}
+
+impl<'a> Reference<'a> {
+    pub fn new(command: &'a [f64]) -> Self {
+        let mean = mean(command);
+        Self {
+            samples: command,
+            mean,
+            spectrum: centred_spectrum(command, mean),
+        }
+    }
+
+    /// The command's samples.
+    pub fn samples(&self) -> &'a [f64] {
+        self.samples
+    }
+
+    /// The same command cut to its first `n` samples, transformed again
+    /// when that is fewer than it has (a displacement shorter than its
+    /// command is measured against as much of it).
+    fn first(&self, n: usize) -> std::borrow::Cow<'_, Reference<'a>> {
+        if n >= self.samples.len() {
+            std::borrow::Cow::Borrowed(self)
+        } else {
+            std::borrow::Cow::Owned(Reference::new(&self.samples[..n]))
+        }
+    }
+}
+
+/// The frequency evaluation index of `displacement` against the command
+/// `reference`.
 ///
 /// Each record's mean is removed first: Guo et al. take every bin from DC,
 /// but a command resting away from zero (the UTFSM logs' -0.21 mm) would
@@ -78,18 +117,20 @@ pub enum FeiNote {
 /// The phase is taken with `atan2` (Guo et al.'s `atan` is right only
 /// within +-90 degrees).
 pub fn frequency_evaluation(
-    command: &[f64],
+    reference: &Reference<'_>,
     displacement: &[f64],
     sample_rate_hz: f64,
 ) -> Result<FrequencyEvaluation, FeiNote> {
-    let n = command.len().min(displacement.len());
+    let n = reference.samples.len().min(displacement.len());
     if n < 8 {
         return Err(FeiNote::TooShort);
     }
-    if constant(&command[..n]) {
+    let reference = reference.first(n);
+    if constant(reference.samples) {
         return Err(FeiNote::ConstantCommand);
     }
-    let (uk, xk) = (spectrum(&command[..n]), spectrum(&displacement[..n]));
+    let x = &displacement[..n];
+    let (uk, xk) = (&reference.spectrum, centred_spectrum(x, mean(x)));
     let (mut cross, mut power, mut weighted_f) = (Complex::new(0.0, 0.0), 0.0, 0.0);
     for (k, (u, x)) in uk.iter().zip(&xk).enumerate().skip(1) {
         let p = u.norm_sqr();
@@ -117,12 +158,22 @@ fn constant(x: &[f64]) -> bool {
     x.iter().all(|v| *v == x[0])
 }
 
-/// The one-sided DFT of `x` less its mean.
-fn spectrum(x: &[f64]) -> Vec<Complex<f64>> {
-    let n = x.len();
-    let mean = x.iter().sum::<f64>() / n as f64;
+/// The mean of `x` (0 for none).
+fn mean(x: &[f64]) -> f64 {
+    if x.is_empty() {
+        0.0
+    } else {
+        x.iter().sum::<f64>() / x.len() as f64
+    }
+}
+
+/// The one-sided DFT of `x` less `mean` (none for no samples).
+fn centred_spectrum(x: &[f64], mean: f64) -> Vec<Complex<f64>> {
+    if x.is_empty() {
+        return Vec::new();
+    }
     let mut buf: Vec<f64> = x.iter().map(|v| v - mean).collect();
-    let plan = RealFftPlanner::<f64>::new().plan_fft_forward(n);
+    let plan = crate::fft::real_forward(x.len());
     let mut out = plan.make_output_vec();
     plan.process(&mut buf, &mut out)
         .expect("lengths come from the plan");
@@ -242,16 +293,17 @@ pub struct FrfBins<'a> {
     pub keep: &'a [bool],
 }
 
-/// Every tracking measure of `displacement` against `command` (m, sampled
-/// at `sample_rate_hz`), with the phase slope from `frf` when given, over
-/// the whole record and in each of `windows`.
+/// Every tracking measure of `displacement` against the command
+/// `reference` (m, sampled at `sample_rate_hz`), with the phase slope from
+/// `frf` when given, over the whole record and in each of `windows`.
 pub fn measure(
-    command: &[f64],
+    reference: &Reference<'_>,
     displacement: &[f64],
     sample_rate_hz: f64,
     frf: Option<FrfBins<'_>>,
     windows: &[Window],
 ) -> Tracking {
+    let command = reference.samples;
     let n = command.len().min(displacement.len());
     let windows = windows
         .iter()
@@ -262,13 +314,13 @@ pub fn measure(
                 label: w.label.clone(),
                 start_s: w.start_s,
                 end_s: w.end_s,
-                fei: frequency_evaluation(c, d, sample_rate_hz).ok(),
+                fei: frequency_evaluation(&Reference::new(c), d, sample_rate_hz).ok(),
                 errors: tracking_errors(c, d),
             }
         })
         .collect();
     let mut notes = Vec::new();
-    let xcorr = xcorr_delay(command, displacement, sample_rate_hz, MAX_DELAY_S)
+    let xcorr = xcorr_delay(reference, displacement, sample_rate_hz, MAX_DELAY_S)
         .map_err(|e| notes.push(format!("delay by cross-correlation: {e}")))
         .ok();
     let slope = match frf {
@@ -277,7 +329,7 @@ pub fn measure(
             .ok(),
         None => None,
     };
-    let fei = frequency_evaluation(command, displacement, sample_rate_hz)
+    let fei = frequency_evaluation(reference, displacement, sample_rate_hz)
         .map_err(|e| notes.push(format!("frequency evaluation index: {e}")))
         .ok();
     let ti = tracking_indicator(command, displacement);
