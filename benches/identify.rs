@@ -114,7 +114,7 @@ fn bench_identify(c: &mut Criterion) {
                     .unwrap();
                 let mut h = frf::estimate(u, y, fs, &choice.plan).unwrap();
                 let mask = frf::band_mask(&h, run.band_hz, ident.coherence_min);
-                fit_run(&mut h, &mask, run.band_hz, ident, &choice.plan, fs).unwrap()
+                fit_run(&mut h, &mask, run.band_hz, ident, &choice.plan, fs, None).unwrap()
             })
         });
     }

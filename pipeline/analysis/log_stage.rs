@@ -475,7 +475,7 @@ fn settings_warning(
     let moved = fit.and_then(|fit| {
         let mut h = frf::estimate(u, y, fs, &auto.plan).ok()?;
         let mask = frf::band_mask(&h, run.band_hz, ident.coherence_min);
-        let (other, _) = fit_run(&mut h, &mask, run.band_hz, ident, &auto.plan, fs).ok()?;
+        let (other, _) = fit_run(&mut h, &mask, run.band_hz, ident, &auto.plan, fs, None).ok()?;
         let parts: Vec<String> = fit
             .param_names
             .iter()
@@ -513,7 +513,7 @@ pub fn log_stage_from(
     warnings.extend(motion_warning(&choice, &log.command_m));
 
     let fit = if matches!(run.role, Role::NoSpecimen | Role::Spring | Role::Fit) {
-        let (fit, data) = fit_run(&mut h, &mask, run.band_hz, ident, &choice.plan, fs)
+        let (fit, data) = fit_run(&mut h, &mask, run.band_hz, ident, &choice.plan, fs, None)
             .map_err(|source| tf_error(path, source))?;
         warnings.extend(fit.warnings.iter().cloned());
         Some((fit, data))

@@ -308,6 +308,7 @@ mod tests {
             known: vec![Complex::new(1.0, 0.0); freq.len()],
             weight: vec![1.0; freq.len()],
             projector: None,
+            last: Default::default(),
         }
     }
 

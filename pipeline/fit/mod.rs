@@ -297,6 +297,7 @@ impl TransientData {
         // columns'.
         let plain = FrfProblem {
             projector: None,
+            last: Default::default(),
             ..problem.clone()
         };
         let w0 = prep.scaling.w0_rad_per_s;
@@ -475,6 +476,7 @@ fn prepare(input: &FitInput, opts: &FitOptions) -> Result<Prepared, FitError> {
         known,
         weight: input.variance.iter().map(|v| (2.0 / v).sqrt()).collect(),
         projector: None,
+        last: Default::default(),
     };
     Ok(Prepared {
         names: shape.names(),

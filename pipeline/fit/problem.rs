@@ -161,12 +161,34 @@ pub struct FrfProblem {
     /// The record's transient columns, projected out of the residuals and
     /// the Jacobian (`fit::transient`); None for a plain fit.
     pub projector: Option<std::sync::Arc<super::transient::Projector>>,
+    /// The last evaluation, kept for the next call at the same point: it
+    /// depends on `shape`, `s` and `known`, which do not change once a
+    /// problem is evaluated (a changed problem is a new one).
+    pub last: LastEval,
 }
 
-/// D' and the model H at one bin.
+/// D', the delay's phasor and the model H at one bin.
+#[derive(Debug, Clone, Copy)]
 struct BinEval {
     den: Complex<f64>,
+    delay: Complex<f64>,
     model: Complex<f64>,
+}
+
+/// The bins' evaluations at the last parameters a problem was evaluated
+/// at: Levenberg-Marquardt asks for the residuals at a trial point and,
+/// when it accepts it, for the Jacobian at the same point, whose every bin
+/// needs the same polynomials and delay phasor. A clone starts empty.
+#[derive(Debug, Default)]
+pub struct LastEval(std::sync::Mutex<Option<Evaluated>>);
+
+/// Parameters and every bin's evaluation there.
+type Evaluated = (Vec<f64>, std::sync::Arc<Vec<BinEval>>);
+
+impl Clone for LastEval {
+    fn clone(&self) -> Self {
+        Self::default()
+    }
 }
 
 impl FrfProblem {
@@ -203,16 +225,37 @@ impl FrfProblem {
         };
         BinEval {
             den: d_val,
+            delay,
             model: n_val / d_val * delay * self.known[i],
         }
     }
 
+    /// Every bin's evaluation at `theta`: the last one's when `theta` is the
+    /// same bits.
+    fn eval_bins(&self, theta: &[f64]) -> std::sync::Arc<Vec<BinEval>> {
+        let mut last = self.last.0.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some((at, bins)) = last.as_ref()
+            && at.len() == theta.len()
+            && at
+                .iter()
+                .zip(theta)
+                .all(|(a, b)| a.to_bits() == b.to_bits())
+        {
+            return bins.clone();
+        }
+        let (num, den, tau) = self.split(theta);
+        let bins = std::sync::Arc::new(
+            (0..self.n_bins())
+                .map(|i| self.eval_bin(i, num, den, tau))
+                .collect::<Vec<_>>(),
+        );
+        *last = Some((theta.to_vec(), bins.clone()));
+        bins
+    }
+
     /// Model response H(s'_i) at every bin (known factors included).
     pub fn model(&self, theta: &[f64]) -> Vec<Complex<f64>> {
-        let (num, den, tau) = self.split(theta);
-        (0..self.n_bins())
-            .map(|i| self.eval_bin(i, num, den, tau).model)
-            .collect()
+        self.eval_bins(theta).iter().map(|b| b.model).collect()
     }
 
     /// Weighted residuals stacked [Re; Im].
@@ -237,7 +280,8 @@ impl FrfProblem {
         let n = self.n_bins();
         let p = self.shape.n_params();
         let m = self.shape.numerator_order;
-        let (num, den, tau) = self.split(theta);
+        let tau = self.split(theta).2;
+        let bins = self.eval_bins(theta);
         let mut jac = DMatrix::zeros(2 * n, p);
         let max_pow = self.shape.denominator_order.max(m);
         let mut pow = vec![Complex::new(1.0, 0.0); max_pow + 1];
@@ -246,12 +290,12 @@ impl FrfProblem {
             for k in 1..=max_pow {
                 pow[k] = pow[k - 1] * s;
             }
-            let b = self.eval_bin(i, num, den, tau);
+            let b = &bins[i];
             // E K / D' = H / N' without dividing by a possibly zero N'.
             let ek_over_d = if tau == 0.0 {
                 self.known[i] / b.den
             } else {
-                (-s * tau).exp() * self.known[i] / b.den
+                b.delay * self.known[i] / b.den
             };
             let w = self.weight[i];
             for j in 0..p {
@@ -355,6 +399,7 @@ mod tests {
             known: vec![Complex::new(1.0, 0.0); freq.len()],
             weight: vec![1.0; freq.len()],
             projector: None,
+            last: Default::default(),
         };
         for (hm, &f) in problem.model(&scaled).iter().zip(freq.iter()) {
             let want = tf.freq_response(f);

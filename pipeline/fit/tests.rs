@@ -287,6 +287,7 @@ fn analytic_jacobian_matches_central_differences() {
                 .collect(),
             weight: (0..nb).map(|_| 0.5 + rng.uniform()).collect(),
             projector: None,
+            last: Default::default(),
         };
         for _ in 0..20 {
             let mut theta: Vec<f64> = (0..shape.n_rational())

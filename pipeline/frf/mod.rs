@@ -861,6 +861,7 @@ fn local_window(k: usize, nb: usize, half: usize) -> Option<std::ops::Range<usiz
 /// DC (which detrending empties) is left out.
 fn etfe_local_noise_density(frf: &Frf, k: usize) -> f64 {
     const P: usize = ETFE_LOCAL_DEGREE + 1;
+    const WIDTH: usize = 2 * ETFE_LOCAL_HALF_WIDTH + 1;
     let r_half = ETFE_LOCAL_HALF_WIDTH;
     let nb = frf.h.len();
     if frf.suu[k] <= 0.0 || k == 0 {
@@ -869,15 +870,31 @@ fn etfe_local_noise_density(frf: &Frf, k: usize) -> f64 {
     let Some(window) = local_window(k, nb, r_half) else {
         return f64::INFINITY;
     };
-    // Weighted least squares in the scaled offset x = (j - k) / R, which
-    // keeps the normal matrix well conditioned.
-    let usable = |j: usize| frf.suu[j] > 0.0 && frf.h[j].re.is_finite() && frf.h[j].im.is_finite();
+    // The window's usable bins (excited, finite), gathered once for both
+    // passes: the offset x = (j - k) / R, scaled so that the normal matrix
+    // is well conditioned, the weight and the estimate.
+    let mut xs = [0.0; WIDTH];
+    let mut ws = [0.0; WIDTH];
+    let mut hs = [Complex::new(0.0, 0.0); WIDTH];
+    let mut used = 0usize;
+    for (j, (&w, &h)) in window
+        .clone()
+        .zip(frf.suu[window.clone()].iter().zip(&frf.h[window]))
+    {
+        if w > 0.0 && h.re.is_finite() && h.im.is_finite() {
+            xs[used] = (j as f64 - k as f64) / r_half as f64;
+            ws[used] = w;
+            hs[used] = h;
+            used += 1;
+        }
+    }
+    if used <= P {
+        return f64::INFINITY;
+    }
+    // Weighted least squares.
     let mut a = nalgebra::SMatrix::<f64, P, P>::zeros();
     let mut b = nalgebra::SVector::<Complex<f64>, P>::zeros();
-    let mut used = 0usize;
-    for j in window.clone().filter(|&j| usable(j)) {
-        let x = (j as f64 - k as f64) / r_half as f64;
-        let w = frf.suu[j];
+    for ((&x, &w), &h) in xs.iter().zip(&ws).zip(&hs).take(used) {
         let mut powers = [1.0; P];
         for p in 1..P {
             powers[p] = powers[p - 1] * x;
@@ -886,12 +903,8 @@ fn etfe_local_noise_density(frf: &Frf, k: usize) -> f64 {
             for q in 0..P {
                 a[(p, q)] += w * powers[p] * powers[q];
             }
-            b[p] += frf.h[j] * (w * powers[p]);
+            b[p] += h * (w * powers[p]);
         }
-        used += 1;
-    }
-    if used <= P {
-        return f64::INFINITY;
     }
     let Some(inv) = a.try_inverse() else {
         return f64::INFINITY;
@@ -899,13 +912,12 @@ fn etfe_local_noise_density(frf: &Frf, k: usize) -> f64 {
     // On the stack: a heap vector per bin was a tenth of the cost.
     let c: [Complex<f64>; P] = std::array::from_fn(|p| (0..P).map(|q| b[q] * inv[(p, q)]).sum());
     let mut rss = 0.0;
-    for j in window.filter(|&j| usable(j)) {
-        let x = (j as f64 - k as f64) / r_half as f64;
+    for ((&x, &w), &h) in xs.iter().zip(&ws).zip(&hs).take(used) {
         let fitted = c
             .iter()
             .rev()
             .fold(Complex::new(0.0, 0.0), |acc, cp| acc * x + cp);
-        rss += frf.suu[j] * (frf.h[j] - fitted).norm_sqr();
+        rss += w * (h - fitted).norm_sqr();
     }
     rss / (used - P) as f64
 }

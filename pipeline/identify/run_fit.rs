@@ -186,6 +186,11 @@ impl RunTfError {
 /// (`fit::transient`) and taken out of `h`; the bins' variances are then
 /// estimated again from `h` without it (the ETFE's local noise level
 /// counts a transient as noise) and the model fitted once more with them.
+///
+/// With `start` (parameters laid out as [`TfFit::params`] of this fit's
+/// model: another reading's fit of the same plant) the first fit starts
+/// there instead of at the linear least-squares start; the optimum is the
+/// same, found in fewer steps.
 pub fn fit_run(
     h: &mut Frf,
     mask: &[bool],
@@ -193,6 +198,7 @@ pub fn fit_run(
     ident: &IdentificationPlan,
     plan: &FrfPlan,
     sample_rate_hz: f64,
+    start: Option<&[f64]>,
 ) -> Result<(TfFit, FitData), RunTfError> {
     let used = mask.iter().filter(|m| **m).count();
     let need = bins_needed(ident);
@@ -207,10 +213,14 @@ pub fn fit_run(
     }
     let opts = fit_options(ident, plan, sample_rate_hz);
     let (fit, data) = if plan.model_noise {
-        refined_fit(h, mask, plan, &opts, ident.max_delay_s)?
+        refined_fit(h, mask, plan, &opts, ident.max_delay_s, start)?
     } else {
         let data = FitData::of(h, mask, plan);
-        (fit::fit(&data.input(), &opts)?, data)
+        let fit = match start {
+            Some(start) => fit::fit_from(&data.input(), &opts, start)?,
+            None => fit::fit(&data.input(), &opts)?,
+        };
+        (fit, data)
     };
     if !fit.stable {
         let poles = fit
@@ -238,13 +248,15 @@ pub fn fit_run(
 /// in the noise); the transient is taken out of `h` and the noise level
 /// read from what that fit leaves. Then the manifest's model, fitted to
 /// `h` on those variances. The data returned are `h` at its bins with the
-/// variances the model was weighted by, so that its cost is theirs.
+/// variances the model was weighted by, so that its cost is theirs. The
+/// first fit starts from `start` when given.
 fn refined_fit(
     h: &mut Frf,
     mask: &[bool],
     plan: &FrfPlan,
     opts: &FitOptions,
     max_delay_s: f64,
+    start: Option<&[f64]>,
 ) -> Result<(TfFit, FitData), FitError> {
     let u = h.input_dft.clone().filter(|_| plan.transient.is_some());
     let (bins, variance) = FitData::usable(h, mask);
@@ -257,11 +269,14 @@ fn refined_fit(
             delay: DelayPlan::Fit { max_s: max_delay_s },
             ..opts.clone()
         };
-        let mut start = fit::fit(&data.input(), opts)?.params;
+        let mut start = match start {
+            Some(start) => start.to_vec(),
+            None => fit::fit(&data.input(), opts)?.params,
+        };
         start.push(0.0);
         fit_at(&data, &bins, u.as_deref(), &nuisance, Some(&start))?
     } else {
-        fit_at(&data, &bins, u.as_deref(), opts, None)?
+        fit_at(&data, &bins, u.as_deref(), opts, start)?
     };
     if let Some(t) = &first.transient {
         h.without_transient(|f, u| t.at(f, u));
