@@ -465,6 +465,9 @@ fn prepare(input: &FitInput, opts: &FitOptions) -> Result<Prepared, FitError> {
         .iter()
         .map(|&f| {
             let z = hold_response(opts.intersample, opts.sample_rate_hz, f);
+            if fixed_delay_s == 0.0 {
+                return z;
+            }
             let phase = -2.0 * std::f64::consts::PI * f * fixed_delay_s;
             z * Complex::from_polar(1.0, phase)
         })
