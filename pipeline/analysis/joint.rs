@@ -714,9 +714,13 @@ fn misfit_note(fit: &JointFit, m: &RunSpread, known: Option<&str>) -> String {
         None => "the rig has something none of the structures holds (friction, a nonlinear specimen, two modes at once)".to_string(),
     };
     format!(
-        "no candidate structure explains the data: the chosen \"{}\" fails its adequacy tests, so {cause}, and its parameters carry an error no std here bounds. Refitted without each of the {} FRFs in turn the rig moves by (jackknife std) {}; the stds include what of that spread statistics do not explain (misfit_std in results.json), but not an error every run shares, which on simulated rigs with piston friction or two modes was 5 to 18 times larger (docs/accuracy.md). Use the rig as approximate: the difference from the sequential estimate (the model-error term) shows its scale, and the per-run adequacy table shows which runs the misfit weighs on",
+        "no candidate structure explains the data: the chosen \"{}\" fails its adequacy tests, so {cause}, and its parameters carry an error no std here bounds. Refitted without {} in turn the rig moves by (jackknife std) {}; the stds include what of that spread statistics do not explain (misfit_std in results.json), but not an error every run shares, which on simulated rigs with piston friction or two modes was 5 to 18 times larger (docs/accuracy.md). Use the rig as approximate: the difference from the sequential estimate (the model-error term) shows its scale, and the per-run adequacy table shows which runs the misfit weighs on",
         fit.structure.as_str(),
-        m.refits,
+        if m.refits == m.frfs {
+            format!("each of the {} FRFs", m.frfs)
+        } else {
+            format!("each of {} groups of its {} FRFs", m.refits, m.frfs)
+        },
         spread.join(", ")
     )
 }

@@ -969,6 +969,12 @@ fn race(
 /// the right model it estimates the statistical variance; what it holds
 /// beyond that, var_jack - var_stat floored at 0, is the model-error
 /// variance this returns (per rig parameter), with the number of refits.
+/// Past [`JACKKNIFE_GROUPS`] FRFs (a night's dozens of springs) the FRFs
+/// are dealt into that many groups (FRF i to group i mod G) and each refit
+/// leaves a group out: the delete-a-group jackknife, var = (G - 1)/G sum
+/// (theta_(g) - theta_(.))^2 (Kott 2001, "The delete-a-group jackknife",
+/// J. Official Statistics 17(4):521-526), G refits where one per FRF made
+/// its cost grow as the square of the FRFs.
 /// None for an adequate fit, a single FRF, or when a refit fails (an FRF
 /// alone carries a parameter: the rig cannot be had without it).
 #[derive(Debug, Clone, PartialEq)]
@@ -978,7 +984,12 @@ pub struct RunSpread {
     /// The jackknife's own std of each, statistical share included.
     pub jackknife_std: [f64; 4],
     pub refits: usize,
+    /// The FRFs the refits left out, one or a group at a time.
+    pub frfs: usize,
 }
+
+/// The most refits [`run_spread`]'s jackknife makes.
+pub const JACKKNIFE_GROUPS: usize = 20;
 
 /// [`RunSpread`] of the chosen fit of `sel` over `runs`.
 pub fn run_spread(
@@ -991,12 +1002,16 @@ pub fn run_spread(
         return None;
     }
     let from = from_optimum(fit, opts);
-    let refits: Vec<Option<[f64; 4]>> = (0..runs.len())
-        .map(|i| {
+    let groups = runs.len().min(JACKKNIFE_GROUPS);
+    // Side by side, gathered in group order: the same bits on any number
+    // of threads.
+    let refits: Vec<Option<[f64; 4]>> = (0..groups)
+        .into_par_iter()
+        .map(|g| {
             let rest: Vec<JointRun<'_>> = runs
                 .iter()
                 .enumerate()
-                .filter(|(j, _)| *j != i)
+                .filter(|(j, _)| j % groups != g)
                 .map(|(_, r)| *r)
                 .collect();
             let f = joint_fit(&rest, &fit.rig, &from).ok()?;
@@ -1017,5 +1032,6 @@ pub fn run_spread(
         std,
         jackknife_std,
         refits: refits.len(),
+        frfs: runs.len(),
     })
 }
