@@ -969,7 +969,7 @@ fn race(
 /// the right model it estimates the statistical variance; what it holds
 /// beyond that, var_jack - var_stat floored at 0, is the model-error
 /// variance this returns (per rig parameter), with the number of refits.
-/// Past [`JACKKNIFE_GROUPS`] FRFs (a night's dozens of springs) the FRFs
+/// Past `JACKKNIFE_GROUPS` FRFs (a night's dozens of springs) the FRFs
 /// are dealt into that many groups (FRF i to group i mod G) and each refit
 /// leaves a group out: the delete-a-group jackknife, var = (G - 1)/G sum
 /// (theta_(g) - theta_(.))^2 (Kott 2001, "The delete-a-group jackknife",
