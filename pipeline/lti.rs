@@ -236,6 +236,18 @@ impl StateSpace {
     }
 }
 
+/// A zero-order hold's response at `f_hz` for samples at `sample_rate_hz`:
+/// `sinc(w T / 2) exp(-i w T / 2)`, what a plant driven through a hold
+/// and sampled at the same rate adds to its own response. One sine and one
+/// cosine, the same bits as `from_polar(sinc, -w T / 2)` (cosine even, sine
+/// odd).
+pub fn zoh_response(f_hz: f64, sample_rate_hz: f64) -> Complex<f64> {
+    let half = std::f64::consts::PI * f_hz / sample_rate_hz; // wT/2
+    let (sin, cos) = (half.sin(), half.cos());
+    let sinc = if half == 0.0 { 1.0 } else { sin / half };
+    Complex::new(sinc * cos, -(sinc * sin))
+}
+
 /// First-order standard deviations of a response's magnitude, 20 log10 |G|
 /// (dB), and phase, arg G (rad), from the gradient of ln G with respect to
 /// parameters of covariance `cov(i, j)`: Re and Im of d ln G are the

@@ -22,14 +22,7 @@ use super::settings::Intersample;
 pub fn hold_response(intersample: Intersample, sample_rate_hz: f64, f_hz: f64) -> Complex<f64> {
     match intersample {
         Intersample::None => Complex::new(1.0, 0.0),
-        Intersample::SampleAndHold => {
-            // sinc(wT/2) e^{-i wT/2}, one sine and one cosine: the same bits
-            // as `from_polar(sinc, -half)` (cosine even, sine odd).
-            let half = std::f64::consts::PI * f_hz / sample_rate_hz; // wT/2
-            let (sin, cos) = (half.sin(), half.cos());
-            let sinc = if half == 0.0 { 1.0 } else { sin / half };
-            Complex::new(sinc * cos, -(sinc * sin))
-        }
+        Intersample::SampleAndHold => crate::lti::zoh_response(f_hz, sample_rate_hz),
     }
 }
 

@@ -333,7 +333,8 @@ pub(super) fn validation(
 }
 
 /// A validation run with its log and model: the time-domain validation
-/// (Eqs. 47-48), the control-structure interaction, its figures and tables.
+/// (Eqs. 47-48), its tracking, the control-structure interaction, its
+/// figures and tables.
 fn validated(
     plan: &RunPlan,
     mut out: RunResult,
@@ -354,38 +355,18 @@ fn validated(
             None
         }
     };
-    // The log's own tracking stands whether or not the model could be
-    // simulated.
-    let reference = Reference::new(&st.log.command_m);
-    let measured = measured_tracking(&reference, st, time.as_ref().map(|t| t.windows.as_slice()));
     let plant = out
         .tf
         .as_ref()
         .and_then(|tf| TransferFunction::with_delay(&tf.num, &tf.den, tf.delay_s).ok());
-    let predicted = time
-        .as_ref()
-        .map(|t| predicted_tracking(&reference, st, t, plant.as_ref()));
-    let compensator = match (linear, &time, &plant) {
-        (Some(lin), Some(t), Some(g)) => Some(compensate(
-            plan,
-            (st, &reference),
-            t,
-            (rig_at_p, seals),
-            &lin,
-            g,
-            design,
-        )),
-        _ => None,
-    };
-    out.tracking = Some(RunTracking {
-        model_gap_s: measured
-            .delay_xcorr_s
-            .zip(predicted.as_ref().and_then(|p| p.delay_xcorr_s))
-            .map(|(m, p)| m - p),
-        measured,
-        predicted,
-        compensator,
-    });
+    out.tracking = Some(run_tracking(
+        plan,
+        st,
+        time.as_ref(),
+        plant.as_ref(),
+        (rig_at_p, seals),
+        design,
+    ));
     let measured = Measured::of(st);
     let bins = ForceBins::of(&measured);
     let csi = linear.and_then(|lin| {
@@ -436,6 +417,44 @@ fn validated(
         figures,
         log_error: None,
         cacheable: true,
+    }
+}
+
+/// A validation run's tracking: the log's own, which stands whether or not
+/// the model could be simulated (`time`), the model's prediction for the
+/// same command, and the compensator designed on the identified `plant`,
+/// all measured against one transform of the command.
+fn run_tracking(
+    plan: &RunPlan,
+    st: &LogStage,
+    time: Option<&validate::TimeStage>,
+    plant: Option<&TransferFunction>,
+    (rig_at_p, seals): (&RigParams, Option<&Seals>),
+    design: &CompensatorPlan<'_>,
+) -> RunTracking {
+    let reference = Reference::new(&st.log.command_m);
+    let measured = measured_tracking(&reference, st, time.map(|t| t.windows.as_slice()));
+    let predicted = time.map(|t| predicted_tracking(&reference, st, t, plant));
+    let compensator = match (plan.specimen.linear(), time, plant) {
+        (Some(lin), Some(t), Some(g)) => Some(compensate(
+            plan,
+            (st, &reference),
+            t,
+            (rig_at_p, seals),
+            &lin,
+            g,
+            design,
+        )),
+        _ => None,
+    };
+    RunTracking {
+        model_gap_s: measured
+            .delay_xcorr_s
+            .zip(predicted.as_ref().and_then(|p| p.delay_xcorr_s))
+            .map(|(m, p)| m - p),
+        measured,
+        predicted,
+        compensator,
     }
 }
 

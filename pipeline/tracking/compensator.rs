@@ -30,7 +30,7 @@ use nalgebra::Complex;
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
-use crate::lti::{StateSpace, TransferFunction};
+use crate::lti::{StateSpace, TransferFunction, zoh_response};
 use crate::model::{self, LinearSpecimen, RigParams};
 use crate::poly;
 use crate::simulate::SimError;
@@ -262,15 +262,7 @@ const BAND_POINTS: usize = 200;
 /// test `sine_through_the_plant_has_the_sampled_frequency_response` in
 /// `simulate::discrete` sums them).
 pub fn held_response(plant: &TransferFunction, f_hz: f64, fs: f64) -> Complex<f64> {
-    plant.freq_response(f_hz) * hold(f_hz, fs)
-}
-
-/// The zero-order hold's response at `f_hz` sampled at `fs`:
-/// `sinc(w T / 2) exp(-i w T / 2)`.
-fn hold(f_hz: f64, fs: f64) -> Complex<f64> {
-    let x = std::f64::consts::PI * f_hz / fs;
-    let sinc = if x == 0.0 { 1.0 } else { x.sin() / x };
-    Complex::from_polar(sinc, -x)
+    plant.freq_response(f_hz) * zoh_response(f_hz, fs)
 }
 
 /// Frequencies at which held plants are read, with all that does not
@@ -296,7 +288,7 @@ impl HeldGrid {
                 .iter()
                 .map(|&f| Complex::new(0.0, 2.0 * std::f64::consts::PI * f))
                 .collect(),
-            hold: freq_hz.iter().map(|&f| hold(f, fs)).collect(),
+            hold: freq_hz.iter().map(|&f| zoh_response(f, fs)).collect(),
             comp: comp.map(|c| freq_hz.iter().map(|&f| c.response(f)).collect()),
             freq_hz,
         }

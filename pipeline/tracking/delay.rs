@@ -103,7 +103,6 @@ pub fn xcorr_delay(
     let first = limit + KERNEL_HALF + 1;
     let last = n - limit - KERNEL_HALF - 1;
     let half = KERNEL_HALF as i64;
-    let lags = 2 * KERNEL_HALF + 1;
     let low = best - half;
     let (rl, gram) = refinement_sums(u, x, mu, mx, low, first..last);
     let corr = |tau: f64| -> f64 {
@@ -117,7 +116,7 @@ pub fn xcorr_delay(
         for (a, wa) in taps.iter().enumerate() {
             for (b, wb) in taps.iter().enumerate() {
                 let (i, j) = (off + a.min(b), off + a.max(b));
-                e += wa * wb * gram[i * lags + j];
+                e += wa * wb * gram[i * LAGS + j];
             }
         }
         r / e.sqrt()
@@ -150,9 +149,7 @@ fn refinement_sums(
     low: i64,
     ts: std::ops::Range<usize>,
 ) -> (Vec<f64>, Vec<f64>) {
-    const LAGS: usize = 2 * KERNEL_HALF + 1;
-    let lags = LAGS;
-    // Command sample s = t - low - a, a in 0..lags, and t in ts.
+    // Command sample s = t - low - a, a in 0..LAGS, and t in ts.
     let at = |t: usize, a: usize| (t as i64 - low - a as i64) as usize;
     let uc = |s: usize| u[s] - mu;
     let (mut rl, mut row0) = ([0.0; LAGS], [0.0; LAGS]);
@@ -170,16 +167,16 @@ fn refinement_sums(
             row0[a] += u0 * ua;
         }
     }
-    let mut gram = vec![0.0; lags * lags];
-    for d in 0..lags {
+    let mut gram = vec![0.0; LAGS * LAGS];
+    for d in 0..LAGS {
         // Row 0 of difference d, then each next row by its ends.
         let mut sum = row0[d];
         gram[d] = sum;
-        for a in 1..lags - d {
+        for a in 1..LAGS - d {
             let leaving = at(ts.end - 1, a - 1);
             let entering = at(ts.start, a);
             sum += uc(entering) * uc(entering - d) - uc(leaving) * uc(leaving - d);
-            gram[a * lags + a + d] = sum;
+            gram[a * LAGS + a + d] = sum;
         }
     }
     (rl.to_vec(), gram)
@@ -286,6 +283,10 @@ pub const MIN_CORRELATION: f64 = 0.5;
 /// The samples each side of a point that interpolate the command there.
 const KERNEL_HALF: usize = 8;
 
+/// The integer lags the refinement reads: `KERNEL_HALF` each side of the
+/// best one, and it.
+const LAGS: usize = 2 * KERNEL_HALF + 1;
+
 /// The weights of Lagrange interpolation through the 2K samples at offsets
 /// j = 1 - K ..= K (K = [`KERNEL_HALF`]) of the point `frac` in [0, 1)
 /// before the sample at j = 0: `w_j = prod_{m != j} (m - frac) / (m - j)`,
@@ -386,7 +387,7 @@ pub fn phase_slope_delay(
 
 #[cfg(test)]
 mod tests {
-    use super::{KERNEL_HALF, integer_lags, refinement_sums};
+    use super::{LAGS, integer_lags, refinement_sums};
     use crate::tracking::centred_spectrum;
 
     /// The sums [`integer_lags`] defines, term by term.
@@ -411,21 +412,20 @@ mod tests {
         let u = record(n, 3, 0.4);
         let x = record(n, 11, -0.7);
         let (mu, mx) = (0.35, -0.65);
-        let lags = 2 * KERNEL_HALF + 1;
         for low in [-40_i64, -8, 0, 25] {
             let ts = 60..n - 60;
             let (rl, gram) = refinement_sums(&u, &x, mu, mx, low, ts.clone());
             let lagged = |t: usize, a: usize| u[(t as i64 - low - a as i64) as usize] - mu;
-            for a in 0..lags {
+            for a in 0..LAGS {
                 let r: f64 = ts.clone().map(|t| (x[t] - mx) * lagged(t, a)).sum();
                 assert!(
                     (rl[a] - r).abs() < 1e-9,
                     "low {low}, rl[{a}]: {} vs {r}",
                     rl[a]
                 );
-                for b in a..lags {
+                for b in a..LAGS {
                     let g: f64 = ts.clone().map(|t| lagged(t, a) * lagged(t, b)).sum();
-                    let got = gram[a * lags + b];
+                    let got = gram[a * LAGS + b];
                     assert!(
                         (got - g).abs() < 1e-9,
                         "low {low}, gram[{a}][{b}]: {got} vs {g}"
