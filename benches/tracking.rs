@@ -4,7 +4,9 @@
 //! discretisation: every tracking measure of the record
 //! (`tracking::measure`, the delay by cross-correlation refined below a
 //! sample dominating), and the compensator designed for the specimen, run
-//! on the command and through the plant (`compensated_displacement`).
+//! on the command and through the plant (`compensated_displacement`); and
+//! the three measures of a validation run against one command, over the
+//! record and the paper's four windows of a sweep.
 //!
 //! `cargo bench --bench tracking`
 
@@ -52,6 +54,25 @@ fn bench_tracking(c: &mut Criterion) {
             tracking::measure(&reference, black_box(&x), FS_HZ, None, &[])
         })
     });
+    // A validation run measures three displacements against its command
+    // (measured, predicted, compensated), each over the record and the
+    // paper's four windows of a sweep: what the command alone gives is
+    // formed once for the three.
+    let windows = servoid::validate::locate_windows(&u, FS_HZ);
+    let y = simulate_linear(&ss, &u, 1.0 / FS_HZ, &[0.0, 0.0])
+        .unwrap()
+        .swap_remove(0)
+        .iter()
+        .map(|v| 0.98 * v)
+        .collect::<Vec<f64>>();
+    group.throughput(Throughput::Elements(3 * n as u64));
+    group.bench_function("three_measures_with_windows/348160_samples", |b| {
+        b.iter(|| {
+            let reference = tracking::Reference::new(black_box(&u));
+            [&x, &y, &u].map(|d| tracking::measure(&reference, black_box(d), FS_HZ, None, &windows))
+        })
+    });
+    group.throughput(Throughput::Elements(n as u64));
     group.bench_function("compensated_displacement/348160_samples", |b| {
         b.iter(|| compensator::compensated_displacement(&ss, &comp, black_box(&u)).unwrap())
     });

@@ -51,15 +51,18 @@ pub enum DelayNote {
 /// gain or lose as the command shifts (a 0.5-5 Hz multisine through a
 /// 2 ms lag measured 1.5 ms).
 ///
-/// The integer lags come from the command's transform, which the frequency
-/// evaluation index reads too, and one transform of the displacement
-/// (`integer_lags`). The refinement evaluates the same sum with the command
-/// interpolated between its samples (16-point Lagrange) and maximises it by
-/// golden-section search, from sums gathered in one pass
-/// (`refinement_sums`): the
-/// three-point parabola, the usual refinement, is biased by a few
-/// hundredths of a sample, and the correlation's own trigonometric
-/// interpolant by the records' ends.
+/// The integer lags come from the command's transform and one transform of
+/// the displacement (`integer_lags`). The refinement evaluates the same
+/// sum with the command interpolated between its samples (16-point
+/// Lagrange) and maximises it by golden-section search: the three-point
+/// parabola, the usual refinement, is biased by a few hundredths of a
+/// sample, and the correlation's own trigonometric interpolant by the
+/// records' ends. Its sums are the integer lags' correlation
+/// (`displacement_sums`) and the command's autocorrelation, formed once
+/// for every displacement measured against it (`gram_row0`), each less
+/// the few hundred products at the ends; where the lags it reads pass the
+/// search limit (a delay within 8 samples of it), they are gathered
+/// sample by sample (`refinement_sums`).
 pub fn xcorr_delay(
     reference: &Reference<'_>,
     displacement: &[f64],
@@ -104,7 +107,21 @@ pub fn xcorr_delay(
     let last = n - limit - KERNEL_HALF - 1;
     let half = KERNEL_HALF as i64;
     let low = best - half;
-    let (rl, gram) = refinement_sums(u, x, mu, mx, low, first..last);
+    let (rl, gram) = if low >= -lim && low + 2 * half <= lim {
+        let row0 = gram_row0(&reference, low, first..last);
+        let rl = displacement_sums(
+            &r[at(low)..=at(low + 2 * half)],
+            u,
+            x,
+            (mu, mx),
+            low,
+            limit,
+            first..last,
+        );
+        (rl, gram_from_row0(u, mu, low, first..last, row0))
+    } else {
+        refinement_sums(u, x, mu, mx, low, first..last)
+    };
     let corr = |tau: f64| -> f64 {
         // tau = shift + frac: u(t - tau) = sum_j u[t - shift - j] L(j - frac),
         // j = 1 - K ..= K, the lag shift + j at offset shift + j - low.
@@ -151,7 +168,6 @@ fn refinement_sums(
 ) -> (Vec<f64>, Vec<f64>) {
     // Command sample s = t - low - a, a in 0..LAGS, and t in ts.
     let at = |t: usize, a: usize| (t as i64 - low - a as i64) as usize;
-    let uc = |s: usize| u[s] - mu;
     let (mut rl, mut row0) = ([0.0; LAGS], [0.0; LAGS]);
     for t in ts.clone() {
         let xt = x[t] - mx;
@@ -167,6 +183,20 @@ fn refinement_sums(
             row0[a] += u0 * ua;
         }
     }
+    (rl.to_vec(), gram_from_row0(u, mu, low, ts, row0))
+}
+
+/// The refinement's Gram matrix (see `refinement_sums`) from its row 0:
+/// each next row by the products that leave and enter at its ends.
+fn gram_from_row0(
+    u: &[f64],
+    mu: f64,
+    low: i64,
+    ts: std::ops::Range<usize>,
+    row0: [f64; LAGS],
+) -> Vec<f64> {
+    let at = |t: usize, a: usize| (t as i64 - low - a as i64) as usize;
+    let uc = |s: usize| u[s] - mu;
     let mut gram = vec![0.0; LAGS * LAGS];
     for d in 0..LAGS {
         // Row 0 of difference d, then each next row by its ends.
@@ -179,7 +209,56 @@ fn refinement_sums(
             gram[a * LAGS + a + d] = sum;
         }
     }
-    (rl.to_vec(), gram)
+    gram
+}
+
+/// Row 0 of the refinement's Gram matrix, `sum_t u[t - low] u[t - low - d]`
+/// over `t` in `ts` (each less the command's mean), from the command's
+/// autocorrelation over the whole record less the products outside `ts`:
+/// a few hundred products at either end, where summing over `ts` took
+/// LAGS a sample. `low` is at least the search limit below `ts.start`.
+fn gram_row0(reference: &Reference<'_>, low: i64, ts: std::ops::Range<usize>) -> [f64; LAGS] {
+    let (u, mu) = (reference.samples, reference.mean);
+    let (head, tail) = (
+        (ts.start as i64 - low) as usize,
+        (ts.end as i64 - low) as usize,
+    );
+    let mut row0 = *reference.autocorrelation();
+    for (d, sum) in row0.iter_mut().enumerate() {
+        // The record's s in d..n, less s in d..head and in tail..n.
+        let outside: f64 = (d..head)
+            .chain(tail..u.len())
+            .map(|s| (u[s] - mu) * (u[s - d] - mu))
+            .sum();
+        *sum -= outside;
+    }
+    row0
+}
+
+/// The refinement's `rl[a] = sum_t x[t] u[t - low - a]` over `t` in `ts`
+/// (each less its mean) from the integer lags' correlation `r` over `t` in
+/// [limit, n - limit) at the lags `low ..= low + 2K`, less the products of
+/// the samples between those ranges' ends.
+fn displacement_sums(
+    r: &[f64],
+    u: &[f64],
+    x: &[f64],
+    (mu, mx): (f64, f64),
+    low: i64,
+    limit: usize,
+    ts: std::ops::Range<usize>,
+) -> Vec<f64> {
+    let n = u.len();
+    r.iter()
+        .enumerate()
+        .map(|(a, r)| {
+            let outside: f64 = (limit..ts.start)
+                .chain(ts.end..n - limit)
+                .map(|t| (x[t] - mx) * (u[(t as i64 - low - a as i64) as usize] - mu))
+                .sum();
+            r - outside
+        })
+        .collect()
 }
 
 /// For every integer lag in +-`limit`, `r(lag) = sum_t x[t] u[t - lag]` and
@@ -285,7 +364,7 @@ const KERNEL_HALF: usize = 8;
 
 /// The integer lags the refinement reads: `KERNEL_HALF` each side of the
 /// best one, and it.
-const LAGS: usize = 2 * KERNEL_HALF + 1;
+pub(super) const LAGS: usize = 2 * KERNEL_HALF + 1;
 
 /// The weights of Lagrange interpolation through the 2K samples at offsets
 /// j = 1 - K ..= K (K = [`KERNEL_HALF`]) of the point `frac` in [0, 1)
@@ -387,8 +466,11 @@ pub fn phase_slope_delay(
 
 #[cfg(test)]
 mod tests {
-    use super::{LAGS, integer_lags, refinement_sums};
-    use crate::tracking::centred_spectrum;
+    use super::{
+        KERNEL_HALF, LAGS, displacement_sums, gram_from_row0, gram_row0, integer_lags,
+        refinement_sums,
+    };
+    use crate::tracking::{Reference, centred_spectrum};
 
     /// The sums [`integer_lags`] defines, term by term.
     fn naive(u: &[f64], x: &[f64], mu: f64, mx: f64, limit: usize) -> (Vec<f64>, Vec<f64>, f64) {
@@ -430,6 +512,48 @@ mod tests {
                         (got - g).abs() < 1e-9,
                         "low {low}, gram[{a}][{b}]: {got} vs {g}"
                     );
+                }
+            }
+        }
+    }
+
+    /// The refinement's sums from the integer lags' correlation and the
+    /// command's autocorrelation, as `xcorr_delay` forms them, against the
+    /// same sums gathered sample by sample (`refinement_sums`, itself
+    /// checked term by term above), over the lags the shortcut serves.
+    #[test]
+    fn the_refinement_sums_from_the_correlations_are_the_sums_gathered() {
+        for n in [2_000, 4_099, 30_000] {
+            let u = record(n, 5 + n as u64, 0.6);
+            let x = record(n, 9 + n as u64, -0.2);
+            let reference = Reference::new(&u);
+            let (mu, mx) = (reference.mean, -0.15);
+            let limit = 60;
+            let (r, _, _) = integer_lags(&u, &x, mu, mx, limit, &reference.spectrum);
+            let ts = limit + KERNEL_HALF + 1..n - limit - KERNEL_HALF - 1;
+            let lim = limit as i64;
+            for low in [-lim, -31, -8, 0, 17, lim - 2 * KERNEL_HALF as i64] {
+                let (want_rl, want_gram) = refinement_sums(&u, &x, mu, mx, low, ts.clone());
+                let at = (low + lim) as usize;
+                let rl =
+                    displacement_sums(&r[at..at + LAGS], &u, &x, (mu, mx), low, limit, ts.clone());
+                let row0 = gram_row0(&reference, low, ts.clone());
+                let gram = gram_from_row0(&u, mu, low, ts.clone(), row0);
+                let tol = 1e-11 * n as f64;
+                for a in 0..LAGS {
+                    assert!(
+                        (rl[a] - want_rl[a]).abs() < tol,
+                        "n {n}, low {low}, rl[{a}]: {} vs {}",
+                        rl[a],
+                        want_rl[a]
+                    );
+                    for b in a..LAGS {
+                        let (got, want) = (gram[a * LAGS + b], want_gram[a * LAGS + b]);
+                        assert!(
+                            (got - want).abs() < tol,
+                            "n {n}, low {low}, gram[{a}][{b}]: {got} vs {want}"
+                        );
+                    }
                 }
             }
         }

@@ -23,6 +23,9 @@ pub mod delay;
 #[cfg(test)]
 mod tests;
 
+use std::ops::Range;
+use std::sync::{Arc, Mutex, OnceLock};
+
 use nalgebra::Complex;
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
@@ -71,13 +74,32 @@ pub enum FeiNote {
 /// A command prepared for the tracking measures of displacements against
 /// it: its mean and the one-sided DFT of it less its mean, transformed
 /// once. A run's measured, predicted and compensated displacements are
-/// measured against the same command, and the cross-correlation and the
-/// frequency evaluation index both read its transform.
-#[derive(Debug, Clone)]
+/// measured against the same command, so what every measure reads of the
+/// command alone is formed here, once, when first read: its Hilbert
+/// transform and power (the frequency evaluation index), its
+/// autocorrelation at the refinement's lags (the cross-correlation's
+/// refinement), and the same for each window of it a measure asks for.
+#[derive(Debug)]
 pub struct Reference<'a> {
     samples: &'a [f64],
     mean: f64,
     spectrum: Vec<Complex<f64>>,
+    fei: OnceLock<FeiTerms>,
+    autocorrelation: OnceLock<[f64; delay::LAGS]>,
+    parts: Mutex<Vec<(Range<usize>, Arc<Reference<'a>>)>>,
+}
+
+/// What the frequency evaluation index reads of the command alone.
+#[derive(Debug)]
+struct FeiTerms {
+    /// The command's discrete Hilbert transform: the inverse DFT of
+    /// `-i sgn(k) U_k`, DC and Nyquist zero, `U` the one-sided DFT of the
+    /// command less its mean.
+    hilbert: Vec<f64>,
+    /// `sum_k |U_k|^2` over the one-sided bins but DC.
+    power: f64,
+    /// `sum_k k |U_k|^2` over the same bins.
+    weighted_bin: f64,
 }
 
 impl<'a> Reference<'a> {
@@ -87,6 +109,9 @@ impl<'a> Reference<'a> {
             samples: command,
             mean,
             spectrum: centred_spectrum(command, mean),
+            fei: OnceLock::new(),
+            autocorrelation: OnceLock::new(),
+            parts: Mutex::new(Vec::new()),
         }
     }
 
@@ -95,14 +120,104 @@ impl<'a> Reference<'a> {
         self.samples
     }
 
-    /// The same command cut to its first `n` samples, transformed again
-    /// when that is fewer than it has (a displacement shorter than its
-    /// command is measured against as much of it).
-    fn first(&self, n: usize) -> std::borrow::Cow<'_, Reference<'a>> {
+    /// The command's samples `range`, prepared once however many measures
+    /// read them.
+    fn part(&self, range: Range<usize>) -> Arc<Reference<'a>> {
+        let mut parts = self.parts.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some((_, r)) = parts.iter().find(|(r, _)| *r == range) {
+            return Arc::clone(r);
+        }
+        let part = Arc::new(Reference::new(&self.samples[range.clone()]));
+        parts.push((range, Arc::clone(&part)));
+        part
+    }
+
+    /// The same command cut to its first `n` samples (a displacement
+    /// shorter than its command is measured against as much of it).
+    fn first(&self, n: usize) -> MaybeOwned<'_, 'a> {
         if n >= self.samples.len() {
-            std::borrow::Cow::Borrowed(self)
+            MaybeOwned::Borrowed(self)
         } else {
-            std::borrow::Cow::Owned(Reference::new(&self.samples[..n]))
+            MaybeOwned::Owned(Box::new(Reference::new(&self.samples[..n])))
+        }
+    }
+
+    fn fei_terms(&self) -> &FeiTerms {
+        self.fei.get_or_init(|| {
+            let n = self.samples.len();
+            let even = n.is_multiple_of(2);
+            let last = self.spectrum.len().saturating_sub(1);
+            let (mut power, mut weighted_bin) = (0.0, 0.0);
+            for (k, u) in self.spectrum.iter().enumerate().skip(1) {
+                let p = u.norm_sqr();
+                power += p;
+                weighted_bin += p * k as f64;
+            }
+            let mut y: Vec<Complex<f64>> = self
+                .spectrum
+                .iter()
+                .enumerate()
+                .map(|(k, u)| {
+                    if k == 0 || (even && k == last) {
+                        Complex::new(0.0, 0.0)
+                    } else {
+                        Complex::new(u.im, -u.re)
+                    }
+                })
+                .collect();
+            let mut hilbert = vec![0.0; n];
+            if n > 0 {
+                crate::fft::real_inverse(n)
+                    .process(&mut y, &mut hilbert)
+                    .expect("lengths come from the plan");
+            }
+            for h in &mut hilbert {
+                *h /= n as f64;
+            }
+            FeiTerms {
+                hilbert,
+                power,
+                weighted_bin,
+            }
+        })
+    }
+
+    /// `A[d] = sum_s (u[s] - mean)(u[s - d] - mean)` over `s` in `d..n`,
+    /// for `d` below the refinement's lag count.
+    fn autocorrelation(&self) -> &[f64; delay::LAGS] {
+        self.autocorrelation.get_or_init(|| {
+            const L: usize = delay::LAGS;
+            let c: Vec<f64> = self.samples.iter().map(|v| v - self.mean).collect();
+            let mut a = [0.0; L];
+            for s in 0..c.len().min(L - 1) {
+                for d in 0..=s {
+                    a[d] += c[s] * c[s - d];
+                }
+            }
+            for s in L - 1..c.len() {
+                // c[s - d] is window[L - 1 - d]: one bounds check a sample.
+                let window: &[f64; L] = c[s + 1 - L..=s].try_into().expect("L samples");
+                for d in 0..L {
+                    a[d] += window[L - 1] * window[L - 1 - d];
+                }
+            }
+            a
+        })
+    }
+}
+
+/// A reference borrowed, or made for a shorter displacement.
+enum MaybeOwned<'r, 'a> {
+    Borrowed(&'r Reference<'a>),
+    Owned(Box<Reference<'a>>),
+}
+
+impl<'a> std::ops::Deref for MaybeOwned<'_, 'a> {
+    type Target = Reference<'a>;
+    fn deref(&self) -> &Reference<'a> {
+        match self {
+            MaybeOwned::Borrowed(r) => r,
+            MaybeOwned::Owned(r) => r,
         }
     }
 }
@@ -130,14 +245,9 @@ pub fn frequency_evaluation(
         return Err(FeiNote::ConstantCommand);
     }
     let x = &displacement[..n];
-    let (uk, xk) = (&reference.spectrum, centred_spectrum(x, mean(x)));
-    let (mut cross, mut power, mut weighted_f) = (Complex::new(0.0, 0.0), 0.0, 0.0);
-    for (k, (u, x)) in uk.iter().zip(&xk).enumerate().skip(1) {
-        let p = u.norm_sqr();
-        cross += x * u.conj();
-        power += p;
-        weighted_f += p * k as f64 * sample_rate_hz / n as f64;
-    }
+    let cross = fei_cross(&reference, x);
+    let terms = reference.fei_terms();
+    let (power, weighted_f) = (terms.power, terms.weighted_bin * sample_rate_hz / n as f64);
     if power == 0.0 || !power.is_finite() {
         return Err(FeiNote::ConstantCommand);
     }
@@ -150,6 +260,40 @@ pub fn frequency_evaluation(
         equivalent_frequency_hz: f_eq,
         delay_s: -phase / (2.0 * std::f64::consts::PI * f_eq),
     })
+}
+
+/// `sum_k X_k conj(U_k)` over the one-sided bins but DC, `X` and `U` the
+/// DFTs of the displacement `x` and the command, each less its mean, by
+/// Parseval from two sums over the samples instead of a transform of `x`.
+/// With `S` the sum over `0 < k < n/2`:
+///
+/// - `sum_t x[t] u[t] = (X_0 U_0 + 2 Re S + X_N U_N) / n` (the Nyquist term
+///   for even `n` only), and
+/// - `sum_t x[t] h[t] = -2 Im S / n`, `h` the command's Hilbert transform
+///   (the DFT `-i sgn(k) U_k`),
+///
+/// and the sum wanted is `S` plus the Nyquist bin's `X_N U_N`.
+fn fei_cross(reference: &Reference<'_>, x: &[f64]) -> Complex<f64> {
+    let n = x.len();
+    let (u, mu, mx) = (reference.samples, reference.mean, mean(x));
+    let h = &reference.fei_terms().hilbert;
+    let (mut xu, mut xh, mut x0, mut xn) = (0.0, 0.0, 0.0, 0.0);
+    for t in 0..n {
+        let xt = x[t] - mx;
+        xu += xt * (u[t] - mu);
+        xh += xt * h[t];
+        x0 += xt;
+        xn += if t % 2 == 0 { xt } else { -xt };
+    }
+    let spectrum = &reference.spectrum;
+    let u0 = spectrum[0].re;
+    let nyquist = if n.is_multiple_of(2) {
+        xn * spectrum[spectrum.len() - 1].re
+    } else {
+        0.0
+    };
+    let nf = n as f64;
+    Complex::new((nf * xu - x0 * u0 + nyquist) / 2.0, -nf / 2.0 * xh)
 }
 
 /// Whether every value is the first (a record less its mean may then
@@ -309,12 +453,12 @@ pub fn measure(
         .iter()
         .map(|w| {
             let r = window_range(w, sample_rate_hz, n);
-            let (c, d) = (&command[r.clone()], &displacement[r]);
+            let (c, d) = (&command[r.clone()], &displacement[r.clone()]);
             WindowTracking {
                 label: w.label.clone(),
                 start_s: w.start_s,
                 end_s: w.end_s,
-                fei: frequency_evaluation(&Reference::new(c), d, sample_rate_hz).ok(),
+                fei: frequency_evaluation(&reference.part(r), d, sample_rate_hz).ok(),
                 errors: tracking_errors(c, d),
             }
         })
