@@ -57,6 +57,12 @@ pub struct LevenbergMarquardt {
     /// Whether the next run goes on from where the last one stopped
     /// ([`Self::resumed`]).
     resume: bool,
+    /// How many accepted steps in a row may each lower the cost by at most
+    /// `ftol` relative before the run stops unconverged
+    /// ([`Self::with_stall_limit`]); None: no such stop.
+    stall_limit: Option<u32>,
+    /// Accepted steps in a row that lowered the cost by at most `ftol`.
+    stalled: u32,
 }
 
 impl Default for LevenbergMarquardt {
@@ -94,7 +100,21 @@ impl LevenbergMarquardt {
             normal: None,
             status: TerminationStatus::NotTerminated,
             resume: false,
+            stall_limit: None,
+            stalled: 0,
         }
+    }
+
+    /// Stop, unconverged, after `steps` accepted steps in a row that each
+    /// lowered the cost by at most `ftol` relative while the undamped step
+    /// still predicted more. That is a direction the data do not fix: a
+    /// mode's frequency or a piston's mass running off to where no bin sees
+    /// it, each step accepted for a change in the cost's last digits. Left
+    /// alone such a run takes every iteration it is allowed, several trial
+    /// points each; it ends unconverged either way.
+    pub fn with_stall_limit(mut self, steps: u32) -> Self {
+        self.stall_limit = Some(steps.max(1));
+        self
     }
 
     /// Relative tolerances on the cost reduction and on the step size; both
@@ -333,6 +353,7 @@ impl LevenbergMarquardt {
         if !resume {
             self.diag = DVector::zeros(0);
             self.lambda = self.lambda0;
+            self.stalled = 0;
         }
         self.update_diag(a);
         self.status = if self.is_converged(a, g, cost, theta) {
@@ -400,10 +421,32 @@ impl LevenbergMarquardt {
         Ok(None)
     }
 
-    /// Judges convergence at an accepted point.
-    fn accept(&mut self, a: &DMatrix<f64>, g: &DVector<f64>, cost: f64, theta: &DVector<f64>) {
+    /// Judges convergence at an accepted point of cost `cost`, reached from
+    /// one of cost `previous`, and whether the run has stalled.
+    fn accept(
+        &mut self,
+        a: &DMatrix<f64>,
+        g: &DVector<f64>,
+        (previous, cost): (f64, f64),
+        theta: &DVector<f64>,
+    ) {
         if self.is_converged(a, g, cost, theta) {
             self.status = TerminationStatus::Terminated(TerminationReason::SolverConverged);
+            return;
+        }
+        let Some(limit) = self.stall_limit else {
+            return;
+        };
+        if previous - cost <= self.ftol * previous {
+            self.stalled += 1;
+        } else {
+            self.stalled = 0;
+        }
+        if self.stalled >= limit {
+            self.status = TerminationStatus::Terminated(TerminationReason::SolverExit(format!(
+                "Levenberg-Marquardt: the cost fell by at most {:e} of itself in each of the last {limit} steps while the undamped step predicted more: a direction the data do not fix",
+                self.ftol
+            )));
         }
     }
 
@@ -471,7 +514,7 @@ where
             }) => {
                 let j_new = problem.jacobian(&trial)?;
                 let (a_new, g_new) = normal_equations(&j_new, &r_new);
-                self.accept(&a_new, &g_new, c_new, &trial);
+                self.accept(&a_new, &g_new, (cost, c_new), &trial);
                 self.normal = Some((a_new, g_new));
                 Ok((
                     state
@@ -548,7 +591,7 @@ where
                 cost: c_new,
                 extra: n_new,
             }) => {
-                self.accept(&n_new.a, &n_new.g, c_new, &trial);
+                self.accept(&n_new.a, &n_new.g, (cost, c_new), &trial);
                 Ok((
                     state.param(trial).jacobian(n_new).cost(c_new),
                     Some(kv(self)),
@@ -641,6 +684,71 @@ mod tests {
         let (_, solver) = path(LevenbergMarquardt::new(), vec![-1.2, 1.0], 4);
         let (fresh, _) = path(solver, first.as_slice().to_vec(), 4);
         assert_ne!(fresh, whole);
+    }
+
+    /// r = (x - 1, e (1 + exp(-y))): the cost falls towards its floor e^2
+    /// as y runs off to infinity, by less at every step, and the undamped
+    /// step there, (1 + e^y) in y, predicts the whole second residual as a
+    /// gain, so neither test of convergence is ever met: a direction the
+    /// data do not fix, as a mode's frequency on a rig without one. Counts
+    /// the points it is evaluated at.
+    struct Stalling(std::cell::Cell<u32>);
+
+    const E: f64 = 0.1;
+
+    impl Operator for Stalling {
+        type Param = DVector<f64>;
+        type Output = DVector<f64>;
+        fn apply(&self, p: &DVector<f64>) -> Result<DVector<f64>, Error> {
+            self.0.set(self.0.get() + 1);
+            Ok(DVector::from_vec(vec![
+                p[0] - 1.0,
+                E * (1.0 + (-p[1]).exp()),
+            ]))
+        }
+    }
+
+    impl Jacobian for Stalling {
+        type Param = DVector<f64>;
+        type Jacobian = DMatrix<f64>;
+        fn jacobian(&self, p: &DVector<f64>) -> Result<DMatrix<f64>, Error> {
+            Ok(DMatrix::from_row_slice(
+                2,
+                2,
+                &[1.0, 0.0, 0.0, -E * (-p[1]).exp()],
+            ))
+        }
+    }
+
+    #[test]
+    fn a_stall_limit_ends_a_run_that_only_creeps() {
+        let run = |lm: LevenbergMarquardt| {
+            let res = Executor::new(Stalling(std::cell::Cell::new(0)), lm)
+                .configure(|s| s.param(DVector::from_vec(vec![3.0, 0.0])).max_iters(200))
+                .run()
+                .unwrap();
+            let evals = res.problem.problem.as_ref().unwrap().0.get();
+            let st = res.state();
+            let reason = match st.get_termination_reason() {
+                Some(TerminationReason::SolverExit(why)) => why.clone(),
+                other => panic!("{other:?}"),
+            };
+            (st.get_cost(), st.get_param().unwrap()[0], evals, reason)
+        };
+        // Left alone it creeps until no damping finds a lower cost, which
+        // takes a score of rejected points at the end.
+        let (cost, x, evals, why) = run(LevenbergMarquardt::new());
+        assert!(why.contains("no step lowers the cost"), "{why}");
+        // With the limit it stops three steps of no gain in, unconverged,
+        // at the same cost (the floor e^2 to 1e-12 of itself) in fewer
+        // evaluations.
+        let (cost_s, x_s, evals_s, why_s) = run(LevenbergMarquardt::new().with_stall_limit(3));
+        assert!(why_s.contains("a direction the data do not fix"), "{why_s}");
+        assert_relative_eq!(cost, E * E, max_relative = 1e-12);
+        assert_relative_eq!(cost_s, E * E, max_relative = 1e-12);
+        assert_relative_eq!(x, 1.0, epsilon = 1e-9);
+        assert_relative_eq!(x_s, 1.0, epsilon = 1e-9);
+        assert!(evals_s * 2 < evals, "{evals_s} evaluations against {evals}");
     }
 
     #[test]
