@@ -165,18 +165,14 @@ fn without_blank_lines(bytes: &[u8], skip_lines: usize) -> Option<Vec<u8>> {
     let body = &bytes[start..];
     let blank = |l: &[u8]| l.is_empty() || l == b"\r";
     // A blank line is one ended by '\n' with nothing (or only '\r') before
-    // it; what follows the final '\n' is not a line.
-    let mut line_start = 0;
-    let mut any = false;
-    for (i, &b) in body.iter().enumerate() {
-        if b == b'\n' {
-            if blank(&body[line_start..i]) {
-                any = true;
-                break;
-            }
-            line_start = i + 1;
-        }
-    }
+    // it; what follows the final '\n' is not a line. So there is one where
+    // the body starts with "\n" or "\r\n" or holds "\n\n" or "\n\r\n":
+    // found at memory speed, where a byte-by-byte walk was a tenth of
+    // reading the file.
+    let any = body.starts_with(b"\n")
+        || body.starts_with(b"\r\n")
+        || memchr::memmem::find(body, b"\n\n").is_some()
+        || memchr::memmem::find(body, b"\n\r\n").is_some();
     if !any {
         return None;
     }
@@ -374,4 +370,67 @@ fn field_detail(line: &[u8], sep: u8, i: usize) -> String {
 
 fn fields_detail(n: usize) -> String {
     format!("the line has {n} field{}", if n == 1 { "" } else { "s" })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::without_blank_lines;
+
+    /// The lines of `bytes` after the first `skip` by a walk over its
+    /// bytes, those blank (empty or a lone '\r', ended by '\n') left out:
+    /// `None` when there is none to leave out.
+    fn walked(bytes: &[u8], skip: usize) -> Option<Vec<u8>> {
+        let mut lines: Vec<&[u8]> = bytes.split(|&b| b == b'\n').collect();
+        // What follows the final '\n' is not a line.
+        let tail = lines.pop().unwrap_or_default();
+        let (head, body) = lines.split_at(skip.min(lines.len()));
+        if lines.len() < skip {
+            return None;
+        }
+        let blank = |l: &&[u8]| l.is_empty() || *l == b"\r";
+        if !body.iter().any(blank) {
+            return None;
+        }
+        let mut out = Vec::new();
+        for l in head.iter().chain(body.iter().filter(|l| !blank(l))) {
+            out.extend_from_slice(l);
+            out.push(b'\n');
+        }
+        // The rest after the last '\n' is kept as a line unless blank.
+        if !blank(&tail) {
+            out.extend_from_slice(tail);
+            out.push(b'\n');
+        }
+        Some(out)
+    }
+
+    #[test]
+    fn blank_lines_are_found_where_a_walk_over_the_lines_finds_them() {
+        let cases: [&[u8]; 14] = [
+            b"a,b\n\n1,2",
+            b"a,b\n\n1,2\n\r",
+            b"a,b\n1,2\n",
+            b"a,b\n\n1,2\n",
+            b"\na,b\n1,2\n",
+            b"\r\na,b\n1,2\n",
+            b"a,b\r\n\r\n1,2\r\n",
+            b"a,b\n1,2",
+            b"a,b\n1,2\n\r",
+            b"a,b\n1,2\n\n",
+            b"a,b\r\n1,2\r\n",
+            b"# x\n\na,b\n1,2\n",
+            b"a\rb\n1,2\n",
+            b"",
+        ];
+        for case in cases {
+            for skip in [0, 1] {
+                assert_eq!(
+                    without_blank_lines(case, skip),
+                    walked(case, skip),
+                    "{:?}, skip {skip}",
+                    String::from_utf8_lossy(case)
+                );
+            }
+        }
+    }
 }
