@@ -83,13 +83,7 @@ fn by_rule(x: &[f64]) -> Vec<Spike> {
 /// the rule's either way.
 fn settled_clean(x: &[f64]) -> bool {
     let n = x.len();
-    let departure = |j: usize| {
-        if j == 0 || j + 1 == n {
-            0.0
-        } else {
-            (x[j] - 0.5 * (x[j - 1] + x[j + 1])).abs()
-        }
-    };
+    let departure = |j: usize| departure_or_zero(x, j);
     let mut block = [0.0; BLOCK];
     (0..n.div_ceil(BLOCK)).all(|b| {
         let range = b * BLOCK..((b + 1) * BLOCK).min(n);
@@ -144,16 +138,20 @@ pub fn interpolate(x: &mut [f64], spikes: &[Spike]) {
     }
 }
 
+/// |x(j) - (x(j-1) + x(j+1))/2|, and 0 at either end (which has one
+/// neighbour): the departures the block medians are taken over.
+fn departure_or_zero(x: &[f64], j: usize) -> f64 {
+    if j == 0 || j + 1 == x.len() {
+        0.0
+    } else {
+        (x[j] - 0.5 * (x[j - 1] + x[j + 1])).abs()
+    }
+}
+
 /// The local scale of each block of `x` (see the module's rule).
 fn local_scales(x: &[f64]) -> Vec<f64> {
     let n = x.len();
-    let departure = |j: usize| {
-        if j == 0 || j + 1 == n {
-            0.0
-        } else {
-            (x[j] - 0.5 * (x[j - 1] + x[j + 1])).abs()
-        }
-    };
+    let departure = |j: usize| departure_or_zero(x, j);
     // One block's departures at a time: a copy of the whole channel's was
     // as large as the channel. A departure is an absolute value, so its
     // bits order as it does (`f64::total_cmp` on values of one sign), and

@@ -470,6 +470,7 @@ mod tests {
         KERNEL_HALF, LAGS, displacement_sums, gram_from_row0, gram_row0, integer_lags,
         refinement_sums,
     };
+    use crate::tracking::tests::record;
     use crate::tracking::{Reference, centred_spectrum};
 
     /// The sums [`integer_lags`] defines, term by term.
@@ -557,19 +558,6 @@ mod tests {
                 }
             }
         }
-    }
-
-    /// A reproducible record with a mean, uniform on [-1, 1) plus `offset`.
-    fn record(n: usize, seed: u64, offset: f64) -> Vec<f64> {
-        let mut s = seed;
-        (0..n)
-            .map(|_| {
-                s = s
-                    .wrapping_mul(6364136223846793005)
-                    .wrapping_add(1442695040888963407);
-                offset + 2.0 * (s >> 11) as f64 / (1u64 << 53) as f64 - 1.0
-            })
-            .collect()
     }
 
     /// The transforms' correlation against the sums themselves, over even,

@@ -31,6 +31,19 @@ fn multisine(n: usize, shift_s: f64) -> Vec<f64> {
         .collect()
 }
 
+/// A reproducible record with a mean, uniform on [-1, 1) plus `offset`.
+pub(super) fn record(n: usize, seed: u64, offset: f64) -> Vec<f64> {
+    let mut s = seed;
+    (0..n)
+        .map(|_| {
+            s = s
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            offset + 2.0 * (s >> 11) as f64 / (1u64 << 53) as f64 - 1.0
+        })
+        .collect()
+}
+
 /// A displacement that is its command 2.37 samples later: the
 /// cross-correlation finds 2.37 samples, well below a sample's resolution.
 #[test]
@@ -71,20 +84,9 @@ fn the_phase_slope_of_a_pure_delay_is_the_delay() {
 /// over even, odd and prime lengths, and on a window of the record.
 #[test]
 fn the_fei_cross_sum_is_the_spectral_sum_it_defines() {
-    let noise = |n: usize, seed: u64, offset: f64| -> Vec<f64> {
-        let mut s = seed;
-        (0..n)
-            .map(|_| {
-                s = s
-                    .wrapping_mul(6364136223846793005)
-                    .wrapping_add(1442695040888963407);
-                offset + 2.0 * (s >> 11) as f64 / (1u64 << 53) as f64 - 1.0
-            })
-            .collect()
-    };
     for n in [8, 9, 1_000, 1_001, 4_099, 65_536] {
-        let u = noise(n, 3 + n as u64, 0.4);
-        let x = noise(n, 17 + n as u64, -1.3);
+        let u = record(n, 3 + n as u64, 0.4);
+        let x = record(n, 17 + n as u64, -1.3);
         let (uk, xk) = (
             centred_spectrum(&u, mean(&u)),
             centred_spectrum(&x, mean(&x)),
