@@ -1236,11 +1236,11 @@ fn rig_theta(rig: &RigParams, p_ref: f64) -> [f64; 4] {
     ]
 }
 
-/// Levenberg-Marquardt with the delay (in samples) held within 0 and its
-/// bound: a negative delay is acausal.
 /// Accepted steps of no gain in a row that stop a joint fit unconverged.
 const STALL_STEPS: u32 = 3;
 
+/// Levenberg-Marquardt with the delay (in samples) held within 0 and its
+/// bound: a negative delay is acausal.
 fn solver(problem: &JointProblem, opts: &JointOptions) -> Result<LevenbergMarquardt, FitError> {
     let p = problem.n_params();
     // Damping moved by 3 rather than 10: measured on the seven-run bench,

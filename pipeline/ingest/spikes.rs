@@ -224,15 +224,13 @@ mod tests {
     /// with a step, and with spikes; and it does settle the clean ones.
     #[test]
     fn settling_a_clean_channel_gives_the_rules_answer() {
-        let mut s = 7_u64;
-        let mut noise = || {
-            s = s
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            (s >> 11) as f64 / (1u64 << 53) as f64 - 0.5
-        };
         let clean = sweep(50_000);
-        let noisy: Vec<f64> = clean.iter().map(|v| v + 1e-5 * noise()).collect();
+        let noise = crate::ingest::tests::lcg(7, clean.len());
+        let noisy: Vec<f64> = clean
+            .iter()
+            .zip(&noise)
+            .map(|(v, e)| v + 5e-6 * e)
+            .collect();
         let quantised: Vec<f64> = clean.iter().map(|v| (v / 1e-4).round() * 1e-4).collect();
         let mut step = noisy.clone();
         for v in &mut step[30_000..] {

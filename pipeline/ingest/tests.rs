@@ -90,7 +90,7 @@ fn assert_contains(msg: &str, parts: &[&str]) {
 
 /// Deterministic pseudo-random numbers in (-1, 1) (64-bit LCG, Knuth's
 /// MMIX constants), so the tests need no RNG crate.
-fn lcg(seed: u64, n: usize) -> Vec<f64> {
+pub(super) fn lcg(seed: u64, n: usize) -> Vec<f64> {
     let mut s = seed;
     (0..n)
         .map(|_| {
