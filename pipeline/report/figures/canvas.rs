@@ -57,6 +57,27 @@ pub(crate) fn polyline(points: &[BackendCoord], out: &mut impl Outline) {
     }
 }
 
+/// The polylines of the strokes at the start of `ops` that share the first
+/// one's width and colour: one path for both outputs (the SVG's one
+/// `<path>`, the PNG's one coverage), so a dashed line's dashes, or pieces
+/// that touch, are a union and not ink laid twice. Empty when `ops` does not
+/// start with a stroke.
+pub(crate) fn stroke_run(ops: &[Op]) -> Vec<&[BackendCoord]> {
+    let Some(Op::Stroke { width, colour, .. }) = ops.first() else {
+        return Vec::new();
+    };
+    ops.iter()
+        .map_while(|op| match op {
+            Op::Stroke {
+                points,
+                width: w,
+                colour: c,
+            } if w == width && c == colour => Some(points.as_slice()),
+            _ => None,
+        })
+        .collect()
+}
+
 /// One recorded primitive.
 #[derive(Clone, Debug)]
 pub(crate) enum Op {

@@ -7,6 +7,8 @@
 
 use tiny_skia::{FillRule, LineCap, LineJoin, Paint, PathBuilder, Pixmap, Rect, Stroke, Transform};
 
+use plotters_backend::BackendCoord;
+
 use super::canvas::{self, Op, Rgba};
 use super::geometry::{Outline, Pt};
 use super::text;
@@ -34,8 +36,16 @@ impl Outline for PathBuilder {
 pub(crate) fn rgb(ops: &[Op], size: (u32, u32)) -> Option<Vec<u8>> {
     let mut pixmap = Pixmap::new(size.0, size.1)?;
     pixmap.fill(tiny_skia::Color::WHITE);
-    for op in ops {
-        draw(&mut pixmap, op);
+    let mut rest = ops;
+    while let [op, ..] = rest {
+        if let Op::Stroke { width, colour, .. } = op {
+            let run = canvas::stroke_run(rest);
+            stroke(&mut pixmap, &run, *width, *colour);
+            rest = &rest[run.len()..];
+        } else {
+            draw(&mut pixmap, op);
+            rest = &rest[1..];
+        }
     }
     // Every pixel is opaque (white below, source-over on top), so the
     // premultiplied RGBA that tiny-skia keeps is plain RGB plus 255.
@@ -82,19 +92,7 @@ fn draw(pixmap: &mut Pixmap, op: &Op) {
             points,
             width,
             colour,
-        } => {
-            let mut pb = PathBuilder::new();
-            canvas::polyline(points, &mut pb);
-            if let Some(path) = pb.finish() {
-                let stroke = Stroke {
-                    width: (*width).max(1) as f32,
-                    line_cap: LineCap::Round,
-                    line_join: LineJoin::Round,
-                    ..Stroke::default()
-                };
-                pixmap.stroke_path(&path, &paint(*colour, true), &stroke, id, None);
-            }
-        }
+        } => stroke(pixmap, &[points], *width, *colour),
         Op::Polygon { points, colour } => {
             let mut pb = PathBuilder::new();
             canvas::polyline(points, &mut pb);
@@ -133,6 +131,26 @@ fn draw(pixmap: &mut Pixmap, op: &Op) {
                 }
             }
         }
+    }
+}
+
+/// The polylines `run`, stroked `width` pixels wide with round joins and
+/// caps as one path, as the SVG's one `<path>` is
+/// ([`canvas::stroke_run`]).
+fn stroke(pixmap: &mut Pixmap, run: &[&[BackendCoord]], width: u32, colour: Rgba) {
+    let mut pb = PathBuilder::new();
+    for points in run {
+        canvas::polyline(points, &mut pb);
+    }
+    if let Some(path) = pb.finish() {
+        let stroke = Stroke {
+            width: width.max(1) as f32,
+            line_cap: LineCap::Round,
+            line_join: LineJoin::Round,
+            ..Stroke::default()
+        };
+        let id = Transform::identity();
+        pixmap.stroke_path(&path, &paint(colour, true), &stroke, id, None);
     }
 }
 

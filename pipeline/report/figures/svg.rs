@@ -56,22 +56,13 @@ pub(crate) fn write(ops: &[Op], size: (u32, u32), title: &str) -> String {
 }
 
 /// The strokes at the start of `ops` of one style (`width`, `colour`) as
-/// one `<path>` element; returns how many ops it took. A dashed line is one
-/// stroke per dash, so this keeps it one element.
+/// one `<path>` element ([`canvas::stroke_run`]); returns how many ops it
+/// took.
 fn write_strokes(s: &mut String, ops: &[Op], width: u32, colour: &Rgba) -> usize {
+    let run = canvas::stroke_run(ops);
     let mut d = PathData::default();
-    let mut n = 0;
-    while let Some(Op::Stroke {
-        points,
-        width: w2,
-        colour: c2,
-    }) = ops.get(n)
-    {
-        if *w2 != width || c2 != colour {
-            break;
-        }
+    for points in &run {
         canvas::polyline(points, &mut d);
-        n += 1;
     }
     let _ = writeln!(
         s,
@@ -80,7 +71,7 @@ fn write_strokes(s: &mut String, ops: &[Op], width: u32, colour: &Rgba) -> usize
         hex(colour),
         opacity("stroke-opacity", colour)
     );
-    n
+    run.len()
 }
 
 /// Pixels x0..x1, y0..y1 filled, as a `<rect>`.
