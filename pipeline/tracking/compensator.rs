@@ -232,15 +232,52 @@ impl Compensator {
     /// The command a controller running C sends for the desired
     /// displacement `x` (direct form II transposed, from rest).
     pub fn apply(&self, x: &[f64]) -> Vec<f64> {
+        match self.a.len().max(self.b.len()) {
+            0 | 1 => self.apply_fixed::<1>(x),
+            2 => self.apply_fixed::<2>(x),
+            3 => self.apply_fixed::<3>(x),
+            4 => self.apply_fixed::<4>(x),
+            5 => self.apply_fixed::<5>(x),
+            6 => self.apply_fixed::<6>(x),
+            7 => self.apply_fixed::<7>(x),
+            8 => self.apply_fixed::<8>(x),
+            _ => self.apply_any(x),
+        }
+    }
+
+    /// Coefficient `i` of `v`, zero past its end (a shorter numerator or
+    /// denominator).
+    fn coef(v: &[f64], i: usize) -> f64 {
+        v.get(i).copied().unwrap_or(0.0)
+    }
+
+    /// [`Compensator::apply`] with the state on the stack, for filters of
+    /// `N` coefficients: the same sums in the same order.
+    fn apply_fixed<const N: usize>(&self, x: &[f64]) -> Vec<f64> {
+        let b: [f64; N] = std::array::from_fn(|i| Self::coef(&self.b, i));
+        let a: [f64; N] = std::array::from_fn(|i| Self::coef(&self.a, i));
+        let mut state = [0.0; N];
+        x.iter()
+            .map(|&xi| {
+                let y = b[0] * xi + state[0];
+                for i in 1..N {
+                    let next = if i + 1 < N { state[i] } else { 0.0 };
+                    state[i - 1] = next + b[i] * xi - a[i] * y;
+                }
+                y
+            })
+            .collect()
+    }
+
+    fn apply_any(&self, x: &[f64]) -> Vec<f64> {
         let n = self.a.len().max(self.b.len());
-        let coef = |v: &[f64], i: usize| v.get(i).copied().unwrap_or(0.0);
         let mut state = vec![0.0; n];
         x.iter()
             .map(|&xi| {
-                let y = coef(&self.b, 0) * xi + state[0];
+                let y = Self::coef(&self.b, 0) * xi + state[0];
                 for i in 1..n {
                     let next = if i + 1 < n { state[i] } else { 0.0 };
-                    state[i - 1] = next + coef(&self.b, i) * xi - coef(&self.a, i) * y;
+                    state[i - 1] = next + Self::coef(&self.b, i) * xi - Self::coef(&self.a, i) * y;
                 }
                 y
             })
@@ -624,4 +661,42 @@ pub struct CompensatorOutcome {
     /// a linear compensator cannot remove it).
     #[serde(default)]
     pub seals: Vec<SealsTracking>,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The stack-held filters of each length give the bits the general one
+    /// gives, numerator and denominator of equal and unequal lengths.
+    #[test]
+    fn the_fixed_filters_are_the_general_one() {
+        let plant = TransferFunction::new(&[1.0e6], &[1.0, 90.0, 1.0e6]).unwrap();
+        let base = design(&plant, 1024.0, 30.0, None, true).unwrap();
+        let mut seed = 5u64;
+        let mut next = || {
+            seed = seed
+                .wrapping_mul(6_364_136_223_846_793_005)
+                .wrapping_add(1_442_695_040_888_963_407);
+            (seed >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+        };
+        let x: Vec<f64> = (0..2000).map(|_| next()).collect();
+        for n in 1..=10 {
+            for extra in [0, 1] {
+                let mut c = base.clone();
+                c.b = (0..n).map(|_| next()).collect();
+                c.a = std::iter::once(1.0)
+                    .chain((1..n + extra).map(|_| 0.3 * next()))
+                    .collect();
+                let (fast, general) = (c.apply(&x), c.apply_any(&x));
+                assert!(
+                    fast.iter()
+                        .zip(&general)
+                        .all(|(f, g)| f.to_bits() == g.to_bits()),
+                    "{n} numerator and {} denominator coefficients",
+                    n + extra
+                );
+            }
+        }
+    }
 }
