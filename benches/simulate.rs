@@ -1,10 +1,14 @@
 //! Simulator throughput: the paper's 170 s chirp at 2048 Hz (348,160 samples)
 //! through the linear Exp1 plant (exact ZOH), and a Duffing specimen on the
-//! same rig with RK4 for comparison. `cargo bench --bench simulate`.
+//! same rig with RK4 for comparison; and the simulator's CSV log of that
+//! run (time, command, displacement: shortest round-trip decimals).
+//! `cargo bench --bench simulate`.
 
 use std::hint::black_box;
+use std::path::Path;
 
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
+use servoid::report::columns::csv_bytes;
 use servoid::simulate::{
     ChirpLaw, Duffing, Excitation, Integrator, Padding, PlantSpec, SpecimenModel, Unmodelled,
     generate, simulate,
@@ -54,6 +58,19 @@ fn bench_simulate(c: &mut Criterion) {
             )
             .expect("simulates")
         })
+    });
+
+    // The CSV log the simulator writes of that run, in values per second.
+    let out = simulate(&exp1, &u, FS_HZ, [0.0, 0.0], Integrator::default()).expect("simulates");
+    let time: Vec<f64> = (0..u.len()).map(|k| k as f64 / FS_HZ).collect();
+    let columns = [
+        ("time_s", &time[..]),
+        ("command_m", &u[..]),
+        ("displacement_m", &out.x1_m[..]),
+    ];
+    group.throughput(Throughput::Elements(3 * u.len() as u64));
+    group.bench_function("csv_log/170s_2048hz_3_columns", |b| {
+        b.iter(|| csv_bytes(Path::new("log.csv"), black_box(&columns)).expect("writes"))
     });
 
     // The nonlinear path for information: 10 s of the same command.

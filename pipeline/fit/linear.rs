@@ -9,6 +9,7 @@
 
 use nalgebra::linalg::{QR, SVD};
 use nalgebra::{Complex, DMatrix, DVector, Dyn};
+use rayon::prelude::*;
 
 use super::problem::FrfProblem;
 
@@ -248,8 +249,14 @@ pub fn delay_grid_points(problem: &FrfProblem, max_tau_scaled: f64) -> usize {
 
 /// Start for a fitted delay: Levy + SK at each delay of a uniform grid on
 /// [0, `max_tau_scaled`], keeping the one whose output-error cost
-/// (the weighted residuals of `problem`) is smallest. Returns the rational
-/// coefficients followed by tau'.
+/// (the weighted residuals of `problem`) is smallest, the first on a tie.
+/// Returns the rational coefficients followed by tau'.
+///
+/// The points are independent and solved side by side: a run's grid (up
+/// to 201 points of ten SK solves) can be the longest task of a stage, and
+/// would otherwise hold one core while the other has nothing left to do.
+/// The choice is made afterwards in grid order, so the start is the same
+/// on any thread count.
 pub fn delay_grid_start(
     problem: &FrfProblem,
     max_tau_scaled: f64,
@@ -257,12 +264,18 @@ pub fn delay_grid_start(
 ) -> Result<Vec<f64>, RankDeficient> {
     debug_assert!(problem.shape.fit_delay);
     let points = delay_grid_points(problem, max_tau_scaled);
+    let solved: Vec<Result<(f64, Vec<f64>), RankDeficient>> = (0..points)
+        .into_par_iter()
+        .map(|k| {
+            let tau = max_tau_scaled * k as f64 / (points - 1) as f64;
+            let mut theta = linear_start(problem, tau, sk_iterations)?.theta;
+            theta.push(tau);
+            Ok((problem.residuals(&theta).norm_squared(), theta))
+        })
+        .collect();
     let mut best: Option<(f64, Vec<f64>)> = None;
-    for k in 0..points {
-        let tau = max_tau_scaled * k as f64 / (points - 1) as f64;
-        let mut theta = linear_start(problem, tau, sk_iterations)?.theta;
-        theta.push(tau);
-        let cost = problem.residuals(&theta).norm_squared();
+    for point in solved {
+        let (cost, theta) = point?;
         let better = match &best {
             None => true,
             Some((c, _)) => cost.is_finite() && (cost < *c || !c.is_finite()),

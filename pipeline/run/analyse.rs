@@ -118,9 +118,14 @@ pub(super) fn analyse_with(
     observer.event(&Event::Started {
         runs: campaign.runs.len(),
     });
+    // One run per task: rayon otherwise hands each thread a block of runs
+    // it works through alone once started, and a block of spring runs (a
+    // tenth of a second each) kept one core busy for half a second of a
+    // 100-log night while the other had nothing left to take.
     let first: Vec<FirstPass> = campaign
         .runs
         .par_iter()
+        .with_max_len(1)
         .map(|plan| first_pass(campaign, plan, sink, observer).map_err(|e| e.in_run(&plan.id)))
         .collect::<Result<_, _>>()?;
 
@@ -151,6 +156,7 @@ pub(super) fn analyse_with(
         .runs
         .par_iter()
         .zip(first)
+        .with_max_len(1)
         .map(|(plan, first)| {
             second_pass(campaign, plan, first, &rig_for_runs, sink, observer)
                 .map_err(|e| e.in_run(&plan.id))

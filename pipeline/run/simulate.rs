@@ -91,12 +91,14 @@ pub fn simulate_campaign(
     };
     // A log's path relative to the output folder, as truth.json names it.
     let log_rel = |s: &RunSignals| format!("logs/{}.{ext}", s.truth.id);
-    // Each run is simulated and its log's bytes made side by side (the
-    // shortest round-trip text of every sample is most of a CSV log's
-    // cost); the files are written after, in the manifest's order.
-    let logs: Vec<(RunSignals, Vec<u8>)> = plan
+    // Each run is simulated, and its log's bytes made (the shortest
+    // round-trip text of every sample is most of a CSV log's cost) and
+    // hashed, side by side; the files are written after, in the manifest's
+    // order, so a run that cannot be simulated leaves no log behind.
+    let logs: Vec<(RunSignals, Vec<u8>, String)> = plan
         .runs
         .par_iter()
+        .with_max_len(1)
         .map(|run| {
             let s = simulated::simulate_run(plan, run)?;
             let path = out_dir.join(log_rel(&s));
@@ -106,19 +108,20 @@ pub fn simulate_campaign(
                 &s,
                 1.0 / m.simulation.sample_rate_hz,
             )?;
-            Ok((s, bytes))
+            let sha256 = sha256_hex(&bytes);
+            Ok((s, bytes, sha256))
         })
         .collect::<Result<_, SimulateError>>()?;
 
     let mut log_paths = Vec::new();
     let mut truth_runs = Vec::new();
-    for (s, bytes) in logs {
+    for (s, bytes, sha256) in logs {
         let rel = log_rel(&s);
         let path = out_dir.join(&rel);
         report::write_artifact(&path, &bytes)?;
         let mut t = s.truth;
         t.log = rel;
-        t.log_sha256 = sha256_hex(&bytes);
+        t.log_sha256 = sha256;
         truth_runs.push(t);
         log_paths.push(path);
     }

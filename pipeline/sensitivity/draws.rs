@@ -177,6 +177,7 @@ fn monte_carlo_reading(
     stiffnesses
         .par_iter()
         .enumerate()
+        .with_max_len(1)
         .map(|(i, &k)| {
             let spring = LinearSpecimen::Spring {
                 stiffness_n_per_m: k,

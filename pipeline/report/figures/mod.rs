@@ -286,13 +286,15 @@ pub fn render(fig: &Figure, size: (u32, u32), formats: Formats) -> Result<Render
     }
 }
 
-/// Render figures in parallel (rayon); results come back in input order and
-/// each figure's bytes do not depend on the number of threads.
+/// Render figures in parallel (rayon), a figure per task so that no thread
+/// is left with a block of them; results come back in input order and each
+/// figure's bytes do not depend on the number of threads.
 pub fn render_many(
     figs: &[(Figure, (u32, u32))],
     formats: Formats,
 ) -> Vec<Result<Rendered, FigureError>> {
     figs.par_iter()
+        .with_max_len(1)
         .map(|(fig, size)| render(fig, *size, formats))
         .collect()
 }
