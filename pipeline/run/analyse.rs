@@ -119,9 +119,9 @@ pub(super) fn analyse_with(
         runs: campaign.runs.len(),
     });
     // One run per task: rayon otherwise hands each thread a block of runs
-    // it works through alone once started, and a block of spring runs (a
-    // tenth of a second each) kept one core busy for half a second of a
-    // 100-log night while the other had nothing left to take.
+    // it works through alone once started, so a block of slow runs (spring
+    // runs with their delay test) holds one core while the other has
+    // nothing left to take.
     let first: Vec<FirstPass> = campaign
         .runs
         .par_iter()

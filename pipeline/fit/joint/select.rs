@@ -527,6 +527,7 @@ fn fit_candidates(
         let delay_fit = delay.usable();
         places
             .par_iter()
+            .with_max_len(1)
             .map(|&place| {
                 assess(
                     place,
@@ -1003,10 +1004,11 @@ pub fn run_spread(
     }
     let from = from_optimum(fit, opts);
     let groups = runs.len().min(JACKKNIFE_GROUPS);
-    // Side by side, gathered in group order: the same bits on any number
-    // of threads.
+    // Side by side, a refit per task (each is a whole joint fit), gathered
+    // in group order: the same bits on any number of threads.
     let refits: Vec<Option<[f64; 4]>> = (0..groups)
         .into_par_iter()
+        .with_max_len(1)
         .map(|g| {
             let rest: Vec<JointRun<'_>> = runs
                 .iter()
