@@ -1,7 +1,9 @@
 //! Throughput of the FRF stage on a log of the paper's shape: 170 s at
 //! 2048 Hz (348,160 samples), a quadratic chirp 0.1-35 Hz through the
 //! no-specimen plant of Eq. 36, Welch H1 with 8192-sample Hann segments at
-//! 50 % overlap (the manifest's defaults).
+//! 50 % overlap (the manifest's defaults). And the whole-record ETFE a run
+//! makes (coherence from 8192-sample segments, the default's rectangular
+//! window), whole and with only the bins up to 35 Hz an analysis keeps.
 //!
 //! `cargo bench --bench frf`
 
@@ -65,6 +67,19 @@ fn bench_frf(c: &mut Criterion) {
     assert!(frf::sweep_amplitude(&u, FS_HZ).is_some());
     group.bench_function("sweep_amplitude/348160_samples", |b| {
         b.iter(|| frf::sweep_amplitude(black_box(&u), FS_HZ).unwrap())
+    });
+    let etfe = FrfPlan {
+        estimator: Estimator::Etfe,
+        window: Window::Rectangular,
+        detrend: Detrend::Linear,
+        ..plan
+    };
+    group.bench_function("etfe_whole/348160_samples", |b| {
+        b.iter(|| frf::estimate(black_box(&u), black_box(&y), FS_HZ, &etfe).unwrap())
+    });
+    let kept = (frf::KEPT_MAX_HZ, frf::VARIANCE_REACH_BINS);
+    group.bench_function("etfe_up_to_35hz/348160_samples", |b| {
+        b.iter(|| frf::estimate_up_to(black_box(&u), black_box(&y), FS_HZ, &etfe, kept).unwrap())
     });
     group.finish();
 }

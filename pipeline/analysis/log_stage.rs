@@ -216,10 +216,10 @@ fn checked_log(
     Ok((log, warnings))
 }
 
-/// The command's power in `band` (Hz) against its total (without DC), from
-/// the FRF's input spectrum; 0 without power.
-fn band_power_fraction(h: &Frf, (lo, hi): (f64, f64)) -> f64 {
-    let total: f64 = h.suu.iter().skip(1).sum();
+/// The command's power in `band` (Hz), from the FRF's input spectrum,
+/// against its `total` over every bin but DC ([`frf::estimate_up_to`]); 0
+/// without power.
+fn band_power_fraction(h: &Frf, total: f64, (lo, hi): (f64, f64)) -> f64 {
     let in_band: f64 = h
         .freq_hz
         .iter()
@@ -639,17 +639,17 @@ fn estimate_frfs(
         .frf
         .resolve(&log.command_m, &log.displacement_m, fs, run.band_hz)
         .map_err(frf_err)?;
-    let mut h =
-        frf::estimate(&log.command_m, &log.displacement_m, fs, &choice.plan).map_err(frf_err)?;
-    // Excitation in the band, taken before the bins above it are freed.
+    // Nothing reads a bin above the band, the tables or the figures (and
+    // the noise estimate's reach beyond them) but the band's share of the
+    // command's power: those bins are not kept (a long ETFE's bins up to
+    // Nyquist took half the memory of a 1 GB log's analysis).
     let (lo, hi) = run.band_hz;
-    let fraction = band_power_fraction(&h, run.band_hz);
-    // Past that fraction, nothing reads a bin above the band, the tables or
-    // the figures (and the noise estimate's reach beyond them): those are
-    // freed before the force path's FRF is estimated (a long ETFE's bins up
-    // to Nyquist took half the memory of a 1 GB log's analysis).
     let keep_hz = hi.max(frf::KEPT_MAX_HZ);
-    h.keep_up_to(keep_hz, frf::VARIANCE_REACH_BINS);
+    let kept = (keep_hz, frf::VARIANCE_REACH_BINS);
+    let (h, total) =
+        frf::estimate_up_to(&log.command_m, &log.displacement_m, fs, &choice.plan, kept)
+            .map_err(frf_err)?;
+    let fraction = band_power_fraction(&h, total, run.band_hz);
     let force_frf = match &log.force_n {
         Some(f) => {
             // The force path's transient is not fitted: its FRF is shown,
@@ -658,8 +658,8 @@ fn estimate_frfs(
                 transient: None,
                 ..choice.plan.clone()
             };
-            let mut ff = frf::estimate(&log.command_m, f, fs, &plan).map_err(frf_err)?;
-            ff.keep_up_to(keep_hz, frf::VARIANCE_REACH_BINS);
+            let (ff, _) =
+                frf::estimate_up_to(&log.command_m, f, fs, &plan, kept).map_err(frf_err)?;
             Some(ff)
         }
         None => None,

@@ -1285,3 +1285,49 @@ fn the_synthesis_refuses_what_it_cannot_assemble() {
         Unsynthesizable::LinearDetrend
     );
 }
+
+#[test]
+fn the_kept_bins_are_the_whole_estimates_to_the_bit() {
+    // `estimate_up_to` against `estimate` then `keep_up_to`, for every
+    // estimator (the LPM with its noise smoothing reaching past the cut, the
+    // ETFE with the command's DFT kept), and the input's total power
+    // against the whole estimate's Suu summed over every bin but DC.
+    let (u, y_clean) = filtered_white(41, 20_000);
+    let noise = white(42, u.len(), 0.05);
+    let y: Vec<f64> = y_clean.iter().zip(&noise).map(|(a, b)| a + b).collect();
+    for (estimator, transient) in [
+        (Estimator::H1, None),
+        (Estimator::H2, None),
+        (Estimator::Etfe, None),
+        (Estimator::Etfe, Some(7.0)),
+        (Estimator::Lpm, None),
+    ] {
+        let plan = FrfPlan {
+            estimator,
+            segment_length: 1000,
+            overlap: 0.5,
+            window: Window::Rectangular,
+            detrend: Detrend::Linear,
+            transient,
+            model_noise: false,
+        };
+        for (f_hz, extra) in [(8.0, VARIANCE_REACH_BINS), (8.0, 0), (49.9, 3), (1e9, 0)] {
+            let mut whole = estimate(&u, &y, FS_HZ, &plan).unwrap();
+            let total: f64 = whole.suu.iter().skip(1).sum();
+            let (kept, got_total) = estimate_up_to(&u, &y, FS_HZ, &plan, (f_hz, extra)).unwrap();
+            whole.keep_up_to(f_hz, extra);
+            let label = format!("{estimator:?} {transient:?} up to {f_hz} Hz + {extra}");
+            assert_eq!(bits(&kept), bits(&whole), "{label}");
+            assert_eq!(kept.variance, whole.variance, "{label}");
+            assert_eq!(kept.input_dft, whole.input_dft, "{label}");
+            assert_eq!(got_total.to_bits(), total.to_bits(), "{label}");
+            if f_hz < 10.0 {
+                assert!(
+                    kept.h.len() * 4 < u.len() / 2,
+                    "{label}: {} bins",
+                    kept.h.len()
+                );
+            }
+        }
+    }
+}
