@@ -45,21 +45,41 @@ fn data(sample_rate_hz: f64, segment: usize) -> (Vec<f64>, Vec<Complex<f64>>, Ve
 }
 
 fn bench_fit(c: &mut Criterion) {
-    let (freq, h, variance) = data(SAMPLE_RATE_HZ, SEGMENT);
+    bench_bins(
+        c,
+        "fit_second_order_hold",
+        (SAMPLE_RATE_HZ, SEGMENT),
+        &[
+            ("no_delay", DelayPlan::None),
+            ("fitted_delay_max_10ms", DelayPlan::Fit { max_s: 0.01 }),
+        ],
+    );
+    bench_bins(
+        c,
+        "fit_etfe_120s_1khz",
+        (1000.0, 120_000),
+        &[("fitted_delay_max_10ms", DelayPlan::Fit { max_s: 0.01 })],
+    );
+}
+
+/// The fits of `cases` on the bins of `segment` samples at `sample_rate_hz`.
+fn bench_bins(
+    c: &mut Criterion,
+    group_name: &str,
+    (sample_rate_hz, segment): (f64, usize),
+    cases: &[(&str, DelayPlan)],
+) {
+    let (freq, h, variance) = data(sample_rate_hz, segment);
     let n = freq.len();
     let input = FitInput {
         freq_hz: &freq,
         h: &h,
         variance: &variance,
     };
-    let mut group = c.benchmark_group("fit_second_order_hold");
+    let mut group = c.benchmark_group(group_name);
     group.throughput(Throughput::Elements(n as u64));
-    let cases = [
-        ("no_delay", DelayPlan::None),
-        ("fitted_delay_max_10ms", DelayPlan::Fit { max_s: 0.01 }),
-    ];
-    for (name, delay) in cases {
-        let mut opts = FitOptions::new(0, 2, SAMPLE_RATE_HZ);
+    for &(name, delay) in cases {
+        let mut opts = FitOptions::new(0, 2, sample_rate_hz);
         opts.delay = delay;
         // Fail loudly rather than time a fit that does not work.
         let check = fit(&input, &opts).expect("the benchmark data fit");
@@ -70,26 +90,6 @@ fn bench_fit(c: &mut Criterion) {
             |b, o| b.iter(|| fit(black_box(&input), black_box(o)).unwrap()),
         );
     }
-    group.finish();
-
-    let (freq, h, variance) = data(1000.0, 120_000);
-    let n = freq.len();
-    let input = FitInput {
-        freq_hz: &freq,
-        h: &h,
-        variance: &variance,
-    };
-    let mut group = c.benchmark_group("fit_etfe_120s_1khz");
-    group.throughput(Throughput::Elements(n as u64));
-    let mut opts = FitOptions::new(0, 2, 1000.0);
-    opts.delay = DelayPlan::Fit { max_s: 0.01 };
-    let check = fit(&input, &opts).expect("the benchmark data fit");
-    assert!(check.converged, "{}", check.termination);
-    group.bench_with_input(
-        BenchmarkId::new("fitted_delay_max_10ms", format!("{n}_bins")),
-        &opts,
-        |b, o| b.iter(|| fit(black_box(&input), black_box(o)).unwrap()),
-    );
     group.finish();
 }
 

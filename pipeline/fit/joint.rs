@@ -516,17 +516,17 @@ impl JointProblem {
         names
     }
 
-    /// The problem over every `stride`-th bin of each run.
+    /// The problem over every `stride`-th bin of each run, run by run.
     fn every(&self, stride: usize) -> JointProblem {
+        // One pass sorts the bins into their runs (a pass per run over all
+        // the bins was 101 passes over 357,641 on a 500-log night).
+        let mut by_run: Vec<Vec<&Bin>> = vec![Vec::new(); self.runs.len()];
+        for b in &self.bins {
+            by_run[b.run].push(b);
+        }
         let mut bins = Vec::with_capacity(self.bins.len() / stride.max(1) + self.runs.len());
-        for r in 0..self.runs.len() {
-            bins.extend(
-                self.bins
-                    .iter()
-                    .filter(|b| b.run == r)
-                    .step_by(stride.max(1))
-                    .cloned(),
-            );
+        for run in &by_run {
+            bins.extend(run.iter().step_by(stride.max(1)).map(|&b| b.clone()));
         }
         JointProblem {
             bins,

@@ -165,35 +165,51 @@ pub fn sanathanan_koerner(
     max_iterations: usize,
 ) -> Result<SkResult, RankDeficient> {
     let m = numerator_order;
-    let mut theta = levy(s, g, w, m, denominator_order)?;
+    let first = levy(s, g, w, m, denominator_order)?;
+    let (theta, iterations) = iterate_sk(s, w, m, max_iterations, first, |wk| {
+        levy(s, g, wk, m, denominator_order)
+    })?;
+    Ok(SkResult { theta, iterations })
+}
+
+/// The SK iterations from Levy's coefficients `theta`: the weights `w`
+/// divided by |D'_prev(s_i)|^2, solved again by `solve`, until
+/// `max_iterations` or a change below 1e-12 of the coefficients' norm.
+/// Returns the coefficients and the solves made.
+fn iterate_sk<T: AsRef<[f64]>, E>(
+    s: &[Complex<f64>],
+    w: &[f64],
+    numerator_order: usize,
+    max_iterations: usize,
+    mut theta: T,
+    mut solve: impl FnMut(&[f64]) -> Result<T, E>,
+) -> Result<(T, usize), E> {
+    let mut wk = vec![0.0; s.len()];
     let mut iterations = 0;
     for _ in 0..max_iterations {
-        let den = &theta[m + 1..];
-        let wk: Vec<f64> = s
-            .iter()
-            .zip(w)
-            .map(|(&si, &wi)| {
-                let d = den
-                    .iter()
-                    .fold(Complex::new(1.0, 0.0), |acc, &c| acc * si + c);
-                wi / d.norm_sqr()
-            })
-            .collect();
-        let next = levy(s, g, &wk, m, denominator_order)?;
+        let den = &theta.as_ref()[numerator_order + 1..];
+        for ((wk, &si), &wi) in wk.iter_mut().zip(s).zip(w) {
+            let d = den
+                .iter()
+                .fold(Complex::new(1.0, 0.0), |acc, &c| acc * si + c);
+            *wk = wi / d.norm_sqr();
+        }
+        let next = solve(&wk)?;
         iterations += 1;
         let change = next
+            .as_ref()
             .iter()
-            .zip(theta.iter())
+            .zip(theta.as_ref())
             .map(|(a, b)| (a - b) * (a - b))
             .sum::<f64>()
             .sqrt();
-        let size = next.iter().map(|a| a * a).sum::<f64>().sqrt();
+        let size = next.as_ref().iter().map(|a| a * a).sum::<f64>().sqrt();
         theta = next;
         if change <= 1e-12 * size {
             break;
         }
     }
-    Ok(SkResult { theta, iterations })
+    Ok((theta, iterations))
 }
 
 /// Levy + SK on the data divided by the known factors and by exp(-s' tau')
@@ -362,29 +378,12 @@ fn screened_sk<const P: usize>(
     let n = problem.shape.denominator_order;
     let s = &problem.s;
     let (g, w) = delayed_data(problem, tau_scaled);
-    let mut theta = levy_normal::<P>(s, &g, &w, m, n)?;
-    let mut wk = vec![0.0; s.len()];
-    for _ in 0..sk_iterations {
-        for ((wk, &si), &wi) in wk.iter_mut().zip(s).zip(&w) {
-            let d = theta[m + 1..]
-                .iter()
-                .fold(Complex::new(1.0, 0.0), |acc, &c| acc * si + c);
-            *wk = wi / d.norm_sqr();
-        }
-        let next = levy_normal::<P>(s, &g, &wk, m, n)?;
-        let change = next
-            .iter()
-            .zip(theta.iter())
-            .map(|(a, b)| (a - b) * (a - b))
-            .sum::<f64>()
-            .sqrt();
-        let size = next.iter().map(|a| a * a).sum::<f64>().sqrt();
-        theta = next;
-        if change <= 1e-12 * size {
-            break;
-        }
-    }
-    Some(theta)
+    let first = levy_normal::<P>(s, &g, &w, m, n)?;
+    iterate_sk(s, &w, m, sk_iterations, first, |wk| {
+        levy_normal::<P>(s, &g, wk, m, n).ok_or(())
+    })
+    .ok()
+    .map(|(theta, _)| theta)
 }
 
 /// [`levy`]'s least squares solved by its normal equations, A^T A x =

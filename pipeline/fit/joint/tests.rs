@@ -1054,3 +1054,47 @@ fn the_grouped_jackknife_gives_the_spread_between_campaigns() {
     );
     assert!((0.7..1.4).contains(&ratio), "ratio {ratio}");
 }
+
+/// The coarse problem holds every `stride`-th bin of each run, run by
+/// run, as filtering the bins run by run gives them, even with the runs'
+/// bins interleaved.
+#[test]
+fn the_coarse_problem_takes_every_strideth_bin_of_each_run() {
+    let c = Campaign::new(None, 0.002);
+    let mut p = problem(&c.runs(), &options(Structure::Delay)).unwrap();
+    // Interleave the runs' bins (each run's own order kept) to show the
+    // selection does not lean on their being grouped.
+    let runs = p.runs.len();
+    let mut queues: Vec<Vec<Bin>> = vec![Vec::new(); runs];
+    for b in p.bins.drain(..) {
+        queues[b.run].push(b);
+    }
+    let mut heads = vec![0; runs];
+    while heads.iter().zip(&queues).any(|(h, q)| *h < q.len()) {
+        for r in 0..runs {
+            if let Some(b) = queues[r].get(heads[r]) {
+                p.bins.push(b.clone());
+                heads[r] += 1;
+            }
+        }
+    }
+    for stride in [1, 2, 3, 7] {
+        let got: Vec<(usize, u64)> = p
+            .every(stride)
+            .bins
+            .iter()
+            .map(|b| (b.run, b.s.im.to_bits()))
+            .collect();
+        let want: Vec<(usize, u64)> = (0..runs)
+            .flat_map(|r| {
+                p.bins
+                    .iter()
+                    .filter(move |b| b.run == r)
+                    .step_by(stride)
+                    .map(|b| (b.run, b.s.im.to_bits()))
+            })
+            .collect();
+        assert_eq!(got, want, "stride {stride}");
+        assert!(got.len() * stride >= p.bins.len(), "stride {stride}");
+    }
+}
