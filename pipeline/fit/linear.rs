@@ -352,7 +352,7 @@ const SCREEN_RATIO: f64 = 1e-5;
 /// must be solved by QR.
 fn screened_cost(problem: &FrfProblem, tau_scaled: f64, sk_iterations: usize) -> Option<f64> {
     let shape = problem.shape;
-    let theta = match shape.n_rational() {
+    let mut theta = match shape.n_rational() {
         2 => screened_sk::<2>(problem, tau_scaled, sk_iterations)?.to_vec(),
         3 => screened_sk::<3>(problem, tau_scaled, sk_iterations)?.to_vec(),
         4 => screened_sk::<4>(problem, tau_scaled, sk_iterations)?.to_vec(),
@@ -362,7 +362,6 @@ fn screened_cost(problem: &FrfProblem, tau_scaled: f64, sk_iterations: usize) ->
         8 => screened_sk::<8>(problem, tau_scaled, sk_iterations)?.to_vec(),
         _ => return None,
     };
-    let mut theta = theta;
     theta.push(tau_scaled);
     Some(problem.residuals(&theta).norm_squared())
 }

@@ -117,15 +117,8 @@ pub fn estimate(
     sample_rate_hz: f64,
     plan: &FrfPlan,
 ) -> Result<Frf, FrfError> {
-    if matches!(plan.estimator, Estimator::Etfe | Estimator::Lpm) {
-        return etfe_or_lpm(
-            u,
-            y,
-            sample_rate_hz,
-            plan.window,
-            (plan.detrend, plan.segment_length, plan.overlap),
-            (plan.estimator == Estimator::Lpm, plan.transient),
-        );
+    if let Some(whole) = whole_record(u, y, sample_rate_hz, plan, None) {
+        return whole.map(|(frf, _)| frf);
     }
     welch(
         u,
@@ -152,21 +145,36 @@ pub fn estimate_up_to(
     plan: &FrfPlan,
     (f_hz, extra): (f64, usize),
 ) -> Result<(Frf, f64), FrfError> {
-    if matches!(plan.estimator, Estimator::Etfe | Estimator::Lpm) {
-        return etfe_or_lpm_up_to(
+    if let Some(whole) = whole_record(u, y, sample_rate_hz, plan, Some((f_hz, extra))) {
+        let (frf, total) = whole?;
+        return Ok((frf, total.expect("a kept estimate sums the input's power")));
+    }
+    let mut frf = estimate(u, y, sample_rate_hz, plan)?;
+    let total = frf.suu.iter().skip(1).sum();
+    frf.keep_up_to(f_hz, extra);
+    Ok((frf, total))
+}
+
+/// The plan's whole-record estimate (ETFE or LPM) by [`etfe_or_lpm_up_to`];
+/// `None` for a Welch estimator.
+fn whole_record(
+    u: &[f64],
+    y: &[f64],
+    sample_rate_hz: f64,
+    plan: &FrfPlan,
+    keep: Option<(f64, usize)>,
+) -> Option<Result<(Frf, Option<f64>), FrfError>> {
+    matches!(plan.estimator, Estimator::Etfe | Estimator::Lpm).then(|| {
+        etfe_or_lpm_up_to(
             u,
             y,
             sample_rate_hz,
             plan.window,
             (plan.detrend, plan.segment_length, plan.overlap),
             (plan.estimator == Estimator::Lpm, plan.transient),
-            Some((f_hz, extra)),
-        );
-    }
-    let mut frf = estimate(u, y, sample_rate_hz, plan)?;
-    let total = frf.suu.iter().skip(1).sum();
-    frf.keep_up_to(f_hz, extra);
-    Ok((frf, total))
+            keep,
+        )
+    })
 }
 
 /// Welch-averaged FRF (P. D. Welch, IEEE Trans. Audio Electroacoust. 15(2),
@@ -296,8 +304,8 @@ fn etfe_or_lpm(
 
 /// [`etfe_or_lpm`] with `keep` = Some((f, extra)) computing only the bins
 /// [`Frf::keep_up_to`]`(f, extra)` keeps (and the LPM's noise smoothing
-/// reach beyond, which it cuts afterwards), and the input's density summed
-/// over every bin but DC.
+/// reach beyond, which it cuts afterwards), and then also the input's
+/// density summed over every bin but DC.
 fn etfe_or_lpm_up_to(
     u: &[f64],
     y: &[f64],
@@ -306,7 +314,7 @@ fn etfe_or_lpm_up_to(
     (detrend_kind, coherence_segment_length, coherence_overlap): (Detrend, usize, f64),
     (lpm, keep_input): (bool, Option<f64>),
     keep: Option<(f64, usize)>,
-) -> Result<(Frf, f64), FrfError> {
+) -> Result<(Frf, Option<f64>), FrfError> {
     check_inputs(
         u,
         y,
@@ -343,17 +351,18 @@ fn etfe_or_lpm_up_to(
         || rayon::join(|| transform_of(u), || transform_of(y)),
         || welch_spectra(u, y, sample_rate_hz, &segments),
     );
-    // Each bin's Suu as `etfe_from_transforms` forms it, summed in order.
-    let total = (1..h.len())
-        .map(|k| {
-            let s = scale * one_sided_factor(k, n);
-            s * h[k].norm_sqr()
-        })
-        .sum();
     // The LPM works on the transforms themselves: kept before they become
     // H and Suy in place.
     let transforms = lpm.then(|| (h.clone(), suy.clone()));
-    if let Some((f_hz, extra)) = keep {
+    let total = keep.map(|(f_hz, extra)| {
+        // Each bin's Suu as `etfe_from_transforms` forms it, summed in
+        // order, before the bins above the kept ones are dropped.
+        let total = (1..h.len())
+            .map(|k| {
+                let s = scale * one_sided_factor(k, n);
+                s * h[k].norm_sqr()
+            })
+            .sum();
         // The bins `keep_up_to` keeps, by the frequencies `bin_frequencies`
         // gives them; the LPM smooths its noise over its neighbours.
         let resolution_hz = sample_rate_hz / n as f64;
@@ -366,7 +375,8 @@ fn etfe_or_lpm_up_to(
             v.truncate(bins);
             v.shrink_to_fit();
         }
-    }
+        total
+    });
     // Up to the band's top only: a copy of a 14 M-sample record's whole
     // transform was 115 MB.
     let input_dft = keep_input.map(|f_hz| {
