@@ -18,6 +18,7 @@ use realfft::RealToComplex;
 
 mod choice;
 pub mod linearity;
+mod local_fits;
 mod lpm;
 mod settings;
 mod sweep;
@@ -28,6 +29,8 @@ pub use choice::{
     describe, excitation,
 };
 pub use linearity::{Linearity, SpringForce, linearity, spring_force};
+pub use local_fits::LocalFits;
+use local_fits::etfe_local_noise_densities;
 pub use settings::{Detrend, Estimator, FrfPlan, Window};
 pub use sweep::{SweepAmplitude, sweep_amplitude};
 pub use synthesis::{EtfeSpectra, EtfeSynthesis, Unsynthesizable};
@@ -69,6 +72,9 @@ pub struct Frf {
     /// realfft gives it), kept when the plan fits the record's transient
     /// (`FrfPlan::transient`), whose columns divide by it.
     pub input_dft: Option<Vec<Complex<f64>>>,
+    /// The memo of the ETFE noise level's local fits (not part of the
+    /// value: see [`LocalFits`]).
+    pub local_fits: LocalFits,
 }
 
 /// Why an FRF cannot be estimated from the given signals and settings.
@@ -243,6 +249,7 @@ pub fn welch(
         resolution_hz,
         variance: None,
         input_dft: None,
+        local_fits: LocalFits::default(),
     })
 }
 
@@ -460,6 +467,7 @@ fn etfe_from_transforms(
         resolution_hz,
         variance: None,
         input_dft: None,
+        local_fits: LocalFits::default(),
     }
 }
 
@@ -568,6 +576,7 @@ impl Frf {
                 .input_dft
                 .as_ref()
                 .map(|u| u[..keep.min(u.len())].to_vec()),
+            local_fits: self.local_fits.clone(),
         }
     }
 
@@ -880,14 +889,7 @@ fn etfe_variance(frf: &Frf, bins: &[usize]) -> Vec<f64> {
         return Vec::new();
     };
     let span = lo.saturating_sub(s_half)..(hi + s_half + 1).min(nb);
-    // Each bin's local fit is independent of the others': computed once per
-    // bin of the span, side by side (the same bits on any thread count).
-    let density: Vec<f64> = span
-        .clone()
-        .into_par_iter()
-        .with_min_len(PAR_MIN_LOCAL_FITS)
-        .map(|j| etfe_local_noise_density(frf, j))
-        .collect();
+    let density = etfe_local_noise_densities(frf, span.clone());
     // Prefix sums of the finite densities and of their count over the span.
     let mut sum = vec![0.0; span.len() + 1];
     let mut count = vec![0usize; span.len() + 1];
@@ -910,14 +912,11 @@ fn etfe_variance(frf: &Frf, bins: &[usize]) -> Vec<f64> {
             // so a bin with a large error would be weighted down by its own
             // noise (the stds came out some 4 % optimistic with them in).
             let (mut own_sum, mut own_n) = (0.0, 0usize);
-            let near = 2 * ETFE_LOCAL_HALF_WIDTH + 1;
-            let lo = a.max((k - span.start).saturating_sub(near));
-            let hi = b.min(k - span.start + near + 1);
-            for (i, &d) in density.iter().enumerate().take(hi).skip(lo) {
-                if d.is_finite()
-                    && local_window(span.start + i, nb, ETFE_LOCAL_HALF_WIDTH)
-                        .is_some_and(|w| w.contains(&k))
-                {
+            let holding = windows_holding(k, nb, ETFE_LOCAL_HALF_WIDTH);
+            let lo = a.max(holding.start.max(span.start) - span.start);
+            let hi = b.min(holding.end.max(span.start) - span.start);
+            for &d in density.get(lo..hi).unwrap_or_default() {
+                if d.is_finite() {
                     own_sum += d;
                     own_n += 1;
                 }
@@ -945,71 +944,19 @@ fn local_window(k: usize, nb: usize, half: usize) -> Option<std::ops::Range<usiz
     })
 }
 
-/// The noise density at bin `k` by the local polynomial method (see
-/// [`h_variance_at`]); infinite where the window has too few excited bins.
-/// The window is shifted, not shortened, at the ends of the spectrum, and
-/// DC (which detrending empties) is left out.
-fn etfe_local_noise_density(frf: &Frf, k: usize) -> f64 {
-    const P: usize = ETFE_LOCAL_DEGREE + 1;
-    const WIDTH: usize = 2 * ETFE_LOCAL_HALF_WIDTH + 1;
-    let r_half = ETFE_LOCAL_HALF_WIDTH;
-    let nb = frf.h.len();
-    if frf.suu[k] <= 0.0 || k == 0 {
-        return f64::INFINITY;
+/// The bins j whose [`local_window`] holds bin `k` (1 <= k < nb): a
+/// range, since a window's first bin never falls as j rises. A window
+/// starts at j - `half` away from the ends, so j runs from k - `half` to
+/// k + `half`; every window holds k when k is among the first 2 `half` + 1
+/// bins or the last, where the windows stop shifting.
+fn windows_holding(k: usize, nb: usize, half: usize) -> std::ops::Range<usize> {
+    let width = 2 * half + 1;
+    if nb <= width || k == 0 {
+        return 0..0;
     }
-    let Some(window) = local_window(k, nb, r_half) else {
-        return f64::INFINITY;
-    };
-    // The window's usable bins (excited, finite), gathered once for both
-    // passes: the offset x = (j - k) / R, scaled so that the normal matrix
-    // is well conditioned, the weight and the estimate.
-    let mut xs = [0.0; WIDTH];
-    let mut ws = [0.0; WIDTH];
-    let mut hs = [Complex::new(0.0, 0.0); WIDTH];
-    let mut used = 0usize;
-    for (j, (&w, &h)) in window
-        .clone()
-        .zip(frf.suu[window.clone()].iter().zip(&frf.h[window]))
-    {
-        if w > 0.0 && h.re.is_finite() && h.im.is_finite() {
-            xs[used] = (j as f64 - k as f64) / r_half as f64;
-            ws[used] = w;
-            hs[used] = h;
-            used += 1;
-        }
-    }
-    if used <= P {
-        return f64::INFINITY;
-    }
-    // Weighted least squares.
-    let mut a = nalgebra::SMatrix::<f64, P, P>::zeros();
-    let mut b = nalgebra::SVector::<Complex<f64>, P>::zeros();
-    for ((&x, &w), &h) in xs.iter().zip(&ws).zip(&hs).take(used) {
-        let mut powers = [1.0; P];
-        for p in 1..P {
-            powers[p] = powers[p - 1] * x;
-        }
-        for p in 0..P {
-            for q in 0..P {
-                a[(p, q)] += w * powers[p] * powers[q];
-            }
-            b[p] += h * (w * powers[p]);
-        }
-    }
-    let Some(inv) = a.try_inverse() else {
-        return f64::INFINITY;
-    };
-    // On the stack: a heap vector per bin was a tenth of the cost.
-    let c: [Complex<f64>; P] = std::array::from_fn(|p| (0..P).map(|q| b[q] * inv[(p, q)]).sum());
-    let mut rss = 0.0;
-    for ((&x, &w), &h) in xs.iter().zip(&ws).zip(&hs).take(used) {
-        let fitted = c
-            .iter()
-            .rev()
-            .fold(Complex::new(0.0, 0.0), |acc, cp| acc * x + cp);
-        rss += w * (h - fitted).norm_sqr();
-    }
-    rss / (used - P) as f64
+    let lo = if k <= width { 0 } else { k - half };
+    let hi = if k < nb - width { k + half + 1 } else { nb };
+    lo..hi
 }
 
 /// Discrete Fourier transform X(k) = sum_n x(n) exp(-2 pi i k n / N) for all

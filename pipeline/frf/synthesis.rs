@@ -28,8 +28,9 @@
 use nalgebra::Complex;
 
 use super::{
-    Detrend, Estimator, Frf, FrfError, FrfPlan, SegmentTransform, VARIANCE_REACH_BINS, Window,
-    accumulate_segment, check_inputs, coherence_of, etfe_from_transforms, to_density, window,
+    Detrend, Estimator, Frf, FrfError, FrfPlan, LocalFits, SegmentTransform, VARIANCE_REACH_BINS,
+    Window, accumulate_segment, check_inputs, coherence_of, etfe_from_transforms, to_density,
+    window,
 };
 
 /// Why a plan's ETFE cannot be assembled in the frequency domain: a
@@ -75,6 +76,8 @@ pub struct EtfeSynthesis {
     /// Whether the FRFs keep the command's DFT for a fit with the record's
     /// transient (`FrfPlan::transient`): all the bins it keeps.
     transient: bool,
+    /// The memo of the local fits every reading's noise level makes.
+    local_fits: LocalFits,
 }
 
 impl EtfeSynthesis {
@@ -132,6 +135,7 @@ impl EtfeSynthesis {
             keep_coarse,
             w: window(Window::Rectangular, l),
             transient: plan.transient.is_some(),
+            local_fits: LocalFits::default(),
             u: EtfeSpectra {
                 whole: Vec::new(),
                 segments: Vec::new(),
@@ -243,6 +247,9 @@ impl EtfeSynthesis {
             self.sample_rate_hz / self.segment_length as f64,
         );
         frf.input_dft = self.transient.then(|| self.u.whole.clone());
+        // Every reading shares the command's Suu, so its local fits' normal
+        // matrices: one memo serves them all.
+        frf.local_fits = self.local_fits.clone();
         frf
     }
 }

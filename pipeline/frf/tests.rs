@@ -872,6 +872,7 @@ fn band_mask_keeps_coherent_bins_inside_the_band() {
         resolution_hz: 1.0,
         variance: None,
         input_dft: None,
+        local_fits: LocalFits::default(),
     };
     assert_eq!(
         band_mask(&frf, (1.0, 4.0), 0.9),
@@ -1327,6 +1328,23 @@ fn the_kept_bins_are_the_whole_estimates_to_the_bit() {
                     "{label}: {} bins",
                     kept.h.len()
                 );
+            }
+        }
+    }
+}
+
+/// The windows holding a bin, by their formula, are those local_window
+/// gives that hold it, checked one window at a time.
+#[test]
+fn the_windows_holding_a_bin_are_those_that_hold_it() {
+    for half in [1, 3, ETFE_LOCAL_HALF_WIDTH] {
+        for nb in [2 * half + 1, 2 * half + 2, 4 * half + 3, 40, 97] {
+            for k in 1..nb {
+                let brute: Vec<usize> = (0..nb)
+                    .filter(|&j| local_window(j, nb, half).is_some_and(|w| w.contains(&k)))
+                    .collect();
+                let formula: Vec<usize> = windows_holding(k, nb, half).collect();
+                assert_eq!(formula, brute, "half {half}, nb {nb}, k {k}");
             }
         }
     }
