@@ -6,7 +6,6 @@
 //! labs' acquisition systems write them, so each reader is tried on a
 //! campaign whose truth is known.
 
-use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 use polars::prelude::{Column, DataFrame, ParquetCompression, ParquetWriter};
@@ -99,28 +98,83 @@ pub fn csv_bytes(path: &Path, columns: &[(&str, &[f64])]) -> Result<Vec<u8>, Col
     let names: Vec<&str> = columns.iter().map(|(name, _)| *name).collect();
     s.push_str(&names.join(","));
     s.push('\n');
+    let mut digits = ryu::Buffer::new();
     for row in 0..n {
         for (j, (_, values)) in columns.iter().enumerate() {
             if j > 0 {
                 s.push(',');
             }
-            push_shortest(&mut s, values[row]);
+            s.push_str(&shortest(&mut digits, values[row]));
         }
         s.push('\n');
     }
     Ok(s.into_bytes())
 }
 
-/// Append `x` in the shortest decimal form that parses back to `x`. Rust's
-/// `Display` and `LowerExp` for f64 both print the shortest round-trip digits;
-/// `Display` never uses an exponent, so tiny and huge values take `LowerExp`.
-fn push_shortest(s: &mut String, x: f64) {
-    let a = x.abs();
-    if a == 0.0 || !a.is_finite() || (1e-5..1e16).contains(&a) {
-        let _ = write!(s, "{x}");
-    } else {
-        let _ = write!(s, "{x:e}");
+/// `x` in the shortest decimal form that parses back to `x`, as Rust's
+/// `Display` writes it for 1e-5 <= |x| < 1e16 and zero (no exponent), and
+/// `LowerExp` elsewhere (tiny and huge values). Ryu (Adams, PLDI 2018)
+/// chooses the same digits and the same notation by the same decimal
+/// exponent, with two differences put right here: it ends an integral
+/// value with ".0", and where `x` lies exactly halfway between the two
+/// closest shortest candidates it takes the even one, where Rust's takes
+/// the one above.
+fn shortest(buf: &mut ryu::Buffer, x: f64) -> std::borrow::Cow<'_, str> {
+    let text = buf.format(x);
+    let text = text.strip_suffix(".0").unwrap_or(text);
+    match last_digit(text) {
+        Some((at, k)) if halfway_rounded_down(x, k) => {
+            let mut up = text.as_bytes().to_vec();
+            // Ryu's choice at a tie is even, so adding one never carries.
+            up[at] += 1;
+            std::borrow::Cow::Owned(String::from_utf8(up).expect("ASCII digits"))
+        }
+        _ => std::borrow::Cow::Borrowed(text),
     }
+}
+
+/// The byte index of `text`'s last significant digit and its decimal
+/// exponent k (the digit counts 10^k); None for text without digits.
+fn last_digit(text: &str) -> Option<(usize, i32)> {
+    let (mantissa, exp) = match text.split_once('e') {
+        Some((m, e)) => (m, e.parse::<i32>().ok()?),
+        None => (text, 0),
+    };
+    match mantissa.split_once('.') {
+        Some((_, frac)) => Some((mantissa.len() - 1, exp - frac.len() as i32)),
+        None => {
+            let zeros = mantissa.len() - mantissa.trim_end_matches('0').len();
+            let at = (mantissa.len() - 1).checked_sub(zeros)?;
+            mantissa.as_bytes()[at]
+                .is_ascii_digit()
+                .then_some((at, exp + zeros as i32))
+        }
+    }
+}
+
+/// Whether `x` lies exactly halfway between the multiples of 10^k on each
+/// side of it and the lower one is even (so that Ryu, rounding half to
+/// even, wrote it): with |x| = M 2^E, M odd, that is k = E + 1, M
+/// divisible by 5^k where k > 0, and M = 1 (mod 4) (|x| / 10^k =
+/// (M 5^-k - 1) / 2 + 1/2, and 5 = 1 (mod 4)).
+fn halfway_rounded_down(x: f64, k: i32) -> bool {
+    let bits = x.to_bits();
+    let exp = ((bits >> 52) & 0x7ff) as i32;
+    let frac = bits & ((1 << 52) - 1);
+    let (m, e) = match exp {
+        0 => (frac, -1074),
+        0x7ff => return false,
+        _ => (frac | (1 << 52), exp - 1075),
+    };
+    if m == 0 {
+        return false;
+    }
+    let tz = m.trailing_zeros();
+    let (m, e) = (m >> tz, e + tz as i32);
+    if k != e + 1 || m % 4 != 1 {
+        return false;
+    }
+    k <= 0 || 5u64.checked_pow(k as u32).is_some_and(|p| m % p == 0)
 }
 
 /// Write `columns` as a Parquet file of f64 columns (Snappy-compressed pages,
@@ -308,4 +362,80 @@ fn check(path: &Path, columns: &[(&str, &[f64])]) -> Result<usize, ColumnWriteEr
         }
     }
     Ok(first_values.len())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::{Rng, SeedableRng};
+
+    /// What Rust's formatter writes: `Display` without an exponent where
+    /// it is short, `LowerExp` elsewhere.
+    fn by_std(x: f64) -> String {
+        let a = x.abs();
+        if a == 0.0 || !a.is_finite() || (1e-5..1e16).contains(&a) {
+            format!("{x}")
+        } else {
+            format!("{x:e}")
+        }
+    }
+
+    /// Ryu's text is the standard formatter's, value by value: on random
+    /// bit patterns (every exponent), on random values of a log's size, on
+    /// integers, on the neighbours of each notation's bounds and of every
+    /// power of ten, and on zeros, subnormals and the extremes.
+    #[test]
+    fn the_shortest_text_is_the_standard_formatters() {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+        let mut values: Vec<f64> = (0..200_000)
+            .map(|_| f64::from_bits(rng.random::<u64>()))
+            .filter(|x| x.is_finite())
+            .collect();
+        values.extend((0..200_000).map(|_| rng.random_range(-0.05..0.05)));
+        values.extend((0..2_000).map(|i| f64::from(i) - 1000.0));
+        for e in -320..=308 {
+            let p = format!("1e{e}").parse::<f64>().unwrap();
+            let mut below = p;
+            let mut above = p;
+            for _ in 0..3 {
+                below = below.next_down();
+                above = above.next_up();
+                values.extend([below, above, -below, -above]);
+            }
+            values.extend([p, -p, 0.5 * p, 3.0 * p]);
+        }
+        values.extend([
+            0.0,
+            -0.0,
+            f64::MIN_POSITIVE,
+            f64::MIN_POSITIVE.next_down(),
+            f64::from_bits(1),
+            f64::MAX,
+            f64::MIN,
+            f64::EPSILON,
+            2f64.powi(53),
+            2f64.powi(53) + 2.0,
+        ]);
+        // Halfway cases: M 2^E with few bits below the point, where the
+        // shortest text's last digit can fall exactly on a tie.
+        for e in -40..=40 {
+            for bits in [53, 30, 12] {
+                for _ in 0..300 {
+                    let m = rng.random::<u64>() >> (64 - bits) | 1;
+                    values.push(m as f64 * 2f64.powi(e));
+                }
+            }
+        }
+        // 2086845729129147.25 lies halfway between ...147.2 and ...147.3.
+        values.push(2_086_845_729_129_147.0 + 0.25);
+        let mut buf = ryu::Buffer::new();
+        let mut ties = 0;
+        for x in values {
+            let text = shortest(&mut buf, x);
+            ties += usize::from(matches!(text, std::borrow::Cow::Owned(_)));
+            assert_eq!(text, by_std(x), "bits {:#x}", x.to_bits());
+        }
+        // Ryu's own text differs from the standard's at each of these.
+        assert!(ties > 100, "{ties} halfway cases");
+    }
 }
