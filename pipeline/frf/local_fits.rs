@@ -103,8 +103,8 @@ impl Gathered {
         }
         for (i, j) in window.enumerate() {
             let w = suu[j];
-            // Not `w <= 0.0`: a NaN Suu excites nothing either.
-            if !matches!(w.partial_cmp(&0.0), Some(std::cmp::Ordering::Greater)) {
+            // A NaN Suu excites nothing either.
+            if w.is_nan() || w <= 0.0 {
                 continue;
             }
             let hj = h.map_or(Complex::new(0.0, 0.0), |h| h[i]);
@@ -305,30 +305,25 @@ mod tests {
         let mut second = frf(h_of(0.7));
         second.local_fits = first.local_fits.clone();
         second.h[200] = Complex::new(f64::NAN, 0.0);
-        let fresh = |f: &Frf| {
-            (0..f.h.len())
+        // Every bin's density through the memo, and each made afresh.
+        let memo_is_fresh = |f: &Frf| {
+            let bits = |d: Vec<f64>| d.into_iter().map(f64::to_bits).collect::<Vec<_>>();
+            let fresh = (0..f.h.len())
                 .map(|k| etfe_local_noise_density(f, k, None))
-                .collect::<Vec<_>>()
+                .collect();
+            assert_eq!(
+                bits(etfe_local_noise_densities(f, 0..f.h.len())),
+                bits(fresh)
+            );
         };
-        let memo = etfe_local_noise_densities(&second, 0..nb);
-        assert_eq!(
-            memo.iter().map(|d| d.to_bits()).collect::<Vec<_>>(),
-            fresh(&second)
-                .iter()
-                .map(|d| d.to_bits())
-                .collect::<Vec<_>>()
-        );
+        memo_is_fresh(&second);
         // The bins next to the non-finite one and the head's top are
         // made afresh; the rest come from the memo.
         let table = first.local_fits.0.get().expect("made on first use");
         assert!(table.at(100, &(93..108), &second.suu).is_some());
         let head = second.head(30.0, 0);
         assert!(head.h.len() < nb);
-        let memo = etfe_local_noise_densities(&head, 0..head.h.len());
-        assert_eq!(
-            memo.iter().map(|d| d.to_bits()).collect::<Vec<_>>(),
-            fresh(&head).iter().map(|d| d.to_bits()).collect::<Vec<_>>()
-        );
+        memo_is_fresh(&head);
         let top = head.h.len() - 1;
         let window = local_window(top, head.h.len(), ETFE_LOCAL_HALF_WIDTH).unwrap();
         assert!(
@@ -340,13 +335,6 @@ mod tests {
         third.local_fits = first.local_fits.clone();
         third.suu[100] *= 2.0;
         assert!(table.at(100, &(93..108), &third.suu).is_none());
-        let memo = etfe_local_noise_densities(&third, 0..nb);
-        assert_eq!(
-            memo.iter().map(|d| d.to_bits()).collect::<Vec<_>>(),
-            fresh(&third)
-                .iter()
-                .map(|d| d.to_bits())
-                .collect::<Vec<_>>()
-        );
+        memo_is_fresh(&third);
     }
 }
