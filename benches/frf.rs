@@ -3,7 +3,9 @@
 //! no-specimen plant of Eq. 36, Welch H1 with 8192-sample Hann segments at
 //! 50 % overlap (the manifest's defaults). And the whole-record ETFE a run
 //! makes (coherence from 8192-sample segments, the default's rectangular
-//! window), whole and with only the bins up to 35 Hz an analysis keeps.
+//! window), whole and with only the bins up to 35 Hz an analysis keeps,
+//! for one output and for two (a run's displacement and force). And one real transform each way, at the paper's record length and at a
+//! night's (120 s at 1 kHz): the unit a run's cost is counted in.
 //!
 //! `cargo bench --bench frf`
 
@@ -81,8 +83,56 @@ fn bench_frf(c: &mut Criterion) {
     group.bench_function("etfe_up_to_35hz/348160_samples", |b| {
         b.iter(|| frf::estimate_up_to(black_box(&u), black_box(&y), FS_HZ, &etfe, kept).unwrap())
     });
+    // A run's displacement and force FRFs (here the response and its
+    // negative), the command's transforms made once for both.
+    let force: Vec<f64> = y.iter().map(|v| -v).collect();
+    let outputs = [(&y[..], &etfe), (&force[..], &etfe)];
+    group.bench_function("etfe_two_outputs_up_to_35hz/348160_samples", |b| {
+        b.iter(|| frf::estimate_many_up_to(black_box(&u), &outputs, FS_HZ, kept).unwrap())
+    });
     group.finish();
 }
 
-criterion_group!(benches, bench_frf);
+/// One real-to-complex and one complex-to-real transform, planned once as
+/// every stage plans them (`servoid::fft`), on the chirp's samples.
+fn bench_transforms(c: &mut Criterion) {
+    let (u, _) = synthetic_log();
+    let mut group = c.benchmark_group("fft");
+    for n in [120_000, u.len()] {
+        let forward = servoid::fft::real_forward(n);
+        let inverse = servoid::fft::real_inverse(n);
+        let mut input = u[..n].to_vec();
+        let mut spectrum = forward.make_output_vec();
+        let mut scratch = forward.make_scratch_vec();
+        group.throughput(Throughput::Elements(n as u64));
+        group.bench_function(format!("real_forward/{n}_samples"), |b| {
+            b.iter(|| {
+                input.copy_from_slice(&u[..n]);
+                forward
+                    .process_with_scratch(black_box(&mut input), &mut spectrum, &mut scratch)
+                    .unwrap()
+            })
+        });
+        let mut bins = spectrum.clone();
+        let mut output = inverse.make_output_vec();
+        let mut scratch = inverse.make_scratch_vec();
+        group.bench_function(format!("real_inverse/{n}_samples"), |b| {
+            b.iter(|| {
+                bins.copy_from_slice(&spectrum);
+                // The bins a real signal's transform has no imaginary part at.
+                bins[0].im = 0.0;
+                if n % 2 == 0 {
+                    let last = bins.len() - 1;
+                    bins[last].im = 0.0;
+                }
+                inverse
+                    .process_with_scratch(black_box(&mut bins), &mut output, &mut scratch)
+                    .unwrap()
+            })
+        });
+    }
+    group.finish();
+}
+
+criterion_group!(benches, bench_frf, bench_transforms);
 criterion_main!(benches);

@@ -646,24 +646,20 @@ fn estimate_frfs(
     let (lo, hi) = run.band_hz;
     let keep_hz = hi.max(frf::KEPT_MAX_HZ);
     let kept = (keep_hz, frf::VARIANCE_REACH_BINS);
-    let (h, total) =
-        frf::estimate_up_to(&log.command_m, &log.displacement_m, fs, &choice.plan, kept)
-            .map_err(frf_err)?;
-    let fraction = band_power_fraction(&h, total, run.band_hz);
-    let force_frf = match &log.force_n {
-        Some(f) => {
-            // The force path's transient is not fitted: its FRF is shown,
-            // not fitted run by run.
-            let plan = FrfPlan {
-                transient: None,
-                ..choice.plan.clone()
-            };
-            let (ff, _) =
-                frf::estimate_up_to(&log.command_m, f, fs, &plan, kept).map_err(frf_err)?;
-            Some(ff)
-        }
-        None => None,
+    // The force path's transient is not fitted: its FRF is shown, not
+    // fitted run by run. Both FRFs read the one command's transforms.
+    let force_plan = FrfPlan {
+        transient: None,
+        ..choice.plan.clone()
     };
+    let mut outputs = vec![(&log.displacement_m[..], &choice.plan)];
+    outputs.extend(log.force_n.as_deref().map(|f| (f, &force_plan)));
+    let mut estimates = frf::estimate_many_up_to(&log.command_m, &outputs, fs, kept)
+        .map_err(frf_err)?
+        .into_iter();
+    let (h, total) = estimates.next().expect("the displacement's FRF");
+    let force_frf = estimates.next().map(|(ff, _)| ff);
+    let fraction = band_power_fraction(&h, total, run.band_hz);
     if fraction < MIN_BAND_POWER_FRACTION {
         return Err(tf_error(
             path,

@@ -161,6 +161,56 @@ pub fn estimate_up_to(
     Ok((frf, total))
 }
 
+/// [`estimate_up_to`] of one command `u` to each of `outputs`, each with
+/// its own plan, every estimate the same bits as made alone. Where every
+/// plan is the same whole-record estimate but for the transient (a run's
+/// displacement and force), the command's whole-record transform and its
+/// coherence segments' transforms are made once for all of them.
+pub fn estimate_many_up_to(
+    u: &[f64],
+    outputs: &[(&[f64], &FrfPlan)],
+    sample_rate_hz: f64,
+    keep: (f64, usize),
+) -> Result<Vec<(Frf, f64)>, FrfError> {
+    let shared = outputs.first().map(|(_, p)| *p).filter(|first| {
+        matches!(first.estimator, Estimator::Etfe | Estimator::Lpm)
+            && outputs.iter().all(|(_, p)| same_but_transient(p, first))
+    });
+    let Some(plan) = shared else {
+        return outputs
+            .iter()
+            .map(|(y, plan)| estimate_up_to(u, y, sample_rate_hz, plan, keep))
+            .collect();
+    };
+    let outputs: Vec<(&[f64], Option<f64>)> =
+        outputs.iter().map(|(y, p)| (*y, p.transient)).collect();
+    let estimates = etfe_or_lpm_many_up_to(
+        u,
+        &outputs,
+        sample_rate_hz,
+        plan.window,
+        (plan.detrend, plan.segment_length, plan.overlap),
+        plan.estimator == Estimator::Lpm,
+        Some(keep),
+    )?;
+    Ok(estimates
+        .into_iter()
+        .map(|(frf, total)| (frf, total.expect("a kept estimate sums the input's power")))
+        .collect())
+}
+
+/// Whether two plans make the same whole-record estimate of the command,
+/// differing at most in the transient (which decides only whether the
+/// command's transform is kept) and in how the fit reads the noise.
+fn same_but_transient(a: &FrfPlan, b: &FrfPlan) -> bool {
+    let bare = |p: &FrfPlan| FrfPlan {
+        transient: None,
+        model_noise: false,
+        ..p.clone()
+    };
+    bare(a) == bare(b)
+}
+
 /// The plan's whole-record estimate (ETFE or LPM) by [`etfe_or_lpm_up_to`];
 /// `None` for a Welch estimator.
 fn whole_record(
@@ -318,17 +368,44 @@ fn etfe_or_lpm_up_to(
     y: &[f64],
     sample_rate_hz: f64,
     window_kind: Window,
-    (detrend_kind, coherence_segment_length, coherence_overlap): (Detrend, usize, f64),
+    segments: (Detrend, usize, f64),
     (lpm, keep_input): (bool, Option<f64>),
     keep: Option<(f64, usize)>,
 ) -> Result<(Frf, Option<f64>), FrfError> {
-    check_inputs(
+    let mut one = etfe_or_lpm_many_up_to(
         u,
-        y,
+        &[(y, keep_input)],
         sample_rate_hz,
-        coherence_segment_length,
-        coherence_overlap,
+        window_kind,
+        segments,
+        lpm,
+        keep,
     )?;
+    Ok(one.pop().expect("one estimate for one output"))
+}
+
+/// [`etfe_or_lpm_up_to`] of `u` to each output `y` (with its `keep_input`):
+/// the command's whole-record transform, its coherence segments' and the
+/// input's summed density are made once, and each output's estimate is
+/// the one it would get alone, to the bit.
+fn etfe_or_lpm_many_up_to(
+    u: &[f64],
+    outputs: &[(&[f64], Option<f64>)],
+    sample_rate_hz: f64,
+    window_kind: Window,
+    (detrend_kind, coherence_segment_length, coherence_overlap): (Detrend, usize, f64),
+    lpm: bool,
+    keep: Option<(f64, usize)>,
+) -> Result<Vec<(Frf, Option<f64>)>, FrfError> {
+    for (y, _) in outputs {
+        check_inputs(
+            u,
+            y,
+            sample_rate_hz,
+            coherence_segment_length,
+            coherence_overlap,
+        )?;
+    }
     let n = u.len();
     // A rectangular window is not materialised: n ones would be 8n bytes of
     // fresh memory for nothing, and first touches of fresh pages are a large
@@ -345,8 +422,8 @@ fn etfe_or_lpm_up_to(
         detrend_kind,
     };
 
-    // The two whole-record transforms and the Welch pass for the coherence
-    // are independent: run them side by side (each with its own plan; the
+    // The whole-record transforms and the Welch pass for the coherence are
+    // independent: run them side by side (each with its own plan; the
     // arithmetic, and so every bit of the result, is the same as in series).
     let transform_of = |x: &[f64]| {
         let mut transform = SegmentTransform::new(n);
@@ -354,62 +431,89 @@ fn etfe_or_lpm_up_to(
         transform.run(x, w.as_deref(), detrend_kind, &mut out);
         out
     };
-    let ((mut h, mut suy), coarse) = rayon::join(
-        || rayon::join(|| transform_of(u), || transform_of(y)),
-        || welch_spectra(u, y, sample_rate_hz, &segments),
+    let ys: Vec<&[f64]> = outputs.iter().map(|(y, _)| *y).collect();
+    let ((u_dft, y_dfts), coarse) = rayon::join(
+        || {
+            rayon::join(
+                || transform_of(u),
+                || ys.par_iter().map(|y| transform_of(y)).collect::<Vec<_>>(),
+            )
+        },
+        || welch_spectra_many(u, &ys, sample_rate_hz, &segments),
     );
-    // The LPM works on the transforms themselves: kept before they become
-    // H and Suy in place.
-    let transforms = lpm.then(|| (h.clone(), suy.clone()));
-    let total = keep.map(|(f_hz, extra)| {
-        // Each bin's Suu as `etfe_from_transforms` forms it, summed in
-        // order, before the bins above the kept ones are dropped.
-        let total = (1..h.len())
+    // Each bin's Suu as `etfe_from_transforms` forms it, summed in order
+    // over the whole transform, before the bins above the kept ones are
+    // dropped; and how many are kept, by the frequencies `bin_frequencies`
+    // gives them (the LPM smooths its noise over its neighbours).
+    let total = keep.map(|_| {
+        (1..u_dft.len())
             .map(|k| {
                 let s = scale * one_sided_factor(k, n);
-                s * h[k].norm_sqr()
+                s * u_dft[k].norm_sqr()
             })
-            .sum();
-        // The bins `keep_up_to` keeps, by the frequencies `bin_frequencies`
-        // gives them; the LPM smooths its noise over its neighbours.
+            .sum()
+    });
+    let kept_bins = keep.map(|(f_hz, extra)| {
         let resolution_hz = sample_rate_hz / n as f64;
-        let below = (0..h.len())
+        let below = (0..u_dft.len())
             .take_while(|&k| k as f64 * resolution_hz <= f_hz)
             .count();
         let reach = if lpm { lpm::SMOOTH_HALF_WIDTH } else { 0 };
-        let bins = below.saturating_add(extra).saturating_add(reach);
-        for v in [&mut h, &mut suy] {
-            v.truncate(bins);
-            v.shrink_to_fit();
+        below.saturating_add(extra).saturating_add(reach)
+    });
+    // The command's transform becomes each output's H in place: a copy for
+    // all but the last, which takes it.
+    let mut u_dft = Some(u_dft);
+    let last = outputs.len().saturating_sub(1);
+    let mut estimates = Vec::with_capacity(outputs.len());
+    for (i, (((_, keep_input), mut suy), coarse)) in
+        outputs.iter().zip(y_dfts).zip(coarse).enumerate()
+    {
+        let mut h = if i == last {
+            u_dft.take().expect("the last output takes the transform")
+        } else {
+            u_dft
+                .clone()
+                .expect("the transform is kept for the last output")
+        };
+        // The LPM works on the transforms themselves: kept before they
+        // become H and Suy in place.
+        let transforms = lpm.then(|| (h.clone(), suy.clone()));
+        if let Some(bins) = kept_bins {
+            for v in [&mut h, &mut suy] {
+                v.truncate(bins);
+                v.shrink_to_fit();
+            }
         }
-        total
-    });
-    // Up to the band's top only: a copy of a 14 M-sample record's whole
-    // transform was 115 MB.
-    let input_dft = keep_input.map(|f_hz| {
-        let bins = ((f_hz * n as f64 / sample_rate_hz).floor() as usize + 1 + VARIANCE_REACH_BINS)
-            .min(h.len());
-        h[..bins].to_vec()
-    });
-    let coarse_coherence = coherence_of(&coarse.suu, &coarse.syy, &coarse.suy);
-    let mut frf = etfe_from_transforms(
-        h,
-        suy,
-        n,
-        scale,
-        sample_rate_hz,
-        &coarse_coherence,
-        sample_rate_hz / coherence_segment_length as f64,
-    );
-    frf.input_dft = input_dft;
-    let mut frf = match transforms {
-        Some((u_k, y_k)) => lpm::take_out_transient(frf, &u_k, &y_k),
-        None => frf,
-    };
-    if let Some((f_hz, extra)) = keep {
-        frf.keep_up_to(f_hz, extra);
+        // Up to the band's top only: a copy of a 14 M-sample record's whole
+        // transform was 115 MB.
+        let input_dft = keep_input.map(|f_hz| {
+            let bins =
+                ((f_hz * n as f64 / sample_rate_hz).floor() as usize + 1 + VARIANCE_REACH_BINS)
+                    .min(h.len());
+            h[..bins].to_vec()
+        });
+        let coarse_coherence = coherence_of(&coarse.suu, &coarse.syy, &coarse.suy);
+        let mut frf = etfe_from_transforms(
+            h,
+            suy,
+            n,
+            scale,
+            sample_rate_hz,
+            &coarse_coherence,
+            sample_rate_hz / coherence_segment_length as f64,
+        );
+        frf.input_dft = input_dft;
+        let mut frf = match transforms {
+            Some((u_k, y_k)) => lpm::take_out_transient(frf, &u_k, &y_k),
+            None => frf,
+        };
+        if let Some((f_hz, extra)) = keep {
+            frf.keep_up_to(f_hz, extra);
+        }
+        estimates.push((frf, total));
     }
-    Ok((frf, total))
+    Ok(estimates)
 }
 
 /// The ETFE from the whole-record transforms U (in `h`) and Y (in `suy`),
@@ -1137,6 +1241,20 @@ struct Segmenting {
 }
 
 fn welch_spectra(u: &[f64], y: &[f64], sample_rate_hz: f64, segments: &Segmenting) -> Spectra {
+    welch_spectra_many(u, &[y], sample_rate_hz, segments)
+        .pop()
+        .expect("one output's spectra")
+}
+
+/// [`welch_spectra`] of `u` with each of `ys`, each segment of `u`
+/// transformed once for all of them; each output's sums are added in the
+/// same order as alone, so their bits are the same.
+fn welch_spectra_many(
+    u: &[f64],
+    ys: &[&[f64]],
+    sample_rate_hz: f64,
+    segments: &Segmenting,
+) -> Vec<Spectra> {
     let Segmenting {
         length: l,
         overlap,
@@ -1153,29 +1271,43 @@ fn welch_spectra(u: &[f64], y: &[f64], sample_rate_hz: f64, segments: &Segmentin
     let mut uf = transform.make_output();
     let mut yf = transform.make_output();
     let nb = uf.len();
-    let mut suu = vec![0.0; nb];
-    let mut syy = vec![0.0; nb];
-    let mut suy = vec![Complex::new(0.0, 0.0); nb];
+    let mut sums: Vec<_> = ys
+        .iter()
+        .map(|_| {
+            (
+                vec![0.0; nb],
+                vec![0.0; nb],
+                vec![Complex::new(0.0, 0.0); nb],
+            )
+        })
+        .collect();
 
     for s in 0..n_segments {
         let segment = s * hop..s * hop + l;
         transform.run(&u[segment.clone()], Some(&w), detrend_kind, &mut uf);
-        transform.run(&y[segment], Some(&w), detrend_kind, &mut yf);
-        accumulate_segment(&uf, &yf, (&mut suu, &mut syy, &mut suy));
+        for (y, (suu, syy, suy)) in ys.iter().zip(&mut sums) {
+            transform.run(&y[segment.clone()], Some(&w), detrend_kind, &mut yf);
+            accumulate_segment(&uf, &yf, (suu, syy, suy));
+        }
     }
-    to_density(
-        (&mut suu, &mut syy, &mut suy),
-        sample_rate_hz,
-        &w,
-        n_segments,
-    );
-    Spectra {
-        suu,
-        syy,
-        suy,
-        n_segments,
-        effective_averages: effective_averages(&w, hop, n_segments),
-    }
+    let effective_averages = effective_averages(&w, hop, n_segments);
+    sums.into_iter()
+        .map(|(mut suu, mut syy, mut suy)| {
+            to_density(
+                (&mut suu, &mut syy, &mut suy),
+                sample_rate_hz,
+                &w,
+                n_segments,
+            );
+            Spectra {
+                suu,
+                syy,
+                suy,
+                n_segments,
+                effective_averages,
+            }
+        })
+        .collect()
 }
 
 /// Adds one segment's |U|^2, |Y|^2 and conj(U) Y to the running sums, bin

@@ -1349,3 +1349,68 @@ fn the_windows_holding_a_bin_are_those_that_hold_it() {
         }
     }
 }
+
+/// One command to several outputs: each estimate and total the bits
+/// `estimate_up_to` gives it alone, whether the command's transforms are
+/// shared (the ETFE and LPM with the transient kept for the first output
+/// only, as a run's displacement and force take them) or each is made on
+/// its own (a Welch estimator; plans that differ beyond the transient).
+#[test]
+fn many_outputs_get_the_bits_each_gets_alone() {
+    let (u, y_clean) = filtered_white(43, 20_000);
+    let y: Vec<f64> = y_clean
+        .iter()
+        .zip(&white(44, u.len(), 0.05))
+        .map(|(a, b)| a + b)
+        .collect();
+    let f: Vec<f64> = y_clean
+        .iter()
+        .zip(&white(45, u.len(), 0.2))
+        .map(|(a, b)| 3.0 * a + b)
+        .collect();
+    let plan = |estimator, transient, window| FrfPlan {
+        estimator,
+        segment_length: 1000,
+        overlap: 0.5,
+        window,
+        detrend: Detrend::Linear,
+        transient,
+        model_noise: false,
+    };
+    let cases = [
+        (Estimator::Etfe, Window::Rectangular, Window::Rectangular),
+        (Estimator::Etfe, Window::Hann, Window::Hann),
+        (Estimator::Lpm, Window::Rectangular, Window::Rectangular),
+        (Estimator::H1, Window::Hann, Window::Hann),
+        (Estimator::Etfe, Window::Rectangular, Window::Hann),
+    ];
+    for (estimator, first_window, second_window) in cases {
+        let first = plan(estimator, Some(7.0), first_window);
+        let second = plan(estimator, None, second_window);
+        for keep in [(8.0, VARIANCE_REACH_BINS), (1e9, 0)] {
+            let label = format!("{estimator:?} {first_window:?}/{second_window:?} {keep:?}");
+            let many = estimate_many_up_to(&u, &[(&y[..], &first), (&f[..], &second)], FS_HZ, keep)
+                .unwrap();
+            assert_eq!(many.len(), 2, "{label}");
+            for ((got, got_total), (x, p)) in many.iter().zip([(&y, &first), (&f, &second)]) {
+                let (alone, total) = estimate_up_to(&u, x, FS_HZ, p, keep).unwrap();
+                assert_eq!(bits(got), bits(&alone), "{label}");
+                assert_eq!(got.variance, alone.variance, "{label}");
+                assert_eq!(got.input_dft, alone.input_dft, "{label}");
+                assert_eq!(got_total.to_bits(), total.to_bits(), "{label}");
+            }
+            // The transient keeps the whole-record estimate's command
+            // transform for the first output only.
+            let whole_record = estimator != Estimator::H1;
+            assert_eq!(many[0].0.input_dft.is_some(), whole_record, "{label}");
+            assert!(many[1].0.input_dft.is_none(), "{label}");
+        }
+    }
+    // An output of the wrong length is refused as alone.
+    let short = &f[..f.len() - 1];
+    let p = plan(Estimator::Etfe, None, Window::Rectangular);
+    assert_eq!(
+        estimate_many_up_to(&u, &[(&y[..], &p), (short, &p)], FS_HZ, (8.0, 0)).unwrap_err(),
+        estimate_up_to(&u, short, FS_HZ, &p, (8.0, 0)).unwrap_err()
+    );
+}
