@@ -172,31 +172,27 @@ pub fn estimate_many_up_to(
     sample_rate_hz: f64,
     keep: (f64, usize),
 ) -> Result<Vec<(Frf, f64)>, FrfError> {
-    let shared = outputs.first().map(|(_, p)| *p).filter(|first| {
-        matches!(first.estimator, Estimator::Etfe | Estimator::Lpm)
-            && outputs.iter().all(|(_, p)| same_but_transient(p, first))
+    // One plan for all (but the transient): a whole-record plan shares
+    // the command's transforms.
+    let shared = outputs
+        .first()
+        .map(|(_, p)| *p)
+        .filter(|first| outputs.iter().all(|(_, p)| same_but_transient(p, first)));
+    let whole = shared.and_then(|plan| {
+        let outputs: Vec<(&[f64], Option<f64>)> =
+            outputs.iter().map(|(y, p)| (*y, p.transient)).collect();
+        whole_record_many(u, &outputs, sample_rate_hz, plan, Some(keep))
     });
-    let Some(plan) = shared else {
-        return outputs
+    match whole {
+        Some(estimates) => Ok(estimates?
+            .into_iter()
+            .map(|(frf, total)| (frf, total.expect("a kept estimate sums the input's power")))
+            .collect()),
+        None => outputs
             .iter()
             .map(|(y, plan)| estimate_up_to(u, y, sample_rate_hz, plan, keep))
-            .collect();
-    };
-    let outputs: Vec<(&[f64], Option<f64>)> =
-        outputs.iter().map(|(y, p)| (*y, p.transient)).collect();
-    let estimates = etfe_or_lpm_many_up_to(
-        u,
-        &outputs,
-        sample_rate_hz,
-        plan.window,
-        (plan.detrend, plan.segment_length, plan.overlap),
-        plan.estimator == Estimator::Lpm,
-        Some(keep),
-    )?;
-    Ok(estimates
-        .into_iter()
-        .map(|(frf, total)| (frf, total.expect("a kept estimate sums the input's power")))
-        .collect())
+            .collect(),
+    }
 }
 
 /// Whether two plans make the same whole-record estimate of the command,
@@ -220,14 +216,31 @@ fn whole_record(
     plan: &FrfPlan,
     keep: Option<(f64, usize)>,
 ) -> Option<Result<(Frf, Option<f64>), FrfError>> {
+    whole_record_many(u, &[(y, plan.transient)], sample_rate_hz, plan, keep)
+        .map(|one| one.map(|mut one| one.pop().expect("one estimate for one output")))
+}
+
+/// Each output's whole-record estimate and, when its bins are kept, the
+/// input's density summed over every bin but DC.
+type Estimates = Vec<(Frf, Option<f64>)>;
+
+/// [`whole_record`] of `u` to each output `y`, each with its own transient
+/// (`keep_input` of [`etfe_or_lpm_many_up_to`]).
+fn whole_record_many(
+    u: &[f64],
+    outputs: &[(&[f64], Option<f64>)],
+    sample_rate_hz: f64,
+    plan: &FrfPlan,
+    keep: Option<(f64, usize)>,
+) -> Option<Result<Estimates, FrfError>> {
     matches!(plan.estimator, Estimator::Etfe | Estimator::Lpm).then(|| {
-        etfe_or_lpm_up_to(
+        etfe_or_lpm_many_up_to(
             u,
-            y,
+            outputs,
             sample_rate_hz,
             plan.window,
             (plan.detrend, plan.segment_length, plan.overlap),
-            (plan.estimator == Estimator::Lpm, plan.transient),
+            plan.estimator == Estimator::Lpm,
             keep,
         )
     })
@@ -396,7 +409,7 @@ fn etfe_or_lpm_many_up_to(
     (detrend_kind, coherence_segment_length, coherence_overlap): (Detrend, usize, f64),
     lpm: bool,
     keep: Option<(f64, usize)>,
-) -> Result<Vec<(Frf, Option<f64>)>, FrfError> {
+) -> Result<Estimates, FrfError> {
     for (y, _) in outputs {
         check_inputs(
             u,
@@ -432,7 +445,7 @@ fn etfe_or_lpm_many_up_to(
         out
     };
     let ys: Vec<&[f64]> = outputs.iter().map(|(y, _)| *y).collect();
-    let ((u_dft, y_dfts), coarse) = rayon::join(
+    let ((mut u_dft, y_dfts), coarse) = rayon::join(
         || {
             rayon::join(
                 || transform_of(u),
@@ -441,45 +454,98 @@ fn etfe_or_lpm_many_up_to(
         },
         || welch_spectra_many(u, &ys, sample_rate_hz, &segments),
     );
-    // Each bin's Suu as `etfe_from_transforms` forms it, summed in order
-    // over the whole transform, before the bins above the kept ones are
-    // dropped; and how many are kept, by the frequencies `bin_frequencies`
-    // gives them (the LPM smooths its noise over its neighbours).
-    let total = keep.map(|_| {
-        (1..u_dft.len())
-            .map(|k| {
-                let s = scale * one_sided_factor(k, n);
-                s * u_dft[k].norm_sqr()
-            })
-            .sum()
-    });
-    let kept_bins = keep.map(|(f_hz, extra)| {
-        let resolution_hz = sample_rate_hz / n as f64;
-        let below = (0..u_dft.len())
-            .take_while(|&k| k as f64 * resolution_hz <= f_hz)
-            .count();
-        let reach = if lpm { lpm::SMOOTH_HALF_WIDTH } else { 0 };
-        below.saturating_add(extra).saturating_add(reach)
-    });
-    // The command's transform becomes each output's H in place: a copy for
-    // all but the last, which takes it.
-    let mut u_dft = Some(u_dft);
+    let total = keep.map(|_| input_total(&u_dft, n, scale));
+    let kept_bins = keep.map(|keep| kept_bins(u_dft.len(), n, sample_rate_hz, keep, lpm));
+    // The command's transform becomes each output's H in place: the last
+    // output takes it, the others a copy of what they read of it (all of
+    // it for the LPM, which works on the whole transforms; else the kept
+    // bins, as a fresh copy of the whole touches pages it then drops).
+    let read = match (lpm, kept_bins) {
+        (false, Some(bins)) => bins.min(u_dft.len()),
+        _ => u_dft.len(),
+    };
     let last = outputs.len().saturating_sub(1);
+    let finish = Finish {
+        n,
+        scale,
+        sample_rate_hz,
+        coarse_resolution_hz: sample_rate_hz / coherence_segment_length as f64,
+        lpm,
+        kept_bins,
+        keep,
+    };
     let mut estimates = Vec::with_capacity(outputs.len());
-    for (i, (((_, keep_input), mut suy), coarse)) in
-        outputs.iter().zip(y_dfts).zip(coarse).enumerate()
+    for (i, (((_, keep_input), suy), coarse)) in outputs.iter().zip(y_dfts).zip(coarse).enumerate()
     {
-        let mut h = if i == last {
-            u_dft.take().expect("the last output takes the transform")
+        let h = if i == last {
+            std::mem::take(&mut u_dft)
         } else {
-            u_dft
-                .clone()
-                .expect("the transform is kept for the last output")
+            u_dft[..read].to_vec()
         };
+        estimates.push((finish.estimate(h, suy, &coarse, *keep_input), total));
+    }
+    Ok(estimates)
+}
+
+/// The input's density summed over every bin of its whole transform `u`
+/// (of `n` samples) but DC: each bin's Suu as `etfe_from_transforms`
+/// forms it with `scale`, in bin order.
+fn input_total(u: &[Complex<f64>], n: usize, scale: f64) -> f64 {
+    (1..u.len())
+        .map(|k| {
+            let s = scale * one_sided_factor(k, n);
+            s * u[k].norm_sqr()
+        })
+        .sum()
+}
+
+/// How many of a transform's `nb` bins an estimate up to `f_hz` with
+/// `extra` beyond keeps, by the frequencies `bin_frequencies` gives them,
+/// and for the LPM the reach of its noise smoothing beyond.
+fn kept_bins(
+    nb: usize,
+    n: usize,
+    sample_rate_hz: f64,
+    (f_hz, extra): (f64, usize),
+    lpm: bool,
+) -> usize {
+    let resolution_hz = sample_rate_hz / n as f64;
+    let below = (0..nb)
+        .take_while(|&k| k as f64 * resolution_hz <= f_hz)
+        .count();
+    let reach = if lpm { lpm::SMOOTH_HALF_WIDTH } else { 0 };
+    below.saturating_add(extra).saturating_add(reach)
+}
+
+/// What makes one output's whole-record estimate from its transforms, the
+/// same for every output of one command.
+struct Finish {
+    n: usize,
+    scale: f64,
+    sample_rate_hz: f64,
+    coarse_resolution_hz: f64,
+    lpm: bool,
+    kept_bins: Option<usize>,
+    keep: Option<(f64, usize)>,
+}
+
+impl Finish {
+    /// The estimate from the command's transform `h` and the output's
+    /// `suy` (each whole, or the command's cut to the kept bins), the
+    /// output's Welch `coarse` spectra for the coherence and its
+    /// `keep_input`.
+    fn estimate(
+        &self,
+        mut h: Vec<Complex<f64>>,
+        mut suy: Vec<Complex<f64>>,
+        coarse: &Spectra,
+        keep_input: Option<f64>,
+    ) -> Frf {
+        let (n, sample_rate_hz) = (self.n, self.sample_rate_hz);
         // The LPM works on the transforms themselves: kept before they
         // become H and Suy in place.
-        let transforms = lpm.then(|| (h.clone(), suy.clone()));
-        if let Some(bins) = kept_bins {
+        let transforms = self.lpm.then(|| (h.clone(), suy.clone()));
+        if let Some(bins) = self.kept_bins {
             for v in [&mut h, &mut suy] {
                 v.truncate(bins);
                 v.shrink_to_fit();
@@ -498,22 +564,21 @@ fn etfe_or_lpm_many_up_to(
             h,
             suy,
             n,
-            scale,
+            self.scale,
             sample_rate_hz,
             &coarse_coherence,
-            sample_rate_hz / coherence_segment_length as f64,
+            self.coarse_resolution_hz,
         );
         frf.input_dft = input_dft;
         let mut frf = match transforms {
             Some((u_k, y_k)) => lpm::take_out_transient(frf, &u_k, &y_k),
             None => frf,
         };
-        if let Some((f_hz, extra)) = keep {
+        if let Some((f_hz, extra)) = self.keep {
             frf.keep_up_to(f_hz, extra);
         }
-        estimates.push((frf, total));
+        frf
     }
-    Ok(estimates)
 }
 
 /// The ETFE from the whole-record transforms U (in `h`) and Y (in `suy`),
