@@ -597,3 +597,90 @@ fn init_on_a_real_folder_warns_what_it_skipped_and_renamed() {
         "the same rig as the hand-written manifest"
     );
 }
+
+/// A European spreadsheet's export of a night's logs: fields delimited by
+/// `;`, numbers with a decimal comma, columns named in German and Spanish
+/// (`Zeit [s]`, `Consigna [mm]`, `Weg [mm]`, `Kraft [kN]`). init finds the
+/// channels and writes the delimiter and the decimal mark, and the filled
+/// manifest gives the same rig, to the last digit, as the logs written
+/// with points and commas.
+#[test]
+fn init_reads_a_european_export_with_its_decimal_comma() {
+    use crate::util::PaperSweep;
+    let dir = scratch();
+    let text = PaperSweep {
+        duration_s: 20.0,
+        log_format: "csv",
+        ..PaperSweep::default()
+    }
+    .text();
+    let sim = crate::util::write(dir.path(), "sim.toml", &text);
+    let o = servoid_into(
+        dir.path(),
+        "simulate",
+        &sim,
+        &dir.path().join("sim"),
+        &["--run"],
+    );
+    assert_eq!(o.code, 0, "{}", o.stderr);
+    let reference = toml_of(&dir.path().join("sim/campaign.toml"));
+    let logs = dir.path().join("export");
+    std::fs::create_dir(&logs).unwrap();
+    for entry in std::fs::read_dir(dir.path().join("sim/logs")).unwrap() {
+        let p = entry.unwrap().path();
+        let body = std::fs::read_to_string(&p).unwrap();
+        let mut lines = body.lines();
+        assert_eq!(
+            lines.next(),
+            Some("time_s,command_mm,displacement_mm,force_kn")
+        );
+        let mut out = String::from("Zeit [s];Consigna [mm];Weg [mm];Kraft [kN]\n");
+        for l in lines {
+            out.push_str(&l.replace(',', ";").replace('.', ","));
+            out.push('\n');
+        }
+        std::fs::write(logs.join(p.file_name().unwrap()), out).unwrap();
+    }
+
+    let o = servoid(dir.path(), &["init", "export", "--out", "export.toml"]);
+    assert_eq!(o.code, 0, "{}", o.stderr);
+    let mut t = toml_of(&dir.path().join("export.toml"));
+    for (ch, column, unit) in [
+        ("time", "Zeit [s]", "s"),
+        ("command", "Consigna [mm]", "mm"),
+        ("displacement", "Weg [mm]", "mm"),
+        ("force", "Kraft [kN]", "kN"),
+    ] {
+        assert_eq!(t["channels"][ch]["column"].as_str(), Some(column), "{ch}");
+        assert_eq!(t["channels"][ch]["unit"].as_str(), Some(unit), "{ch}");
+    }
+    for r in runs(&t) {
+        let csv = &r["data"]["csv"];
+        assert_eq!(csv["delimiter"].as_str(), Some(";"), "{r}");
+        assert_eq!(csv["decimal"].as_str(), Some(","), "{r}");
+    }
+    fill_rig(&mut t, &reference);
+    let reference_runs = runs(&reference).clone();
+    for r in t["runs"].as_array_mut().unwrap() {
+        let id = r["id"].as_str().unwrap().to_string();
+        let want = reference_runs
+            .iter()
+            .find(|x| x["id"].as_str() == Some(id.as_str()))
+            .unwrap();
+        let r = r.as_table_mut().unwrap();
+        r.insert("p_gain".into(), want["p_gain"].clone());
+        if let Some(s) = want.get("specimen") {
+            r.insert("specimen".into(), s.clone());
+        }
+    }
+    std::fs::write(dir.path().join("export.toml"), toml::to_string(&t).unwrap()).unwrap();
+    let o = servoid(dir.path(), &["check", "export.toml"]);
+    assert_eq!(o.code, 0, "{}", o.stderr);
+    let o = servoid(dir.path(), &["run", "export.toml", "--out", "filled"]);
+    assert_eq!(o.code, 0, "{}", o.stderr);
+    assert_eq!(
+        rig_of(&dir.path().join("filled/results.json")),
+        rig_of(&dir.path().join("sim/results.json")),
+        "the same rig as the logs with decimal points"
+    );
+}

@@ -17,6 +17,9 @@ pub struct Inspected {
     pub rate_hz: Option<f64>,
     /// A CSV log's delimiter, as its header splits best.
     pub csv_delimiter: Option<char>,
+    /// Whether a CSV log's numbers use a decimal comma (a European
+    /// export's `0,000762939453` with fields delimited by `;`).
+    pub csv_decimal_comma: bool,
 }
 
 /// Inspect the log at `path` in `format` (at most `max_bytes`).
@@ -43,10 +46,12 @@ pub fn inspect_bytes(
             .collect()
     };
     let mut csv_delimiter = None;
+    let mut csv_decimal_comma = false;
     let (columns, rate_hz) = match format {
         LogFormat::Csv => {
             let (names, sep) = csv_header(path, bytes)?;
             csv_delimiter = Some(char::from(sep));
+            csv_decimal_comma = sep != b',' && decimal_comma(bytes, sep);
             (named(names), None)
         }
         LogFormat::Parquet => (named(super::parquet::names(path, bytes)?), None),
@@ -60,7 +65,39 @@ pub fn inspect_bytes(
         columns,
         rate_hz,
         csv_delimiter,
+        csv_decimal_comma,
     })
+}
+
+/// The data lines a CSV log's decimal mark is read from.
+const DECIMAL_LINES: usize = 20;
+
+/// Whether the numbers of a CSV log delimited by `sep` (not a comma) are
+/// written with a decimal comma: among the first [`DECIMAL_LINES`] lines
+/// after the header, some field is digits, one comma and digits, and none
+/// is digits, a point and digits.
+fn decimal_comma(bytes: &[u8], sep: u8) -> bool {
+    let text = String::from_utf8_lossy(&bytes[..bytes.len().min(1 << 16)]);
+    let lines = text.lines().filter(|l| !l.trim().is_empty()).skip(1);
+    let (mut comma, mut point) = (false, false);
+    for line in lines.take(DECIMAL_LINES) {
+        for field in line.split(char::from(sep)) {
+            let f = field.trim().trim_start_matches(['-', '+']);
+            let number_with = |mark: char| {
+                f.split_once(mark).is_some_and(|(a, b)| {
+                    // Digits, and an exponent's letters and signs after them.
+                    let digits = |s: &str| {
+                        s.starts_with(|c: char| c.is_ascii_digit())
+                            && s.chars().all(|c| c.is_ascii_digit() || "eE+-".contains(c))
+                    };
+                    digits(a) && digits(b)
+                })
+            };
+            comma |= number_with(',');
+            point |= number_with('.');
+        }
+    }
+    comma && !point
 }
 
 /// The delimiters a CSV log may use, tried in turn: the first that splits

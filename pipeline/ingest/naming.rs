@@ -43,7 +43,7 @@ const TIME_WORDS: [&str; 10] = [
     "tiempo",
     "tempo",
 ];
-const COMMAND_WORDS: [&str; 17] = [
+const COMMAND_WORDS: [&str; 18] = [
     "cmd",
     "command",
     "u",
@@ -58,6 +58,7 @@ const COMMAND_WORDS: [&str; 17] = [
     "sollweg",
     "vorgabe",
     "consigne",
+    "consigna",
     "comando",
     "referencia",
     "riferimento",

@@ -425,9 +425,14 @@ fn run_block(out: &mut String, log: &FoundLog, back: &ReadBack) {
     }
     match log.inspected.csv_delimiter.filter(|d| *d != ',') {
         Some(d) => {
+            let decimal = if log.inspected.csv_decimal_comma {
+                ", decimal = \",\""
+            } else {
+                ""
+            };
             let _ = writeln!(
                 out,
-                "data = {{ log = {}, csv = {{ delimiter = {} }} }}",
+                "data = {{ log = {}, csv = {{ delimiter = {}{decimal} }} }}",
                 quoted(&log.path),
                 quoted(&d.to_string())
             );
@@ -643,6 +648,11 @@ pub fn log_plan(
     };
     let csv = CsvOptions {
         delimiter: log.inspected.csv_delimiter.unwrap_or(',').to_string(),
+        decimal: if log.inspected.csv_decimal_comma {
+            ",".into()
+        } else {
+            ".".into()
+        },
         ..CsvOptions::default()
     };
     Some(LogPlan {
@@ -690,6 +700,7 @@ mod tests {
                 columns: cols(&["t", "u", "x"]),
                 rate_hz: None,
                 csv_delimiter: Some(','),
+                csv_decimal_comma: false,
             },
         };
         let logs = [log("log 1"), log("k2")];
