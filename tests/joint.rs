@@ -1140,7 +1140,7 @@ fn records_not_at_rest_are_calibrated_with_the_lpm() {
                 let told = results.runs.iter().all(|run| {
                     run.warnings
                         .iter()
-                        .any(|w| w.contains("is not at rest at the record's end"))
+                        .any(|w| w.contains("is not at rest at the record's"))
                 });
                 assert_eq!(told, estimator == "etfe", "seed {seed}, {estimator}");
                 let r = results.rig.as_ref().unwrap();

@@ -46,6 +46,10 @@ pub struct Evidence {
     /// term (N/m^3) its force against its displacement gives.
     #[serde(default)]
     pub spring_cubic_n_per_m3: Option<f64>,
+    /// A spring run's force against its displacement: the stiffness its
+    /// load cell gives (N/m) and the displacement's amplitude (m).
+    #[serde(default)]
+    pub load_cell: Option<(f64, f64)>,
 }
 
 /// What a validation run gives the joint fit: the band's bins of its x1/u

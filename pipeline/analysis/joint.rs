@@ -69,6 +69,11 @@ fn described(s: Structure, split: bool) -> String {
     }
 }
 
+/// Runs whose rates differ by less than this share are one DAQ's: a rate
+/// fitted to jittered stamps differs from another log's in its last
+/// digits, and the hold's response with it by less than a part in 1e6.
+const SAME_RATE: f64 = 1e-6;
+
 /// The joint fit of the identification runs in `evidence` (and the
 /// validation runs' FRFs in `validation`, when the manifest includes them),
 /// from the sequential rig `start`: what it found, and whether the campaign
@@ -86,7 +91,7 @@ pub fn joint(
 ) -> Option<JointResult> {
     let (fitted, identification_frfs) = fitted_frfs(evidence, validation)?;
     let fs = fitted[0].3;
-    if fitted.iter().any(|f| f.3 != fs) {
+    if fitted.iter().any(|f| (f.3 / fs - 1.0).abs() > SAME_RATE) {
         warnings.push(
             "rig: no joint fit: the runs it would fit were logged at different sample rates; the sequential estimate is used".into(),
         );
@@ -379,6 +384,27 @@ fn stiffening_note(springs: &[(String, f64)]) -> Option<String> {
     ))
 }
 
+/// Why no candidate structure could be used, each in a few words: its
+/// fit's error, or why the fit it made is not a rig.
+fn no_usable_structure(sel: &Selection) -> String {
+    let each: Vec<String> = sel
+        .candidates
+        .iter()
+        .map(|c| {
+            let why = match (&c.fit, &c.unusable) {
+                (Err(e), _) => e.to_string(),
+                (Ok(_), Some(why)) => why.clone(),
+                (Ok(_), None) => "usable, not chosen".to_string(),
+            };
+            format!("\"{}\": {why}", c.structure.as_str())
+        })
+        .collect();
+    format!(
+        "no candidate structure gave a usable rig: {}",
+        each.join("; ")
+    )
+}
+
 /// The result table and the use decision.
 /// `known` is what the runs' own warnings or the springs' agreement already
 /// found wrong, which the misfit is put down to.
@@ -398,11 +424,11 @@ fn describe(
     let Some(fit) = chosen.and_then(|c| c.fit.as_ref().ok()) else {
         let why = match chosen.map(|c| &c.fit) {
             Some(Err(e)) => e.to_string(),
-            _ => "no structure could be fitted".into(),
+            _ => no_usable_structure(sel),
         };
         result.use_note = format!("the sequential estimate is used: the joint fit failed ({why})");
         warnings.push(format!(
-            "rig: the joint fit failed ({why}); the sequential estimate is used; check identification.band_hz and the runs' coherence"
+            "rig: the joint fit failed ({why}); the sequential estimate is used"
         ));
         return result;
     };

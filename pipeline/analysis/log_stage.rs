@@ -141,12 +141,57 @@ pub enum LogStageError {
         /// The likely unit mistake, when one explains it ("" otherwise).
         hint: String,
     },
+    #[error(transparent)]
+    Inverted(Box<Inverted>),
+    #[error(
+        "{}: the force against the displacement gives a stiffness of {} N/m where the specimen's is {} N/m: the force reads {} times the load: a unit mistake? With channels.force.unit = \"{}\" (the manifest says \"{}\") it gives {} N/m",
+        path.display(),
+        crate::units::format_number(*measured, 5),
+        crate::units::format_number(*stated, 6),
+        crate::units::format_number(measured / stated, 3),
+        fix.symbol(),
+        given.symbol(),
+        crate::units::format_number(measured * fix.to_si() / given.to_si(), 5)
+    )]
+    ForceUnit {
+        path: PathBuf,
+        measured: f64,
+        stated: f64,
+        given: crate::units::Unit,
+        fix: crate::units::Unit,
+    },
     #[error("{}: {source}", path.display())]
     Tf {
         path: PathBuf,
         #[source]
         source: RunTfError,
     },
+}
+
+/// A channel that reads its signal inverted: its gain at the band's
+/// lowest frequencies against the signal it follows, and what to set.
+#[derive(Debug, thiserror::Error)]
+#[error(
+    "{}: the {channel} reads {what} (its gain to the {against} at {} Hz is {} at {:.0} degrees, where {expected}): {cause}? Set channels.{channel}.scale = {} (the sign reversed), or fix the sensor's wiring",
+    path.display(),
+    crate::units::format_number(*at_hz, 3),
+    crate::units::format_number(gain.norm(), 3),
+    gain.arg().to_degrees(),
+    crate::units::format_number(-scale, 6)
+)]
+pub struct Inverted {
+    pub path: PathBuf,
+    pub channel: &'static str,
+    /// What the channel reads, and against what its gain is taken.
+    pub what: &'static str,
+    pub against: &'static str,
+    pub at_hz: f64,
+    pub gain: nalgebra::Complex<f64>,
+    /// What the gain should be, and what makes it otherwise.
+    pub expected: &'static str,
+    pub cause: &'static str,
+    /// The channel's scale the manifest gives.
+    pub scale: f64,
 }
 
 /// Largest tolerated sample-interval deviation (fraction of the interval)
@@ -233,15 +278,21 @@ fn band_power_fraction(h: &Frf, total: f64, (lo, hi): (f64, f64)) -> f64 {
 /// The warning for an explicit ETFE or Welch estimate of a command not at
 /// rest at the record's ends, whose transient it counts as noise (`auto`
 /// fits it, the LPM takes it out).
-fn motion_warning(choice: &FrfChoice, command: &[f64]) -> Option<String> {
+fn motion_warning(
+    choice: &FrfChoice,
+    command: &[f64],
+    sample_rate_hz: f64,
+    band_hz: (f64, f64),
+) -> Option<String> {
     let plan = &choice.plan;
     if choice.chosen || plan.estimator == frf::Estimator::Lpm {
         return None;
     }
-    let (end, ratio) = frf::ends_in_motion(command)?;
+    let w = frf::rest_window(sample_rate_hz, band_hz.0);
+    let (end, ratio) = frf::ends_in_motion(command, w)?;
     Some(format!(
-        "identification.frf: the command is not at rest at the record's {end} (over the first or last {:.1} % of the record, or between its ends, it moves by {:.0} % of its RMS): the {} counts the transient's leakage as noise, and the fits' stds come out too large (1.5 to 7 times on sweeps cut in motion); the default estimator (identification.frf.estimator left out, \"auto\") fits the transient beside the model and takes it out",
-        100.0 * frf::REST_END_FRACTION,
+        "identification.frf: the command is not at rest at the record's {end} (over its first or last {} s, or between its ends, it moves by {:.0} % of its RMS): the {} counts the transient's leakage as noise, and the fits' stds come out too large (1.5 to 7 times on sweeps cut in motion); the default estimator (identification.frf.estimator left out, \"auto\") fits the transient beside the model and takes it out",
+        crate::units::format_number(w as f64 / sample_rate_hz, 3),
         100.0 * ratio,
         match plan.estimator {
             frf::Estimator::H1 => "Welch H1 estimate",
@@ -361,6 +412,152 @@ fn static_gain_check(
     })
 }
 
+/// The bins a channel's polarity is read at: the fit band's lowest coherent
+/// ones, up to twice the first's frequency (at most this many).
+const POLARITY_BINS: usize = 64;
+
+/// An FRF averaged (weighted by the command's power) over the band's lowest
+/// coherent bins, with the first one's frequency: an actuator under P
+/// control follows its command there with a gain near its static gain,
+/// positive for any specimen (Eqs. 12, 14, 17: n0 / d0 > 0), and a
+/// specimen's force follows its displacement with its stiffness. None
+/// without a coherent bin.
+fn low_band_gain(h: &Frf, mask: &[bool]) -> Option<(nalgebra::Complex<f64>, f64)> {
+    let first = mask.iter().position(|m| *m)?;
+    let top = 2.0 * h.freq_hz[first];
+    let (sum, weight) = (first..h.h.len())
+        .filter(|&k| mask[k] && h.freq_hz[k] <= top)
+        .take(POLARITY_BINS)
+        .fold((nalgebra::Complex::new(0.0, 0.0), 0.0), |(s, w), k| {
+            (s + h.h[k] * h.suu[k], w + h.suu[k])
+        });
+    (weight > 0.0).then(|| (sum / weight, h.freq_hz[first]))
+}
+
+/// A gain whose phase is this far from zero reads a signal inverted.
+const INVERTED_PHASE: f64 = 2.0 * std::f64::consts::PI / 3.0;
+
+/// Refuse a displacement that answers its command with the opposite sign.
+fn displacement_polarity(
+    path: &std::path::Path,
+    plan: &LogPlan,
+    h: &Frf,
+    mask: &[bool],
+) -> Result<(), LogStageError> {
+    match low_band_gain(h, mask) {
+        Some((gain, at_hz)) if gain.arg().abs() > INVERTED_PHASE => {
+            Err(LogStageError::Inverted(Box::new(Inverted {
+                path: path.to_path_buf(),
+                channel: "displacement",
+                what: "the command's motion inverted",
+                against: "command",
+                at_hz,
+                gain,
+                expected: "an actuator under P control follows its command in phase",
+                cause: "an LVDT wired backwards, or a negative scale",
+                scale: manifest_scale(&plan.channels.displacement),
+            })))
+        }
+        _ => Ok(()),
+    }
+}
+
+/// A channel's `scale` as the manifest gives it: its gain to SI without
+/// its unit's factor.
+fn manifest_scale(channel: &ingest::ChannelPlan) -> f64 {
+    channel.gain / channel.unit.to_si()
+}
+
+/// The force units a load cell's reading is tried in.
+const FORCE_UNITS: [crate::units::Unit; 3] = [
+    crate::units::Unit::Newton,
+    crate::units::Unit::Kilonewton,
+    crate::units::Unit::PoundForce,
+];
+
+/// Refuse a force whose ratio to the displacement (`measured`, N/m) has the
+/// sign or the scale of another unit against the specimen's stiffness
+/// `stated`: inverted (a load cell wired backwards), or in another unit
+/// than the manifest's (N declared as kN reads a thousandth of the load).
+fn force_scale(
+    path: &std::path::Path,
+    plan: &LogPlan,
+    measured: f64,
+    stated: f64,
+    at_hz: f64,
+) -> Result<(), LogStageError> {
+    let Some(force) = plan.channels.force.as_ref() else {
+        return Ok(());
+    };
+    let ratio = measured / stated;
+    if ratio < 0.0 && (0.5..2.0).contains(&-ratio) {
+        return Err(LogStageError::Inverted(Box::new(Inverted {
+            path: path.to_path_buf(),
+            channel: "force",
+            what: "the load inverted",
+            against: "displacement",
+            at_hz,
+            gain: nalgebra::Complex::new(measured, 0.0),
+            expected: "a specimen pushes back on its displacement, with its stiffness",
+            cause: "a load cell wired backwards, or a negative scale",
+            scale: manifest_scale(force),
+        })));
+    }
+    let fix = FORCE_UNITS
+        .into_iter()
+        .filter(|u| *u != force.unit)
+        .find(|u| (ratio * u.to_si() / force.unit.to_si() - 1.0).abs() < STIFFNESS_UNIT_TOLERANCE);
+    match fix {
+        Some(fix) if (ratio - 1.0).abs() > 0.5 => Err(LogStageError::ForceUnit {
+            path: path.to_path_buf(),
+            measured,
+            stated,
+            given: force.unit,
+            fix,
+        }),
+        _ => Ok(()),
+    }
+}
+
+/// The force's scale against the specimen's stiffness ([`force_scale`]): a
+/// spring's from its force against its displacement over the record, a
+/// validation specimen's from the two FRFs at the band's lowest bins, where
+/// its force is its stiffness times its displacement. Nothing for a run
+/// without a specimen or a force.
+fn check_force_scale(
+    path: &std::path::Path,
+    plan: &LogPlan,
+    run: &RunPlan,
+    spring: Option<&frf::SpringForce>,
+    h: &Frf,
+    force_frf: Option<&Frf>,
+    mask: &[bool],
+) -> Result<(), LogStageError> {
+    let at_hz = || low_band_gain(h, mask).map_or(0.0, |(_, f)| f);
+    match (run.specimen, spring, force_frf) {
+        (SpecimenModel::Spring { stiffness_n_per_m }, Some(s), _) => {
+            force_scale(path, plan, s.stiffness_n_per_m, stiffness_n_per_m, at_hz())
+        }
+        (
+            SpecimenModel::LinearSdof {
+                stiffness_n_per_m, ..
+            },
+            _,
+            Some(hf),
+        ) => match (low_band_gain(hf, mask), low_band_gain(h, mask)) {
+            (Some((gf, at_hz)), Some((gx, _))) if gx.norm() > 0.0 => {
+                force_scale(path, plan, (gf / gx).re, stiffness_n_per_m, at_hz)
+            }
+            _ => Ok(()),
+        },
+        _ => Ok(()),
+    }
+}
+
+/// How near a unit's factor must bring a force's stiffness to the stated
+/// one to name it.
+const STIFFNESS_UNIT_TOLERANCE: f64 = 0.05;
+
 /// The warning for a rig that did not answer the sweep linearly.
 fn nonlinearity_warning(l: &frf::Linearity) -> Option<String> {
     l.nonlinear().then(|| {
@@ -431,6 +628,38 @@ fn stiffening_warning(s: &frf::SpringForce) -> Option<String> {
             100.0 * s.stiffening,
             s.cubic_n_per_m3,
             s.cubic_t
+        )
+    })
+}
+
+/// A channel whose consecutive samples are equal this often is not
+/// dithered by its noise: its quantisation error follows the signal.
+const UNDITHERED_SHARE: f64 = 0.25;
+/// Beyond this share of its RMS an undithered converter step is coarse.
+const COARSE_STEP_SHARE: f64 = 0.01;
+
+/// What a misfit is put down to where the displacement's converter is
+/// coarse and its noise too small to dither it: the quantisation error
+/// then follows the signal (a distortion at each frequency the sweep
+/// passes) where the FRF's variances take white noise. None otherwise.
+fn coarse_quantisation(x: &[f64]) -> Option<String> {
+    let n = x.len();
+    if n < 2 {
+        return None;
+    }
+    let equal = x.windows(2).filter(|w| w[0] == w[1]).count() as f64 / (n - 1) as f64;
+    if equal < UNDITHERED_SHARE {
+        return None;
+    }
+    let step = ingest::quantum_step(x)?;
+    let mean = x.iter().sum::<f64>() / n as f64;
+    let rms = (x.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / n as f64).sqrt();
+    (step > COARSE_STEP_SHARE * rms).then(|| {
+        format!(
+            "the displacement's coarse quantisation: its converter's step of {} mm is {:.1} % of its RMS and its noise does not dither it ({:.0} % of consecutive samples equal), so the quantisation error follows the signal where the FRF's variances take white noise; log the displacement at a finer resolution or range",
+            crate::units::format_number(1e3 * step, 3),
+            100.0 * step / rms,
+            100.0 * equal
         )
     })
 }
@@ -510,7 +739,8 @@ pub fn log_stage_from(
     let fs = log.sample_rate_hz;
     let (choice, mut h, force_frf) = estimate_frfs(run, ident, &log, path)?;
     let mask = frf::band_mask(&h, run.band_hz, ident.coherence_min);
-    warnings.extend(motion_warning(&choice, &log.command_m));
+    displacement_polarity(path, plan, &h, &mask)?;
+    warnings.extend(motion_warning(&choice, &log.command_m, fs, run.band_hz));
 
     let fit = if matches!(run.role, Role::NoSpecimen | Role::Spring | Role::Fit) {
         let (fit, data) = fit_run(&mut h, &mask, run.band_hz, ident, &choice.plan, fs, None)
@@ -529,20 +759,22 @@ pub fn log_stage_from(
     let periodogram = (h.n_averages == 1).then_some(h.suu.as_slice());
     let excitation = frf::excitation(&log.command_m, fs, periodogram);
     let linearity = matches!(excitation, frf::Excitation::Sweep { .. })
-        .then(|| {
-            frf::linearity(
-                &log.command_m,
-                &log.displacement_m,
-                log.force_n.as_deref(),
-                fs,
-            )
-        })
+        .then(|| linearity_of(&log))
         .flatten();
     let fit_data = fit_data.map(|d| with_sweep_amplitude(d, excitation, &log));
     let spring = match (&run.specimen, &log.force_n) {
         (SpecimenModel::Spring { .. }, Some(f)) => frf::spring_force(&log.displacement_m, f, fs),
         _ => None,
     };
+    check_force_scale(
+        path,
+        plan,
+        run,
+        spring.as_ref(),
+        &h,
+        force_frf.as_ref(),
+        &mask,
+    )?;
     let contradicted = settings_warning(run, ident, &choice, excitation, &log, fit.as_ref());
     let cause = findings(
         run,
@@ -550,7 +782,8 @@ pub fn log_stage_from(
         spring.as_ref(),
         contradicted,
         &mut warnings,
-    );
+    )
+    .or_else(|| coarse_quantisation(&log.displacement_m));
     Ok(LogStage {
         log,
         choice,
@@ -565,6 +798,20 @@ pub fn log_stage_from(
         fit_data,
         warnings,
     })
+}
+
+/// Whether the rig answered the log's sweep linearly. Harmonics a channel's
+/// converter step could make are not counted; the steps are read (a sort
+/// of the channel) only where harmonics are found.
+fn linearity_of(log: &Log) -> Option<frf::Linearity> {
+    let (u, x, f) = (&log.command_m, &log.displacement_m, log.force_n.as_deref());
+    let fs = log.sample_rate_hz;
+    let found = frf::linearity(u, x, f, fs, [0.0; 2])?;
+    if !found.nonlinear() {
+        return Some(found);
+    }
+    let step = |v: &[f64]| ingest::quantum_step(v).unwrap_or(0.0);
+    frf::linearity(u, x, f, fs, [step(x), f.map_or(0.0, step)])
 }
 
 /// A run's bins with the displacement's amplitude along its sweep: seal

@@ -7,6 +7,7 @@ use std::sync::Arc;
 
 use super::evidence::{Evidence, RigInput, ValidationEvidence};
 use super::log_stage::LogStageError;
+use super::log_stage::STIFFNESS_MISMATCH;
 use crate::identify::consistency::Consistency;
 use crate::identify::{self, Estimate, IdentifyError, SecondOrder, SpringRun, TfEstimate};
 use crate::manifest::{Campaign, Role, RunPlan};
@@ -205,32 +206,117 @@ impl<'a> Gathered<'a> {
     }
 }
 
-/// The springs' likely causes of disagreement narrowed by what the runs
-/// show: a run's own finding (FRF settings, a stiffness its force
-/// contradicts, a rig not linear) first, and then not the dynamics the
-/// model leaves out; nor those where every spring run's own fit passes its
-/// adequacy tests, as they would show there as misfit.
+/// The springs' likely causes of disagreement, narrowed to those the runs
+/// allow: a run's own finding (FRF settings, a stiffness its force
+/// contradicts, a rig not linear) first, and then the pattern's. Springs
+/// whose load cells confirm their stated stiffnesses rule out a stiffness
+/// typed wrong, a swapped log and a unit, which would each show in the
+/// load cell; springs that disagree where their loads differ, with every
+/// stiffness confirmed or harmonics of the command in their displacement,
+/// point at a gain that depends on the load. The dynamics the model leaves
+/// out are dropped where a run's finding explains the disagreement or
+/// every spring run's own fit passes its adequacy tests (they would show
+/// there as misfit).
 fn narrow_causes(c: &mut Consistency, runs: &Gathered<'_>, run_cause: Option<&str>) {
     if c.consistent != Some(false) {
         return;
     }
-    let drop_dynamics = |c: &mut Consistency| {
-        c.likely_causes
-            .retain(|cause| !cause.starts_with(identify::consistency::DYNAMICS_CAUSE));
-    };
-    if let Some(cause) = run_cause {
-        drop_dynamics(c);
-        c.likely_causes.insert(0, cause.to_string());
-        return;
-    }
-    let springs_adequate = runs
+    let springs: Vec<Spring<'_>> = runs
         .evidence
         .iter()
-        .filter(|(p, _)| p.role == Role::Spring)
-        .all(|(_, e)| e.adequacy.as_ref().is_some_and(|a| a.passed()));
-    if springs_adequate {
-        drop_dynamics(c);
+        .filter_map(|(p, e)| match p.specimen {
+            SpecimenModel::Spring { stiffness_n_per_m } => Some(Spring {
+                id: &p.id,
+                stated: stiffness_n_per_m,
+                evidence: e,
+            }),
+            _ => None,
+        })
+        .collect();
+    let confirmed = !springs.is_empty()
+        && springs.iter().all(|s| {
+            s.evidence
+                .load_cell
+                .is_some_and(|(k, _)| (k / s.stated - 1.0).abs() <= STIFFNESS_MISMATCH)
+        });
+    let harmonics: Vec<&str> = springs
+        .iter()
+        .filter(|s| s.evidence.friction_signature || s.evidence.spring_cubic_n_per_m3.is_some())
+        .map(|s| s.id)
+        .collect();
+    let adequate = springs
+        .iter()
+        .all(|s| s.evidence.adequacy.as_ref().is_some_and(|a| a.passed()));
+    let odd = c
+        .likely_causes
+        .iter()
+        .find(|cause| cause.starts_with("spring run "))
+        .cloned();
+    let mut causes: Vec<String> = run_cause.map(String::from).into_iter().collect();
+    causes.extend(odd);
+    if confirmed || !harmonics.is_empty() {
+        causes.push(load_dependence(c, &springs, &harmonics));
     }
+    if confirmed {
+        c.note += &format!(
+            "; every spring's load cell confirms its stated stiffness within {:.0} %, so neither a stiffness typed wrong, a swapped log nor a unit makes them disagree",
+            100.0 * STIFFNESS_MISMATCH
+        );
+    } else {
+        causes.extend(
+            identify::consistency::MANIFEST_CAUSES
+                .iter()
+                .map(|s| s.to_string()),
+        );
+    }
+    if run_cause.is_none() && !adequate {
+        causes.push(identify::consistency::DYNAMICS_CAUSE.to_string());
+    }
+    c.likely_causes = causes;
+}
+
+/// A spring run as the springs' causes read it.
+struct Spring<'a> {
+    id: &'a str,
+    stated: f64,
+    evidence: &'a Evidence,
+}
+
+/// The springs' disagreement put down to a gain that depends on the load,
+/// with what shows it: the parameters that disagree at each spring's load
+/// (its load cell's stiffness times its displacement's amplitude), and the
+/// runs whose displacement holds harmonics of the command.
+fn load_dependence(c: &Consistency, springs: &[Spring<'_>], harmonics: &[&str]) -> String {
+    let mut by_load: Vec<(&Spring<'_>, Option<f64>)> = springs
+        .iter()
+        .map(|s| (s, s.evidence.load_cell.map(|(k, a)| k * a)))
+        .collect();
+    by_load.sort_by(|a, b| a.1.unwrap_or(0.0).total_cmp(&b.1.unwrap_or(0.0)));
+    let loads: Vec<String> = by_load
+        .iter()
+        .map(|(s, load)| match load {
+            Some(f) => format!("{} at {} N", s.id, crate::units::format_number(*f, 3)),
+            None => s.id.to_string(),
+        })
+        .collect();
+    let which: Vec<&str> = c
+        .checks
+        .iter()
+        .filter(|t| !t.consistent)
+        .map(|t| t.parameter.as_str())
+        .collect();
+    let mut text = format!(
+        "a gain that depends on the load: {} differ between springs loaded differently ({})",
+        which.join(", "),
+        loads.join(", ")
+    );
+    if !harmonics.is_empty() {
+        text += &format!(
+            ", and {} hold harmonics of the command (the rig is not linear at their amplitude)",
+            harmonics.join(", ")
+        );
+    }
+    text + ": the servo-valve's flow falling with the load pressure, seal friction, or a spring that stiffens; each spring's rig is an equivalent linear one at its own load"
 }
 
 /// What the lab reads of the sequential identification: a given rig the

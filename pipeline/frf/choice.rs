@@ -85,10 +85,12 @@ pub struct Ends {
 }
 
 impl Ends {
-    pub fn of(u: &[f64], y: &[f64]) -> Self {
+    /// The ends of a command `u` and displacement `y`, each end's window
+    /// `w` samples long ([`super::rest_window`]).
+    pub fn of(u: &[f64], y: &[f64], w: usize) -> Self {
         Self {
-            command: ends_against_noise(u),
-            displacement: ends_against_noise(y),
+            command: ends_against_noise(u, w),
+            displacement: ends_against_noise(y, w),
         }
     }
 
@@ -174,7 +176,7 @@ impl FrfRequest {
         sample_rate_hz: f64,
         band_hz: (f64, f64),
     ) -> Result<FrfChoice, FrfError> {
-        let ends = Ends::of(u, y);
+        let ends = Ends::of(u, y, super::rest_window(sample_rate_hz, band_hz.0));
         if let Some(plan) = self.explicit() {
             return Ok(FrfChoice {
                 reason: format!("{} (the manifest's)", describe(&plan)),

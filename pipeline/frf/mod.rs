@@ -773,27 +773,39 @@ impl Frf {
     }
 }
 
-/// The share of a record the rest test reads at each end: 0.1 %, at
-/// least [`REST_MIN_SAMPLES`] samples.
-pub const REST_END_FRACTION: f64 = 1e-3;
+/// The rest test reads a tenth of the band's slowest period at each end
+/// (0.2 s for a band from 0.5 Hz), at least [`REST_MIN_SAMPLES`]: the state
+/// that leaks into the band is the one at the record's very ends, and a lab's
+/// rest before and after a test is a second or so, however long the test.
+pub const REST_WINDOW_PERIODS: f64 = 0.1;
 pub const REST_MIN_SAMPLES: usize = 16;
+
+/// The samples each end's rest window holds for a band from `lowest_hz`,
+/// sampled at `sample_rate_hz` ([`REST_WINDOW_PERIODS`]).
+pub fn rest_window(sample_rate_hz: f64, lowest_hz: f64) -> usize {
+    let w = (REST_WINDOW_PERIODS * sample_rate_hz / lowest_hz).round();
+    if w.is_finite() {
+        (w as usize).max(REST_MIN_SAMPLES)
+    } else {
+        REST_MIN_SAMPLES
+    }
+}
 /// An end whose signal moves by more than this share of the record's RMS
 /// across its window, or that rests this far from the other end's level,
 /// is not at rest.
 pub const REST_RMS_RATIO: f64 = 0.1;
 
 /// Where a signal is not at rest at the record's ends: "start", "end" or
-/// "start and end" for an end whose window of [`REST_END_FRACTION`] of the
-/// record spans more than [`REST_RMS_RATIO`] of the record's RMS from its
+/// "start and end" for an end whose window of `w` samples ([`rest_window`])
+/// spans more than [`REST_RMS_RATIO`] of the record's RMS from its
 /// lowest to its highest sample (it moves), or "end, away from its start"
 /// for ends resting at levels that far apart; with the largest of those
 /// ratios. None when both ends rest at one level. What matters is the
 /// state's difference between the ends: the ETFE's DFT then holds its
 /// leakage T(k) beside G U (see `fit::transient`); ends that rest at one
 /// level, however far from the record's mean, leave none.
-pub fn ends_in_motion(u: &[f64]) -> Option<(&'static str, f64)> {
+pub fn ends_in_motion(u: &[f64], w: usize) -> Option<(&'static str, f64)> {
     let n = u.len();
-    let w = ((n as f64 * REST_END_FRACTION) as usize).max(REST_MIN_SAMPLES);
     if n < 4 * w {
         return None;
     }
@@ -841,14 +853,13 @@ pub const REST_NOISE_LEVEL: f64 = 5.0;
 /// the ends 68 um apart, 2.4 % of a sweep's RMS but 30 times the level's
 /// noise under 2 um of LVDT noise: enough leakage in the band's lowest bins
 /// to count tens of times the noise there.
-pub fn ends_against_noise(x: &[f64]) -> Option<(&'static str, f64)> {
+pub fn ends_against_noise(x: &[f64], w: usize) -> Option<(&'static str, f64)> {
     let n = x.len();
-    let w = ((n as f64 * REST_END_FRACTION) as usize).max(REST_MIN_SAMPLES);
     if n < 4 * w {
         return None;
     }
     let (sigma, rms) = noise_std(x, w);
-    if let Some((end, ratio)) = ends_in_motion(x) {
+    if let Some((end, ratio)) = ends_in_motion(x, w) {
         return Some((end, ratio * rms / sigma));
     }
     let (first, last) = (&x[..w], &x[n - w..]);

@@ -1095,13 +1095,13 @@ fn a_record_cut_in_motion_is_told_from_one_at_rest() {
             }
         })
         .collect();
-    assert_eq!(ends_in_motion(&rest), None);
+    assert_eq!(ends_in_motion(&rest, 16), None);
     // Started and cut at a zero crossing: each 16-sample window rises by
     // sin(2 pi 1.3 0.015) = 0.1222 at the start and by sin(-2 pi 1.3
     // 0.001) - sin(-2 pi 1.3 0.016) = 0.1219 at the end, against an RMS of
     // 1/sqrt(2).
     let cut: Vec<f64> = (0..10_000).map(|i| sine(i as f64 / fs)).collect();
-    let (end, ratio) = ends_in_motion(&cut).unwrap();
+    let (end, ratio) = ends_in_motion(&cut, 16).unwrap();
     assert_eq!(end, "start and end");
     let rms = (cut.iter().map(|v| v * v).sum::<f64>() / 1e4).sqrt();
     let want = (2.0 * std::f64::consts::PI * 1.3 * 0.015).sin() / rms;
@@ -1111,7 +1111,7 @@ fn a_record_cut_in_motion_is_told_from_one_at_rest() {
     let crest: Vec<f64> = (0..10_000)
         .map(|i| sine(i as f64 / fs + 0.25 / 1.3))
         .collect();
-    assert_eq!(ends_in_motion(&crest), None);
+    assert_eq!(ends_in_motion(&crest, 16), None);
     // At rest, then the sine, then held half a unit up: the ends rest at
     // levels 0.5 apart.
     let mut held = rest.clone();
@@ -1120,13 +1120,13 @@ fn a_record_cut_in_motion_is_told_from_one_at_rest() {
         let m = held.iter().sum::<f64>() / held.len() as f64;
         (held.iter().map(|v| (v - m).powi(2)).sum::<f64>() / held.len() as f64).sqrt()
     };
-    let (end, ratio) = ends_in_motion(&held).unwrap();
+    let (end, ratio) = ends_in_motion(&held, 16).unwrap();
     assert_eq!(end, "end, away from its start");
     assert!((ratio - 0.5 / rms).abs() < 1e-9, "{ratio}");
     // Only the end cut in motion.
     let mut half = cut.clone();
     half[..2000].iter_mut().for_each(|v| *v = 0.0);
-    assert_eq!(ends_in_motion(&half).map(|e| e.0), Some("end"));
+    assert_eq!(ends_in_motion(&half, 16).map(|e| e.0), Some("end"));
 }
 
 #[test]

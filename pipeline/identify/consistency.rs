@@ -225,17 +225,19 @@ fn causes(loo: &[LeaveOneOut]) -> Vec<String> {
             "spring run {one} is the odd one out: without it the other springs agree"
         ));
     }
-    out.extend(
-        [
-            "a spring's stiffness typed wrong in the manifest or the run table (stiffness_n_per_m)",
-            "the logs of two runs swapped (each run's log = ... names the file it analyses)",
-            "a channel in the wrong unit or scale in one run (its [channels] or the DAQ's range)",
-            DYNAMICS_CAUSE,
-        ]
-        .map(String::from),
-    );
+    out.extend(MANIFEST_CAUSES.iter().map(|s| s.to_string()));
+    out.push(DYNAMICS_CAUSE.to_string());
     out
 }
+
+/// What makes springs disagree that the manifest or the logs it names
+/// would be to blame for: each shows in a spring's load cell, where it has
+/// one.
+pub const MANIFEST_CAUSES: [&str; 3] = [
+    "a spring's stiffness typed wrong in the manifest or the run table (stiffness_n_per_m)",
+    "the logs of two runs swapped (each run's log = ... names the file it analyses)",
+    "a channel in the wrong unit or scale in one run (its [channels] or the DAQ's range)",
+];
 
 /// The likely cause of springs that disagree which the model, not the
 /// manifest, would be to blame for.

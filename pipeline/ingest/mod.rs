@@ -20,11 +20,13 @@
 //! globs) and tells them from the run tables among them.
 
 mod arrays;
+mod clipping;
 mod csv;
 mod daq;
 mod discover;
 mod fields;
 mod hdf5;
+mod held;
 mod inspect;
 mod mat;
 pub mod naming;
@@ -100,18 +102,22 @@ pub struct Log {
 /// its value and its neighbours' in the channel's unit.
 #[derive(Debug, thiserror::Error)]
 #[error(
-    "{}: {at} (sample {sample}, t = {} s): {channel} (column {column}) is an isolated spike: {} {unit} where its neighbours read {} and {} {unit} ({} times the channel's local sample-to-sample scale): a corrupted sample? Fix the file, or set channels.{channel}.repair = \"interpolate\" to replace it by its neighbours' line (results.json records it)",
+    "{}: {at} (sample {sample}, t = {} s): {channel} (column {column}) {}: {} {unit} where its neighbours read {} and {} {unit} ({} times the channel's local sample-to-sample scale): {}? Fix the file, or set channels.{channel}.repair = \"interpolate\" to replace it by its neighbours' line (results.json records it)",
     path.display(),
     format_number(*time_s, 6),
+    spike_words(*width).0,
     format_number(*value, 6),
     format_number(*before, 6),
     format_number(*after, 6),
-    format_number(*ratio, 2)
+    format_number(*ratio, 2),
+    spike_words(*width).1
 )]
 pub struct SpikeFound {
     pub path: PathBuf,
     pub at: At,
     pub sample: usize,
+    /// Adjacent samples departing together (1 to `spikes::MAX_WIDTH`).
+    pub width: usize,
     pub time_s: f64,
     pub channel: &'static str,
     pub column: String,
@@ -120,6 +126,100 @@ pub struct SpikeFound {
     pub after: f64,
     pub unit: &'static str,
     pub ratio: f64,
+}
+
+/// What a run of `width` bad samples is, and what likely made it: one or
+/// two samples are an isolated spike, more a corrupt stretch.
+fn spike_words(width: usize) -> (String, &'static str) {
+    if width <= 2 {
+        ("is an isolated spike".into(), "a corrupted sample")
+    } else {
+        (
+            format!("starts a corrupt stretch of {width} adjacent samples"),
+            "a corrupted stretch of the file or a DAQ glitch",
+        )
+    }
+}
+
+/// How a time column fails to increase.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum TimeFault {
+    /// One stamp is out of order and the next is in order again.
+    Swapped,
+    /// Time goes back and carries on from there.
+    Reset,
+    /// A stamp repeats the one before, off any rounded grid.
+    Repeated,
+}
+
+/// A displacement or force that holds one value while it should move
+/// (`ingest::held`): where, for how long, and what it looks like.
+#[derive(Debug, thiserror::Error)]
+#[error(
+    "{}: {at} (samples {sample} to {}, t = {} to {} s): {}: the run cannot be analysed; fix the file, record the run again, or cut the log to one side of it",
+    path.display(),
+    sample + len - 1,
+    format_number(*time_s, 6),
+    format_number(time_s + *len as f64 * dt_s, 6),
+    held_words(self)
+)]
+pub struct HeldFound {
+    pub path: PathBuf,
+    pub at: At,
+    pub sample: usize,
+    pub len: usize,
+    pub time_s: f64,
+    pub dt_s: f64,
+    pub channel: &'static str,
+    pub column: String,
+    pub kind: HeldKind,
+    /// The held value, in the channel's unit, and its speed on either
+    /// side (the slower), in that unit per second.
+    pub value: f64,
+    pub unit: &'static str,
+    pub speed: f64,
+}
+
+/// What a held stretch looks like (`ingest::held`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum HeldKind {
+    /// The channel drops to zero and comes back.
+    Dropout,
+    /// The channel holds a value while its command moves, or leaves it by
+    /// a jump.
+    Stuck,
+    /// Every channel holds its value at once.
+    Frozen,
+}
+
+/// A held stretch in words, for [`HeldFound`].
+fn held_words(h: &HeldFound) -> String {
+    let HeldFound {
+        len,
+        dt_s,
+        channel,
+        column,
+        kind,
+        value,
+        unit,
+        speed,
+        ..
+    } = h;
+    let seconds = format_number(*len as f64 * dt_s, 3);
+    match kind {
+        HeldKind::Dropout => format!(
+            "the {channel} (column {column}) drops to 0 {unit} for {len} samples ({seconds} s) and comes back: a dropout of the sensor or its cable"
+        ),
+        HeldKind::Stuck => format!(
+            "the {channel} (column {column}) holds {} {unit} for {len} samples ({seconds} s), where it moves at {} {unit}/s on either side: a stuck sensor or channel",
+            format_number(*value, 6),
+            format_number(*speed, 3)
+        ),
+        HeldKind::Frozen => format!(
+            "every channel holds its value for {len} samples ({seconds} s), the {channel} at {} {unit}, and jumps on: the DAQ stalled and repeated its last sample",
+            format_number(*value, 6)
+        ),
+    }
 }
 
 /// One isolated spike replaced by its neighbours' line (`ingest::spikes`).
@@ -131,7 +231,7 @@ pub struct Repaired {
     pub at: String,
     pub sample: usize,
     pub time_s: f64,
-    /// Samples replaced (1 or 2).
+    /// Samples replaced (1 to `spikes::MAX_WIDTH`).
     pub width: usize,
     /// The spike's value and its neighbours', in SI (m or N).
     pub value: f64,
@@ -146,14 +246,39 @@ pub enum Timing {
     /// construction.
     Exact { dt_s: f64 },
     /// Measured from a time column. The jitter is the deviation of each
-    /// interval t(k+1) - t(k) from the mean interval.
+    /// interval t(k+1) - t(k) from the mean interval; `stamps` says how the
+    /// stamps stand against a uniform grid, and the interval is the grid's
+    /// where they stand on one.
     Measured {
         mean_dt_s: f64,
         jitter_rms_s: f64,
         jitter_max_s: f64,
         /// Where the interval with the largest deviation ends.
         worst_at: At,
+        stamps: Stamps,
     },
+}
+
+/// How a time column's stamps stand against the uniform grid fitted to them
+/// by least squares, t(k) = t0 + k dt.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Stamps {
+    /// Uniform to what printing them in decimal costs.
+    Exact,
+    /// On the grid to their own resolution: stamps rounded to
+    /// `resolution_s` (a DAQ writing 1 ms stamps at 2048 Hz repeats some).
+    Rounded { resolution_s: f64 },
+    /// Scattered about the grid by at most half an interval (the largest
+    /// deviation and its place, and the RMS): a DAQ sampling on its clock
+    /// and stamping each sample late by a varying amount.
+    Scattered {
+        max_s: f64,
+        rms_s: f64,
+        worst_at: At,
+    },
+    /// Off any uniform grid by more than half an interval: a rate that
+    /// drifts, or sampling that is not uniform.
+    Uneven,
 }
 
 impl Timing {
@@ -302,8 +427,10 @@ pub enum IngestError {
     },
     #[error(transparent)]
     Spike(Box<SpikeFound>),
+    #[error(transparent)]
+    Held(Box<HeldFound>),
     #[error(
-        "{}: the manifest states a sampling rate of {} Hz (channels.time.sample_rate_hz), but the log's own time column `{column}` steps {} s ({} Hz): name that column as the time base (time = {{ column = \"{column}\", unit = \"s\" }}) or correct the rate",
+        "{}: the manifest states a sampling rate of {} Hz (channels.time.sample_rate_hz), but the log's own time column `{column}` steps {} s ({} Hz): name that column as the time base (time = {{ column = \"{column}\", unit = \"{unit}\" }}) or correct the rate",
         path.display(),
         format_number(*stated_hz, 6),
         format_number(*dt_s, 6),
@@ -314,6 +441,9 @@ pub enum IngestError {
         stated_hz: f64,
         column: String,
         dt_s: f64,
+        /// The column's unit as its name or the file gives it ("s" where
+        /// neither does).
+        unit: &'static str,
     },
     #[error(
         "{}: {at}: {channel} (column {column}) is {si:e} {} after scaling, beyond {range}: a corrupted sample, or a wrong unit? Fix or remove the line",
@@ -331,14 +461,21 @@ pub enum IngestError {
         range: String,
     },
     #[error(
-        "{}: {at}: time does not increase ({t_s} s after {prev_s} s); time stamps must be strictly increasing",
-        path.display()
+        "{}: {at}: time {} ({t_s} s after {prev_s} s): {}",
+        path.display(),
+        match kind { TimeFault::Repeated => "does not increase", _ => "goes back" },
+        match kind {
+            TimeFault::Swapped => "two stamps out of order (the next one is in order again): samples or stamps swapped in writing the file; fix the file",
+            TimeFault::Reset => "the time column starts again: two recordings in one file (the DAQ restarted?); split the file into one log per recording",
+            TimeFault::Repeated => "time stamps must increase (stamps rounded coarser than the interval repeat, which servoid takes only where every stamp lies within half its resolution of a uniform grid)",
+        }
     )]
     NotMonotonic {
         path: PathBuf,
         at: At,
         prev_s: f64,
         t_s: f64,
+        kind: TimeFault,
     },
     #[error(
         "{}: {at}: sample number {next} follows {prev}; consecutive numbers were expected, so samples are missing or repeated and the time base is not uniform",
@@ -351,7 +488,7 @@ pub enum IngestError {
         next: u64,
     },
     #[error(
-        "{}: sampling is not uniform: interval jitter max {jitter_max_s:.3e} s (interval ending at {worst_at}), rms {jitter_rms_s:.3e} s, against a mean interval of {dt_s:.6e} s; the max is {fraction:.3e} of the interval, above the tolerance {tolerance:e}",
+        "{}: sampling is not uniform: interval jitter max {jitter_max_s:.3e} s (interval ending at {worst_at}), rms {jitter_rms_s:.3e} s, against a mean interval of {dt_s:.6e} s; the max is {fraction:.3e} of the interval, above the tolerance {tolerance:e}, and the stamps stray from any uniform grid by more than half an interval (samples missing, or a rate that drifts). If the DAQ samples on a fixed clock and only its stamps are off, state its rate: channels.time.sample_rate_hz",
         path.display()
     )]
     Jitter {
@@ -364,7 +501,7 @@ pub enum IngestError {
         tolerance: f64,
     },
     #[error(
-        "{}: the {channel} channel looks clipped: {:.2} % of its samples sit exactly at its {which} {level:e} {unit} (tolerance {:.2} %)",
+        "{}: the {channel} channel is clipped: {:.2} % of its samples sit exactly at its {which} {level:e} {unit} (over the {:.2} % tolerated, and more than a quantised crest holds) while the command moves: a sensor or converter at the end of its range? Record again within the range",
         path.display(), 100.0 * fraction, 100.0 * tolerance
     )]
     Clipped {
@@ -845,10 +982,16 @@ pub fn read_log_from(plan: &LogPlan, file: LogFile) -> Result<Log, IngestError> 
     }
     if let TimePlan::SampleRate { hz } = plan.channels.time
         && let Some((probe, unit_known)) = undeclared_time(plan, &bytes)
-        && let Ok(log) =
-            read_raw(&probe, &bytes).and_then(|raw| assemble(&probe, sha256.clone(), raw))
     {
-        return stated_rate(log, hz, &probe, unit_known);
+        match read_raw(&probe, &bytes).and_then(|raw| assemble(&probe, sha256.clone(), raw)) {
+            Ok(log) => return stated_rate(log, hz, &probe, unit_known),
+            // A time column that goes back holds two recordings, or two
+            // samples out of order, whatever rate the manifest states.
+            Err(e @ IngestError::NotMonotonic { kind, .. }) if kind != TimeFault::Repeated => {
+                return Err(e);
+            }
+            Err(_) => {}
+        }
     }
     let raw = read_raw(plan, &bytes)?;
     assemble(plan, sha256, raw)
@@ -920,7 +1063,7 @@ fn stated_rate(log: Log, hz: f64, probe: &LogPlan, unit_known: bool) -> Result<L
     if !agrees {
         let TimePlan::Column {
             column: Column::Name(column),
-            ..
+            to_s,
         } = &probe.channels.time
         else {
             unreachable!("the probe reads a time column by name")
@@ -930,6 +1073,7 @@ fn stated_rate(log: Log, hz: f64, probe: &LogPlan, unit_known: bool) -> Result<L
             stated_hz: hz,
             column: column.clone(),
             dt_s,
+            unit: if *to_s == 1e-3 { "ms" } else { "s" },
         });
     }
     Ok(Log {
@@ -1237,6 +1381,14 @@ fn assemble(plan: &LogPlan, sha256: String, raw: Raw<'_>) -> Result<Log, IngestE
         _ => None,
     };
     push_repair_warnings(path, &repairs, &mut warnings);
+    check_held(
+        site,
+        dt_s,
+        ch,
+        &command_m,
+        &displacement_m,
+        force_n.as_deref(),
+    )?;
     Ok(Log {
         path: path.clone(),
         sha256,
@@ -1407,6 +1559,7 @@ fn despiked(
             path: site.path.clone(),
             at: (site.locate)(first.index),
             sample: first.index,
+            width: first.width,
             time_s: first.index as f64 * dt_s,
             channel,
             column: plan.column.to_string(),
@@ -1431,6 +1584,67 @@ fn despiked(
     Ok(v)
 }
 
+/// Refuse a displacement or force that holds one value while it should
+/// move (`ingest::held`): stuck, dropped to zero, or frozen with every
+/// other channel.
+fn check_held(
+    site: Site<'_>,
+    dt_s: f64,
+    ch: &Channels,
+    command: &[f64],
+    displacement: &[f64],
+    force: Option<&[f64]>,
+) -> Result<(), IngestError> {
+    let channels = [
+        Some(("displacement", &ch.displacement, displacement)),
+        ch.force.as_ref().zip(force).map(|(p, f)| ("force", p, f)),
+    ];
+    for (channel, plan, x) in channels.into_iter().flatten() {
+        // A stretch held at the channel's extreme is the clip check's
+        // (`check_log`): a rail, a quantised crest, or a step's level.
+        let (lo, hi) = x
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &v| {
+                (lo.min(v), hi.max(v))
+            });
+        let Some(h) = held::find(x)
+            .into_iter()
+            .find(|h| h.value != lo && h.value != hi)
+        else {
+            continue;
+        };
+        let others_hold = held::holds_over(command, h.start, h.len)
+            && channels
+                .iter()
+                .flatten()
+                .all(|(_, _, y)| held::holds_over(y, h.start, h.len));
+        let entered_by_jump = h.start > 0 && x[h.start - 1] != h.value;
+        let kind = if others_hold {
+            HeldKind::Frozen
+        } else if h.value == 0.0 && entered_by_jump {
+            HeldKind::Dropout
+        } else {
+            HeldKind::Stuck
+        };
+        let si = plan.unit.to_si();
+        return Err(IngestError::Held(Box::new(HeldFound {
+            path: site.path.clone(),
+            at: (site.locate)(h.start),
+            sample: h.start,
+            len: h.len,
+            time_s: h.start as f64 * dt_s,
+            dt_s,
+            channel,
+            column: plan.column.to_string(),
+            kind,
+            value: h.value / si,
+            unit: plan.unit.symbol(),
+            speed: h.speed / (si * dt_s),
+        })));
+    }
+    Ok(())
+}
+
 /// One warning per channel whose spikes were repaired: how many, and the
 /// first.
 fn push_repair_warnings(path: &Path, repairs: &[Repaired], warnings: &mut Vec<String>) {
@@ -1451,8 +1665,9 @@ fn push_repair_warnings(path: &Path, repairs: &[Repaired], warnings: &mut Vec<St
     }
 }
 
-/// Mean interval and jitter of time stamps `t` (s); refuses time that does not
-/// strictly increase.
+/// Mean interval and jitter of time stamps `t` (s), and how they stand
+/// against a uniform grid ([`Stamps`]); refuses time that goes back, and
+/// repeated stamps but for rounding.
 fn measure_timing(
     path: &Path,
     t: &[f64],
@@ -1467,13 +1682,23 @@ fn measure_timing(
             advice: "the log has too few rows",
         });
     }
-    if let Some(k) = t.windows(2).position(|w| w[1] <= w[0]) {
-        return Err(IngestError::NotMonotonic {
-            path: path.to_path_buf(),
-            at: locate(k + 1),
-            prev_s: t[k],
-            t_s: t[k + 1],
-        });
+    let not_monotonic = |k: usize, kind| IngestError::NotMonotonic {
+        path: path.to_path_buf(),
+        at: locate(k + 1),
+        prev_s: t[k],
+        t_s: t[k + 1],
+        kind,
+    };
+    if let Some(k) = t.windows(2).position(|w| w[1] < w[0]) {
+        // In order again two stamps on: one stamp out of place.
+        let swapped =
+            t.get(k + 2).is_some_and(|&next| next > t[k]) && (k == 0 || t[k + 1] > t[k - 1]);
+        let kind = if swapped {
+            TimeFault::Swapped
+        } else {
+            TimeFault::Reset
+        };
+        return Err(not_monotonic(k, kind));
     }
     let intervals = (t.len() - 1) as f64;
     let mean_dt_s = (t[t.len() - 1] - t[0]) / intervals;
@@ -1487,13 +1712,104 @@ fn measure_timing(
             worst = k + 1;
         }
     }
+    let repeated = t.windows(2).position(|w| w[1] == w[0]);
+    let (mean_dt_s, stamps) = if jitter_max_s <= JITTER_WARN_FRACTION * mean_dt_s {
+        (mean_dt_s, Stamps::Exact)
+    } else {
+        grid_of(t, jitter_max_s, locate)
+    };
+    if let Some(k) = repeated
+        && !matches!(stamps, Stamps::Rounded { .. })
+    {
+        return Err(not_monotonic(k, TimeFault::Repeated));
+    }
     Ok(Timing::Measured {
         mean_dt_s,
         jitter_rms_s: (sum_sq / intervals).sqrt(),
         jitter_max_s,
         worst_at: locate(worst),
+        stamps,
     })
 }
+
+/// The uniform grid t0 + k dt fitted to stamps `t` by least squares, and
+/// how the stamps stand against it: within half their own resolution
+/// (rounded), within half an interval (scattered), or neither (uneven),
+/// with the grid's interval, or the mean interval where they are uneven.
+/// Scattered stamps keep every interval within half a grid interval of the
+/// mean (`interval_max_s`): a longer one is a sample missing.
+fn grid_of(t: &[f64], interval_max_s: f64, locate: &dyn Fn(usize) -> At) -> (f64, Stamps) {
+    let n = t.len();
+    let kbar = (n - 1) as f64 / 2.0;
+    let tbar = t.iter().sum::<f64>() / n as f64;
+    let (mut skt, mut skk) = (0.0, 0.0);
+    for (k, &tk) in t.iter().enumerate() {
+        let dk = k as f64 - kbar;
+        skt += dk * (tk - tbar);
+        skk += dk * dk;
+    }
+    let dt = skt / skk;
+    let (mut max, mut sum_sq, mut worst) = (0.0_f64, 0.0, 0);
+    for (k, &tk) in t.iter().enumerate() {
+        let e = tk - tbar - dt * (k as f64 - kbar);
+        sum_sq += e * e;
+        if e.abs() > max {
+            max = e.abs();
+            worst = k;
+        }
+    }
+    let mean = (t[n - 1] - t[0]) / (n - 1) as f64;
+    // Rounding leaves each stamp within half a step of its true time; the
+    // least-squares line is not the one that keeps them all within it, and
+    // a tenth more allows for its error over a few thousand stamps.
+    // Too few stamps cannot show a grid: a repeated one is then a fault.
+    // Rounding moves each interval by less than a step, nearly always by
+    // well under one (a missing sample moves one by a whole interval).
+    let rounded = (n >= MIN_GRID_STAMPS)
+        .then(|| stamp_resolution(t))
+        .flatten()
+        .filter(|&step| max <= 0.55 * step && interval_max_s < 0.9 * step);
+    let stamps = match rounded {
+        Some(resolution_s) => Stamps::Rounded { resolution_s },
+        None if max <= 0.5 * dt && interval_max_s < 0.5 * dt => Stamps::Scattered {
+            max_s: max,
+            rms_s: (sum_sq / n as f64).sqrt(),
+            worst_at: locate(worst),
+        },
+        None => return (mean, Stamps::Uneven),
+    };
+    (dt, stamps)
+}
+
+/// The fewest stamps whose grid is judged.
+const MIN_GRID_STAMPS: usize = 16;
+
+/// The step stamps `t` are rounded to: the smallest gap between them or a
+/// whole fraction of it (up to a sixteenth), the coarsest on which every
+/// stamp sits. Stamps rounded to 0.1 ms at 2048 Hz step 0.4 or 0.5 ms,
+/// never 0.1 ms. None when they sit on no such grid.
+fn stamp_resolution(t: &[f64]) -> Option<f64> {
+    let gap = t
+        .windows(2)
+        .map(|w| w[1] - w[0])
+        .filter(|d| *d > 0.0)
+        .fold(f64::INFINITY, f64::min);
+    if !gap.is_finite() {
+        return None;
+    }
+    let t0 = t[0];
+    (1..=16).map(|m| gap / m as f64).find(|&step| {
+        t.iter().all(|&v| {
+            let r = (v - t0) / step;
+            (r - r.round()).abs() < 1e-3
+        })
+    })
+}
+
+/// Stamps scattered about their grid by more than this fraction of an
+/// interval are worth a warning: the samples may be uneven, not only their
+/// stamps.
+const SCATTER_WARN_FRACTION: f64 = 0.01;
 
 /// Jitter below this fraction of the interval is what printing time stamps
 /// in decimal costs (a few ulps of t); above it a warning is worth giving.
@@ -1502,10 +1818,12 @@ const JITTER_WARN_FRACTION: f64 = 1e-6;
 /// Judge whether `log` suits the analysis.
 ///
 /// Errors: fewer than `needs.min_samples` samples; sample-interval jitter
-/// above `needs.max_jitter_fraction` of the mean interval; a channel with more
-/// than `needs.clip_fraction` of its samples exactly at its maximum or
-/// minimum (clipped or saturated; a constant channel is 100 % at both).
-/// Warnings: jitter above 1e-6 of the interval but within tolerance.
+/// above `needs.max_jitter_fraction` of the mean interval; a constant
+/// channel; a displacement or force with more than `needs.clip_fraction` of
+/// its samples exactly at its maximum or minimum that neither quantisation
+/// nor a command holding still explains (`clipping`).
+/// Warnings: jitter above 1e-6 of the interval but within tolerance; a
+/// command limited at one level (it is what the valve received).
 ///
 /// Returns every warning about the log: those found while reading
 /// (`log.warnings`) followed by those of these checks.
@@ -1526,26 +1844,46 @@ pub fn check_log(log: &Log, needs: &Needs) -> Result<Vec<String>, IngestError> {
         jitter_rms_s,
         jitter_max_s,
         worst_at,
+        stamps,
     } = log.timing
     {
-        let fraction = jitter_max_s / mean_dt_s;
-        if fraction > needs.max_jitter_fraction {
-            return Err(IngestError::Jitter {
-                path: path.clone(),
-                dt_s: mean_dt_s,
-                jitter_rms_s,
-                jitter_max_s,
+        match stamps {
+            Stamps::Exact | Stamps::Rounded { .. } => {}
+            Stamps::Scattered {
+                max_s,
+                rms_s,
                 worst_at,
-                fraction,
-                tolerance: needs.max_jitter_fraction,
-            });
-        }
-        if fraction > JITTER_WARN_FRACTION {
-            warnings.push(format!(
-                "{}: sampling is slightly uneven: interval jitter max {jitter_max_s:.3e} s (interval ending at {worst_at}), rms {jitter_rms_s:.3e} s, against a mean interval of {mean_dt_s:.6e} s ({fraction:.3e} of it, within the tolerance {:e}); the analysis assumes uniform sampling",
-                path.display(),
-                needs.max_jitter_fraction
-            ));
+            } => {
+                if max_s > SCATTER_WARN_FRACTION * mean_dt_s {
+                    warnings.push(format!(
+                        "{}: the time stamps scatter about a uniform grid by up to {:.1} % of an interval (rms {:.1} %, the largest at {worst_at}): the rate, {} Hz, is the grid's, fitted to all {} stamps, and the samples are taken as uniform, as a DAQ's clock samples; state channels.time.sample_rate_hz if the DAQ's rate is known",
+                        path.display(),
+                        100.0 * max_s / mean_dt_s,
+                        100.0 * rms_s / mean_dt_s,
+                        format_number(1.0 / mean_dt_s, 8),
+                        log.n_rows
+                    ));
+                }
+            }
+            Stamps::Uneven => {
+                let fraction = jitter_max_s / mean_dt_s;
+                if fraction > needs.max_jitter_fraction {
+                    return Err(IngestError::Jitter {
+                        path: path.clone(),
+                        dt_s: mean_dt_s,
+                        jitter_rms_s,
+                        jitter_max_s,
+                        worst_at,
+                        fraction,
+                        tolerance: needs.max_jitter_fraction,
+                    });
+                }
+                warnings.push(format!(
+                    "{}: sampling is slightly uneven: interval jitter max {jitter_max_s:.3e} s (interval ending at {worst_at}), rms {jitter_rms_s:.3e} s, against a mean interval of {mean_dt_s:.6e} s ({fraction:.3e} of it, within the tolerance {:e}); the analysis assumes uniform sampling",
+                    path.display(),
+                    needs.max_jitter_fraction
+                ));
+            }
         }
     }
     let mut channels: Vec<(&'static str, &'static str, &[f64])> = vec![
@@ -1569,41 +1907,47 @@ pub fn check_log(log: &Log, needs: &Needs) -> Result<Vec<String>, IngestError> {
                 unit,
             });
         }
-        if let Some((which, level, fraction)) = clipping(x)
-            && fraction > needs.clip_fraction
+        if let Some(p) = clipping::plateau(x)
+            && p.fraction > needs.clip_fraction
+            && !clipping::quantised_crest(x, &p)
         {
-            return Err(IngestError::Clipped {
-                path: path.clone(),
-                channel,
-                which,
-                level,
-                unit,
-                fraction,
-                tolerance: needs.clip_fraction,
-            });
+            if channel == "command" {
+                warnings.extend(limited_command(path, x, &p));
+            } else if clipping::held_with_command(x, &log.command_m, &p) < 0.5 {
+                return Err(IngestError::Clipped {
+                    path: path.clone(),
+                    channel,
+                    which: p.which,
+                    level: p.level,
+                    unit,
+                    fraction: p.fraction,
+                    tolerance: needs.clip_fraction,
+                });
+            }
         }
     }
     Ok(warnings)
 }
 
-/// The extreme (maximum or minimum) at which most samples of `x` sit, with
-/// that fraction of samples; `None` when `x` is empty.
-fn clipping(x: &[f64]) -> Option<(&'static str, f64, f64)> {
-    if x.is_empty() {
-        return None;
-    }
-    let max = x.iter().copied().fold(f64::NEG_INFINITY, f64::max);
-    let min = x.iter().copied().fold(f64::INFINITY, f64::min);
-    // Exact equality on purpose: a clipped channel repeats its rail value.
-    let at_max = x.iter().filter(|&&v| v == max).count();
-    let at_min = x.iter().filter(|&&v| v == min).count();
-    let n = x.len() as f64;
-    Some(if at_max >= at_min {
-        ("maximum", max, at_max as f64 / n)
-    } else {
-        ("minimum", min, at_min as f64 / n)
+/// What to say of a command that holds one of its extremes beyond a
+/// quantised crest: nothing for a step or square wave (its levels hold
+/// nearly every sample, as the test intends); for a command limited at a
+/// level, that it is analysed as the valve received it.
+fn limited_command(path: &Path, u: &[f64], p: &clipping::Plateau) -> Option<String> {
+    (clipping::at_levels(u) < STEP_LEVELS_SHARE).then(|| {
+        format!(
+            "{}: the command holds its {} {} mm in {:.1} % of its samples (a limit set in the controller?): it is analysed as the command the valve received",
+            path.display(),
+            p.which,
+            format_number(1e3 * p.level, 4),
+            100.0 * p.fraction
+        )
     })
 }
+
+/// A command whose extremes and rest level hold this share of its samples
+/// is a step or square wave.
+const STEP_LEVELS_SHARE: f64 = 0.9;
 
 /// Margin kept before the first and after the last excited sample (s): many
 /// times the actuator's time constants (1/beta1 is tens of milliseconds), so

@@ -1,24 +1,35 @@
-//! Isolated spikes in a logged channel: one or two samples a corrupted
-//! transfer, a flipped bit or a DAQ glitch put far from both neighbours,
-//! which a sweep's FRF turns into a rig thousands of times off.
+//! Isolated spikes and corrupt stretches in a logged channel: one sample or
+//! a few adjacent ones that a corrupted transfer, a flipped bit or a DAQ
+//! glitch put far from both neighbours, which a sweep's FRF turns into a rig
+//! thousands of times off.
 //!
-//! The rule. A run of w = 1 or 2 samples starting at i is a spike when each
-//! departs from the straight line through its neighbours x(i-1) and x(i+w)
-//! by more than [`THRESHOLD`] times the channel's local scale, all on the
-//! same side, and the neighbours agree with each other better than the
-//! run does with them (a step moves its neighbours apart: it is not a
-//! spike). The local scale is the median of |x(j) - (x(j-1) + x(j+1))/2|
-//! over the block of [`BLOCK`] samples around, the larger of it and its two
-//! neighbouring blocks', and no less than the median over the record's
-//! blocks or the channel's converter step. A sine's departure swings within
-//! 1.4 times its median, Gaussian noise's beyond 7.5 times once in a
-//! million samples; a flipped exponent bit puts a sample thousands of times
-//! out.
+//! The rule. A run of w = 1 to [`MAX_WIDTH`] samples starting at i is a
+//! spike when each departs from the straight line through its neighbours
+//! x(i-1) and x(i+w) by more than [`THRESHOLD`] times the channel's local
+//! scale (times (w+1)^2 / 9 beyond three samples, as a chord's error over a
+//! smooth signal grows), all on the same side, and the neighbours agree with
+//! each other better than the run does with them (a step moves its
+//! neighbours apart: it is not a spike). Nor is a run that one side of it
+//! explains: where the run lies on the straight line the two samples beyond
+//! either neighbour extend to (within the same threshold, growing with the
+//! square of the distance), it is the edge of something that starts or
+//! ends there, as a random excitation starts after a rest, not a departure
+//! from both sides. The local scale is the median of
+//! |x(j) - (x(j-1) + x(j+1))/2| over the block of [`BLOCK`] samples around,
+//! the larger of it and its two neighbouring blocks', and no less than the
+//! median over the record's blocks or the channel's converter step. A
+//! sine's departure swings within 1.4 times its median, Gaussian noise's
+//! beyond 7.5 times once in a million samples; a flipped exponent bit puts a
+//! sample thousands of times out.
 
 /// How many local scales a spike departs by.
 pub const THRESHOLD: f64 = 30.0;
 /// The samples of a block the local scale is the median of.
 pub const BLOCK: usize = 256;
+/// The widest run of adjacent samples taken as one spike (a corrupt
+/// stretch); longer ones are a held channel's (`ingest::held`) or the
+/// signal's own.
+pub const MAX_WIDTH: usize = 16;
 
 /// One spike: its first sample, its width, its value(s) and neighbours.
 #[derive(Debug, Clone, PartialEq)]
@@ -58,8 +69,8 @@ fn by_rule(x: &[f64]) -> Vec<Spike> {
             j += 1;
             continue;
         }
-        // A one-sample spike, or the first of two.
-        let found = (1..=2)
+        // A one-sample spike, or the first of a stretch.
+        let found = (1..=MAX_WIDTH)
             .filter(|w| j + w < n)
             .find_map(|w| spike_at(x, j, w, s));
         match found {
@@ -109,7 +120,11 @@ fn spike_at(x: &[f64], i: usize, w: usize, s: f64) -> Option<Spike> {
     let d: Vec<f64> = (i..i + w).map(|j| x[j] - line(j)).collect();
     let least = d.iter().map(|v| v.abs()).fold(f64::INFINITY, f64::min);
     let same_side = d.iter().all(|v| v.signum() == d[0].signum());
-    if !(least > THRESHOLD * s && same_side && (after - before).abs() < least) {
+    let chord = ((w + 1) * (w + 1)) as f64 / 9.0;
+    if !(least > THRESHOLD * s * chord.max(1.0) && same_side && (after - before).abs() < least) {
+        return None;
+    }
+    if edge_of(x, i, w, s) {
         return None;
     }
     let (k, far) = d
@@ -125,6 +140,26 @@ fn spike_at(x: &[f64], i: usize, w: usize, s: f64) -> Option<Spike> {
         after,
         ratio: far.abs() / s,
     })
+}
+
+/// Whether the run of `w` samples from `i` lies on the line one side's two
+/// nearest samples extend to, each within [`THRESHOLD`] scales `s` times the
+/// square of its distance from that side: an onset or an end, which that
+/// side explains.
+fn edge_of(x: &[f64], i: usize, w: usize, s: f64) -> bool {
+    let n = x.len();
+    let within = |j: usize, predicted: f64, distance: usize| {
+        (x[j] - predicted).abs() <= THRESHOLD * s * (distance * distance) as f64
+    };
+    let left = i >= 2 && {
+        let (a, b) = (x[i - 2], x[i - 1]);
+        (i..i + w).all(|j| within(j, b + (b - a) * (j + 1 - i) as f64, j + 1 - i))
+    };
+    let right = i + w + 1 < n && {
+        let (a, b) = (x[i + w + 1], x[i + w]);
+        (i..i + w).all(|j| within(j, b + (b - a) * (i + w - j) as f64, i + w - j))
+    };
+    left || right
 }
 
 /// `x` with each spike replaced by the straight line between its

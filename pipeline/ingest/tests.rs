@@ -1059,7 +1059,7 @@ fn time_that_does_not_increase_names_the_row() {
     );
     assert_contains(
         &err(&plan_by_name(&path, LogFormat::Csv)),
-        &["back.csv", "line 5", "2 s after 3 s"],
+        &["back.csv", "line 5", "2 s after 3 s", "goes back"],
     );
     let path = write_file(
         dir.path(),
@@ -1081,50 +1081,124 @@ fn jittered(dir: &Path, n: usize, jitter: impl Fn(usize) -> f64) -> LogPlan {
     plan_by_name(&path, LogFormat::Csv)
 }
 
+/// Time stamps against the uniform grid fitted to them: scattered by a
+/// DAQ's late stamping, rounded to a coarser resolution than the interval,
+/// missing a sample, drifting, repeated. Each is taken or refused as the
+/// samples it implies are uniform or not.
 #[test]
-fn jitter_above_tolerance_is_an_error_and_below_a_warning() {
+fn time_stamps_are_read_against_a_uniform_grid() {
     let dir = tempfile::tempdir().unwrap();
     let n = 2000;
-    // From sample 1000 (line 1002) on, every stamp is 5e-5 s late: one
-    // interval is 5e-5 s (5 % of dt) too long. With d = 5e-5 and m = 1999
-    // intervals the mean interval is 1e-3 + d/m, that interval deviates by
-    // d (m-1)/m and the others by -d/m, so rms = d sqrt(m-1)/m.
-    let p = jittered(dir.path(), n, |k| if k >= 1000 { 5e-5 } else { 0.0 });
-    let log = read_log(&p).unwrap();
-    let Timing::Measured {
-        jitter_max_s,
-        worst_at,
-        mean_dt_s,
-        jitter_rms_s,
-    } = log.timing
-    else {
-        panic!("a time column gives measured timing")
+    let timing = |p: &LogPlan| match read_log(p).unwrap().timing {
+        Timing::Measured {
+            mean_dt_s, stamps, ..
+        } => (mean_dt_s, stamps),
+        Timing::Exact { .. } => panic!("a time column gives measured timing"),
     };
-    let (d, m) = (5e-5, 1999.0_f64);
-    assert_relative_eq!(mean_dt_s, 1e-3 + d / m, max_relative = 1e-9);
-    assert_relative_eq!(jitter_max_s, d * (m - 1.0) / m, max_relative = 1e-6);
-    assert_relative_eq!(jitter_rms_s, d * (m - 1.0).sqrt() / m, max_relative = 1e-6);
-    assert_eq!(worst_at, At::Line(1002));
-    let msg = check_log(&log, &NEEDS).unwrap_err().to_string();
-    assert_contains(
-        &msg,
-        &["jitter.csv", "line 1002", "4.997e-5", "tolerance 1e-2"],
-    );
 
-    let loose = Needs {
-        max_jitter_fraction: 0.1,
-        ..NEEDS
+    // Each stamp late by up to 5 % of the interval (uniform in [0, 5e-5)):
+    // the samples are uniform, and the grid's interval is the clock's to a
+    // part in 1e6; a warning says how far the stamps scatter.
+    let late = lcg(9, n);
+    let p = jittered(dir.path(), n, |k| 2.5e-5 * (1.0 + late[k]));
+    let (dt, stamps) = timing(&p);
+    assert!((dt / 1e-3 - 1.0).abs() < 1e-6, "{dt}");
+    let Stamps::Scattered { max_s, .. } = stamps else {
+        panic!("{stamps:?}")
     };
-    let warnings = check_log(&log, &loose).unwrap();
-    assert_eq!(warnings.len(), 1);
-    assert_contains(&warnings[0], &["jitter.csv", "uneven", "line 1002"]);
+    // Half the 5e-5 spread about the fitted grid, within a tenth (the
+    // fitted offset and slope move with the draws).
+    assert!((max_s / 2.5e-5 - 1.0).abs() < 0.1, "{max_s}");
+    let warnings = check_log(&read_log(&p).unwrap(), &NEEDS).unwrap();
+    assert_eq!(warnings.len(), 1, "{warnings:?}");
+    assert_contains(&warnings[0], &["jitter.csv", "scatter", "sample_rate_hz"]);
 
-    // Time stamps k * 1e-3 printed shortest-round-trip carry only rounding.
-    let p = jittered(dir.path(), n, |_| 0.0);
+    // 2048 Hz stamps rounded to 1 ms repeat some stamps and step 0, 1 ms:
+    // within half a millisecond of the grid, the samples are uniform, and
+    // nothing is said.
+    let path = dir.path().join("rounded.csv");
+    let t: Vec<f64> = (0..n)
+        .map(|k| (k as f64 / 2048.0 * 1e3).round() * 1e-3)
+        .collect();
+    let u = lcg(5, n);
+    write_csv(&path, &[("t", &t[..]), ("u", &u), ("x", &u), ("f", &u)]).unwrap();
+    let p = plan_by_name(&path, LogFormat::Csv);
+    let (dt, stamps) = timing(&p);
+    assert!((dt * 2048.0 - 1.0).abs() < 1e-5, "{dt}");
+    let Stamps::Rounded { resolution_s } = stamps else {
+        panic!("{stamps:?}")
+    };
+    assert_relative_eq!(resolution_s, 1e-3, max_relative = 1e-9);
     assert!(
         check_log(&read_log(&p).unwrap(), &NEEDS)
             .unwrap()
             .is_empty()
+    );
+
+    // One sample missing: an interval twice the others, off any grid by
+    // half an interval; refused, with the advice to state the rate.
+    let p = jittered(dir.path(), n, |k| if k >= 1000 { 1e-3 } else { 0.0 });
+    assert_eq!(timing(&p).1, Stamps::Uneven);
+    let msg = check_log(&read_log(&p).unwrap(), &NEEDS)
+        .unwrap_err()
+        .to_string();
+    assert_contains(
+        &msg,
+        &["jitter.csv", "line 1002", "not uniform", "sample_rate_hz"],
+    );
+
+    // A clock drifting by 2 % over the record: intervals within the 1 %
+    // tolerance of their mean, stamps 2.5 intervals off the straight line
+    // at the middle: read at the mean interval, with the old warning.
+    let p = jittered(dir.path(), n, |k| {
+        let x = k as f64 / (n - 1) as f64;
+        0.02 * 1e-3 * (n as f64) * x * x / 2.0
+    });
+    let (_, stamps) = timing(&p);
+    assert_eq!(stamps, Stamps::Uneven);
+    let warnings = check_log(&read_log(&p).unwrap(), &NEEDS).unwrap();
+    assert_eq!(warnings.len(), 1, "{warnings:?}");
+    assert_contains(&warnings[0], &["jitter.csv", "uneven"]);
+
+    // Time stamps k * 1e-3 printed shortest-round-trip carry only rounding.
+    let p = jittered(dir.path(), n, |_| 0.0);
+    assert_eq!(timing(&p).1, Stamps::Exact);
+    assert!(
+        check_log(&read_log(&p).unwrap(), &NEEDS)
+            .unwrap()
+            .is_empty()
+    );
+}
+
+/// Time that goes back is two recordings in one file, or two stamps out of
+/// order; the message tells which.
+#[test]
+fn time_that_goes_back_is_a_reset_or_a_swap() {
+    let dir = tempfile::tempdir().unwrap();
+    let n = 100;
+    let p = jittered(dir.path(), n, |k| if k >= 60 { -0.06 } else { 0.0 });
+    assert_contains(
+        &err(&p),
+        &[
+            "jitter.csv",
+            "line 62",
+            "goes back",
+            "two recordings in one file",
+        ],
+    );
+    let p = jittered(dir.path(), n, |k| match k {
+        40 => 1e-3,
+        41 => -1e-3,
+        _ => 0.0,
+    });
+    assert_contains(
+        &err(&p),
+        &[
+            "jitter.csv",
+            "line 43",
+            "goes back",
+            "two stamps out of order",
+        ],
     );
 }
 

@@ -151,6 +151,10 @@ pub(super) fn without_rig(
             .and_then(|st| st.spring)
             .filter(|s| s.stiffens())
             .map(|s| s.cubic_n_per_m3),
+        load_cell: stage
+            .as_ref()
+            .and_then(|st| st.spring)
+            .map(|s| (s.stiffness_n_per_m, s.amplitude_m)),
     });
     let mut kept = Kept {
         estimate,
