@@ -21,15 +21,23 @@ use crate::util::{PaperSweep, scratch};
 /// What a message can name as the cause.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
 enum Class {
-    /// A corrupted sample.
+    /// A corrupted sample or stretch of samples.
     Sample,
+    /// A channel that does not read its signal: stuck, dropped, frozen,
+    /// inverted, clipped.
+    Channel,
     /// The time base or a unit: the rate, a scale.
     Units,
+    /// A time column that holds two recordings or samples out of order.
+    TimeBase,
+    /// A converter too coarse for the signal.
+    Quantisation,
     /// The FRF settings the manifest names.
     Settings,
     /// Linear dynamics the paper's model lacks: a delay, a mode, a piston.
     Dynamics,
-    /// A nonlinearity: friction, a stiffening spring.
+    /// A nonlinearity: friction, a stiffening spring, a gain that depends
+    /// on the load.
     Nonlinear,
     /// What the manifest says of a specimen.
     Specimen,
@@ -40,8 +48,18 @@ enum Class {
 fn classes(message: &str) -> Vec<Class> {
     let m = message.to_lowercase();
     let has = |words: &[&str]| words.iter().any(|w| m.contains(w));
-    let table: [(Class, &[&str]); 6] = [
-        (Class::Sample, &["isolated spike"]),
+    let table: [(Class, &[&str]); 9] = [
+        (Class::Sample, &["isolated spike", "corrupt stretch"]),
+        (
+            Class::Channel,
+            &[
+                "stuck sensor",
+                "a dropout of the sensor",
+                "the daq stalled",
+                "wired backwards",
+                "is clipped",
+            ],
+        ),
         (
             Class::Units,
             &[
@@ -49,8 +67,14 @@ fn classes(message: &str) -> Vec<Class> {
                 "static gain",
                 "unit mistake",
                 "were it milliseconds",
+                "wrong unit or scale",
             ],
         ),
+        (
+            Class::TimeBase,
+            &["two recordings in one file", "two stamps out of order"],
+        ),
+        (Class::Quantisation, &["coarse quantisation"]),
         (
             Class::Settings,
             &[
@@ -73,11 +97,16 @@ fn classes(message: &str) -> Vec<Class> {
             &[
                 "not linear at this amplitude",
                 "(friction, a nonlinear specimen",
+                "a gain that depends on the load",
             ],
         ),
         (
             Class::Specimen,
-            &["springs disagree", "the springs' disagreement"],
+            &[
+                "stiffness typed wrong",
+                "the spring's stiffness the manifest states",
+                "swapped in the manifest",
+            ],
         ),
     ];
     table
@@ -105,6 +134,8 @@ struct Case {
     edit: fn(String) -> String,
     /// Something done to the logs before the analysis.
     logs: fn(&std::path::Path),
+    /// The converters' bits.
+    bits: u32,
 }
 
 fn nothing(s: String) -> String {
@@ -123,6 +154,7 @@ const BASE: Case = Case {
     at_rest: true,
     edit: nothing,
     logs: no_logs,
+    bits: 18,
 };
 
 fn simulation(case: &Case, seed: u64) -> String {
@@ -134,6 +166,7 @@ fn simulation(case: &Case, seed: u64) -> String {
         unmodelled: case.unmodelled,
         sensor: case.sensor,
         springs: case.springs.unwrap_or(PaperSweep::default().springs),
+        bits: case.bits,
         ..PaperSweep::default()
     }
     .text()
@@ -172,6 +205,105 @@ fn diagnose(case: &Case, seed: u64) -> Vec<String> {
     std::fs::write(&out.manifest, (case.edit)(text)).unwrap();
     let campaign = load(&out.manifest).expect("the analysis manifest loads");
     messages(&analyse(&campaign))
+}
+
+/// Column `col` of the log of run `run` rewritten by `f(sample, value)`.
+fn rewrite(logs: &std::path::Path, run: &str, col: usize, f: impl Fn(usize, &str) -> String) {
+    let path = logs.join(format!("{run}.csv"));
+    let text = std::fs::read_to_string(&path).unwrap();
+    let mut out = String::with_capacity(text.len());
+    for (i, line) in text.lines().enumerate() {
+        if i == 0 {
+            out.push_str(line);
+        } else {
+            let mut fields: Vec<String> = line.split(',').map(String::from).collect();
+            fields[col] = f(i - 1, &fields[col]);
+            out.push_str(&fields.join(","));
+        }
+        out.push('\n');
+    }
+    std::fs::write(&path, out).unwrap();
+}
+
+/// Every log's column `col` rewritten.
+fn rewrite_all(logs: &std::path::Path, col: usize, f: impl Fn(usize, &str) -> String + Copy) {
+    for run in ["no-specimen", "spring-k1", "spring-k2"] {
+        rewrite(logs, run, col, f);
+    }
+}
+
+fn negated(v: &str) -> String {
+    format!("{}", -v.parse::<f64>().unwrap())
+}
+
+/// Three adjacent samples of the no-specimen displacement 1.7 mm off.
+fn corrupt_stretch(logs: &std::path::Path) {
+    rewrite(logs, "no-specimen", 2, |k, v| match k {
+        20_000..20_003 => format!("{}", v.parse::<f64>().unwrap() + 1.7),
+        _ => v.to_string(),
+    });
+}
+
+/// The no-specimen displacement stuck for 2 s.
+fn stuck(logs: &std::path::Path) {
+    let path = logs.join("no-specimen.csv");
+    let text = std::fs::read_to_string(&path).unwrap();
+    let held = text
+        .lines()
+        .nth(20_001)
+        .unwrap()
+        .split(',')
+        .nth(2)
+        .unwrap()
+        .to_string();
+    rewrite(logs, "no-specimen", 2, |k, v| match k {
+        20_000..22_000 => held.clone(),
+        _ => v.to_string(),
+    });
+}
+
+/// The no-specimen displacement dropping to zero for 50 samples.
+fn dropout(logs: &std::path::Path) {
+    rewrite(logs, "no-specimen", 2, |k, v| match k {
+        20_000..20_050 => "0".into(),
+        _ => v.to_string(),
+    });
+}
+
+/// Every channel of the no-specimen log frozen for 2 s.
+fn frozen(logs: &std::path::Path) {
+    let path = logs.join("no-specimen.csv");
+    let text = std::fs::read_to_string(&path).unwrap();
+    let held: Vec<String> = text
+        .lines()
+        .nth(20_001)
+        .unwrap()
+        .split(',')
+        .map(String::from)
+        .collect();
+    for (col, value) in held.iter().enumerate().skip(1) {
+        rewrite(logs, "no-specimen", col, |k, v| match k {
+            20_000..22_000 => value.clone(),
+            _ => v.to_string(),
+        });
+    }
+}
+
+/// A time column that starts again at 0 after 30 s in every log.
+fn reset(logs: &std::path::Path) {
+    rewrite_all(logs, 0, |k, v| match k {
+        30_000.. => format!("{}", v.parse::<f64>().unwrap() - 30.0),
+        _ => v.to_string(),
+    });
+}
+
+/// Two time stamps swapped in every log.
+fn swapped(logs: &std::path::Path) {
+    rewrite_all(logs, 0, |k, v| match k {
+        20_000 => "20.001".into(),
+        20_001 => "20".into(),
+        _ => v.to_string(),
+    });
 }
 
 /// A flipped sample in a spring run's log: the displacement of its sample
@@ -277,6 +409,76 @@ fn cases() -> Vec<Case> {
                 assert!(s.contains(d), "{s}");
                 s.replace(d, &d.replace("unit = \"mm\"", "unit = \"cm\""))
             },
+            ..BASE
+        },
+        Case {
+            name: "three adjacent corrupt displacement samples (+1.7 mm)",
+            cause: Some(Class::Sample),
+            logs: corrupt_stretch,
+            ..BASE
+        },
+        Case {
+            name: "a displacement stuck for 2 s",
+            cause: Some(Class::Channel),
+            logs: stuck,
+            ..BASE
+        },
+        Case {
+            name: "a displacement dropping to zero for 50 samples",
+            cause: Some(Class::Channel),
+            logs: dropout,
+            ..BASE
+        },
+        Case {
+            name: "every channel frozen for 2 s",
+            cause: Some(Class::Channel),
+            logs: frozen,
+            ..BASE
+        },
+        Case {
+            name: "the displacement inverted",
+            cause: Some(Class::Channel),
+            logs: |logs| rewrite_all(logs, 2, |_, v| negated(v)),
+            ..BASE
+        },
+        Case {
+            name: "the force inverted",
+            cause: Some(Class::Channel),
+            logs: |logs| rewrite_all(logs, 3, |_, v| negated(v)),
+            ..BASE
+        },
+        Case {
+            name: "a force in kN declared as N",
+            cause: Some(Class::Units),
+            edit: |s| {
+                let f = "[channels.force]\ncolumn = \"force_kn\"\nunit = \"kN\"";
+                assert!(s.contains(f), "{s}");
+                s.replace(f, &f.replace("unit = \"kN\"", "unit = \"N\""))
+            },
+            ..BASE
+        },
+        Case {
+            name: "a time column that starts again (a rate stated)",
+            cause: Some(Class::TimeBase),
+            logs: reset,
+            edit: |s| {
+                let t = "[channels.time]\ncolumn = \"time_s\"\nunit = \"s\"";
+                assert!(s.contains(t), "{s}");
+                s.replace(t, "[channels.time]\nsample_rate_hz = 1000.0")
+            },
+            ..BASE
+        },
+        Case {
+            name: "two time stamps swapped",
+            cause: Some(Class::TimeBase),
+            logs: swapped,
+            ..BASE
+        },
+        Case {
+            name: "a 10-bit displacement",
+            cause: Some(Class::Quantisation),
+            sensor: "",
+            bits: 10,
             ..BASE
         },
         Case {

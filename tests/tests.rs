@@ -36,3 +36,4 @@ mod simulate;
 mod slurm;
 mod time_domain;
 mod tracking;
+mod valid;

@@ -214,6 +214,15 @@ pub struct PaperSweep {
     pub sensor: &'static str,
     /// The springs' `specimen = ...` tables.
     pub springs: [&'static str; 2],
+    /// The `[excitation]` table's lines in place of the chirp (its
+    /// duration and rests are then theirs).
+    pub excitation: Option<&'static str>,
+    /// The chirp's amplitude (m).
+    pub amplitude_m: f64,
+    /// The converters' bits (command, displacement, force).
+    pub bits: u32,
+    /// Paper's Exp1 as a validation run after the springs.
+    pub validation: bool,
 }
 
 impl Default for PaperSweep {
@@ -230,6 +239,10 @@ impl Default for PaperSweep {
                 "{ stiffness_n_per_m = 116640.0 }",
                 "{ stiffness_n_per_m = 88540.0 }",
             ],
+            excitation: None,
+            amplitude_m: 0.004,
+            bits: 18,
+            validation: false,
         }
     }
 }
@@ -256,6 +269,18 @@ impl PaperSweep {
             format!("[rig.unmodelled]\n{}\n", self.unmodelled)
         };
         let [k1, k2] = self.springs;
+        let excitation = match self.excitation {
+            Some(lines) => lines.to_string(),
+            None => format!(
+                "kind = \"chirp\"\nlaw = \"quadratic\"\nf0_hz = 0.1\nf1_hz = 35.0\nduration_s = {body:?}\namplitude_m = {:?}\nlead_in_s = {lead:?}\nlead_out_s = {lead:?}",
+                self.amplitude_m
+            ),
+        };
+        let validation = if self.validation {
+            "\n[[runs]]\nid = \"exp1\"\nrole = \"validation\"\np_gain = 1.0\nspecimen = { mass_kg = 3.8, damping_ns_per_m = 5.0, stiffness_n_per_m = 129400.0 }\n"
+        } else {
+            ""
+        };
         format!(
             r#"schema_version = 1
 
@@ -276,28 +301,21 @@ a3_per_s = 16.118
 
 {unmodelled}
 [excitation]
-kind = "chirp"
-law = "quadratic"
-f0_hz = 0.1
-f1_hz = 35.0
-duration_s = {body:?}
-amplitude_m = 0.004
-lead_in_s = {lead:?}
-lead_out_s = {lead:?}
+{excitation}
 
 [instrument.command]
 unit = "mm"
-quantization = {{ bits = 18, full_scale = 50.0 }}
+quantization = {{ bits = {bits}, full_scale = 50.0 }}
 
 [instrument.displacement]
 unit = "mm"
 noise_rms = 0.002
-{sensor}quantization = {{ bits = 18, full_scale = 50.0 }}
+{sensor}quantization = {{ bits = {bits}, full_scale = 50.0 }}
 
 [instrument.force]
 unit = "kN"
 noise_rms = 0.001
-quantization = {{ bits = 18, full_scale = 5.0 }}
+quantization = {{ bits = {bits}, full_scale = 5.0 }}
 
 [identification]
 band_hz = [0.5, 30.0]
@@ -318,7 +336,8 @@ id = "spring-k2"
 role = "spring"
 p_gain = 1.0
 specimen = {k2}
-"#,
+{validation}"#,
+            bits = self.bits,
             fs = self.sample_rate_hz,
             seed = self.seed,
             format = self.log_format,

@@ -105,6 +105,7 @@ fn log(data: &[u8], file: &str, format: LogFormat, time: TimePlan, names: [Colum
         min_samples: 16,
         max_jitter_fraction: 0.01,
         clip_fraction: 0.01,
+        force_loaded: true,
     };
     ingest::check_log(&log, &needs).is_ok()
 }

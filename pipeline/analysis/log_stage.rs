@@ -144,21 +144,25 @@ pub enum LogStageError {
     #[error(transparent)]
     Inverted(Box<Inverted>),
     #[error(
-        "{}: the force against the displacement gives a stiffness of {} N/m where the specimen's is {} N/m: the force reads {} times the load: a unit mistake? With channels.force.unit = \"{}\" (the manifest says \"{}\") it gives {} N/m",
+        "{}: the force against the displacement gives a stiffness of {} N/m where the specimen's is {} N/m ({} times it): a unit mistake? With channels.{channel}.unit = \"{}\" (the manifest says \"{}\") it gives {} N/m",
         path.display(),
         crate::units::format_number(*measured, 5),
         crate::units::format_number(*stated, 6),
         crate::units::format_number(measured / stated, 3),
         fix.symbol(),
         given.symbol(),
-        crate::units::format_number(measured * fix.to_si() / given.to_si(), 5)
+        crate::units::format_number(*fixed, 5)
     )]
-    ForceUnit {
+    StiffnessUnit {
         path: PathBuf,
         measured: f64,
         stated: f64,
+        /// The channel whose unit fits, the manifest's and the one that
+        /// fits, and the stiffness with it (N/m).
+        channel: &'static str,
         given: crate::units::Unit,
         fix: crate::units::Unit,
+        fixed: f64,
     },
     #[error("{}: {source}", path.display())]
     Tf {
@@ -240,6 +244,7 @@ pub fn replayed_command(
 /// length), trimmed to its excitation when the manifest asks, with its
 /// warnings.
 fn checked_log(
+    run: &RunPlan,
     plan: &LogPlan,
     ident: &IdentificationPlan,
     file: LogFile,
@@ -249,6 +254,7 @@ fn checked_log(
         min_samples: ident.frf.min_samples(),
         max_jitter_fraction: MAX_JITTER_FRACTION,
         clip_fraction: CLIP_FRACTION,
+        force_loaded: run.role != Role::NoSpecimen,
     };
     // check_log returns the log's own warnings with its findings, so each
     // warning is listed once.
@@ -468,17 +474,24 @@ fn manifest_scale(channel: &ingest::ChannelPlan) -> f64 {
     channel.gain / channel.unit.to_si()
 }
 
-/// The force units a load cell's reading is tried in.
+/// The units a channel's reading is tried in, by what it measures.
 const FORCE_UNITS: [crate::units::Unit; 3] = [
     crate::units::Unit::Newton,
     crate::units::Unit::Kilonewton,
     crate::units::Unit::PoundForce,
 ];
+const LENGTH_UNITS: [crate::units::Unit; 4] = [
+    crate::units::Unit::Meter,
+    crate::units::Unit::Centimeter,
+    crate::units::Unit::Millimeter,
+    crate::units::Unit::Inch,
+];
 
 /// Refuse a force whose ratio to the displacement (`measured`, N/m) has the
 /// sign or the scale of another unit against the specimen's stiffness
-/// `stated`: inverted (a load cell wired backwards), or in another unit
-/// than the manifest's (N declared as kN reads a thousandth of the load).
+/// `stated`: inverted (a load cell wired backwards), or a channel in
+/// another unit than the manifest's (N declared as kN reads a thousandth
+/// of the load, mm declared as cm ten times the displacement).
 fn force_scale(
     path: &std::path::Path,
     plan: &LogPlan,
@@ -503,19 +516,36 @@ fn force_scale(
             scale: manifest_scale(force),
         })));
     }
-    let fix = FORCE_UNITS
-        .into_iter()
-        .filter(|u| *u != force.unit)
-        .find(|u| (ratio * u.to_si() / force.unit.to_si() - 1.0).abs() < STIFFNESS_UNIT_TOLERANCE);
-    match fix {
-        Some(fix) if (ratio - 1.0).abs() > 0.5 => Err(LogStageError::ForceUnit {
+    if (ratio - 1.0).abs() <= 0.5 {
+        return Ok(());
+    }
+    // The stiffness is force over displacement: a force unit's factor
+    // multiplies it, a displacement unit's divides it.
+    let displacement = &plan.channels.displacement;
+    let fits = |channel, given: crate::units::Unit, units: &[crate::units::Unit], power: i32| {
+        units
+            .iter()
+            .copied()
+            .filter(|u| *u != given)
+            .find_map(|fix| {
+                let fixed = measured * (fix.to_si() / given.to_si()).powi(power);
+                ((fixed / stated - 1.0).abs() < STIFFNESS_UNIT_TOLERANCE)
+                    .then_some((channel, given, fix, fixed))
+            })
+    };
+    let found = fits("force", force.unit, &FORCE_UNITS, 1)
+        .or_else(|| fits("displacement", displacement.unit, &LENGTH_UNITS, -1));
+    match found {
+        Some((channel, given, fix, fixed)) => Err(LogStageError::StiffnessUnit {
             path: path.to_path_buf(),
             measured,
             stated,
-            given: force.unit,
+            channel,
+            given,
             fix,
+            fixed,
         }),
-        _ => Ok(()),
+        None => Ok(()),
     }
 }
 
@@ -734,7 +764,7 @@ pub fn log_stage_from(
     file: LogFile,
 ) -> Result<LogStage, LogStageError> {
     let path = &plan.path;
-    let (log, mut warnings) = checked_log(plan, ident, file)?;
+    let (log, mut warnings) = checked_log(run, plan, ident, file)?;
     check_band_below_nyquist(run, &log, path)?;
     let fs = log.sample_rate_hz;
     let (choice, mut h, force_frf) = estimate_frfs(run, ident, &log, path)?;

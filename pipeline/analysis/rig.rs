@@ -257,7 +257,9 @@ fn narrow_causes(c: &mut Consistency, runs: &Gathered<'_>, run_cause: Option<&st
     if confirmed || !harmonics.is_empty() {
         causes.push(load_dependence(c, &springs, &harmonics));
     }
-    if confirmed {
+    if let Some(swap) = swapped(&springs) {
+        causes.push(swap);
+    } else if confirmed {
         c.note += &format!(
             "; every spring's load cell confirms its stated stiffness within {:.0} %, so neither a stiffness typed wrong, a swapped log nor a unit makes them disagree",
             100.0 * STIFFNESS_MISMATCH
@@ -273,6 +275,37 @@ fn narrow_causes(c: &mut Consistency, runs: &Gathered<'_>, run_cause: Option<&st
         causes.push(identify::consistency::DYNAMICS_CAUSE.to_string());
     }
     c.likely_causes = causes;
+}
+
+/// Springs whose load cells read another spring's stated stiffness (each
+/// within [`STIFFNESS_MISMATCH`]), in words: the stiffnesses or the logs
+/// swapped. None unless every spring whose load cell contradicts its own
+/// stiffness reads another's.
+fn swapped(springs: &[Spring<'_>]) -> Option<String> {
+    let near = |k: f64, stated: f64| (k / stated - 1.0).abs() <= STIFFNESS_MISMATCH;
+    let mut pairs = Vec::new();
+    for (i, s) in springs.iter().enumerate() {
+        let (k, _) = s.evidence.load_cell?;
+        if near(k, s.stated) {
+            continue;
+        }
+        let other = springs
+            .iter()
+            .enumerate()
+            .find(|(j, o)| *j != i && near(k, o.stated))?;
+        pairs.push(format!(
+            "{}'s load cell reads {} N/m, {}'s stated stiffness",
+            s.id,
+            crate::units::format_number(k, 5),
+            other.1.id
+        ));
+    }
+    (!pairs.is_empty()).then(|| {
+        format!(
+            "{}: the stiffnesses swapped in the manifest or the run table (stiffness_n_per_m), or the runs' logs (each run's log = ...)",
+            pairs.join(", ")
+        )
+    })
 }
 
 /// A spring run as the springs' causes read it.

@@ -323,6 +323,9 @@ pub struct Needs {
     /// Largest tolerated fraction of samples sitting exactly at a channel's
     /// maximum (or minimum); above it the channel is taken as clipped.
     pub clip_fraction: f64,
+    /// Whether the force carries a load: not with no specimen, where a
+    /// load cell reads zero and a coarse converter holds one code.
+    pub force_loaded: bool,
 }
 
 /// A read error as a lab engineer would say it: a log that is not there is
@@ -1894,6 +1897,11 @@ pub fn check_log(log: &Log, needs: &Needs) -> Result<Vec<String>, IngestError> {
         channels.push(("force", "N", f));
     }
     for (channel, unit, x) in channels {
+        // An unloaded force reads zero, or holds a coarse converter's code:
+        // nothing to judge.
+        if channel == "force" && !needs.force_loaded {
+            continue;
+        }
         // A constant channel sits at both extremes: "clipped at 0 m" for an
         // all-zero command misled; it is a missing signal.
         if let Some(&first) = x.first()

@@ -115,6 +115,7 @@ const NEEDS: Needs = Needs {
     min_samples: 1024,
     max_jitter_fraction: 0.01,
     clip_fraction: 0.01,
+    force_loaded: true,
 };
 
 // ------------------------------------------------------- real DAQ logs
