@@ -659,9 +659,14 @@ pub struct Truth {
     pub sample_rate_hz: f64,
     /// The true rig parameters (a1b0 at `rig.p_gain`).
     pub rig: RigParams,
-    /// True when the plant is exactly the paper's model (no unmodelled dynamics).
+    /// True when the plant is exactly the paper's model (no unmodelled
+    /// dynamics, no flow-pressure law).
     pub clean: bool,
     pub unmodelled: Option<UnmodelledSpec>,
+    /// F_max = A P_s (N) of the servo-valve's flow-pressure law (docs/model.md),
+    /// when the rig has one.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub max_force_n: Option<f64>,
     pub runs: Vec<TruthRun>,
 }
 

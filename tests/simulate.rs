@@ -392,3 +392,173 @@ fn a_validation_run_with_the_wrong_specimen_is_flagged() {
         "the side-by-side columns"
     );
 }
+
+/// The three programs `servoid simulate` makes for servo tuning and real
+/// supplies, on BASE's rig with the ShoreWestern actuator's flow-pressure
+/// law (A = 2.387e-4 m^2, P_s = 20.7 MPa, docs/model.md):
+/// - k1 under a square wave of +-10 mm, 6 s period: the logged command holds
+///   exact plateaus, switching at the sample nearest each edge; each plateau
+///   ends, settled, at the force the reduced flow balances the leak at;
+/// - v1 under a 3 mm chirp limited to 2 mm: the logged command never
+///   exceeds the limit and sits at it on the samples where the chirp's own
+///   formula is beyond it;
+/// - truth.json holds F_max, and the campaign is not "clean".
+#[test]
+fn square_waves_command_limits_and_the_flow_law_are_simulated() {
+    let (area, supply) = (2.387e-4, 20.7e6);
+    let fmax = area * supply;
+    let (amp, period, lead_in, fs) = (0.01, 6.0, 0.5, 1000.0);
+    let (chirp_amp, limit) = (0.003, 0.002);
+    let text = BASE
+        .replace(
+            "[rig.parameters]",
+            &format!("supply_pressure_pa = {supply:e}\npiston_area_m2 = {area:e}\n\n[rig.parameters]"),
+        )
+        .replace("noise_rms = 1.0", "noise_rms = 0.0")
+        .replace(
+            "specimen = { stiffness_n_per_m = 100000.0 }",
+            &format!(
+                "specimen = {{ stiffness_n_per_m = 100000.0 }}\nexcitation = {{ kind = \"square\", amplitude_m = {amp}, period_s = {period:?}, duration_s = 12.0, lead_in_s = {lead_in} }}"
+            ),
+        )
+        .replace(
+            "specimen = { mass_kg = 4.0,",
+            &format!(
+                "excitation = {{ kind = \"chirp\", law = \"linear\", f0_hz = 0.5, f1_hz = 40.0, duration_s = 20.0, amplitude_m = {chirp_amp}, limit_m = {limit}, lead_in_s = 0.5, lead_out_s = 0.5 }}\nspecimen = {{ mass_kg = 4.0,"
+            ),
+        );
+    let dir = scratch();
+    let manifest = write(dir.path(), "sim.toml", &text);
+    let out = dir.path().join("out");
+    let r = servoid_into(dir.path(), "simulate", &manifest, &out, &["--quiet"]);
+    assert_eq!(r.code, 0, "{}", r.stderr);
+
+    // The square wave, in mm: zeros, then +10 and -10 in turn with edge j
+    // on sample lead-in + round(j period fs / 2) = 500 + 3000 j.
+    let command = csv_column(&out.join("logs/k1.csv"), "command_mm");
+    assert_eq!(command.len(), 500 + 12_000);
+    assert!(command[..500].iter().all(|v| *v == 0.0));
+    let level = command[500];
+    assert!((level - 10.0).abs() < 1e-12, "{level}");
+    for (i, v) in command[500..].iter().enumerate() {
+        let want = if (i / 3000) % 2 == 0 { level } else { -level };
+        assert_eq!(*v, want, "sample {}", 500 + i);
+    }
+
+    // Each plateau's last force: the steady state of the rig with the law.
+    // At rest r = a1b0 (u0 - x1) / beta1 and r sqrt(1 - f / F_max) = a3 f
+    // with f = k x1 (u0 > 0; the run is odd in u0): bisection on x1. The
+    // slow pole (about -12 1/s) has died out in a 3 s plateau.
+    let k = 1.0e5;
+    let gap = |x: f64| A1B0 / BETA1 * (amp - x) * (1.0 - k * x / fmax).sqrt() - A3 * k * x;
+    let (mut lo, mut hi) = (0.0, amp);
+    for _ in 0..200 {
+        let mid = 0.5 * (lo + hi);
+        if gap(mid) > 0.0 {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    let steady_force = k * 0.5 * (lo + hi);
+    // Eq. 14's static gain would put it 2 % higher.
+    let linear_force = k * amp * A1B0 / (A1B0 + BETA1 * A3 * k);
+    assert!(steady_force < 0.99 * linear_force);
+    let force = csv_column(&out.join("logs/k1.csv"), "force_n");
+    for j in 0..4 {
+        let last = 500 + 3000 * (j + 1) - 1;
+        let want = if j % 2 == 0 {
+            steady_force
+        } else {
+            -steady_force
+        };
+        assert!(
+            rel(force[last], want) < 1e-6,
+            "plateau {j}: {} N vs {want} N",
+            force[last]
+        );
+    }
+
+    // The limited chirp: |command| <= 2 mm, and at 2 mm exactly where the
+    // linear chirp A sin(2 pi (f0 t + (f1 - f0) t^2 / (2 t1))) is beyond it
+    // (a sample or two of slack for round-off at the threshold); about
+    // 1 - (2 / pi) asin(L / A) of the sweep, as for any sine.
+    let command = csv_column(&out.join("logs/v1.csv"), "command_mm");
+    assert_eq!(command.len(), 21_000);
+    let lim_mm = limit * 1000.0;
+    assert!(command.iter().all(|v| v.abs() <= lim_mm));
+    let at_limit = command.iter().filter(|v| v.abs() == lim_mm).count();
+    let beyond = (0..20_000)
+        .filter(|&i| {
+            let t = i as f64 / fs;
+            let phase = 2.0 * std::f64::consts::PI * (0.5 * t + 39.5 * t * t / 40.0);
+            (chirp_amp * phase.sin()).abs() >= limit
+        })
+        .count();
+    assert!(at_limit.abs_diff(beyond) <= 2, "{at_limit} vs {beyond}");
+    let share = at_limit as f64 / 20_000.0;
+    let sine_share = 1.0 - 2.0 / std::f64::consts::PI * (limit / chirp_amp).asin();
+    assert!((share - sine_share).abs() < 0.01, "{share} vs {sine_share}");
+
+    let truth = json(&out.join("truth.json"));
+    assert!(rel(truth["max_force_n"].as_f64().unwrap(), fmax) < 1e-12);
+    assert_eq!(truth["clean"], false);
+    // Nonlinear: no transfer function of the simulated plant.
+    assert!(run_by_id(&truth, "k1")["plant_tf_x1_u"].is_null());
+}
+
+/// The new keys are checked as the others: the key named, nothing written.
+#[test]
+fn square_waves_limits_and_the_supply_are_checked() {
+    let square = "kind = \"square\"\n";
+    let base_square = BASE.replace(
+        "kind = \"chirp\"\nlaw = \"linear\"\nf0_hz = 0.5\nf1_hz = 40.0\n",
+        square,
+    );
+    assert_ne!(base_square, BASE);
+    refused(&base_square, "excitation.period_s", "needs `period_s`");
+    refused(
+        &base_square.replace(square, &format!("{square}period_s = 0.0015\n")),
+        "excitation.period_s",
+        "a square wave needs at least 2",
+    );
+    refused(
+        &BASE.replace("duration_s = 20.0", "duration_s = 20.0\nlimit_m = -0.001"),
+        "excitation.limit_m",
+        "must be positive",
+    );
+    refused(
+        &BASE.replace(
+            "[rig.parameters]",
+            "supply_pressure_pa = 2.07e7\n\n[rig.parameters]",
+        ),
+        "rig.piston_area_m2",
+        "F_max = A P_s",
+    );
+}
+
+/// A 50 kg specimen on a rig whose supply holds 300 N: swept to 40 Hz, its
+/// inertia drives the chamber force past F_max against the flow, where the
+/// valve passes no flow (BASE's 4 kg specimen and spring stay below it).
+/// The run is named with the force and F_max, and nothing is written.
+#[test]
+fn a_force_beyond_the_supply_names_the_run() {
+    let text = BASE
+        .replace(
+            "[rig.parameters]",
+            "supply_pressure_pa = 3.0e7\npiston_area_m2 = 1.0e-5\n\n[rig.parameters]",
+        )
+        .replace("mass_kg = 4.0", "mass_kg = 50.0");
+    let dir = scratch();
+    let manifest = write(dir.path(), "sim.toml", &text);
+    let out = dir.path().join("out");
+    let r = servoid_into(dir.path(), "simulate", &manifest, &out, &[]);
+    assert_ne!(r.code, 0, "{}", r.stdout);
+    assert!(
+        r.stderr.contains("run v1: the actuator force reached "),
+        "{}",
+        r.stderr
+    );
+    assert!(r.stderr.contains("F_max = A P_s = 300 N"), "{}", r.stderr);
+    assert!(!out.join("truth.json").exists());
+}

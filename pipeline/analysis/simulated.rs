@@ -78,10 +78,14 @@ pub fn simulate_run(plan: &SimulationPlan, run: &SimRunPlan) -> Result<RunSignal
         Excitation::Multisine { seed, .. } | Excitation::RandomBand { seed, .. } => {
             *seed = exc_seed
         }
-        Excitation::Chirp { .. } => {}
+        Excitation::Chirp { .. } | Excitation::Square { .. } => {}
     }
-    let u = excitation::generate(&exc, fs, run.padding)
+    let mut u = excitation::generate(&exc, fs, run.padding)
         .map_err(|source| SimRunError::Excitation { run: id(), source })?;
+    if let Some(limit_m) = run.limit_m {
+        excitation::limit(&mut u, limit_m)
+            .map_err(|source| SimRunError::Excitation { run: id(), source })?;
+    }
     let ins = &m.instrument;
     let response = plant::simulate(
         &spec,
@@ -182,8 +186,9 @@ pub fn truth(plan: &SimulationPlan, runs: Vec<TruthRun>) -> Truth {
         seed: m.simulation.seed,
         sample_rate_hz: m.simulation.sample_rate_hz,
         rig: m.rig.parameters,
-        clean: m.rig.unmodelled.is_none(),
+        clean: m.rig.unmodelled.is_none() && m.rig.max_force_n().is_none(),
         unmodelled: m.rig.unmodelled.clone(),
+        max_force_n: m.rig.max_force_n(),
         runs,
     }
 }

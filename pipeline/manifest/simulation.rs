@@ -150,6 +150,24 @@ pub struct SimRig {
     /// campaign that is exactly the paper's model ("clean").
     #[serde(default)]
     pub unmodelled: Option<UnmodelledSpec>,
+    /// Supply pressure P_s (Pa), with `piston_area_m2`: the servo-valve's
+    /// flow then falls with the load pressure, f' = -a2 x2 - a3 f + r
+    /// sqrt(1 - sign(r) f / F_max) with F_max = A P_s (docs/model.md; Eq. 10 is
+    /// its limit f << F_max). Give both or neither; truth.json records
+    /// F_max as `max_force_n`.
+    #[serde(default)]
+    pub supply_pressure_pa: Option<f64>,
+    /// Piston area A (m^2) of the flow-pressure law, with
+    /// `supply_pressure_pa`.
+    #[serde(default)]
+    pub piston_area_m2: Option<f64>,
+}
+
+impl SimRig {
+    /// F_max = A P_s (N) when the rig has the flow-pressure law.
+    pub fn max_force_n(&self) -> Option<f64> {
+        Some(self.piston_area_m2? * self.supply_pressure_pa?)
+    }
 }
 
 /// Unmodelled dynamics ("rich" campaigns).
@@ -221,9 +239,14 @@ pub struct ExcitationSpec {
     pub f_max_hz: Option<f64>,
     /// Length of the excitation (s), without lead-in and lead-out.
     pub duration_s: f64,
-    /// Peak amplitude of a chirp (m).
+    /// Peak amplitude of a chirp, or the levels +-amplitude_m of a square
+    /// wave (m).
     #[serde(default)]
     pub amplitude_m: Option<f64>,
+    /// A square wave's full period (s): it holds each level half a period,
+    /// switching at the sample nearest each edge.
+    #[serde(default)]
+    pub period_s: Option<f64>,
     /// RMS of a multisine or random signal (m).
     #[serde(default)]
     pub rms_m: Option<f64>,
@@ -236,15 +259,25 @@ pub struct ExcitationSpec {
     /// Zeros after the excitation (s).
     #[serde(default)]
     pub lead_out_s: f64,
+    /// The controller's command limit (m): the command is clamped to
+    /// +-limit_m before it is logged and before the servo-valve sees it.
+    #[serde(default)]
+    pub limit_m: Option<f64>,
 }
 
 /// Kinds of excitation.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
 #[serde(rename_all = "snake_case")]
 pub enum ExcitationKind {
+    /// A swept sine: `law`, `f0_hz`, `f1_hz`, `amplitude_m`.
     Chirp,
+    /// Equal tones with random phases: `f_min_hz`, `f_max_hz`, `n_tones`,
+    /// `rms_m`.
     Multisine,
+    /// Band-limited Gaussian noise: `f_min_hz`, `f_max_hz`, `rms_m`.
     RandomBand,
+    /// A square wave (servo tuning): `amplitude_m`, `period_s`.
+    Square,
 }
 
 /// Chirp laws (MATLAB `chirp` conventions).
@@ -335,6 +368,8 @@ pub struct SimRunPlan {
     /// from the campaign seed when the run is simulated.
     pub excitation: Excitation,
     pub padding: Padding,
+    /// The controller's command limit (m), if any.
+    pub limit_m: Option<f64>,
 }
 
 /// Read and check a simulation manifest.
@@ -432,7 +467,7 @@ fn assemble(
         file: path.to_path_buf(),
         manifest_sha256: sha256_hex(text.as_bytes()),
         integrator,
-        unmodelled: unmodelled(rig.unmodelled.as_ref()),
+        unmodelled: unmodelled(&rig),
         manifest: SimulationManifest {
             schema_version: s.schema_version?,
             simulation: info,
@@ -493,6 +528,21 @@ fn check_rig(r: &SimRig, bad: &mut impl FnMut(KeyPath, String)) {
                 ),
             );
         }
+    }
+    match (r.supply_pressure_pa, r.piston_area_m2) {
+        (Some(ps), Some(a)) => {
+            positive(ps, &root.key("rig").key("supply_pressure_pa"), bad);
+            positive(a, &root.key("rig").key("piston_area_m2"), bad);
+        }
+        (Some(_), None) => bad(
+            root.key("rig").key("piston_area_m2"),
+            "the flow-pressure law needs the piston area beside `supply_pressure_pa` (F_max = A P_s)".into(),
+        ),
+        (None, Some(_)) => bad(
+            root.key("rig").key("supply_pressure_pa"),
+            "the flow-pressure law needs the supply pressure beside `piston_area_m2` (F_max = A P_s)".into(),
+        ),
+        (None, None) => {}
     }
     let Some(u) = &r.unmodelled else { return };
     let up = root.key("rig").key("unmodelled");
@@ -617,7 +667,7 @@ fn check_runs(s: &Sections, bad: &mut impl FnMut(KeyPath, String)) -> Vec<SimRun
             let plant = PlantSpec {
                 rig: r.parameters.at_p_gain(run.p_gain),
                 specimen: *spec,
-                unmodelled: unmodelled(r.unmodelled.as_ref()),
+                unmodelled: unmodelled(r),
             };
             if let Err(e) = plant::validate(&plant) {
                 bad(
@@ -638,6 +688,7 @@ fn check_runs(s: &Sections, bad: &mut impl FnMut(KeyPath, String)) -> Vec<SimRun
                     lead_in_s: exc.lead_in_s,
                     lead_out_s: exc.lead_out_s,
                 },
+                limit_m: exc.limit_m,
             });
         }
     }
@@ -699,10 +750,14 @@ fn check_duffing_spring(
     }))
 }
 
-/// The simulator's form of the unmodelled dynamics.
-fn unmodelled(u: Option<&UnmodelledSpec>) -> Unmodelled {
-    let Some(u) = u else {
-        return Unmodelled::default();
+/// The simulator's form of what the rig has beyond the paper's model.
+fn unmodelled(rig: &SimRig) -> Unmodelled {
+    let max_force_n = rig.max_force_n();
+    let Some(u) = &rig.unmodelled else {
+        return Unmodelled {
+            max_force_n,
+            ..Unmodelled::default()
+        };
     };
     let mode = |m: &Option<ValveModeSpec>| {
         m.as_ref().map(|v| ValveMode {
@@ -720,6 +775,7 @@ fn unmodelled(u: Option<&UnmodelledSpec>) -> Unmodelled {
             smoothing_velocity_m_per_s: f.smoothing_velocity_m_per_s,
             viscous_ns_per_m: f.viscous_ns_per_m,
         }),
+        max_force_n,
     }
 }
 
@@ -753,6 +809,11 @@ fn excitation(spec: &ExcitationSpec) -> Excitation {
             duration_s: spec.duration_s,
             seed: 0,
         },
+        ExcitationKind::Square => Excitation::Square {
+            amplitude_m: spec.amplitude_m.unwrap_or_default(),
+            period_s: spec.period_s.unwrap_or_default(),
+            duration_s: spec.duration_s,
+        },
     }
 }
 
@@ -779,50 +840,70 @@ fn check_excitation(
             Some(x) => Some(x),
         }
     };
-    let (lo_key, hi_key, lo, hi) = match e.kind {
+    // The band a kind sweeps or fills: its two keys and their values.
+    let band = match e.kind {
         ExcitationKind::Chirp => {
             need("amplitude_m", e.amplitude_m, bad);
-            (
+            Some((
                 "f0_hz",
                 "f1_hz",
                 need("f0_hz", e.f0_hz, bad),
                 need("f1_hz", e.f1_hz, bad),
-            )
+            ))
         }
         ExcitationKind::Multisine | ExcitationKind::RandomBand => {
             need("rms_m", e.rms_m, bad);
             if e.kind == ExcitationKind::Multisine && e.n_tones.is_none_or(|n| n == 0) {
                 bad(p.key("n_tones"), "a multisine needs `n_tones` >= 1".into());
             }
-            (
+            Some((
                 "f_min_hz",
                 "f_max_hz",
                 need("f_min_hz", e.f_min_hz, bad),
                 need("f_max_hz", e.f_max_hz, bad),
-            )
+            ))
         }
-    };
-    if let (Some(lo), Some(hi)) = (lo, hi)
-        && e.kind != ExcitationKind::Chirp
-        && lo >= hi
-    {
-        bad(
-            p.key(lo_key),
-            format!("must be below {hi_key} ({lo} >= {hi})"),
-        );
-    }
-    if let Some(ny) = nyquist {
-        for (key, v) in [(lo_key, lo), (hi_key, hi)] {
-            if let Some(v) = v
-                && v >= ny
+        ExcitationKind::Square => {
+            need("amplitude_m", e.amplitude_m, bad);
+            // Two samples a period: one per level at the least.
+            if let Some(period) = need("period_s", e.period_s, bad)
+                && let Some(fs) = fs.filter(|f| f.is_finite() && *f > 0.0)
+                && period * fs < 2.0
             {
                 bad(
-                    p.key(key),
+                    p.key("period_s"),
                     format!(
-                        "{v} Hz is at or above the Nyquist frequency ({ny} Hz at simulation.sample_rate_hz = {})",
-                        2.0 * ny
+                        "{period} s spans {} sample(s) at simulation.sample_rate_hz = {fs}; a square wave needs at least 2",
+                        period * fs
                     ),
                 );
+            }
+            None
+        }
+    };
+    if let Some((lo_key, hi_key, lo, hi)) = band {
+        if let (Some(lo), Some(hi)) = (lo, hi)
+            && e.kind != ExcitationKind::Chirp
+            && lo >= hi
+        {
+            bad(
+                p.key(lo_key),
+                format!("must be below {hi_key} ({lo} >= {hi})"),
+            );
+        }
+        if let Some(ny) = nyquist {
+            for (key, v) in [(lo_key, lo), (hi_key, hi)] {
+                if let Some(v) = v
+                    && v >= ny
+                {
+                    bad(
+                        p.key(key),
+                        format!(
+                            "{v} Hz is at or above the Nyquist frequency ({ny} Hz at simulation.sample_rate_hz = {})",
+                            2.0 * ny
+                        ),
+                    );
+                }
             }
         }
     }
@@ -840,6 +921,14 @@ fn check_excitation(
     if e.kind != ExcitationKind::Chirp && e.law.is_some() {
         bad(p.key("law"), "applies only to a chirp".into());
     }
+    if e.kind != ExcitationKind::Square && e.period_s.is_some() {
+        bad(p.key("period_s"), "applies only to a square wave".into());
+    }
+    if let Some(l) = e.limit_m
+        && !(l.is_finite() && l > 0.0)
+    {
+        bad(p.key("limit_m"), format!("must be positive (got {l})"));
+    }
 }
 
 fn kind_name(k: ExcitationKind) -> &'static str {
@@ -847,6 +936,7 @@ fn kind_name(k: ExcitationKind) -> &'static str {
         ExcitationKind::Chirp => "chirp",
         ExcitationKind::Multisine => "multisine",
         ExcitationKind::RandomBand => "random_band",
+        ExcitationKind::Square => "square",
     }
 }
 
@@ -956,6 +1046,78 @@ mod tests {
             e.contains("excitation.f0_hz: a chirp excitation needs `f0_hz`"),
             "{e}"
         );
+    }
+
+    #[test]
+    fn square_waves_limits_and_the_supply_name_their_keys() {
+        let chirp = "kind = \"chirp\"\nlaw = \"quadratic\"\nf0_hz = 0.1\nf1_hz = 35.0\n";
+        assert!(BUNDLED.contains(chirp));
+        let square = BUNDLED.replace(chirp, "kind = \"square\"\n");
+        let e = problems(&square);
+        assert!(
+            e.contains("excitation.period_s: a square excitation needs `period_s`"),
+            "{e}"
+        );
+        let e = problems(&square.replace("amplitude_m = 0.004", "period_s = 0.0005"));
+        assert!(
+            e.contains("excitation.amplitude_m: a square excitation needs `amplitude_m`"),
+            "{e}"
+        );
+        assert!(
+            e.contains("excitation.period_s: 0.0005 s spans 1.024 sample(s) at simulation.sample_rate_hz = 2048; a square wave needs at least 2"),
+            "{e}"
+        );
+        let plan = load_simulation_str(
+            &square.replace(
+                "amplitude_m = 0.004",
+                "amplitude_m = 0.004\nperiod_s = 2.0\nlimit_m = 0.003",
+            ),
+            Path::new("sim.toml"),
+        )
+        .unwrap();
+        assert_eq!(
+            plan.runs[0].excitation,
+            Excitation::Square {
+                amplitude_m: 0.004,
+                period_s: 2.0,
+                duration_s: 170.0
+            }
+        );
+        assert_eq!(plan.runs[0].limit_m, Some(0.003));
+        let e = problems(&BUNDLED.replace(
+            "amplitude_m = 0.004",
+            "amplitude_m = 0.004\nperiod_s = 2.0\nlimit_m = 0.0",
+        ));
+        assert!(
+            e.contains("excitation.period_s: applies only to a square wave"),
+            "{e}"
+        );
+        assert!(
+            e.contains("excitation.limit_m: must be positive (got 0)"),
+            "{e}"
+        );
+
+        let supplied = |lines: &str| {
+            BUNDLED.replace("[rig.parameters]", &format!("{lines}\n[rig.parameters]"))
+        };
+        let e = problems(&supplied("piston_area_m2 = 2.387e-4"));
+        assert!(
+            e.contains("rig.supply_pressure_pa: the flow-pressure law needs the supply pressure"),
+            "{e}"
+        );
+        let e = problems(&supplied(
+            "piston_area_m2 = 2.387e-4\nsupply_pressure_pa = -1.0",
+        ));
+        assert!(
+            e.contains("rig.supply_pressure_pa: must be positive"),
+            "{e}"
+        );
+        let plan = load_simulation_str(
+            &supplied("piston_area_m2 = 2.387e-4\nsupply_pressure_pa = 2.07e7"),
+            Path::new("sim.toml"),
+        )
+        .unwrap();
+        assert_eq!(plan.unmodelled.max_force_n, Some(2.387e-4 * 2.07e7));
     }
 
     #[test]

@@ -1,7 +1,8 @@
 //! Command signals u(t) for simulated tests: swept sines (linear, quadratic
-//! after MATLAB's `chirp`, logarithmic), random-phase multisines and
-//! band-limited Gaussian noise, sampled at t_k = k / fs with zero lead-in and
-//! lead-out.
+//! after MATLAB's `chirp`, logarithmic), random-phase multisines,
+//! band-limited Gaussian noise and square waves (servo tuning), sampled at
+//! t_k = k / fs with zero lead-in and lead-out, and the controller's command
+//! limit ([`limit`]).
 //!
 //! The excitation itself has N = round(duration_s * fs) samples. Multisines
 //! and random-band noise are periodic over those N samples (period N / fs,
@@ -64,6 +65,15 @@ pub enum Excitation {
         duration_s: f64,
         seed: u64,
     },
+    /// +amplitude for the first half of each period, -amplitude for the
+    /// second; each edge (at multiples of period_s / 2) moved to the sample
+    /// nearest it, halfway between two samples to the later one, so the
+    /// sampled command holds exact plateaus.
+    Square {
+        amplitude_m: f64,
+        period_s: f64,
+        duration_s: f64,
+    },
 }
 
 /// Zeros before and after the excitation (s).
@@ -94,6 +104,14 @@ pub enum ExcitationError {
     BandOrder { f_min_hz: f64, f_max_hz: f64 },
     #[error("n_tones must be at least 1 (got 0)")]
     NoTones,
+    #[error(
+        "period_s = {period_s} s at sample_rate_hz = {sample_rate_hz} spans {samples} sample(s); a square wave needs at least 2"
+    )]
+    PeriodTooShort {
+        period_s: f64,
+        sample_rate_hz: f64,
+        samples: f64,
+    },
     #[error(
         "a logarithmic chirp needs f0_hz > 0 and f1_hz > 0 (got f0_hz = {f0_hz}, f1_hz = {f1_hz})"
     )]
@@ -161,7 +179,8 @@ impl Excitation {
         match *self {
             Excitation::Chirp { duration_s, .. }
             | Excitation::Multisine { duration_s, .. }
-            | Excitation::RandomBand { duration_s, .. } => duration_s,
+            | Excitation::RandomBand { duration_s, .. }
+            | Excitation::Square { duration_s, .. } => duration_s,
         }
     }
 
@@ -229,6 +248,22 @@ impl Excitation {
                 band(f_min_hz, f_max_hz, fs)?;
                 positive("rms_m", rms_m)?;
                 band_bins(f_min_hz, f_max_hz, fs, samples)?;
+            }
+            Excitation::Square {
+                amplitude_m,
+                period_s,
+                ..
+            } => {
+                positive("amplitude_m", amplitude_m)?;
+                positive("period_s", period_s)?;
+                // Two samples a period: one per level at the least.
+                if period_s * fs < 2.0 {
+                    return Err(ExcitationError::PeriodTooShort {
+                        period_s,
+                        sample_rate_hz: fs,
+                        samples: period_s * fs,
+                    });
+                }
             }
         }
         Ok(())
@@ -331,6 +366,28 @@ pub fn generate(
             }
             x
         }
+        Excitation::Square {
+            amplitude_m,
+            period_s,
+            ..
+        } => {
+            // Edge j (at j period_s / 2) falls on sample round(j half);
+            // f64::round takes a tie away from zero, to the later sample.
+            let half = 0.5 * period_s * fs;
+            let mut body = Vec::with_capacity(n);
+            let mut level = amplitude_m;
+            let mut j = 1usize;
+            let mut next = half.round() as usize;
+            for k in 0..n {
+                while k >= next {
+                    level = -level;
+                    j += 1;
+                    next = (j as f64 * half).round() as usize;
+                }
+                body.push(level);
+            }
+            body
+        }
     };
     let lead_in = (padding.lead_in_s * fs).round() as usize;
     let lead_out = (padding.lead_out_s * fs).round() as usize;
@@ -339,6 +396,17 @@ pub fn generate(
     u.extend(body);
     u.resize(u.len() + lead_out, 0.0);
     Ok(u)
+}
+
+/// Clamps the command to +-`limit_m`, as a controller's command limit does
+/// before the servo-valve: the command the plant sees and the log records
+/// is the clamped one.
+pub fn limit(u: &mut [f64], limit_m: f64) -> Result<(), ExcitationError> {
+    positive("limit_m", limit_m)?;
+    for v in u {
+        *v = v.clamp(-limit_m, limit_m);
+    }
+    Ok(())
 }
 
 /// `n_tones` distinct bins linearly spaced over `bins` (which holds at least
@@ -658,6 +726,99 @@ mod tests {
     }
 
     #[test]
+    fn a_square_wave_holds_its_levels_and_switches_at_the_nearest_sample() {
+        // 51.2 samples a half period: the edges at 51.2, 102.4, 153.6, 204.8
+        // and 256 samples fall, rounded to the nearest, on samples 51, 102,
+        // 154, 205 and 256 (by hand). Sample k lies in half period
+        // floor((k + 1/2) / 51.2) counted from the nearest-sample edges
+        // (no k + 1/2 is a multiple of 51.2, so no edge is a tie here).
+        let (fs, period, amp) = (1024.0, 0.1, 2e-3);
+        let exc = Excitation::Square {
+            amplitude_m: amp,
+            period_s: period,
+            duration_s: 1.0,
+        };
+        let padding = Padding {
+            lead_in_s: 0.25,
+            lead_out_s: 0.125,
+        };
+        let u = generate(&exc, fs, padding).unwrap();
+        assert_eq!(u.len(), 256 + 1024 + 128);
+        assert!(u[..256].iter().chain(&u[256 + 1024..]).all(|v| *v == 0.0));
+        let body = &u[256..256 + 1024];
+        for (k, v) in body.iter().enumerate() {
+            let half = ((k as f64 + 0.5) / (0.5 * period * fs)).floor() as usize;
+            let want = if half.is_multiple_of(2) { amp } else { -amp };
+            assert_eq!(*v, want, "sample {k}");
+        }
+        let edges: Vec<usize> = (1..body.len())
+            .filter(|&k| body[k] != body[k - 1])
+            .collect();
+        assert_eq!(edges[..5], [51, 102, 154, 205, 256]);
+        assert_eq!(edges.len(), 19);
+
+        // 2.5 samples a half period (exact in binary): the edges at 2.5 and
+        // 7.5 are ties and go to the later sample (3 and 8), those at 5 and
+        // 10 are on samples.
+        let tie = Excitation::Square {
+            amplitude_m: 1.0,
+            period_s: 5.0 / 1024.0,
+            duration_s: 12.0 / 1024.0,
+        };
+        let u = generate(&tie, 1024.0, Padding::default()).unwrap();
+        assert_eq!(
+            u,
+            [
+                1.0, 1.0, 1.0, -1.0, -1.0, 1.0, 1.0, 1.0, -1.0, -1.0, 1.0, 1.0
+            ]
+        );
+    }
+
+    #[test]
+    fn the_limit_clamps_the_command_and_nothing_else() {
+        // A square wave above the limit sits at +-limit; a chirp reads
+        // clamp(A sin(phase(t_k)), -L, L) with MATLAB's quadratic phase
+        // 2 pi (f0 t + (f1 - f0) t^3 / (3 t1^2)) written out here.
+        let fs = 1000.0;
+        let padding = Padding {
+            lead_in_s: 0.1,
+            lead_out_s: 0.1,
+        };
+        let square = Excitation::Square {
+            amplitude_m: 2e-3,
+            period_s: 0.05,
+            duration_s: 1.0,
+        };
+        let mut u = generate(&square, fs, padding).unwrap();
+        limit(&mut u, 1.5e-3).unwrap();
+        assert!(u[..100].iter().chain(&u[1100..]).all(|v| *v == 0.0));
+        assert!(u[100..1100].iter().all(|v| v.abs() == 1.5e-3));
+        let (f0, f1, t1, amp, lim) = (0.5, 20.0, 4.0, 3e-3, 2e-3);
+        let chirp = Excitation::Chirp {
+            law: ChirpLaw::Quadratic,
+            f0_hz: f0,
+            f1_hz: f1,
+            duration_s: t1,
+            amplitude_m: amp,
+        };
+        let mut u = generate(&chirp, fs, padding).unwrap();
+        limit(&mut u, lim).unwrap();
+        for (k, v) in u[100..4100].iter().enumerate() {
+            let t = k as f64 / fs;
+            let phase = 2.0 * PI * (f0 * t + (f1 - f0) * t.powi(3) / (3.0 * t1 * t1));
+            let want = (amp * phase.sin()).clamp(-lim, lim);
+            assert!((v - want).abs() <= 1e-15, "sample {k}: {v} vs {want}");
+        }
+        assert!(u.iter().any(|v| v.abs() == lim));
+        for bad in [0.0, -1e-3, f64::NAN, f64::INFINITY] {
+            assert_eq!(
+                limit(&mut u, bad).unwrap_err().to_string(),
+                format!("limit_m must be positive and finite (got {bad})")
+            );
+        }
+    }
+
+    #[test]
     fn every_invalid_setting_is_named_with_its_numbers() {
         let fs = 1000.0;
         let none = Padding::default();
@@ -721,6 +882,24 @@ mod tests {
             msg(&ms(1.0, 500.0, 10), fs),
             "f_max_hz = 500 Hz is at or above the Nyquist frequency 500 Hz (sample_rate_hz = 1000)"
         );
+        let square = |amplitude_m, period_s| Excitation::Square {
+            amplitude_m,
+            period_s,
+            duration_s: 2.0,
+        };
+        assert_eq!(
+            msg(&square(1e-3, 1.5e-3), fs),
+            "period_s = 0.0015 s at sample_rate_hz = 1000 spans 1.5 sample(s); a square wave needs at least 2"
+        );
+        assert_eq!(
+            msg(&square(1e-3, f64::NAN), fs),
+            "period_s must be positive and finite (got NaN)"
+        );
+        assert_eq!(
+            msg(&square(-1e-3, 0.1), fs),
+            "amplitude_m must be positive and finite (got -0.001)"
+        );
+        generate(&square(1e-3, 2e-3), fs, none).unwrap();
         let rb = Excitation::RandomBand {
             f_min_hz: 1.1,
             f_max_hz: 1.4,

@@ -1,7 +1,8 @@
 //! The simulator's numerical core: a rig, a test program and an instrument
 //! chain in, sampled lab signals with known ground truth out.
 //!
-//! - [`excitation`]: command signals (chirps, multisines, band-limited noise).
+//! - [`excitation`]: command signals (chirps, multisines, band-limited noise,
+//!   square waves) and the controller's command limit.
 //! - [`discrete`]: exact zero-order-hold simulation of linear state spaces,
 //!   with exact fractional output delays.
 //! - [`ode`]: RK4 and Dormand-Prince 5(4) for nonlinear plants, the input held
@@ -9,7 +10,8 @@
 //! - [`specimen`]: linear and nonlinear specimens (Duffing, Bouc-Wen,
 //!   smoothed Coulomb friction).
 //! - [`plant`]: the plant of Eq. 10 with a specimen and optional unmodelled
-//!   dynamics (a servo-valve mode, piston mass), simulated to x1 and force.
+//!   dynamics (a servo-valve mode, piston mass, the valve's flow-pressure
+//!   law), simulated to x1 and force.
 //! - [`instrument`]: sensor noise, offset, drift and quantisation, with one
 //!   reproducible random stream per channel.
 //!
@@ -99,6 +101,16 @@ pub enum SimError {
     /// and was given another number.
     #[error("state-space dimensions disagree: {delays} output delay(s) for {outputs} output(s)")]
     OutputDelays { delays: usize, outputs: usize },
+    /// The force reached F_max = A P_s against the valve's flow, where the
+    /// servo-valve's flow-pressure law (docs/model.md) passes no flow.
+    #[error(
+        "the actuator force reached {force_n} N against the valve's flow near t = {t_s} s, at or beyond F_max = A P_s = {max_force_n} N, where the servo-valve passes no flow (the flow-pressure law): lower the command or the specimen's force, or raise the supply pressure or the piston area"
+    )]
+    BeyondSupply {
+        force_n: f64,
+        max_force_n: f64,
+        t_s: f64,
+    },
     /// The numerical integration of a nonlinear plant failed.
     #[error("integration failed: {0}")]
     Ode(#[from] OdeError),

@@ -32,6 +32,15 @@
 //! specimen and reads the force on the specimen side, f - m_p x2' =
 //! (m f + m_p g) / M: the actuator force f itself when m_p = 0 (the paper's
 //! assumption), and zero with nothing attached.
+//!
+//! With the servo-valve's flow-pressure law (docs/model.md, after Merritt
+//! ch. 5; F_max = A P_s) the flow reaching the chamber is r sqrt(1 - sign(r)
+//! f / F_max) in place of r: f' = -a2 x2 - a3 f + r sqrt(1 - sign(r) f /
+//! F_max), and on a massless rig x1' = (r sqrt(1 - sign(r) g / F_max) -
+//! a3 g) / (g' + a2), the force being the spring's g. Eq. 10 is its limit
+//! f << F_max, and its linearisation at rest.
+
+use std::cell::Cell;
 
 use nalgebra::{Complex, DMatrix, DVector};
 use schemars::JsonSchema;
@@ -72,6 +81,11 @@ pub struct Unmodelled {
     /// read: it makes the plant nonlinear.
     #[serde(default)]
     pub actuator_friction: Option<ActuatorFriction>,
+    /// F_max = A P_s (N) of the servo-valve's flow-pressure law: the flow
+    /// falls with the load pressure (docs/model.md), which makes the plant
+    /// nonlinear. None: Eq. 10's flow, whatever the load.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub max_force_n: Option<f64>,
 }
 
 /// Friction on the piston, F tanh(x2 / v0) + c_v x2: Coulomb (the tanh
@@ -148,6 +162,9 @@ pub fn validate(spec: &PlantSpec) -> Result<(), SimError> {
     if let Some(mp) = spec.unmodelled.piston_mass_kg {
         require_positive("unmodelled dynamics", "piston_mass_kg", mp)?;
     }
+    if let Some(fmax) = spec.unmodelled.max_force_n {
+        require_positive("flow-pressure law", "max_force_n", fmax)?;
+    }
     let (m, mut c, k) = spec.specimen.linearised_at_rest();
     if let Some(fr) = spec.unmodelled.actuator_friction {
         require_positive("actuator friction", "coulomb_force_n", fr.coulomb_force_n)?;
@@ -188,7 +205,7 @@ pub fn validate(spec: &PlantSpec) -> Result<(), SimError> {
             .collect::<Vec<_>>()
             .join(", ");
         return Err(SimError::Unstable {
-            what: if spec.specimen.linear_mck().is_some() {
+            what: if linear_state_space(spec).is_some() {
                 "linear plant"
             } else {
                 "linearisation at rest"
@@ -204,7 +221,8 @@ pub fn validate(spec: &PlantSpec) -> Result<(), SimError> {
 /// Without unmodelled dynamics it is `model::state_space` (Eq. 10). The
 /// parameters are not checked here; see [`validate`].
 pub fn linear_state_space(spec: &PlantSpec) -> Option<StateSpace> {
-    if spec.unmodelled.actuator_friction.is_some() {
+    let un = &spec.unmodelled;
+    if un.actuator_friction.is_some() || un.max_force_n.is_some() {
         return None;
     }
     let (m, c, k) = spec.specimen.linear_mck()?;
@@ -343,7 +361,7 @@ fn mode_block(a: &mut DMatrix<f64>, at: usize, vm: ValveMode) -> f64 {
 /// A plant with a specimen that has a mass (every nonlinear one), as an ODE
 /// with states [x1, x2, f, r, (v, w), (p, p'), (q, q'), (z)] and the command
 /// as input.
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone)]
 pub struct NonlinearPlant<'a> {
     spec: &'a PlantSpec,
     total_mass_kg: f64,
@@ -354,6 +372,9 @@ pub struct NonlinearPlant<'a> {
     measurement: Option<((f64, f64), usize)>,
     /// Index of the first specimen-internal state.
     internal: usize,
+    /// The force at which the flow-pressure law was last asked for a flow
+    /// at or beyond F_max (its rate was NaN), for [`simulate`] to name.
+    beyond_supply_n: Cell<Option<f64>>,
 }
 
 impl<'a> NonlinearPlant<'a> {
@@ -394,6 +415,47 @@ impl<'a> NonlinearPlant<'a> {
             command,
             measurement,
             internal: next,
+            beyond_supply_n: Cell::new(None),
+        })
+    }
+
+    /// The force the valve's flow works against: f, or on a massless rig
+    /// the spring's g(x1) (f = g there).
+    fn chamber_force_n(&self, x: &[f64]) -> f64 {
+        if self.total_mass_kg == 0.0 {
+            self.spec
+                .specimen
+                .restoring_force_n(x[0], x[1], &x[self.internal..])
+        } else {
+            x[2]
+        }
+    }
+
+    /// The valve's flow r as it reaches the chamber against the force f:
+    /// r sqrt(1 - sign(r) f / F_max) with the flow-pressure law
+    /// (docs/model.md), r without. None where the load is at or beyond F_max against the
+    /// flow: the valve passes no flow there and the law's root has no real
+    /// value.
+    fn chamber_flow(&self, r: f64, f: f64) -> Option<f64> {
+        let Some(fmax) = self.spec.unmodelled.max_force_n else {
+            return Some(r);
+        };
+        if r == 0.0 {
+            return Some(0.0);
+        }
+        let head = 1.0 - r.signum() * f / fmax;
+        (head > 0.0).then(|| r * head.sqrt())
+    }
+
+    /// The flow reaching the chamber, NaN (which the integrators reject, or
+    /// fail on) beyond F_max, the force then kept for [`simulate`] (a stage
+    /// built on an earlier NaN has no force to keep).
+    fn flow_or_nan(&self, r: f64, f: f64) -> f64 {
+        self.chamber_flow(r, f).unwrap_or_else(|| {
+            if f.is_finite() && r.is_finite() {
+                self.beyond_supply_n.set(Some(f));
+            }
+            f64::NAN
         })
     }
 
@@ -459,7 +521,7 @@ impl OdeSystem for NonlinearPlant<'_> {
                 .specimen
                 .spring_slope_n_per_m(x1)
                 .expect("a massless plant has a spring specimen (checked in new)");
-            let rate = (r - rig.a3_per_s * g) / (slope + rig.a2_n_per_m);
+            let rate = (self.flow_or_nan(r, g) - rig.a3_per_s * g) / (slope + rig.a2_n_per_m);
             dx[0] = rate;
             dx[1] = 0.0;
             dx[2] = slope * rate;
@@ -467,7 +529,7 @@ impl OdeSystem for NonlinearPlant<'_> {
             let friction = self.actuator_friction_n(x2);
             dx[0] = x2;
             dx[1] = (f - g - friction) / self.total_mass_kg;
-            dx[2] = -rig.a2_n_per_m * x2 - rig.a3_per_s * f + r;
+            dx[2] = -rig.a2_n_per_m * x2 - rig.a3_per_s * f + self.flow_or_nan(r, f);
         }
         let reference = match self.command {
             None => u,
@@ -551,7 +613,20 @@ pub fn simulate(
     let mut x1_m = vec![0.0; len];
     let mut force_n = vec![0.0; len];
     let x0 = vec![0.0; plant.dim()];
-    integrate_held(&plant, u, dt, &x0, integ, &taps, |event, x| {
+    // The flow-pressure law beyond F_max: a state the integrator accepted
+    // there (the first, at its sample), or the force its last period asked
+    // a flow at when the integration failed.
+    let mut sample = 0;
+    let mut beyond: Option<(usize, f64)> = None;
+    let integrated = integrate_held(&plant, u, dt, &x0, integ, &taps, |event, x| {
+        if let Event::Sample(k) = event {
+            sample = k;
+            plant.beyond_supply_n.set(None);
+            let f = plant.chamber_force_n(x);
+            if beyond.is_none() && plant.chamber_flow(x[3], f).is_none() {
+                beyond = Some((k, f));
+            }
+        }
         for (i, &(shift, tap)) in reads.iter().enumerate() {
             let at = match (event, tap) {
                 (Event::Sample(k), None) => k + shift,
@@ -566,7 +641,22 @@ pub fn simulate(
                 }
             }
         }
-    })?;
+    });
+    let failed_beyond = integrated
+        .as_ref()
+        .err()
+        .and_then(|_| plant.beyond_supply_n.get())
+        .map(|f| (sample, f));
+    if let (Some(max_force_n), Some((k, force_n))) =
+        (spec.unmodelled.max_force_n, beyond.or(failed_beyond))
+    {
+        return Err(SimError::BeyondSupply {
+            force_n,
+            max_force_n,
+            t_s: k as f64 * dt,
+        });
+    }
+    integrated?;
     Ok(PlantResponse { x1_m, force_n })
 }
 
@@ -1307,5 +1397,216 @@ mod tests {
             states[4].iter().any(|z| z.abs() > 0.5 * bound),
             "the loop must yield"
         );
+    }
+
+    /// The paper's rig with the flow-pressure law at F_max (N).
+    fn with_supply(specimen: SpecimenModel, max_force_n: f64) -> PlantSpec {
+        spec(
+            specimen,
+            Unmodelled {
+                max_force_n: Some(max_force_n),
+                ..Default::default()
+            },
+        )
+    }
+
+    const TIGHT: Integrator = Integrator::DormandPrince {
+        rtol: 1e-11,
+        atol: 1e-15,
+    };
+
+    fn spring(k: f64) -> SpecimenModel {
+        SpecimenModel::Spring {
+            stiffness_n_per_m: k,
+        }
+    }
+
+    #[test]
+    fn an_unlimited_supply_is_the_linear_plant() {
+        // F_max = 1e12 N against forces of a few hundred N: the law's
+        // departure, about |r| f / (2 F_max) against r, is below 1e-9, so
+        // the integrated nonlinear plant (each branch: massless with and
+        // without a spring, with a mass) must be the exact ZOH simulation.
+        let fs = 2048.0;
+        let u = command(fs, 1.0);
+        for sm in [SpecimenModel::None, spring(116_640.0), exp1()] {
+            let ps = with_supply(sm, 1e12);
+            assert!(linear_state_space(&ps).is_none(), "integrated, not ZOH");
+            let got = simulate(&ps, &u, fs, [0.0; 2], TIGHT).unwrap();
+            let exact = simulate(
+                &spec(sm, Unmodelled::default()),
+                &u,
+                fs,
+                [0.0; 2],
+                Integrator::default(),
+            )
+            .unwrap();
+            assert_close(&got.x1_m, &exact.x1_m, 1e-6, "x1");
+            if sm != SpecimenModel::None {
+                assert_close(&got.force_n, &exact.force_n, 1e-6, "force");
+            }
+        }
+    }
+
+    #[test]
+    fn a_held_command_settles_where_the_reduced_flow_balances_the_leak() {
+        // At rest under a held command u0 every rate is zero: r' = 0 gives
+        // r = a1b0 (u0 - x1) / beta1, x2 = 0 leaves the spring's f = k x1
+        // (an SDOF specimen's too: no velocity, no acceleration), and f' = 0
+        // gives r sqrt(1 - sign(r) f / F_max) = a3 f. With u0 > 0 every
+        // term is positive: x1 solves
+        //   a1b0 / beta1 (u0 - x1) sqrt(1 - k x1 / F_max) = a3 k x1,
+        // whose left side falls and right side rises on [0, u0]: bisection.
+        // Without the law it is Eq. 14's static gain a1b0 / (a1b0 + beta1
+        // a3 k). The run is odd in u0, so -u0 settles at -x1. F_max is the
+        // ShoreWestern rig's, 2.387e-4 m^2 x 20.7 MPa.
+        let rig = crate::model::PAPER_RIG;
+        let fmax = 2.387e-4 * 20.7e6;
+        let (fs, u0) = (1000.0, 0.01);
+        let steady = |k: f64| {
+            let gap = |x: f64| {
+                rig.a1b0_n_per_m_s2 / rig.beta1_per_s * (u0 - x) * (1.0 - k * x / fmax).sqrt()
+                    - rig.a3_per_s * k * x
+            };
+            let (mut lo, mut hi) = (0.0, u0);
+            for _ in 0..200 {
+                let mid = 0.5 * (lo + hi);
+                if gap(mid) > 0.0 { lo = mid } else { hi = mid }
+            }
+            0.5 * (lo + hi)
+        };
+        for (sm, k) in [(spring(116_640.0), 116_640.0), (exp1(), 129_400.0)] {
+            let x1 = steady(k);
+            let linear = u0 * rig.a1b0_n_per_m_s2
+                / (rig.a1b0_n_per_m_s2 + rig.beta1_per_s * rig.a3_per_s * k);
+            // The law matters here: some 2 % less displacement.
+            assert!(x1 < 0.99 * linear, "{x1} vs {linear}");
+            for sign in [1.0, -1.0] {
+                // Three seconds: the slow pole (-12 1/s without the law,
+                // faster with it) has died out to 1e-15.
+                let u: Vec<f64> = (0..3000)
+                    .map(|k| if k == 0 { 0.0 } else { sign * u0 })
+                    .collect();
+                let r = simulate(&with_supply(sm, fmax), &u, fs, [0.0; 2], TIGHT).unwrap();
+                let (x_end, f_end) = (r.x1_m[2999], r.force_n[2999]);
+                assert_relative_eq!(x_end, sign * x1, max_relative = 1e-7);
+                assert_relative_eq!(f_end, sign * k * x1, max_relative = 1e-7);
+            }
+        }
+    }
+
+    /// The paper's linear plant (states `ss`) run beside its first-order
+    /// departure under the flow-pressure law: docs/model.md's extra flow
+    /// -|r| f / (2 F_max), of the linear trajectory's r and f, enters
+    /// where the valve's flow r does (r's column of A, its own row aside).
+    struct FirstOrder {
+        ss: StateSpace,
+        max_force_n: f64,
+    }
+
+    impl OdeSystem for FirstOrder {
+        fn dim(&self) -> usize {
+            2 * self.ss.a.nrows()
+        }
+
+        fn deriv(&self, x: &[f64], u: f64, dx: &mut [f64]) {
+            let n = self.ss.a.nrows();
+            let (lin, dep) = x.split_at(n);
+            let r = lin[n - 1];
+            let f: f64 = (0..n).map(|j| self.ss.c[(1, j)] * lin[j]).sum();
+            let extra = -r.abs() * f / (2.0 * self.max_force_n);
+            for i in 0..n {
+                let mut a_lin = self.ss.b[i] * u;
+                let mut a_dep = 0.0;
+                for j in 0..n {
+                    a_lin += self.ss.a[(i, j)] * lin[j];
+                    a_dep += self.ss.a[(i, j)] * dep[j];
+                }
+                if i != n - 1 {
+                    a_dep += self.ss.a[(i, n - 1)] * extra;
+                }
+                dx[i] = a_lin;
+                dx[n + i] = a_dep;
+            }
+        }
+    }
+
+    #[test]
+    fn to_first_order_the_law_is_a_leak_growing_with_the_flow() {
+        // docs/model.md: sqrt(1 - sign(r) f / F_max) = 1 - sign(r) f / (2 F_max)
+        // + O(f^2 / F_max^2), so the flow is r - |r| f / (2 F_max): the
+        // nonlinear plant's departure from the linear one is, to first
+        // order in 1 / F_max, the linear plant driven by -|r| f / (2 F_max)
+        // along the linear trajectory. A chirp to 40 Hz has r and f of
+        // either relative sign (at low frequency they share it, near the
+        // loop's corner they do not): the sign rule is checked where it
+        // flips the extra flow. The second order, about the departure's
+        // square, is within 2 % of it here (F_max some 60 x the force;
+        // measured 0.8 %, where the extra flow -r |f| / (2 F_max) misses by
+        // more than the departure itself).
+        let fs = 2048.0;
+        let u = command(fs, 1.0);
+        for sm in [spring(116_640.0), exp1()] {
+            let plain = spec(sm, Unmodelled::default());
+            let ss = linear_state_space(&plain).unwrap();
+            let linear = simulate(&plain, &u, fs, [0.0; 2], Integrator::default()).unwrap();
+            let fmax = 60.0 * peak(&linear.force_n);
+            let got = simulate(&with_supply(sm, fmax), &u, fs, [0.0; 2], TIGHT).unwrap();
+            let n = ss.a.nrows();
+            let c0: Vec<f64> = (0..n).map(|j| ss.c[(0, j)]).collect();
+            let sys = FirstOrder {
+                ss,
+                max_force_n: fmax,
+            };
+            let states =
+                crate::simulate::ode::simulate_held(&sys, &u, 1.0 / fs, &vec![0.0; 2 * n], TIGHT)
+                    .unwrap();
+            let want: Vec<f64> = (0..u.len())
+                .map(|k| (0..n).map(|j| c0[j] * states[n + j][k]).sum())
+                .collect();
+            let departure: Vec<f64> = got
+                .x1_m
+                .iter()
+                .zip(&linear.x1_m)
+                .map(|(a, b)| a - b)
+                .collect();
+            // The departure is real (well above the integrator's 1e-11)...
+            assert!(peak(&want) > 1e-3 * peak(&linear.x1_m), "{}", peak(&want));
+            // ... and the first-order term's.
+            assert_close(&departure, &want, 0.02, "departure");
+        }
+    }
+
+    #[test]
+    fn a_force_beyond_the_supply_is_an_error_not_a_nan() {
+        // A 50 kg mass swept to 40 Hz: its inertia drives the chamber force
+        // past F_max = 300 N against the flow (the oil column, -a2 x2,
+        // keeps pushing f up while the flow term falls to zero), where the
+        // valve passes no flow. Each integrator stops and names the force
+        // reached and F_max.
+        let heavy = SpecimenModel::LinearSdof {
+            mass_kg: 50.0,
+            damping_ns_per_m: 5.0,
+            stiffness_n_per_m: 129_400.0,
+        };
+        let fs = 2048.0;
+        let u = command(fs, 1.0);
+        for integ in [TIGHT, Integrator::Rk4 { substeps: 8 }] {
+            let e = simulate(&with_supply(heavy, 300.0), &u, fs, [0.0; 2], integ).unwrap_err();
+            let SimError::BeyondSupply {
+                force_n,
+                max_force_n,
+                t_s,
+            } = e
+            else {
+                panic!("{integ:?}: {e}");
+            };
+            assert_eq!(max_force_n, 300.0);
+            assert!(force_n.abs() >= 300.0, "{integ:?}: {force_n}");
+            assert!((0.0..1.15).contains(&t_s), "{t_s}");
+            let msg = e.to_string();
+            assert!(msg.contains(&format!("reached {force_n} N")), "{msg}");
+            assert!(msg.contains("F_max = A P_s = 300 N"), "{msg}");
+        }
     }
 }
