@@ -492,8 +492,8 @@ pub struct SpringForceResult {
 pub struct HarmonicsFound {
     /// Blocks with a harmonic.
     pub blocks: usize,
-    /// The largest harmonic's amplitude over the fundamental's, its order
-    /// (2 or 3) and the fundamental's frequency there (Hz).
+    /// The largest harmonic's amplitude over the signal's in its part of
+    /// the sweep, its order (2 or 3) and the sweep's frequency there (Hz).
     pub largest_ratio: f64,
     pub order: usize,
     pub at_hz: f64,

@@ -609,7 +609,7 @@ pub fn linearity_note(l: &frf::Linearity) -> String {
     }
     let what = |name: &str, beyond: &str, f: &frf::linearity::Found| {
         format!(
-            "the {name} holds harmonics of the command beyond the {beyond}'s in {} of {} blocks of the sweep (the largest, the {}, {:.2} % of the fundamental at {:.1} Hz)",
+            "the {name} holds harmonics of the command beyond the {beyond}'s in {} of {} blocks of the sweep (the largest, the {}, {:.2} % of the {name}'s amplitude where the sweep is at {:.1} Hz)",
             f.blocks,
             l.checked,
             if f.order == 2 { "second" } else { "third" },
@@ -789,7 +789,7 @@ pub fn log_stage_from(
     let periodogram = (h.n_averages == 1).then_some(h.suu.as_slice());
     let excitation = frf::excitation(&log.command_m, fs, periodogram);
     let linearity = matches!(excitation, frf::Excitation::Sweep { .. })
-        .then(|| linearity_of(&log))
+        .then(|| linearity_of(&log, &run.specimen))
         .flatten();
     let fit_data = fit_data.map(|d| with_sweep_amplitude(d, excitation, &log));
     let spring = match (&run.specimen, &log.force_n) {
@@ -833,15 +833,30 @@ pub fn log_stage_from(
 /// Whether the rig answered the log's sweep linearly. Harmonics a channel's
 /// converter step could make are not counted; the steps are read (a sort
 /// of the channel) only where harmonics are found.
-fn linearity_of(log: &Log) -> Option<frf::Linearity> {
-    let (u, x, f) = (&log.command_m, &log.displacement_m, log.force_n.as_deref());
+fn linearity_of(log: &Log, specimen: &SpecimenModel) -> Option<frf::Linearity> {
+    let (u, x) = (&log.command_m, &log.displacement_m);
     let fs = log.sample_rate_hz;
+    // The force is checked against the specimen's linear force (at rest,
+    // for a nonlinear one): a spring's k, or k - m w^2 + i c w (Eq. 15);
+    // not without a specimen to load it.
+    let (m, c, k) = specimen.linearised_at_rest();
+    let stiffness = |f_hz: f64| {
+        let w = 2.0 * std::f64::consts::PI * f_hz;
+        nalgebra::Complex::new(k - m * w * w, c * w)
+    };
+    let loaded = m > 0.0 || c > 0.0 || k > 0.0;
+    let f = log
+        .force_n
+        .as_deref()
+        .filter(|_| loaded)
+        .map(|f| (f, &stiffness as frf::linearity::Stiffness<'_>));
     let found = frf::linearity(u, x, f, fs, [0.0; 2])?;
     if !found.nonlinear() {
         return Some(found);
     }
     let step = |v: &[f64]| ingest::quantum_step(v).unwrap_or(0.0);
-    frf::linearity(u, x, f, fs, [step(x), f.map_or(0.0, step)])
+    let steps = [step(x), f.map_or(0.0, |(f, _)| step(f))];
+    frf::linearity(u, x, f, fs, steps)
 }
 
 /// A run's bins with the displacement's amplitude along its sweep: seal

@@ -18,7 +18,11 @@
 //! displacement the command's own power there times the displacement's
 //! over the command's at p (the actuator's gain falls with frequency, so
 //! this overstates the linear part), for the force the displacement's
-//! power there times the force's over the displacement's at p. Over 18
+//! power there times the force's over the displacement's at p, carried to
+//! hp by the specimen's own force over its displacement (its dynamic
+//! stiffness k - m w^2 + i c w: a spring's is flat, a mass's grows with
+//! w^2, and vanishes at its resonance, where the force's fundamental does
+//! too). Over 18
 //! degrees of freedom 10 times the mean is a chance of 1e-40: a clean rig
 //! never shows one (`tests/diagnosis.rs`). Each block is weighed by a
 //! Blackman-Harris window: a rectangular one's leakage from the
@@ -56,8 +60,10 @@ const MIN_BLOCK: usize = 64;
 pub struct Found {
     /// Blocks with a harmonic, of those checked.
     pub blocks: usize,
-    /// The largest harmonic's amplitude over the fundamental's, its order
-    /// (2 or 3) and the fundamental's frequency (Hz) there.
+    /// The largest harmonic's amplitude over the signal's in its block (a
+    /// fundamental that vanishes, at a specimen's resonance, would make a
+    /// ratio to it meaningless), its order (2 or 3) and the fundamental's
+    /// frequency (Hz) there.
     pub largest: f64,
     pub order: usize,
     pub at_hz: f64,
@@ -86,19 +92,24 @@ impl Linearity {
     }
 }
 
-/// The check of a sweep `u` -> `x` (and `force`), sampled at
+/// The specimen's force over its displacement at a frequency (Hz), its
+/// dynamic stiffness, for the force's check.
+pub type Stiffness<'a> = &'a dyn Fn(f64) -> Complex<f64>;
+
+/// The check of a sweep `u` -> `x` (and `force`, with the specimen's
+/// dynamic stiffness: without it the force is not checked), sampled at
 /// `sample_rate_hz`, whose converters' steps are `steps` (displacement,
 /// force; 0 where a channel sits on no grid). None when the record is too
 /// short for the blocks.
 pub fn linearity(
     u: &[f64],
     x: &[f64],
-    force: Option<&[f64]>,
+    force: Option<(&[f64], Stiffness<'_>)>,
     sample_rate_hz: f64,
     steps: [f64; 2],
 ) -> Option<Linearity> {
     let n = u.len();
-    if n / BLOCKS < MIN_BLOCK || x.len() != n || force.is_some_and(|f| f.len() != n) {
+    if n / BLOCKS < MIN_BLOCK || x.len() != n || force.is_some_and(|(f, _)| f.len() != n) {
         return None;
     }
     let block = 1usize << (n / BLOCKS).ilog2();
@@ -135,7 +146,7 @@ pub fn linearity(
         }
         checked += 1;
         let xx = power(&x[range.clone()]);
-        let ff = force.map(|f| power(&f[range.clone()]));
+        let ff = force.map(|(f, _)| power(&f[range.clone()]));
         let band = |s: &[f64], c: usize| s[c - BINS..=c + BINS].iter().sum::<f64>();
         let floor = |s: &[f64]| {
             let mut tail = s[floor_from..].to_vec();
@@ -152,22 +163,31 @@ pub fn linearity(
                 });
             0.5 * (hi - lo)
         };
-        let mut pairs = vec![(&xx, &uu, amplitude(&x[range.clone()]))];
-        if let (Some(ff), Some(f)) = (&ff, force) {
-            pairs.push((ff, &xx, amplitude(&f[range.clone()])));
+        // (signal, what drives it linearly, its amplitude in the block,
+        // its linear gain's power at twice and three times the fundamental
+        // over the fundamental's)
+        let mut pairs = vec![(&xx, &uu, amplitude(&x[range.clone()]), [1.0, 1.0])];
+        if let (Some(ff), Some((f, stiffness))) = (&ff, force) {
+            let at = |h: usize| stiffness((h * p) as f64 * df).norm_sqr();
+            let carried = [at(2) / at(1), at(3) / at(1)];
+            pairs.push((ff, &xx, amplitude(&f[range.clone()]), carried));
         }
-        for (k, (s, drive, a)) in pairs.into_iter().enumerate() {
+        for (k, (s, drive, a, gain)) in pairs.into_iter().enumerate() {
             let (s1, d1) = (band(s, p), band(drive, p));
             if s1 <= 0.0 || d1 <= 0.0 {
                 continue;
             }
             let noise = floor(s);
+            let total: f64 = s.iter().skip(1).sum();
             let mut best: Option<(f64, usize)> = None;
             for h in [2, 3] {
-                let linear = band(drive, h * p) * s1 / d1;
+                let linear = band(drive, h * p) * s1 / d1 * gain[h - 2];
                 let sh = band(s, h * p);
-                if sh > SIGNIFICANT * (noise + linear) {
-                    let ratio = ((sh - noise - linear) / s1).sqrt();
+                if sh > SIGNIFICANT * (noise + linear) && linear.is_finite() {
+                    // The harmonic's share of the block's signal, by its
+                    // power's share (a Blackman-Harris band of 9 bins holds
+                    // a line's power whole).
+                    let ratio = ((sh - noise - linear) / total).sqrt();
                     if ratio * a <= steps[k] {
                         continue;
                     }
