@@ -1,5 +1,6 @@
 //! The valid-data corpus: logs of the paper's rig (Table 3) as labs' DAQs
-//! write them, each with nothing wrong: servoid's own excitations, coarse
+//! write them, each with nothing wrong: servoid's own excitations (a
+//! command limited in the controller among them), coarse
 //! and fine converters at small and large amplitudes, rates from 2048 Hz to
 //! 10 kHz, records from 10 s to 20 minutes, time stamps jittered or rounded.
 //! Each is simulated (a no-specimen run, springs k1 and k2 and the paper's
@@ -157,6 +158,18 @@ fn cases() -> Vec<Case> {
             },
         ));
     }
+    out.push(Case {
+        may_say: &["a limit set in the controller"],
+        ..case(
+            "a 4 mm chirp limited at 3 mm in the controller",
+            PaperSweep {
+                excitation: Some(
+                    "kind = \"chirp\"\nlaw = \"quadratic\"\nf0_hz = 0.1\nf1_hz = 35.0\nduration_s = 58.0\namplitude_m = 0.004\nlimit_m = 0.003\nlead_in_s = 1.0\nlead_out_s = 1.0",
+                ),
+                ..sweep()
+            },
+        )
+    });
     out.push(Case {
         logs: late_stamps,
         may_say: &["scatter about a uniform grid"],
