@@ -24,7 +24,7 @@ enum Class {
     /// A corrupted sample or stretch of samples.
     Sample,
     /// A channel that does not read its signal: stuck, dropped, frozen,
-    /// inverted, clipped.
+    /// inverted, clipped, read through a nonlinearity.
     Channel,
     /// The time base or a unit: the rate, a scale.
     Units,
@@ -58,6 +58,7 @@ fn classes(message: &str) -> Vec<Class> {
                 "the daq stalled",
                 "wired backwards",
                 "is clipped",
+                "a nonlinearity the loop does not see",
             ],
         ),
         (
@@ -136,6 +137,8 @@ struct Case {
     logs: fn(&std::path::Path),
     /// The converters' bits.
     bits: u32,
+    /// Lines of the simulated `[rig]` table.
+    rig: &'static str,
 }
 
 fn nothing(s: String) -> String {
@@ -155,6 +158,7 @@ const BASE: Case = Case {
     edit: nothing,
     logs: no_logs,
     bits: 18,
+    rig: "",
 };
 
 fn simulation(case: &Case, seed: u64) -> String {
@@ -167,6 +171,7 @@ fn simulation(case: &Case, seed: u64) -> String {
         sensor: case.sensor,
         springs: case.springs.unwrap_or(PaperSweep::default().springs),
         bits: case.bits,
+        rig: case.rig,
         ..PaperSweep::default()
     }
     .text()
@@ -294,6 +299,15 @@ fn reset(logs: &std::path::Path) {
     rewrite_all(logs, 0, |k, v| match k {
         30_000.. => format!("{}", v.parse::<f64>().unwrap() - 30.0),
         _ => v.to_string(),
+    });
+}
+
+/// Every log's displacement (mm) read through a cubic: x (1 + 0.003 (x /
+/// 4 mm)^2), 0.3 % at the sweep's 4 mm, outside the loop.
+fn cubic_reading(logs: &std::path::Path) {
+    rewrite_all(logs, 2, |_, v| {
+        let x = v.parse::<f64>().unwrap();
+        format!("{}", x * (1.0 + 0.003 * (x / 4.0).powi(2)))
     });
 }
 
@@ -472,6 +486,24 @@ fn cases() -> Vec<Case> {
             name: "two time stamps swapped",
             cause: Some(Class::TimeBase),
             logs: swapped,
+            ..BASE
+        },
+        Case {
+            name: "the valve's flow-pressure law, F_max 4.9 kN",
+            cause: Some(Class::Nonlinear),
+            rig: "supply_pressure_pa = 2.07e7\npiston_area_m2 = 2.387e-4",
+            ..BASE
+        },
+        Case {
+            name: "the valve's flow-pressure law, F_max 2.5 kN",
+            cause: Some(Class::Nonlinear),
+            rig: "supply_pressure_pa = 2.07e7\npiston_area_m2 = 1.2077e-4",
+            ..BASE
+        },
+        Case {
+            name: "a logged displacement 0.3 % cubic",
+            cause: Some(Class::Channel),
+            logs: cubic_reading,
             ..BASE
         },
         Case {

@@ -223,6 +223,9 @@ pub struct PaperSweep {
     pub bits: u32,
     /// Paper's Exp1 as a validation run after the springs.
     pub validation: bool,
+    /// Lines of the `[rig]` table (the flow law's supply pressure and
+    /// piston area).
+    pub rig: &'static str,
 }
 
 impl Default for PaperSweep {
@@ -243,6 +246,7 @@ impl Default for PaperSweep {
             amplitude_m: 0.004,
             bits: 18,
             validation: false,
+            rig: "",
         }
     }
 }
@@ -292,6 +296,7 @@ log_format = "{format}"
 
 [rig]
 name = "the paper's rig, simulated"
+{rig}
 
 [rig.parameters]
 beta1_per_s = 267.0
@@ -342,6 +347,7 @@ specimen = {k2}
             seed = self.seed,
             format = self.log_format,
             sensor = self.sensor,
+            rig = self.rig,
         )
     }
 }

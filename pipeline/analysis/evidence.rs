@@ -50,6 +50,10 @@ pub struct Evidence {
     /// load cell gives (N/m) and the displacement's amplitude (m).
     #[serde(default)]
     pub load_cell: Option<(f64, f64)>,
+    /// How its displacement's gain changes with amplitude where its sweep
+    /// is slow (`log_stage::LogStage::slow`).
+    #[serde(default)]
+    pub slow: Option<crate::frf::SlowCubic>,
 }
 
 /// What a validation run gives the joint fit: the band's bins of its x1/u

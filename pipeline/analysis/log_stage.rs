@@ -87,6 +87,9 @@ pub struct LogStage {
     /// A spring run's force against its displacement, when it logs a
     /// force.
     pub spring: Option<frf::SpringForce>,
+    /// How the displacement's gain against the command changes with
+    /// amplitude where a sweep is slow (None: not a sweep, or no slow part).
+    pub slow: Option<frf::SlowCubic>,
     /// What the run's own warnings already found wrong (FRF settings the
     /// log contradicts, a rig not linear): what any misfit of its fit is
     /// then put down to, rather than dynamics the model lacks.
@@ -694,6 +697,49 @@ fn coarse_quantisation(x: &[f64]) -> Option<String> {
     })
 }
 
+/// A misfit put down to a nonlinear reading ([`reading_nonlinearity`]).
+pub const READING_CAUSE: &str = "the logged displacement or command read through a nonlinearity the loop does not see (the unloaded run's warning)";
+
+/// Where a sweep is slow the loop makes the displacement it feeds back
+/// follow the command through a gain flat with amplitude, and without a
+/// specimen nothing loads the actuator there (no pressure, no leakage
+/// flow): an unloaded run's logged displacement whose gain against the
+/// command changes with amplitude there (`frf::slow_cubic`) is read
+/// through something nonlinear that the loop does not see; a warning names
+/// it, and it is what the run's misfit is put down to. A loaded run's gain
+/// may change with its load as well (the servo-valve's flow falls with the
+/// load pressure): the run states what it found and leaves the cause to
+/// the campaign, which reads every run's (`rig::slow_gain_pattern`). Not
+/// given a displacement that holds friction's harmonics: friction changes
+/// the slow gain too, and the linearity check names it.
+fn slow_gain_findings(
+    run: &RunPlan,
+    slow: Option<&frf::SlowCubic>,
+) -> (Option<String>, Option<String>) {
+    let Some(found) = slow.filter(|s| s.significant()) else {
+        return (None, None);
+    };
+    if run.specimen.loads() {
+        let cause = format!(
+            "its gain against the command changes by {:+.2} % at {} mm where the sweep is below {} Hz (t = {:.0}): a gain that changes with amplitude, which the rig's warnings put down to the load or the reading",
+            100.0 * found.share,
+            crate::units::format_number(1e3 * found.amplitude_m, 2),
+            frf::linearity::SLOW_HZ,
+            found.t.abs()
+        );
+        return (None, Some(cause));
+    }
+    let warning = format!(
+        "the displacement's gain against the command changes by {:+.2} % at {} mm where the sweep is below {} Hz (t = {:.0}, over {:.1} s), where the loop makes the displacement it feeds back follow the command and no specimen loads the actuator: the logged displacement or command is read through a nonlinearity the loop does not see (a sensor, its conditioning or a range other than the controller's); calibrate the logged channels against the controller's over their range",
+        100.0 * found.share,
+        crate::units::format_number(1e3 * found.amplitude_m, 2),
+        frf::linearity::SLOW_HZ,
+        found.t.abs(),
+        found.seconds
+    );
+    (Some(warning), Some(READING_CAUSE.to_string()))
+}
+
 /// A run's misfit put down to its FRF settings, or to the rig's
 /// nonlinearity, when its warnings found either.
 pub const SETTINGS_CAUSE: &str = "the FRF settings the log contradicts (identification.frf: the warning above names them and what the default would use)";
@@ -806,6 +852,14 @@ pub fn log_stage_from(
         &mask,
     )?;
     let contradicted = settings_warning(run, ident, &choice, excitation, &log, fit.as_ref());
+    let slow = matches!(excitation, frf::Excitation::Sweep { .. })
+        .then(|| frf::slow_cubic(&log.command_m, &log.displacement_m, fs))
+        .flatten();
+    let friction = linearity
+        .and_then(|l| l.displacement)
+        .is_some_and(|f| f.blocks >= frf::linearity::MIN_BLOCKS);
+    let (reading, slow_cause) = slow_gain_findings(run, slow.as_ref().filter(|_| !friction));
+    warnings.extend(reading);
     let cause = findings(
         run,
         linearity.as_ref(),
@@ -813,6 +867,7 @@ pub fn log_stage_from(
         contradicted,
         &mut warnings,
     )
+    .or(slow_cause)
     .or_else(|| coarse_quantisation(&log.displacement_m));
     Ok(LogStage {
         log,
@@ -820,6 +875,7 @@ pub fn log_stage_from(
         excitation,
         linearity,
         spring,
+        slow,
         cause,
         frf: h,
         force_frf,
@@ -844,7 +900,7 @@ fn linearity_of(log: &Log, specimen: &SpecimenModel) -> Option<frf::Linearity> {
         let w = 2.0 * std::f64::consts::PI * f_hz;
         nalgebra::Complex::new(k - m * w * w, c * w)
     };
-    let loaded = m > 0.0 || c > 0.0 || k > 0.0;
+    let loaded = specimen.loads();
     let f = log
         .force_n
         .as_deref()

@@ -8,6 +8,7 @@ use std::sync::Arc;
 use super::evidence::{Evidence, RigInput, ValidationEvidence};
 use super::log_stage::LogStageError;
 use super::log_stage::STIFFNESS_MISMATCH;
+use crate::frf;
 use crate::identify::consistency::Consistency;
 use crate::identify::{self, Estimate, IdentifyError, SecondOrder, SpringRun, TfEstimate};
 use crate::manifest::{Campaign, Role, RunPlan};
@@ -73,12 +74,25 @@ pub fn establish<'a>(
     }
     let runs = Gathered::of(campaign, inputs)?;
     let mut ident = identify::identify_rig(&runs.no_spec, &runs.springs)?;
-    // What a run's own warnings already found wrong, named with the run.
-    let run_cause = runs
-        .evidence
-        .iter()
-        .find_map(|(p, e)| e.cause.as_ref().map(|c| format!("run {}: {c}", p.id)));
-    narrow_causes(&mut ident.consistency, &runs, run_cause.as_deref());
+    let slow = slow_gain_pattern(&runs.evidence);
+    if let Some(SlowGain::Load(text)) = &slow {
+        warnings.push(format!("rig: {text}"));
+    }
+    // What a run's own warnings already found wrong, named with the run;
+    // a gain the load changes is the campaign's finding, not one run's.
+    let run_cause = match &slow {
+        Some(SlowGain::Load(_)) => Some(LOAD_GAIN_CAUSE.to_string()),
+        _ => runs
+            .evidence
+            .iter()
+            .find_map(|(p, e)| e.cause.as_ref().map(|c| format!("run {}: {c}", p.id))),
+    };
+    narrow_causes(
+        &mut ident.consistency,
+        &runs,
+        run_cause.as_deref(),
+        slow.is_some(),
+    );
     identification_warnings(campaign, &ident, warnings);
     // What the joint fit's misfit, if any, is put down to.
     let known = run_cause.or_else(|| {
@@ -217,7 +231,12 @@ impl<'a> Gathered<'a> {
 /// out are dropped where a run's finding explains the disagreement or
 /// every spring run's own fit passes its adequacy tests (they would show
 /// there as misfit).
-fn narrow_causes(c: &mut Consistency, runs: &Gathered<'_>, run_cause: Option<&str>) {
+fn narrow_causes(
+    c: &mut Consistency,
+    runs: &Gathered<'_>,
+    run_cause: Option<&str>,
+    slow_gain: bool,
+) {
     if c.consistent != Some(false) {
         return;
     }
@@ -254,14 +273,16 @@ fn narrow_causes(c: &mut Consistency, runs: &Gathered<'_>, run_cause: Option<&st
         .cloned();
     let mut causes: Vec<String> = run_cause.map(String::from).into_iter().collect();
     causes.extend(odd);
-    if confirmed || !harmonics.is_empty() {
+    // The slow parts of the sweeps have already told the load's gain from
+    // the reading's (`slow_gain_pattern`).
+    if !slow_gain && (confirmed || !harmonics.is_empty()) {
         causes.push(load_dependence(c, &springs, &harmonics));
     }
     if let Some(swap) = swapped(&springs) {
         causes.push(swap);
     } else if confirmed {
         c.note += &format!(
-            "; every spring's load cell confirms its stated stiffness within {:.0} %, so neither a stiffness typed wrong, a swapped log nor a unit makes them disagree",
+            "; every spring's load cell confirms its stated stiffness within {:.0} %, which rules out the manifest's stiffnesses, the runs' logs and the force's unit",
             100.0 * STIFFNESS_MISMATCH
         );
     } else {
@@ -275,6 +296,80 @@ fn narrow_causes(c: &mut Consistency, runs: &Gathered<'_>, run_cause: Option<&st
         causes.push(identify::consistency::DYNAMICS_CAUSE.to_string());
     }
     c.likely_causes = causes;
+}
+
+/// What a misfit is put down to where the loaded runs' gain changes with
+/// amplitude and the unloaded run's does not ([`slow_gain_pattern`]).
+pub const LOAD_GAIN_CAUSE: &str =
+    "a gain that depends on the load, which the slow parts of the sweeps show (the warning above)";
+
+/// What the runs' slow stretches say of a gain that changes with amplitude
+/// (`frf::slow_cubic`, read where the loop makes the rig follow its
+/// command).
+enum SlowGain {
+    /// The unloaded run's changes: the reading, which every run shares.
+    Reading,
+    /// The unloaded run's does not, loaded runs' do: the load. The warning.
+    Load(String),
+}
+
+/// The pattern of the identification runs' slow gains, when one is
+/// significant (`frf::SlowCubic::significant`). Without an unloaded run
+/// whose slow gain was read, or with a spring whose load cell finds it
+/// stiffening, or with friction's harmonics in a displacement, a change has
+/// no single cause here and None is given (its own fit names what it
+/// found).
+fn slow_gain_pattern(evidence: &[(&RunPlan, &Evidence)]) -> Option<SlowGain> {
+    let (unloaded, loaded): (Vec<_>, Vec<_>) = evidence
+        .iter()
+        .filter(|(_, e)| e.slow.is_some())
+        .partition(|(p, _)| !p.specimen.loads());
+    // Friction changes the slow gain as well, loaded or not.
+    if evidence.iter().any(|(_, e)| e.friction_signature) {
+        return None;
+    }
+    if unloaded
+        .iter()
+        .any(|(_, e)| e.slow.is_some_and(|s| s.significant()))
+    {
+        return Some(SlowGain::Reading);
+    }
+    let changed: Vec<(&RunPlan, frf::SlowCubic)> = loaded
+        .iter()
+        .filter_map(|(p, e)| e.slow.filter(|s| s.significant()).map(|s| (*p, s)))
+        .collect();
+    let stiffening = evidence
+        .iter()
+        .any(|(_, e)| e.spring_cubic_n_per_m3.is_some());
+    if unloaded.is_empty() || changed.is_empty() || stiffening {
+        return None;
+    }
+    let describe = |s: &frf::SlowCubic| {
+        format!(
+            "{:+.2} % at {} mm (t = {:.0})",
+            100.0 * s.share,
+            crate::units::format_number(1e3 * s.amplitude_m, 2),
+            s.t.abs()
+        )
+    };
+    let runs: Vec<String> = changed
+        .iter()
+        .map(|(p, s)| format!("{}'s {}", p.id, describe(s)))
+        .collect();
+    let (p, s) = unloaded[0];
+    let reference = s.slow.map(|s| describe(&s)).unwrap_or_default();
+    let falls = changed.iter().all(|(_, s)| s.share < 0.0);
+    let why = if falls {
+        "the servo-valve's flow falling with the load pressure (its flow-pressure law, Q ~ sqrt(1 - F / F_max)) or a load-dependent leakage: each run's rig is an equivalent linear one at its own load, and the rig's parameters hold near the loads they were identified at"
+    } else {
+        "each run's rig is an equivalent linear one at its own load, and the rig's parameters hold near the loads they were identified at"
+    };
+    Some(SlowGain::Load(format!(
+        "a gain that depends on the load: where the sweeps are below {} Hz the loaded runs' gain against the command changes with amplitude ({}) and the unloaded {}'s does not ({reference}): {why}",
+        frf::linearity::SLOW_HZ,
+        runs.join(", "),
+        p.id,
+    )))
 }
 
 /// Springs whose load cells read another spring's stated stiffness (each

@@ -28,7 +28,7 @@ pub use choice::{
     DEFAULT_OVERLAP, DEFAULT_SEGMENT_LENGTH, Ends, Excitation, FrfChoice, FrfRequest, MIN_PERIODS,
     describe, excitation,
 };
-pub use linearity::{Linearity, SpringForce, linearity, spring_force};
+pub use linearity::{Linearity, SlowCubic, SpringForce, linearity, slow_cubic, spring_force};
 pub use local_fits::LocalFits;
 use local_fits::etfe_local_noise_densities;
 pub use settings::{Detrend, Estimator, FrfPlan, Window};

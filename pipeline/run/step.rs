@@ -155,6 +155,7 @@ pub(super) fn without_rig(
             .as_ref()
             .and_then(|st| st.spring)
             .map(|s| (s.stiffness_n_per_m, s.amplitude_m)),
+        slow: stage.as_ref().and_then(|st| st.slow),
     });
     let mut kept = Kept {
         estimate,

@@ -261,6 +261,13 @@ impl SpecimenModel {
         }
     }
 
+    /// Whether the specimen puts any force on the actuator (a mass, a
+    /// damper or a spring: at rest or linearised there).
+    pub fn loads(&self) -> bool {
+        let (m, c, k) = self.linearised_at_rest();
+        m != 0.0 || c != 0.0 || k != 0.0
+    }
+
     /// Number of internal states (Bouc-Wen's z).
     pub fn internal_states(&self) -> usize {
         match self {
