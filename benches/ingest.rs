@@ -10,10 +10,10 @@ use std::hint::black_box;
 use std::path::{Path, PathBuf};
 
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
-use servoid::ingest::read_log;
 use servoid::ingest::{
     ChannelPlan, Channels, Column, CsvOptions, LogFormat, LogPlan, Repair, TimePlan,
 };
+use servoid::ingest::{Needs, check_log, read_log};
 use servoid::report::columns::{
     UnitColumn, hdf5_bytes, mat_bytes, mat_v73_bytes, tdms_bytes, write_csv, write_parquet,
 };
@@ -199,6 +199,24 @@ fn bench(c: &mut Criterion) {
             b.iter(|| black_box(read_log(black_box(p)).unwrap()))
         });
     }
+    group.finish();
+
+    // The checks a log passes before any spectrum (spikes and corrupt
+    // stretches, held channels, clipping, the time base), on the paper's
+    // 170 s record once read: what they add to each read above.
+    let log = read_log(&cases[0].1).unwrap();
+    let needs = Needs {
+        min_samples: 4096,
+        max_jitter_fraction: 0.05,
+        clip_fraction: 0.01,
+        force_loaded: true,
+    };
+    let mut group = c.benchmark_group("check_log");
+    group.sample_size(20);
+    group.throughput(Throughput::Elements(3 * ROWS as u64));
+    group.bench_function(format!("{ROWS}x3"), |b| {
+        b.iter(|| black_box(check_log(black_box(&log), &needs).unwrap()))
+    });
     group.finish();
 }
 
