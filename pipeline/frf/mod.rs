@@ -18,6 +18,7 @@ use realfft::RealToComplex;
 
 mod choice;
 pub mod linearity;
+mod lines;
 mod local_fits;
 mod lpm;
 mod settings;
@@ -29,6 +30,7 @@ pub use choice::{
     describe, excitation,
 };
 pub use linearity::{Linearity, SlowCubic, SpringForce, linearity, slow_cubic, spring_force};
+pub use lines::{at_lines, sparse_lines};
 pub use local_fits::LocalFits;
 use local_fits::etfe_local_noise_densities;
 pub use settings::{Detrend, Estimator, FrfPlan, Window};

@@ -213,7 +213,7 @@ pub fn fit_run(
     }
     let opts = fit_options(ident, plan, sample_rate_hz);
     let (fit, data) = if plan.model_noise {
-        refined_fit(h, mask, plan, &opts, ident.max_delay_s, start)?
+        refined_fit(h, mask, band_hz, plan, &opts, ident.max_delay_s, start)?
     } else {
         let data = FitData::of(h, mask, plan);
         let fit = match start {
@@ -240,7 +240,10 @@ pub fn fit_run(
     Ok((fit, data))
 }
 
-/// [`fit_run`]'s fit as `auto` makes it (`plan.model_noise`). First what
+/// [`fit_run`]'s fit as `auto` makes it (`plan.model_noise`). For a
+/// command of sparse lines over `band_hz` (`frf::sparse_lines`), the FRF
+/// and its variance at the excited lines from the non-excited ones
+/// (`frf::at_lines`), and the model fitted there. Otherwise, first what
 /// is not the model: the record's transient (when `plan.transient`) and
 /// the bins' noise level, from a fit of the model with a delay (up to
 /// `max_delay_s`, whatever the manifest's delay: a sensor's delay the
@@ -253,11 +256,25 @@ pub fn fit_run(
 fn refined_fit(
     h: &mut Frf,
     mask: &[bool],
+    band_hz: (f64, f64),
     plan: &FrfPlan,
     opts: &FitOptions,
     max_delay_s: f64,
     start: Option<&[f64]>,
 ) -> Result<(TfFit, FitData), FitError> {
+    if frf::sparse_lines(h, band_hz)
+        && let Some((bins, variance)) = frf::at_lines(h, mask, band_hz)
+    {
+        // A periodic command's lines: the transient and the noise level
+        // from the lines it does not excite (`frf::at_lines`), the model
+        // fitted at the excited ones alone.
+        let data = FitData::at(h, &bins, variance, plan);
+        let fit = match start {
+            Some(start) => fit::fit_from(&data.input(), opts, start)?,
+            None => fit::fit(&data.input(), opts)?,
+        };
+        return Ok((fit, data));
+    }
     let u = h.input_dft.clone().filter(|_| plan.transient.is_some());
     let (bins, variance) = FitData::usable(h, mask);
     let data = FitData::at(h, &bins, variance, plan);

@@ -1,0 +1,151 @@
+//! A command whose spectrum is sparse lines (a periodic multisine or square
+//! wave whose periods the record holds whole): the FRF at its excited lines
+//! and its noise level from the lines it does not excite.
+//!
+//! Between a periodic command's lines U is zero, so the output's DFT there
+//! holds only what is not G U: Y(k) = T(k) + V(k), the record's transient
+//! (the leakage of the states at its ends, smooth in k) and the noise. At an
+//! excited line Y(k) = G(k) U(k) + T(k) + V(k). The transient at a line is
+//! interpolated by a local polynomial through the non-excited lines around
+//! it, and the scatter they leave about it is the noise level there
+//! (Pintelon, Barbe, Vandersteen & Van Moer, "Improved (non-)parametric
+//! identification of dynamic systems excited by periodic signals", MSSP
+//! 25(7), 2011, 2683-2704; Pintelon & Schoukens, *System Identification: A
+//! Frequency Domain Approach*, 2nd ed., 2012, Secs. 2.4 and 7.2): G(k) =
+//! (Y(k) - T^(k)) / U(k), with variance sigma_V^2(k) (1 + q(k)) / |U(k)|^2,
+//! q(k) the interpolation's own variance factor. The ETFE's local
+//! polynomials cannot do this: a window around a line holds one excited bin,
+//! whose weight pins the polynomial, and the rest is the transient's
+//! leakage, which it counts as noise, and a transient fitted beside the model
+//! at the excited lines alone is not the one between them.
+
+use nalgebra::{Complex, Matrix3, Vector3};
+
+use super::{ETFE_NOISE_SMOOTH_HALF_WIDTH, Frf, UNEXCITED_SHARE};
+
+/// Non-excited lines taken on each side of an excited one, and how far
+/// (bins) they are looked for: 2 x 6 bins leave 9 complex degrees of
+/// freedom after the quadratic, pooled over the lines nearby (below).
+const PER_SIDE: usize = 6;
+const REACH_BINS: usize = 4 * PER_SIDE;
+/// The fewest non-excited lines a line's polynomial needs: two more than
+/// its coefficients.
+const MIN_NEIGHBOURS: usize = 5;
+
+/// Whether `frf`'s command is sparse lines over `band_hz`: at least half of
+/// the band's bins hold no excitation (below [`UNEXCITED_SHARE`] of the
+/// band's mean input power, as [`super::band_mask`] reads it), which a
+/// sweep, noise or a multisine between rests (whose lines leak into every
+/// bin) never leave. Only for a single record with the command's DFT kept.
+pub fn sparse_lines(frf: &Frf, band_hz: (f64, f64)) -> bool {
+    if frf.n_averages != 1 || frf.input_dft.is_none() {
+        return false;
+    }
+    let in_band: Vec<f64> = frf
+        .freq_hz
+        .iter()
+        .zip(&frf.suu)
+        .filter(|(f, _)| **f >= band_hz.0 && **f <= band_hz.1)
+        .map(|(_, p)| *p)
+        .collect();
+    if in_band.is_empty() {
+        return false;
+    }
+    let floor = UNEXCITED_SHARE * in_band.iter().sum::<f64>() / in_band.len() as f64;
+    let excited = in_band.iter().filter(|p| **p >= floor).count();
+    2 * excited <= in_band.len()
+}
+
+/// The excited lines of `mask` (the fit's bins) with the transient
+/// interpolated from the non-excited lines taken out of `frf` there, and
+/// E|dH|^2 at each: the bins the fit is given and their variances. A line
+/// with too few non-excited lines around it is left out. None where the
+/// command's DFT is not kept.
+pub fn at_lines(
+    frf: &mut Frf,
+    mask: &[bool],
+    band_hz: (f64, f64),
+) -> Option<(Vec<usize>, Vec<f64>)> {
+    let u = frf.input_dft.clone()?;
+    let nb = frf.h.len().min(u.len()).min(mask.len());
+    let (sum, n) = frf
+        .freq_hz
+        .iter()
+        .zip(&frf.suu)
+        .filter(|(f, _)| **f >= band_hz.0 && **f <= band_hz.1)
+        .fold((0.0, 0usize), |(s, n), (_, p)| (s + p, n + 1));
+    let floor = UNEXCITED_SHARE * sum / n.max(1) as f64;
+    let finite = |h: Complex<f64>| h.re.is_finite() && h.im.is_finite();
+    // A non-excited line whose output is known: Y = H U where U is not
+    // exactly zero.
+    let quiet = |j: usize| j > 0 && frf.suu[j] < floor && u[j].norm_sqr() > 0.0 && finite(frf.h[j]);
+    // Per line: (bin, T^, noise density of Y, q).
+    let mut found: Vec<(usize, Complex<f64>, f64, f64)> = Vec::new();
+    for k in (1..nb).filter(|&k| mask[k] && frf.suu[k] >= floor) {
+        let mut near = Vec::with_capacity(2 * PER_SIDE);
+        let mut below = 0;
+        let mut above = 0;
+        for d in 1..=REACH_BINS {
+            if below < PER_SIDE && k > d && quiet(k - d) {
+                near.push(k - d);
+                below += 1;
+            }
+            if above < PER_SIDE && k + d < nb && quiet(k + d) {
+                near.push(k + d);
+                above += 1;
+            }
+        }
+        if near.len() < MIN_NEIGHBOURS {
+            continue;
+        }
+        let scale = near.iter().map(|&j| j.abs_diff(k)).max().unwrap_or(1) as f64;
+        let powers = |j: usize| {
+            let x = (j as f64 - k as f64) / scale;
+            Vector3::new(1.0, x, x * x)
+        };
+        let mut a = Matrix3::<f64>::zeros();
+        let mut b = [Complex::new(0.0, 0.0); 3];
+        for &j in &near {
+            let p = powers(j);
+            a += p * p.transpose();
+            let y = frf.h[j] * u[j];
+            for (r, br) in b.iter_mut().enumerate() {
+                *br += y * p[r];
+            }
+        }
+        let Some(inv) = a.try_inverse() else {
+            continue;
+        };
+        let c: [Complex<f64>; 3] =
+            std::array::from_fn(|r| (0..3).map(|s| b[s] * inv[(r, s)]).sum());
+        let rss: f64 = near
+            .iter()
+            .map(|&j| {
+                let p = powers(j);
+                let fitted = c[0] + c[1] * p[1] + c[2] * p[2];
+                (frf.h[j] * u[j] - fitted).norm_sqr()
+            })
+            .sum();
+        found.push((k, c[0], rss / (near.len() - 3) as f64, inv[(0, 0)]));
+    }
+    // The noise density pooled over the lines within S bins, as the ETFE's
+    // is ([`ETFE_NOISE_SMOOTH_HALF_WIDTH`]): weights drawn from one line's 9
+    // degrees of freedom would make the fit's stds optimistic.
+    let mut bins = Vec::with_capacity(found.len());
+    let mut variance = Vec::with_capacity(found.len());
+    for &(k, t, _, q) in &found {
+        let (s, m) = found
+            .iter()
+            .filter(|(j, ..)| j.abs_diff(k) <= ETFE_NOISE_SMOOTH_HALF_WIDTH)
+            .fold((0.0, 0usize), |(s, m), (_, _, d, _)| (s + d, m + 1));
+        let density = s / m as f64;
+        let uk = u[k];
+        frf.h[k] = (frf.h[k] * uk - t) / uk;
+        // Suy = s conj(U) Y and Suu = s |U|^2, as in `Frf::without_transient`.
+        frf.suy[k] -= t / uk * frf.suu[k];
+        frf.syy[k] = frf.suy[k].norm_sqr() / frf.suu[k];
+        bins.push(k);
+        variance.push(density * (1.0 + q) / uk.norm_sqr());
+    }
+    Some((bins, variance))
+}
