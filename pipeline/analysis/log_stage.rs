@@ -813,7 +813,13 @@ pub fn log_stage_from(
     let (log, mut warnings) = checked_log(run, plan, ident, file)?;
     check_band_below_nyquist(run, &log, path)?;
     let fs = log.sample_rate_hz;
-    let (choice, mut h, force_frf) = estimate_frfs(run, ident, &log, path)?;
+    let (mut choice, mut h, force_frf) = estimate_frfs(run, ident, &log, path)?;
+    // `auto`'s fit of a command of sparse lines reads the transient and the
+    // noise from the lines between them (`identify::run_fit`), as the
+    // reason then says.
+    if choice.chosen && choice.plan.model_noise && frf::sparse_lines(&h, run.band_hz) {
+        choice.reason += "; the command is sparse lines (a periodic command whose periods the record holds whole): the FRF is taken at its excited lines, the transient and the noise level read from the lines between them";
+    }
     let mask = frf::band_mask(&h, run.band_hz, ident.coherence_min);
     displacement_polarity(path, plan, &h, &mask)?;
     warnings.extend(motion_warning(&choice, &log.command_m, fs, run.band_hz));
