@@ -8,6 +8,8 @@
 //!   the four rig parameters within 0.5 %;
 //! - the bundled rich campaign (a 150 Hz servo-valve mode, sensor delays,
 //!   offsets and drift) within 3 %;
+//! - the paper's rig logged at 200 Hz, where the hold's aliases matter,
+//!   within 3 of its stated stds;
 //! - the standard deviations are honest: over many seeds the truth lies
 //!   within two standard deviations about 95 % of the time, and the noise
 //!   variance the fit weights by matches the scatter of the FRF over seeds.
@@ -21,11 +23,11 @@ use std::path::Path;
 
 use servoid::manifest::load;
 use servoid::manifest::simulation::{SimulationPlan, load_simulation, load_simulation_str};
-use servoid::results::Results;
+use servoid::results::{Results, RigSource};
 use servoid::run::analyse;
 use servoid::run::simulate::simulate_campaign;
 
-use crate::util::{root, run_by_id, scratch};
+use crate::util::{PAPER_TRUTH, PaperSweep, root, run_by_id, scratch};
 
 /// A campaign on a rig that is not the paper's: a no-specimen run and two
 /// springs at about 0.16 and 0.11 a2 (the paper's ratios), at 1 kHz.
@@ -159,6 +161,43 @@ fn a_clean_campaign_gives_the_rig_within_half_a_percent() {
             "{name}: error {:.3e} is more than 4 std ({std:.3e})",
             value - truth
         );
+    }
+}
+
+/// The paper's rig logged at 200 Hz (60 s sweeps, the defaults): the
+/// hold's aliases are 0.6 % of the no-specimen response at 30 Hz, and a fit
+/// that modelled the hold by its continuous factor alone put beta1 0.2 %
+/// (15 stds) and a1b0 0.16-0.21 % (5-6 stds) high on these seeds, and for
+/// one of them failed the joint fit's adequacy tests and blamed friction or
+/// a nonlinear specimen. With the exact sampled response every rig
+/// parameter is within 3 of its stated stds, and no warning names a cause
+/// the rig does not have.
+#[test]
+fn a_campaign_sampled_at_200_hz_gives_the_rig_within_its_stds() {
+    for seed in [2026, 2027] {
+        let dir = scratch();
+        let sim = PaperSweep {
+            sample_rate_hz: 200.0,
+            seed,
+            ..PaperSweep::default()
+        };
+        let (results, _) = simulate_and_identify(&sim.text(), dir.path());
+        let source = &results.rig.as_ref().expect("a rig").source;
+        assert_eq!(*source, RigSource::Joint, "seed {seed}");
+        for ((name, value, std), (_, truth)) in rig(&results).into_iter().zip(PAPER_TRUTH) {
+            let z = (value - truth) / std;
+            eprintln!(
+                "200 Hz, seed {seed}: {name} {:+.4} % ({z:+.2} stds)",
+                100.0 * (value / truth - 1.0)
+            );
+            assert!(z.abs() < 3.0, "seed {seed}: {name} {z:.2} stds off");
+        }
+        for w in &results.warnings {
+            assert!(
+                !(w.contains("friction") || w.contains("nonlinear")),
+                "seed {seed}: {w}"
+            );
+        }
     }
 }
 

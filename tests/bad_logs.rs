@@ -125,9 +125,12 @@ fn logs_without_excitation_or_coherence_fail_alone_and_name_their_files() {
 /// `tests/bad/log-displacement-unit/bare.csv`, read in its own unit, mm)
 /// fails its run; with `repair = "interpolate"` on the displacement the
 /// run completes, its warning names the sample, results.json records what
-/// was replaced and by what, and the fit is the clean log's within a
-/// tenth of its std (the line between the neighbours stands in for one
-/// sample of 2,200).
+/// was replaced and by what, and the fit is the clean log's within 0.3 of
+/// its std. The line between the neighbours stands in for one sample of
+/// 2,200 but is not it: the 200 Hz sweep bends between samples, and the
+/// difference moves the fit by 0.16-0.23 std here (measured, the hold's
+/// aliases modelled; 0.03 std without them), and by 0.7 std for a sample
+/// at 7 s, where the sweep is faster.
 #[test]
 fn a_spike_is_repaired_when_the_channel_asks_and_recorded() {
     let dir = scratch();
@@ -217,6 +220,6 @@ data = {{ log = "{log}" }}
             want["params"][k].as_f64().unwrap(),
             want["std"][k].as_f64().unwrap(),
         );
-        assert!((p - q).abs() < 0.1 * sd, "{k}: {p} vs {q} (std {sd})");
+        assert!((p - q).abs() < 0.3 * sd, "{k}: {p} vs {q} (std {sd})");
     }
 }

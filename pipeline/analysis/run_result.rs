@@ -547,11 +547,7 @@ fn own_fit_warnings(summary: &FitSummary, st: &LogStage, fit: &TfFit) -> Vec<Str
 fn fit_adequacy(ident: &IdentificationPlan, st: &LogStage, fit: &TfFit) -> Option<Adequacy> {
     let data = st.fit_data.as_ref()?;
     let fs = st.log.sample_rate_hz;
-    let model: Vec<_> = data
-        .freq_hz
-        .iter()
-        .map(|&f| fit.tf.freq_response(f) * crate::fit::hold_response(ident.intersample, fs, f))
-        .collect();
+    let model = fit.as_logged(ident.intersample, fs, &data.freq_hz);
     Some(adequacy::assess(
         &Residuals {
             freq_hz: &data.freq_hz,

@@ -106,6 +106,7 @@ mod tests {
             n_bins: 100,
             warnings: Vec::new(),
             transient: None,
+            aliases: false,
         }
     }
 

@@ -26,7 +26,15 @@
 //! measurement path (the logged x1 is filtered). The force tells the two
 //! apart: it follows a shaped command (f/u = S V A / D0) but not a filter
 //! on the displacement channel (f/u = S A / D0). The measured FRF is the
-//! model times the hold Z(s) and exp(-s tau). A run's force over command is S(s) times
+//! model times the hold Z(s), its aliases A(s) and exp(-s tau). As the
+//! per-run fit has them (`fit` module docs), A is the factor the sampling's
+//! folded images put on each run's continuous model with the hold,
+//! evaluated at the estimate and followed to the estimate whose A is its
+//! own, or left at 1 where its whole effect is below the fit's tolerance
+//! ([`settle`]). The friction's and a stiffening spring's describing
+//! functions hold at a bin's own frequency, not at its images: A is the
+//! linear rig's (the specimen as stated, the seals' viscous damping in).
+//! A run's force over command is S(s) times
 //! its x1/u (Eq. 45: the specimen's poles are the force path's zeros), so a
 //! validation run, whose m, c and k the manifest gives, adds two FRFs that
 //! the same parameters must explain; S(s) is known, so every log-derivative
@@ -47,10 +55,12 @@ use nalgebra::{Complex, DMatrix, DVector};
 
 use super::adequacy::{Adequacy, Residuals, Sums};
 use super::lm::{LevenbergMarquardt, Normal};
-use super::problem::hold_response;
+use super::problem::{alias_factor, hold_response};
 use super::settings::Intersample;
 use super::{FitError, covariance, covariance_from_normal};
+use crate::lti::TransferFunction;
 use crate::model::{self, LinearSpecimen, RigParams};
+use crate::poly;
 use rayon::prelude::*;
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
@@ -417,6 +427,8 @@ struct Bin {
     sp: Complex<f64>,
     h: Complex<f64>,
     /// The known factors: the hold's response, times S(s) for a force.
+    held: Complex<f64>,
+    /// `held` times the aliases at the model they were evaluated for.
     known: Complex<f64>,
     /// Whether the bin is of a force FRF (its delay is the force's).
     force: bool,
@@ -429,11 +441,13 @@ struct Bin {
     coulomb: Complex<f64>,
 }
 
-/// A run's specimen polynomial S(s) = m s^2 + c s + k and its P / P_ref.
+/// A run's specimen polynomial S(s) = m s^2 + c s + k, its P / P_ref and
+/// whether its FRF is a force's.
 #[derive(Debug, Clone, Copy)]
 struct RunModel {
     mck: (f64, f64, f64),
     p_ratio: f64,
+    force: bool,
 }
 
 /// The least-squares problem over every bin of every run.
@@ -455,7 +469,12 @@ struct JointProblem {
     seal_damping: Option<usize>,
     /// The sample period (s): the delay's unit in theta.
     period_s: f64,
+    /// The command's intersample behaviour, for the aliases.
+    intersample: Intersample,
 }
+
+/// Bins (their indices) and their known factors.
+type KnownAt = Vec<(usize, Complex<f64>)>;
 
 /// H and its derivatives with respect to theta at one bin.
 struct BinEval {
@@ -487,6 +506,25 @@ struct Point {
     fc: f64,
     /// The seals' viscous damping (N s/m), 0 when not fitted.
     cv: f64,
+}
+
+impl Point {
+    /// The rig (a1b0 referred to `p_ref`) with delays and no mode, piston,
+    /// friction or seal damping.
+    fn of_rig(rig: &RigParams, p_ref: f64, delay_s: f64, force_delay_s: f64) -> Point {
+        Point {
+            b1: rig.beta1_per_s,
+            a1b0: rig.a1b0_n_per_m_s2 * p_ref / rig.p_gain,
+            a2: rig.a2_n_per_m,
+            a3: rig.a3_per_s,
+            tau: delay_s,
+            tau_force: force_delay_s,
+            mode: None,
+            mp: 0.0,
+            fc: 0.0,
+            cv: 0.0,
+        }
+    }
 }
 
 /// Bins per chunk of a parallel pass: each chunk's sums are formed on one
@@ -538,6 +576,7 @@ impl JointProblem {
             friction: self.friction,
             seal_damping: self.seal_damping,
             period_s: self.period_s,
+            intersample: self.intersample,
         }
     }
 
@@ -565,6 +604,120 @@ impl JointProblem {
             fc: self.friction.map_or(0.0, |k| theta[k]),
             cv: self.seal_damping.map_or(0.0, |k| theta[k]),
         }
+    }
+
+    /// Run `r`'s linear model at `x` as a transfer function, for its
+    /// aliases (module docs): x1/u = A V / D with the rig, mode, piston and
+    /// seal damping at `x` and the specimen as stated, times S(s) for a
+    /// force, with the run's delay.
+    fn run_tf(&self, r: usize, x: &Point) -> Result<TransferFunction, crate::lti::LtiError> {
+        let run = self.runs[r];
+        let (m, c, k) = run.mck;
+        let load = poly::trim_leading_zeros(&[m + x.mp, c + x.cv, k]);
+        let q = poly::add(&poly::mul(&[1.0, x.a3], &load), &[x.a2, 0.0]);
+        let sbq = poly::mul(&[1.0, x.b1], &q);
+        let a = x.a1b0 * run.p_ratio;
+        let place = match (self.structure.place(), run.force) {
+            (Some(Place::Measurement), true) => None,
+            (place, _) => place,
+        };
+        let (num, den) = match (x.mode, place) {
+            (Some((wv, zeta)), Some(place)) => {
+                let vden = [1.0, 2.0 * zeta * wv, wv * wv];
+                let den = if place == Place::Loop {
+                    poly::add(&poly::mul(&sbq, &vden), &[a * wv * wv])
+                } else {
+                    poly::mul(&poly::add(&sbq, &[a]), &vden)
+                };
+                (vec![a * wv * wv], den)
+            }
+            _ => (vec![a], poly::add(&sbq, &[a])),
+        };
+        let (num, tau) = if run.force {
+            (poly::mul(&num, &[m, c, k]), x.tau_force)
+        } else {
+            (num, x.tau)
+        };
+        TransferFunction::with_delay(&num, &poly::trim_leading_zeros(&den), tau)
+    }
+
+    /// The known factor at every `stride`-th bin of each run for the model
+    /// at `x`, with the bin's index: the hold (times S(s) for a force)
+    /// times the aliases of its run's linear model ([`alias_factor`]), run
+    /// by run side by side. None without a hold or for a point that gives
+    /// no model.
+    fn exact_known(&self, x: &Point, stride: usize) -> Option<KnownAt> {
+        if self.intersample == Intersample::None {
+            return None;
+        }
+        let fs = 1.0 / self.period_s;
+        let mut spans = Vec::with_capacity(self.runs.len());
+        let mut start = 0;
+        while start < self.bins.len() {
+            let r = self.bins[start].run;
+            let end = start + self.bins[start..].partition_point(|b| b.run == r);
+            spans.push((r, start..end));
+            start = end;
+        }
+        let per_run: Option<Vec<KnownAt>> = spans
+            .into_par_iter()
+            .with_max_len(1)
+            .map(|(r, span)| {
+                let tf = self.run_tf(r, x).ok()?;
+                let at: Vec<usize> = span.step_by(stride).collect();
+                let f: Vec<f64> = at
+                    .iter()
+                    .map(|&i| self.bins[i].s.im / (2.0 * std::f64::consts::PI))
+                    .collect();
+                let alias = alias_factor(self.intersample, fs, &tf, &f);
+                Some(
+                    at.into_iter()
+                        .zip(alias)
+                        .map(|(i, a)| (i, self.bins[i].held * a))
+                        .collect(),
+                )
+            })
+            .collect();
+        Some(per_run?.concat())
+    }
+
+    /// Sets the known factors to the aliases at `x` where they would
+    /// move some parameter by [`super::ALIAS_SETTLED`] of its std or more,
+    /// as the per-run fit judges it ([`super::shift_in_stds`] on every
+    /// [`super::ALIAS_PROBE_STRIDE`]-th bin of each run, `scale` the root
+    /// of the reduced chi-square; 1 before a fit). Whether it set them.
+    fn follow_aliases(&mut self, x: &Point, scale: f64) -> bool {
+        let Some(probe) = self.exact_known(x, super::ALIAS_PROBE_STRIDE) else {
+            return false;
+        };
+        let p = self.n_params();
+        let mut a = DMatrix::zeros(p, p);
+        let mut b = DVector::zeros(p);
+        for &(i, new) in &probe {
+            let bin = &self.bins[i];
+            let e = self.eval_at::<true>(bin, x);
+            let d = e.model * (new / bin.known - 1.0) * bin.weight;
+            for j in 0..p {
+                let gj = e.grad[j] * bin.weight;
+                b[j] += gj.re * d.re + gj.im * d.im;
+                for k in 0..p {
+                    let gk = e.grad[k] * bin.weight;
+                    a[(j, k)] += gj.re * gk.re + gj.im * gk.im;
+                }
+            }
+        }
+        let share = probe.len() as f64 / self.bins.len() as f64;
+        let shift = super::shift_in_stds(&a, &b, share, scale);
+        if !shift.is_some_and(|z| z.iter().any(|&z| z >= super::ALIAS_SETTLED)) {
+            return false;
+        }
+        let Some(known) = self.exact_known(x, 1) else {
+            return false;
+        };
+        for (i, k) in known {
+            self.bins[i].known = k;
+        }
+        true
     }
 
     /// The model at one bin, and with `GRAD` its log-derivatives (inlined
@@ -878,6 +1031,7 @@ fn problem(runs: &[JointRun<'_>], opts: &JointOptions) -> Result<JointProblem, F
         models.push(RunModel {
             mck: run.specimen.mck(),
             p_ratio: run.p_gain / opts.p_ref,
+            force: run.output == Output::Force,
         });
         for i in 0..run.h.len() {
             let f = run.freq_hz[i];
@@ -900,14 +1054,16 @@ fn problem(runs: &[JointRun<'_>], opts: &JointOptions) -> Result<JointProblem, F
                 ),
                 _ => Complex::default(),
             };
+            let held = match run.output {
+                Output::Displacement => hold,
+                Output::Force => hold * sp,
+            };
             bins.push(Bin {
                 s,
                 sp,
                 h: run.h[i],
-                known: match run.output {
-                    Output::Displacement => hold,
-                    Output::Force => hold * sp,
-                },
+                held,
+                known: held,
                 force: run.output == Output::Force,
                 weight: (2.0 / v).sqrt(),
                 run: r,
@@ -931,6 +1087,7 @@ fn problem(runs: &[JointRun<'_>], opts: &JointOptions) -> Result<JointProblem, F
         friction,
         seal_damping,
         period_s: 1.0 / opts.sample_rate_hz,
+        intersample: opts.intersample,
     })
 }
 
@@ -942,8 +1099,9 @@ pub fn joint_fit(
     start: &RigParams,
     opts: &JointOptions,
 ) -> Result<JointFit, FitError> {
-    let problem = problem(runs, opts)?;
-    let optimum = optimise(&problem, start, opts)?;
+    let mut problem = problem(runs, opts)?;
+    let theta0 = start_theta(&problem, start, opts)?;
+    let optimum = settle(&mut problem, opts, theta0)?;
     finish(&problem, optimum, opts)
 }
 
@@ -958,23 +1116,55 @@ pub(super) fn joint_fit_staged(
     opts: &JointOptions,
     stride: usize,
 ) -> Result<JointFit, FitError> {
-    let problem = problem(runs, opts)?;
-    let coarse = problem.every(stride);
-    let optimum = match Leg::from(&coarse, start, opts, opts.max_iterations) {
-        Ok(leg) => {
-            Leg::run(
-                &problem,
-                solver(&problem, opts)?,
-                leg.optimum.theta,
-                None,
-                opts.max_iterations,
-                0,
-            )?
-            .optimum
-        }
-        Err(_) => optimise(&problem, start, opts)?,
+    let mut problem = problem(runs, opts)?;
+    let mut coarse = problem.every(stride);
+    let theta0 = start_theta(&coarse, start, opts)?;
+    coarse.follow_aliases(&coarse.point(&theta0), 1.0);
+    let near = match Leg::from(&coarse, start, opts, opts.max_iterations) {
+        Ok(leg) => leg.optimum.theta,
+        Err(_) => start_theta(&problem, start, opts)?,
     };
+    let optimum = settle(&mut problem, opts, near)?;
     finish(&problem, optimum, opts)
+}
+
+/// The most re-evaluations of the aliases [`settle`] makes after its first
+/// leg (as `fit`'s own refinement).
+const ALIAS_PASSES: usize = 4;
+
+/// Levenberg-Marquardt on `problem` from `theta0` with the hold's aliases
+/// those of the model it finds (module docs): evaluated at `theta0`, then
+/// at each optimum, and fitted again from there while they would move it
+/// by [`super::ALIAS_SETTLED`] of its stated std or more. The aliases the
+/// problem is left with are those of the optimum's last leg.
+fn settle(
+    problem: &mut JointProblem,
+    opts: &JointOptions,
+    theta0: Vec<f64>,
+) -> Result<Optimum, FitError> {
+    problem.follow_aliases(&problem.point(&theta0), 1.0);
+    let leg = |problem: &JointProblem, theta, before| {
+        Leg::run(
+            problem,
+            solver(problem, opts)?,
+            theta,
+            None,
+            opts.max_iterations,
+            before,
+        )
+    };
+    let mut optimum = leg(problem, theta0, 0)?.optimum;
+    let dof = (2 * problem.bins.len())
+        .saturating_sub(problem.n_params())
+        .max(1);
+    for _ in 0..ALIAS_PASSES {
+        let scale = (optimum.cost / dof as f64).sqrt();
+        if !problem.follow_aliases(&problem.point(&optimum.theta), scale) {
+            break;
+        }
+        optimum = leg(problem, optimum.theta, optimum.iterations)?.optimum;
+    }
+    Ok(optimum)
 }
 
 /// Where Levenberg-Marquardt stopped.
@@ -1004,13 +1194,44 @@ impl Jacobian for Borrowed<'_> {
     }
 }
 
-/// Levenberg-Marquardt on `problem` from the start `opts` and `start` give.
-fn optimise(
+/// The parameters Levenberg-Marquardt starts from for `problem`: the rig
+/// `start` (a1b0 referred to `opts.p_ref`) and the delays, mode, piston and
+/// friction `opts` start at.
+fn start_theta(
     problem: &JointProblem,
     start: &RigParams,
     opts: &JointOptions,
-) -> Result<Optimum, FitError> {
-    Ok(Leg::from(problem, start, opts, opts.max_iterations)?.optimum)
+) -> Result<Vec<f64>, FitError> {
+    let p = problem.n_params();
+    let mut theta0 = rig_theta(start, opts.p_ref).to_vec();
+    let fs = opts.sample_rate_hz;
+    let delay = |d: f64| (d * fs).clamp(0.0, opts.max_delay_s * fs);
+    if opts.structure != Structure::Plain {
+        theta0.push(delay(opts.delay_start_s));
+    }
+    if opts.structure.place().is_some() {
+        theta0.push((2.0 * std::f64::consts::PI * opts.valve_start.0).ln());
+        theta0.push(opts.valve_start.1.ln());
+    }
+    if opts.structure.piston() {
+        theta0.push(opts.piston_start_kg.ln());
+    }
+    if problem.force_delay.is_some() {
+        theta0.push(delay(opts.force_delay_start_s));
+    }
+    if problem.friction.is_some() {
+        theta0.push(opts.friction_start_n);
+    }
+    if problem.seal_damping.is_some() {
+        theta0.push(0.0);
+    }
+    if !theta0.iter().all(|t| t.is_finite()) {
+        return Err(FitError::NoSolution);
+    }
+    if 2 * problem.bins.len() <= p {
+        return Err(FitError::NoSolution);
+    }
+    Ok(theta0)
 }
 
 /// Levenberg-Marquardt run for a number of iterations: where it stopped,
@@ -1028,39 +1249,10 @@ impl Leg {
         opts: &JointOptions,
         max_iterations: u64,
     ) -> Result<Leg, FitError> {
-        let p = problem.n_params();
-        let mut theta0 = rig_theta(start, opts.p_ref).to_vec();
-        let fs = opts.sample_rate_hz;
-        let delay = |d: f64| (d * fs).clamp(0.0, opts.max_delay_s * fs);
-        if opts.structure != Structure::Plain {
-            theta0.push(delay(opts.delay_start_s));
-        }
-        if opts.structure.place().is_some() {
-            theta0.push((2.0 * std::f64::consts::PI * opts.valve_start.0).ln());
-            theta0.push(opts.valve_start.1.ln());
-        }
-        if opts.structure.piston() {
-            theta0.push(opts.piston_start_kg.ln());
-        }
-        if problem.force_delay.is_some() {
-            theta0.push(delay(opts.force_delay_start_s));
-        }
-        if problem.friction.is_some() {
-            theta0.push(opts.friction_start_n);
-        }
-        if problem.seal_damping.is_some() {
-            theta0.push(0.0);
-        }
-        if !theta0.iter().all(|t| t.is_finite()) {
-            return Err(FitError::NoSolution);
-        }
-        if 2 * problem.bins.len() <= p {
-            return Err(FitError::NoSolution);
-        }
         Self::run(
             problem,
             solver(problem, opts)?,
-            theta0,
+            start_theta(problem, start, opts)?,
             None,
             max_iterations,
             0,

@@ -11,6 +11,7 @@ use argmin::core::{Error as ArgminError, Jacobian, Operator};
 use nalgebra::{Complex, DMatrix, DVector};
 
 use super::settings::Intersample;
+use crate::lti::TransferFunction;
 
 /// Response of the command's intersample behaviour at `f_hz` (Hz).
 ///
@@ -24,6 +25,60 @@ pub fn hold_response(intersample: Intersample, sample_rate_hz: f64, f_hz: f64) -
         Intersample::None => Complex::new(1.0, 0.0),
         Intersample::SampleAndHold => crate::lti::zoh_response(f_hz, sample_rate_hz),
     }
+}
+
+/// What a log of the command and of the output holds of the plant `tf`
+/// (its delay included) at each of `freq_hz`: with a held command its
+/// exact sampled response, aliases and all ([`crate::lti::ZohSampled`]),
+/// of which `tf`'s response times [`hold_response`] is the first term;
+/// without a hold, `tf`'s response.
+pub fn sampled_response(
+    intersample: Intersample,
+    sample_rate_hz: f64,
+    tf: &TransferFunction,
+    freq_hz: &[f64],
+) -> Vec<Complex<f64>> {
+    match intersample {
+        Intersample::None => freq_hz.iter().map(|&f| tf.freq_response(f)).collect(),
+        Intersample::SampleAndHold => {
+            crate::lti::ZohSampled::new(tf, sample_rate_hz).response(freq_hz)
+        }
+    }
+}
+
+/// The factor the aliases put on `tf`'s continuous model with the hold at
+/// each of `freq_hz`: [`sampled_response`] over `tf`'s response times
+/// [`hold_response`] ([`crate::lti::ZohSampled::over_hold`] over the
+/// rational part). A fit models the hold as this factor on its rational
+/// model, evaluated at its own estimate (`fit::refine_held`): the aliases
+/// depend on the plant, but weakly, so a few re-evaluations reach the
+/// model whose factor is its own. 1 without a hold, and where the ratio is
+/// not finite (a continuous model that vanishes at a bin).
+pub fn alias_factor(
+    intersample: Intersample,
+    sample_rate_hz: f64,
+    tf: &TransferFunction,
+    freq_hz: &[f64],
+) -> Vec<Complex<f64>> {
+    let one = Complex::new(1.0, 0.0);
+    if intersample == Intersample::None {
+        return vec![one; freq_hz.len()];
+    }
+    let sampled = crate::lti::ZohSampled::new(tf, sample_rate_hz);
+    let mut work = Vec::new();
+    freq_hz
+        .iter()
+        .map(|&f| {
+            let s = Complex::new(0.0, 2.0 * std::f64::consts::PI * f);
+            let a = sampled.over_hold(f, &mut work) * crate::poly::eval(&tf.den, s)
+                / crate::poly::eval(&tf.num, s);
+            if a.re.is_finite() && a.im.is_finite() {
+                a
+            } else {
+                one
+            }
+        })
+        .collect()
 }
 
 /// Orders of the fitted model and whether a delay is a parameter.
@@ -150,7 +205,8 @@ pub struct FrfProblem {
     pub s: Vec<Complex<f64>>,
     /// Measured response.
     pub h: Vec<Complex<f64>>,
-    /// Known factor K at each bin (hold times fixed delay).
+    /// Known factor K at each bin: the hold, its aliases at the model
+    /// they were evaluated for ([`alias_factor`]) and any fixed delay.
     pub known: Vec<Complex<f64>>,
     /// sqrt(2 / variance) at each bin.
     pub weight: Vec<f64>,
@@ -254,6 +310,15 @@ impl FrfProblem {
         self.eval_bins(theta).iter().map(|b| b.model).collect()
     }
 
+    /// Model response at every `stride`-th bin (known factors included).
+    pub fn model_every(&self, theta: &[f64], stride: usize) -> Vec<Complex<f64>> {
+        let (num, den, tau) = self.split(theta);
+        (0..self.n_bins())
+            .step_by(stride)
+            .map(|i| self.eval_bin(i, num, den, tau).model)
+            .collect()
+    }
+
     /// Weighted residuals stacked [Re; Im].
     pub fn residuals(&self, theta: &[f64]) -> DVector<f64> {
         let n = self.n_bins();
@@ -332,7 +397,6 @@ impl Jacobian for FrfProblem {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::lti::TransferFunction;
     use approx::assert_relative_eq;
 
     #[test]

@@ -348,10 +348,11 @@ fn residual_noise(
         .map(|(f, _)| *f)
         .fold(0.0, f64::max);
     let mut residual = h.head(top, frf::VARIANCE_REACH_BINS);
-    for (hk, &f) in residual.h.iter_mut().zip(&h.freq_hz) {
+    let n = residual.h.len();
+    let model = fit.as_logged(opts.intersample, opts.sample_rate_hz, &h.freq_hz[..n]);
+    for ((hk, &f), m) in residual.h.iter_mut().zip(&h.freq_hz).zip(model) {
         if f > 0.0 {
-            *hk -= fit.tf.freq_response(f)
-                * fit::hold_response(opts.intersample, opts.sample_rate_hz, f);
+            *hk -= m;
         }
     }
     FitData::usable(&residual, &mask[..residual.h.len()])

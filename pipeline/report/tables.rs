@@ -142,19 +142,24 @@ fn frf_table(run: &RunResult, st: &Measured<'_>, intersample: Intersample) -> Fr
         .collect();
     let freq_hz: Vec<f64> = bins.iter().map(|&i| st.frf.freq_hz[i]).collect();
     let fs = st.sample_rate_hz;
-    let model_tf = match st.fit {
-        Some(fit) => Some(fit.tf.clone()),
-        None => run.tf.as_ref().map(|t| TransferFunction {
-            num: t.num.clone(),
-            den: t.den.clone(),
-            delay_s: t.delay_s,
+    // A fitted model as its fit compared it with the log, a predicted one
+    // with the hold's continuous factor (`model_response`).
+    let model = match st.fit {
+        Some(fit) => Some(fit.as_logged(intersample, fs, &freq_hz)),
+        None => run.tf.as_ref().map(|t| {
+            let tf = TransferFunction {
+                num: t.num.clone(),
+                den: t.den.clone(),
+                delay_s: t.delay_s,
+            };
+            model_response(&tf, intersample, fs, &freq_hz)
         }),
     };
     FrfTable {
         h: bins.iter().map(|&i| st.frf.h[i]).collect(),
         coherence: bins.iter().map(|&i| st.frf.coherence[i]).collect(),
         in_fit: bins.iter().map(|&i| st.mask[i]).collect(),
-        model: model_tf.map(|tf| model_response(&tf, intersample, fs, &freq_hz)),
+        model,
         force: st.force_frf.map(|ff| {
             (
                 bins.iter().map(|&i| ff.h[i]).collect(),

@@ -11,7 +11,7 @@
 use nalgebra::{DMatrix, DVector, SMatrix, SVector};
 
 use super::SimError;
-use crate::lti::StateSpace;
+use crate::lti::{StateSpace, phi_gamma, split_delay};
 
 /// A state space discretised with a zero-order hold:
 /// `x[k+1] = ad x[k] + bd u[k]`, `y[k] = c x[k] + d u[k]`.
@@ -25,15 +25,9 @@ pub struct Discretized {
     pub dt_s: f64,
 }
 
-/// Zero-order-hold discretisation over `dt_s` (s).
-///
-/// exp() of the augmented matrix is nalgebra's Pade scaling-and-squaring
-/// (Al-Mohy & Higham 2009), applied after a diagonal power-of-two balancing:
-/// the plant's A mixes 1/m ~ 0.3 with a1b0 ~ 2.4e9, so ||A T|| ~ 1e6 while
-/// its eigenvalues times T are below 1. Unbalanced, that costs about twenty
-/// squarings and the small entries of Phi lose digits; balanced, the norm is
-/// that of the eigenvalues. exp(D^-1 M D) = D^-1 exp(M) D exactly, and
-/// powers of two make the scaling exact in floating point.
+/// Zero-order-hold discretisation over `dt_s` (s), through
+/// [`crate::lti::phi_gamma`] (a balanced matrix exponential: the plant's A
+/// mixes 1/m ~ 0.3 with a1b0 ~ 2.4e9).
 pub fn zoh(ss: &StateSpace, dt_s: f64) -> Discretized {
     let (phi, gamma) = phi_gamma(&ss.a, &ss.b, dt_s);
     Discretized {
@@ -45,55 +39,11 @@ pub fn zoh(ss: &StateSpace, dt_s: f64) -> Discretized {
     }
 }
 
-/// Phi(tau) and Gamma(tau) from exp([[A, B], [0, 0]] tau).
-pub(crate) fn phi_gamma(
-    a: &DMatrix<f64>,
-    b: &DVector<f64>,
-    tau: f64,
-) -> (DMatrix<f64>, DVector<f64>) {
-    let n = a.nrows();
-    let mut m = DMatrix::<f64>::zeros(n + 1, n + 1);
-    m.view_mut((0, 0), (n, n)).copy_from(&(a * tau));
-    m.view_mut((0, n), (n, 1)).copy_from(&(b * tau));
-    let e = expm_balanced(&m);
-    let phi = e.view((0, 0), (n, n)).into_owned();
-    let gamma = e.view((0, n), (n, 1)).column(0).into_owned();
-    (phi, gamma)
-}
-
-/// exp(M) through a power-of-two diagonal similarity; NaN throughout for
-/// an M with a non-finite entry (nalgebra's scaling and squaring would
-/// square u64::MAX times: a hang).
-pub(crate) fn expm_balanced(m: &DMatrix<f64>) -> DMatrix<f64> {
-    if m.iter().any(|v| !v.is_finite()) {
-        return DMatrix::from_element(m.nrows(), m.ncols(), f64::NAN);
-    }
-    let d = crate::lti::balancing_diagonal(m);
-    let n = m.nrows();
-    let balanced = DMatrix::from_fn(n, n, |i, j| m[(i, j)] * d[j] / d[i]);
-    let e = balanced.exp();
-    DMatrix::from_fn(n, n, |i, j| e[(i, j)] * d[i] / d[j])
-}
-
 /// How one output is read: `y[k + shift] = row . x[k] + gain u[k]`.
 struct Tap {
     shift: usize,
     row: DVector<f64>,
     gain: f64,
-}
-
-/// Splits a delay into whole samples and a fraction: Some((q, eps)) with
-/// delay = q T + eps, 0 < eps < T, or None-fraction when the delay is a whole
-/// number of samples to within 1e-9 of a sample.
-fn split_delay(delay_s: f64, dt_s: f64) -> (usize, Option<f64>) {
-    let q = delay_s / dt_s;
-    let whole = q.round();
-    if (q - whole).abs() < 1e-9 {
-        (whole as usize, None)
-    } else {
-        let qf = q.floor();
-        (qf as usize, Some(delay_s - qf * dt_s))
-    }
 }
 
 /// Simulates `ss` from rest with the command `u` held over each sample period

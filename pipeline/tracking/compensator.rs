@@ -293,11 +293,11 @@ pub const TARGET_AMPLITUDE_PCT: f64 = 1.0;
 /// Frequencies over the band where [`band_tracking`] reads the response.
 const BAND_POINTS: usize = 200;
 
-/// The plant driven through the controller's zero-order hold and sampled at
-/// `fs`: `G(i w) sinc(w T / 2) exp(-i w T / 2)`. The folded images the
-/// sampling adds are below 1e-11 of it for x1/u (relative degree 4; the
-/// test `sine_through_the_plant_has_the_sampled_frequency_response` in
-/// `simulate::discrete` sums them).
+/// The plant driven through the controller's zero-order hold at `fs`:
+/// `G(i w) sinc(w T / 2) exp(-i w T / 2)`, the hold's continuous factor.
+/// Sampled at `fs` the hold's images fold back onto it too
+/// ([`crate::lti::ZohSampled`]): for Exp1's x1/u (relative degree 4) at
+/// 30 Hz, 1e-9 of it at 2048 Hz, 8e-8 at 1 kHz and 1.7e-3 at 200 Hz.
 pub fn held_response(plant: &TransferFunction, f_hz: f64, fs: f64) -> Complex<f64> {
     plant.freq_response(f_hz) * zoh_response(f_hz, fs)
 }

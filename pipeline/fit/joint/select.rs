@@ -83,8 +83,8 @@ use serde::{Deserialize, Deserializer, Serialize, Serializer};
 use statrs::distribution::{ContinuousCDF, FisherSnedecor};
 
 use super::{
-    FitError, JointFit, JointOptions, JointProblem, JointRun, Leg, Output, Structure, finish,
-    joint_fit, joint_fit_staged, problem, rig_theta, solver,
+    FitError, JointFit, JointOptions, JointProblem, JointRun, Leg, Output, Point, Structure,
+    finish, joint_fit, joint_fit_staged, problem, rig_theta, settle,
 };
 use crate::model::RigParams;
 
@@ -779,8 +779,14 @@ fn fit_mode(
         Some(f) => (f.rig, f.delay_s, f.force_delay_s.unwrap_or(f.delay_s)),
         None => (*start, 0.0, 0.0),
     };
-    let prob = problem(runs, &base)?;
-    let coarse = prob.every(GRID_STRIDE);
+    let mut prob = problem(runs, &base)?;
+    let mut coarse = prob.every(GRID_STRIDE);
+    // The grid is scored, and the race run, with the aliases of the delay
+    // fit's model (the last leg follows its own).
+    coarse.follow_aliases(
+        &Point::of_rig(&rig, opts.p_ref, delay_s, force_delay_s),
+        1.0,
+    );
     let with_force = coarse.force_delay.is_some();
     let mut grid = Vec::new();
     if structure.piston() {
@@ -822,7 +828,7 @@ fn fit_mode(
         })
         .collect();
     scored.sort_by(|a, b| a.cost.total_cmp(&b.cost));
-    race(&prob, &coarse, &rig, &base, &scored)
+    race(&mut prob, &coarse, &rig, &base, &scored)
 }
 
 /// The piston's starts: its mode over the same range as a mode's,
@@ -915,11 +921,12 @@ fn mode_starts(
 /// quarter of the bins the grid was scored on, for a few iterations; then
 /// only the one with the lower cost (the first on a tie) goes on to that
 /// problem's optimum, and from there on every bin to the optimum of all of
-/// them, which alone is finished (covariance, adequacy). The quarter's
+/// them (its aliases its own), which alone is finished (covariance,
+/// adequacy). The quarter's
 /// optimum is within its noise of the whole's, so the last leg takes a few
 /// iterations where a start from the grid takes a dozen.
 fn race(
-    prob: &JointProblem,
+    prob: &mut JointProblem,
     coarse: &JointProblem,
     rig: &RigParams,
     base: &JointOptions,
@@ -947,15 +954,8 @@ fn race(
     let more = base.max_iterations.saturating_sub(leg.optimum.iterations);
     let near = leg.go_on(coarse, more)?.optimum.theta;
     let full = options(start);
-    let leg = Leg::run(
-        prob,
-        solver(prob, &full)?,
-        near,
-        None,
-        base.max_iterations,
-        0,
-    )?;
-    finish(prob, leg.optimum, &full)
+    let optimum = settle(prob, &full, near)?;
+    finish(prob, optimum, &full)
 }
 
 /// The rig's spread over the runs, for a fit its adequacy tests reject.

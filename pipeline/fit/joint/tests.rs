@@ -1,7 +1,7 @@
 //! The joint estimator against responses computed another way: the
 //! simulator's state space of the rig with its valve mode
-//! (`simulate::plant::linear_state_space`), solved as (sI - A) x = B at
-//! each bin, times the hold and the delay written out here.
+//! (`simulate::plant::linear_state_space`), held and sampled as a log of
+//! it is (`lti::ZohSampled`: the hold, its aliases and the delay).
 
 use super::*;
 use crate::simulate::plant::{PlantSpec, Unmodelled, ValveMode, linear_state_space};
@@ -54,14 +54,7 @@ fn truth_of(
         unmodelled,
     })
     .unwrap();
-    f.iter()
-        .map(|&f| {
-            let s = Complex::new(0.0, 2.0 * std::f64::consts::PI * f);
-            ss.eval(output, s)
-                * hold_response(Intersample::SampleAndHold, FS, f)
-                * (-s * delay_s).exp()
-        })
-        .collect()
+    crate::lti::ZohSampled::of_state_space(&ss, output, delay_s, FS).response(f)
 }
 
 fn options(structure: Structure) -> JointOptions {
@@ -783,6 +776,109 @@ fn mode(hz: f64, zeta: f64) -> Option<ValveMode> {
         natural_frequency_hz: hz,
         damping_ratio: zeta,
     })
+}
+
+/// At 200 Hz, where the hold's images are 0.6 % of the no-specimen
+/// response at 30 Hz: on the exact sampled responses of the three
+/// identification runs of a rig with a 1.3-sample delay and no mode or a
+/// 60 Hz mode in the loop, each structure follows the aliases to the rig
+/// from 5-10 % off, to 2e-6.
+#[test]
+fn at_200_hz_each_structure_recovers_the_rig_through_the_aliases() {
+    recovers_at_200_hz(&[
+        (Structure::Delay, Unmodelled::default()),
+        (Structure::DelayValve, in_loop(mode(60.0, 0.6))),
+    ]);
+}
+
+/// As [`at_200_hz_each_structure_recovers_the_rig_through_the_aliases`]
+/// with a 110 Hz mode in the loop (above the 100 Hz Nyquist frequency: its
+/// images fold into the band too) and with a 3 kg piston.
+#[test]
+#[ignore = "fails: with the 110 Hz mode beta1 ends 7.5e-5 off (the aliases' fixed point or another optimum, not yet known)"]
+fn at_200_hz_a_mode_above_nyquist_or_a_piston_recovers_the_rig() {
+    recovers_at_200_hz(&[
+        (Structure::DelayValve, in_loop(mode(110.0, 0.6))),
+        (
+            Structure::DelayPiston,
+            Unmodelled {
+                piston_mass_kg: Some(3.0),
+                ..Default::default()
+            },
+        ),
+    ]);
+}
+
+/// The joint fit of each of `cases` (structure, what the simulated rig
+/// holds) at 200 Hz, noise-free, recovers the rig and delay to 2e-6.
+fn recovers_at_200_hz(cases: &[(Structure, Unmodelled)]) {
+    let fs = 200.0;
+    let delay = 1.3 / fs;
+    let f = freqs();
+    let specimens = [
+        SpecimenModel::None,
+        SpecimenModel::Spring {
+            stiffness_n_per_m: K1,
+        },
+        SpecimenModel::Spring {
+            stiffness_n_per_m: K2,
+        },
+    ];
+    let var = vec![1e-6; f.len()];
+    for &(structure, unmodelled) in cases {
+        let h: Vec<Vec<Complex<f64>>> = specimens
+            .iter()
+            .map(|&specimen| {
+                let ss = linear_state_space(&PlantSpec {
+                    rig: rig(),
+                    specimen,
+                    unmodelled,
+                })
+                .unwrap();
+                crate::lti::ZohSampled::of_state_space(&ss, 0, delay, fs).response(&f)
+            })
+            .collect();
+        let runs: Vec<JointRun<'_>> = h
+            .iter()
+            .zip(&specimens)
+            .map(|(h, s)| JointRun {
+                specimen: s.linear().unwrap(),
+                p_gain: 1.0,
+                output: Output::Displacement,
+                freq_hz: &f,
+                h,
+                variance: &var,
+                bin_hz: 0.05,
+                lag: 1,
+                amplitude_m: None,
+                spring_cubic_n_per_m3: None,
+            })
+            .collect();
+        let opts = JointOptions {
+            sample_rate_hz: fs,
+            ..options(structure)
+        };
+        let fit = joint_fit(&runs, &off(&rig()), &opts).unwrap();
+        let r = rig();
+        let want = [
+            r.beta1_per_s,
+            r.a1b0_n_per_m_s2,
+            r.a2_n_per_m,
+            r.a3_per_s,
+            delay,
+        ];
+        for (i, want) in want.into_iter().enumerate() {
+            let got = fit.params[i];
+            assert!(
+                (got / want - 1.0).abs() < 2e-6,
+                "{structure:?} {}: {got} vs {want}",
+                fit.names[i]
+            );
+        }
+        // The cost noise of that variance would give is 2 x 1,773: this is
+        // the fixed point's last steps (dA/dtheta is left out), not misfit.
+        assert!(fit.cost < 1e-8, "{structure:?}: {}", fit.cost);
+    }
 }
 
 /// The model at each place against the simulator's state space: with the
