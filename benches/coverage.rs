@@ -181,9 +181,9 @@ struct Outcome {
 fn outcome(results: &Results) -> Option<Outcome> {
     let r = results.rig.as_ref()?;
     let est = [&r.beta1, &r.a1b0, &r.a2, &r.a3];
-    let mut warnings: Vec<String> = results.warnings.clone();
+    let mut warnings: Vec<String> = results.warnings.iter().map(|w| w.detail.clone()).collect();
     for run in &results.runs {
-        warnings.extend(run.warnings.iter().cloned());
+        warnings.extend(run.warnings.iter().map(|w| w.detail.clone()));
         if let Some(e) = &run.error {
             warnings.push(format!("run {} failed: {e}", run.id));
         }

@@ -15,7 +15,7 @@ use clap::{Parser, Subcommand, ValueEnum};
 use indicatif::{ProgressBar, ProgressStyle};
 
 use crate::identify::Estimate;
-use crate::results::{Results, RigSource, Status};
+use crate::results::{Results, RigSource, Status, Warning};
 use crate::run::{self, CampaignOutcome, Event, FigureFormats, JobError, Observer, Settings};
 
 /// `servoid --version`: the release and the commit it was built from
@@ -59,6 +59,10 @@ pub struct JobArgs {
     /// Print nothing but errors.
     #[arg(long, short)]
     quiet: bool,
+    /// Print each warning's detail (the evidence, the remedy, the keys)
+    /// under its headline.
+    #[arg(long, short)]
+    verbose: bool,
     /// Seconds to wait for another job writing the same output folder
     /// before giving up (exit 2); the message names that job. Default:
     /// 1800.
@@ -346,7 +350,7 @@ fn cmd_check(manifest: &Path) -> u8 {
                 ));
             }
             for w in &checked.warnings {
-                warn(&format!("warning: {w}"));
+                warn(&format!("warning: {w:#}"));
             }
             EXIT_OK
         }
@@ -603,6 +607,7 @@ fn cmd_simulate(manifest: &Path, then_run: bool, args: &JobArgs, figures: Figure
 struct Watch {
     json: bool,
     quiet: bool,
+    verbose: bool,
     bar: Option<ProgressBar>,
 }
 
@@ -620,6 +625,7 @@ impl Watch {
         Self {
             json,
             quiet: args.quiet,
+            verbose: args.verbose,
             bar,
         }
     }
@@ -696,7 +702,7 @@ impl Watch {
             })
             .to_string());
         } else if !self.quiet {
-            print_summary(results);
+            print_summary(results, self.verbose);
             say(&format!("wrote {}", outcome.results_path.display()));
             say(&format!("wrote {}", outcome.page_path.display()));
             say(&format!(
@@ -823,7 +829,14 @@ impl Observer for Watch {
     }
 }
 
-fn print_summary(r: &Results) {
+fn print_summary(r: &Results, verbose: bool) {
+    let shown = |w: &Warning| {
+        if verbose {
+            format!("{w:#}")
+        } else {
+            w.to_string()
+        }
+    };
     say(&format!("campaign {}", r.campaign.name));
     for run in &r.runs {
         let status = match (
@@ -854,7 +867,7 @@ fn print_summary(r: &Results) {
             say(&format!("      outlier: {note}"));
         }
         for w in &run.warnings {
-            say(&format!("      warning: {w}"));
+            say(&format!("      warning: {}", shown(w)));
         }
     }
     match &r.rig {
@@ -913,6 +926,6 @@ fn print_summary(r: &Results) {
         ));
     }
     for w in &r.warnings {
-        say(&format!("  warning: {w}"));
+        say(&format!("  warning: {}", shown(w)));
     }
 }

@@ -34,8 +34,8 @@
 //!    compensated plant with `simulate`'s discretisation.
 //! 8. `model`: the plant of Eq. 10 and its canonical form (Eqs. 34-35).
 //! 9. `lti`: transfer functions and state spaces.
-//! 10. `poly` (real polynomials) and `units` (physical units and their SI
-//!     factors).
+//! 10. `poly` (real polynomials), `units` (physical units and their SI
+//!     factors) and `warning` (a warning's headline and detail).
 //!
 //! The numerical core (layers 7-10) is pure: data in, typed results out, the
 //! same bits whatever the thread count. Errors are typed per stage and reach
@@ -61,3 +61,4 @@ pub mod simulate;
 pub mod tracking;
 pub mod units;
 pub mod validate;
+pub mod warning;

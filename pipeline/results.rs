@@ -12,6 +12,8 @@
 use std::collections::BTreeMap;
 
 use schemars::JsonSchema;
+
+pub use crate::warning::Warning;
 use serde::{Deserialize, Serialize};
 
 use crate::drift::Check;
@@ -24,7 +26,7 @@ use crate::model::RigParams;
 use crate::simulate::specimen::SpecimenModel;
 
 /// Version of the results.json format.
-pub const RESULTS_SCHEMA_VERSION: u32 = 1;
+pub const RESULTS_SCHEMA_VERSION: u32 = 2;
 
 /// The results.json schema.
 pub fn results_schema() -> serde_json::Value {
@@ -59,7 +61,7 @@ pub struct Results {
     /// the alarms raised; null when the campaign has no rig.
     pub drift: Option<DriftResult>,
     /// Campaign-level warnings.
-    pub warnings: Vec<String>,
+    pub warnings: Vec<Warning>,
     /// The manifest as read (after defaults), for provenance.
     pub manifest: Manifest,
 }
@@ -400,7 +402,7 @@ pub struct RunResult {
     /// Why the run failed (null when ok).
     pub error: Option<String>,
     /// Warnings that did not stop the run.
-    pub warnings: Vec<String>,
+    pub warnings: Vec<Warning>,
     pub specimen: SpecimenModel,
     /// Undamped natural frequency of an SDOF specimen (Hz).
     pub natural_frequency_hz: Option<f64>,

@@ -193,7 +193,8 @@ data = {{ log = "{log}" }}
     let (o, repaired) = run("repaired", "spiked.csv", r#", repair = "interpolate""#);
     assert_eq!(o.code, 0, "{}\n{}", o.stdout, o.stderr);
     assert!(
-        o.stdout.contains("1 isolated spike(s) in the displacement replaced by their neighbours' line as channels.displacement.repair asks, the first at line 1001"),
+        o.stdout
+            .contains("1 spike(s) in the displacement repaired, the first at t = 4.9950 s"),
         "{}",
         o.stdout
     );

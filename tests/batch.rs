@@ -593,7 +593,7 @@ fn json_events_carry_errors_warnings_and_manifest_problems() {
         .filter(|e| e["event"] == "warning" && e["run"] == "log1")
         .collect();
     assert!(
-        warned.iter().any(|e| e["warning"]
+        warned.iter().any(|e| e["warning"]["detail"]
             .as_str()
             .unwrap()
             .contains("the model explains only 31 % of the measured response")),

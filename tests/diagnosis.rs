@@ -179,16 +179,29 @@ fn simulation(case: &Case, seed: u64) -> String {
 
 /// Every message of a campaign: the runs' errors, then the campaign's
 /// warnings (what the rig's identification makes of all the runs), then
-/// each run's, in manifest order.
+/// each run's, in manifest order; each warning's detail, its headline
+/// checked for length (a lab reads it at a glance).
 fn messages(results: &Results) -> Vec<String> {
+    for w in results
+        .warnings
+        .iter()
+        .chain(results.runs.iter().flat_map(|r| &r.warnings))
+    {
+        assert!(
+            w.headline.chars().count() <= servoid::warning::HEADLINE_MAX,
+            "a headline over {} characters: {}",
+            servoid::warning::HEADLINE_MAX,
+            w.headline
+        );
+    }
     let mut out: Vec<String> = results
         .runs
         .iter()
         .filter_map(|r| r.error.clone())
         .collect();
-    out.extend(results.warnings.iter().cloned());
+    out.extend(results.warnings.iter().map(|w| w.detail.clone()));
     for r in &results.runs {
-        out.extend(r.warnings.iter().cloned());
+        out.extend(r.warnings.iter().map(|w| w.detail.clone()));
     }
     out
 }

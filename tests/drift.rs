@@ -322,7 +322,7 @@ fn a_renamed_rig_is_told_it_starts_a_new_history() {
         .as_array()
         .unwrap()
         .iter()
-        .map(|w| w.as_str().unwrap())
+        .map(|w| w["detail"].as_str().unwrap())
         .collect();
     assert!(warnings.contains(&said), "{warnings:?}");
     let results = run_as("shake table 2");
@@ -436,7 +436,7 @@ fn a_corrected_night_replaces_its_row_and_a_row_can_be_removed() {
         .as_array()
         .unwrap()
         .iter()
-        .filter_map(Value::as_str)
+        .filter_map(|w| w["detail"].as_str())
         .filter(|w| w.starts_with("history: this night's logs were analysed before"))
         .collect();
     assert_eq!(said.len(), 1, "{}", second["warnings"]);

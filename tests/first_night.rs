@@ -96,7 +96,7 @@ fn warnings(results: &Value) -> Vec<String> {
                 .as_array()
                 .unwrap()
                 .iter()
-                .map(|w| w.as_str().unwrap().to_string()),
+                .map(|w| w["detail"].as_str().unwrap().to_string()),
         );
     }
     out

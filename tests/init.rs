@@ -367,9 +367,8 @@ fn init_on_a_night_folder_names_its_run_table() {
     let o = servoid(dir.path(), &["check", "flat.toml"]);
     assert_eq!(o.code, 0, "{}", o.stderr);
     assert!(
-        o.stderr.contains(
-            "warning: flat/extra.csv: matched by [run_table] logs = \"flat\", but no run uses it"
-        ),
+        o.stderr
+            .contains("flat/extra.csv: matched by [run_table] logs = \"flat\", but no run uses it"),
         "{}",
         o.stderr
     );

@@ -397,7 +397,10 @@ fn a_clean_campaign_gives_the_rig_within_a_tenth_of_a_percent() {
         assert!(e.abs() < 0.001, "{name} {:.4} % off", 100.0 * e);
     }
     assert!(
-        !results.warnings.iter().any(|w| w.starts_with("rig:")),
+        !results
+            .warnings
+            .iter()
+            .any(|w| w.detail.starts_with("rig:")),
         "{:?}",
         results.warnings
     );
@@ -838,7 +841,7 @@ fn run_mismatch(rig: &Mismatch, seed: u64) -> Outcome {
         friction,
         damping,
         stiffening,
-        warnings: results.warnings.clone(),
+        warnings: results.warnings.iter().map(|w| w.detail.clone()).collect(),
     }
 }
 
@@ -1067,7 +1070,7 @@ fn a_run_at_another_p_gain_settles_the_place() {
                 results
                     .warnings
                     .iter()
-                    .any(|w| w.starts_with("rig: the data cannot tell")),
+                    .any(|w| w.detail.starts_with("rig: the data cannot tell")),
                 "{:?}",
                 results.warnings
             );

@@ -30,7 +30,7 @@ const LAYERS: &[&[&str]] = &[
     ],
     &["model"],
     &["lti"],
-    &["fft", "poly", "units"],
+    &["fft", "poly", "units", "warning"],
 ];
 
 /// Uses inside one layer that run one way (from, to).

@@ -353,8 +353,12 @@ fn a_warning_from_reading_a_log_is_listed_once() {
     assert_eq!(r.code, 0, "{}", r.stderr);
     let results: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("results.json")).unwrap()).unwrap();
-    let warnings: Vec<String> =
-        serde_json::from_value(run_by_id(&results, "0A")["warnings"].clone()).unwrap();
+    let warnings: Vec<String> = run_by_id(&results, "0A")["warnings"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|w| w["detail"].as_str().unwrap().to_string())
+        .collect();
     let overrides: Vec<&String> = warnings
         .iter()
         .filter(|w| {

@@ -400,12 +400,16 @@ v1,validation,1.5,4,10,120000,
     let c = servoid::manifest::load(&manifest).unwrap();
     assert_eq!(c.runs.len(), 6);
     // v2's own log, `logs/v2.csv`, is matched but no run uses it.
+    let details: Vec<&str> = c.warnings.iter().map(|w| w.detail.as_str()).collect();
     assert_eq!(
-        c.warnings,
+        details,
         ["logs/v2.csv: matched by [run_table] logs = \"logs/*.csv\", but no run uses it"]
     );
     // It reaches results.json with the table's provenance.
-    assert_eq!(results["warnings"][0], c.warnings[0].as_str());
+    assert_eq!(
+        results["warnings"][0]["detail"],
+        c.warnings[0].detail.as_str()
+    );
     let table_sha = servoid::ingest::sha256_hex(table.as_bytes());
     assert_eq!(
         results["campaign"]["run_table"],

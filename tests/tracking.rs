@@ -405,7 +405,7 @@ fn a_stated_cutoff_the_compensator_cannot_use_is_warned() {
         .as_array()
         .unwrap()
         .iter()
-        .filter_map(Value::as_str)
+        .filter_map(|w| w["detail"].as_str())
         .find(|w| {
             w.starts_with("compensator.cutoff_hz = 1000000000 Hz: no compensator was designed")
         })

@@ -16,6 +16,7 @@ use servoid::manifest::simulation::load_simulation_str;
 use servoid::results::{Results, Status};
 use servoid::run::analyse;
 use servoid::run::simulate::simulate_campaign;
+use servoid::warning::HEADLINE_MAX;
 
 use crate::util::{PAPER_TRUTH, PaperSweep, scratch};
 
@@ -270,7 +271,12 @@ fn faults(case: &Case, r: &Results) -> Vec<String> {
     );
     for (at, w) in warnings {
         if !case.may_say.iter().any(|phrase| w.contains(phrase)) {
-            out.push(format!("{at}: {w}"));
+            out.push(format!("{at}: {w:#}"));
+        }
+        if w.headline.chars().count() > HEADLINE_MAX {
+            out.push(format!(
+                "{at}: a headline over {HEADLINE_MAX} characters: {w}"
+            ));
         }
     }
     out

@@ -8,6 +8,7 @@ use crate::drift::{self, Entry, OPTIONAL_TABLE_COLUMNS, TABLE_COLUMNS};
 use crate::ingest::{self, Table};
 use crate::manifest::Campaign;
 use crate::results::{DriftResult, Results, RigResult};
+use crate::warning::Warning;
 
 /// Columns of a history table that servoid does not write, with each
 /// row's cell.
@@ -63,11 +64,14 @@ pub fn place(
             .map(|(_, old)| old)
     });
     if let Some(old) = was_replaced {
-        results.warnings.push(format!(
-            "history: this night's logs were analysed before by this campaign{} (inputs {}): this analysis replaces that entry of {file_name}, and the replaced row is kept in {}",
-            old.date.as_ref().map_or(String::new(), |d| format!(", date {d}")),
-            &old.inputs_sha256[..old.inputs_sha256.len().min(12)],
-            audit_name(file_name),
+        results.warnings.push(Warning::new(
+            "history: these logs were analysed before; this analysis replaces that entry",
+            format!(
+                "history: this night's logs were analysed before by this campaign{} (inputs {}): this analysis replaces that entry of {file_name}, and the replaced row is kept in {}",
+                old.date.as_ref().map_or(String::new(), |d| format!(", date {d}")),
+                &old.inputs_sha256[..old.inputs_sha256.len().min(12)],
+                audit_name(file_name),
+            ),
         ));
     }
     let slot = own.or(corrected).unwrap_or(entries.len());
@@ -79,12 +83,18 @@ pub fn place(
     if !entries.iter().any(|e| e.rig == entry.rig)
         && let Some((other, n)) = close_rig(entries, &entry.rig)
     {
-        results.warnings.push(format!(
-            "rig `{}` starts a new history in {}, which holds {n} {} of rig `{other}`: if that is this rig renamed, give [rig] name = \"{other}\" to check its drift against {}",
-            entry.rig,
-            file_name,
-            if n == 1 { "entry" } else { "entries" },
-            if n == 1 { "it" } else { "them" },
+        results.warnings.push(Warning::new(
+            format!(
+                "rig `{}` starts a new history beside rig `{other}`: renamed?",
+                entry.rig
+            ),
+            format!(
+                "rig `{}` starts a new history in {}, which holds {n} {} of rig `{other}`: if that is this rig renamed, give [rig] name = \"{other}\" to check its drift against {}",
+                entry.rig,
+                file_name,
+                if n == 1 { "entry" } else { "entries" },
+                if n == 1 { "it" } else { "them" },
+            ),
         ));
     }
     let rule = campaign.history.rule;

@@ -25,6 +25,7 @@ use crate::model::{RigParams, Seals};
 use crate::results::{
     FTestResult, JointCandidate, JointParameter, JointResult, RigEstimates, RunAdequacy,
 };
+use crate::warning::Warning;
 
 /// How much worse than the sequential fits' pooled reduced chi-square the
 /// joint fit's may be and still count as adequate.
@@ -87,14 +88,15 @@ pub fn joint(
     start: &RigParams,
     sequential: &RigEstimates,
     known: Option<&str>,
-    warnings: &mut Vec<String>,
+    warnings: &mut Vec<Warning>,
 ) -> Option<JointResult> {
     let (fitted, identification_frfs) = fitted_frfs(evidence, validation)?;
     let fs = fitted[0].3;
     if fitted.iter().any(|f| (f.3 / fs - 1.0).abs() > SAME_RATE) {
-        warnings.push(
-            "rig: no joint fit: the runs it would fit were logged at different sample rates; the sequential estimate is used".into(),
-        );
+        warnings.push(Warning::new(
+            "rig: no joint fit: the runs were logged at different sample rates",
+            "rig: no joint fit: the runs it would fit were logged at different sample rates; the sequential estimate is used",
+        ));
         return None;
     }
     let runs: Vec<JointRun<'_>> = fitted
@@ -132,7 +134,10 @@ pub fn joint(
         let linear = joint::select(&stated, start, &opts, choice, band_top);
         match (sel.fit().map(schwarz), linear.fit().map(schwarz)) {
             (Some(with), Some(without)) if without <= with => {
-                warnings.push(STIFFENING_REJECTED.into());
+                warnings.push(Warning::new(
+                    "rig: the springs' cubic term is not borne out by their FRFs; the stated k are used",
+                    STIFFENING_REJECTED,
+                ));
                 (stated, linear)
             }
             (None, Some(_)) => (stated, linear),
@@ -159,7 +164,13 @@ pub fn joint(
         .filter_map(|(id, r)| Some((id.clone(), r.spring_cubic_n_per_m3?)))
         .collect();
     if let Some(note) = stiffening_note(&stiffening) {
-        warnings.push(format!("rig: {note}"));
+        warnings.push(Warning::new(
+            format!(
+                "rig: not linear: {} stiffening spring(s) taken at their amplitude in the joint fit",
+                stiffening.len()
+            ),
+            format!("rig: {note}"),
+        ));
     }
     let mut result = describe(
         &sel,
@@ -415,7 +426,7 @@ fn describe(
     campaign: &Campaign,
     sequential: &RigEstimates,
     seq_chi2: Option<f64>,
-    warnings: &mut Vec<String>,
+    warnings: &mut Vec<Warning>,
 ) -> JointResult {
     let split = sel.candidate(Structure::DelayMeasurement).is_some();
     let spread = sel.spread();
@@ -427,8 +438,9 @@ fn describe(
             _ => no_usable_structure(sel),
         };
         result.use_note = format!("the sequential estimate is used: the joint fit failed ({why})");
-        warnings.push(format!(
-            "rig: the joint fit failed ({why}); the sequential estimate is used"
+        warnings.push(Warning::new(
+            "rig: the joint fit failed; the sequential estimate is used",
+            format!("rig: the joint fit failed ({why}); the sequential estimate is used"),
         ));
         return result;
     };
@@ -444,14 +456,26 @@ fn describe(
     result.parameters = parameters(fit, sequential, spread.as_ref(), misfit);
     // With the friction fitted, its harmonics are what remains unexplained.
     let known = if let Some(note) = friction_note(fit, ids) {
-        warnings.push(format!("rig: {note}"));
+        warnings.push(Warning::new(
+            format!(
+                "rig: seal friction, not linear at this amplitude: F = {:.1} N fitted",
+                fit.friction_n.unwrap_or(f64::NAN)
+            ),
+            format!("rig: {note}"),
+        ));
         Some(FRICTION_HARMONICS)
     } else {
         known
     };
     if let Some(m) = misfit {
         let text = misfit_note(fit, m, known);
-        warnings.push(format!("rig: {text}"));
+        warnings.push(Warning::new(
+            format!(
+                "rig: no structure explains the data; {}",
+                fit.adequacy.failure_headline()
+            ),
+            format!("rig: {text}"),
+        ));
         result.misfit = Some(text);
     }
     result.r1 = Some(r1(&fit.rig, &cov));
@@ -461,7 +485,10 @@ fn describe(
         .as_ref()
         .and_then(|s| ambiguity(fit, s, &sel.candidates, split))
     {
-        warnings.push(format!("rig: {text}"));
+        warnings.push(Warning::new(
+            "rig: the data cannot tell two structures apart; the stds include the spread",
+            format!("rig: {text}"),
+        ));
         result.ambiguity = Some(text);
     }
     result.adequacy = Some(fit.adequacy.clone());
@@ -487,7 +514,7 @@ fn table(
     sel: &Selection,
     spread: Option<&StructureSpread>,
     split: bool,
-    warnings: &mut Vec<String>,
+    warnings: &mut Vec<Warning>,
 ) -> JointResult {
     let candidates: Vec<JointCandidate> = sel
         .candidates
@@ -507,10 +534,17 @@ fn table(
             s.as_str()
         );
         if let Some(auto) = sel.auto.filter(|a| *a != s) {
-            warnings.push(format!(
-                "rig: identification.joint.structure = \"{}\" is kept, but the data reject it: they choose \"{}\" (F tests in the report); remove the key to let the data choose",
-                s.as_str(),
-                auto.as_str()
+            warnings.push(Warning::new(
+                format!(
+                    "rig: the data reject joint.structure = \"{}\"; they choose \"{}\"",
+                    s.as_str(),
+                    auto.as_str()
+                ),
+                format!(
+                    "rig: identification.joint.structure = \"{}\" is kept, but the data reject it: they choose \"{}\" (F tests in the report); remove the key to let the data choose",
+                    s.as_str(),
+                    auto.as_str()
+                ),
             ));
         }
     }
@@ -546,7 +580,7 @@ fn adequacy_warnings(
     fit: &JointFit,
     campaign: &Campaign,
     known: Option<&str>,
-    warnings: &mut Vec<String>,
+    warnings: &mut Vec<Warning>,
 ) {
     let structure = fit.structure.as_str();
     let estimator = campaign.identification.frf.estimator;
@@ -556,16 +590,18 @@ fn adequacy_warnings(
         estimator.understated_noise(),
         known,
     ) {
-        warnings.push(format!(
-            "rig: the joint fit (structure \"{structure}\"): {d}"
+        warnings.push(Warning::new(
+            format!("rig: the joint fit: {}", fit.adequacy.failure_headline()),
+            format!("rig: the joint fit (structure \"{structure}\"): {d}"),
         ));
     }
     if let Some(o) = fit
         .adequacy
         .overstated_because(estimator.overstated_noise(), known)
     {
-        warnings.push(format!(
-            "rig: the joint fit (structure \"{structure}\"): {o}"
+        warnings.push(Warning::new(
+            format!("rig: the joint fit: {}", fit.adequacy.overstated_headline()),
+            format!("rig: the joint fit (structure \"{structure}\"): {o}"),
         ));
     }
 }
@@ -577,7 +613,7 @@ fn use_decision(
     campaign: &Campaign,
     unusable: Option<String>,
     seq_chi2: Option<f64>,
-    warnings: &mut Vec<String>,
+    warnings: &mut Vec<Warning>,
 ) -> (bool, String) {
     let structure = fit.structure.as_str();
     let reduced = fit.cost / fit.dof as f64;
@@ -589,8 +625,11 @@ fn use_decision(
                 .to_string(),
         ),
         (_, Some(why)) => {
-            warnings.push(format!(
-                "rig: the joint fit (structure \"{structure}\") is not used: {why}; the sequential estimate is used (identification.joint)"
+            warnings.push(Warning::new(
+                "rig: the joint fit is not usable; the sequential estimate is used",
+                format!(
+                    "rig: the joint fit (structure \"{structure}\") is not used: {why}; the sequential estimate is used (identification.joint)"
+                ),
             ));
             (
                 false,
@@ -613,9 +652,14 @@ fn use_decision(
             ),
         ),
         (JointRig::Auto, None) => {
-            warnings.push(format!(
-                "rig: the joint fit (structure \"{structure}\") is not adequate (reduced chi-square {reduced:.3}, the per-run fits' {}); the sequential estimate is used; identification.joint.rig = \"joint\" would use it anyway",
-                seq_chi2.map_or("unknown".into(), |s| format!("{s:.3}"))
+            warnings.push(Warning::new(
+                format!(
+                    "rig: the joint fit is not adequate (reduced chi-square {reduced:.2}); the sequential rig is used"
+                ),
+                format!(
+                    "rig: the joint fit (structure \"{structure}\") is not adequate (reduced chi-square {reduced:.3}, the per-run fits' {}); the sequential estimate is used; identification.joint.rig = \"joint\" would use it anyway",
+                    seq_chi2.map_or("unknown".into(), |s| format!("{s:.3}"))
+                ),
             ));
             (
                 false,

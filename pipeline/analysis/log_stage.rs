@@ -4,6 +4,7 @@
 //! estimated, and, for the runs that identify or characterise the rig, its
 //! transfer function fitted. Pure apart from `ingest` reading the file.
 
+use crate::warning::Warning;
 use std::path::PathBuf;
 
 use crate::fit::TfFit;
@@ -24,7 +25,7 @@ pub struct OwnTf {
     /// Covariance of (n0, d1, d0) for a second-order fit.
     pub cov: Option<[[f64; 3]; 3]>,
     pub source: TfSource,
-    pub warnings: Vec<String>,
+    pub warnings: Vec<Warning>,
     pub stage: Option<Box<LogStage>>,
 }
 
@@ -105,7 +106,7 @@ pub struct LogStage {
     /// What the fit was given (with `fit`): the noise profile of a
     /// no-specimen run reads its variance from here.
     pub fit_data: Option<FitData>,
-    pub warnings: Vec<String>,
+    pub warnings: Vec<Warning>,
 }
 
 impl LogStage {
@@ -251,7 +252,7 @@ fn checked_log(
     plan: &LogPlan,
     ident: &IdentificationPlan,
     file: LogFile,
-) -> Result<(Log, Vec<String>), IngestError> {
+) -> Result<(Log, Vec<Warning>), IngestError> {
     let mut log = ingest::read_log_from(plan, file)?;
     let needs = Needs {
         min_samples: ident.frf.min_samples(),
@@ -292,22 +293,25 @@ fn motion_warning(
     command: &[f64],
     sample_rate_hz: f64,
     band_hz: (f64, f64),
-) -> Option<String> {
+) -> Option<Warning> {
     let plan = &choice.plan;
     if choice.chosen || plan.estimator == frf::Estimator::Lpm {
         return None;
     }
     let w = frf::rest_window(sample_rate_hz, band_hz.0);
     let (end, ratio) = frf::ends_in_motion(command, w)?;
-    Some(format!(
-        "identification.frf: the command is not at rest at the record's {end} (over its first or last {} s, or between its ends, it moves by {:.0} % of its RMS): the {} counts the transient's leakage as noise, and the fits' stds come out too large (1.5 to 7 times on sweeps cut in motion); the default estimator (identification.frf.estimator left out, \"auto\") fits the transient beside the model and takes it out",
-        crate::units::format_number(w as f64 / sample_rate_hz, 3),
-        100.0 * ratio,
-        match plan.estimator {
-            frf::Estimator::H1 => "Welch H1 estimate",
-            frf::Estimator::H2 => "Welch H2 estimate",
-            _ => "ETFE",
-        }
+    let (estimator, short) = match plan.estimator {
+        frf::Estimator::H1 => ("Welch H1 estimate", "H1"),
+        frf::Estimator::H2 => ("Welch H2 estimate", "H2"),
+        _ => ("ETFE", "ETFE"),
+    };
+    Some(Warning::new(
+        format!("identification.frf: the {short} takes the motion at the record's {end} as noise"),
+        format!(
+            "identification.frf: the command is not at rest at the record's {end} (over its first or last {} s, or between its ends, it moves by {:.0} % of its RMS): the {estimator} counts the transient's leakage as noise, and the fits' stds come out too large (1.5 to 7 times on sweeps cut in motion); the default estimator (identification.frf.estimator left out, \"auto\") fits the transient beside the model and takes it out",
+            crate::units::format_number(w as f64 / sample_rate_hz, 3),
+            100.0 * ratio,
+        ),
     ))
 }
 
@@ -361,7 +365,7 @@ fn static_gain_check(
     path: &std::path::Path,
     plan: &LogPlan,
     fit: &TfFit,
-) -> Result<Option<String>, LogStageError> {
+) -> Result<Option<Warning>, LogStageError> {
     let (n0, d0) = (
         fit.tf.num.last().copied().unwrap_or(f64::NAN),
         fit.tf.den.last().copied().unwrap_or(f64::NAN),
@@ -372,10 +376,16 @@ fn static_gain_check(
         return Ok(None);
     }
     if off <= STATIC_GAIN_LIMIT {
-        return Ok(Some(format!(
-            "{}: the no-specimen run's static gain x1/u is {gain:.4}, {:.0} % from the 1 an actuator under P control has at rest: check the channels' scale and offset, and that the run had no specimen",
-            path.display(),
-            100.0 * (gain - 1.0).abs()
+        return Ok(Some(Warning::new(
+            format!(
+                "the no-specimen run's static gain is {gain:.4}, {:.0} % from 1",
+                100.0 * (gain - 1.0).abs()
+            ),
+            format!(
+                "{}: the no-specimen run's static gain x1/u is {gain:.4}, {:.0} % from the 1 an actuator under P control has at rest: check the channels' scale and offset, and that the run had no specimen",
+                path.display(),
+                100.0 * (gain - 1.0).abs()
+            ),
         )));
     }
     let ch = &plan.channels;
@@ -592,14 +602,37 @@ fn check_force_scale(
 const STIFFNESS_UNIT_TOLERANCE: f64 = 0.05;
 
 /// The warning for a rig that did not answer the sweep linearly.
-fn nonlinearity_warning(l: &frf::Linearity) -> Option<String> {
+fn nonlinearity_warning(l: &frf::Linearity) -> Option<Warning> {
     l.nonlinear().then(|| {
-        format!(
-            "{}: the rig is not linear at this amplitude ({}); a linear model's fit and the rig from it are an equivalent linear rig's at this amplitude, with an error their stds do not include: test again at another amplitude to see how far it moves",
-            linearity_note(l),
-            NONLINEAR_CAUSES
+        Warning::new(
+            linearity_headline(l),
+            format!(
+                "{}: the rig is not linear at this amplitude ({}); a linear model's fit and the rig from it are an equivalent linear rig's at this amplitude, with an error their stds do not include: test again at another amplitude to see how far it moves",
+                linearity_note(l),
+                NONLINEAR_CAUSES
+            ),
         )
     })
+}
+
+/// The largest harmonic a nonlinear rig's sweep holds, in a line.
+fn linearity_headline(l: &frf::Linearity) -> String {
+    let found = [("displacement", l.displacement), ("force", l.force)]
+        .into_iter()
+        .filter_map(|(name, f)| {
+            f.filter(|f| f.blocks >= frf::linearity::MIN_BLOCKS)
+                .map(|f| (name, f))
+        })
+        .max_by(|a, b| a.1.largest.total_cmp(&b.1.largest));
+    match found {
+        Some((name, f)) => format!(
+            "not linear at this amplitude: the {name}'s {} harmonic is {:.1} % of it at {:.1} Hz",
+            if f.order == 2 { "second" } else { "third" },
+            100.0 * f.largest,
+            f.at_hz
+        ),
+        None => "the rig is not linear at this amplitude".to_string(),
+    }
 }
 
 /// The linearity check in words, as the run's page says it.
@@ -640,27 +673,41 @@ pub const STIFFNESS_MISMATCH: f64 = 0.02;
 
 /// The warning for a spring whose force and displacement give another
 /// stiffness than the manifest's.
-fn stiffness_warning(s: &frf::SpringForce, stated: f64) -> Option<String> {
+fn stiffness_warning(s: &frf::SpringForce, stated: f64) -> Option<Warning> {
     let off = s.stiffness_n_per_m / stated - 1.0;
     (off.abs() > STIFFNESS_MISMATCH).then(|| {
-        format!(
+        Warning::new(
+            format!(
+                "the load cell gives k = {} N/m, {:+.1} % from the stated stiffness",
+                crate::units::format_number(s.stiffness_n_per_m, 5),
+                100.0 * off
+            ),
+            format!(
             "the spring's force against its displacement gives a stiffness of {} N/m, {:+.1} % from the {} N/m the manifest states (specimen.stiffness_n_per_m): a stiffness typed wrong, another run's log, or the load cell's scale? Eqs. 18-20 take the stated one as exact",
             crate::units::format_number(s.stiffness_n_per_m, 5),
             100.0 * off,
             crate::units::format_number(stated, 6)
+            ),
         )
     })
 }
 
 /// The warning for a spring that stiffens at the test's amplitude.
-fn stiffening_warning(s: &frf::SpringForce) -> Option<String> {
+fn stiffening_warning(s: &frf::SpringForce) -> Option<Warning> {
     s.stiffens().then(|| {
-        format!(
+        Warning::new(
+            format!(
+                "not linear at this amplitude: the spring is {:+.2} % stiffer at {} mm than at rest",
+                100.0 * s.stiffening,
+                crate::units::format_number(1e3 * s.amplitude_m, 3)
+            ),
+            format!(
             "the spring's force grows faster than its displacement: its stiffness at the test's {} mm is {:+.2} % from its stiffness at rest (a cubic term of {:e} N/m^3, t = {:.0}): the rig is not linear at this amplitude (a stiffening spring); Eqs. 18-20 take one stiffness, so the sequential rig carries an error its stds do not include; the joint fit takes the spring at its amplitude (the rig's warnings say so). To use the paper's method, test at a smaller amplitude or with a spring that stays linear",
             crate::units::format_number(1e3 * s.amplitude_m, 3),
             100.0 * s.stiffening,
             s.cubic_n_per_m3,
             s.cubic_t
+            ),
         )
     })
 }
@@ -715,7 +762,7 @@ pub const READING_CAUSE: &str = "the logged displacement or command read through
 fn slow_gain_findings(
     run: &RunPlan,
     slow: Option<&frf::SlowCubic>,
-) -> (Option<String>, Option<String>) {
+) -> (Option<Warning>, Option<String>) {
     let Some(found) = slow.filter(|s| s.significant()) else {
         return (None, None);
     };
@@ -729,13 +776,21 @@ fn slow_gain_findings(
         );
         return (None, Some(cause));
     }
-    let warning = format!(
-        "the displacement's gain against the command changes by {:+.2} % at {} mm where the sweep is below {} Hz (t = {:.0}, over {:.1} s), where the loop makes the displacement it feeds back follow the command and no specimen loads the actuator: the logged displacement or command is read through a nonlinearity the loop does not see (a sensor, its conditioning or a range other than the controller's); calibrate the logged channels against the controller's over their range",
-        100.0 * found.share,
-        crate::units::format_number(1e3 * found.amplitude_m, 2),
-        frf::linearity::SLOW_HZ,
-        found.t.abs(),
-        found.seconds
+    let warning = Warning::new(
+        format!(
+            "a nonlinear reading: the slow gain changes {:+.2} % at {} mm with no load (t = {:.0})",
+            100.0 * found.share,
+            crate::units::format_number(1e3 * found.amplitude_m, 2),
+            found.t.abs()
+        ),
+        format!(
+            "the displacement's gain against the command changes by {:+.2} % at {} mm where the sweep is below {} Hz (t = {:.0}, over {:.1} s), where the loop makes the displacement it feeds back follow the command and no specimen loads the actuator: the logged displacement or command is read through a nonlinearity the loop does not see (a sensor, its conditioning or a range other than the controller's); calibrate the logged channels against the controller's over their range",
+            100.0 * found.share,
+            crate::units::format_number(1e3 * found.amplitude_m, 2),
+            frf::linearity::SLOW_HZ,
+            found.t.abs(),
+            found.seconds
+        ),
     );
     (Some(warning), Some(READING_CAUSE.to_string()))
 }
@@ -763,15 +818,16 @@ fn settings_warning(
     excitation: frf::Excitation,
     log: &Log,
     fit: Option<&TfFit>,
-) -> Option<String> {
+) -> Option<Warning> {
     if choice.chosen {
         return None;
     }
     let why = contradiction(&choice.plan, excitation, log.command_m.len())?;
     let (u, y, fs) = (&log.command_m, &log.displacement_m, log.sample_rate_hz);
     let mut text = format!("identification.frf: {why}");
+    let headline = "identification.frf: settings this log contradicts; the default would suit it";
     let Ok(auto) = frf::FrfRequest::default().resolve(u, y, fs, run.band_hz) else {
-        return Some(text);
+        return Some(Warning::new(headline, text));
     };
     text += &format!(
         "; the default (leave identification.frf.estimator out: \"auto\") would use the {}",
@@ -799,7 +855,7 @@ fn settings_warning(
     if let Some(moved) = moved {
         text += &format!(", with which this run's own fit moves by {moved}");
     }
-    Some(text)
+    Some(Warning::new(headline, text))
 }
 
 /// The log stage of one run whose log file is already read.
@@ -1031,8 +1087,8 @@ fn findings(
     run: &RunPlan,
     linearity: Option<&frf::Linearity>,
     spring: Option<&frf::SpringForce>,
-    contradicted: Option<String>,
-    warnings: &mut Vec<String>,
+    contradicted: Option<Warning>,
+    warnings: &mut Vec<Warning>,
 ) -> Option<String> {
     let stated_k = match run.specimen {
         SpecimenModel::Spring { stiffness_n_per_m } => Some(stiffness_n_per_m),

@@ -2,6 +2,7 @@
 //! paper's procedure (Fig. 6, Eqs. 18-20) when it can be, else the
 //! parameters the manifest gives.
 
+use crate::warning::Warning;
 use std::fmt;
 use std::sync::Arc;
 
@@ -64,7 +65,7 @@ fn join(failed: &[FailedRun]) -> String {
 pub fn establish<'a>(
     campaign: &'a Campaign,
     inputs: impl Iterator<Item = &'a RigInput>,
-    warnings: &mut Vec<String>,
+    warnings: &mut Vec<Warning>,
 ) -> Result<(RigParams, RigResult), RigError> {
     if !campaign.identifies_rig() {
         return match campaign.given_rig {
@@ -75,25 +76,36 @@ pub fn establish<'a>(
     let runs = Gathered::of(campaign, inputs)?;
     let mut ident = identify::identify_rig(&runs.no_spec, &runs.springs)?;
     let slow = slow_gain_pattern(&runs.evidence);
-    if let Some(SlowGain::Load(text)) = &slow {
-        warnings.push(format!("rig: {text}"));
+    if let Some(SlowGain::Load { text, largest }) = &slow {
+        warnings.push(Warning::new(
+            format!(
+                "rig: a gain that depends on the load: slow gain {:+.2} % under load, none unloaded",
+                100.0 * largest
+            ),
+            format!("rig: {text}"),
+        ));
     }
     // What a run's own warnings already found wrong, named with the run;
     // a gain the load changes is the campaign's finding, not one run's.
     let run_cause = match &slow {
-        Some(SlowGain::Load(_)) => Some(LOAD_GAIN_CAUSE.to_string()),
+        Some(SlowGain::Load { .. }) => Some(LOAD_GAIN_CAUSE.to_string()),
         _ => runs
             .evidence
             .iter()
             .find_map(|(p, e)| e.cause.as_ref().map(|c| format!("run {}: {c}", p.id))),
     };
-    narrow_causes(
+    let slow_name = match &slow {
+        Some(SlowGain::Reading) => Some("a nonlinear reading (the unloaded run's warning)"),
+        Some(SlowGain::Load { .. }) => Some("a gain that depends on the load"),
+        None => None,
+    };
+    let cause_name = narrow_causes(
         &mut ident.consistency,
         &runs,
         run_cause.as_deref(),
-        slow.is_some(),
+        slow_name,
     );
-    identification_warnings(campaign, &ident, warnings);
+    identification_warnings(campaign, &ident, cause_name.as_deref(), warnings);
     // What the joint fit's misfit, if any, is put down to.
     let known = run_cause.or_else(|| {
         (ident.consistency.consistent == Some(false)).then(|| {
@@ -235,10 +247,10 @@ fn narrow_causes(
     c: &mut Consistency,
     runs: &Gathered<'_>,
     run_cause: Option<&str>,
-    slow_gain: bool,
-) {
+    slow_gain: Option<&str>,
+) -> Option<String> {
     if c.consistent != Some(false) {
-        return;
+        return None;
     }
     let springs: Vec<Spring<'_>> = runs
         .evidence
@@ -271,31 +283,53 @@ fn narrow_causes(
         .iter()
         .find(|cause| cause.starts_with("spring run "))
         .cloned();
-    let mut causes: Vec<String> = run_cause.map(String::from).into_iter().collect();
-    causes.extend(odd);
+    // Each cause with its name in a few words, for the headline.
+    let mut causes: Vec<(String, String)> = run_cause
+        .map(|r| {
+            let name = match (slow_gain, r.split_once(": ")) {
+                (Some(slow), _) => slow.to_string(),
+                (None, Some((run, _))) if run.starts_with("run ") => {
+                    format!("what {run}'s warnings found")
+                }
+                _ => r.split(',').next().unwrap_or(r).to_string(),
+            };
+            (name, r.to_string())
+        })
+        .into_iter()
+        .collect();
+    causes.extend(odd.map(|o| ("one spring an outlier".to_string(), o)));
     // The slow parts of the sweeps have already told the load's gain from
     // the reading's (`slow_gain_pattern`).
-    if !slow_gain && (confirmed || !harmonics.is_empty()) {
-        causes.push(load_dependence(c, &springs, &harmonics));
+    if slow_gain.is_none() && (confirmed || !harmonics.is_empty()) {
+        causes.push((
+            "a gain that depends on the load".to_string(),
+            load_dependence(c, &springs, &harmonics),
+        ));
     }
     if let Some(swap) = swapped(&springs) {
-        causes.push(swap);
+        causes.push(("stiffnesses or logs swapped".to_string(), swap));
     } else if confirmed {
         c.note += &format!(
             "; every spring's load cell confirms its stated stiffness within {:.0} %, which rules out the manifest's stiffnesses, the runs' logs and the force's unit",
             100.0 * STIFFNESS_MISMATCH
         );
     } else {
-        causes.extend(
-            identify::consistency::MANIFEST_CAUSES
-                .iter()
-                .map(|s| s.to_string()),
-        );
+        causes.extend(identify::consistency::MANIFEST_CAUSES.iter().map(|s| {
+            (
+                "a stiffness, log or unit the manifest gives?".to_string(),
+                s.to_string(),
+            )
+        }));
     }
     if run_cause.is_none() && !adequate {
-        causes.push(identify::consistency::DYNAMICS_CAUSE.to_string());
+        causes.push((
+            "dynamics the model leaves out".to_string(),
+            identify::consistency::DYNAMICS_CAUSE.to_string(),
+        ));
     }
-    c.likely_causes = causes;
+    let first = causes.first().map(|(name, _)| name.clone());
+    c.likely_causes = causes.into_iter().map(|(_, text)| text).collect();
+    first
 }
 
 /// What a misfit is put down to where the loaded runs' gain changes with
@@ -309,8 +343,9 @@ pub const LOAD_GAIN_CAUSE: &str =
 enum SlowGain {
     /// The unloaded run's changes: the reading, which every run shares.
     Reading,
-    /// The unloaded run's does not, loaded runs' do: the load. The warning.
-    Load(String),
+    /// The unloaded run's does not, loaded runs' do: the load. The
+    /// warning, and the largest change (a share).
+    Load { text: String, largest: f64 },
 }
 
 /// The pattern of the identification runs' slow gains, when one is
@@ -364,12 +399,20 @@ fn slow_gain_pattern(evidence: &[(&RunPlan, &Evidence)]) -> Option<SlowGain> {
     } else {
         "each run's rig is an equivalent linear one at its own load, and the rig's parameters hold near the loads they were identified at"
     };
-    Some(SlowGain::Load(format!(
-        "a gain that depends on the load: where the sweeps are below {} Hz the loaded runs' gain against the command changes with amplitude ({}) and the unloaded {}'s does not ({reference}): {why}",
-        frf::linearity::SLOW_HZ,
-        runs.join(", "),
-        p.id,
-    )))
+    let largest = changed
+        .iter()
+        .map(|(_, s)| s.share)
+        .max_by(|a, b| a.abs().total_cmp(&b.abs()))
+        .unwrap_or(0.0);
+    Some(SlowGain::Load {
+        largest,
+        text: format!(
+            "a gain that depends on the load: where the sweeps are below {} Hz the loaded runs' gain against the command changes with amplitude ({}) and the unloaded {}'s does not ({reference}): {why}",
+            frf::linearity::SLOW_HZ,
+            runs.join(", "),
+            p.id,
+        ),
+    })
 }
 
 /// Springs whose load cells read another spring's stated stiffness (each
@@ -453,19 +496,38 @@ fn load_dependence(c: &Consistency, springs: &[Spring<'_>], harmonics: &[&str]) 
 fn identification_warnings(
     campaign: &Campaign,
     ident: &identify::RigIdentification,
-    warnings: &mut Vec<String>,
+    cause_name: Option<&str>,
+    warnings: &mut Vec<Warning>,
 ) {
     if let Some(given) = &campaign.given_rig {
-        warnings.push(format!(
-            "the manifest gives [rig.parameters] and the campaign identifies the rig; the identified parameters are used (given: beta1 = {:.6e}, a1b0 = {:.6e} at P = {}, a2 = {:.6e}, a3 = {:.6e})",
-            given.beta1_per_s, given.a1b0_n_per_m_s2, given.p_gain, given.a2_n_per_m, given.a3_per_s
+        warnings.push(Warning::new(
+            "the identified rig replaces the manifest's [rig.parameters]",
+            format!(
+                "the manifest gives [rig.parameters] and the campaign identifies the rig; the identified parameters are used (given: beta1 = {:.6e}, a1b0 = {:.6e} at P = {}, a2 = {:.6e}, a3 = {:.6e})",
+                given.beta1_per_s, given.a1b0_n_per_m_s2, given.p_gain, given.a2_n_per_m, given.a3_per_s
+            ),
         ));
     }
     if ident.consistency.consistent == Some(false) {
-        warnings.push(format!(
-            "rig: {}; likely causes: {}",
-            ident.consistency.note,
-            ident.consistency.likely_causes.join("; ")
+        let worst = ident
+            .consistency
+            .checks
+            .iter()
+            .filter(|t| !t.consistent)
+            .min_by(|a, b| a.p_value.total_cmp(&b.p_value));
+        let shown = worst.map_or(String::new(), |t| {
+            format!(" ({} p = {:.0e})", t.parameter, t.p_value)
+        });
+        warnings.push(Warning::new(
+            format!(
+                "rig: the springs disagree{shown}; likely: {}",
+                cause_name.unwrap_or("see the detail")
+            ),
+            format!(
+                "rig: {}; likely causes: {}",
+                ident.consistency.note,
+                ident.consistency.likely_causes.join("; ")
+            ),
         ));
     }
     // A check that could not be made is said where the lab reads, not only
@@ -475,10 +537,17 @@ fn identification_warnings(
         && why != identify::consistency::Untested::NoCovariance
     {
         let runs: Vec<&str> = ident.per_spring.iter().map(|s| s.run.as_str()).collect();
-        warnings.push(format!(
-            "rig: the springs' agreement was not tested (spring runs {}): {}",
-            runs.join(", "),
-            ident.consistency.note
+        let n = runs.len();
+        warnings.push(Warning::new(
+            format!(
+                "rig: the springs' agreement was not tested ({n} spring run{})",
+                if n == 1 { "" } else { "s" }
+            ),
+            format!(
+                "rig: the springs' agreement was not tested (spring runs {}): {}",
+                runs.join(", "),
+                ident.consistency.note
+            ),
         ));
     }
 }

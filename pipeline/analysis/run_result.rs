@@ -22,6 +22,7 @@ use crate::simulate::specimen::SpecimenModel;
 use crate::tracking::compensator::{self, Compensator, CompensatorOutcome};
 use crate::tracking::{self, FrfBins, Reference, Tracking};
 use crate::validate::{self, Record, ValidateError};
+use crate::warning::Warning;
 use std::sync::Arc;
 
 /// Below this fit percent (MATLAB tfest's FitPercent, [`crate::fit::TfFit`])
@@ -453,9 +454,10 @@ pub fn fitted(
                 out.validation = Some(t.metrics.clone());
                 time = Some(t);
             }
-            Err(e) => out
-                .warnings
-                .push(format!("time-domain check of the fitted model: {e}")),
+            Err(e) => out.warnings.push(Warning::new(
+                "the time-domain check of the fitted model could not be made",
+                format!("time-domain check of the fitted model: {e}"),
+            )),
         }
     }
     if let Some(st) = &stage {
@@ -492,7 +494,7 @@ fn tf_result(tf: &TransferFunction, source: TfSource, fit: Option<&TfFit>) -> Tf
 /// What the run's own fit says is wrong with it, in this order: a delay it
 /// lacks, its misfit's diagnosis, stds it overstates, a model that
 /// explains too little of the response.
-fn own_fit_warnings(summary: &FitSummary, st: &LogStage, fit: &TfFit) -> Vec<String> {
+fn own_fit_warnings(summary: &FitSummary, st: &LogStage, fit: &TfFit) -> Vec<Warning> {
     let mut warnings = Vec::new();
     // The delay is named as the cause only where it explains most of what
     // the fit leaves beyond the noise: a nonlinearity or the FRF settings
@@ -505,38 +507,56 @@ fn own_fit_warnings(summary: &FitSummary, st: &LogStage, fit: &TfFit) -> Vec<Str
                 summary.reduced_chi2 - with >= DELAY_EXPLAINS * (summary.reduced_chi2 - 1.0)
             })
     }) {
-        warnings.push(format!(
-            "the run's own fit: {}; with a delay of {:.3} ms its reduced chi-square is {:.3} (without, {:.3}); set identification.delay = {{ mode = \"fit\" }}",
-            t.note,
-            1e3 * t.delay_s.unwrap_or(f64::NAN),
-            t.reduced_chi2.unwrap_or(f64::NAN),
-            summary.reduced_chi2
+        warnings.push(Warning::new(
+            format!(
+                "the run's own fit lacks a delay: {:.3} ms takes its reduced chi-square from {:.2} to {:.2}",
+                1e3 * t.delay_s.unwrap_or(f64::NAN),
+                summary.reduced_chi2,
+                t.reduced_chi2.unwrap_or(f64::NAN),
+            ),
+            format!(
+                "the run's own fit: {}; with a delay of {:.3} ms its reduced chi-square is {:.3} (without, {:.3}); set identification.delay = {{ mode = \"fit\" }}",
+                t.note,
+                1e3 * t.delay_s.unwrap_or(f64::NAN),
+                t.reduced_chi2.unwrap_or(f64::NAN),
+                summary.reduced_chi2
+            ),
         ));
     }
-    if let Some(d) = summary.adequacy.as_ref().and_then(|a| {
-        a.diagnosis_because(
+    if let Some(a) = summary.adequacy.as_ref() {
+        if let Some(d) = a.diagnosis_because(
             (!fit.shape.fit_delay).then_some("set identification.delay = \"fit\""),
             st.choice.plan.estimator.understated_noise(),
             st.cause.as_deref(),
-        )
-    }) {
-        warnings.push(format!("the run's own fit: {d}"));
-    }
-    if let Some(o) = summary.adequacy.as_ref().and_then(|a| {
-        a.overstated_because(
+        ) {
+            warnings.push(Warning::new(
+                format!("the run's own fit: {}", a.failure_headline()),
+                format!("the run's own fit: {d}"),
+            ));
+        }
+        if let Some(o) = a.overstated_because(
             st.choice.plan.estimator.overstated_noise(),
             st.cause.as_deref(),
-        )
-    }) {
-        warnings.push(format!("the run's own fit: {o}"));
+        ) {
+            warnings.push(Warning::new(
+                format!("the run's own fit: {}", a.overstated_headline()),
+                format!("the run's own fit: {o}"),
+            ));
+        }
     }
     // A model that explains under half of the measured response is not a
     // rig's: the likely causes are in the log's mapping, not in the model
     // (swapped command and displacement columns measured 31 %).
     if summary.fit_percent < POOR_FIT_PERCENT {
-        warnings.push(format!(
-            "the model explains only {:.0} % of the measured response (fit percent below {POOR_FIT_PERCENT:.0}); likely cause: the channels' columns (command and displacement swapped, or another run's log)",
-            summary.fit_percent
+        warnings.push(Warning::new(
+            format!(
+                "the model explains only {:.0} % of the response: columns swapped, or another run's log?",
+                summary.fit_percent
+            ),
+            format!(
+                "the model explains only {:.0} % of the measured response (fit percent below {POOR_FIT_PERCENT:.0}); likely cause: the channels' columns (command and displacement swapped, or another run's log)",
+                summary.fit_percent
+            ),
         ));
     }
     warnings

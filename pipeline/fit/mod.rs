@@ -45,6 +45,7 @@ pub mod transient;
 #[cfg(test)]
 mod tests;
 
+use crate::warning::Warning;
 use argmin::core::{Executor, State, TerminationReason};
 use nalgebra::{Complex, DMatrix, DVector};
 
@@ -150,7 +151,7 @@ pub struct TfFit {
     /// Number of bins fitted.
     pub n_bins: usize,
     /// What the caller should know (not converged, unstable, delay at bound).
-    pub warnings: Vec<String>,
+    pub warnings: Vec<Warning>,
     /// The record's transient fitted beside the model
     /// ([`fit_with_transient`]); None for a plain fit.
     pub transient: Option<transient::Transient>,
@@ -1058,8 +1059,11 @@ fn refine(prep: &Prepared, opts: &FitOptions, start: Vec<f64>) -> Result<TfFit, 
     let termination = reason.text().to_string();
     let mut warnings = Vec::new();
     if !converged {
-        warnings.push(format!(
-            "the fit did not converge ({termination} after {iterations} iterations); the coefficients and their covariance are from the last accepted step"
+        warnings.push(Warning::new(
+            format!("the fit did not converge in {iterations} iterations"),
+            format!(
+                "the fit did not converge ({termination} after {iterations} iterations); the coefficients and their covariance are from the last accepted step"
+            ),
         ));
     }
     let stable = tf.is_stable();
@@ -1210,24 +1214,30 @@ fn fit_percent(prep: &Prepared, theta: &[f64], transient: Option<&transient::Tra
 }
 
 /// The warning for a model with a pole outside the open left half-plane.
-fn unstable_warning(tf: &TransferFunction) -> String {
+fn unstable_warning(tf: &TransferFunction) -> Warning {
     let poles: Vec<String> = tf.poles().iter().map(|p| format!("{p:.4}")).collect();
-    format!(
-        "the fitted model is unstable: poles outside the open left half-plane among [{}] (rad/s)",
-        poles.join(", ")
+    Warning::new(
+        "the fitted model is unstable: a pole outside the open left half-plane",
+        format!(
+            "the fitted model is unstable: poles outside the open left half-plane among [{}] (rad/s)",
+            poles.join(", ")
+        ),
     )
 }
 
 /// The warning for a fitted delay `tau_s` at a bound of its range, where
 /// its standard deviation no longer holds.
-fn delay_bound_warning(prep: &Prepared, theta: &[f64], tau_s: f64) -> Option<String> {
+fn delay_bound_warning(prep: &Prepared, theta: &[f64], tau_s: f64) -> Option<Warning> {
     let max_s = prep.max_delay_s?;
     let tau_scaled = theta[prep.problem.shape.n_params() - 1];
     // Compared in scaled units, where the solver clamps exactly.
     let at_bound = tau_scaled <= 0.0 || tau_scaled >= max_s * prep.scaling.w0_rad_per_s;
     at_bound.then(|| {
-        format!(
-            "the fitted delay {tau_s} s is at a bound of [0, {max_s}] s; its standard deviation assumes an interior optimum"
+        Warning::new(
+            format!("the fitted delay {tau_s:.3e} s is at a bound of its range [0, {max_s}] s"),
+            format!(
+                "the fitted delay {tau_s} s is at a bound of [0, {max_s}] s; its standard deviation assumes an interior optimum"
+            ),
         )
     })
 }

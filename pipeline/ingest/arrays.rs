@@ -17,6 +17,7 @@
 //! rows than columns, as Simulink's To File block writes `[t; u; y]`) has its
 //! channels in rows. Places are 1-based element (sample) numbers.
 
+use crate::warning::Warning;
 use std::path::Path;
 
 use super::plan::{Column, LogPlan, TimePlan};
@@ -81,7 +82,7 @@ pub(super) trait Arrays {
 
     /// What a reader that read the file has to say of it (a recording cut
     /// short), each naming the file.
-    fn warnings(&self) -> Vec<String> {
+    fn warnings(&self) -> Vec<Warning> {
         Vec::new()
     }
 }
@@ -211,7 +212,7 @@ fn check_unit(
     variable: &str,
     channel: &'static str,
     unit: Unit,
-    warnings: &mut Vec<String>,
+    warnings: &mut Vec<Warning>,
 ) -> Result<(), IngestError> {
     let Some(stated) = arrays
         .stated_unit(variable)
@@ -231,10 +232,16 @@ fn check_unit(
             },
         )),
         None => {
-            warnings.push(format!(
-                "{}: variable `{variable}` ({channel} channel) states its unit as {stated:?}, which servoid does not know; the manifest's `{}` is used",
-                path.display(),
-                unit.symbol()
+            warnings.push(Warning::new(
+                format!(
+                    "the {channel}'s unit {stated:?} is unknown; the manifest's `{}` is used",
+                    unit.symbol()
+                ),
+                format!(
+                    "{}: variable `{variable}` ({channel} channel) states its unit as {stated:?}, which servoid does not know; the manifest's `{}` is used",
+                    path.display(),
+                    unit.symbol()
+                ),
             ));
             Ok(())
         }

@@ -28,6 +28,7 @@
 //! Lines end in `\n` or `\r\n`; blank lines are skipped; places are 1-based
 //! line numbers.
 
+use crate::warning::Warning;
 use std::path::Path;
 
 use super::plan::{Column, LogPlan, TimePlan};
@@ -62,9 +63,12 @@ pub(super) fn read<'a>(
     if let Some(size) = header.header_size
         && size != names_line
     {
-        warnings.push(format!(
-            "{}: the header says `Header Size: {size}` but the column names are on line {names_line}",
-            path.display()
+        warnings.push(Warning::new(
+            format!("the header's size ({size}) is not the column names' line ({names_line})"),
+            format!(
+                "{}: the header says `Header Size: {size}` but the column names are on line {names_line}",
+                path.display()
+            ),
         ));
     }
     let want = wanted(plan);
@@ -82,15 +86,21 @@ pub(super) fn read<'a>(
     if let Some(count) = header.sample_count
         && count != data.rows
     {
-        warnings.push(format!(
-            "{}: the header says `Sample Count: {count}` but the file has {} data lines{}",
-            path.display(),
-            data.rows,
-            if data.rows < count {
-                " (truncated?)"
-            } else {
-                ""
-            }
+        let truncated = if data.rows < count {
+            " (truncated?)"
+        } else {
+            ""
+        };
+        warnings.push(Warning::new(
+            format!(
+                "the header says {count} samples, the file has {}{truncated}",
+                data.rows
+            ),
+            format!(
+                "{}: the header says `Sample Count: {count}` but the file has {} data lines{truncated}",
+                path.display(),
+                data.rows,
+            ),
         ));
     }
     let header_hz = header_rate(&header, path, &mut warnings);
@@ -111,13 +121,16 @@ pub(super) fn read<'a>(
 
 /// The rate the header gives: its `Sampling Rate`, else 1 / its `Sampling
 /// Interval`; a warning when it gives both and they disagree.
-fn header_rate(header: &Header, path: &Path, warnings: &mut Vec<String>) -> Option<f64> {
+fn header_rate(header: &Header, path: &Path, warnings: &mut Vec<Warning>) -> Option<f64> {
     match (header.rate_hz, header.interval_s) {
         (Some(hz), Some(dt)) => {
             if ((hz * dt) - 1.0).abs() > 1e-9 {
-                warnings.push(format!(
-                    "{}: the header's `Sampling Rate: {hz}` and `Sampling Interval: {dt}` disagree; the rate is used",
-                    path.display()
+                warnings.push(Warning::new(
+                    "the header's sampling rate and interval disagree; the rate is used",
+                    format!(
+                        "{}: the header's `Sampling Rate: {hz}` and `Sampling Interval: {dt}` disagree; the rate is used",
+                        path.display()
+                    ),
                 ));
             }
             Some(hz)
@@ -136,7 +149,7 @@ fn time_base(
     columns: &mut impl Iterator<Item = Vec<f64>>,
     header_hz: Option<f64>,
     path: &Path,
-    warnings: &mut Vec<String>,
+    warnings: &mut Vec<Warning>,
 ) -> Result<RawTime, IngestError> {
     Ok(match &plan.channels.time {
         TimePlan::Column { column, to_s } => RawTime::Column {
@@ -148,9 +161,12 @@ fn time_base(
             if let Some(h) = header_hz
                 && ((h - hz) / hz).abs() > 1e-9
             {
-                warnings.push(format!(
-                    "{}: the manifest's sampling rate {hz} Hz overrides the header's {h} Hz",
-                    path.display()
+                warnings.push(Warning::new(
+                    format!("the manifest's sampling rate {hz} Hz overrides the header's {h} Hz"),
+                    format!(
+                        "{}: the manifest's sampling rate {hz} Hz overrides the header's {h} Hz",
+                        path.display()
+                    ),
                 ));
             }
             RawTime::Rate {

@@ -40,6 +40,7 @@ mod tdms;
 #[cfg(test)]
 mod tests;
 
+use crate::warning::Warning;
 use std::fmt;
 use std::path::{Path, PathBuf};
 
@@ -93,7 +94,7 @@ pub struct Log {
     pub n_rows: usize,
     pub timing: Timing,
     /// Oddities found while reading; each names the file.
-    pub warnings: Vec<String>,
+    pub warnings: Vec<Warning>,
     /// The isolated spikes a channel's `repair = "interpolate"` replaced.
     pub repairs: Vec<Repaired>,
 }
@@ -1222,7 +1223,7 @@ struct Raw<'a> {
     force: Option<Vec<f64>>,
     /// Where sample `i` (0-based) sits in the file.
     locate: Box<dyn Fn(usize) -> At + Send + 'a>,
-    warnings: Vec<String>,
+    warnings: Vec<Warning>,
 }
 
 enum RawTime {
@@ -1650,19 +1651,25 @@ fn check_held(
 
 /// One warning per channel whose spikes were repaired: how many, and the
 /// first.
-fn push_repair_warnings(path: &Path, repairs: &[Repaired], warnings: &mut Vec<String>) {
+fn push_repair_warnings(path: &Path, repairs: &[Repaired], warnings: &mut Vec<Warning>) {
     for channel in ["command", "displacement", "force"] {
         let mut these = repairs.iter().filter(|r| r.channel == channel);
         if let Some(first) = these.next() {
-            warnings.push(format!(
-                "{}: {} isolated spike(s) in the {channel} replaced by their neighbours' line as channels.{channel}.repair asks, the first at {} (t = {:.4} s, {:e} where its neighbours read {:e} and {:e} in SI)",
-                path.display(),
-                1 + these.count(),
-                first.at,
-                first.time_s,
-                first.value,
-                first.before,
-                first.after
+            let count = 1 + these.count();
+            warnings.push(Warning::new(
+                format!(
+                    "{count} spike(s) in the {channel} repaired, the first at t = {:.4} s",
+                    first.time_s
+                ),
+                format!(
+                    "{}: {count} isolated spike(s) in the {channel} replaced by their neighbours' line as channels.{channel}.repair asks, the first at {} (t = {:.4} s, {:e} where its neighbours read {:e} and {:e} in SI)",
+                    path.display(),
+                    first.at,
+                    first.time_s,
+                    first.value,
+                    first.before,
+                    first.after
+                ),
             ));
         }
     }
@@ -1830,7 +1837,7 @@ const JITTER_WARN_FRACTION: f64 = 1e-6;
 ///
 /// Returns every warning about the log: those found while reading
 /// (`log.warnings`) followed by those of these checks.
-pub fn check_log(log: &Log, needs: &Needs) -> Result<Vec<String>, IngestError> {
+pub fn check_log(log: &Log, needs: &Needs) -> Result<Vec<Warning>, IngestError> {
     let path = &log.path;
     let mut warnings = log.warnings.clone();
     if log.n_rows < needs.min_samples {
@@ -1858,13 +1865,20 @@ pub fn check_log(log: &Log, needs: &Needs) -> Result<Vec<String>, IngestError> {
                 worst_at,
             } => {
                 if max_s > SCATTER_WARN_FRACTION * mean_dt_s {
-                    warnings.push(format!(
+                    warnings.push(Warning::new(
+                        format!(
+                            "time stamps scatter up to {:.1} % of an interval about a {} Hz grid",
+                            100.0 * max_s / mean_dt_s,
+                            format_number(1.0 / mean_dt_s, 8)
+                        ),
+                        format!(
                         "{}: the time stamps scatter about a uniform grid by up to {:.1} % of an interval (rms {:.1} %, the largest at {worst_at}): the rate, {} Hz, is the grid's, fitted to all {} stamps, and the samples are taken as uniform, as a DAQ's clock samples; state channels.time.sample_rate_hz if the DAQ's rate is known",
                         path.display(),
                         100.0 * max_s / mean_dt_s,
                         100.0 * rms_s / mean_dt_s,
                         format_number(1.0 / mean_dt_s, 8),
                         log.n_rows
+                    ),
                     ));
                 }
             }
@@ -1881,10 +1895,13 @@ pub fn check_log(log: &Log, needs: &Needs) -> Result<Vec<String>, IngestError> {
                         tolerance: needs.max_jitter_fraction,
                     });
                 }
-                warnings.push(format!(
-                    "{}: sampling is slightly uneven: interval jitter max {jitter_max_s:.3e} s (interval ending at {worst_at}), rms {jitter_rms_s:.3e} s, against a mean interval of {mean_dt_s:.6e} s ({fraction:.3e} of it, within the tolerance {:e}); the analysis assumes uniform sampling",
-                    path.display(),
-                    needs.max_jitter_fraction
+                warnings.push(Warning::new(
+                    format!("sampling slightly uneven: intervals jitter up to {fraction:.1e} of the mean"),
+                    format!(
+                        "{}: sampling is slightly uneven: interval jitter max {jitter_max_s:.3e} s (interval ending at {worst_at}), rms {jitter_rms_s:.3e} s, against a mean interval of {mean_dt_s:.6e} s ({fraction:.3e} of it, within the tolerance {:e}); the analysis assumes uniform sampling",
+                        path.display(),
+                        needs.max_jitter_fraction
+                    ),
                 ));
             }
         }
@@ -1941,14 +1958,21 @@ pub fn check_log(log: &Log, needs: &Needs) -> Result<Vec<String>, IngestError> {
 /// quantised crest: nothing for a step or square wave (its levels hold
 /// nearly every sample, as the test intends); for a command limited at a
 /// level, that it is analysed as the valve received it.
-fn limited_command(path: &Path, u: &[f64], p: &clipping::Plateau) -> Option<String> {
+fn limited_command(path: &Path, u: &[f64], p: &clipping::Plateau) -> Option<Warning> {
     (clipping::at_levels(u) < STEP_LEVELS_SHARE).then(|| {
-        format!(
-            "{}: the command holds its {} {} mm in {:.1} % of its samples (a limit set in the controller?): it is analysed as the command the valve received",
-            path.display(),
-            p.which,
-            format_number(1e3 * p.level, 4),
-            100.0 * p.fraction
+        let level = format_number(1e3 * p.level, 4);
+        Warning::new(
+            format!(
+                "the command holds its {} {level} mm in {:.1} % of its samples: a limit set in the controller?",
+                p.which,
+                100.0 * p.fraction
+            ),
+            format!(
+                "{}: the command holds its {} {level} mm in {:.1} % of its samples (a limit set in the controller?): it is analysed as the command the valve received",
+                path.display(),
+                p.which,
+                100.0 * p.fraction
+            ),
         )
     })
 }
@@ -1991,9 +2015,12 @@ pub fn trim_to_excitation(log: &Log, threshold_fraction: f64) -> Log {
     let first = u.iter().position(|x| (x - u0).abs() > threshold);
     let last = u.iter().rposition(|x| (x - u0).abs() > threshold);
     let (Some(first), Some(last)) = (first, last) else {
-        out.warnings.push(format!(
-            "{}: the command never departs from its rest level {u0:e} m by more than {threshold_fraction} of its largest excursion ({peak:e} m); nothing trimmed",
-            log.path.display()
+        out.warnings.push(Warning::new(
+            "the command never leaves its rest level: nothing trimmed",
+            format!(
+                "{}: the command never departs from its rest level {u0:e} m by more than {threshold_fraction} of its largest excursion ({peak:e} m); nothing trimmed",
+                log.path.display()
+            ),
         ));
         return out;
     };

@@ -244,7 +244,7 @@ fn real_daq_log_by_index_and_with_a_given_rate() {
     assert_same_bits(&log.command_m, &by_name.command_m);
     assert_relative_eq!(log.sample_rate_hz, 1024.0);
     assert_eq!(log.warnings.len(), 1);
-    assert_contains(&log.warnings[0], &["1A.txt", "1024 Hz", "1000 Hz"]);
+    assert_contains(&log.warnings[0].detail, &["1A.txt", "1024 Hz", "1000 Hz"]);
 }
 
 // ------------------------------------------------------------ CSV
@@ -1112,7 +1112,10 @@ fn time_stamps_are_read_against_a_uniform_grid() {
     assert!((max_s / 2.5e-5 - 1.0).abs() < 0.1, "{max_s}");
     let warnings = check_log(&read_log(&p).unwrap(), &NEEDS).unwrap();
     assert_eq!(warnings.len(), 1, "{warnings:?}");
-    assert_contains(&warnings[0], &["jitter.csv", "scatter", "sample_rate_hz"]);
+    assert_contains(
+        &warnings[0].detail,
+        &["jitter.csv", "scatter", "sample_rate_hz"],
+    );
 
     // 2048 Hz stamps rounded to 1 ms repeat some stamps and step 0, 1 ms:
     // within half a millisecond of the grid, the samples are uniform, and
@@ -1159,7 +1162,7 @@ fn time_stamps_are_read_against_a_uniform_grid() {
     assert_eq!(stamps, Stamps::Uneven);
     let warnings = check_log(&read_log(&p).unwrap(), &NEEDS).unwrap();
     assert_eq!(warnings.len(), 1, "{warnings:?}");
-    assert_contains(&warnings[0], &["jitter.csv", "uneven"]);
+    assert_contains(&warnings[0].detail, &["jitter.csv", "uneven"]);
 
     // Time stamps k * 1e-3 printed shortest-round-trip carry only rounding.
     let p = jittered(dir.path(), n, |_| 0.0);
@@ -1335,7 +1338,7 @@ fn daq_header_disagreements_are_warnings() {
     let log = read_log(&daq_plan(&path)).unwrap();
     assert_eq!(log.warnings.len(), 1);
     assert_contains(
-        &log.warnings[0],
+        &log.warnings[0].detail,
         &["warn.txt", "Sample Count: 6", "4 data lines", "truncated"],
     );
 }
@@ -1391,7 +1394,7 @@ fn trim_keeps_the_excitation_and_half_a_second_around_it() {
 
     let flat = trim_to_excitation(&log_with_command(vec![0.25; 100], 1000.0), 0.05);
     assert_eq!(flat.n_rows, 100);
-    assert_contains(&flat.warnings[0], &["mem.csv", "never departs"]);
+    assert_contains(&flat.warnings[0].detail, &["mem.csv", "never departs"]);
 }
 
 // ------------------------------------------- format errors, word for word

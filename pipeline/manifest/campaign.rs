@@ -5,6 +5,7 @@
 //! collected, with its key path, run and line. The runs of a `[run_table]`
 //! (checked in `table`) follow those of `[[runs]]`.
 
+use crate::warning::Warning;
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 
@@ -53,7 +54,7 @@ pub struct Campaign {
     pub run_table: Option<RunTableInfo>,
     /// What is odd but not wrong (a log the run table's `logs` matched that
     /// no run uses); each names its file.
-    pub warnings: Vec<String>,
+    pub warnings: Vec<Warning>,
     /// Where the rig's history is kept and when it raises an alarm.
     pub history: HistoryPlan,
     /// The stiffness sensitivity's sweep and target.
@@ -510,12 +511,19 @@ fn check_compensator(
 /// A stated cut-off below the identification band's top: the
 /// compensator's low-pass then removes the band it is to track, and its
 /// design succeeds all the same.
-fn cutoff_below_band(c: &CompensatorSettings, band_hz: (f64, f64)) -> Option<String> {
+fn cutoff_below_band(c: &CompensatorSettings, band_hz: (f64, f64)) -> Option<Warning> {
     let fc = c.cutoff_hz.filter(|&fc| fc < band_hz.1)?;
-    Some(format!(
-        "compensator.cutoff_hz = {fc} Hz is below the identification band's top ({} Hz): the compensator's low-pass removes the band it is to track. Leave it out for {} times the band's top",
-        band_hz.1,
-        crate::tracking::compensator::CUTOFF_PER_BAND
+    let headline = format!(
+        "compensator.cutoff_hz = {fc} Hz is below the band's top ({} Hz)",
+        band_hz.1
+    );
+    Some(Warning::new(
+        headline,
+        format!(
+            "compensator.cutoff_hz = {fc} Hz is below the identification band's top ({} Hz): the compensator's low-pass removes the band it is to track. Leave it out for {} times the band's top",
+            band_hz.1,
+            crate::tracking::compensator::CUTOFF_PER_BAND
+        ),
     ))
 }
 

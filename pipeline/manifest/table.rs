@@ -10,6 +10,7 @@
 //! expected and fails alone when it is read), and a matched log that no run
 //! uses is a warning, not an error.
 
+use crate::warning::Warning;
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 
@@ -87,7 +88,7 @@ pub(super) struct CheckedTable {
     pub keys: Vec<RowKey>,
     /// None when the table could not be read (the problem is recorded).
     pub info: Option<RunTableInfo>,
-    pub warnings: Vec<String>,
+    pub warnings: Vec<Warning>,
 }
 
 /// The logs `[run_table] logs` names.
@@ -786,23 +787,30 @@ pub const UNUSED_LOGS_LISTED: usize = 10;
 /// each matched log that no run uses, naming it as the manifest's folder
 /// sees it, the first [`UNUSED_LOGS_LISTED`] of them and then their count;
 /// and one when `logs` matched nothing.
-fn unused_logs(m: &Matched, used: &BTreeSet<PathBuf>) -> Vec<String> {
-    let mut out: Vec<String> = m
+fn unused_logs(m: &Matched, used: &BTreeSet<PathBuf>) -> Vec<Warning> {
+    let name = |p: &Path| {
+        p.file_name()
+            .map_or_else(|| m.shown(p), |n| n.to_string_lossy().into_owned())
+    };
+    let mut out: Vec<Warning> = m
         .loops
         .iter()
         .map(|(link, ancestor)| {
-            format!(
-                "{}: a folder link back to {} (a loop): [run_table] logs = {:?} does not follow it",
-                m.shown(link),
-                m.shown(ancestor),
-                m.spec
+            Warning::new(
+                format!("[run_table] logs: the folder link {} loops; not followed", name(link)),
+                format!(
+                    "{}: a folder link back to {} (a loop): [run_table] logs = {:?} does not follow it",
+                    m.shown(link),
+                    m.shown(ancestor),
+                    m.spec
+                ),
             )
         })
         .collect();
     if m.files.is_empty() {
-        out.push(format!(
-            "[run_table] logs = {:?} matches no log file",
-            m.spec
+        out.push(Warning::new(
+            "[run_table] logs matches no log file",
+            format!("[run_table] logs = {:?} matches no log file", m.spec),
         ));
         return out;
     }
@@ -812,17 +820,23 @@ fn unused_logs(m: &Matched, used: &BTreeSet<PathBuf>) -> Vec<String> {
         .filter(|f| !used.contains(&same_file(f)))
         .collect();
     out.extend(unused.iter().take(UNUSED_LOGS_LISTED).map(|f| {
-        format!(
-            "{}: matched by [run_table] logs = {:?}, but no run uses it",
-            m.shown(f),
-            m.spec
+        Warning::new(
+            format!("[run_table] logs matches {}, which no run uses", name(f)),
+            format!(
+                "{}: matched by [run_table] logs = {:?}, but no run uses it",
+                m.shown(f),
+                m.spec
+            ),
         )
     }));
     if unused.len() > UNUSED_LOGS_LISTED {
-        out.push(format!(
-            "and {} more logs matched by [run_table] logs = {:?} that no run uses (narrow the glob, or move old logs out)",
-            unused.len() - UNUSED_LOGS_LISTED,
-            m.spec
+        let more = unused.len() - UNUSED_LOGS_LISTED;
+        out.push(Warning::new(
+            format!("[run_table] logs matches {more} more logs no run uses"),
+            format!(
+                "and {more} more logs matched by [run_table] logs = {:?} that no run uses (narrow the glob, or move old logs out)",
+                m.spec
+            ),
         ));
     }
     out
@@ -840,6 +854,11 @@ mod tests {
 
     use crate::ingest::{LogFormat, sha256_hex};
     use crate::manifest::{Campaign, RunSource, load};
+    use crate::warning::Warning;
+
+    fn details(warnings: &[Warning]) -> Vec<&str> {
+        warnings.iter().map(|w| w.detail.as_str()).collect()
+    }
 
     /// A campaign whose rig comes from published transfer functions, one
     /// `[[runs]]` fit run on `logs/c.csv`, and a run table of fit runs.
@@ -926,7 +945,7 @@ logs = "LOGS"
         let table = "id,role,p_gain,log\na,fit,1,\nb,fit,2,../logs/./b.csv\n";
         let c = campaign(d, "logs/*.csv", table, &files);
         assert_eq!(
-            c.warnings,
+            details(&c.warnings),
             [
                 "logs/m-spare.csv: matched by [run_table] logs = \"logs/*.csv\", but no run uses it",
                 "logs/z-spare.csv: matched by [run_table] logs = \"logs/*.csv\", but no run uses it",
@@ -969,7 +988,7 @@ logs = "LOGS"
         let table = "id,role,p_gain\na,fit,1\nb,fit,1\n";
         let c = campaign(d, "logs/**/*.csv", table, &[]);
         assert_eq!(
-            c.warnings,
+            details(&c.warnings),
             [
                 "logs/day1/deep/back: a folder link back to logs/day1 (a loop): [run_table] logs = \"logs/**/*.csv\" does not follow it",
                 "logs/day1/up: a folder link back to logs (a loop): [run_table] logs = \"logs/**/*.csv\" does not follow it",
@@ -990,9 +1009,9 @@ logs = "LOGS"
         let files: Vec<&str> = files.iter().map(String::as_str).collect();
         let c = campaign(d, "logs/*.csv", "id,role,p_gain\nold00,fit,1\n", &files);
         assert_eq!(c.warnings.len(), super::UNUSED_LOGS_LISTED + 1);
-        assert!(c.warnings[0].starts_with("logs/old01.csv: matched"));
+        assert!(c.warnings[0].detail.starts_with("logs/old01.csv: matched"));
         assert_eq!(
-            c.warnings[10],
+            c.warnings[10].detail,
             "and 14 more logs matched by [run_table] logs = \"logs/*.csv\" that no run uses (narrow the glob, or move old logs out)"
         );
     }
@@ -1013,7 +1032,7 @@ logs = "LOGS"
         let table = "id,role,p_gain\na,fit,1\n\nk2.v1,fit,1\n";
         let c = campaign(d, "logs", table, &files);
         assert_eq!(
-            c.warnings,
+            details(&c.warnings),
             [
                 "logs/m-spare.csv: matched by [run_table] logs = \"logs\", but no run uses it",
                 "logs/z-spare.csv: matched by [run_table] logs = \"logs\", but no run uses it",
@@ -1038,7 +1057,7 @@ logs = "LOGS"
             (d.join("logs/run-k2.parquet"), LogFormat::Parquet)
         );
         assert_eq!(
-            c.warnings,
+            details(&c.warnings),
             ["[run_table] logs = \"logs/run-*.parquet\" matches no log file"]
         );
     }

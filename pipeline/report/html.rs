@@ -125,6 +125,9 @@ impl<'a> Pages<'a> {
             .collect();
         let ctx = minijinja::context! {
             r => self.r.clone(),
+            run_warnings => ser(shared_warnings(
+                results.runs.iter().map(|r| (r.id.as_str(), r.warnings.as_slice()))
+            )),
             figures => ser(figures),
             notice => results.manifest.campaign.synthetic.as_deref(),
             figures_note => self.figures_note,
@@ -154,6 +157,34 @@ impl<'a> Pages<'a> {
         };
         Ok(self.env.get_template("run.html")?.render(ctx)?)
     }
+}
+
+/// The runs' warnings by headline, each once with the runs that give it
+/// (in manifest order), in the order they first appear: a night whose
+/// runs share a warning reads it once.
+#[derive(Debug, serde::Serialize)]
+struct SharedWarning<'a> {
+    headline: &'a str,
+    runs: Vec<&'a str>,
+}
+
+fn shared_warnings<'a>(
+    runs: impl IntoIterator<Item = (&'a str, &'a [crate::warning::Warning])>,
+) -> Vec<SharedWarning<'a>> {
+    let mut out: Vec<SharedWarning<'a>> = Vec::new();
+    for (id, warnings) in runs {
+        for w in warnings {
+            match out.iter_mut().find(|s| s.headline == w.headline) {
+                Some(s) if s.runs.last() != Some(&id) => s.runs.push(id),
+                Some(_) => {}
+                None => out.push(SharedWarning {
+                    headline: &w.headline,
+                    runs: vec![id],
+                }),
+            }
+        }
+    }
+    out
 }
 
 fn as_f64(v: &Value) -> Option<f64> {
@@ -282,5 +313,32 @@ mod tests {
         assert_eq!(format_number(0.0, 3), "0");
         assert_eq!(num(Value::from(()), None), "\u{2013}");
         assert_eq!(pct(Value::from(0.000_74)), "+0.07 %");
+    }
+
+    /// Three runs, two of which share a headline (one of them twice): the
+    /// shared one is listed once with both runs, the other alone.
+    #[test]
+    fn a_warning_runs_share_is_listed_once_with_their_ids() {
+        use crate::warning::Warning;
+        let limit = Warning::new("the command is limited", "a.csv: ...");
+        let misfit = Warning::new("the run's own fit: misfit", "...");
+        let a = [limit.clone(), limit.clone()];
+        let b: [Warning; 0] = [];
+        let c = [
+            misfit.clone(),
+            Warning::new("the command is limited", "c.csv: ..."),
+        ];
+        let shared = shared_warnings([("a", &a[..]), ("b", &b[..]), ("c", &c[..])]);
+        let got: Vec<(&str, Vec<&str>)> = shared
+            .iter()
+            .map(|s| (s.headline, s.runs.clone()))
+            .collect();
+        assert_eq!(
+            got,
+            [
+                ("the command is limited", vec!["a", "c"]),
+                ("the run's own fit: misfit", vec!["c"]),
+            ]
+        );
     }
 }

@@ -26,6 +26,7 @@ pub mod output_folder;
 pub use html::PageFigure;
 pub use output_folder::OutputFolder;
 
+use crate::warning::Warning;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
@@ -217,7 +218,7 @@ impl<'a> FigureFiles<'a> {
     pub fn write(
         &self,
         specs: &[FigureSpec],
-    ) -> Result<(Vec<PageFigure>, Vec<String>), WriteError> {
+    ) -> Result<(Vec<PageFigure>, Vec<Warning>), WriteError> {
         let jobs: Vec<(figures::Figure, (u32, u32))> =
             specs.iter().map(|s| (s.figure.clone(), s.size)).collect();
         let rendered = figures::render_many(&jobs, self.formats);
@@ -227,7 +228,10 @@ impl<'a> FigureFiles<'a> {
             let r = match r {
                 Ok(r) => r,
                 Err(e) => {
-                    warnings.push(format!("figure {}: {e}", spec.id));
+                    warnings.push(Warning::new(
+                        format!("figure {} not drawn", spec.id),
+                        format!("figure {}: {e}", spec.id),
+                    ));
                     continue;
                 }
             };

@@ -19,6 +19,7 @@
 //! output goes to the `sink` (figures, tables, cache) as it arrives, so a
 //! write error stops the job while the analysis itself never writes.
 
+use crate::warning::Warning;
 use std::sync::Arc;
 use std::time::Instant;
 
@@ -230,9 +231,10 @@ fn campaign_level(
         .as_ref()
         .and_then(|s| s.monte_carlo_note.as_ref())
     {
-        results
-            .warnings
-            .push(format!("sensitivity.monte_carlo: not run: {note}"));
+        results.warnings.push(Warning::new(
+            "sensitivity.monte_carlo: not run",
+            format!("sensitivity.monte_carlo: not run: {note}"),
+        ));
     }
     if let Some(w) = stated_cutoff_unused(campaign, &results) {
         results.warnings.push(w);
@@ -247,7 +249,7 @@ fn campaign_level(
 /// A stated `compensator.cutoff_hz` no run's compensator could be designed
 /// with: each run's note says why, and the campaign says it once, naming
 /// the key.
-fn stated_cutoff_unused(campaign: &Campaign, results: &Results) -> Option<String> {
+fn stated_cutoff_unused(campaign: &Campaign, results: &Results) -> Option<Warning> {
     let fc = campaign.compensator.cutoff_hz?;
     let outcomes: Vec<(&str, &CompensatorOutcome)> = results
         .runs
@@ -262,13 +264,17 @@ fn stated_cutoff_unused(campaign: &Campaign, results: &Results) -> Option<String
         .filter_map(|(id, c)| Some((*id, c.note.as_deref()?)))
         .collect();
     let (_, why) = notes.first()?;
-    Some(format!(
-        "compensator.cutoff_hz = {fc} Hz: no compensator was designed ({why}, for {})",
-        notes
-            .iter()
-            .map(|(id, _)| format!("run {id}"))
-            .collect::<Vec<_>>()
-            .join(", ")
+    let headline = format!("compensator.cutoff_hz = {fc} Hz: no compensator could be designed");
+    Some(Warning::new(
+        headline,
+        format!(
+            "compensator.cutoff_hz = {fc} Hz: no compensator was designed ({why}, for {})",
+            notes
+                .iter()
+                .map(|(id, _)| format!("run {id}"))
+                .collect::<Vec<_>>()
+                .join(", ")
+        ),
     ))
 }
 
@@ -285,7 +291,7 @@ struct PerRun {
 
 impl PerRun {
     /// Gather `done`; their figures' warnings go to `warnings`.
-    fn of(done: Vec<Done>, warnings: &mut Vec<String>) -> Self {
+    fn of(done: Vec<Done>, warnings: &mut Vec<Warning>) -> Self {
         let n = done.len();
         let mut all = PerRun {
             results: Vec::with_capacity(n),

@@ -211,7 +211,7 @@ pub(super) fn merge_stamps(out_dir: &Path, dirs: &[PathBuf]) -> Result<(), Write
 /// releases adds to it or computes it differently: the version alone
 /// would let an older build's entries stand in for outcomes this build
 /// computes otherwise.
-const OUTCOME_FORMAT: u32 = 10;
+const OUTCOME_FORMAT: u32 = 11;
 
 /// A key from the text of what decides a run's outcome. The plan's Debug
 /// text holds every setting with its floats to the last bit; a rebuild that

@@ -16,6 +16,7 @@ mod sink;
 mod step;
 mod verify;
 
+use crate::warning::Warning;
 use std::path::{Path, PathBuf};
 
 pub use crate::analysis::{FailedRun, RigError};
@@ -177,7 +178,7 @@ pub struct Checked {
     pub missing_logs: Vec<(String, PathBuf)>,
     /// The manifest's warnings (a run table's logs no row uses, ...), as
     /// results.json would carry them.
-    pub warnings: Vec<String>,
+    pub warnings: Vec<Warning>,
 }
 
 impl std::fmt::Display for Checked {
@@ -543,7 +544,10 @@ fn write_campaign(
         Err(u) => {
             // Named as the user knows the file, not under the work folder.
             let said = u.message(&set.final_path(&u.path));
-            results.warnings.push(said.clone());
+            results.warnings.push(Warning::new(
+                "the history could not be updated",
+                said.clone(),
+            ));
             (None, Some(said))
         }
     };

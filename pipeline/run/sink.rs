@@ -5,6 +5,7 @@
 //! write error is the sink's to report, and a run's log is long dropped when
 //! its files are written.
 
+use crate::warning::Warning;
 use std::path::Path;
 
 use super::cache::{self, Cache, Probe};
@@ -31,7 +32,7 @@ pub(super) struct Sink<'a> {
 pub(super) struct Stored {
     kept: Kept,
     figures: Vec<PageFigure>,
-    figure_warnings: Vec<String>,
+    figure_warnings: Vec<Warning>,
     /// The figure and table files with their sizes, to tell they are still
     /// there.
     files: Vec<(String, u64)>,
@@ -53,7 +54,7 @@ pub(super) enum Probed {
 pub(super) struct Done {
     pub kept: Kept,
     pub figures: Vec<PageFigure>,
-    pub figure_warnings: Vec<String>,
+    pub figure_warnings: Vec<Warning>,
     /// The run's tables as written (relative to the output folder).
     pub tables: Vec<String>,
     /// Why its log could not be read or analysed (never from the cache).
@@ -167,7 +168,7 @@ impl Sink<'_> {
     pub(super) fn figures(
         &self,
         specs: &[FigureSpec],
-    ) -> Result<(Vec<PageFigure>, Vec<String>), WriteError> {
+    ) -> Result<(Vec<PageFigure>, Vec<Warning>), WriteError> {
         match self.files {
             Some(files) if !specs.is_empty() => files.write(specs),
             _ => Ok((Vec::new(), Vec::new())),

@@ -4,6 +4,7 @@
 //! read (by `ingest`, through `log_stage`) and dropped inside each step; the
 //! writing is `sink`'s, as each run's output arrives.
 
+use crate::warning::Warning;
 use std::sync::Arc;
 
 use super::sensitivity::NoiseSource;
@@ -207,7 +208,10 @@ pub(super) fn with_rig(
     out.force_tf = match rig_at_p.map(|r| models(r, &plan.specimen)) {
         Some(Ok((_, f))) => f,
         Some(Err(e)) => {
-            out.warnings.push(format!("no force model (Eq. 45): {e}"));
+            out.warnings.push(Warning::new(
+                "no force model (Eq. 45)",
+                format!("no force model (Eq. 45): {e}"),
+            ));
             None
         }
         None => None,

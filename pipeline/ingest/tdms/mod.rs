@@ -11,6 +11,7 @@
 
 mod layout;
 
+use crate::warning::Warning;
 use std::path::Path;
 
 use super::arrays::{self, Arrays};
@@ -165,11 +166,16 @@ impl Arrays for Tdms<'_, '_> {
         &self.unusable
     }
 
-    fn warnings(&self) -> Vec<String> {
+    fn warnings(&self) -> Vec<Warning> {
         self.layout
             .dropped
             .iter()
-            .map(|d| format!("{}: {d}", self.path.display()))
+            .map(|d| {
+                Warning::new(
+                    "the file ends inside a segment, which was dropped",
+                    format!("{}: {d}", self.path.display()),
+                )
+            })
             .collect()
     }
 }
