@@ -265,8 +265,8 @@ pub fn zoh_response(f_hz: f64, sample_rate_hz: f64) -> Complex<f64> {
 /// without them put beta1 0.2 % (nine stds) high.
 ///
 /// Computed from the state space rather than by summing: with Phi(t) =
-/// e^{A t} and Gamma(t) = int_0^t e^{A s} ds B, x[k+1] = Phi(T) x[k] +
-/// Gamma(T) u[k] holds exactly, and a delay tau = q T + eps (0 <= eps < T)
+/// e^{A t} and Gamma(t) = int_0^t e^{A s} ds B, x\[k+1\] = Phi(T) x\[k\] +
+/// Gamma(T) u\[k\] holds exactly, and a delay tau = q T + eps (0 <= eps < T)
 /// reads the state T - eps into the period q + 1 samples back (the
 /// simulator's taps, `simulate::discrete`), so
 ///

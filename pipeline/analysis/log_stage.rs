@@ -744,7 +744,7 @@ fn coarse_quantisation(x: &[f64]) -> Option<String> {
     })
 }
 
-/// A misfit put down to a nonlinear reading ([`reading_nonlinearity`]).
+/// A misfit put down to a nonlinear reading (`slow_gain_findings`).
 pub const READING_CAUSE: &str = "the logged displacement or command read through a nonlinearity the loop does not see (the unloaded run's warning)";
 
 /// Where a sweep is slow the loop makes the displacement it feeds back

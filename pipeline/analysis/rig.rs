@@ -333,7 +333,7 @@ fn narrow_causes(
 }
 
 /// What a misfit is put down to where the loaded runs' gain changes with
-/// amplitude and the unloaded run's does not ([`slow_gain_pattern`]).
+/// amplitude and the unloaded run's does not (`slow_gain_pattern`).
 pub const LOAD_GAIN_CAUSE: &str =
     "a gain that depends on the load, which the slow parts of the sweeps show (the warning above)";
 

@@ -31,7 +31,7 @@
 //! folded images put on each run's continuous model with the hold,
 //! evaluated at the estimate and followed to the estimate whose A is its
 //! own, or left at 1 where its whole effect is below the fit's tolerance
-//! ([`settle`]). The friction's and a stiffening spring's describing
+//! (`settle`). The friction's and a stiffening spring's describing
 //! functions hold at a bin's own frequency, not at its images: A is the
 //! linear rig's (the specimen as stated, the seals' viscous damping in).
 //! A run's force over command is S(s) times

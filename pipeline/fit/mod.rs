@@ -21,13 +21,13 @@
 //! factor per bin and makes the factor exact, Z A with A = G_d / (G Z) at
 //! its own estimate ([`alias_factor`]): set at the start, then at each
 //! optimum until evaluating it there would move no parameter by
-//! [`ALIAS_SETTLED`] of its stated std ([`refine_held`]). A depends weakly
+//! [`ALIAS_SETTLED`] of its stated std (`refine_held`). A depends weakly
 //! on the plant (A - 1 is O((f / fs)^(r+1)) for relative degree r), so
 //! each re-evaluation takes the error down by about that much, and one or
 //! two settle it; the Jacobian leaves out dA/dtheta, a relative O((f /
 //! fs)^(r+1)) of it, and so do the stds. Where the aliases' whole effect
 //! is below that tolerance (its projection onto the Jacobian's columns,
-//! read on every [`ALIAS_PROBE_STRIDE`]-th bin: [`shift_in_stds`]), as on
+//! read on every [`ALIAS_PROBE_STRIDE`]-th bin: `shift_in_stds`), as on
 //! the paper's 2048 Hz logs, the fit is the continuous factor's; what reads
 //! the fit against its log (adequacy, residual noise, figures, tables)
 //! takes the model as the fit compared it ([`TfFit::as_logged`]).
@@ -903,7 +903,7 @@ const ALIAS_PASSES: usize = 4;
 
 /// The aliases are followed while evaluating them at the estimate would
 /// move some parameter by this fraction of its stated std or more
-/// ([`shift_in_stds`]). Where their whole effect is below it (a high
+/// (`shift_in_stds`). Where their whole effect is below it (a high
 /// sampling rate: the paper's 2048 Hz), the hold's continuous factor is the
 /// model. On noise-free data the fit follows them to round-off, in as many
 /// passes as allowed.
