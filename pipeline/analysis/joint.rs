@@ -469,9 +469,12 @@ fn describe(
     };
     if let Some(m) = misfit {
         let text = misfit_note(fit, m, known);
+        let likely = known
+            .and_then(super::log_stage::cause_name)
+            .map_or(String::new(), |n| format!("; likely {n}"));
         warnings.push(Warning::new(
             format!(
-                "rig: no structure explains the data; {}",
+                "rig: no structure fits: {}{likely}",
                 fit.adequacy.failure_headline()
             ),
             format!("rig: {text}"),
@@ -590,8 +593,14 @@ fn adequacy_warnings(
         estimator.understated_noise(),
         known,
     ) {
+        let likely = known
+            .and_then(super::log_stage::cause_name)
+            .map_or(String::new(), |n| format!("; likely {n}"));
         warnings.push(Warning::new(
-            format!("rig: the joint fit: {}", fit.adequacy.failure_headline()),
+            format!(
+                "rig: joint fit misses: {}{likely}",
+                fit.adequacy.failure_headline()
+            ),
             format!("rig: the joint fit (structure \"{structure}\"): {d}"),
         ));
     }

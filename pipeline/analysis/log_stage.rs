@@ -801,6 +801,38 @@ pub const SETTINGS_CAUSE: &str = "the FRF settings the log contradicts (identifi
 pub const NONLINEAR_CAUSE: &str = "the rig is not linear at this amplitude (the warning above says how): no linear structure holds it";
 pub const STIFFNESS_CAUSE: &str = "the spring's stiffness the manifest states, which its force and displacement contradict (the warning above)";
 
+/// A cause a misfit is put down to (a run's, or the campaign's: the
+/// constants above, `rig::LOAD_GAIN_CAUSE`, the springs' disagreement, the
+/// friction's harmonics), named in a few words for a headline; a run's
+/// cause may carry its run's id ("run k1: ...").
+pub fn cause_name(cause: &str) -> Option<&'static str> {
+    let cause = match cause.split_once(": ") {
+        Some((run, rest)) if run.starts_with("run ") => rest,
+        _ => cause,
+    };
+    let named: [(&str, &str); 9] = [
+        (SETTINGS_CAUSE, "the FRF settings"),
+        (STIFFNESS_CAUSE, "the stated stiffness"),
+        (NONLINEAR_CAUSE, "a nonlinear rig"),
+        (READING_CAUSE, "a nonlinear reading"),
+        (
+            "its gain against the command changes",
+            "an amplitude-dependent gain",
+        ),
+        (
+            "the displacement's coarse quantisation",
+            "coarse quantisation",
+        ),
+        ("a gain that depends on the load", "a load-dependent gain"),
+        ("the springs' disagreement", "the springs' disagreement"),
+        ("the seal friction's harmonics", "seal friction's harmonics"),
+    ];
+    named
+        .iter()
+        .find(|(text, _)| cause.starts_with(text))
+        .map(|(_, name)| *name)
+}
+
 /// What a response's harmonics point at, in a few words.
 pub const NONLINEAR_CAUSES: &str = "seal friction puts odd harmonics into the displacement, a stiffening spring its third into the force";
 
@@ -1113,4 +1145,31 @@ fn findings(
     };
     warnings.extend(contradicted);
     cause
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Each cause a misfit is put down to has a short name, short enough
+    /// for a headline beside a fit's numbers, found past a run's id.
+    #[test]
+    fn each_cause_has_a_short_name() {
+        let causes = [
+            SETTINGS_CAUSE.to_string(),
+            STIFFNESS_CAUSE.to_string(),
+            NONLINEAR_CAUSE.to_string(),
+            format!("run spring-k1: {READING_CAUSE}"),
+            crate::analysis::rig::LOAD_GAIN_CAUSE.to_string(),
+        ];
+        for c in &causes {
+            let name = cause_name(c).unwrap_or_else(|| panic!("no name for {c}"));
+            assert!(name.len() <= 27, "{name}");
+        }
+        assert_eq!(
+            cause_name(&format!("run k1: {READING_CAUSE}")),
+            Some("a nonlinear reading")
+        );
+        assert_eq!(cause_name("run k1: something else"), None);
+    }
 }

@@ -116,28 +116,25 @@ impl Adequacy {
         self.failures().is_empty()
     }
 
-    /// A failed fit's finding in a line: the test that failed most, with
-    /// its number.
+    /// A failed fit's finding in a few words: the test that failed most,
+    /// with its number.
     pub fn failure_headline(&self) -> String {
         let phase = self.phase_slope.as_ref().filter(|p| p.z > Z_LIMIT);
         let correlated = self.correlation.as_ref().filter(|c| c.z > Z_LIMIT);
         if self.cost_z > Z_LIMIT {
             format!(
-                "misfit: reduced chi-square {:.2}, {:.0} std above the noise's",
+                "chi-square {:.2}, {:.0} std above noise",
                 self.reduced_chi2(),
                 self.cost_z
             )
         } else if let Some(p) = phase {
             format!(
-                "misfit: the phase lags as a {:.3} ms delay would ({:.0} std)",
+                "phase lags as a {:.3} ms delay ({:.0} std)",
                 1e3 * p.delay_s,
                 p.z
             )
         } else if let Some(c) = correlated {
-            format!(
-                "misfit: residuals correlate (r = {:.2}, {:.0} std)",
-                c.r, c.z
-            )
+            format!("residuals correlate (r = {:.2}, {:.0} std)", c.r, c.z)
         } else {
             "the fit passes its adequacy tests".to_string()
         }
@@ -146,7 +143,7 @@ impl Adequacy {
     /// An overstated noise's finding in a line.
     pub fn overstated_headline(&self) -> String {
         format!(
-            "stds too wide: reduced chi-square {:.3}, {:.0} std below the noise's",
+            "stds too wide: chi-square {:.3}, {:.0} std below noise",
             self.reduced_chi2(),
             -self.cost_z
         )
