@@ -469,9 +469,7 @@ fn describe(
     };
     if let Some(m) = misfit {
         let text = misfit_note(fit, m, known);
-        let likely = known
-            .and_then(super::log_stage::cause_name)
-            .map_or(String::new(), |n| format!("; likely {n}"));
+        let likely = super::log_stage::likely(known);
         warnings.push(Warning::new(
             format!(
                 "rig: no structure fits: {}{likely}",
@@ -593,9 +591,7 @@ fn adequacy_warnings(
         estimator.understated_noise(),
         known,
     ) {
-        let likely = known
-            .and_then(super::log_stage::cause_name)
-            .map_or(String::new(), |n| format!("; likely {n}"));
+        let likely = super::log_stage::likely(known);
         warnings.push(Warning::new(
             format!(
                 "rig: joint fit misses: {}{likely}",

@@ -833,6 +833,14 @@ pub fn cause_name(cause: &str) -> Option<&'static str> {
         .map(|(_, name)| *name)
 }
 
+/// "; likely <name>" for a headline whose misfit is put down to `cause`
+/// ([`cause_name`]), or nothing.
+pub fn likely(cause: Option<&str>) -> String {
+    cause
+        .and_then(cause_name)
+        .map_or(String::new(), |n| format!("; likely {n}"))
+}
+
 /// What a response's harmonics point at, in a few words.
 pub const NONLINEAR_CAUSES: &str = "seal friction puts odd harmonics into the displacement, a stiffening spring its third into the force";
 

@@ -529,11 +529,7 @@ fn own_fit_warnings(summary: &FitSummary, st: &LogStage, fit: &TfFit) -> Vec<War
             st.choice.plan.estimator.understated_noise(),
             st.cause.as_deref(),
         ) {
-            let likely = st
-                .cause
-                .as_deref()
-                .and_then(super::log_stage::cause_name)
-                .map_or(String::new(), |n| format!("; likely {n}"));
+            let likely = super::log_stage::likely(st.cause.as_deref());
             warnings.push(Warning::new(
                 format!("the run's own fit misses: {}{likely}", a.failure_headline()),
                 format!("the run's own fit: {d}"),
