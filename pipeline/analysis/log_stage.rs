@@ -833,7 +833,7 @@ pub fn cause_name(cause: &str) -> Option<&'static str> {
         .map(|(_, name)| *name)
 }
 
-/// "; likely <name>" for a headline whose misfit is put down to `cause`
+/// `"; likely <name>"` for a headline whose misfit is put down to `cause`
 /// ([`cause_name`]), or nothing.
 pub fn likely(cause: Option<&str>) -> String {
     cause
