@@ -131,6 +131,8 @@ fn bench_joint(c: &mut Criterion) {
         friction_start_n: 0.0,
         friction_smoothing_m_per_s: None,
         seal_damping: false,
+        command_gain: false,
+        command_gain_start: 1.0,
     };
     // Fail loudly rather than time a fit that does not work.
     let fit = joint_fit(&runs, &start, &opts).unwrap();

@@ -482,3 +482,75 @@ fn a_500_run_campaign_page_is_complete_sortable_and_filterable() {
         page.len()
     ));
 }
+
+/// A night whose runs share a warning (each run's command limited at 3 mm
+/// in the controller): in Chromium each run's status cell in the campaign
+/// page's runs table takes a line or two (its status and a link to its
+/// warnings), and below the table the warning is listed once with a link
+/// to each run's warnings.
+#[test]
+fn a_warning_the_runs_share_is_listed_once_and_each_run_keeps_one_line() {
+    let dir = scratch();
+    let sim = crate::util::PaperSweep {
+        excitation: Some(
+            "kind = \"chirp\"\nlaw = \"quadratic\"\nf0_hz = 0.1\nf1_hz = 35.0\nduration_s = 58.0\namplitude_m = 0.004\nlimit_m = 0.003\nlead_in_s = 1.0\nlead_out_s = 1.0",
+        ),
+        validation: true,
+        log_format: "csv",
+        ..Default::default()
+    };
+    let manifest = write(dir.path(), "night.toml", &sim.text());
+    let out = dir.path().join("out");
+    let o = crate::util::servoid_into(
+        dir.path(),
+        "simulate",
+        &manifest,
+        &out,
+        &["--run", "--quiet", "--figures", "none"],
+    );
+    assert_eq!(o.code, 0, "stderr:\n{}", o.stderr);
+    let Some(mut b) =
+        browser("a_warning_the_runs_share_is_listed_once_and_each_run_keeps_one_line")
+    else {
+        return;
+    };
+    b.open(&out.join("report.html")).unwrap();
+    let errors = b.errors().unwrap();
+    assert!(errors.is_empty(), "console errors:\n{}", errors.join("\n"));
+    // Each run's status cell: the height its content takes, in lines of
+    // its text (a warning's paragraphs in it took some 1,000 px a run).
+    let lines = b
+        .evaluate(
+            "Array.from(document.querySelectorAll('#run-table tbody tr')).map(r => {\
+               const td = r.children[4]; const range = document.createRange();\
+               range.selectNodeContents(td);\
+               const line = parseFloat(getComputedStyle(td).lineHeight) || 1.2 * parseFloat(getComputedStyle(td).fontSize);\
+               return range.getBoundingClientRect().height / line; })",
+        )
+        .unwrap();
+    let lines: Vec<f64> = lines
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|h| h.as_f64().unwrap())
+        .collect();
+    assert_eq!(lines.len(), 4, "{lines:?}");
+    assert!(
+        lines.iter().all(|&l| l > 0.5 && l < 2.6),
+        "status cells of {lines:?} lines"
+    );
+    let shared = b
+        .evaluate(
+            "Array.from(document.querySelector('#run-warnings ~ ul.warn').querySelectorAll('li'))\
+             .map(li => [li.textContent, li.querySelectorAll('a').length])",
+        )
+        .unwrap();
+    let limited: Vec<&Value> = shared
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|li| text(li[0].clone()).contains("a limit set in the controller"))
+        .collect();
+    assert_eq!(limited.len(), 1, "listed once: {shared}");
+    assert_eq!(limited[0][1], 4, "with each run's link: {shared}");
+}

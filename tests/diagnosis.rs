@@ -10,13 +10,9 @@
 //! is absent. The confusion table (`cargo test --release diagnosis --
 //! --nocapture` prints it) is in docs/accuracy.md.
 
-use servoid::manifest::load;
-use servoid::manifest::simulation::load_simulation_str;
 use servoid::results::Results;
-use servoid::run::analyse;
-use servoid::run::simulate::simulate_campaign;
 
-use crate::util::{PaperSweep, scratch};
+use crate::util::{PaperSweep, analysed_simulation, rewrite_column};
 
 /// What a message can name as the cause.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
@@ -207,40 +203,16 @@ fn messages(results: &Results) -> Vec<String> {
 }
 
 fn diagnose(case: &Case, seed: u64) -> Vec<String> {
-    let dir = scratch();
-    let sim = load_simulation_str(&simulation(case, seed), &dir.path().join("sim.toml"))
-        .expect("a valid simulation");
-    let out = simulate_campaign(&sim, dir.path()).expect("simulates");
-    (case.logs)(&dir.path().join("logs"));
-    // The lab's manifest names its logs without their SHA-256 (a log a
-    // case damages would fail that check first).
-    let text: String = std::fs::read_to_string(&out.manifest)
-        .unwrap()
-        .lines()
-        .filter(|l| !l.starts_with("sha256 = "))
-        .map(|l| format!("{l}\n"))
-        .collect();
-    std::fs::write(&out.manifest, (case.edit)(text)).unwrap();
-    let campaign = load(&out.manifest).expect("the analysis manifest loads");
-    messages(&analyse(&campaign))
+    messages(&analysed_simulation(
+        &simulation(case, seed),
+        case.logs,
+        case.edit,
+    ))
 }
 
 /// Column `col` of the log of run `run` rewritten by `f(sample, value)`.
 fn rewrite(logs: &std::path::Path, run: &str, col: usize, f: impl Fn(usize, &str) -> String) {
-    let path = logs.join(format!("{run}.csv"));
-    let text = std::fs::read_to_string(&path).unwrap();
-    let mut out = String::with_capacity(text.len());
-    for (i, line) in text.lines().enumerate() {
-        if i == 0 {
-            out.push_str(line);
-        } else {
-            let mut fields: Vec<String> = line.split(',').map(String::from).collect();
-            fields[col] = f(i - 1, &fields[col]);
-            out.push_str(&fields.join(","));
-        }
-        out.push('\n');
-    }
-    std::fs::write(&path, out).unwrap();
+    rewrite_column(&logs.join(format!("{run}.csv")), col, f);
 }
 
 /// Every log's column `col` rewritten.

@@ -351,3 +351,45 @@ specimen = {k2}
         )
     }
 }
+
+/// `sweep` (a simulation manifest) simulated in a scratch folder, its logs
+/// touched by `logs`, and analysed as the generated manifest has it, less
+/// the logs' SHA-256 (a touched log would fail that check first) and with
+/// `edit` applied: the results.
+pub fn analysed_simulation(
+    sweep: &str,
+    logs: impl FnOnce(&Path),
+    edit: impl FnOnce(String) -> String,
+) -> servoid::results::Results {
+    use servoid::manifest::{load, simulation::load_simulation_str};
+    let dir = scratch();
+    let sim = load_simulation_str(sweep, &dir.path().join("sim.toml")).expect("a valid simulation");
+    let out = servoid::run::simulate::simulate_campaign(&sim, dir.path()).expect("simulates");
+    logs(&dir.path().join("logs"));
+    let text: String = std::fs::read_to_string(&out.manifest)
+        .unwrap()
+        .lines()
+        .filter(|l| !l.starts_with("sha256 = "))
+        .map(|l| format!("{l}\n"))
+        .collect();
+    std::fs::write(&out.manifest, edit(text)).unwrap();
+    servoid::run::analyse(&load(&out.manifest).expect("the analysis manifest loads"))
+}
+
+/// Column `col` of the CSV log `path` (a header line, then samples)
+/// rewritten by `f(sample, field)`.
+pub fn rewrite_column(path: &Path, col: usize, f: impl Fn(usize, &str) -> String) {
+    let text = std::fs::read_to_string(path).unwrap();
+    let mut out = String::with_capacity(text.len());
+    for (i, line) in text.lines().enumerate() {
+        if i == 0 {
+            out.push_str(line);
+        } else {
+            let mut fields: Vec<String> = line.split(',').map(String::from).collect();
+            fields[col] = f(i - 1, &fields[col]);
+            out.push_str(&fields.join(","));
+        }
+        out.push('\n');
+    }
+    std::fs::write(path, out).unwrap();
+}

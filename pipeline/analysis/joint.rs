@@ -119,44 +119,9 @@ pub fn joint(
     opts.friction_smoothing_m_per_s = campaign.joint.friction_smoothing_m_per_s;
     let choice = campaign.joint.structure;
     let band_top = fitted.iter().map(|(p, ..)| p.band_hz.1).fold(0.0, f64::max);
-    let sel = joint::select(&runs, start, &opts, choice, band_top);
-    // A spring's stiffening is read from its force; the data then choose
-    // whether the fit holds better with it or with the stated k (a load
-    // cell's delay against the LVDT's can mimic a cubic term).
-    let (runs, sel) = if runs.iter().any(|r| r.spring_cubic_n_per_m3.is_some()) {
-        let stated: Vec<JointRun<'_>> = runs
-            .iter()
-            .map(|r| JointRun {
-                spring_cubic_n_per_m3: None,
-                ..*r
-            })
-            .collect();
-        let linear = joint::select(&stated, start, &opts, choice, band_top);
-        match (sel.fit().map(schwarz), linear.fit().map(schwarz)) {
-            (Some(with), Some(without)) if without <= with => {
-                warnings.push(Warning::new(
-                    "rig: the springs' cubic term is not borne out by their FRFs; the stated k are used",
-                    STIFFENING_REJECTED,
-                ));
-                (stated, linear)
-            }
-            (None, Some(_)) => (stated, linear),
-            _ => (runs, sel),
-        }
-    } else {
-        (runs, sel)
-    };
+    let (runs, sel) = select_springs(runs, start, &opts, choice, band_top, warnings);
     let misfit = joint::run_spread(&runs, &sel, &opts);
-    // An identification run is named by its id; a validation run's two
-    // FRFs by what each measures.
-    let ids: Vec<String> = fitted
-        .iter()
-        .map(|(p, output, ..)| match (p.role, output) {
-            (Role::Validation, Output::Displacement) => format!("{} x1/u", p.id),
-            (Role::Validation, Output::Force) => format!("{} f/u", p.id),
-            _ => p.id.clone(),
-        })
-        .collect();
+    let ids = frf_ids(&fitted);
     let seq_chi2 = sequential_chi2(evidence);
     let stiffening: Vec<(String, f64)> = ids
         .iter()
@@ -190,15 +155,63 @@ pub fn joint(
     Some(result)
 }
 
-/// Each FRF the joint fit is given: its run, what it measures, its bins and
-/// the rate they were logged at; the identification runs' first, then the
-/// validation runs' (their count is the second value). None when no
-/// identification run has bins to fit.
-#[allow(clippy::type_complexity)]
+/// The structure chosen for `runs`, and the runs it was chosen on: where a
+/// spring's stiffening was read from its force, the data choose whether the
+/// fit holds better with it or with the stated k (a load cell's delay
+/// against the LVDT's can mimic a cubic term).
+fn select_springs<'a>(
+    runs: Vec<JointRun<'a>>,
+    start: &RigParams,
+    opts: &JointOptions,
+    choice: Choice,
+    band_top: f64,
+    warnings: &mut Vec<Warning>,
+) -> (Vec<JointRun<'a>>, Selection) {
+    let sel = joint::select(&runs, start, opts, choice, band_top);
+    if !runs.iter().any(|r| r.spring_cubic_n_per_m3.is_some()) {
+        return (runs, sel);
+    }
+    let stated: Vec<JointRun<'_>> = runs
+        .iter()
+        .map(|r| JointRun {
+            spring_cubic_n_per_m3: None,
+            ..*r
+        })
+        .collect();
+    let linear = joint::select(&stated, start, opts, choice, band_top);
+    match (sel.fit().map(schwarz), linear.fit().map(schwarz)) {
+        (Some(with), Some(without)) if without <= with => {
+            warnings.push(Warning::new(
+                "rig: the springs' cubic term is not borne out by their FRFs; the stated k are used",
+                STIFFENING_REJECTED,
+            ));
+            (stated, linear)
+        }
+        (None, Some(_)) => (stated, linear),
+        _ => (runs, sel),
+    }
+}
+
+/// Each fitted FRF's name: an identification run's id; a validation run's
+/// two FRFs by what each measures.
+fn frf_ids(fitted: &[Fitted<'_>]) -> Vec<String> {
+    fitted
+        .iter()
+        .map(|(p, output, ..)| match (p.role, output) {
+            (Role::Validation, Output::Displacement) => format!("{} x1/u", p.id),
+            (Role::Validation, Output::Force) => format!("{} f/u", p.id),
+            _ => p.id.clone(),
+        })
+        .collect()
+}
+
 /// An FRF the joint fit is given: its run, what it measures, its bins, the
 /// log's sample rate and a stiffening spring's cubic term (N/m^3).
 type Fitted<'a> = (&'a RunPlan, Output, &'a FitData, f64, Option<f64>);
 
+/// Each FRF the joint fit is given, the identification runs' first, then
+/// the validation runs' (their count is the second value). None when no
+/// identification run has bins to fit.
 fn fitted_frfs<'a>(
     evidence: &[(&'a RunPlan, &'a Evidence)],
     validation: &[(&'a RunPlan, &'a ValidationEvidence)],
@@ -256,6 +269,8 @@ fn options(ident: &IdentificationPlan, start: &RigParams, fs: f64) -> JointOptio
         friction_start_n: 0.0,
         friction_smoothing_m_per_s: None,
         seal_damping: false,
+        command_gain: false,
+        command_gain_start: 1.0,
     }
 }
 
@@ -329,10 +344,22 @@ fn explain(sel: &Selection) -> String {
     } else {
         parts.join("; ")
     };
+    let gain = sel.fit().and_then(command_gain_note).unwrap_or_default();
     format!(
-        "the data choose \"{}\" by extra-sum-of-squares F tests between nested structures and, among the modes the tests take at different places (the same parameter count), the lowest weighted cost: {tests}",
+        "the data choose \"{}\" by extra-sum-of-squares F tests between nested structures and, among the modes the tests take at different places (the same parameter count), the lowest weighted cost: {tests}{gain}",
         auto.as_str()
     )
+}
+
+/// The logged command's gain where the fit took it, in words.
+fn command_gain_note(fit: &JointFit) -> Option<String> {
+    let g = fit.command_gain?;
+    let k = fit.names.iter().position(|n| *n == joint::COMMAND_GAIN)?;
+    Some(format!(
+        "; the logged command's gain, fitted because the F test takes it over the 1 the rig has at rest (p < 0.001), is {g:.6} +- {:.6}: the logged command reads {:+.4} % from the command the loop follows (another converter's or calibration's scale, or a command of few levels, each level quantised)",
+        fit.std[k],
+        100.0 * (1.0 / g - 1.0)
+    ))
 }
 
 /// What a fit with the piston's friction leaves unexplained.

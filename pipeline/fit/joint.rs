@@ -44,7 +44,7 @@
 //! different sizes) and the delay in sample periods; Levenberg-Marquardt
 //! (`fit::lm`) with the analytic Jacobian below, residuals weighted by each
 //! bin's measured variance as the per-run fit weights them. The bins (tens
-//! of thousands) far outnumber the parameters (at most seven), so the
+//! of thousands) far outnumber the parameters (at most twelve), so the
 //! solver is given J^T J and J^T r accumulated bin by bin in one parallel
 //! pass ([`Normal`]) rather than a tall J; J itself is formed once, at the
 //! optimum, for the covariance (through its QR factor, which keeps the
@@ -264,6 +264,17 @@ pub const FRICTION: &str = "coulomb_friction_n";
 /// specimen's damping shared by every run.
 pub const SEAL_DAMPING: &str = "seal_damping_ns_per_m";
 
+/// The name of the gain between the logged command and the command the
+/// loop follows, the last parameter when it is fitted. Under P control the
+/// piston integrates the valve's flow, so at rest the displacement equals
+/// the command the loop sees (Eq. 12 at s = 0): the rig's own static gain
+/// is 1 and no rig parameter can stand for another. The logged command
+/// need not be that command: a reading of it through another converter or
+/// calibration differs by a gain, and on a command of few levels (a square
+/// wave) its quantisation is one too (half a step in a level). The gain
+/// multiplies every run's FRF, displacement and force alike.
+pub const COMMAND_GAIN: &str = "command_gain";
+
 /// How to fit.
 #[derive(Debug, Clone, Copy)]
 pub struct JointOptions {
@@ -294,6 +305,10 @@ pub struct JointOptions {
     pub friction_smoothing_m_per_s: Option<f64>,
     /// Whether the seals' viscous damping is fitted with the friction.
     pub seal_damping: bool,
+    /// Whether the logged command's gain ([`COMMAND_GAIN`]) is fitted,
+    /// and where it starts.
+    pub command_gain: bool,
+    pub command_gain_start: f64,
 }
 
 /// The joint estimate.
@@ -315,6 +330,8 @@ pub struct JointFit {
     pub friction_n: Option<f64>,
     /// The seals' viscous damping (N s/m), when fitted.
     pub seal_damping_ns_per_m: Option<f64>,
+    /// The logged command's gain ([`COMMAND_GAIN`]), when fitted.
+    pub command_gain: Option<f64>,
     /// beta1, a1b0, a2, a3, then delay (s), valve frequency (Hz) and
     /// damping as the structure has them, then the force FRFs' delay.
     pub params: Vec<f64>,
@@ -467,6 +484,8 @@ struct JointProblem {
     friction: Option<usize>,
     /// Where the seals' viscous damping is in theta, when it is fitted.
     seal_damping: Option<usize>,
+    /// Where the command's log gain is in theta, when it is fitted.
+    command_gain: Option<usize>,
     /// The sample period (s): the delay's unit in theta.
     period_s: f64,
     /// The command's intersample behaviour, for the aliases.
@@ -483,8 +502,9 @@ struct BinEval {
 }
 
 /// The most parameters a fit has: the valve-and-piston structure's eight,
-/// the force FRFs' delay, the friction and the seals' damping.
-const MAX_PARAMS: usize = 11;
+/// the force FRFs' delay, the friction, the seals' damping and the
+/// command's gain.
+const MAX_PARAMS: usize = 12;
 
 /// The physical values at a point theta, computed once per pass over the
 /// bins.
@@ -506,6 +526,8 @@ struct Point {
     fc: f64,
     /// The seals' viscous damping (N s/m), 0 when not fitted.
     cv: f64,
+    /// The logged command's gain, 1 when not fitted.
+    g: f64,
 }
 
 impl Point {
@@ -523,6 +545,7 @@ impl Point {
             mp: 0.0,
             fc: 0.0,
             cv: 0.0,
+            g: 1.0,
         }
     }
 }
@@ -538,6 +561,7 @@ impl JointProblem {
             + usize::from(self.force_delay.is_some())
             + usize::from(self.friction.is_some())
             + usize::from(self.seal_damping.is_some())
+            + usize::from(self.command_gain.is_some())
     }
 
     fn names(&self) -> Vec<&'static str> {
@@ -550,6 +574,9 @@ impl JointProblem {
         }
         if self.seal_damping.is_some() {
             names.push(SEAL_DAMPING);
+        }
+        if self.command_gain.is_some() {
+            names.push(COMMAND_GAIN);
         }
         names
     }
@@ -575,6 +602,7 @@ impl JointProblem {
             force_delay: self.force_delay,
             friction: self.friction,
             seal_damping: self.seal_damping,
+            command_gain: self.command_gain,
             period_s: self.period_s,
             intersample: self.intersample,
         }
@@ -603,6 +631,7 @@ impl JointProblem {
             },
             fc: self.friction.map_or(0.0, |k| theta[k]),
             cv: self.seal_damping.map_or(0.0, |k| theta[k]),
+            g: self.command_gain.map_or(1.0, |k| theta[k].exp()),
         }
     }
 
@@ -629,9 +658,9 @@ impl JointProblem {
                 } else {
                     poly::mul(&poly::add(&sbq, &[a]), &vden)
                 };
-                (vec![a * wv * wv], den)
+                (vec![x.g * a * wv * wv], den)
             }
-            _ => (vec![a], poly::add(&sbq, &[a])),
+            _ => (vec![x.g * a], poly::add(&sbq, &[a])),
         };
         let (num, tau) = if run.force {
             (poly::mul(&num, &[m, c, k]), x.tau_force)
@@ -767,10 +796,10 @@ impl JointProblem {
         // exp(-s tau) on the imaginary axis: a rotation by -w tau.
         let tau = if bin.force { x.tau_force } else { x.tau };
         let known = if tau == 0.0 {
-            bin.known
+            bin.known * x.g
         } else {
             let (sin, cos) = (-s.im * tau).sin_cos();
-            bin.known * Complex::new(cos, sin)
+            bin.known * Complex::new(x.g * cos, x.g * sin)
         };
         let inv_d = one / d;
         let h = num * inv_d * known;
@@ -800,6 +829,9 @@ impl JointProblem {
             }
             if let Some(k) = self.seal_damping {
                 grad[k] = -h_d * sb * (s + x.a3) * s;
+            }
+            if let Some(k) = self.command_gain {
+                grad[k] = h;
             }
             if let (Some((wv, zeta)), Some(place)) = (x.mode, place) {
                 // wv dV/dwv / V and zeta dV/dzeta / V, times the
@@ -877,6 +909,7 @@ impl JointProblem {
             9 => self.normal_p::<9>(theta),
             10 => self.normal_p::<10>(theta),
             11 => self.normal_p::<11>(theta),
+            12 => self.normal_p::<12>(theta),
             p => unreachable!("{p} parameters"),
         }
     }
@@ -1077,6 +1110,12 @@ fn problem(runs: &[JointRun<'_>], opts: &JointOptions) -> Result<JointProblem, F
     let friction = (opts.friction && runs.iter().any(|r| r.amplitude_m.is_some()))
         .then(|| opts.structure.n_params() + usize::from(force_delay.is_some()));
     let seal_damping = friction.filter(|_| opts.seal_damping).map(|k| k + 1);
+    let command_gain = opts.command_gain.then(|| {
+        opts.structure.n_params()
+            + usize::from(force_delay.is_some())
+            + usize::from(friction.is_some())
+            + usize::from(seal_damping.is_some())
+    });
     Ok(JointProblem {
         bins,
         runs: models,
@@ -1086,6 +1125,7 @@ fn problem(runs: &[JointRun<'_>], opts: &JointOptions) -> Result<JointProblem, F
         force_delay,
         friction,
         seal_damping,
+        command_gain,
         period_s: 1.0 / opts.sample_rate_hz,
         intersample: opts.intersample,
     })
@@ -1224,6 +1264,9 @@ fn start_theta(
     }
     if problem.seal_damping.is_some() {
         theta0.push(0.0);
+    }
+    if problem.command_gain.is_some() {
+        theta0.push(opts.command_gain_start.ln());
     }
     if !theta0.iter().all(|t| t.is_finite()) {
         return Err(FitError::NoSolution);
@@ -1380,6 +1423,10 @@ fn finish(
         params.push(theta[k]);
         factors.push(1.0);
     }
+    if let Some(k) = problem.command_gain {
+        params.push(theta[k].exp());
+        factors.push(theta[k].exp());
+    }
     let covariance = DMatrix::from_fn(p, p, |i, j| cov_theta[(i, j)] * factors[i] * factors[j]);
     let std = (0..p).map(|i| covariance[(i, i)].sqrt()).collect();
     let (adequacy, per_run) = problem.adequacy(&theta);
@@ -1405,6 +1452,7 @@ fn finish(
         force_delay_s: problem.force_delay.map(|k| params[k]),
         friction_n: problem.friction.map(|k| params[k]),
         seal_damping_ns_per_m: problem.seal_damping.map(|k| params[k]),
+        command_gain: problem.command_gain.map(|k| params[k]),
         params,
         names,
         covariance,

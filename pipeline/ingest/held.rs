@@ -171,15 +171,7 @@ pub fn holds_over(x: &[f64], start: usize, len: usize) -> bool {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    fn sweep(n: usize) -> Vec<f64> {
-        (0..n)
-            .map(|i| {
-                let t = i as f64 / 1000.0;
-                0.004 * (2.0 * std::f64::consts::PI * (0.1 * t + 0.3 * t * t)).sin()
-            })
-            .collect()
-    }
+    use crate::ingest::test_signals::sweep;
 
     fn quantise(x: &[f64], q: f64) -> Vec<f64> {
         x.iter().map(|v| (v / q).round() * q).collect()

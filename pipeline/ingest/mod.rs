@@ -1838,17 +1838,28 @@ const JITTER_WARN_FRACTION: f64 = 1e-6;
 /// Returns every warning about the log: those found while reading
 /// (`log.warnings`) followed by those of these checks.
 pub fn check_log(log: &Log, needs: &Needs) -> Result<Vec<Warning>, IngestError> {
-    let path = &log.path;
-    let mut warnings = log.warnings.clone();
     if log.n_rows < needs.min_samples {
         return Err(IngestError::TooShort {
-            path: path.clone(),
+            path: log.path.clone(),
             n: log.n_rows,
             min: needs.min_samples,
             need: "identification.frf.segment_length",
             advice: "record this run longer, or leave segment_length out so that servoid chooses a segment for each log (a lower segment_length would change every run's FRF, and so the rig)",
         });
     }
+    let mut warnings = log.warnings.clone();
+    warnings.extend(check_timing(log, needs)?);
+    warnings.extend(check_channels(log, needs)?);
+    Ok(warnings)
+}
+
+/// What the time column says of the sampling: stamps scattered about
+/// their grid (a warning beyond [`SCATTER_WARN_FRACTION`]), or intervals
+/// that jitter (an error beyond `needs.max_jitter_fraction`, a warning
+/// within it).
+fn check_timing(log: &Log, needs: &Needs) -> Result<Vec<Warning>, IngestError> {
+    let path = &log.path;
+    let mut warnings = Vec::new();
     if let Timing::Measured {
         mean_dt_s,
         jitter_rms_s,
@@ -1906,6 +1917,15 @@ pub fn check_log(log: &Log, needs: &Needs) -> Result<Vec<Warning>, IngestError> 
             }
         }
     }
+    Ok(warnings)
+}
+
+/// Each channel judged: none constant, a displacement or force not
+/// clipped where its command does not hold, a command limited at a level
+/// said.
+fn check_channels(log: &Log, needs: &Needs) -> Result<Vec<Warning>, IngestError> {
+    let path = &log.path;
+    let mut warnings = Vec::new();
     let mut channels: Vec<(&'static str, &'static str, &[f64])> = vec![
         ("command", "m", &log.command_m),
         ("displacement", "m", &log.displacement_m),
@@ -2057,4 +2077,19 @@ fn dims(size: &[usize]) -> String {
 /// What a cut-short MAT element needs, for [`FormatProblem::CutShort`].
 fn needed_bytes(needed: Option<usize>) -> String {
     needed.map_or_else(|| "an 8-byte tag and data".to_string(), |n| n.to_string())
+}
+
+/// Signals the ingest checks are tried on in their tests.
+#[cfg(test)]
+pub(crate) mod test_signals {
+    /// `n` samples at 1 kHz of a 4 mm quadratic chirp from 0.1 Hz, rising
+    /// 0.6 Hz a second.
+    pub fn sweep(n: usize) -> Vec<f64> {
+        (0..n)
+            .map(|i| {
+                let t = i as f64 / 1000.0;
+                0.004 * (2.0 * std::f64::consts::PI * (0.1 * t + 0.3 * t * t)).sin()
+            })
+            .collect()
+    }
 }

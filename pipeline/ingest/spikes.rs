@@ -223,15 +223,7 @@ fn local_scales(x: &[f64]) -> Vec<f64> {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    fn sweep(n: usize) -> Vec<f64> {
-        (0..n)
-            .map(|i| {
-                let t = i as f64 / 1000.0;
-                0.004 * (2.0 * std::f64::consts::PI * (0.1 * t + 0.3 * t * t)).sin()
-            })
-            .collect()
-    }
+    use crate::ingest::test_signals::sweep;
 
     /// One flipped sample in a sweep is found where it is, with its
     /// neighbours; interpolated, the record is the sweep again.

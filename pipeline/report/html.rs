@@ -161,30 +161,107 @@ impl<'a> Pages<'a> {
 
 /// The runs' warnings by headline, each once with the runs that give it
 /// (in manifest order), in the order they first appear: a night whose
-/// runs share a warning reads it once.
+/// runs share a warning reads it once. Headlines that differ only in
+/// their numbers are one warning, each number given as the range the runs
+/// span ("in 8.1–9.4 % of its samples").
 #[derive(Debug, serde::Serialize)]
 struct SharedWarning<'a> {
-    headline: &'a str,
+    headline: String,
     runs: Vec<&'a str>,
 }
+
+/// A headline cut at its numbers: the text around them, and each number
+/// as written with its value. A digit inside a word (x1/u, H2) is text.
+fn split_numbers(h: &str) -> (Vec<&str>, Vec<(&str, f64)>) {
+    let b = h.as_bytes();
+    let digit = |i: usize| b.get(i).is_some_and(u8::is_ascii_digit);
+    let (mut text, mut numbers) = (Vec::new(), Vec::new());
+    let (mut start, mut i) = (0, 0);
+    while i < b.len() {
+        let sign = matches!(b[i], b'-' | b'+') && digit(i + 1);
+        let in_word =
+            i > 0 && (b[i - 1].is_ascii_alphanumeric() || matches!(b[i - 1], b'_' | b'.'));
+        if !(digit(i) || sign) || in_word {
+            i += 1;
+            continue;
+        }
+        let mut j = i + usize::from(sign);
+        while digit(j) || (b.get(j) == Some(&b'.') && digit(j + 1)) {
+            j += 1;
+        }
+        if b.get(j) == Some(&b'e') {
+            let k = j + 1 + usize::from(matches!(b.get(j + 1), Some(b'-' | b'+')));
+            if digit(k) {
+                j = k;
+                while digit(j) {
+                    j += 1;
+                }
+            }
+        }
+        if let Ok(v) = h[i..j].parse::<f64>() {
+            text.push(&h[start..i]);
+            numbers.push((&h[i..j], v));
+            start = j;
+        }
+        i = j;
+    }
+    text.push(&h[start..]);
+    (text, numbers)
+}
+
+/// A shared warning's text and, number by number, what its runs give
+/// there, and the runs.
+type Group<'a> = (Vec<&'a str>, Vec<Vec<(&'a str, f64)>>, Vec<&'a str>);
 
 fn shared_warnings<'a>(
     runs: impl IntoIterator<Item = (&'a str, &'a [crate::warning::Warning])>,
 ) -> Vec<SharedWarning<'a>> {
-    let mut out: Vec<SharedWarning<'a>> = Vec::new();
+    let mut groups: Vec<Group<'a>> = Vec::new();
     for (id, warnings) in runs {
         for w in warnings {
-            match out.iter_mut().find(|s| s.headline == w.headline) {
-                Some(s) if s.runs.last() != Some(&id) => s.runs.push(id),
-                Some(_) => {}
-                None => out.push(SharedWarning {
-                    headline: &w.headline,
-                    runs: vec![id],
-                }),
+            let (text, numbers) = split_numbers(&w.headline);
+            match groups.iter_mut().find(|g| g.0 == text) {
+                Some((_, slots, ids)) => {
+                    if ids.last() != Some(&id) {
+                        ids.push(id);
+                    }
+                    for (slot, n) in slots.iter_mut().zip(numbers) {
+                        slot.push(n);
+                    }
+                }
+                None => {
+                    let slots = numbers.into_iter().map(|n| vec![n]).collect();
+                    groups.push((text, slots, vec![id]));
+                }
             }
         }
     }
-    out
+    groups
+        .into_iter()
+        .map(|(text, slots, runs)| SharedWarning {
+            headline: with_ranges(&text, &slots),
+            runs,
+        })
+        .collect()
+}
+
+/// A group's headline: its text with each number, or the range its runs
+/// span there (the lowest and the highest as written).
+fn with_ranges(text: &[&str], slots: &[Vec<(&str, f64)>]) -> String {
+    let mut headline = String::from(text[0]);
+    for (slot, after) in slots.iter().zip(&text[1..]) {
+        if slot.iter().all(|n| n.0 == slot[0].0) {
+            headline.push_str(slot[0].0);
+        } else {
+            let low = slot.iter().min_by(|a, b| a.1.total_cmp(&b.1));
+            let high = slot.iter().max_by(|a, b| a.1.total_cmp(&b.1));
+            if let (Some(low), Some(high)) = (low, high) {
+                headline.push_str(&format!("{}\u{2013}{}", low.0, high.0));
+            }
+        }
+        headline.push_str(after);
+    }
+    headline
 }
 
 fn as_f64(v: &Value) -> Option<f64> {
@@ -331,13 +408,68 @@ mod tests {
         let shared = shared_warnings([("a", &a[..]), ("b", &b[..]), ("c", &c[..])]);
         let got: Vec<(&str, Vec<&str>)> = shared
             .iter()
-            .map(|s| (s.headline, s.runs.clone()))
+            .map(|s| (s.headline.as_str(), s.runs.clone()))
             .collect();
         assert_eq!(
             got,
             [
                 ("the command is limited", vec!["a", "c"]),
                 ("the run's own fit: misfit", vec!["c"]),
+            ]
+        );
+    }
+
+    /// Headlines that differ in their numbers alone are one, each number
+    /// the range the runs give; a digit in a word (x1/u) is text, and a
+    /// headline whose words differ is another warning.
+    #[test]
+    fn headlines_that_differ_in_their_numbers_are_one_with_their_ranges() {
+        use crate::warning::Warning;
+        let at = |pct: &str| {
+            [Warning::new(
+                format!("the command holds its maximum 3 mm in {pct} % of its samples"),
+                "...",
+            )]
+        };
+        let (a, b, c) = (at("8.1"), at("9.4"), at("10.2"));
+        let fit = |z: &str| {
+            [Warning::new(
+                format!("x1/u misses: chi-square 1.25, {z} std above noise"),
+                "...",
+            )]
+        };
+        let (d, e) = (fit("11"), fit("-2.5e1"));
+        let other = [Warning::new(
+            "the command holds its minimum 3 mm in 9.4 % of its samples",
+            "...",
+        )];
+        let shared = shared_warnings([
+            ("a", &a[..]),
+            ("b", &b[..]),
+            ("c", &c[..]),
+            ("d", &d[..]),
+            ("e", &e[..]),
+            ("f", &other[..]),
+        ]);
+        let got: Vec<(&str, Vec<&str>)> = shared
+            .iter()
+            .map(|s| (s.headline.as_str(), s.runs.clone()))
+            .collect();
+        assert_eq!(
+            got,
+            [
+                (
+                    "the command holds its maximum 3 mm in 8.1\u{2013}10.2 % of its samples",
+                    vec!["a", "b", "c"]
+                ),
+                (
+                    "x1/u misses: chi-square 1.25, -2.5e1\u{2013}11 std above noise",
+                    vec!["d", "e"]
+                ),
+                (
+                    "the command holds its minimum 3 mm in 9.4 % of its samples",
+                    vec!["f"]
+                ),
             ]
         );
     }

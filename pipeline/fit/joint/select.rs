@@ -370,6 +370,12 @@ pub struct Moved {
 /// came out 130 N s/m in the structures without the loop's mode, and they
 /// were chosen); tried only on the structure the undamped choice made, a
 /// rig that damps takes a mode for it first (docs/accuracy.md).
+///
+/// Then the logged command's gain ([`super::COMMAND_GAIN`]) is tried on
+/// the chosen structure in the same way, and where the data take it every
+/// structure is fitted and chosen again with it: a gain the rig does not
+/// have is left at 1, so the fit is the paper's unless the logged command's
+/// scale is shown to differ.
 pub fn select(
     runs: &[JointRun<'_>],
     start: &RigParams,
@@ -378,14 +384,53 @@ pub fn select(
     band_top_hz: f64,
 ) -> Selection {
     let undamped = select_among(runs, start, opts, choice, band_top_hz);
-    if opts.seal_damping || !seal_damping_taken(runs, &undamped, opts) {
-        return undamped;
-    }
-    let damped = JointOptions {
-        seal_damping: true,
-        ..*opts
+    let (selection, opts) = if opts.seal_damping || !seal_damping_taken(runs, &undamped, opts) {
+        (undamped, *opts)
+    } else {
+        let damped = JointOptions {
+            seal_damping: true,
+            ..*opts
+        };
+        (
+            select_among(runs, start, &damped, choice, band_top_hz),
+            damped,
+        )
     };
-    select_among(runs, start, &damped, choice, band_top_hz)
+    if opts.command_gain {
+        return selection;
+    }
+    match command_gain_taken(runs, &selection, &opts) {
+        Some(gain) => {
+            let gained = JointOptions {
+                command_gain: true,
+                command_gain_start: gain,
+                ..opts
+            };
+            select_among(runs, start, &gained, choice, band_top_hz)
+        }
+        None => selection,
+    }
+}
+
+/// The logged command's gain, where the chosen fit refitted from its
+/// optimum with the gain freed is taken by the extra-sum-of-squares F test
+/// (p < [`P_SIGNIFICANT`]).
+fn command_gain_taken(
+    runs: &[JointRun<'_>],
+    selection: &Selection,
+    opts: &JointOptions,
+) -> Option<f64> {
+    let fit = selection.fit()?;
+    let gained = JointOptions {
+        friction_start_n: fit.friction_n.unwrap_or(opts.friction_start_n),
+        command_gain: true,
+        command_gain_start: 1.0,
+        ..from_optimum(fit, opts)
+    };
+    let refit = joint_fit(runs, &fit.rig, &gained).ok()?;
+    (f_test(fit, &refit).p_value < P_SIGNIFICANT)
+        .then_some(refit.command_gain)
+        .flatten()
 }
 
 /// Whether the chosen fit with the seals' viscous damping freed, refitted
@@ -587,6 +632,7 @@ fn fit_valve_piston(
         delay_start_s: valve.delay_s,
         force_delay_start_s: valve.force_delay_s.unwrap_or(valve.delay_s),
         friction_start_n: valve.friction_n.unwrap_or(opts.friction_start_n),
+        command_gain_start: valve.command_gain.unwrap_or(opts.command_gain_start),
         ..*opts
     };
     joint_fit_staged(runs, &valve.rig, &both, GRID_STRIDE)
@@ -770,6 +816,9 @@ fn fit_mode(
     let seal_damping_start = delay_fit
         .and_then(|f| f.seal_damping_ns_per_m)
         .unwrap_or(0.0);
+    let command_gain_start = delay_fit
+        .and_then(|f| f.command_gain)
+        .unwrap_or(opts.command_gain_start);
     let base = JointOptions {
         structure,
         friction_start_n,
@@ -818,6 +867,11 @@ fn fit_mode(
     if coarse.seal_damping.is_some() {
         for (theta, _) in &mut grid {
             theta.push(seal_damping_start);
+        }
+    }
+    if coarse.command_gain.is_some() {
+        for (theta, _) in &mut grid {
+            theta.push(command_gain_start.ln());
         }
     }
     let mut scored: Vec<ValveStart> = grid

@@ -73,6 +73,8 @@ fn options(structure: Structure) -> JointOptions {
         friction_start_n: 0.0,
         friction_smoothing_m_per_s: None,
         seal_damping: false,
+        command_gain: false,
+        command_gain_start: 1.0,
     }
 }
 
@@ -199,6 +201,16 @@ fn the_jacobian_is_the_residuals_derivative() {
         let p = problem(&c.runs(), &options(structure)).unwrap();
         let theta = theta_at(structure);
         assert_jacobian(&p, &theta, &format!("{structure:?}"));
+        // And with the logged command's gain, last.
+        let gained = JointOptions {
+            command_gain: true,
+            ..options(structure)
+        };
+        let p = problem(&c.runs(), &gained).unwrap();
+        let mut theta = theta;
+        theta.push(0.002);
+        assert_eq!(p.n_params(), theta.len());
+        assert_jacobian(&p, &theta, &format!("{structure:?} with the gain"));
     }
 }
 
@@ -640,6 +652,65 @@ fn the_data_choose_the_structure_they_were_made_with() {
             assert!((hz / 110.0 - 1.0).abs() < 0.05 && (zeta / 0.6 - 1.0).abs() < 0.1);
         }
     }
+}
+
+/// A logged command that reads 0.05 % low (every FRF 1.0005 times the
+/// rig's): the F test takes the command's gain, which comes out within 4
+/// std of 1.0005, and the rig within 4 std of the truth; the same data at
+/// the gain of 1 leave it out, and the fit is the one without it.
+#[test]
+fn a_logged_commands_gain_is_fitted_where_the_data_show_it() {
+    let r = rig();
+    let truth = [r.beta1_per_s, r.a1b0_n_per_m_s2, r.a2_n_per_m, r.a3_per_s];
+    let mut scaled = Campaign::new(None, 0.0).noisy(1e-8, 7);
+    for h in &mut scaled.h {
+        for v in h.iter_mut() {
+            *v *= 1.0005;
+        }
+    }
+    let sel = select(
+        &scaled.runs(),
+        &off(&r),
+        &options(Structure::Plain),
+        Choice::Auto,
+        30.0,
+    );
+    let fit = sel.fit().unwrap();
+    let k = fit.names.iter().position(|n| *n == COMMAND_GAIN).unwrap();
+    let z = (fit.params[k] - 1.0005) / fit.std[k];
+    assert!(
+        z.abs() < 4.0,
+        "the gain {} +- {}",
+        fit.params[k],
+        fit.std[k]
+    );
+    assert_eq!(fit.command_gain, Some(fit.params[k]));
+    for (i, t) in truth.iter().enumerate() {
+        let z = (fit.params[i] - t) / fit.std[i];
+        assert!(z.abs() < 4.0, "{}: z = {z}", fit.names[i]);
+    }
+    // Fitted without the gain, the rig takes it up and misses the truth:
+    // no rig parameter can stand for it.
+    let without = joint_fit(&scaled.runs(), &off(&r), &options(Structure::Plain)).unwrap();
+    let worst = (0..4)
+        .map(|i| ((without.params[i] - truth[i]) / without.std[i]).abs())
+        .fold(0.0, f64::max);
+    assert!(
+        worst > 4.0,
+        "without the gain the rig is within {worst} std"
+    );
+    // The same noise at the gain of 1: the F test leaves the gain out.
+    let plain = Campaign::new(None, 0.0).noisy(1e-8, 7);
+    let sel = select(
+        &plain.runs(),
+        &off(&r),
+        &options(Structure::Plain),
+        Choice::Auto,
+        30.0,
+    );
+    let fit = sel.fit().unwrap();
+    assert_eq!(fit.command_gain, None);
+    assert!(!fit.names.contains(&COMMAND_GAIN));
 }
 
 /// A structure the manifest fixes is kept though the data choose another.
