@@ -149,7 +149,7 @@ pub enum Command {
     /// Rerun the analysis a results.json records (its manifest and logs
     /// checked by their hashes) and list every quantity that differs.
     Verify {
-        /// The results.json to verify.
+        /// The results.json to verify, or the output folder that holds it.
         results: PathBuf,
         /// The manifest, when it is no longer where results.json says.
         #[arg(long)]
@@ -158,15 +158,15 @@ pub enum Command {
         #[arg(long, short, value_parser = clap::value_parser!(u64).range(1..))]
         jobs: Option<u64>,
     },
-    /// Propose a campaign manifest from a lab's logs: channels from the
-    /// columns' names and units, roles from the files' names, and every
-    /// value only the lab knows as a placeholder `servoid check` names.
     /// Edit a rig history: remove a night's entry (a night run with a
     /// wrong manifest), recorded in the history's audit file.
     History {
         #[command(subcommand)]
         action: HistoryAction,
     },
+    /// Propose a campaign manifest from a lab's logs: channels from the
+    /// columns' names and units, roles from the files' names, and every
+    /// value only the lab knows as a placeholder `servoid check` names.
     Init {
         /// Logs: files, folders of logs, or globs.
         #[arg(required = true)]

@@ -402,6 +402,10 @@ fn verify_reruns_the_recorded_analysis_and_names_what_differs() {
     let o = verify(&[]);
     assert_eq!(o.code, 0, "{}{}", o.stdout, o.stderr);
     assert!(o.stdout.contains("everything matches"), "{}", o.stdout);
+    // The output folder stands for its results.json.
+    let o = crate::util::servoid(night.dir.path(), &["verify", out.to_str().unwrap()]);
+    assert_eq!(o.code, 0, "{}{}", o.stdout, o.stderr);
+    assert!(o.stdout.contains("everything matches"), "{}", o.stdout);
     assert!(
         o.stdout.contains(&format!(
             "(7 logs checked by their hashes, {files} output files by the set's record)"

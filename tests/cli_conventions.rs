@@ -54,6 +54,41 @@ fn completions_for_bash_zsh_and_fish_name_every_subcommand() {
     );
 }
 
+/// Each subcommand's `--help` opens with what that command does (the
+/// words below, written from what each command is for): a description
+/// attached to the wrong command shows here.
+#[test]
+fn each_subcommands_help_opens_with_its_own_description() {
+    for (sub, opening) in [
+        (&["run"][..], "Run a campaign"),
+        (&["simulate"], "Simulate a campaign"),
+        (&["merge"], "Merge the folders of `servoid run --shard"),
+        (&["verify"], "Rerun the analysis a results.json records"),
+        (&["history"], "Edit a rig history"),
+        (
+            &["history", "remove"],
+            "Remove the entries of one date from a history",
+        ),
+        (&["init"], "Propose a campaign manifest from a lab's logs"),
+        (&["check"], "Check a manifest"),
+        (&["schema"], "Write the JSON Schemas"),
+        (&["completions"], "Print a shell's completion script"),
+        (&["man"], "Print servoid's man page"),
+        (&["keys"], "Print the manifests' key reference"),
+    ] {
+        let mut args = sub.to_vec();
+        args.push("--help");
+        let o = servoid(&root(), &args);
+        assert_eq!(o.code, 0, "{sub:?}: {}", o.stderr);
+        assert!(
+            o.stdout.starts_with(opening),
+            "`servoid {} --help` opens:\n{}",
+            sub.join(" "),
+            o.stdout.lines().next().unwrap_or_default()
+        );
+    }
+}
+
 /// The man page is roff with the title, name and every subcommand.
 #[test]
 fn the_man_page_is_roff_naming_every_subcommand() {

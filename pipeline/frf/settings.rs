@@ -54,9 +54,9 @@ pub enum Estimator {
     /// the band.
     #[default]
     Auto,
-    /// Welch H1 = Syu/Suu (noise on the output).
+    /// Welch H1 = Suy/Suu, Suy = conj(U) Y (noise on the output).
     H1,
-    /// Welch H2 = Syy/Suy (noise on the input).
+    /// Welch H2 = Syy/Syu, Syu = conj(Suy) (noise on the input).
     H2,
     /// Empirical transfer-function estimate Y/U over the whole record.
     Etfe,

@@ -548,7 +548,11 @@ pub struct Run {
     /// `YYYY-MM-DDTHH:MM:SS`, optionally ending in `Z`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub date: Option<String>,
-    /// Proportional gain of the analog controller in this run.
+    /// Proportional gain of the analog controller in this run: the valve's
+    /// drive over the position error, as the controller's dial reads it
+    /// (V/V on an analog controller). Only ratios between runs matter:
+    /// a1b0 is proportional to it (Eq. 10), and results give a1b0 at the
+    /// rig's P gain.
     pub p_gain: f64,
     /// The physical specimen; omit for `no_specimen` runs.
     #[serde(default)]

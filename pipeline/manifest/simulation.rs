@@ -312,7 +312,11 @@ pub struct SimRun {
     /// Free-form description.
     #[serde(default)]
     pub description: String,
-    /// Proportional gain of the analog controller in this run.
+    /// Proportional gain of the analog controller in this run: the valve's
+    /// drive over the position error, as the controller's dial reads it
+    /// (V/V on an analog controller). Only ratios between runs matter:
+    /// a1b0 is proportional to it (Eq. 10), and results give a1b0 at the
+    /// rig's P gain.
     pub p_gain: f64,
     #[serde(default)]
     pub specimen: Option<Specimen>,

@@ -467,6 +467,12 @@ pub fn verify_results(
     manifest: Option<&Path>,
     jobs: Option<usize>,
 ) -> Result<Verification, JobError> {
+    // An output folder stands for the results.json it holds.
+    let results = if results.is_dir() {
+        &results.join("results.json")
+    } else {
+        results
+    };
     pool(jobs)?.install(|| verify::verify(results, manifest))
 }
 

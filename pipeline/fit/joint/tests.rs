@@ -866,7 +866,6 @@ fn at_200_hz_each_structure_recovers_the_rig_through_the_aliases() {
 /// with a 110 Hz mode in the loop (above the 100 Hz Nyquist frequency: its
 /// images fold into the band too) and with a 3 kg piston.
 #[test]
-#[ignore = "fails: with the 110 Hz mode beta1 ends 7.5e-5 off (the aliases' fixed point or another optimum, not yet known)"]
 fn at_200_hz_a_mode_above_nyquist_or_a_piston_recovers_the_rig() {
     recovers_at_200_hz(&[
         (Structure::DelayValve, in_loop(mode(110.0, 0.6))),
