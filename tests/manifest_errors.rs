@@ -558,3 +558,33 @@ fn an_outlier_validation_run_is_flagged_on_the_command_line() {
     let v = &crate::util::run_by_id(&r, "exp1")["validation"];
     assert_eq!(v["outlier"], true);
 }
+
+/// `[[numbered_figures]]`: a number that is not digits and a letter, one
+/// given twice, an entry with both a figure and a reason and one with
+/// neither, and a figure that is no file stem are each named at their key.
+#[test]
+fn numbered_figures_are_checked_each_at_its_key() {
+    let text = format!(
+        "{BASE}\n{}",
+        concat!(
+            "[[numbered_figures]]\nnumber = \"8\"\nfigure = \"frf-ns\"\ncaption = \"a\"\n\n",
+            "[[numbered_figures]]\nnumber = \"8\"\nfigure = \"frf-k1\"\ncaption = \"b\"\n\n",
+            "[[numbered_figures]]\nnumber = \"Fig. 9\"\nfigure = \"frf-k1\"\ncaption = \"c\"\n\n",
+            "[[numbered_figures]]\nnumber = \"10\"\nfigure = \"frf-k1\"\ncaption = \"d\"\nnot_drawn = \"a photo\"\n\n",
+            "[[numbered_figures]]\nnumber = \"11\"\ncaption = \"e\"\n\n",
+            "[[numbered_figures]]\nnumber = \"12\"\nfigure = \"figures/frf-k1.png\"\ncaption = \"f\"\n",
+        )
+    );
+    let c = check(&text);
+    assert_eq!(c.code, 2, "{}", c.stderr);
+    for f in [
+        "numbered_figures[1].number: 8 is given twice",
+        "numbered_figures[2].number: must be digits and an optional lowercase letter",
+        "numbered_figures[3]: give `figure`",
+        "numbered_figures[4]: give `figure`",
+        "numbered_figures[5].figure: must be a figure's file stem",
+        "5 problems",
+    ] {
+        assert!(c.stderr.contains(f), "missing {f:?} in:\n{}", c.stderr);
+    }
+}

@@ -19,8 +19,8 @@ use super::keypath::KeyPath;
 use super::problem::{ManifestError, Problem, TablePlace};
 use super::raw::{
     CampaignInfo, Channel, Channels as RawChannels, CompareMode, CompensatorSettings, History,
-    Identification, JointSettings, Limits, Manifest, MonteCarloSettings, Reference, Rig, Role, Run,
-    RunData, RunTable, SCHEMA_VERSION, SensitivitySettings, manifest_schema,
+    Identification, JointSettings, Limits, Manifest, MonteCarloSettings, NumberedFigure, Reference,
+    Rig, Role, Run, RunData, RunTable, SCHEMA_VERSION, SensitivitySettings, manifest_schema,
 };
 use super::table::{CheckedTable, RowKey, RunTableInfo, TableRun, check_table};
 use crate::drift::{MIN_HISTORY, Rule};
@@ -196,6 +196,7 @@ pub fn load_str(text: &str, path: &Path) -> Result<Campaign, ManifestError> {
         sensitivity: doc.section::<SensitivitySettings>("sensitivity"),
         compensator: doc.section::<CompensatorSettings>("compensator"),
         limits: doc.section::<Limits>("limits"),
+        numbered_figures: doc.array::<NumberedFigure>("numbered_figures"),
     };
     doc.begin_checks();
     let base_dir = path.parent().unwrap_or(Path::new(""));
@@ -225,6 +226,7 @@ struct Partial {
     sensitivity: Option<SensitivitySettings>,
     compensator: Option<CompensatorSettings>,
     limits: Option<Limits>,
+    numbered_figures: Vec<Option<NumberedFigure>>,
 }
 
 /// What every run's checks share.
@@ -257,6 +259,7 @@ fn validate(
     let history = check_history(partial.history.as_ref(), base_dir, &mut bad);
     let sensitivity = check_sensitivity(partial.sensitivity.as_ref(), &mut bad);
     let compensator = check_compensator(partial.compensator.as_ref(), &mut bad);
+    check_numbered_figures(&partial.numbered_figures, &mut bad);
     let channels = partial.channels.clone().unwrap_or_default();
     check_channels(&channels, &root.key("channels"), &mut bad);
     let identification = partial.identification.clone().unwrap_or_default();
@@ -402,6 +405,7 @@ fn campaign_of(partial: Partial, checked: Checked, file: &Path, bytes: &[u8]) ->
         sensitivity: partial.sensitivity,
         compensator: partial.compensator,
         limits: partial.limits,
+        numbered_figures: partial.numbered_figures.into_iter().flatten().collect(),
     };
     let cutoff_warning = cutoff_below_band(&checked.compensator, checked.ident_plan.band_hz);
     Some(Campaign {
@@ -428,6 +432,55 @@ fn campaign_of(partial: Partial, checked: Checked, file: &Path, bytes: &[u8]) ->
         compensator: checked.compensator,
         joint: ident.joint,
     })
+}
+
+/// `[[numbered_figures]]`: each number digits and an optional letter, once;
+/// each with a figure or the reason it has none, not both; a figure named
+/// as its file's stem (lowercase letters, digits and `-`).
+pub(super) fn check_numbered_figures(
+    figures: &[Option<NumberedFigure>],
+    bad: &mut impl FnMut(KeyPath, String),
+) {
+    let mut seen: Vec<&str> = Vec::new();
+    for (i, f) in figures.iter().enumerate() {
+        let Some(f) = f else { continue };
+        let path = KeyPath::root().key("numbered_figures").index(i);
+        let digits = f.number.chars().take_while(char::is_ascii_digit).count();
+        let rest = &f.number[digits..];
+        if digits == 0 || rest.len() > 1 || !rest.chars().all(|c| c.is_ascii_lowercase()) {
+            bad(
+                path.key("number"),
+                format!(
+                    "must be digits and an optional lowercase letter (`8`, `16a`; got {:?})",
+                    f.number
+                ),
+            );
+        } else if seen.contains(&f.number.as_str()) {
+            bad(path.key("number"), format!("{} is given twice", f.number));
+        }
+        seen.push(&f.number);
+        match (&f.figure, &f.not_drawn) {
+            (Some(id), None) => {
+                if id.is_empty()
+                    || !id
+                        .chars()
+                        .all(|c| c.is_ascii_lowercase() || c.is_ascii_digit() || c == '-')
+                {
+                    bad(
+                        path.key("figure"),
+                        format!(
+                            "must be a figure's file stem under figures/ (`frf-no-specimen`; got {id:?})"
+                        ),
+                    );
+                }
+            }
+            (None, Some(_)) => {}
+            _ => bad(
+                path,
+                "give `figure` (the campaign's figure that stands for it) or `not_drawn` (why none does), one of them".into(),
+            ),
+        }
+    }
 }
 
 /// The sensitivity's settings: a range 0 < low < high, at least two

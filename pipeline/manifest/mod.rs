@@ -35,8 +35,8 @@ pub use problem::{ManifestError, Problem, TablePlace};
 pub use raw::{
     BoucWenParams, CampaignInfo, Channel, Channels, CompareMode, CompensatorSettings, DelayMode,
     DelaySettings, FrfSettings, Identification, JointRig, JointSettings, Manifest, ModelOrders,
-    MonteCarloSettings, PublishedTf, Reference, Rig, Role, Run, RunData, RunTable, SCHEMA_VERSION,
-    SensitivitySettings, Specimen, SpecimenKind, TimeChannel, manifest_schema,
+    MonteCarloSettings, NumberedFigure, PublishedTf, Reference, Rig, Role, Run, RunData, RunTable,
+    SCHEMA_VERSION, SensitivitySettings, Specimen, SpecimenKind, TimeChannel, manifest_schema,
 };
 pub use simulation::{SimulationPlan, load_simulation, simulation_schema};
 pub use table::RunTableInfo;

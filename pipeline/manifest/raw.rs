@@ -68,6 +68,44 @@ pub struct Manifest {
     /// Resource limits (defaults apply when the table is absent).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub limits: Option<Limits>,
+    /// A publication's figures by their numbers (the paper's Fig. 8, ...),
+    /// each standing for one the campaign draws.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub numbered_figures: Vec<NumberedFigure>,
+}
+
+/// A publication's figure by its number: a copy of the campaign's figure
+/// that stands for it, written as `figures/fig-<number>.png` (and `.svg`,
+/// as the figures are drawn) and shown on the campaign page with its
+/// caption; or a figure the campaign cannot draw, with why.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[schemars(deny_unknown_fields)]
+pub struct NumberedFigure {
+    /// Its number as the publication gives it, digits and an optional
+    /// letter (`8`, `16a`); the file is `fig-08`, `fig-16a`.
+    pub number: String,
+    /// The campaign's figure that stands for it: the stem of its file under
+    /// `figures/` (`frf-no-specimen`). Absent where `not_drawn` says why.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub figure: Option<String>,
+    /// What it shows, and what differs from the publication's.
+    pub caption: String,
+    /// Why the campaign draws no counterpart (a photograph, a block
+    /// diagram).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub not_drawn: Option<String>,
+}
+
+impl NumberedFigure {
+    /// The file stem: `fig-` and the number, its digits padded to two.
+    pub fn stem(&self) -> String {
+        let digits = self.number.chars().take_while(char::is_ascii_digit).count();
+        format!(
+            "fig-{:0>2}{}",
+            &self.number[..digits],
+            &self.number[digits..]
+        )
+    }
 }
 
 /// The feedforward compensator designed on the identified plant with each
@@ -548,11 +586,10 @@ pub struct Run {
     /// `YYYY-MM-DDTHH:MM:SS`, optionally ending in `Z`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub date: Option<String>,
-    /// Proportional gain of the analog controller in this run: the valve's
-    /// drive over the position error, as the controller's dial reads it
-    /// (V/V on an analog controller). Only ratios between runs matter:
-    /// a1b0 is proportional to it (Eq. 10), and results give a1b0 at the
-    /// rig's P gain.
+    /// Proportional gain of the analog controller in this run: the
+    /// servo-valve's drive per unit of position error (mA/m in the paper's
+    /// Table 1). Only ratios between runs matter: a1b0 is proportional to
+    /// it (Eq. 10), and results give a1b0 at the rig's P gain.
     pub p_gain: f64,
     /// The physical specimen; omit for `no_specimen` runs.
     #[serde(default)]

@@ -11,7 +11,7 @@ use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 use serde_json::Value;
 
-use super::campaign::check_sensitivity;
+use super::campaign::{check_numbered_figures, check_sensitivity};
 use super::checks::{
     P_GAIN_RANGE, STIFFNESS_RANGE, check_slug, check_specimen, plausible, positive,
 };
@@ -20,7 +20,8 @@ use super::identification::check_identification;
 use super::keypath::KeyPath;
 use super::problem::{ManifestError, Problem};
 use super::raw::{
-    Identification, Reference, Role, SCHEMA_VERSION, SensitivitySettings, Specimen, SpecimenKind,
+    Identification, NumberedFigure, Reference, Role, SCHEMA_VERSION, SensitivitySettings, Specimen,
+    SpecimenKind,
 };
 use crate::ingest::sha256_hex;
 use crate::model::RigParams;
@@ -54,6 +55,10 @@ pub struct SimulationManifest {
     /// analysis manifest (checked here as it will check them).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub sensitivity: Option<SensitivitySettings>,
+    /// A publication's figures by their numbers, copied into the generated
+    /// analysis manifest.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub numbered_figures: Vec<NumberedFigure>,
 }
 
 /// Global settings of a simulation.
@@ -312,11 +317,10 @@ pub struct SimRun {
     /// Free-form description.
     #[serde(default)]
     pub description: String,
-    /// Proportional gain of the analog controller in this run: the valve's
-    /// drive over the position error, as the controller's dial reads it
-    /// (V/V on an analog controller). Only ratios between runs matter:
-    /// a1b0 is proportional to it (Eq. 10), and results give a1b0 at the
-    /// rig's P gain.
+    /// Proportional gain of the analog controller in this run: the
+    /// servo-valve's drive per unit of position error (mA/m in the paper's
+    /// Table 1). Only ratios between runs matter: a1b0 is proportional to
+    /// it (Eq. 10), and results give a1b0 at the rig's P gain.
     pub p_gain: f64,
     #[serde(default)]
     pub specimen: Option<Specimen>,
@@ -395,6 +399,7 @@ struct Sections {
     raw_ids: Vec<Option<String>>,
     references: Vec<Option<Reference>>,
     sensitivity: Option<SensitivitySettings>,
+    numbered_figures: Vec<Option<NumberedFigure>>,
 }
 
 /// Check simulation-manifest text as if read from `path`.
@@ -412,6 +417,7 @@ pub fn load_simulation_str(text: &str, path: &Path) -> Result<SimulationPlan, Ma
         raw_ids: doc.raw("runs", "id"),
         references: doc.array("references"),
         sensitivity: doc.section("sensitivity"),
+        numbered_figures: doc.array("numbered_figures"),
     };
     doc.begin_checks();
     let problems = &mut doc.problems;
@@ -432,6 +438,7 @@ pub fn load_simulation_str(text: &str, path: &Path) -> Result<SimulationPlan, Ma
     if let Some(sens) = &s.sensitivity {
         check_sensitivity(Some(sens), &mut bad);
     }
+    check_numbered_figures(&s.numbered_figures, &mut bad);
     let runs = check_runs(&s, &mut bad);
     for (i, r) in s.references.iter().enumerate() {
         if let Some(r) = r
@@ -482,6 +489,7 @@ fn assemble(
             runs: s.runs.into_iter().collect::<Option<Vec<_>>>()?,
             references: s.references.into_iter().collect::<Option<Vec<_>>>()?,
             sensitivity: s.sensitivity,
+            numbered_figures: s.numbered_figures.into_iter().collect::<Option<Vec<_>>>()?,
         },
         runs,
     })

@@ -123,12 +123,22 @@ impl<'a> Pages<'a> {
             .iter()
             .map(|r| (r.id.as_str(), r.a1b0))
             .collect();
+        // A publication's figures by number apart from the campaign's own,
+        // in the manifest's order, with those it cannot draw.
+        let numbered = &results.manifest.numbered_figures;
+        let stems: Vec<String> = numbered.iter().map(|n| n.stem()).collect();
+        let (by_number, own): (Vec<&PageFigure>, Vec<&PageFigure>) =
+            figures.iter().partition(|f| stems.contains(&f.id));
+        let not_drawn: Vec<&crate::manifest::NumberedFigure> =
+            numbered.iter().filter(|n| n.not_drawn.is_some()).collect();
         let ctx = minijinja::context! {
             r => self.r.clone(),
+            numbered_figures => ser(by_number),
+            not_drawn => ser(not_drawn),
             run_warnings => ser(shared_warnings(
                 results.runs.iter().map(|r| (r.id.as_str(), r.warnings.as_slice()))
             )),
-            figures => ser(figures),
+            figures => ser(own),
             notice => results.manifest.campaign.synthetic.as_deref(),
             figures_note => self.figures_note,
             failed => failed,

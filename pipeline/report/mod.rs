@@ -252,6 +252,56 @@ impl<'a> FigureFiles<'a> {
     }
 }
 
+impl FigureFiles<'_> {
+    /// A publication's figures by their numbers (`numbered`), each a copy
+    /// of the drawn figure it names (`drawn`: run and campaign figures
+    /// alike), written beside it as `figures/fig-<number>.<ext>`: their
+    /// page entries, titled by their numbers, and a warning for each that
+    /// names a figure not drawn.
+    pub fn numbered(
+        &self,
+        numbered: &[crate::manifest::NumberedFigure],
+        drawn: &[&PageFigure],
+    ) -> Result<(Vec<PageFigure>, Vec<Warning>), WriteError> {
+        let mut page = Vec::new();
+        let mut warnings = Vec::new();
+        for n in numbered {
+            let Some(id) = &n.figure else { continue };
+            let Some(source) = drawn.iter().find(|f| &f.id == id) else {
+                warnings.push(Warning::new(
+                    format!("numbered_figures: Fig. {}: no figure {id}", n.number),
+                    format!(
+                        "numbered_figures: Fig. {} names the figure {id}, which this campaign did not draw; its figures are {}",
+                        n.number,
+                        drawn.iter().map(|f| f.id.as_str()).collect::<Vec<_>>().join(", ")
+                    ),
+                ));
+                continue;
+            };
+            let stem = n.stem();
+            let mut fig = PageFigure::new(&stem, &format!("Fig. {}", n.number), &n.caption);
+            let copy = |file: &str, ext: &str| -> Result<String, WriteError> {
+                let from = self.out_dir.join(file);
+                let bytes = std::fs::read(&from).map_err(|source| WriteError::Io {
+                    path: from.clone(),
+                    source,
+                })?;
+                let name = format!("figures/{stem}.{ext}");
+                write_artifact(&self.out_dir.join(&name), &bytes)?;
+                Ok(name)
+            };
+            if let Some(png) = &source.png_file {
+                fig.png_file = Some(copy(png, "png")?);
+            }
+            if let Some(svg) = &source.svg_file {
+                fig.svg_file = Some(copy(svg, "svg")?);
+            }
+            page.push(fig);
+        }
+        Ok((page, warnings))
+    }
+}
+
 /// Write a document to `path` atomically and durably (temporary file,
 /// fsync, rename): results.json, the campaign page, the history, what a
 /// later run or a reviewer trusts as the record. Call [`settle`] first so

@@ -204,7 +204,7 @@ pub const TRACKING_TABLE: &str = "tables/tracking.parquet";
 /// measured measures, the model's prediction and the compensated
 /// prediction (each `measured_`, `predicted_`, `compensated_` and the
 /// measure: delays in s, FEI amplitude, phase in degrees and delay in s,
-/// the tracking indicator in % of peak^2, J2 and J3 in %), the delay the
+/// the tracking indicator in % of a 90-degree lag's area, J2 and J3 in %), the delay the
 /// model lacks, and the compensator's design and target range. A measure a
 /// run does not have is null. Built from the results alone, so a merged
 /// campaign writes the same table as one run whole.

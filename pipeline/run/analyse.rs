@@ -184,8 +184,18 @@ pub(super) fn analyse_with(
         manifest: campaign.manifest.clone(),
     };
     let rig = rig_for_runs.ok().map(|(p, ..)| p);
-    let (results, campaign_figures) =
+    let (mut results, mut campaign_figures) =
         campaign_level(campaign, results, rig, noise.as_ref(), &runs.overlay, sink)?;
+    let drawn: Vec<&PageFigure> = runs
+        .figures
+        .iter()
+        .flatten()
+        .chain(&campaign_figures)
+        .collect();
+    let (numbered, numbered_warnings) =
+        sink.numbered(&campaign.manifest.numbered_figures, &drawn)?;
+    results.warnings.extend(numbered_warnings);
+    campaign_figures.extend(numbered);
     sink.finish()?;
     Ok(Analysed {
         results,

@@ -175,6 +175,19 @@ impl Sink<'_> {
         }
     }
 
+    /// A publication's figures by their numbers, copied from the figures
+    /// drawn (none when the job draws none).
+    pub(super) fn numbered(
+        &self,
+        numbered: &[crate::manifest::NumberedFigure],
+        drawn: &[&PageFigure],
+    ) -> Result<(Vec<PageFigure>, Vec<Warning>), WriteError> {
+        match self.files {
+            Some(files) if !numbered.is_empty() => files.numbered(numbered, drawn),
+            _ => Ok((Vec::new(), Vec::new())),
+        }
+    }
+
     /// Write what the cache keeps of the whole campaign (the log stamps) and
     /// forget what it no longer uses.
     pub(super) fn finish(&self) -> Result<(), WriteError> {

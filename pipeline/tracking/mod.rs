@@ -335,23 +335,58 @@ fn centred_spectrum(x: &[f64], mean: f64) -> Vec<Complex<f64>> {
 /// lags its command traces the loop anticlockwise, so **TI falls while the
 /// actuator lags and rises while it leads**; for `x_c = a sin(wt)`, `x_m =
 /// b sin(wt - phi)` it falls by `pi a b sin(phi)` a cycle. Returned with
-/// its value normalised by the square of the larger peak, in percent (as
-/// OpenFresco's `plotOutputXPCtarget.m` shows it), which does not depend on
-/// the unit.
+/// [`tracking_indicator_per_cycle`].
 pub fn tracking_indicator(command: &[f64], displacement: &[f64]) -> Option<(f64, f64)> {
     let n = command.len().min(displacement.len());
     if n < 2 {
         return None;
     }
-    let (xc, xm) = (&command[..n], &displacement[..n]);
+    let ti = indicator_over(&command[..n], &displacement[..n]);
+    Some((
+        ti,
+        tracking_indicator_per_cycle(&command[..n], &displacement[..n])?,
+    ))
+}
+
+/// TI over the samples given, by the trapezoidal rule.
+fn indicator_over(xc: &[f64], xm: &[f64]) -> f64 {
     let mut ti = 0.0;
-    for i in 1..n {
+    for i in 1..xc.len().min(xm.len()) {
         let a = 0.5 * (xm[i] + xm[i - 1]) * (xc[i] - xc[i - 1]);
         let ta = 0.5 * (xc[i] + xc[i - 1]) * (xm[i] - xm[i - 1]);
         ti += 0.5 * (a - ta);
     }
-    let peak = xc.iter().chain(xm).fold(0.0_f64, |m, v| m.max(v.abs()));
-    (peak > 0.0).then(|| (ti, ti / (peak * peak) * 100.0))
+    ti
+}
+
+/// TI over the command's whole cycles (from one upward zero crossing to
+/// the next) as a percentage of the area a lag of 90 degrees would enclose
+/// in them, pi a_k b_k a cycle with a_k and b_k half the command's and the
+/// displacement's range in cycle k: -100 sin(phi) for a sine lagging by
+/// phi, whatever its amplitude, frequency or length, so two runs compare.
+/// None without a whole cycle.
+pub fn tracking_indicator_per_cycle(command: &[f64], displacement: &[f64]) -> Option<f64> {
+    let n = command.len().min(displacement.len());
+    let up: Vec<usize> = (1..n)
+        .filter(|&i| command[i - 1] < 0.0 && command[i] >= 0.0)
+        .collect();
+    let half_range = |x: &[f64]| {
+        let (lo, hi) = x
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &v| {
+                (l.min(v), h.max(v))
+            });
+        0.5 * (hi - lo)
+    };
+    let mut area = 0.0;
+    for w in up.windows(2) {
+        let (i, j) = (w[0], w[1]);
+        area +=
+            std::f64::consts::PI * half_range(&command[i..=j]) * half_range(&displacement[i..=j]);
+    }
+    let (&first, &last) = (up.first()?, up.last()?);
+    (area > 0.0)
+        .then(|| 100.0 * indicator_over(&command[first..=last], &displacement[first..=last]) / area)
 }
 
 /// The tracking error's size, as the RTHS benchmark's J2 and J3 define it
@@ -405,7 +440,9 @@ pub struct Tracking {
     /// The tracking indicator TI of Mercan & Ricles (2007) at the end of
     /// the record (m^2): negative when the displacement lagged overall.
     pub tracking_indicator_m2: Option<f64>,
-    /// TI over the square of the larger peak of the two records (%).
+    /// TI over the command's whole cycles as a percentage of the area a
+    /// 90-degree lag would enclose in them (-100 sin(phi) for a sine
+    /// lagging by phi).
     pub tracking_indicator_pct: Option<f64>,
     /// J2 and J3 of the RTHS benchmark (Silva et al. 2020).
     pub errors: Option<TrackingErrors>,

@@ -152,7 +152,8 @@ fn a_first_order_lag_is_its_time_constant_at_low_frequency() {
 /// A sine of 2 Hz over 40 whole cycles, followed at 95 % of its amplitude
 /// and 2.37 samples late: the frequency evaluation index is 0.95 at
 /// -360 f tau degrees; the tracking indicator falls by pi a b sin(phi) a
-/// cycle; J2 and J3 are those of the difference sine, whose amplitude is
+/// cycle, -100 sin(phi) % of a 90-degree lag's area at any amplitude and
+/// frequency; J2 and J3 are those of the difference sine, whose amplitude is
 /// sqrt(a^2 + b^2 - 2 a b cos phi).
 #[test]
 fn a_known_amplitude_error_and_delay_give_every_measure_by_hand() {
@@ -175,7 +176,26 @@ fn a_known_amplitude_error_and_delay_give_every_measure_by_hand() {
     let cycles = 40.0;
     let want = -cycles * PI * a * b * phi.sin();
     assert!((ti / want - 1.0).abs() < 1e-4, "TI {ti}, by hand {want}");
-    assert!((ti_pct - want / (a * a) * 100.0).abs() < 1e-3 * want.abs() / (a * a) * 100.0);
+    // Per cycle, against a 90-degree lag's area: -100 sin(phi), and the
+    // same for the same lag at other amplitudes, another frequency and
+    // another length.
+    let per_cycle = -100.0 * phi.sin();
+    assert!(
+        (ti_pct - per_cycle).abs() < 1e-3 * per_cycle.abs(),
+        "{ti_pct} % against {per_cycle} %"
+    );
+    let w2 = 2.5 * w;
+    let (u2, x2): (Vec<f64>, Vec<f64>) = (0..7_000)
+        .map(|k| {
+            let t = k as f64 / FS;
+            (0.3 * a * (w2 * t).sin(), 0.2 * b * (w2 * t - phi).sin())
+        })
+        .unzip();
+    let (_, other) = tracking_indicator(&u2, &x2).unwrap();
+    assert!(
+        (other - per_cycle).abs() < 2e-3 * per_cycle.abs(),
+        "{other} % against {per_cycle} %"
+    );
     // A lead raises it by as much.
     let (lead, _) = tracking_indicator(&x, &u).unwrap();
     assert!((lead + ti).abs() < 1e-9 * ti.abs(), "{lead} {ti}");
