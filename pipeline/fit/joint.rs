@@ -1,54 +1,17 @@
-//! The joint grey-box estimator of the rig: beta1, a1b0 (at a reference P gain), a2 and a3
-//! fitted together and directly to the FRFs of several runs, each run's
-//! model the exact x1/u of its specimen at its P gain, with nuisance
-//! dynamics shared by every run: the command's hold, a pure delay and,
-//! optionally, a second-order mode at one of three places: in
-//! the position loop (the servo-valve spool's), in the command path ahead
-//! of the loop, or in the measurement path of the logged displacement.
+//! The joint grey-box estimator of the rig: beta1, a1b0 (at a reference P
+//! gain), a2 and a3 fitted together to the FRFs of several runs, each
+//! run's model the exact x1/u (or f/u) of its specimen at its P gain
+//! (Eqs. 12, 14, 17 and 45), with what every run shares: the command's
+//! hold and its aliases, a delay, optionally a second-order mode in the
+//! loop, the command path or the measurement path, the piston's mass, its
+//! seals' friction and damping, and the logged command's gain.
 //!
-//! The paper's sequential procedure (Eqs. 18-20) fits each run alone and
-//! combines the coefficients by algebra, so each run's model error enters
-//! the rig separately; here one set of physical parameters has to explain
-//! every run at once, and the parameters' covariance comes from the fit.
-//!
-//! The model (Eq. 10 with the valve mode of `simulate::plant`): with the
-//! specimen's S(s) = m s^2 + c s + k (S = k for a massless spring, 0 for
-//! none), the mechanics give r = Q(s) x1 with Q = (s + a3) S + a2 s, the
-//! valve (s + beta1) r = A V(s) (u - x1) with A = a1b0 P / P_ref and
-//! V = wv^2 / (s^2 + 2 zeta wv s + wv^2) (1 without the mode), so
-//!
-//!   x1/u = A V / D,  D = (s + beta1) Q + A V,
-//!
-//! which is Eqs. 12, 14 and 17 when V = 1. That is the mode in the loop.
-//! Outside it the loop is the paper's and the mode multiplies what comes
-//! out: x1/u = V A / D0 with D0 = (s + beta1) Q + A, the same for a mode in
-//! the command path (the loop follows a shaped command) and in the
-//! measurement path (the logged x1 is filtered). The force tells the two
-//! apart: it follows a shaped command (f/u = S V A / D0) but not a filter
-//! on the displacement channel (f/u = S A / D0). The measured FRF is the
-//! model times the hold Z(s), its aliases A(s) and exp(-s tau). As the
-//! per-run fit has them (`fit` module docs), A is the factor the sampling's
-//! folded images put on each run's continuous model with the hold,
-//! evaluated at the estimate and followed to the estimate whose A is its
-//! own, or left at 1 where its whole effect is below the fit's tolerance
-//! (`settle`). The friction's and a stiffening spring's describing
-//! functions hold at a bin's own frequency, not at its images: A is the
-//! linear rig's (the specimen as stated, the seals' viscous damping in).
-//! A run's force over command is S(s) times
-//! its x1/u (Eq. 45: the specimen's poles are the force path's zeros), so a
-//! validation run, whose m, c and k the manifest gives, adds two FRFs that
-//! the same parameters must explain; S(s) is known, so every log-derivative
-//! below holds for it unchanged.
-//!
-//! Parameters are solved for as logarithms (all positive, and of very
-//! different sizes) and the delay in sample periods; Levenberg-Marquardt
-//! (`fit::lm`) with the analytic Jacobian below, residuals weighted by each
-//! bin's measured variance as the per-run fit weights them. The bins (tens
-//! of thousands) far outnumber the parameters (at most twelve), so the
-//! solver is given J^T J and J^T r accumulated bin by bin in one parallel
-//! pass ([`Normal`]) rather than a tall J; J itself is formed once, at the
-//! optimum, for the covariance (through its QR factor, which keeps the
-//! rank test's precision).
+//! In the notation below, Q = (s + a3) S + a2 s, A = a1b0 P / P_ref, V the
+//! mode's factor, and x1/u = A V / D with D = (s + beta1) Q + A V in the
+//! loop (D0 = (s + beta1) Q + A outside it). Parameters are solved for as
+//! logarithms, the delay in samples, by Levenberg-Marquardt on J^T J and
+//! J^T r summed bin by bin (`Normal`). The model's derivation and the
+//! solver's choices: docs/methods.md, "The joint fit".
 
 use argmin::core::{Error as ArgminError, Executor, Jacobian, State, TerminationReason};
 use nalgebra::{Complex, DMatrix, DVector};
@@ -1179,7 +1142,7 @@ pub(super) fn joint_fit_staged(
 const ALIAS_PASSES: usize = 12;
 
 /// Levenberg-Marquardt on `problem` from `theta0` with the hold's aliases
-/// those of the model it finds (module docs): evaluated at `theta0`, then
+/// those of the model it finds (docs/methods.md, "The joint fit"): evaluated at `theta0`, then
 /// at each optimum, and fitted again from there while they would move it
 /// by [`super::ALIAS_SETTLED`] of its stated std or more. The aliases the
 /// problem is left with are those of the optimum's last leg.

@@ -1,81 +1,15 @@
-//! The model structure chosen by the data.
-//!
-//! The candidates: the paper's model (4 parameters), with a delay (5), with
-//! a delay and the piston's mass (6: the actuator's own mode, the piston on
-//! the oil column's stiffness a2), and with a delay and a second-order mode
-//! (7) at each place it can sit: in the loop, in the command path, and
-//! (when force FRFs are fitted, which alone can tell it from the command
-//! path) in the displacement's measurement path. Each of these holds the
-//! delay structure (a mode at an infinite frequency, a piston of no mass),
-//! which holds the paper's.
-//!
-//! Between nested weighted least-squares fits the classical test is the
-//! extra-sum-of-squares F test: with cost_a of the smaller and cost_b of
-//! the larger structure,
-//!
-//!   F = ((cost_a - cost_b) / (p_b - p_a)) / (cost_b / dof_b),
-//!
-//! is F(p_b - p_a, dof_b)-distributed when the extra parameters are not
-//! needed. Dividing by the larger fit's reduced chi-square rather than
-//! trusting the variances to be exact keeps the test honest when the noise
-//! level is off or model error remains: the extra parameters must explain
-//! more than the residual scatter, not merely more than the nominal noise.
-//! The delay is taken over the paper's model, and a mode over the delay,
-//! when its p-value is below [`P_SIGNIFICANT`].
-//!
-//! The piston and the three places are not nested in one another, so no F
-//! test orders them: among those the F test takes over the delay, the one
-//! with the lowest AIC (cost + 2 p, the noise known) is chosen; between the
-//! places, with equal counts, that is the lowest cost.
-//!
-//! Choosing one structure does not make the others wrong. Where two explain
-//! the data about equally well and put the rig in different places, the
-//! difference is uncertainty the chosen fit's own covariance does not hold.
-//! [`StructureSpread`] weighs every usable candidate by its Schwarz (BIC)
-//! weight and adds the weighted spread of their rig parameters about the
-//! chosen estimate to the chosen fit's covariance (Burnham & Anderson 2002,
-//! Model Selection and Multimodel Inference, Sect. 4.3: the unconditional
-//! variance, var_i + (theta_i - theta_avg)^2 weighted; taken here about the
-//! chosen estimate rather than the average, because the rig the campaign
-//! uses must be one model's, its state space and validation with it, so the
-//! spread that matters is about that one). The weights are
-//! exp(-BIC_i / 2) normalised, BIC = cost / c + p ln(2N) with c the best
-//! reduced chi-square floored at 1 (the quasi-likelihood form, Burnham &
-//! Anderson Sect. 6.2: when model error leaves every fit above its noise,
-//! cost differences count for less). Schwarz's penalty rather than
-//! Akaike's 2 per parameter keeps the weights in step with the F test at p
-//! < 0.001 that chooses: with tens of thousands of bins a structure the
-//! test rejects keeps an Akaike weight of 0.1-0.3 (a delay fitted on a rig
-//! without one: 0.27-0.3 on clean records), which widened clean rigs' total
-//! stds up to four times; its Schwarz weight is below 0.01. Between
-//! structures whose costs differ by tens of units, as the places on the
-//! suite's rigs do, the two weights agree.
-//!
-//! Two fits of one data set differ by noise too: where both structures hold
-//! the truth (a delay fitted on a rig without one), the larger fit's
-//! estimate is the smaller's plus a difference of variance var_big -
-//! var_small (Hausman 1978, Specification tests in econometrics,
-//! Econometrica 46(6)), which the statistical std already counts. So a
-//! difference counts only where it exceeds [`HAUSMAN_Z`] times that std
-//! (Hausman's test at about 5 %), and then with that share taken out,
-//! d^2 - |var_i - var_chosen|: what remains is what statistics do not
-//! explain. A rival is named only on such a difference, and one beyond the
-//! two fits' combined stds. Without the test a clean rig's stds would
-//! count its noise twice: on clean records the larger structures' weights
-//! (0.1-0.3 each under AIC) times their noise differences widened the
-//! total std up to four times the statistical one.
-//!
-//! The starts: the paper's model and the delay from the sequential
-//! estimate (Eqs. 18-20), the delay from 0; each mode from the best of a
-//! grid of frequencies (1.5 to 12 times the band's top) and dampings (0.3,
-//! 0.55, 0.8), the piston from masses putting its mode over the same range,
-//! scored by the cost alone at the delay fit's rig (on a quarter of the
-//! bins), then Levenberg-Marquardt from the best two for three iterations
-//! each, and only the one with the lower cost on to convergence. Every fit
-//! first converges on that quarter of the bins and then on all of them
-//! from there: the same optimum, in a third of the passes over every bin
-//! (the whole selection of six structures takes 71-79 ms on the seven-run
-//! bench where three took 57 ms; `cargo bench --bench joint`).
+//! The model structure chosen by the data: the paper's model, a delay, a
+//! piston's mass, a mode in the loop, the command path or the
+//! measurement path, and the loop's mode with the piston. Nested
+//! structures are chosen by the extra-sum-of-squares F test at
+//! [`P_SIGNIFICANT`] (scaled by the larger fit's residual scatter), the
+//! places among themselves by AIC; the seals' damping and the logged
+//! command's gain are freed on the chosen structure where the F test takes
+//! them. Every usable candidate's Schwarz weight spreads its rig into the
+//! chosen fit's covariance ([`StructureSpread`]), counting a difference
+//! only beyond twice what two fits of the same data differ by ([`HAUSMAN_Z`],
+//! Hausman 1978). The derivation, the weights and the starts:
+//! docs/methods.md, "The joint fit".
 
 use rayon::prelude::*;
 use schemars::JsonSchema;
@@ -208,7 +142,7 @@ pub struct Selection {
 
 impl Selection {
     /// The spread of the rig among the candidates about the chosen fit's
-    /// (module docs), when a structure is chosen.
+    /// (docs/methods.md, "The joint fit"), when a structure is chosen.
     pub fn spread(&self) -> Option<StructureSpread> {
         let chosen = self.fit()?;
         let usable: Vec<(usize, &JointFit)> = self
@@ -223,7 +157,7 @@ impl Selection {
             .fold(f64::INFINITY, f64::min)
             .max(1.0);
         // Schwarz's penalty, ln of the number of real residuals per
-        // parameter (module docs).
+        // parameter (docs/methods.md, "The joint fit").
         let qaic = |f: &JointFit| {
             let n = (f.dof + f.params.len()) as f64;
             f.cost / c_hat + f.params.len() as f64 * n.ln()
@@ -245,7 +179,7 @@ impl Selection {
         for (i, f) in &usable {
             let w = weights[*i];
             let d: [f64; 4] = std::array::from_fn(|k| f.params[k] - chosen.params[k]);
-            // Only what statistics do not explain (module docs): a
+            // Only what statistics do not explain (docs/methods.md, "The joint fit"): a
             // difference within HAUSMAN_Z of its statistical std adds
             // nothing, a larger one its square less |var_i - var_chosen|.
             let noise: [f64; 4] =
@@ -312,24 +246,24 @@ impl Selection {
 
 /// How many of its statistical stds (sqrt |var_i - var_chosen|) a
 /// candidate's difference from the chosen rig must exceed to count in the
-/// structure std or as a rival (module docs).
+/// structure std or as a rival (docs/methods.md, "The joint fit").
 pub const HAUSMAN_Z: f64 = 2.0;
 
 /// The weight under which a structure is not named as a rival
 /// (its share of the spread still counts).
 pub const WEIGHT_FLOOR: f64 = 0.01;
 
-/// The rig's spread among the structures (module docs).
+/// The rig's spread among the structures (docs/methods.md, "The joint fit").
 #[derive(Debug, Clone, PartialEq)]
 pub struct StructureSpread {
     /// Each candidate's Schwarz (BIC) weight, in the candidates' order: 0
     /// for an unusable one.
     pub weights: Vec<f64>,
-    /// The variance inflation the weights divide the costs by (module docs).
+    /// The variance inflation the weights divide the costs by (docs/methods.md, "The joint fit").
     pub c_hat: f64,
     /// The structure std of beta1, a1b0, a2 and a3: sqrt of the weighted
     /// mean square of the candidates' differences from the chosen fit, less
-    /// their statistical share (module docs).
+    /// their statistical share (docs/methods.md, "The joint fit").
     pub std: [f64; 4],
     /// The structure covariance they come from.
     pub covariance: [[f64; 4]; 4],
@@ -802,7 +736,7 @@ struct ValveStart {
 }
 
 /// The delay-and-mode (or delay-and-piston) fit of `structure` from the
-/// best starts of a grid (module docs).
+/// best starts of a grid (docs/methods.md, "The joint fit").
 fn fit_mode(
     runs: &[JointRun<'_>],
     start: &RigParams,
