@@ -1,37 +1,18 @@
 //! An output folder replaced as a whole: a reader sees the previous set of
-//! outputs or the new one, never a mix.
+//! outputs or the new one, never a mix. A job writes into a work folder
+//! beside its target (`.<name>.servoid-<pid>`), started as hard links of
+//! the previous set (the cache, the history and the lab's own files carried
+//! without copying; every writer replaces by rename, so they are never
+//! touched through the links), and the two are exchanged in one step
+//! (renameat2 with RENAME_EXCHANGE on Linux). The job holds a flock on
+//! `.<name>.servoid-lock` beside the folder, released by the kernel when it
+//! ends or dies; a second job waits for it up to `--wait` ([`DEFAULT_WAIT`])
+//! and names it, then starts from the set it left. A work folder left by a
+//! killed job is unlocked, and the next job removes it.
 //!
-//! Each file was already written atomically, but a set of them was not: a
-//! kill -9 or a full disk between results.json and report.html left a new
-//! results.json beside the old page. Now a job writes into a fresh work
-//! folder beside its target (`.<name>.servoid-<pid>`) and the two folders
-//! are exchanged in one step at the end (renameat2 with RENAME_EXCHANGE on
-//! Linux). The work folder starts as a copy of the previous set made of
-//! hard links, so what lives in the output folder between runs (the run
-//! cache in `.cache/`, the rig history, a simulation's logs, files of the
-//! lab's own) is carried across without copying bytes; every writer
-//! replaces files by rename, never in place, so the previous set's files
-//! are never touched through those links.
-//!
-//! The output folder is locked for the whole job (flock on
-//! `.<name>.servoid-lock` beside it, released by the kernel when the job
-//! ends or dies, so a stale lock never blocks a later night): a second
-//! job into the same folder (two runs, a run and a merge) waits for the
-//! first with a message on stderr naming it (pid, command, and whether it
-//! is stopped), then starts from the set the first put in place; it gives
-//! up after `--wait` ([`DEFAULT_WAIT`] unless given), so a hung or stopped
-//! holder cannot block every later night. Without it both carried the same previous set and the later
-//! exchange dropped the earlier job's history entry.
-//!
-//! A work folder is locked (flock) while its job lives. One left by a
-//! killed job is unlocked, and the next job beside it removes it, as it
-//! skips the per-file temporaries (`.<file>.tmp-<pid>`) such a job left
-//! inside the previous set.
-//!
-//! Fault injection: with `SERVOID_KILL_AT=<point>` in the environment, the
-//! process sends itself SIGKILL at that point (`locked`, `carried`, `results`,
-//! `exchange`, `exchanged`); tests/output_set.rs uses it to kill a rerun
-//! where a mix would be most likely.
+//! Fault injection: `SERVOID_KILL_AT=<point>` (`locked`, `carried`,
+//! `results`, `exchange`, `exchanged`) makes the process SIGKILL itself
+//! there; tests/output_set.rs kills reruns where a mix would be likeliest.
 
 use std::fs::File;
 use std::path::{Path, PathBuf};
