@@ -1,41 +1,16 @@
-//! Whether a fitted model explains its FRF: three tests
-//! on the weighted residuals e_k = (h_k - h_model,k) / sqrt(E|dH_k|^2 / 2),
-//! whose real and imaginary parts each have unit variance when the model is
-//! right and the variances are honest.
+//! Whether a fitted model explains its FRF: three one-sided tests on the
+//! weighted residuals e_k = (h_k - h_model,k) / sqrt(E|dH_k|^2 / 2), whose
+//! real and imaginary parts each have unit variance when the model is
+//! right and the variances are honest:
 //!
-//! 1. **Cost.** The weighted cost sum |e_k|^2 is then chi-square with
-//!    2N - p degrees of freedom: mean 2N - p, standard deviation
-//!    sqrt(2 (2N - p)). The test is z = (cost - dof) / sqrt(2 dof); a bare
-//!    reduced chi-square says nothing without the spread it should have.
-//! 2. **Correlation at the estimator's bandwidth.** Noise at bins further
-//!    apart than the estimator's spectral kernel is uncorrelated (the
-//!    rectangular ETFE's neighbours already are; a Hann or Hamming
-//!    segment's bins share noise with up to two neighbours, a
-//!    Blackman-Harris segment's with up to six), while a model error is
-//!    smooth in frequency. With L that lag, r = sum Re(e_k conj e_{k+L}) /
-//!    sqrt(sum |e_k|^2 sum |e_{k+L}|^2) over the n pairs of fitted bins L
-//!    apart is about N(0, 1/(2n)) under the null (each product has variance
-//!    2 and each |e|^2 mean 2), so z = r sqrt(2n).
-//! 3. **A phase residual that grows linearly.** A missing delay tau leaves
-//!    h / h_model = exp(-j w tau), a phase residual -w tau. The phase
-//!    residual phi_k = Im((h_k - h_model,k) / h_model,k) has variance
-//!    (E|dH_k|^2 / 2) / |h_model,k|^2; its weighted least-squares slope
-//!    through the origin gives tau with its std, and z = tau / std. A fitted
-//!    delay makes the slope zero at the optimum (it is the delay's gradient),
-//!    so the test speaks where the delay is fixed or absent.
+//! 1. the cost against its chi-square mean and spread (2N - p dof);
+//! 2. the correlation of residuals the estimator's kernel apart;
+//! 3. a phase residual that grows linearly with frequency (a missing delay).
 //!
-//! Each test fails beyond [`Z_LIMIT`] standard deviations, one-sided (a
-//! model error raises the cost and the correlation; a missing delay is
-//! positive): under the null that happens about 3 times in 100,000.
-//!
-//! The other side is a finding too, not a failure of the model: a cost or
-//! a neighbouring correlation [`Z_LIMIT`] std BELOW its expectation says
-//! the variances overstate the noise ([`Adequacy::overstated`]). The
-//! ETFE's local noise fit takes a transient's leakage or a sensor's drift
-//! for noise (a drift of 0.4 um/s: reduced chi2 0.92, r = -0.16 one bin
-//! apart; a sweep cut in motion: 0.875): each bin's variance then holds a
-//! share of what its neighbours' estimates also hold, which lowers the cost
-//! and makes neighbouring residuals anticorrelate.
+//! Each fails beyond [`Z_LIMIT`] std. A cost or a neighbouring correlation
+//! as far BELOW its expectation says the variances overstate the noise
+//! ([`Adequacy::overstated`]). The derivations: docs/methods.md, "The
+//! adequacy tests".
 
 use nalgebra::Complex;
 use schemars::JsonSchema;

@@ -1,44 +1,15 @@
 //! Whether the rig behaved linearly at the amplitude a sweep drove it:
 //! harmonics of the command in the response, and for a spring run the
-//! spring's force against its displacement. A sweep holds one narrow band
-//! at a time; a linear rig answers each part of it at that band only, so
-//! power at twice or three times the sweep's frequency, beyond what the
-//! command itself holds there and the noise, is distortion. Seal friction
-//! puts odd harmonics into the displacement (its force is a square wave of
-//! the velocity); a stiffening spring puts its cubic term's third harmonic
-//! into the force the load cell reads, which a linear spring's force
-//! follows the displacement without.
-//!
-//! The test, per block of the record (the 32 blocks the excitation is read
-//! from, each a power of two long): the sweep's peak bin p and the power
-//! within [`BINS`] of p, 2p and 3p; the noise floor from the median of the
-//! block's bins above 4p (a median of exponentially distributed powers is
-//! their mean times ln 2). A harmonic is found where its power is more than
-//! [`SIGNIFICANT`] times the noise and the linear part together: for the
-//! displacement the command's own power there times the displacement's
-//! over the command's at p (the actuator's gain falls with frequency, so
-//! this overstates the linear part), for the force the displacement's
-//! power there times the force's over the displacement's at p, carried to
-//! hp by the specimen's own force over its displacement (its dynamic
-//! stiffness k - m w^2 + i c w: a spring's is flat, a mass's grows with
-//! w^2, and vanishes at its resonance, where the force's fundamental does
-//! too). Over 18
-//! degrees of freedom 10 times the mean is a chance of 1e-40: a clean rig
-//! never shows one (`tests/diagnosis.rs`). Each block is weighed by a
-//! Blackman-Harris window: a rectangular one's leakage from the
-//! fundamental lies 30 dB under it two dozen bins away, where a third
-//! harmonic of a few per cent is.
-//!
-//! A converter's step distorts too: a sine quantised to steps of q carries
-//! an error bounded by q / 2, periodic with the sine where the amplitude is
-//! a few steps, whose harmonics each stay within (4 / pi) q / 2 = 0.64 q.
-//! A harmonic no larger than one step of its signal's converter is not
-//! counted: the data cannot tell it from the converter's.
-//!
-//! A stiffening spring's third harmonic in the force is a fraction of a
-//! per cent of it at a test's few mm, under a 1 N load cell's noise in a
-//! block; its force against its displacement shows it plainly
-//! ([`spring_force`]).
+//! spring's force against its displacement ([`spring_force`]). A sweep
+//! holds one narrow band at a time, so power at twice or three times its
+//! frequency, beyond what the command itself holds there and the noise,
+//! is distortion: seal friction's odd harmonics in the displacement, a
+//! stiffening spring's third in the force. Per block of the record, a
+//! harmonic counts where its power exceeds [`SIGNIFICANT`] times the noise
+//! and the linear part together, within [`BINS`] of 2p or 3p, and not where
+//! one converter step explains it; a signal with harmonics in
+//! [`MIN_BLOCKS`] blocks is not linear. The test's derivation and its
+//! false-alarm rate: docs/methods.md, "The linearity check".
 
 use nalgebra::{Complex, SMatrix, SVector};
 
