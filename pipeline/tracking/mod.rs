@@ -334,18 +334,15 @@ fn centred_spectrum(x: &[f64], mean: f64) -> Vec<Complex<f64>> {
 /// `x_c`) encloses, counted positive anticlockwise. A displacement that
 /// lags its command traces the loop anticlockwise, so **TI falls while the
 /// actuator lags and rises while it leads**; for `x_c = a sin(wt)`, `x_m =
-/// b sin(wt - phi)` it falls by `pi a b sin(phi)` a cycle. Returned with
+/// b sin(wt - phi)` it falls by `pi a b sin(phi)` a cycle: TI at the end
+/// of the record (m^2, as the records' unit). None for fewer than two
+/// samples or records that are zero throughout; runs compare by
 /// [`tracking_indicator_per_cycle`].
-pub fn tracking_indicator(command: &[f64], displacement: &[f64]) -> Option<(f64, f64)> {
+pub fn tracking_indicator(command: &[f64], displacement: &[f64]) -> Option<f64> {
     let n = command.len().min(displacement.len());
-    if n < 2 {
-        return None;
-    }
-    let ti = indicator_over(&command[..n], &displacement[..n]);
-    Some((
-        ti,
-        tracking_indicator_per_cycle(&command[..n], &displacement[..n])?,
-    ))
+    let (xc, xm) = (&command[..n], &displacement[..n]);
+    let moves = xc.iter().chain(xm).any(|v| *v != 0.0);
+    (n >= 2 && moves).then(|| indicator_over(xc, xm))
 }
 
 /// TI over the samples given, by the trapezoidal rule.
@@ -514,6 +511,7 @@ pub fn measure(
         .map_err(|e| notes.push(format!("frequency evaluation index: {e}")))
         .ok();
     let ti = tracking_indicator(command, displacement);
+    let ti_per_cycle = tracking_indicator_per_cycle(command, displacement);
     let errors = tracking_errors(command, displacement);
     if errors.is_none() {
         notes.push("tracking errors: the command is zero throughout".into());
@@ -523,8 +521,8 @@ pub fn measure(
         delay_xcorr_samples: xcorr.map(|d| d * sample_rate_hz),
         delay_phase_slope_s: slope,
         fei,
-        tracking_indicator_m2: ti.map(|t| t.0),
-        tracking_indicator_pct: ti.map(|t| t.1),
+        tracking_indicator_m2: ti,
+        tracking_indicator_pct: ti_per_cycle,
         errors,
         windows,
         notes,
