@@ -1360,42 +1360,7 @@ fn finish(
     } else {
         cov_theta
     };
-    // To physical units: x = exp(theta) for the log parameters (dx = x
-    // dtheta), the delay in seconds, the valve frequency in Hz.
-    let mut params: Vec<f64> = theta[..4].iter().map(|t| t.exp()).collect();
-    let mut factors = params.clone();
-    if opts.structure != Structure::Plain {
-        params.push(theta[4] * problem.period_s);
-        factors.push(problem.period_s);
-    }
-    if opts.structure.place().is_some() {
-        let hz = theta[5].exp() / (2.0 * std::f64::consts::PI);
-        params.push(hz);
-        factors.push(hz);
-        params.push(theta[6].exp());
-        factors.push(theta[6].exp());
-    }
-    if opts.structure.piston() {
-        let mp = theta[opts.structure.piston_index()].exp();
-        params.push(mp);
-        factors.push(mp);
-    }
-    if let Some(k) = problem.force_delay {
-        params.push(theta[k] * problem.period_s);
-        factors.push(problem.period_s);
-    }
-    if let Some(k) = problem.friction {
-        params.push(theta[k]);
-        factors.push(1.0);
-    }
-    if let Some(k) = problem.seal_damping {
-        params.push(theta[k]);
-        factors.push(1.0);
-    }
-    if let Some(k) = problem.command_gain {
-        params.push(theta[k].exp());
-        factors.push(theta[k].exp());
-    }
+    let (params, factors) = physical(problem, &theta, opts);
     let covariance = DMatrix::from_fn(p, p, |i, j| cov_theta[(i, j)] * factors[i] * factors[j]);
     let std = (0..p).map(|i| covariance[(i, i)].sqrt()).collect();
     let (adequacy, per_run) = problem.adequacy(&theta);
@@ -1433,6 +1398,48 @@ fn finish(
         adequacy,
         per_run,
     })
+}
+
+/// The parameters at `theta` in physical units, and each one's derivative
+/// with respect to its element of theta: x = exp(theta) for the log
+/// parameters (dx = x dtheta), the delays in seconds, the mode's frequency
+/// in Hz.
+fn physical(problem: &JointProblem, theta: &[f64], opts: &JointOptions) -> (Vec<f64>, Vec<f64>) {
+    let mut params: Vec<f64> = theta[..4].iter().map(|t| t.exp()).collect();
+    let mut factors = params.clone();
+    if opts.structure != Structure::Plain {
+        params.push(theta[4] * problem.period_s);
+        factors.push(problem.period_s);
+    }
+    if opts.structure.place().is_some() {
+        let hz = theta[5].exp() / (2.0 * std::f64::consts::PI);
+        params.push(hz);
+        factors.push(hz);
+        params.push(theta[6].exp());
+        factors.push(theta[6].exp());
+    }
+    if opts.structure.piston() {
+        let mp = theta[opts.structure.piston_index()].exp();
+        params.push(mp);
+        factors.push(mp);
+    }
+    if let Some(k) = problem.force_delay {
+        params.push(theta[k] * problem.period_s);
+        factors.push(problem.period_s);
+    }
+    if let Some(k) = problem.friction {
+        params.push(theta[k]);
+        factors.push(1.0);
+    }
+    if let Some(k) = problem.seal_damping {
+        params.push(theta[k]);
+        factors.push(1.0);
+    }
+    if let Some(k) = problem.command_gain {
+        params.push(theta[k].exp());
+        factors.push(theta[k].exp());
+    }
+    (params, factors)
 }
 
 /// The rig's log parameters, a1b0 referred to `p_ref`.

@@ -402,6 +402,14 @@ mod tests {
         assert_eq!(pct(Value::from(0.000_74)), "+0.07 %");
     }
 
+    /// Each shared warning's headline and runs.
+    fn headlines_and_runs<'a>(shared: &'a [SharedWarning<'a>]) -> Vec<(&'a str, Vec<&'a str>)> {
+        shared
+            .iter()
+            .map(|s| (s.headline.as_str(), s.runs.clone()))
+            .collect()
+    }
+
     /// Three runs, two of which share a headline (one of them twice): the
     /// shared one is listed once with both runs, the other alone.
     #[test]
@@ -416,10 +424,7 @@ mod tests {
             Warning::new("the command is limited", "c.csv: ..."),
         ];
         let shared = shared_warnings([("a", &a[..]), ("b", &b[..]), ("c", &c[..])]);
-        let got: Vec<(&str, Vec<&str>)> = shared
-            .iter()
-            .map(|s| (s.headline.as_str(), s.runs.clone()))
-            .collect();
+        let got = headlines_and_runs(&shared);
         assert_eq!(
             got,
             [
@@ -461,10 +466,7 @@ mod tests {
             ("e", &e[..]),
             ("f", &other[..]),
         ]);
-        let got: Vec<(&str, Vec<&str>)> = shared
-            .iter()
-            .map(|s| (s.headline.as_str(), s.runs.clone()))
-            .collect();
+        let got = headlines_and_runs(&shared);
         assert_eq!(
             got,
             [

@@ -346,49 +346,50 @@ pub fn select(
     }
 }
 
-/// The logged command's gain, where the chosen fit refitted from its
-/// optimum with the gain freed is taken by the extra-sum-of-squares F test
-/// (p < [`P_SIGNIFICANT`]).
+/// The logged command's gain, where the chosen fit refitted with the gain
+/// freed is taken ([`refit_taken`]).
 fn command_gain_taken(
     runs: &[JointRun<'_>],
     selection: &Selection,
     opts: &JointOptions,
 ) -> Option<f64> {
-    let fit = selection.fit()?;
-    let gained = JointOptions {
-        friction_start_n: fit.friction_n.unwrap_or(opts.friction_start_n),
+    let freed = JointOptions {
         command_gain: true,
         command_gain_start: 1.0,
-        ..from_optimum(fit, opts)
+        ..*opts
     };
-    let refit = joint_fit(runs, &fit.rig, &gained).ok()?;
-    (f_test(fit, &refit).p_value < P_SIGNIFICANT)
-        .then_some(refit.command_gain)
-        .flatten()
+    refit_taken(runs, selection.fit()?, &freed)?.command_gain
 }
 
-/// Whether the chosen fit with the seals' viscous damping freed, refitted
-/// from its optimum, has a damping that does not drive the piston and is
-/// taken by the extra-sum-of-squares F test
-/// (p < [`P_SIGNIFICANT`]). A fit without friction has none to free.
+/// Whether the chosen fit refitted with the seals' viscous damping freed
+/// is taken ([`refit_taken`]) with a damping that does not drive the
+/// piston. A fit without friction has none to free.
 fn seal_damping_taken(runs: &[JointRun<'_>], selection: &Selection, opts: &JointOptions) -> bool {
     let Some(fit) = selection.fit().filter(|f| f.friction_n.is_some()) else {
         return false;
     };
-    let damped = JointOptions {
-        friction_start_n: fit.friction_n.unwrap_or(opts.friction_start_n),
+    let freed = JointOptions {
         seal_damping: true,
-        ..from_optimum(fit, opts)
+        ..*opts
     };
     // The refit's other parameters may leave the physical range or stall
     // (a mode the damping makes redundant, its damping going to zero): that
     // is for the choice among the damped structures to settle; here only
     // the damping is judged. A refit stopped short of its optimum only
     // understates what the damping explains.
-    let Ok(refit) = joint_fit(runs, &fit.rig, &damped) else {
-        return false;
+    refit_taken(runs, fit, &freed).is_some_and(|r| r.seal_damping_driving().is_none())
+}
+
+/// `fit` refitted from its optimum (its friction too) with what `freed`
+/// frees, where the extra-sum-of-squares F test takes the refit over it
+/// (p < [`P_SIGNIFICANT`]).
+fn refit_taken(runs: &[JointRun<'_>], fit: &JointFit, freed: &JointOptions) -> Option<JointFit> {
+    let opts = JointOptions {
+        friction_start_n: fit.friction_n.unwrap_or(freed.friction_start_n),
+        ..from_optimum(fit, freed)
     };
-    refit.seal_damping_driving().is_none() && f_test(fit, &refit).p_value < P_SIGNIFICANT
+    let refit = joint_fit(runs, &fit.rig, &opts).ok()?;
+    (f_test(fit, &refit).p_value < P_SIGNIFICANT).then_some(refit)
 }
 
 /// `opts` for a refit of `fit`'s structure started at its optimum: its

@@ -668,14 +668,19 @@ fn a_logged_commands_gain_is_fitted_where_the_data_show_it() {
             *v *= 1.0005;
         }
     }
-    let sel = select(
-        &scaled.runs(),
-        &off(&r),
-        &options(Structure::Plain),
-        Choice::Auto,
-        30.0,
-    );
-    let fit = sel.fit().unwrap();
+    let chosen = |c: &Campaign| {
+        select(
+            &c.runs(),
+            &off(&r),
+            &options(Structure::Plain),
+            Choice::Auto,
+            30.0,
+        )
+        .fit()
+        .cloned()
+        .unwrap()
+    };
+    let fit = chosen(&scaled);
     let k = fit.names.iter().position(|n| *n == COMMAND_GAIN).unwrap();
     let z = (fit.params[k] - 1.0005) / fit.std[k];
     assert!(
@@ -700,15 +705,7 @@ fn a_logged_commands_gain_is_fitted_where_the_data_show_it() {
         "without the gain the rig is within {worst} std"
     );
     // The same noise at the gain of 1: the F test leaves the gain out.
-    let plain = Campaign::new(None, 0.0).noisy(1e-8, 7);
-    let sel = select(
-        &plain.runs(),
-        &off(&r),
-        &options(Structure::Plain),
-        Choice::Auto,
-        30.0,
-    );
-    let fit = sel.fit().unwrap();
+    let fit = chosen(&Campaign::new(None, 0.0).noisy(1e-8, 7));
     assert_eq!(fit.command_gain, None);
     assert!(!fit.names.contains(&COMMAND_GAIN));
 }
