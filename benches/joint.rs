@@ -34,7 +34,9 @@ use std::hint::black_box;
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use nalgebra::Complex;
 use servoid::fit::Intersample;
-use servoid::fit::joint::{Choice, JointOptions, JointRun, Output, Structure, joint_fit, select};
+use servoid::identify::joint::{
+    Choice, JointOptions, JointRun, Output, Structure, joint_fit, select,
+};
 use servoid::lti::ZohSampled;
 use servoid::model::{LinearSpecimen, PAPER_RIG, RigParams};
 use servoid::simulate::plant::{PlantSpec, Unmodelled, ValveMode, linear_state_space};

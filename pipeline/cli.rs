@@ -68,6 +68,18 @@ pub struct JobArgs {
     /// 1800.
     #[arg(long, value_name = "SECONDS")]
     wait: Option<u64>,
+    /// The night's date (ISO 8601, YYYY-MM-DD), given to every run the
+    /// manifest and its run table leave undated: the date of the rig
+    /// history's entry, which `servoid history remove --date` names. A
+    /// nightly job passes the night it records, e.g. `--date "$(date
+    /// +%F)"`.
+    #[arg(long, value_name = "YYYY-MM-DD", value_parser = night_date)]
+    date: Option<String>,
+}
+
+/// `--date`, checked against the calendar and normalised.
+fn night_date(text: &str) -> Result<String, String> {
+    crate::manifest::normalise_date(text).map_err(|e| e.to_string())
 }
 
 /// How a campaign is run: a job, its figures, and its share.
@@ -535,6 +547,7 @@ fn settings(args: &JobArgs, figures: FigureFormats) -> Settings {
         figures,
         force: args.force,
         wait: args.wait.map(std::time::Duration::from_secs),
+        date: args.date.clone(),
     }
 }
 

@@ -3,17 +3,14 @@
 //! by more than its uncertainty allows, so that a nightly job can page
 //! someone when a servo-valve degrades.
 //!
-//! The rule, for each of beta1, a1b0 (referred to P = 1, as it scales with
-//! the P gain), a2 and a3: with m the median of the parameter over the last
-//! K entries before this one (K = `window`, at least [`MIN_HISTORY`] of
-//! them), alarm when |x - m| > N max(sigma_x, sigma_h), N = `threshold`,
-//! sigma_x the campaign's own standard deviation of x and sigma_h the
-//! history's scatter. sigma_h is measured on night-to-night differences
-//! (1.4826 times their median absolute deviation about their median,
-//! divided by sqrt 2): noise between nights raises it, while a steady drift
-//! does not (its differences are all alike), so a slow degradation is caught
-//! instead of widening its own threshold, as the scatter of the values
-//! themselves would.
+//! For each of beta1, a1b0 (referred to P = 1), a2 and a3, with m its median
+//! over the last K = `window` entries (at least [`MIN_HISTORY`]): alarm when
+//! |x - m| > N max(sigma_x, sigma_h), N = `threshold`, sigma_x the
+//! campaign's own std of x and sigma_h the history's scatter, measured on
+//! night-to-night differences (1.4826 times their MAD, over sqrt 2) so that
+//! a steady drift does not widen its own threshold. The night's actuator
+//! delay is checked the same way, with a floor. Why the differences:
+//! docs/methods.md, "The drift rule".
 
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};

@@ -95,12 +95,7 @@ impl TransferFunction {
 
     /// H(s), the delay included.
     pub fn eval(&self, s: Complex<f64>) -> Complex<f64> {
-        let rational = poly::eval(&self.num, s) / poly::eval(&self.den, s);
-        if self.delay_s == 0.0 {
-            rational
-        } else {
-            rational * (-s * self.delay_s).exp()
-        }
+        poly::eval(&self.num, s) / poly::eval(&self.den, s) * poly::delay(s, self.delay_s)
     }
 
     /// Frequency response H(j 2 pi f) at `f_hz` (Hz).

@@ -15,6 +15,22 @@ pub fn eval(coeffs: &[f64], s: Complex<f64>) -> Complex<f64> {
         .fold(Complex::new(0.0, 0.0), |acc, &c| acc * s + c)
 }
 
+/// Evaluate a monic polynomial at `s`: `rest` are its coefficients after
+/// the leading 1 (highest power first), as the fits store a denominator.
+pub fn eval_monic(rest: &[f64], s: Complex<f64>) -> Complex<f64> {
+    rest.iter()
+        .fold(Complex::new(1.0, 0.0), |acc, &c| acc * s + c)
+}
+
+/// A pure delay's response exp(-s tau); exactly 1 where there is none.
+pub fn delay(s: Complex<f64>, tau: f64) -> Complex<f64> {
+    if tau == 0.0 {
+        Complex::new(1.0, 0.0)
+    } else {
+        (-s * tau).exp()
+    }
+}
+
 /// Evaluate a real polynomial (highest power first) at a real point.
 pub fn eval_real(coeffs: &[f64], x: f64) -> f64 {
     coeffs.iter().fold(0.0, |acc, &c| acc * x + c)

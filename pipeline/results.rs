@@ -17,7 +17,7 @@ pub use crate::warning::Warning;
 use serde::{Deserialize, Serialize};
 
 use crate::drift::Check;
-use crate::fit::joint::Structure;
+use crate::identify::joint::Structure;
 use crate::identify::{Estimate, PerSpring};
 use crate::lti::TransferFunction;
 use crate::manifest::simulation::UnmodelledSpec;

@@ -158,7 +158,7 @@ fn every_command_in_the_readme_and_docs_runs_as_written() {
                 }
                 continue;
             };
-            if args.get(1).is_some_and(|m| m.starts_with(WORKED_NIGHT)) {
+            if in_worked_night(&args) {
                 // Run in order by the_worked_night_runs_as_written_and_alarms_on_the_drifted_night.
                 continue;
             }
@@ -342,6 +342,17 @@ fn toml_blocks_are_read_with_their_indentation_taken_off() {
 /// commands on its files run together, in order.
 const WORKED_NIGHT: &str = "experiments/nightly/";
 
+/// The worked night's output folder, which its `history` commands name.
+const WORKED_NIGHT_OUT: &str = "reports/frame-b/";
+
+/// Whether a command is one of the worked night's: on its manifests, or on
+/// the history it writes.
+fn in_worked_night(args: &[String]) -> bool {
+    args.get(1).is_some_and(|m| m.starts_with(WORKED_NIGHT))
+        || (args.first().is_some_and(|c| c == "history")
+            && args.iter().any(|a| a.starts_with(WORKED_NIGHT_OUT)))
+}
+
 /// Copy the folder `from` into `to`, but for what the walkthrough writes
 /// (`incoming/`, its lock): a checkout that tried the example copies as a
 /// fresh one.
@@ -408,8 +419,10 @@ const TRUTH_TOLERANCE: f64 = 0.005;
 /// night whose true rig is the first night's exits 0 without an alarm; a
 /// night whose truth moved exits 3 with one alarm per moved parameter,
 /// naming it, its deviation the truth's move (it needs `MIN_HISTORY`
-/// earlier nights, which the walkthrough must give it). history.parquet
-/// then holds every night once, in order, each within 0.5 % of its truth.
+/// earlier nights, which the walkthrough must give it). Each night is run
+/// with its `--date`, and `history remove --date` takes one out:
+/// history.parquet then holds every other night once, in order, with its
+/// date, each within 0.5 % of its truth.
 #[test]
 fn the_worked_night_runs_as_written_and_alarms_on_the_drifted_night() {
     use servoid::drift::MIN_HISTORY;
@@ -423,7 +436,7 @@ fn the_worked_night_runs_as_written_and_alarms_on_the_drifted_night() {
             let Some(args) = servoid_args(&command) else {
                 continue;
             };
-            if args.get(1).is_some_and(|m| m.starts_with(WORKED_NIGHT)) {
+            if in_worked_night(&args) {
                 assert_eq!(
                     *doc.get_or_insert_with(|| file.clone()),
                     file,
@@ -461,6 +474,13 @@ fn the_worked_night_runs_as_written_and_alarms_on_the_drifted_night() {
     let mut fresh = false;
     let mut out = None;
     let mut alarmed = 0;
+    // Each night's --date, and the dates removed from the history.
+    let mut dates: Vec<String> = Vec::new();
+    let mut removed: Vec<String> = Vec::new();
+    let flag = |args: &[String], name: &str| -> Option<String> {
+        let at = args.iter().position(|a| a == name)?;
+        args.get(at + 1).cloned()
+    };
     for (command, args) in &commands {
         eprintln!("{}: running `{command}`", doc.display());
         let refs: Vec<&str> = args.iter().map(String::as_str).collect();
@@ -474,6 +494,7 @@ fn the_worked_night_runs_as_written_and_alarms_on_the_drifted_night() {
             "run" => {
                 assert!(fresh, "`{command}` runs no new night's logs");
                 fresh = false;
+                dates.push(flag(args, "--date").expect("each night is run with its date"));
                 let at = args.iter().position(|a| a == "--out");
                 let given = Path::new(&args[at.expect("the nights' folder is given") + 1]);
                 assert!(
@@ -549,25 +570,39 @@ fn the_worked_night_runs_as_written_and_alarms_on_the_drifted_night() {
                 }
                 alarmed += 1;
             }
+            "history" => {
+                assert_eq!(o.code, 0, "`{command}`:\n{}", o.stderr);
+                let date = flag(args, "--date").expect("a removal names its date");
+                assert!(dates.contains(&date), "`{command}`: no night of {date}");
+                removed.push(date);
+            }
             _ => assert_eq!(o.code, 0, "`{command}`:\n{}", o.stderr),
         }
     }
     assert!(alarmed > 0, "the walkthrough's nights raise no alarm");
+    assert!(!removed.is_empty(), "the walkthrough removes no night");
 
     // The history: every night once, in order, each near its own truth.
     let history = out
         .expect("the walkthrough runs a night")
         .join("history.parquet");
     let table = read_table(&history, TableFormat::Parquet).unwrap();
-    assert_eq!(table.rows.len(), truths.len(), "one history row a night");
+    // The nights kept, each with its date and truth.
+    let kept: Vec<(&String, &Vec<(&str, f64)>)> = dates
+        .iter()
+        .zip(&truths)
+        .filter(|(d, _)| !removed.contains(d))
+        .collect();
+    assert_eq!(table.rows.len(), kept.len(), "one history row a night kept");
     let cell = |row: &[Option<String>], name: &str| -> String {
         let k = table
             .column(name)
             .unwrap_or_else(|| panic!("no column {name}"));
         row[k].clone().unwrap_or_else(|| panic!("{name} is empty"))
     };
-    for (n, (row, truth)) in table.rows.iter().zip(&truths).enumerate() {
+    for (n, (row, (date, truth))) in table.rows.iter().zip(kept).enumerate() {
         assert_eq!(cell(row, "rig"), rig, "row {n}");
+        assert_eq!(&cell(row, "date"), date, "row {n}");
         let p_gain: f64 = cell(row, "p_gain").parse().unwrap();
         for &(name, value) in truth {
             let mut got: f64 = cell(row, name).parse().unwrap();

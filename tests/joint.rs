@@ -5,9 +5,9 @@
 //! the manifest), compared with the parameters they were simulated from.
 //! The simulator shares only the model's equations with the fit (docs/model.md;
 //! the valve mode's state space is checked against the transfer function
-//! in the unit tests of `fit::joint`).
+//! in the unit tests of `identify::joint`).
 
-use servoid::fit::joint::Structure;
+use servoid::identify::joint::Structure;
 use servoid::manifest::simulation::load_simulation_str;
 use servoid::manifest::{Campaign, load};
 use servoid::results::{JointResult, Results, RigSource};
@@ -535,7 +535,7 @@ fn a_fixed_structure_the_data_reject_is_kept_and_flagged() {
     // (on this record the two differ by a cost of 131 in 23,000).
     assert_eq!(
         joint.data_choose.and_then(|s| s.place()),
-        Some(servoid::fit::joint::Place::Loop),
+        Some(servoid::identify::joint::Place::Loop),
         "{:?}",
         joint.data_choose
     );

@@ -1,5 +1,5 @@
 //! The joint grey-box fit in the campaign: the identification
-//! runs' FRFs to `fit::joint::select`, its outcome beside the sequential
+//! runs' FRFs to `identify::joint::select`, its outcome beside the sequential
 //! estimate, and the decision which of the two the campaign uses.
 //!
 //! The joint estimate is used (with `identification.joint.rig = "auto"`)
@@ -13,13 +13,11 @@
 
 use super::evidence::{Evidence, ValidationEvidence};
 use crate::fit::adequacy::Adequacy;
-use crate::fit::joint::{
-    self, Candidate, Choice, JointFit, JointOptions, JointRun, Output, P_SIGNIFICANT, Place,
-    RunSpread, Selection, Structure, StructureSpread,
+use crate::identify::joint::{
+    self, Candidate, Choice, JointFit, JointIdentification, JointOptions, JointRun, Output,
+    P_SIGNIFICANT, Place, RunSpread, Selection, Structure, StructureSpread,
 };
-use crate::identify::Estimate;
-use crate::identify::FitData;
-use crate::identify::IdentificationPlan;
+use crate::identify::{Estimate, FitData, IdentificationPlan};
 use crate::manifest::{Campaign, JointRig, Role, RunPlan};
 use crate::model::{RigParams, Seals};
 use crate::results::{
@@ -119,13 +117,18 @@ pub fn joint(
     opts.friction_smoothing_m_per_s = campaign.joint.friction_smoothing_m_per_s;
     let choice = campaign.joint.structure;
     let band_top = fitted.iter().map(|(p, ..)| p.band_hz.1).fold(0.0, f64::max);
-    let (runs, sel) = select_springs(runs, start, &opts, choice, band_top, warnings);
-    let misfit = joint::run_spread(&runs, &sel, &opts);
+    let ident = joint::identify(runs, start, &opts, choice, band_top);
+    if ident.stiffening_rejected {
+        warnings.push(Warning::new(
+            "rig: the springs' cubic term is not borne out by their FRFs; the stated k are used",
+            STIFFENING_REJECTED,
+        ));
+    }
     let ids = frf_ids(&fitted);
     let seq_chi2 = sequential_chi2(evidence);
     let stiffening: Vec<(String, f64)> = ids
         .iter()
-        .zip(&runs)
+        .zip(&ident.runs)
         .filter_map(|(id, r)| Some((id.clone(), r.spring_cubic_n_per_m3?)))
         .collect();
     if let Some(note) = stiffening_note(&stiffening) {
@@ -138,13 +141,7 @@ pub fn joint(
         ));
     }
     let mut result = describe(
-        &sel,
-        (misfit.as_ref(), known),
-        &ids,
-        campaign,
-        sequential,
-        seq_chi2,
-        warnings,
+        &ident, known, &ids, campaign, sequential, seq_chi2, warnings,
     );
     if ids.len() > identification_frfs {
         result.explanation.push_str(&format!(
@@ -153,43 +150,6 @@ pub fn joint(
         ));
     }
     Some(result)
-}
-
-/// The structure chosen for `runs`, and the runs it was chosen on: where a
-/// spring's stiffening was read from its force, the data choose whether the
-/// fit holds better with it or with the stated k (a load cell's delay
-/// against the LVDT's can mimic a cubic term).
-fn select_springs<'a>(
-    runs: Vec<JointRun<'a>>,
-    start: &RigParams,
-    opts: &JointOptions,
-    choice: Choice,
-    band_top: f64,
-    warnings: &mut Vec<Warning>,
-) -> (Vec<JointRun<'a>>, Selection) {
-    let sel = joint::select(&runs, start, opts, choice, band_top);
-    if !runs.iter().any(|r| r.spring_cubic_n_per_m3.is_some()) {
-        return (runs, sel);
-    }
-    let stated: Vec<JointRun<'_>> = runs
-        .iter()
-        .map(|r| JointRun {
-            spring_cubic_n_per_m3: None,
-            ..*r
-        })
-        .collect();
-    let linear = joint::select(&stated, start, opts, choice, band_top);
-    match (sel.fit().map(schwarz), linear.fit().map(schwarz)) {
-        (Some(with), Some(without)) if without <= with => {
-            warnings.push(Warning::new(
-                "rig: the springs' cubic term is not borne out by their FRFs; the stated k are used",
-                STIFFENING_REJECTED,
-            ));
-            (stated, linear)
-        }
-        (None, Some(_)) => (stated, linear),
-        _ => (runs, sel),
-    }
 }
 
 /// Each fitted FRF's name: an identification run's id; a validation run's
@@ -401,12 +361,6 @@ const UNRESOLVED_PISTON: &str = ". The data resolve no piston mass (its mode lie
 /// Where the springs' forces show a cubic term the FRFs do not bear out.
 const STIFFENING_REJECTED: &str = "rig: the springs' force against their displacement shows a cubic term (the spring runs' warnings), but the joint fit holds better with each stated k than with the springs stiffening, so it takes the stated k: a delay between the load cell and the LVDT, or the rig's own dynamics in the force, can mimic a cubic term; a spring that truly stiffens shows it in its FRF too";
 
-/// A fit's Schwarz criterion, cost + p ln(2N) over its 2N residuals.
-fn schwarz(fit: &JointFit) -> f64 {
-    let p = fit.params.len();
-    fit.cost + p as f64 * ((fit.dof + p) as f64).ln()
-}
-
 /// How the joint fit took the springs that stiffen, (run, k3) each.
 fn stiffening_note(springs: &[(String, f64)]) -> Option<String> {
     if springs.is_empty() {
@@ -447,14 +401,15 @@ fn no_usable_structure(sel: &Selection) -> String {
 /// `known` is what the runs' own warnings or the springs' agreement already
 /// found wrong, which the misfit is put down to.
 fn describe(
-    sel: &Selection,
-    (misfit, known): (Option<&RunSpread>, Option<&str>),
+    ident: &JointIdentification<'_>,
+    known: Option<&str>,
     ids: &[String],
     campaign: &Campaign,
     sequential: &RigEstimates,
     seq_chi2: Option<f64>,
     warnings: &mut Vec<Warning>,
 ) -> JointResult {
+    let (sel, misfit) = (&ident.selection, ident.misfit.as_ref());
     let split = sel.candidate(Structure::DelayMeasurement).is_some();
     let spread = sel.spread();
     let mut result = table(sel, spread.as_ref(), split, warnings);
@@ -471,15 +426,7 @@ fn describe(
         ));
         return result;
     };
-    let structure_cov = spread.as_ref().map_or([[0.0; 4]; 4], |s| s.covariance);
-    // The runs' model-error spread adds on the diagonal (the jackknife's
-    // correlations are too few refits to trust).
-    let misfit_var: [f64; 4] = misfit.map_or([0.0; 4], |m| m.std.map(|s| s * s));
-    let cov: [[f64; 4]; 4] = std::array::from_fn(|i| {
-        std::array::from_fn(|j| {
-            fit.covariance[(i, j)] + structure_cov[i][j] + if i == j { misfit_var[i] } else { 0.0 }
-        })
-    });
+    let cov = ident.rig_covariance().expect("a structure is chosen");
     result.parameters = parameters(fit, sequential, spread.as_ref(), misfit);
     // With the friction fitted, its harmonics are what remains unexplained.
     let known = if let Some(note) = friction_note(fit, ids) {
@@ -506,7 +453,7 @@ fn describe(
         ));
         result.misfit = Some(text);
     }
-    result.r1 = Some(r1(&fit.rig, &cov));
+    result.r1 = ident.r1();
     result.covariance = Some(cov);
     result.structure_covariance = spread.as_ref().map(|s| s.covariance);
     if let Some(text) = spread
@@ -880,19 +827,6 @@ fn parameters(
             }
         })
         .collect()
-}
-
-/// R1 = a1b0 / a2 with its first-order std.
-fn r1(rig: &RigParams, cov: &[[f64; 4]; 4]) -> Estimate {
-    let r1 = rig.r1();
-    let (a, b) = (rig.a1b0_n_per_m_s2, rig.a2_n_per_m);
-    // Gradient (1 / a2, -a1b0 / a2^2) over (a1b0, a2).
-    let g = [1.0 / b, -a / (b * b)];
-    let var = g[0] * g[0] * cov[1][1] + 2.0 * g[0] * g[1] * cov[1][2] + g[1] * g[1] * cov[2][2];
-    Estimate {
-        value: r1,
-        std: Some(var.max(0.0).sqrt()),
-    }
 }
 
 /// The joint estimate as the rig's estimates (a1b0 at the reference P

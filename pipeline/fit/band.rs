@@ -12,6 +12,7 @@
 use nalgebra::Complex;
 
 use crate::lti::log_response_std;
+use crate::poly;
 
 use super::TfFit;
 
@@ -33,7 +34,7 @@ pub fn response_std(fit: &TfFit, freq_hz: &[f64]) -> ResponseStd {
     let p = fit.params.len();
     for &f in freq_hz {
         let s = Complex::new(0.0, 2.0 * std::f64::consts::PI * f);
-        let (num, den) = (eval(&fit.tf.num, s), eval(&fit.tf.den, s));
+        let (num, den) = (poly::eval(&fit.tf.num, s), poly::eval(&fit.tf.den, s));
         // d ln G / d param, in the order of `params`.
         let mut grad: Vec<Complex<f64>> = Vec::with_capacity(p);
         // Numerator n_m .. n0: the coefficient of s^i.
@@ -52,12 +53,6 @@ pub fn response_std(fit: &TfFit, freq_hz: &[f64]) -> ResponseStd {
         out.phase_rad.push(phase);
     }
     out
-}
-
-/// A polynomial (highest power first) at `s`.
-fn eval(coef: &[f64], s: Complex<f64>) -> Complex<f64> {
-    coef.iter()
-        .fold(Complex::new(0.0, 0.0), |acc, &c| acc * s + c)
 }
 
 #[cfg(test)]

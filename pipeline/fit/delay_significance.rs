@@ -1,11 +1,10 @@
-//! Whether a run's data support a pure delay its fit lacks (the
-//! structure the data support, asked of every per-run fit made without a
-//! delay, which covers runs the joint fit cannot, such as a press driving
-//! an unknown specimen).
+//! Whether a run's data support a pure delay its fit lacks, asked of every
+//! per-run fit made without one (a press driving an unknown specimen, which
+//! the joint fit cannot take).
 //!
 //! The fit is made again with a fitted delay, and the two are compared by
 //! the extra-sum-of-squares F test the joint fit's structure selection
-//! uses (`fit::joint::select`): with cost_0 the weighted cost without the
+//! uses (`identify::joint::select`): with cost_0 the weighted cost without the
 //! delay and cost_1, dof_1 with it,
 //!
 //!   F = (cost_0 - cost_1) / (cost_1 / dof_1),
@@ -17,8 +16,11 @@
 
 use statrs::distribution::{ContinuousCDF, FisherSnedecor};
 
-use super::joint::P_SIGNIFICANT;
 use super::{DelayPlan, FitError, FitInput, FitOptions, TfFit, fit};
+
+/// The p-value below which a larger model is taken: the delay here, a
+/// larger structure in the joint fit's selection.
+pub const P_SIGNIFICANT: f64 = 1e-3;
 
 /// The fit with a delay, and the F test against the fit without.
 #[derive(Debug)]

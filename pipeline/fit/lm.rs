@@ -1,29 +1,17 @@
 //! Levenberg-Marquardt for nonlinear least squares, written as an argmin
 //! [`Solver`] so it runs in argmin's `Executor` like the built-in solvers
-//! (argmin 0.11 has Gauss-Newton but no damped method, and Gauss-Newton
-//! fails from far starts: BUILD-NOTES.md).
+//! (argmin 0.11 has Gauss-Newton, which fails from far starts, but no
+//! damped method).
 //!
-//! Each iteration solves (J^T J + lambda D) delta = -J^T r, with D Marquardt's
-//! diagonal scaling (the running maximum of diag(J^T J), as in Moré 1978, so
-//! the damping is invariant to the parameters' units). A step that lowers the
-//! cost is accepted and lambda divided by `factor`; a rejected step
-//! multiplies lambda by `factor` and tries again within the same iteration,
-//! so every iteration ends with an accepted step or a termination.
-//!
-//! Convergence is judged at each accepted point from the undamped
-//! (Gauss-Newton) step there: converged when it would lower the cost by at
-//! most `ftol` relative, or when its D-scaled size is at most `xtol`
-//! relative to the parameters. Judging the undamped step, not the damped one,
-//! keeps a heavily damped, tiny step far from the optimum from passing for
-//! convergence.
-//!
-//! Box bounds are handled by projection: a parameter at a bound whose step
-//! would leave the box is held there and the step recomputed without it.
-//!
-//! References: D. W. Marquardt, "An algorithm for least-squares estimation
-//! of nonlinear parameters", J. SIAM 11 (1963) 431-441; J. J. Moré, "The
-//! Levenberg-Marquardt algorithm: implementation and theory", Lecture Notes
-//! in Mathematics 630 (1978) 105-116.
+//! Each iteration solves (J^T J + lambda D) delta = -J^T r, D Marquardt's
+//! diagonal scaling (the running maximum of diag(J^T J)); a rejected step
+//! raises lambda and is tried again within the iteration. Convergence is
+//! judged from the undamped (Gauss-Newton) step at each accepted point
+//! (`ftol` on the cost, `xtol` on its scaled size), so that a heavily
+//! damped, tiny step does not pass for it. Box bounds by projection.
+//! `LevenbergMarquardt` takes residuals and J; a problem that gives J^T J
+//! and J^T r itself gives `Normal`. The algorithm and its references
+//! (Marquardt 1963; Moré 1978): docs/methods.md, "Levenberg-Marquardt".
 
 use argmin::core::{
     ArgminError, Error, IterState, Jacobian, KV, Operator, Problem, Solver, TerminationReason,

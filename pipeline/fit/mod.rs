@@ -1,41 +1,22 @@
 //! Continuous-time transfer-function fitting to measured frequency-response
 //! bins: H(jw) = N(jw)/D(jw) exp(-jw tau) Z(jw) A(jw), with D monic, Z the
 //! command's sample-and-hold, A the aliases the sampling folds onto each
-//! bin and tau none, fixed or fitted. For the paper's procedure
-//! the model is x1/u = n0/(s^2 + d1 s + d0) (Eqs. 11-14), whose coefficients
-//! and covariance feed Eqs. 18-20 (`identify`).
+//! bin and tau none, fixed or fitted. For the paper's procedure the model is
+//! x1/u = n0/(s^2 + d1 s + d0) (Eqs. 11-14), whose coefficients and
+//! covariance feed Eqs. 18-20 (`identify`).
 //!
-//! Procedure: scale frequency by w0 ([`Scaling`]); Levy's linear least
-//! squares and Sanathanan-Koerner re-weighting on h / (Z exp(-jw tau))
-//! ([`linear`]); for a fitted delay, the best of those over a grid of delays;
-//! then Levenberg-Marquardt ([`LevenbergMarquardt`], an argmin solver) on the
-//! weighted complex error with an analytic Jacobian ([`FrfProblem`]); then the
-//! covariance from the Jacobian at the optimum ([`covariance`]).
-//!
-//! The hold: G(jw) Z(jw) is only the first term of the sampled response of
-//! a plant driven through a zero-order hold,
-//! G_d(e^{jwT}) = (1 - e^{-jwT}) sum_k G(j w_k) / (j w_k T), w_k = w + k ws
-//! ([`crate::lti::ZohSampled`]); the others fold the hold's images back
-//! onto the band, 0.6 % of the paper's no-specimen response at 30 Hz
-//! sampled at 200 Hz. The fit keeps its rational model times a known
-//! factor per bin and makes the factor exact, Z A with A = G_d / (G Z) at
-//! its own estimate ([`alias_factor`]): set at the start, then at each
-//! optimum until evaluating it there would move no parameter by
-//! [`ALIAS_SETTLED`] of its stated std (`refine_held`). A depends weakly
-//! on the plant (A - 1 is O((f / fs)^(r+1)) for relative degree r), so
-//! each re-evaluation takes the error down by about that much, and one or
-//! two settle it; the Jacobian leaves out dA/dtheta, a relative O((f /
-//! fs)^(r+1)) of it, and so do the stds. Where the aliases' whole effect
-//! is below that tolerance (its projection onto the Jacobian's columns,
-//! read on every [`ALIAS_PROBE_STRIDE`]-th bin: `shift_in_stds`), as on
-//! the paper's 2048 Hz logs, the fit is the continuous factor's; what reads
-//! the fit against its log (adequacy, residual noise, figures, tables)
-//! takes the model as the fit compared it ([`TfFit::as_logged`]).
+//! Procedure: frequency scaled by w0 ([`Scaling`]); Levy and
+//! Sanathanan-Koerner ([`linear`]), over a grid of delays for a fitted one;
+//! Levenberg-Marquardt ([`LevenbergMarquardt`]) with an analytic Jacobian
+//! ([`FrfProblem`]); the covariance at the optimum ([`covariance`]). A
+//! ([`alias_factor`]) is taken at the fit's own estimate until it would move
+//! no parameter by [`ALIAS_SETTLED`] of its std, or left out where its whole
+//! effect is below that; [`TfFit::as_logged`] is the model as the fit
+//! compared it. The derivation: docs/methods.md, "The per-run fit".
 
 pub mod adequacy;
 pub mod band;
 pub mod delay_significance;
-pub mod joint;
 pub mod linear;
 pub mod lm;
 pub mod problem;

@@ -12,6 +12,7 @@ use nalgebra::{Complex, DMatrix, DVector};
 
 use super::settings::Intersample;
 use crate::lti::TransferFunction;
+use crate::poly;
 
 /// Response of the command's intersample behaviour at `f_hz` (Hz).
 ///
@@ -263,18 +264,9 @@ impl FrfProblem {
 
     fn eval_bin(&self, i: usize, num: &[f64], den: &[f64], tau: f64) -> BinEval {
         let s = self.s[i];
-        let n_val = num
-            .iter()
-            .fold(Complex::new(0.0, 0.0), |acc, &c| acc * s + c);
-        // Monic: start Horner from the implicit leading 1.
-        let d_val = den
-            .iter()
-            .fold(Complex::new(1.0, 0.0), |acc, &c| acc * s + c);
-        let delay = if tau == 0.0 {
-            Complex::new(1.0, 0.0)
-        } else {
-            (-s * tau).exp()
-        };
+        let n_val = poly::eval(num, s);
+        let d_val = poly::eval_monic(den, s);
+        let delay = poly::delay(s, tau);
         BinEval {
             den: d_val,
             delay,

@@ -1,30 +1,18 @@
-//! The record's transient, fitted beside a run's model.
+//! The record's transient, fitted beside a run's model. A record that does
+//! not start and end at rest (a sweep cut while the rig still moves, a
+//! multisine or noise run started from rest) has the DFT
+//! Y(k) = G(k) U(k) + T(k) + V(k), T the leakage of the states at its ends.
+//! Over the band T is a real polynomial of degree n + 1 over the model's own
+//! denominator D (of order n), times the model's delay, and a drifting
+//! sensor adds c fs / s: divided by U(k), n + 3 columns that enter H = Y/U
+//! linearly with real coefficients (`weighted_columns`, `column_count`).
 //!
-//! A record that does not start and end at rest (a sweep cut while the rig
-//! still moves, a multisine or noise run started from rest) has the DFT
-//! Y(k) = G(k) U(k) + T(k) + V(k): T is the leakage of the states at the
-//! record's ends. For the discrete-time system the held command drives, T =
-//! C (z I - A_d)^-1 z (x(0) - x(N)), a rational function of z = exp(jw/fs)
-//! with the plant's poles (Pintelon & Schoukens, *System Identification: A
-//! Frequency Domain Approach*, 2nd ed., 2012, Sec. 6.3.2). With
-//! 1 - exp((p - s)/fs) = ((s - p)/fs) / phi((s - p)/fs) and phi(x) =
-//! x / (1 - exp(-x)) = 1 + x/2 + x^2/12 - ..., T = I(s)/D(s) + c0 + c1 s +
-//! O((w/fs)^3): over the fitted band, the model's own denominator D over a
-//! real polynomial of degree n + 1 (n the order of D; the polynomial part
-//! also takes a delay line's end samples), times the model's delay. A
-//! drifting sensor adds a ramp, whose DFT is c / (1 - 1/z) ~ c fs / s + c/2:
-//! one more column. Divided by U(k), the n + 3 columns enter the FRF
-//! H = Y/U linearly with real coefficients.
-//!
-//! The fit eliminates those coefficients at every step (separable least
-//! squares with the denominator held from the previous pass, Golub &
-//! Pereyra 2003): residuals and Jacobian are projected onto the complement
-//! of the weighted columns, so the covariance of the model's parameters is
-//! the marginal one, which pays for the transient's parameters. Passes
-//! repeat until the denominator the columns are built from stops moving.
-//! A sweep's U turns its phase quickly from bin to bin, where G and T are
-//! smooth, so the columns hardly correlate with the model's: on clean
-//! sweeps the model's stds grow by 0.2 % or less.
+//! The fit eliminates them at every step by separable least squares
+//! (`Projector`: residuals and Jacobian projected onto the complement of
+//! the columns), so the model's covariance is the marginal one; `Transient`
+//! is what was taken out. The derivation (Pintelon & Schoukens 2012,
+//! Sec. 6.3.2; Golub & Pereyra 2003): docs/methods.md, "The transient
+//! fitted beside the model".
 
 use nalgebra::{Complex, DMatrix, DVector};
 
@@ -146,15 +134,8 @@ fn columns_at(s: Complex<f64>, u: Complex<f64>, den: &[f64], tau: f64) -> Vec<Co
         out.resize(column_count(n), Complex::new(0.0, 0.0));
         return out;
     }
-    let d = den
-        .iter()
-        .fold(Complex::new(1.0, 0.0), |acc, &c| acc * s + c);
-    let delay = if tau == 0.0 {
-        Complex::new(1.0, 0.0)
-    } else {
-        (-s * tau).exp()
-    };
-    let base = delay / (d * u);
+    let d = crate::poly::eval_monic(den, s);
+    let base = crate::poly::delay(s, tau) / (d * u);
     let mut power = Complex::new(1.0, 0.0);
     for _ in 0..n + 2 {
         out.push(base * power);

@@ -2,29 +2,17 @@
 //! the band, and what a log's command is (a sweep, a multisine, noise), so
 //! that explicit settings the data contradict can be named.
 //!
-//! The choice, measured on simulated campaigns of the paper's rig
-//! (`cargo bench --bench coverage`, docs/accuracy.md): Welch's H1 and H2
-//! average segments that each see another part of a sweep, which biases
-//! the estimate and its coherence (a1b0 +16 % on 20 s records with 8,192-
-//! sample segments, a3 +1.1 % on 170 s ones), so `auto` never averages
-//! segments. The ETFE over the whole record with a rectangular window is
-//! exact where the record starts and ends at rest (Y = G U + V bin by bin);
-//! where it does not, or a sensor drifts, the leakage of the states at the
-//! ends is fitted beside each run's model (`fit::transient`). Whether the
-//! ends rest is judged against each signal's own noise, not its size: a
-//! level difference of a few hundredths of the signal's RMS (a drift of
-//! 0.4 um/s over 170 s) leaks tens of times the noise into the band's
-//! lowest bins. Where a transient is fitted that is not there its columns
-//! take nothing, and cost the model's stds 0.2 % or less. The local polynomial method (`lpm`) cannot do this
-//! where a sweep's phase turns by a whole turn per bin (its end) or hardly
-//! at all (its start): there G U and the transient are both smooth across
-//! its few bins (on 60 s sweeps cut in motion a1b0 came out 11 stds high
-//! on average with a Hann window, and with a rectangular one the stds
-//! were some 20 % too wide). The bins' noise level is read from what a
-//! first fit leaves, where the local polynomials need follow only the
-//! model's misfit. The Welch segments only give the coherence that masks
-//! bins without excitation: their length resolves the band's lowest
-//! frequency twice over, and the record holds at least two of them.
+//! `auto` never averages Welch segments, which each see another part of a
+//! sweep and bias the estimate. It takes the ETFE over the whole record
+//! with a rectangular window (Y = G U + V bin by bin where the record starts
+//! and ends at rest), and fits the record's transient beside each run's
+//! model (`fit::transient`) where the ends do not rest within each signal's
+//! own noise (`Ends`). The bins' noise level is read from what a first fit
+//! leaves. Welch segments only give the coherence that masks unexcited
+//! bins: long enough to resolve the band's lowest frequency twice over, at
+//! least two in the record. `FrfChoice` resolves a run's plan; `excitation`
+//! says what a command is. Why, with the evidence: docs/methods.md,
+//! "Choosing the FRF estimator".
 
 use super::{
     Detrend, Estimator, FrfError, FrfPlan, MIN_SEGMENT_LENGTH, Window, ends_against_noise,

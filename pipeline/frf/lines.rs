@@ -1,23 +1,16 @@
 //! A command whose spectrum is sparse lines (a periodic multisine or square
 //! wave whose periods the record holds whole): the FRF at its excited lines
-//! and its noise level from the lines it does not excite.
+//! and its noise level from the lines it does not excite (`sparse_lines`,
+//! `at_lines`).
 //!
-//! Between a periodic command's lines U is zero, so the output's DFT there
-//! holds only what is not G U: Y(k) = T(k) + V(k), the record's transient
-//! (the leakage of the states at its ends, smooth in k) and the noise. At an
-//! excited line Y(k) = G(k) U(k) + T(k) + V(k). The transient at a line is
-//! interpolated by a local polynomial through the non-excited lines around
-//! it, and the scatter they leave about it is the noise level there
-//! (Pintelon, Barbe, Vandersteen & Van Moer, "Improved (non-)parametric
-//! identification of dynamic systems excited by periodic signals", MSSP
-//! 25(7), 2011, 2683-2704; Pintelon & Schoukens, *System Identification: A
-//! Frequency Domain Approach*, 2nd ed., 2012, Secs. 2.4 and 7.2): G(k) =
-//! (Y(k) - T^(k)) / U(k), with variance sigma_V^2(k) (1 + q(k)) / |U(k)|^2,
-//! q(k) the interpolation's own variance factor. The ETFE's local
-//! polynomials cannot do this: a window around a line holds one excited bin,
-//! whose weight pins the polynomial, and the rest is the transient's
-//! leakage, which it counts as noise, and a transient fitted beside the model
-//! at the excited lines alone is not the one between them.
+//! Between the lines U is zero, so there Y(k) = T(k) + V(k): the record's
+//! transient, smooth in k, and the noise. At an excited line the transient
+//! is interpolated by a local polynomial through the non-excited lines
+//! around it, whose scatter about it is the noise level:
+//! G(k) = (Y(k) - T^(k)) / U(k), with the variance
+//! sigma_V^2(k) (1 + q(k)) / |U(k)|^2 (Pintelon, Barbe, Vandersteen & Van
+//! Moer 2011). Why not the ETFE's local polynomials: docs/methods.md,
+//! "Periodic commands: the excited lines".
 
 use nalgebra::{Complex, Matrix3, Vector3};
 

@@ -1,29 +1,16 @@
 //! The local polynomial method with its transient term (Pintelon,
-//! Schoukens, Vandersteen & Barbe 2010, "Estimation of nonparametric noise
-//! and FRF models for multivariable systems, Part I: Theory", MSSP 24(3),
-//! 573-595), for the ETFE of one record.
+//! Schoukens, Vandersteen & Barbe 2010, MSSP 24(3), 573-595), for the ETFE
+//! of a record that does not start and end at rest, or whose sensor
+//! drifts: Y(k) = G(k) U(k) + T(k) + E(k), the transient T smooth in k.
 //!
-//! A record that does not start and end at rest, or whose sensor drifts,
-//! has DFT Y(k) = G(k) U(k) + T(k) + E(k), where the transient T (the
-//! initial and final conditions' leakage, a drift's ramp) is a smooth
-//! function of k like G, and E the noise. The plain ETFE Y/U counts T/U as
-//! noise: with a sweep, U's phase turns fast from bin to bin, so T/U looks
-//! white to the local fit of H that `etfe_variance` makes, and the variance
-//! comes out too large (a drift of 0.4 um/s made the joint fit's reduced
-//! chi-square 0.92 with neighbouring residuals correlated at r = -0.16).
-//!
-//! Here, around each bin k, over 2R + 1 bins j with x = (j - k)/R, the
-//! local model Y(j) = sum_p g_p x^p U(j) + sum_p t_p x^p (p <= 2) is fitted
-//! by complex least squares: T(k) = t_0. The bin's estimate is
+//! Around each bin k, over 2R + 1 bins (R = `HALF_WIDTH`), G and T are
+//! local quadratics fitted by complex least squares. The estimate is
 //! H(k) = (Y(k) - t_0) / U(k): the transient out, the bin's own noise kept,
-//! so neighbouring bins stay nearly independent for the fits that weigh
-//! them so. t_0 = sum_j c_j Y(j) shares the bin's noise through c, so the
-//! estimate's noise E(k) - sum_j c_j E(j) has variance
-//! sigma^2 (1 - 2 Re c_k + sum_j |c_j|^2), each bin's own factor. The noise
-//! level sigma^2 is the local residuals' sum of squares over their 2R + 1 -
-//! 6 complex degrees of freedom, averaged over the 2S + 1 bins around k
-//! less the windows that hold bin k itself (their residuals hold E(k), and
-//! a bin with a large error would be weighted down by its own noise).
+//! with the variance sigma^2 (1 - 2 Re c_k + sum_j |c_j|^2) that t_0's
+//! weights c give it. The noise level sigma^2 is the local residuals' mean
+//! square, averaged over 2S + 1 bins (S = `SMOOTH_HALF_WIDTH`) less the
+//! windows that hold bin k. The derivation: docs/methods.md, "The local
+//! polynomial method".
 
 use nalgebra::{Complex, SMatrix, SVector};
 use rayon::prelude::*;

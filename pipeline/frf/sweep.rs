@@ -1,19 +1,18 @@
 //! The command's amplitude along a sweep, frequency by frequency. A slow
 //! sweep holds one frequency at a time, so the displacement's amplitude
 //! while it passed a frequency is the FRF's gain there times this; seal
-//! friction's equivalent damping at a bin, 4 F / (pi V) with V the
-//! velocity amplitude there (Gelb & Vander Velde 1968, Multiple-Input
-//! Describing Functions, Ch. 2), follows from it. The gain is read from the
-//! FRF rather than from the displacement's envelope, which the friction's
-//! own harmonics and the noise swell where the response is small.
+//! friction's equivalent damping at a bin, 4 F / (pi V) with V the velocity
+//! amplitude there (Gelb & Vander Velde 1968, Multiple-Input Describing
+//! Functions, Ch. 2; docs/model.md, "Seal friction"), follows from it. The
+//! gain comes from the FRF, not the displacement's envelope, which the
+//! friction's own harmonics and the noise swell where the response is small.
 //!
 //! The command's analytic part (the Hilbert transform, by FFT) gives its
-//! instantaneous frequency, the phase it advances in a window over the
-//! window's length, and its envelope, the median of its modulus over the
-//! window. Windows where the command is at rest (its envelope under
-//! [`ACTIVE`] of the sweep's) say nothing and are left out; the rest,
-//! ordered by frequency, are read at a bin by linear interpolation, and at
-//! the ends by the nearest.
+//! instantaneous frequency (the phase it advances in a window over the
+//! window's length) and its envelope (the median of its modulus there).
+//! Windows where the envelope is under [`ACTIVE`] of the sweep's are left
+//! out; the rest, ordered by frequency, are read at a bin by linear
+//! interpolation, and at the ends by the nearest.
 
 use nalgebra::Complex;
 

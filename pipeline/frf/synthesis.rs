@@ -1,29 +1,17 @@
 //! The ETFE of a simulated run assembled in the frequency domain, for the
-//! stiffness sensitivity's Monte Carlo: a thousand
-//! identifications replay one command, and each differs from the others
-//! only by its noise.
+//! stiffness sensitivity's Monte Carlo: its identifications replay one
+//! command and differ only by their noise.
 //!
 //! With a rectangular window and the mean (or nothing) taken out, the
-//! transforms are linear in the signal: the DFT of `clean + e` is the DFT
-//! of `clean` plus the DFT of `e`, bin by bin, and every bin but DC is
-//! untouched by the mean. So the command's transforms are computed once,
-//! the noiseless response's once per stiffness, and a draw adds the DFT of
-//! its white noise drawn directly on the bins the fit reads. For white
-//! Gaussian noise of std sigma over n samples, the bins 0 < k < n/2 of its
-//! DFT are independent, their real and imaginary parts each N(0, n
-//! sigma^2 / 2) (sum cos^2 = sum sin^2 = n/2 there); the Nyquist bin is
-//! real, N(0, n sigma^2); DC is N(0, n sigma^2), or 0 once the mean is
-//! taken out. This is exact for the whole-record transform the ETFE and
-//! its variance read (the ETFE's own noise model, `h_variance_at`).
-//!
-//! One approximation, stated: the Welch segments that give the ETFE's
-//! coherence share samples with each other (when they overlap) and with
-//! the whole record, which correlates their noise bins; here each
-//! segment's bins are drawn with exactly their own distribution but
-//! independently of the other segments' and of the whole record's. The
-//! coherence only decides which bins the fit uses (its limit against the
-//! estimate); the Monte Carlo's test compares the two ways on a rig near
-//! the coherence limit (`sensitivity::draws`' tests).
+//! transforms are linear in the signal. So the command's transforms are
+//! computed once, the noiseless response's once per stiffness
+//! (`EtfeSynthesis::spectra_of`), and a draw adds the DFT of white noise
+//! drawn directly on the bins the fit reads (`EtfeSynthesis::white_noise`):
+//! exact for the whole-record transform the ETFE and its variance read. One
+//! approximation, stated: each Welch segment's bins, which only give the
+//! coherence, are drawn with their own distribution but independently of
+//! the other segments' and of the whole record's. The derivation:
+//! docs/methods.md, "The Monte Carlo's draws".
 
 use nalgebra::Complex;
 

@@ -1,21 +1,18 @@
 //! Logs saved as named numeric arrays (MATLAB MAT-files, level 5 and v7.3;
-//! HDF5; TDMS channels): how a plan's channels are found among them,
-//! whatever the file format, so every such format addresses channels, names
-//! what is missing and checks units the same way.
+//! HDF5; TDMS channels): how a plan's channels are found among them, so
+//! that every such format addresses channels, names what is missing and
+//! checks units the same way.
 //!
-//! How channels are addressed:
-//! - `Column::Name("x1")`: the numeric vector variable `x1` (1 x N or N x 1).
-//!   Inside a MATLAB struct or an HDF5 group the name is its path:
-//!   `log.x1` (MATLAB), `run1/x1` (HDF5), `Group/x1` (TDMS).
-//! - `Column::Name("data:2")`: channel 2 (0-based) of the 2-D variable `data`,
-//!   used when no variable is literally named `data:2`.
-//! - `Column::Index(2)`: channel 2 of the only 2-D (non-vector) numeric
-//!   variable; an error when there is none or more than one.
+//! - `Column::Name("x1")`: the numeric vector `x1` (1 x N or N x 1); inside
+//!   a struct or group, its path: `log.x1` (MATLAB), `run1/x1` (HDF5),
+//!   `Group/x1` (TDMS).
+//! - `Column::Name("data:2")`: channel 2 (0-based) of the 2-D variable
+//!   `data`, when no variable is literally named `data:2`.
+//! - `Column::Index(2)`: channel 2 of the only 2-D numeric variable.
 //!
-//! In a 2-D variable the channels are its columns (N x channels, as
-//! `save('log.mat', 'data')` keeps a table of samples); a wide variable (fewer
-//! rows than columns, as Simulink's To File block writes `[t; u; y]`) has its
-//! channels in rows. Places are 1-based element (sample) numbers.
+//! A 2-D variable's channels are its columns (N x channels), or its rows
+//! when it is wide (Simulink's To File writes `[t; u; y]`). Places are
+//! 1-based sample numbers. For users: docs/manifest.md, "Log formats".
 
 use crate::warning::Warning;
 use std::path::Path;

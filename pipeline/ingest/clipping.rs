@@ -1,20 +1,17 @@
 //! A channel that sits at one of its extremes: a sensor or converter at the
 //! end of its range (clipped), or one of the things that look like it and
-//! are valid data. A value repeated at the peak is clipping only when
-//! nothing else explains it:
+//! are valid data. A value repeated at the peak (`plateau`) is clipping
+//! only when nothing else explains it:
 //!
-//! - quantisation: a smooth crest spends as long in its top code as its
-//!   shape gives it. Near a crest of amplitude A a sine spends a time
-//!   proportional to sqrt(A - x) above x, so the top code holds at most
-//!   1 / (sqrt 2 - 1) = 2.4 times the samples of the code below it, the
-//!   share of the record within one step q of the peak being
-//!   sqrt(2 q / A) / pi (1.6 % for 0.3 mm on an 18-bit +-50 mm converter).
-//!   A rail holds many times the code below it: the signal crosses the
-//!   codes below once per crest and then stays.
+//! - quantisation (`quantised_crest`): a smooth crest's top code holds at
+//!   most 2.4 times the samples of the code below it, a rail many times
+//!   more ([`QUANTISED_PEAK_RATIO`]);
 //! - the command holding still: a step or square-wave command, and the
-//!   displacement and force that settle with it.
+//!   displacement and force that settle with it (`held_with_command`);
 //! - a command limited in the controller: the logged command is what the
 //!   valve received, so it is analysed as it is, and said.
+//!
+//! The crest's bound: docs/methods.md, "Clipping".
 
 use super::quantisation::quantum_step;
 

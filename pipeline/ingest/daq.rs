@@ -1,32 +1,17 @@
-//! DAQ text exports, parsed by hand (the data lines are ragged, which polars
-//! refuses).
+//! DAQ text exports (`.txt`), parsed by hand: the data lines are ragged,
+//! which polars refuses. A header of `key: value` lines (`Sampling Rate`,
+//! `Sampling Interval`, `Sample Count`, ...), then a line without a colon
+//! naming the columns (`Sample Number, Date/Time, CHANNEL0, ..., Events`),
+//! then one line per sample.
 //!
-//! The layout, as in `/work/shared/data/utfsm-mts-mrdamper/`:
-//!
-//! ```text
-//! Header Size:  7
-//! Version:  2
-//! Sampling Interval:  0.001
-//! Sampling Rate:  1000
-//! Sample Count:  61500
-//! Device Serial Number:  0
-//! Sample Number, Date/Time, CHANNEL0, CHANNEL1, CHANNEL2, Events
-//!          1,   06/29/2022 04:05:36.674 PM, -0.0209, -0.0166, -0.0169, DAQ Start
-//!          2,   06/29/2022 04:05:36.675 PM, -0.0221, -0.0166, -0.0167
-//! ...
-//!      61500,   06/29/2022 04:06:38.173 PM, -0.0282, -0.0218, -0.0204, DAQ Pause, DAQ Stop
-//! ```
-//!
-//! Header lines are `key: value`; the first line without a colon names the
-//! columns. Fields after the last wanted one are never looked at, so the
-//! Events field may be absent or hold commas. Columns are addressed by name
-//! (`CHANNEL0`) or by 0-based index into the column-name line. The time base
-//! is the header's `Sampling Rate` (or 1 / `Sampling Interval`) for
-//! `FromLog`, the manifest's rate, or a named column; in every case the
-//! `Sample Number` column must count up by one, since a skipped number is a
-//! dropped sample. The date/time stamps (millisecond resolution) are not used.
-//! Lines end in `\n` or `\r\n`; blank lines are skipped; places are 1-based
-//! line numbers.
+//! Columns are addressed by name (`CHANNEL0`) or by 0-based index into the
+//! column-name line; fields after the last wanted one are never looked at,
+//! so the Events field may be absent or hold commas. The time base is the
+//! header's `Sampling Rate` (or 1 / `Sampling Interval`) for `FromLog`, the
+//! manifest's rate, or a named column; the `Sample Number` column must count
+//! up by one (a skipped number is a dropped sample). The date/time stamps
+//! are not used. Places are 1-based line numbers. A whole example:
+//! docs/methods.md, "DAQ text exports".
 
 use crate::warning::Warning;
 use std::path::Path;

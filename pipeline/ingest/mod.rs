@@ -2,22 +2,16 @@
 //!
 //! A log holds the command displacement u, the measured displacement x1 and,
 //! optionally, the actuator force f, uniformly sampled. [`read_log`] reads one
-//! file as a [`LogPlan`] describes it (CSV, Parquet, MATLAB level-5 MAT or DAQ
-//! text), verifies its SHA-256, and converts every channel to SI once, here:
-//! SI value = raw * gain + offset. [`check_log`] then judges whether the log
-//! suits the FRF settings (length, uniform sampling, clipping), and
-//! [`trim_to_excitation`] keeps the excited part. Every error and warning
-//! names the file and, where it helps, the 1-based line (text formats), row
-//! (Parquet) or element (MAT) at fault.
-//!
-//! The file is read into memory once; the hash is taken over exactly the bytes
-//! that are parsed.
-//!
-//! [`read_table`] reads a side table (a campaign's run table, CSV or
-//! Parquet) as text cells for the manifest to check.
-//!
-//! [`collect`] finds the logs `servoid init` is given (files, folders,
-//! globs) and tells them from the run tables among them.
+//! file as a [`LogPlan`] describes it (CSV, Parquet, MAT, HDF5, TDMS or DAQ
+//! text), verifies its SHA-256 over exactly the bytes it parses, and converts
+//! every channel to SI once, here: SI value = raw * gain + offset.
+//! [`check_log`] then judges whether the log suits the FRF settings (length,
+//! uniform sampling, clipping), and [`trim_to_excitation`] keeps the excited
+//! part. Every error and warning names the file and the 1-based line, row or
+//! element at fault. [`read_table`] reads a side table (a run table, CSV or
+//! Parquet) as text cells; [`collect`] finds the logs `servoid init` is given
+//! and tells them from the run tables among them. How the readers read and
+//! what they refuse: docs/methods.md, "Reading the logs".
 
 mod arrays;
 mod clipping;

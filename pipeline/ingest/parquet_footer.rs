@@ -3,24 +3,16 @@
 //! and `parquet_thrift.rs`), to find the lists that decoder would reserve
 //! memory for before reading them.
 //!
-//! polars reads each field it knows as the type parquet.thrift declares for
-//! it, whatever the wire type in the field's header says, skips the others
-//! by their wire type, and sizes a `Vec` from a list's declared count
-//! before reading its elements. A footer whose field 4 (the row groups)
-//! had the wire type of an integer was, to polars, a list of 2^31 row
-//! groups: a 110 GB reservation, and the process aborted (found by the run
-//! table's Parquet fuzz target). A generic thrift walk driven by wire types
-//! reads such a footer differently and sees no such list; this walk follows
-//! polars field by field, and refuses a list that declares more elements
-//! than bytes remain (every element polars reads as a list element is a
-//! struct of at least one byte). Where polars' decoder would stop with an
-//! error, the walk stops too and leaves the refusal to polars: nothing is
-//! reserved after that point.
-//!
-//! This mirrors one version of polars, polars-parquet 0.55.2: `Cargo.toml`
-//! pins polars to it exactly, a test fails when Cargo.lock holds another
-//! polars-parquet, and the fuzz targets replay the inputs that found the
-//! divergence.
+//! polars reads each field it knows as the type parquet.thrift declares,
+//! whatever its wire type, and sizes a `Vec` from a list's declared count
+//! before reading the elements: one footer can make it reserve tens of
+//! gigabytes and abort. This walk follows polars field by field and refuses
+//! a list that declares more elements than bytes remain (`OverlongList`);
+//! where polars would stop with an error, it stops and leaves the refusal
+//! to polars. It mirrors polars-parquet 0.55.2: `Cargo.toml` pins it, a test
+//! fails on another in Cargo.lock, and the fuzz targets replay footers the
+//! two walks read differently. Why not a generic thrift walk:
+//! docs/methods.md, "The Parquet footer".
 
 /// A list in the footer that declares more elements than the footer has
 /// bytes left: polars would reserve for all of them first.

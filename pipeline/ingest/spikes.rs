@@ -1,26 +1,16 @@
 //! Isolated spikes and corrupt stretches in a logged channel: one sample or
 //! a few adjacent ones that a corrupted transfer, a flipped bit or a DAQ
 //! glitch put far from both neighbours, which a sweep's FRF turns into a rig
-//! thousands of times off.
+//! thousands of times off. `find` finds them; `interpolate` repairs them.
 //!
-//! The rule. A run of w = 1 to [`MAX_WIDTH`] samples starting at i is a
-//! spike when each departs from the straight line through its neighbours
-//! x(i-1) and x(i+w) by more than [`THRESHOLD`] times the channel's local
-//! scale (times (w+1)^2 / 9 beyond three samples, as a chord's error over a
-//! smooth signal grows), all on the same side, and the neighbours agree with
-//! each other better than the run does with them (a step moves its
-//! neighbours apart: it is not a spike). Nor is a run that one side of it
-//! explains: where the run lies on the straight line the two samples beyond
-//! either neighbour extend to (within the same threshold, growing with the
-//! square of the distance), it is the edge of something that starts or
-//! ends there, as a random excitation starts after a rest, not a departure
-//! from both sides. The local scale is the median of
-//! |x(j) - (x(j-1) + x(j+1))/2| over the block of [`BLOCK`] samples around,
-//! the larger of it and its two neighbouring blocks', and no less than the
-//! median over the record's blocks or the channel's converter step. A
-//! sine's departure swings within 1.4 times its median, Gaussian noise's
-//! beyond 7.5 times once in a million samples; a flipped exponent bit puts a
-//! sample thousands of times out.
+//! A run of w = 1 to [`MAX_WIDTH`] samples is a spike when each departs from
+//! the straight line through its two neighbours by more than [`THRESHOLD`]
+//! times the channel's local scale (times (w+1)^2 / 9 beyond three
+//! samples), all on one side; not where the neighbours disagree more (a
+//! step), nor where the line through either side's samples explains it
+//! (the edge of something that starts there). The local scale is a median
+//! second difference over [`BLOCK`] samples, at least the record's median
+//! and the converter step. Why these bounds: docs/methods.md, "Spikes".
 
 /// How many local scales a spike departs by.
 pub const THRESHOLD: f64 = 30.0;

@@ -88,6 +88,16 @@ pub struct HistoryPlan {
 }
 
 impl Campaign {
+    /// Give `date` (normalised by [`crate::manifest::normalise_date`]) to every run the
+    /// manifest and run table leave undated: the night a job records, for
+    /// a nightly manifest that is the same every night. A run's own date
+    /// stays.
+    pub fn date_undated_runs(&mut self, date: &str) {
+        for run in self.runs.iter_mut().filter(|r| r.date.is_none()) {
+            run.date = Some(date.to_string());
+        }
+    }
+
     /// Whether the campaign can identify the rig itself (Fig. 6, steps 3-5).
     pub fn identifies_rig(&self) -> bool {
         self.runs.iter().any(|r| r.role == Role::NoSpecimen)

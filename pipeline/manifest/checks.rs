@@ -71,7 +71,7 @@ pub enum DateFault {
 /// (no surrounding space, upper-case `T` and `Z`; a space or `t` between date
 /// and time, as RFC 3339 allows, becomes `T`) or, when it is not such a
 /// date, the message saying so.
-pub(super) fn normalise_date(text: &str) -> Result<String, BadDate> {
+pub fn normalise_date(text: &str) -> Result<String, BadDate> {
     let s = text.trim();
     let fail = |why: DateFault| {
         Err(BadDate {

@@ -448,7 +448,7 @@ pub struct Identification {
 #[schemars(deny_unknown_fields)]
 pub struct JointSettings {
     #[serde(default)]
-    pub structure: crate::fit::joint::Choice,
+    pub structure: crate::identify::joint::Choice,
     #[serde(default)]
     pub rig: JointRig,
     /// Also fit the validation runs, whose m, c and k the manifest gives:

@@ -1,21 +1,18 @@
-//! MATLAB level-5 MAT files (`models.mat`), written by servoid itself: the
-//! format is a header and a list of tagged elements (MathWorks, "MAT-File
-//! Format", R2024a, ch. 1), and what models.mat holds (numeric matrices,
-//! text, structs, cell arrays) is a small part of it. The Rust MAT writers
-//! were weighed and not taken: matrw 0.1 returns Ok when its write failed
-//! and writes text as UTF-8 bytes MATLAB reads as another length; matio-rs
-//! needs cmake and libclang to build. MATLAB, Octave and
-//! `scipy.io.loadmat` read these files; the tests read them back with the
-//! `matfile` crate (numbers) and scipy (everything).
+//! MATLAB level-5 MAT files (`models.mat`), written by servoid itself: a
+//! header and a list of tagged elements (MathWorks, "MAT-File Format",
+//! R2024a, ch. 1), of which models.mat needs numeric matrices, text,
+//! structs and cell arrays. The Rust MAT writers do not do: matrw 0.1
+//! returns Ok when its write failed and writes text as UTF-8 bytes MATLAB
+//! reads as another length; matio-rs needs cmake and libclang to build.
+//! MATLAB, Octave and `scipy.io.loadmat` read these files.
 //!
-//! Layout (little-endian): 128-byte header (116 bytes of text, 8 of
-//! subsystem offset, version 0x0100, "IM"); then one `miMATRIX` element per
-//! variable: array flags (class), dimensions, name, then the data: `miDOUBLE`
-//! values in column-major order; `miUINT16` UTF-16 code units for text; for
-//! a struct its field-name length, the names and one unnamed `miMATRIX` per
-//! field (a struct array: the names once, then each element's fields in
-//! turn); for a cell array one unnamed `miMATRIX` per element. Every
-//! element is padded to 8 bytes.
+//! Layout (little-endian): a 128-byte header (116 bytes of text, 8 of
+//! subsystem offset, version 0x0100, "IM"), then one `miMATRIX` element per
+//! variable: array flags (class), dimensions, name, data. `miDOUBLE` values
+//! are column-major; text is `miUINT16` UTF-16 code units; a struct has its
+//! field-name length, the names and one unnamed `miMATRIX` per field (per
+//! element, in turn, for a struct array); a cell array one unnamed
+//! `miMATRIX` per element. Every element is padded to 8 bytes.
 
 /// A value in a MAT file.
 #[derive(Debug, Clone, PartialEq)]

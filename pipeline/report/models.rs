@@ -1,22 +1,18 @@
 //! What `models.mat` holds: the campaign's identified models in the shapes
 //! MATLAB's `tf(num, den)` and `ss(A, B, C, D)` (and `scipy.signal`) take,
-//! so a lab designing a compensator starts from the numbers servoid found
-//! rather than retyping coefficients. Built from the results alone (pure);
-//! `run` writes the bytes beside results.json.
+//! so a lab designing a compensator starts from the numbers servoid found.
+//! Built from the results alone (pure); `run` writes the bytes.
 //!
 //! Three variables, each a struct a MATLAB user reads by name:
 //! - `servoid`: the version, campaign and manifest hash, and the units.
-//! - `rig`: beta1, a1b0, a2, a3 (a1b0 at the rig's `p_gain`) with their
-//!   stds and covariance, and R1.
-//! - `runs`: a 1 x n struct array in manifest order: the run's transfer
-//!   function x1/u (numerator, denominator, delay; for a fitted one its
-//!   band, parameters, stds and covariance), and, where the rig and the
-//!   specimen give one, the plant as a state space: in physical form
-//!   (Eq. 10) and, for an SDOF specimen, in controllable canonical form
-//!   (Eqs. 34-35) with Cn kept (the plant exactly) and dropped (the paper's
-//!   simplified model, Sec. 3.2.2); for a validation run, the model-based
-//!   compensator designed for its specimen (`filter(b, a, x)` at `fs`).
-//!   What a run does not have is `[]`.
+//! - `rig`: beta1, a1b0 (at the rig's `p_gain`), a2, a3, their stds and
+//!   covariance, and R1.
+//! - `runs`: a 1 x n struct array in manifest order: each run's x1/u
+//!   (numerator, denominator, delay; a fitted one's band, parameters, stds,
+//!   covariance); its plant as a state space, physical (Eq. 10) and, for an
+//!   SDOF specimen, canonical (Eqs. 34-35) with Cn kept and dropped
+//!   (Sec. 3.2.2); a validation run's compensator (`filter(b, a, x)` at
+//!   `fs`). What a run does not have is `[]`.
 
 use super::matlab::{MatValue, MatWriteError, mat_bytes};
 use crate::model::{self, CnTerm, LinearSdof, LinearSpecimen, RigParams};

@@ -3,21 +3,14 @@
 //! thread count), holding one log per worker at a time:
 //!
 //! 1. every run that does not need the rig (no-specimen, spring and fit
-//!    runs) is read, estimated, fitted and checked in the time domain, its
-//!    figures drawn, and its signals dropped; what the rig needs (the fitted
-//!    model and covariance) and what its later figure needs (the force FRF's
-//!    plotted bins) are kept;
+//!    runs) is read, estimated and fitted, its figures drawn and its signals
+//!    dropped; what the rig and its later figures need is kept;
 //! 2. the rig is identified from them (Fig. 6, Eqs. 18-20) or taken as
 //!    given; then the validation runs are read, predicted and validated,
-//!    their figures drawn and their signals dropped, and the other runs get
-//!    what depends on the rig (a1b0 at their P gain, the force model and its
-//!    figure).
+//!    and the other runs get what depends on the rig.
 //!
-//! Then the canonical forms, outliers, the stiffness sensitivity and the
-//! comparisons with published numbers. A failed run is recorded in its
-//! result and the batch goes on. Each run's work is `step`'s (pure); its
-//! output goes to the `sink` (figures, tables, cache) as it arrives, so a
-//! write error stops the job while the analysis itself never writes.
+//! Then the sensitivity and the comparisons. A failed run is recorded and
+//! the batch goes on; each run's output goes to the `sink` as it arrives.
 
 use crate::warning::Warning;
 use std::sync::Arc;

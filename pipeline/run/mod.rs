@@ -46,6 +46,10 @@ pub struct Settings {
     /// How long to wait for another job writing the same output folder
     /// (None: [`crate::report::output_folder::DEFAULT_WAIT`]).
     pub wait: Option<std::time::Duration>,
+    /// The date of the night the job records, given to every run the
+    /// manifest leaves undated (ISO 8601, normalised): the history's
+    /// `date`.
+    pub date: Option<String>,
 }
 
 /// How shards are merged: the job's settings (its `figures` unused), the
@@ -223,7 +227,7 @@ pub fn run_campaign(
     settings: &Settings,
     observer: &dyn Observer,
 ) -> Result<CampaignOutcome, JobError> {
-    let campaign = load_campaign(path)?;
+    let campaign = load_campaign(path, settings.date.as_deref())?;
     let out_dir = settings
         .out
         .clone()
@@ -272,7 +276,8 @@ pub fn run_simulation(
         .install(|| simulate::simulate_campaign(&plan, set.dir()))
         .map_err(|e| relocate(e.into()))?;
     let campaign = if then_run {
-        let campaign = load_campaign(&simulated.manifest).map_err(relocate)?;
+        let campaign =
+            load_campaign(&simulated.manifest, settings.date.as_deref()).map_err(relocate)?;
         Some(
             workers
                 .install(|| write_campaign(&campaign, &set, settings, observer))
@@ -315,7 +320,7 @@ pub fn run_shard(
     shard: Shard,
     observer: &dyn Observer,
 ) -> Result<ShardOutcome, JobError> {
-    let campaign = load_campaign(path)?;
+    let campaign = load_campaign(path, settings.date.as_deref())?;
     if campaign.joint.include_validation {
         return Err(JobError::NotShardable {
             file: path.to_path_buf(),
@@ -366,6 +371,7 @@ pub fn run_shard(
         shard,
         runs: share.runs.iter().map(|r| r.id.clone()).collect(),
         figures: settings.figures,
+        date: settings.date.clone(),
     };
     shard::write_info(work, &info).map_err(|e| relocate(e.into()))?;
     let out_dir = set.commit()?;
@@ -401,8 +407,19 @@ pub fn merge(
         }
         .into());
     }
+    // The shards' date is the night's: another would key every run anew.
+    if let Some(asked) = &merge.job.date
+        && first.date.as_ref() != Some(asked)
+    {
+        return Err(MergeError::OtherDate {
+            shards: first.date.clone(),
+            asked: asked.clone(),
+        }
+        .into());
+    }
     let settings = &Settings {
         figures: first.figures,
+        date: first.date.clone(),
         ..merge.job.clone()
     };
     let manifest = merge
@@ -428,7 +445,7 @@ pub fn merge(
         cache::merge_stamps(set.dir(), &shard_dirs)
     })();
     gathered.map_err(|e| relocate(e.into()))?;
-    let campaign = load_campaign(&manifest)?;
+    let campaign = load_campaign(&manifest, settings.date.as_deref())?;
     if campaign.manifest_sha256 != first.manifest_sha256 {
         return Err(MergeError::ManifestChanged {
             manifest: manifest.clone(),
@@ -445,10 +462,16 @@ pub fn merge(
     Ok(outcome)
 }
 
-/// A campaign manifest, refusing a simulation manifest with a hint.
-fn load_campaign(path: &Path) -> Result<Box<Campaign>, JobError> {
+/// A campaign manifest, refusing a simulation manifest with a hint; its
+/// undated runs given the job's `date`.
+fn load_campaign(path: &Path, date: Option<&str>) -> Result<Box<Campaign>, JobError> {
     match manifest::load_any(path)? {
-        Loaded::Campaign(c) => Ok(c),
+        Loaded::Campaign(mut c) => {
+            if let Some(date) = date {
+                c.date_undated_runs(date);
+            }
+            Ok(c)
+        }
         Loaded::Simulation(_) => Err(JobError::WrongKind {
             file: path.to_path_buf(),
             found: "simulation",

@@ -7,13 +7,10 @@
 //! each shard needs the rig they give) and every n-th of the others (fit
 //! and validation runs, counted in manifest order, starting at the i-th);
 //! the first shard also does the campaign's Monte Carlo.
-//! It writes what it did as the run cache holds it (`.cache/`), its figures
-//! and tables, and `shard.json`, which says which campaign, servoid and share
-//! it is. The merge checks the shards belong together (same campaign
-//! manifest, same servoid, each share of n exactly once), gathers their
-//! files into its own folder and runs the campaign there: every run comes
-//! from the cache, so the merge does no per-log work and writes exactly
-//! what one run over all the logs writes.
+//! It writes its runs' cache entries, figures and tables, and `shard.json`
+//! (campaign, servoid, share, date). The merge checks the shards belong
+//! together, gathers their files and runs the campaign there: every run
+//! comes from the cache, so it writes exactly what one run would.
 
 use std::path::{Path, PathBuf};
 
@@ -91,6 +88,10 @@ pub struct ShardInfo {
     /// The figure files it drew (`--figures`): part of each run's cache
     /// key, so the merge draws the same or redoes every run.
     pub figures: FigureFormats,
+    /// The night's date the shard was run with (`--date`): part of each
+    /// run's plan, so the merge records the same.
+    #[serde(default)]
+    pub date: Option<String>,
 }
 
 /// Why shards cannot be merged; each names the folder.
@@ -156,6 +157,14 @@ pub enum MergeError {
         shards: FigureFormats,
         asked: FigureFormats,
     },
+    #[error(
+        "the shards were run with {}, and each run's cached outcome is for that date: merge without --date, or run the shards again with --date {asked}",
+        shards.as_ref().map_or("no --date".to_string(), |d| format!("--date {d}"))
+    )]
+    OtherDate {
+        shards: Option<String>,
+        asked: String,
+    },
 }
 
 /// The shard a folder holds (its `shard.json`), when it holds one.
@@ -216,6 +225,13 @@ pub fn check(dirs: &[PathBuf]) -> Result<Vec<(PathBuf, ShardInfo)>, MergeError> 
                 "--figures",
                 info.figures.as_str().to_string(),
                 first.figures.as_str().to_string(),
+            ));
+        }
+        if info.date != first.date {
+            return Err(mismatch(
+                "--date",
+                info.date.clone().unwrap_or_else(|| "none".into()),
+                first.date.clone().unwrap_or_else(|| "none".into()),
             ));
         }
         if info.shard.count != first.shard.count {

@@ -1,24 +1,18 @@
-//! The stiffness sensitivity's Monte Carlo draws (paper Sec. 2.3): at each stiffness, a no-specimen run and a spring run simulated
-//! from the identified rig (Eq. 10, exactly: zero-order hold and the
-//! campaign's delay, `simulate::discrete`), driven by the campaign's own
-//! measured command, their displacement read with white noise of the level
-//! the campaign's FRF variance implies and rounded to its converter's grid;
-//! each pair identified by the function that identifies a run
-//! (`identify::fit_run`: the campaign's own FRF and fit settings, refused as
-//! `servoid run` refuses a run: too few bins, unstable, not converged), and
-//! Eqs. 18-20. The bias and spread of beta1, a1b0, a2 and a3 against k.
+//! The stiffness sensitivity's Monte Carlo draws (paper Sec. 2.3): at each
+//! stiffness, a no-specimen run and a spring run simulated from the
+//! identified rig (Eq. 10 exactly: zero-order hold and the campaign's
+//! delay), driven by the campaign's measured command, read with white noise
+//! of the level its FRF variance implies and rounded to its converter's
+//! grid; each pair identified as `servoid run` identifies a run
+//! (`identify::fit_run`), then Eqs. 18-20. `monte_carlo` gives the bias and
+//! spread of beta1, a1b0, a2 and a3 against k.
 //!
-//! Where the campaign's FRF settings allow it (`McInput::in_frequency_domain`)
-//! a reading is drawn in the frequency domain (`frf::synthesis`): the
-//! command's transforms are computed once and each noiseless response's
-//! once per stiffness, and a draw adds white noise's DFT on the bins the
-//! fit reads. Elsewhere each reading is simulated sample by sample.
-//!
-//! Deterministic whatever the thread count: each (stiffness, seed) draws
-//! its noise from its own ChaCha stream, and the results are gathered in
-//! grid order. The noiseless responses are simulated once per stiffness
-//! (and once for the no-specimen run) and shared by the seeds: the noise is
-//! all that differs between draws. The stiffnesses run side by side.
+//! Where the FRF settings allow (`McInput::in_frequency_domain`) a reading
+//! is drawn in the frequency domain (`frf::synthesis`); elsewhere it is
+//! simulated sample by sample. Each (stiffness, seed) has its own ChaCha
+//! stream: the same bits whatever the thread count. What it does:
+//! docs/methods.md, "What it does", step 7; the draws: "The Monte Carlo's
+//! draws".
 
 use rand_distr::{Distribution, Normal, StandardNormal};
 use rayon::prelude::*;

@@ -5,18 +5,14 @@
 //!   square waves) and the controller's command limit.
 //! - [`discrete`]: exact zero-order-hold simulation of linear state spaces,
 //!   with exact fractional output delays.
-//! - [`ode`]: RK4 and Dormand-Prince 5(4) for nonlinear plants, the input held
-//!   between samples.
-//! - [`specimen`]: linear and nonlinear specimens (Duffing, Bouc-Wen,
-//!   smoothed Coulomb friction).
-//! - [`plant`]: the plant of Eq. 10 with a specimen and optional unmodelled
-//!   dynamics (a servo-valve mode, piston mass, the valve's flow-pressure
-//!   law), simulated to x1 and force.
+//! - [`ode`]: RK4 and Dormand-Prince 5(4), the input held between samples.
+//! - [`specimen`]: linear, Duffing, Bouc-Wen and smoothed Coulomb friction.
+//! - [`plant`]: Eq. 10 with a specimen and optional unmodelled dynamics.
 //! - [`instrument`]: sensor noise, offset, drift and quantisation, with one
 //!   reproducible random stream per channel.
 //!
-//! Everything here is pure: no files, no printing, the same bits for the same
-//! inputs. Manifests, the command line and file writing live elsewhere.
+//! Pure: no files, no printing, the same bits for the same inputs. The
+//! plant's equations: docs/methods.md, "The simulated plant".
 
 pub mod discrete;
 pub mod excitation;

@@ -2,43 +2,16 @@
 //! actuator, P controller) with a specimen and optional unmodelled dynamics,
 //! from the command u to the measured displacement x1 and load-cell force.
 //!
-//! States, in this order (absent ones dropped):
-//!
-//! - with inertia (a specimen mass or a piston mass): x1, x2, f, r;
-//!   massless rig (no specimen or a spring, no piston mass): x1, r, with
-//!   f = k x1 and x1' = (r - a3 k x1) / (k + a2) (docs/model.md);
-//! - a servo-valve mode: v, w (v' = w);
-//! - a command-path mode: p, p' (the command shaped ahead of the loop);
-//! - a measurement-path mode: q, q' (the logged displacement filtered);
-//! - a Bouc-Wen specimen: z.
-//!
-//! Equations (f the hydraulic force on the piston, g the specimen's restoring
-//! force, m its mass, m_p the piston mass, M = m + m_p):
-//!
-//!   M x2' = f - g(x1, x2, z)
-//!   f'    = -a2 x2 - a3 f + r
-//!   r'    = -beta1 r + a1b0 e,  e = u' - x1, or e = v with a valve mode:
-//!   v'' + 2 zeta wv v' + wv^2 v = wv^2 (u' - x1)
-//!
-//! so the valve's transfer a1b0 / (s + beta1) is multiplied by
-//! wv^2 / (s^2 + 2 zeta wv s + wv^2): a mode inside the position loop. The
-//! loop's reference u' is the command u itself, or with a command-path mode
-//! p'' + 2 zeta wp p' + wp^2 p = wp^2 u the shaped command p (a valve driver
-//! or command filter ahead of the loop: x1/u gains the factor outside the
-//! loop, and so does the force). A measurement-path mode
-//! q'' + 2 zeta wq q' + wq^2 q = wq^2 x1 filters only the logged
-//! displacement (the feedback sees x1): x1/u gains the same factor as from
-//! the command path, the force does not. The load cell sits between piston and
-//! specimen and reads the force on the specimen side, f - m_p x2' =
-//! (m f + m_p g) / M: the actuator force f itself when m_p = 0 (the paper's
-//! assumption), and zero with nothing attached.
-//!
-//! With the servo-valve's flow-pressure law (docs/model.md, after Merritt
-//! ch. 5; F_max = A P_s) the flow reaching the chamber is r sqrt(1 - sign(r)
-//! f / F_max) in place of r: f' = -a2 x2 - a3 f + r sqrt(1 - sign(r) f /
-//! F_max), and on a massless rig x1' = (r sqrt(1 - sign(r) g / F_max) -
-//! a3 g) / (g' + a2), the force being the spring's g. Eq. 10 is its limit
-//! f << F_max, and its linearisation at rest.
+//! States, in this order (absent ones dropped): x1, x2, f, r with inertia (a
+//! specimen's or the piston's mass), or x1, r on a massless rig; then v, w
+//! for a servo-valve mode in the loop; p, p' for a mode in the command path;
+//! q, q' for one in the measurement path; z for a Bouc-Wen specimen. The
+//! load cell reads the force on the specimen's side, (m f + m_p g) / M.
+//! [`linear_state_space`] gives a linear specimen's plant for exact ZOH;
+//! [`NonlinearPlant`] is the ODE the integrators take (nonlinear specimens,
+//! friction, the valve's flow-pressure law); `simulate` runs either. The
+//! equations: docs/methods.md, "The simulated plant"; where the extra
+//! dynamics sit: docs/model.md.
 
 use std::cell::Cell;
 

@@ -1,30 +1,18 @@
-//! A model-based feedforward compensator for the identified plant (issue
-//! 27, item 3): the plant's inverse made proper by a low-pass, discretised
-//! for the controller's sample rate, with a phase lead that makes up the
-//! delay the low-pass, the sample-and-hold and the plant's own delay leave.
+//! A model-based feedforward compensator for the identified plant: the
+//! plant's inverse made proper by a low-pass, discretised for the
+//! controller's sample rate, with a phase lead that makes up the delay the
+//! low-pass, the sample-and-hold and the plant's own delay leave.
 //!
-//! With the plant `G(s) = N(s)/D(s) e^{-s tau_p}` of relative degree `r`
-//! (for the paper's plant with an SDOF specimen, Eqs. 34-35, `N` is a
-//! constant and `r = 4`), the feedforward is
-//!
-//! `F(s) = D(s) / N(s) * B(s)`, `B` the Butterworth low-pass of order `r`
-//! and unit gain at DC,
-//!
-//! so that `G F = B e^{-s tau_p}`: flat amplitude up to well below the
-//! cut-off, and a delay of `tau_p` plus the low-pass's group delay. This is
-//! the model-based feedforward of Carrion & Spencer (2007, "Model-based
-//! strategies for real-time hybrid testing", NSEL Report 6, UIUC) and
-//! Phillips & Spencer (2013, J. Eng. Mech. 139(2):219-228), which invert the
-//! identified actuator-specimen model; they make it causal with a low-pass
-//! (Carrion & Spencer) or backward differences (Phillips, Takada, Spencer &
-//! Fujino 2014, Smart Struct. Syst. 14(6):1081-1103). The remaining delay is
-//! taken up by extrapolating the command ahead by as much (Horiuchi et al.
-//! 1999, Earthquake Eng. Struct. Dyn. 28(10):1121-1141: a cubic Lagrange
-//! polynomial through the last four samples).
-//!
+//! For `G(s) = N(s)/D(s) e^{-s tau_p}` of relative degree `r` (`N` a
+//! constant and `r = 4` for the paper's plant with an SDOF specimen,
+//! Eqs. 34-35), `design` gives `F(s) = D(s) / N(s) * B(s)`, `B` the
+//! Butterworth low-pass of order `r` and unit DC gain, so that
+//! `G F = B e^{-s tau_p}` (Carrion & Spencer 2007; Phillips & Spencer 2013).
 //! `F` is discretised by the bilinear (Tustin) map at the log's rate; the
-//! compensator a controller runs is `C(z) = E(z) F_d(z)`, `E` the
-//! extrapolation. Pure: the plant in, the filter's coefficients out.
+//! controller runs `C(z) = E(z) F_d(z)`, `E` the extrapolation of the
+//! command ahead by a cubic through its last four samples (Horiuchi et al.
+//! 1999). Pure: the plant in, the filter's coefficients out. The design,
+//! its references and its checks: docs/tracking.md, "The compensator".
 
 use nalgebra::Complex;
 use schemars::JsonSchema;

@@ -2,19 +2,16 @@
 //!
 //! - [`xcorr_delay`]: the lag that maximises the cross-correlation of the
 //!   command and the displacement, refined below a sample on the
-//!   correlation's band-limited interpolant. This is the delay a pure
-//!   time shift would have (Knapp & Carter 1976, "The generalized
-//!   correlation method for estimation of time delay", IEEE Trans. ASSP
-//!   24(4):320-327, with unit weighting).
+//!   correlation's band-limited interpolant: the delay a pure time shift
+//!   would have (Knapp & Carter 1976, IEEE Trans. ASSP 24(4):320-327, with
+//!   unit weighting).
 //! - [`phase_slope_delay`]: minus the slope of the FRF's unwrapped phase
 //!   against angular frequency over the band, the group delay averaged
 //!   over it.
 //!
-//! They agree for a pure delay and differ when the plant is not one (a
-//! lag's phase is not linear in frequency), which is why both are kept.
-//!
-//! Pure: signals in, numbers out. A positive delay is a displacement that
-//! lags its command.
+//! They agree for a pure delay and differ when the plant is not one, which
+//! is why both are kept. Pure: signals in, numbers out. A positive delay is
+//! a displacement that lags its command. Definitions: docs/tracking.md.
 
 use nalgebra::Complex;
 

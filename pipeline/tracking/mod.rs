@@ -1,21 +1,18 @@
-//! How well the actuator follows its command: the tracking
-//! measures an RTHS lab reads of a run, each from the command and the
-//! measured (or predicted) displacement alone, so that the same function
-//! gives the measured tracking of a log and the tracking the identified
-//! model predicts for its command.
+//! How well the actuator follows its command: the tracking measures an RTHS
+//! lab reads of a run, each from the command and the measured (or
+//! predicted) displacement alone, so that one function gives a log's
+//! measured tracking and the tracking the identified model predicts.
 //!
-//! - the time delay by cross-correlation ([`delay::xcorr_delay`]) and by
-//!   the slope of the FRF's phase ([`delay::phase_slope_delay`]);
+//! - the delay by cross-correlation ([`delay::xcorr_delay`]) and by the
+//!   slope of the FRF's phase ([`delay::phase_slope_delay`]);
 //! - the frequency evaluation index ([`frequency_evaluation`]: Guo, Chen,
-//!   Xu & Sanchez 2014), the amplitude and phase of the tracking at the
-//!   frequencies the command has, and the delay they imply;
-//! - the tracking indicator ([`tracking_indicator`]: Mercan & Ricles
-//!   2007), the signed area of the synchronized subspace plot;
-//! - the tracking error's normalised RMS and peak ([`tracking_errors`]:
-//!   J2 and J3 of the RTHS benchmark, Silva et al. 2020).
+//!   Xu & Sanchez 2014);
+//! - the tracking indicator ([`tracking_indicator`]: Mercan & Ricles 2007);
+//! - the tracking error's normalised RMS and peak ([`tracking_errors`]: J2
+//!   and J3 of the RTHS benchmark, Silva et al. 2020).
 //!
-//! Pure: signals in, numbers or notes out. Displacements in m, times in
-//! s. A positive delay is a displacement that lags its command.
+//! Pure. Displacements in m, times in s; a positive delay is a displacement
+//! that lags its command. Definitions: docs/tracking.md, "The measures".
 
 pub mod compensator;
 pub mod delay;

@@ -1,20 +1,16 @@
 //! Where each channel's values lie in a TDMS file, found by walking its
 //! segments as NI documents them ("TDMS File Format Internal Structure"):
-//! each segment a 28-byte lead-in (tag `TDSm`, table of contents, version,
-//! the segment's length and its metadata's length), an object list (each
-//! object's path, raw-data index and properties) and raw data, in chunks
-//! that hold every listed object's values in turn.
+//! each a 28-byte lead-in (tag `TDSm`, table of contents, version, the
+//! segment's and its metadata's lengths), an object list (paths, raw-data
+//! indices, properties) and raw data, in chunks that hold every listed
+//! object's values in turn.
 //!
-//! servoid walks the segments itself rather than through a crate: the
-//! crates it tried refuse a whole file for one string channel (its raw-data
-//! index is 8 bytes longer), for a last segment a power loss cut short, and
-//! sum a corrupt declared count into a channel's length. Here a string,
-//! boolean or timestamp channel is passed over and named when asked for; a
-//! last segment cut short gives what its whole chunks hold, with a warning;
-//! a count the segment cannot hold names the channel and the bytes.
-//!
-//! Every offset is checked against the file before it is used: a damaged
-//! file is an error in words, never a panic or an allocation it declares.
+//! A string, boolean or timestamp channel is passed over, and named when
+//! asked for; a last segment cut short gives what its whole chunks hold,
+//! with a warning; a count the segment cannot hold names the channel and
+//! the bytes. Every offset is checked against the file before it is used:
+//! a damaged file is an error in words, never a panic or an allocation it
+//! declares. Why not a crate: docs/methods.md, "TDMS segments".
 
 use std::collections::HashMap;
 

@@ -2,18 +2,17 @@
 //! response functions (the paper's Figs. 8, 11, 13, 15-17), grids of
 //! measured-versus-simulated time windows (Figs. 9, 12, 14, 19-22) and
 //! generic x-y lines (residuals, sensitivity curves). Each figure renders to
-//! whichever of PNG bytes and an SVG string are asked for, both showing the
-//! same drawing: plotters lays the chart out once into a list of primitives
-//! (`canvas`), which `svg` writes and `raster` draws with tiny-skia for the
-//! PNG (`encode`).
+//! whichever of PNG bytes and an SVG string are asked for, one drawing:
+//! plotters lays the chart out once into a list of primitives (`canvas`),
+//! which `svg` writes and `raster` draws with tiny-skia for the PNG
+//! (`encode`).
 //!
 //! Text uses DejaVu Sans compiled into the binary: the PNG rasterises it and
 //! the SVG holds the glyph outlines as paths (no `<text>`), so a figure looks
 //! the same on every machine and nothing reads system fonts. Colours are the
-//! Okabe-Ito palette; measured data are solid, models dashed, references
-//! dotted. Output bytes depend only on the input data and size.
-//!
-//! Functions here are pure: they write no files (the caller does).
+//! Okabe-Ito palette; measured data solid, models dashed, references dotted.
+//! Output bytes depend only on the input data and size. Pure: the caller
+//! writes the files.
 
 mod canvas;
 pub mod catalogue;

@@ -16,11 +16,11 @@
 use argmin::core::{Error as ArgminError, Executor, Jacobian, State, TerminationReason};
 use nalgebra::{Complex, DMatrix, DVector};
 
-use super::adequacy::{Adequacy, Residuals, Sums};
-use super::lm::{LevenbergMarquardt, Normal};
-use super::problem::{alias_factor, hold_response};
-use super::settings::Intersample;
-use super::{FitError, covariance, covariance_from_normal};
+use crate::fit::Intersample;
+use crate::fit::adequacy::{Adequacy, Residuals, Sums};
+use crate::fit::lm::{LevenbergMarquardt, Normal};
+use crate::fit::problem::{alias_factor, hold_response};
+use crate::fit::{FitError, covariance, covariance_from_normal};
 use crate::lti::TransferFunction;
 use crate::model::{self, LinearSpecimen, RigParams};
 use crate::poly;
@@ -674,12 +674,12 @@ impl JointProblem {
     }
 
     /// Sets the known factors to the aliases at `x` where they would
-    /// move some parameter by [`super::ALIAS_SETTLED`] of its std or more,
-    /// as the per-run fit judges it ([`super::shift_in_stds`] on every
-    /// [`super::ALIAS_PROBE_STRIDE`]-th bin of each run, `scale` the root
+    /// move some parameter by [`crate::fit::ALIAS_SETTLED`] of its std or more,
+    /// as the per-run fit judges it ([`crate::fit::shift_in_stds`] on every
+    /// [`crate::fit::ALIAS_PROBE_STRIDE`]-th bin of each run, `scale` the root
     /// of the reduced chi-square; 1 before a fit). Whether it set them.
     fn follow_aliases(&mut self, x: &Point, scale: f64) -> bool {
-        let Some(probe) = self.exact_known(x, super::ALIAS_PROBE_STRIDE) else {
+        let Some(probe) = self.exact_known(x, crate::fit::ALIAS_PROBE_STRIDE) else {
             return false;
         };
         let p = self.n_params();
@@ -699,8 +699,8 @@ impl JointProblem {
             }
         }
         let share = probe.len() as f64 / self.bins.len() as f64;
-        let shift = super::shift_in_stds(&a, &b, share, scale);
-        if !shift.is_some_and(|z| z.iter().any(|&z| z >= super::ALIAS_SETTLED)) {
+        let shift = crate::fit::shift_in_stds(&a, &b, share, scale);
+        if !shift.is_some_and(|z| z.iter().any(|&z| z >= crate::fit::ALIAS_SETTLED)) {
             return false;
         }
         let Some(known) = self.exact_known(x, 1) else {
@@ -935,7 +935,7 @@ impl JointProblem {
 }
 
 impl JointProblem {
-    /// [`super::correlated_covariance`] at `theta`: each bin's score, and
+    /// [`crate::fit::correlated_covariance`] at `theta`: each bin's score, and
     /// its place along its run's FRF in bins, paired up to its run's lag
     /// less one bins apart (the lag being the first at which bins are
     /// independent).
@@ -959,7 +959,14 @@ impl JointProblem {
             position.push((b.run, f / self.bin_hz[b.run]));
         }
         let reach: Vec<f64> = self.lag.iter().map(|l| (l - 1) as f64).collect();
-        super::correlated_covariance(&scores, &position, &reach, a_inv, 2 * self.bins.len(), dof)
+        crate::fit::correlated_covariance(
+            &scores,
+            &position,
+            &reach,
+            a_inv,
+            2 * self.bins.len(),
+            dof,
+        )
     }
 
     /// Whether any run's bins share data with their neighbours.
@@ -1137,14 +1144,14 @@ pub(super) fn joint_fit_staged(
 /// each pass then takes a fixed share of the distance left (at 200 Hz with
 /// a 110 Hz mode in the loop the delay is 2.5e-5 off after eight and
 /// within 2e-6 after twelve). The loop stops as soon as the aliases would
-/// move no parameter by [`super::ALIAS_SETTLED`] of its std, so a rig that
+/// move no parameter by [`crate::fit::ALIAS_SETTLED`] of its std, so a rig that
 /// needs none pays for none.
 const ALIAS_PASSES: usize = 12;
 
 /// Levenberg-Marquardt on `problem` from `theta0` with the hold's aliases
 /// those of the model it finds (docs/methods.md, "The joint fit"): evaluated at `theta0`, then
 /// at each optimum, and fitted again from there while they would move it
-/// by [`super::ALIAS_SETTLED`] of its stated std or more. The aliases the
+/// by [`crate::fit::ALIAS_SETTLED`] of its stated std or more. The aliases the
 /// problem is left with are those of the optimum's last leg.
 fn settle(
     problem: &mut JointProblem,
@@ -1490,8 +1497,8 @@ fn solver(problem: &JointProblem, opts: &JointOptions) -> Result<LevenbergMarqua
 
 mod select;
 pub use select::{
-    Candidate, Choice, FTest, HAUSMAN_Z, P_SIGNIFICANT, RunSpread, Selection, StructureSpread,
-    WEIGHT_FLOOR, run_spread, select,
+    Candidate, Choice, FTest, HAUSMAN_Z, JointIdentification, P_SIGNIFICANT, RunSpread, Selection,
+    StructureSpread, WEIGHT_FLOOR, identify, run_spread, select,
 };
 
 #[cfg(test)]

@@ -20,10 +20,10 @@ use super::{
     FitError, JointFit, JointOptions, JointProblem, JointRun, Leg, Output, Point, Structure,
     finish, joint_fit, joint_fit_staged, problem, rig_theta, settle,
 };
+use crate::identify::Estimate;
 use crate::model::RigParams;
 
-/// The p-value below which a larger structure is taken.
-pub const P_SIGNIFICANT: f64 = 1e-3;
+pub use crate::fit::delay_significance::P_SIGNIFICANT;
 
 /// How the structure is chosen: `identification.joint.structure`, "auto"
 /// or one of [`Structure`]'s names.
@@ -980,6 +980,101 @@ pub struct RunSpread {
 
 /// The most refits [`run_spread`]'s jackknife makes.
 pub const JACKKNIFE_GROUPS: usize = 20;
+
+/// A campaign's joint fit: the structure chosen, on which runs, and the
+/// runs' model-error spread where the chosen fit misses.
+#[derive(Debug)]
+pub struct JointIdentification<'a> {
+    /// The runs the structure was chosen on: as given, or with every
+    /// spring's cubic term dropped where the data take the stated k.
+    pub runs: Vec<JointRun<'a>>,
+    pub selection: Selection,
+    /// [`run_spread`] of the chosen fit.
+    pub misfit: Option<RunSpread>,
+    /// Whether some spring's cubic term, read from its force, was given
+    /// and the fit holds at least as well with each stated k.
+    pub stiffening_rejected: bool,
+}
+
+impl JointIdentification<'_> {
+    /// The total covariance of the chosen rig's beta1, a1b0, a2 and a3:
+    /// the fit's own, the spread among the structures
+    /// ([`Selection::spread`]) and the runs' model-error spread on the
+    /// diagonal (the jackknife's correlations are too few refits to
+    /// trust). None when no structure is chosen.
+    pub fn rig_covariance(&self) -> Option<[[f64; 4]; 4]> {
+        let fit = self.selection.fit()?;
+        let structure = self
+            .selection
+            .spread()
+            .map_or([[0.0; 4]; 4], |s| s.covariance);
+        let misfit: [f64; 4] = self
+            .misfit
+            .as_ref()
+            .map_or([0.0; 4], |m| m.std.map(|s| s * s));
+        Some(std::array::from_fn(|i| {
+            std::array::from_fn(|j| {
+                fit.covariance[(i, j)] + structure[i][j] + if i == j { misfit[i] } else { 0.0 }
+            })
+        }))
+    }
+
+    /// R1 = a1b0 / a2 of the chosen rig, with its first-order std from
+    /// [`Self::rig_covariance`].
+    pub fn r1(&self) -> Option<Estimate> {
+        let (rig, cov) = (&self.selection.fit()?.rig, self.rig_covariance()?);
+        let (a, b) = (rig.a1b0_n_per_m_s2, rig.a2_n_per_m);
+        // Gradient (1 / a2, -a1b0 / a2^2) over (a1b0, a2).
+        let g = [1.0 / b, -a / (b * b)];
+        let var = g[0] * g[0] * cov[1][1] + 2.0 * g[0] * g[1] * cov[1][2] + g[1] * g[1] * cov[2][2];
+        Some(Estimate {
+            value: rig.r1(),
+            std: Some(var.max(0.0).sqrt()),
+        })
+    }
+}
+
+/// The joint fit of a campaign's `runs` from the sequential rig `start`
+/// (docs/methods.md, "The joint fit"): the structure chosen by [`select`];
+/// where a spring's stiffening was read from its force, chosen again with
+/// each stated k and the better of the two kept by Schwarz's criterion (a
+/// load cell's delay against the LVDT's can mimic a cubic term); then the
+/// runs' spread about the chosen fit ([`run_spread`]).
+pub fn identify<'a>(
+    runs: Vec<JointRun<'a>>,
+    start: &RigParams,
+    opts: &JointOptions,
+    choice: Choice,
+    band_top_hz: f64,
+) -> JointIdentification<'a> {
+    let sel = select(&runs, start, opts, choice, band_top_hz);
+    let (runs, selection, stiffening_rejected) =
+        if runs.iter().any(|r| r.spring_cubic_n_per_m3.is_some()) {
+            let stated: Vec<JointRun<'_>> = runs
+                .iter()
+                .map(|r| JointRun {
+                    spring_cubic_n_per_m3: None,
+                    ..*r
+                })
+                .collect();
+            let linear = select(&stated, start, opts, choice, band_top_hz);
+            let bic = |s: &Selection| s.chosen.and_then(|c| s.candidate(c)?.bic());
+            match (bic(&sel), bic(&linear)) {
+                (Some(with), Some(without)) if without <= with => (stated, linear, true),
+                (None, Some(_)) => (stated, linear, false),
+                _ => (runs, sel, false),
+            }
+        } else {
+            (runs, sel, false)
+        };
+    let misfit = run_spread(&runs, &selection, opts);
+    JointIdentification {
+        runs,
+        selection,
+        misfit,
+        stiffening_rejected,
+    }
+}
 
 /// [`RunSpread`] of the chosen fit of `sel` over `runs`.
 pub fn run_spread(
