@@ -38,9 +38,10 @@ use servoid::identify::joint::{
     Choice, JointOptions, JointRun, Output, Structure, joint_fit, select,
 };
 use servoid::lti::ZohSampled;
+use servoid::model::SpecimenModel;
 use servoid::model::{LinearSpecimen, PAPER_RIG, RigParams};
 use servoid::simulate::plant::{PlantSpec, Unmodelled, ValveMode, linear_state_space};
-use servoid::simulate::{SpecimenModel, seeded_rng};
+use servoid::simulate::seeded_rng;
 
 const FS: f64 = 2048.0;
 

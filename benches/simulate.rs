@@ -8,10 +8,10 @@ use std::hint::black_box;
 use std::path::Path;
 
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
+use servoid::model::{Duffing, SpecimenModel};
 use servoid::report::columns::csv_bytes;
 use servoid::simulate::{
-    ChirpLaw, Duffing, Excitation, Integrator, Padding, PlantSpec, SpecimenModel, Unmodelled,
-    generate, simulate,
+    ChirpLaw, Excitation, Integrator, Padding, PlantSpec, Unmodelled, generate, simulate,
 };
 
 const FS_HZ: f64 = 2048.0;

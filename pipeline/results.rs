@@ -23,7 +23,7 @@ use crate::lti::TransferFunction;
 use crate::manifest::simulation::UnmodelledSpec;
 use crate::manifest::{CompareMode, Manifest, Role, RunTableInfo};
 use crate::model::RigParams;
-use crate::simulate::specimen::SpecimenModel;
+use crate::model::SpecimenModel;
 
 /// Version of the results.json format.
 pub const RESULTS_SCHEMA_VERSION: u32 = 2;

@@ -22,10 +22,10 @@ use nalgebra::{DMatrix, DVector};
 
 use servoid::fit::lm::LevenbergMarquardt;
 use servoid::frf::{Detrend, detrend};
+use servoid::model::SpecimenModel;
 use servoid::model::{LinearSpecimen, RigParams};
 use servoid::simulate::ode::Integrator;
 use servoid::simulate::plant::{ActuatorFriction, PlantSpec, Unmodelled, simulate};
-use servoid::simulate::specimen::SpecimenModel;
 
 /// One run's record: the command and displacement as logged (m), its
 /// specimen and P gain.

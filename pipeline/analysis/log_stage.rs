@@ -14,8 +14,8 @@ use crate::identify::{FitData, RunTfError, fit_run};
 use crate::ingest::{self, IngestError, Log, LogFile, LogPlan, Needs};
 use crate::lti::TransferFunction;
 use crate::manifest::{Campaign, Role, RunPlan, RunSource};
+use crate::model::SpecimenModel;
 use crate::results::TfSource;
-use crate::simulate::specimen::SpecimenModel;
 
 /// What the first stage gives for each run: its own transfer function, and
 /// the log's signals and spectra when it has a log.

@@ -14,8 +14,8 @@ use crate::identify::consistency::Consistency;
 use crate::identify::{self, Estimate, IdentifyError, SecondOrder, SpringRun, TfEstimate};
 use crate::manifest::{Campaign, Role, RunPlan};
 use crate::model::RigParams;
+use crate::model::SpecimenModel;
 use crate::results::{RigEstimates, RigResult, RigSource, Spread};
-use crate::simulate::specimen::SpecimenModel;
 
 /// Why the campaign has no rig parameters.
 #[derive(Debug, thiserror::Error)]

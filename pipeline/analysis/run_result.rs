@@ -13,12 +13,12 @@ use crate::identify::{FitData, fit_options};
 use crate::ingest::Log;
 use crate::lti::TransferFunction;
 use crate::manifest::{Campaign, CompensatorSettings, IdentificationPlan, RunPlan, RunSource};
+use crate::model::SpecimenModel;
 use crate::model::{self, LinearSpecimen, RigParams, Seals};
 use crate::results::{
     DelayTestResult, FitSummary, FrfUsed, HarmonicsFound, LinearityResult, LogInfo, RunResult,
     RunTracking, Status, TfResult, TfSource,
 };
-use crate::simulate::specimen::SpecimenModel;
 use crate::tracking::compensator::{self, Compensator, CompensatorOutcome};
 use crate::tracking::{self, FrfBins, Reference, Tracking};
 use crate::validate::{self, Record, ValidateError};

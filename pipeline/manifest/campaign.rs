@@ -28,7 +28,7 @@ use crate::identify::IdentificationPlan;
 use crate::ingest::{self, ChannelPlan, Channels, LogFormat, LogPlan, TimePlan};
 use crate::lti::{LtiError, TransferFunction};
 use crate::model::RigParams;
-use crate::simulate::specimen::SpecimenModel;
+use crate::model::SpecimenModel;
 use crate::units::TimeUnit;
 
 /// A checked campaign, ready to run.

@@ -8,7 +8,7 @@
 use super::keypath::KeyPath;
 use super::raw::{Channel, Channels, Role, Specimen, SpecimenKind};
 use crate::ingest::Column;
-use crate::simulate::specimen::{BoucWen, Duffing, Friction, SpecimenModel};
+use crate::model::{BoucWen, Duffing, Friction, SpecimenModel};
 use crate::units::UnitKind;
 
 /// The longest name that becomes part of a file name (a run id, a

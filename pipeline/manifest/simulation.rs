@@ -25,11 +25,11 @@ use super::raw::{
 };
 use crate::ingest::sha256_hex;
 use crate::model::RigParams;
+use crate::model::SpecimenModel;
 use crate::simulate::excitation::{ChirpLaw, Excitation, Padding};
 use crate::simulate::instrument::Sensor;
 use crate::simulate::ode::Integrator;
 use crate::simulate::plant::{self, ActuatorFriction, PlantSpec, Unmodelled, ValveMode};
-use crate::simulate::specimen::SpecimenModel;
 use crate::units::UnitKind;
 
 /// A simulated campaign: the truth, the test program and the instruments.
@@ -754,7 +754,7 @@ fn check_duffing_spring(
     {
         return None;
     }
-    ok.then_some(SpecimenModel::Duffing(crate::simulate::specimen::Duffing {
+    ok.then_some(SpecimenModel::Duffing(crate::model::Duffing {
         mass_kg: 0.0,
         damping_ns_per_m: 0.0,
         stiffness_n_per_m: k,

@@ -21,7 +21,7 @@ use super::problem::{Problem, TablePlace};
 use super::raw::{Role, RunTable, Specimen};
 use super::scaffold::PLACEHOLDER;
 use crate::ingest::{self, LogFormat, TableFormat};
-use crate::simulate::specimen::SpecimenModel;
+use crate::model::SpecimenModel;
 
 /// The run table's provenance: which file, its hash and its rows.
 #[derive(

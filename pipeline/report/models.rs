@@ -15,9 +15,9 @@
 //!   `fs`). What a run does not have is `[]`.
 
 use super::matlab::{MatValue, MatWriteError, mat_bytes};
+use crate::model::SpecimenModel;
 use crate::model::{self, CnTerm, LinearSdof, LinearSpecimen, RigParams};
 use crate::results::{FitSummary, Results, RigResult, RunResult, Status, TfResult, TfSource};
-use crate::simulate::SpecimenModel;
 use crate::tracking::compensator::CompensatorOutcome;
 
 /// The bytes of `models.mat` for `results`. The header names the servoid

@@ -26,13 +26,13 @@ use crate::analysis::evidence::RigInput;
 use crate::analysis::rig;
 use crate::ingest::LogFile;
 use crate::manifest::{Campaign, Role, RunPlan};
+use crate::model::SpecimenModel;
 use crate::model::{self, CnTerm, LinearSdof, RigParams};
 use crate::report::figures::catalogue::{self, OverlayRun};
 use crate::report::{FigureFormats, PageFigure, WriteError};
 use crate::results::{
     CampaignSummary, CcfResult, ComplexValue, RESULTS_SCHEMA_VERSION, Results, RunResult, Status,
 };
-use crate::simulate::specimen::SpecimenModel;
 use crate::tracking::compensator::CompensatorOutcome;
 use crate::validate::csi::Csi;
 use crate::validate::{self, ValidationMetrics};

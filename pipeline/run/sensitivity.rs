@@ -13,6 +13,7 @@ use crate::identify;
 use crate::ingest::IngestError;
 use crate::manifest::{Campaign, MonteCarloSettings, Role, RunSource};
 use crate::model::RigParams;
+use crate::model::SpecimenModel;
 use crate::report::WriteError;
 use crate::results::{AnalyticSensitivity, Results, SensitivityResult};
 use crate::sensitivity::draws::{McInput, monte_carlo};
@@ -20,7 +21,6 @@ use crate::sensitivity::montecarlo::{MonteCarlo, compare};
 use crate::sensitivity::{
     CoefficientNoise, NoiseProfile, StiffnessSensitivity, log_grid, recommend, stiffness_sweep,
 };
-use crate::simulate::specimen::SpecimenModel;
 
 /// The sensitivity of a campaign whose rig is `rig`; `noise` the first
 /// no-specimen run's FRF noise. None when the rig allows no sweep.

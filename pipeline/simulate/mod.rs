@@ -33,7 +33,7 @@ pub use plant::{
     ActuatorFriction, NonlinearPlant, PlantResponse, PlantSpec, Unmodelled, ValveMode,
     linear_state_space, simulate, validate,
 };
-pub use specimen::{BoucWen, Duffing, ForcedSpecimen, Friction, SpecimenModel};
+pub use specimen::ForcedSpecimen;
 
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -43,15 +43,8 @@ use sha2::{Digest, Sha256};
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum SimError {
     /// A parameter is missing its required sign or range.
-    #[error("{owner}: {name} must be {requirement} (got {value})")]
-    Parameter {
-        /// Which part of the plant (e.g. "rig", "duffing specimen").
-        owner: &'static str,
-        /// The parameter's name, as in the types of this module.
-        name: &'static str,
-        value: f64,
-        requirement: &'static str,
-    },
+    #[error(transparent)]
+    Parameter(#[from] crate::model::ParameterError),
     /// The plant (or its linearisation at rest) has an eigenvalue with a
     /// non-negative real part.
     #[error(
@@ -152,56 +145,4 @@ impl Draws {
     }
 }
 
-/// Checks that `value` is finite and positive.
-pub(crate) fn require_positive(
-    owner: &'static str,
-    name: &'static str,
-    value: f64,
-) -> Result<(), SimError> {
-    if value.is_finite() && value > 0.0 {
-        Ok(())
-    } else {
-        Err(SimError::Parameter {
-            owner,
-            name,
-            value,
-            requirement: "positive and finite",
-        })
-    }
-}
-
-/// Checks that `value` is finite and non-negative.
-pub(crate) fn require_non_negative(
-    owner: &'static str,
-    name: &'static str,
-    value: f64,
-) -> Result<(), SimError> {
-    if value.is_finite() && value >= 0.0 {
-        Ok(())
-    } else {
-        Err(SimError::Parameter {
-            owner,
-            name,
-            value,
-            requirement: "non-negative and finite",
-        })
-    }
-}
-
-/// Checks that `value` is finite.
-pub(crate) fn require_finite(
-    owner: &'static str,
-    name: &'static str,
-    value: f64,
-) -> Result<(), SimError> {
-    if value.is_finite() {
-        Ok(())
-    } else {
-        Err(SimError::Parameter {
-            owner,
-            name,
-            value,
-            requirement: "finite",
-        })
-    }
-}
+pub(crate) use crate::model::specimen::{require_finite, require_non_negative, require_positive};

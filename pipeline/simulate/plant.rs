@@ -21,9 +21,9 @@ use serde::{Deserialize, Serialize};
 
 use super::discrete::simulate_linear;
 use super::ode::{Event, Integrator, OdeSystem, integrate_held};
-use super::specimen::SpecimenModel;
 use super::{SimError, require_finite, require_non_negative, require_positive};
 use crate::lti::StateSpace;
+use crate::model::SpecimenModel;
 use crate::model::{self, LinearSpecimen, RigParams};
 
 /// A second-order servo-valve mode in series with the first-order valve.
@@ -155,12 +155,13 @@ pub fn validate(spec: &PlantSpec) -> Result<(), SimError> {
         // a piston mass M -> 0, whose quartic has d4 = M and d2 ~ k + a2: with
         // k + a2 <= 0 any small mass gives a real pole near +sqrt(-(k + a2)/M),
         // even where the massless model looks stable.
-        return Err(SimError::Parameter {
+        return Err(crate::model::ParameterError {
             owner: spec.specimen.name(),
             name: "stiffness_n_per_m",
             value: k,
             requirement: "above -a2_n_per_m on a massless rig (below it the rig is statically unstable)",
-        });
+        }
+        .into());
     }
     let ss = build_linear(rig, m, c, k, &spec.unmodelled);
     let unstable: Vec<Complex<f64>> = ss
@@ -636,7 +637,7 @@ pub fn simulate(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::simulate::specimen::{BoucWen, Duffing, Friction};
+    use crate::model::{BoucWen, Duffing, Friction};
     use approx::assert_relative_eq;
 
     fn exp1() -> SpecimenModel {

@@ -549,10 +549,10 @@ fn the_target_stiffness_range_ends_where_the_hand_loop_reaches_the_target() {
 /// harmonics it leaves out take their share of the motion).
 #[test]
 fn the_friction_factor_is_what_the_nonlinear_plant_gives_at_a_sine() {
+    use crate::model::SpecimenModel;
     use crate::model::{self, LinearSpecimen, PAPER_RIG};
     use crate::simulate::ode::Integrator;
     use crate::simulate::plant::{ActuatorFriction, PlantSpec, Unmodelled, simulate};
-    use crate::simulate::specimen::SpecimenModel;
     let (m, c, k) = (3.8, 5.0, 129_400.0);
     let specimen = SpecimenModel::LinearSdof {
         mass_kg: m,

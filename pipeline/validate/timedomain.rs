@@ -15,12 +15,12 @@ use serde::{Deserialize, Serialize};
 
 use super::metrics::{self as validate, Errors, Window};
 use crate::lti::{StateSpace, TransferFunction};
+use crate::model::SpecimenModel;
 use crate::model::{self, CnTerm, LinearSdof, RigParams, Seals};
 use crate::simulate::SimError;
 use crate::simulate::discrete::simulate_linear;
 use crate::simulate::ode::Integrator;
 use crate::simulate::plant::{self, ActuatorFriction, PlantSpec, Unmodelled};
-use crate::simulate::specimen::SpecimenModel;
 
 /// A run's measured signals in SI, uniformly sampled, as the time-domain
 /// checks read them.

@@ -4,8 +4,8 @@
 //! it is (`lti::ZohSampled`: the hold, its aliases and the delay).
 
 use super::*;
+use crate::model::SpecimenModel;
 use crate::simulate::plant::{PlantSpec, Unmodelled, ValveMode, linear_state_space};
-use crate::simulate::specimen::SpecimenModel;
 
 const FS: f64 = 1000.0;
 

@@ -12,6 +12,9 @@ use serde::{Deserialize, Serialize};
 
 use crate::lti::{LtiError, StateSpace, TransferFunction};
 
+pub mod specimen;
+pub use specimen::{BoucWen, Duffing, Friction, ParameterError, SpecimenModel};
+
 /// The four parameters of the hydraulic transfer system (Eq. 10), with a1b0
 /// stated at the P gain `p_gain` (a1b0 = a1 P c is proportional to P, Eq. 7).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, JsonSchema)]
