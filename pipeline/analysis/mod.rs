@@ -10,12 +10,15 @@
 //! `run` schedules it and writes what it gives.
 
 pub mod compare;
+pub mod conclusions;
 pub mod evidence;
 pub mod history;
 pub mod joint;
 pub mod log_stage;
 pub mod rig;
 pub mod run_result;
+pub mod sensitivity;
 pub mod simulated;
+pub mod step;
 
 pub use rig::{FailedRun, RigError};

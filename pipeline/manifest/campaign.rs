@@ -70,12 +70,33 @@ pub struct Campaign {
 /// The stiffness sensitivity's checked settings.
 #[derive(Debug, Clone, PartialEq)]
 pub struct SensitivityPlan {
-    /// None: 0.01 to 10 times the identified a2.
-    pub range_n_per_m: Option<(f64, f64)>,
+    pub range: StiffnessRange,
     pub points: usize,
     pub target_rel_std: f64,
     /// None: no Monte Carlo.
     pub monte_carlo: Option<MonteCarloSettings>,
+}
+
+/// The specimen stiffnesses the sensitivity sweeps (Sec. 2.3), which each
+/// validation run's compensator is designed over too.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum StiffnessRange {
+    /// The manifest's `sensitivity.stiffness_range_n_per_m` (N/m).
+    Given(f64, f64),
+    /// From 0.01 to 10 times the identified rig's a2: the paper's springs
+    /// sit near 0.1 a2, and the rig's response to the specimen changes
+    /// most about a2 (Eq. 19).
+    OfA2,
+}
+
+impl StiffnessRange {
+    /// The range in N/m for a rig of `a2_n_per_m` (N/m).
+    pub fn n_per_m(self, a2_n_per_m: f64) -> (f64, f64) {
+        match self {
+            StiffnessRange::Given(lo, hi) => (lo, hi),
+            StiffnessRange::OfA2 => (0.01 * a2_n_per_m, 10.0 * a2_n_per_m),
+        }
+    }
 }
 
 /// The rig history's checked settings.
@@ -546,7 +567,11 @@ pub(super) fn check_sensitivity(
         }
     }
     SensitivityPlan {
-        range_n_per_m: s.stiffness_range_n_per_m.map(|[lo, hi]| (lo, hi)),
+        range: s
+            .stiffness_range_n_per_m
+            .map_or(StiffnessRange::OfA2, |[lo, hi]| {
+                StiffnessRange::Given(lo, hi)
+            }),
         points: s.points,
         target_rel_std: s.target_rel_std,
         monte_carlo: s.monte_carlo,

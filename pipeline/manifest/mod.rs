@@ -29,7 +29,9 @@ mod table;
 use std::path::Path;
 
 pub use crate::identify::IdentificationPlan;
-pub use campaign::{Campaign, Quantity, ReferencePlan, RunPlan, RunSource, load, load_str};
+pub use campaign::{
+    Campaign, Quantity, ReferencePlan, RunPlan, RunSource, StiffnessRange, load, load_str,
+};
 pub use checks::{BadDate, normalise_date};
 pub use keypath::{KeyPath, Seg};
 pub use problem::{ManifestError, Problem, TablePlace};

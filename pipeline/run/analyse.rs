@@ -18,24 +18,19 @@ use std::time::Instant;
 
 use rayon::prelude::*;
 
-use super::sensitivity::NoiseSource;
 use super::sink::{Done, Probed, Sink};
 use super::step::{self, Output, RigOutcome};
-use crate::analysis::compare::compare;
+use crate::analysis::conclusions;
 use crate::analysis::evidence::RigInput;
 use crate::analysis::rig;
+use crate::analysis::sensitivity::NoiseSource;
 use crate::ingest::LogFile;
 use crate::manifest::{Campaign, Role, RunPlan};
-use crate::model::SpecimenModel;
-use crate::model::{self, CnTerm, LinearSdof, RigParams};
+use crate::model::RigParams;
 use crate::report::figures::catalogue::{self, OverlayRun};
 use crate::report::{FigureFormats, PageFigure, WriteError};
-use crate::results::{
-    CampaignSummary, CcfResult, ComplexValue, RESULTS_SCHEMA_VERSION, Results, RunResult, Status,
-};
-use crate::tracking::compensator::CompensatorOutcome;
+use crate::results::{RESULTS_SCHEMA_VERSION, Results, RunResult, Status};
 use crate::validate::csi::Csi;
-use crate::validate::{self, ValidationMetrics};
 
 pub use crate::analysis::run_result::RunError;
 
@@ -159,12 +154,15 @@ pub(super) fn analyse_with(
     let runs = PerRun::of(second, &mut warnings);
     let (rig_result, rig_error) = match rig {
         Ok((_, r)) => (Some(r), None),
-        Err(e) => (None, needs_rig(campaign).then(|| e.to_string())),
+        Err(e) => (
+            None,
+            conclusions::needs_rig(campaign).then(|| e.to_string()),
+        ),
     };
     let results = Results {
         schema_version: RESULTS_SCHEMA_VERSION,
         servoid_version: env!("CARGO_PKG_VERSION").to_string(),
-        campaign: summary(campaign),
+        campaign: conclusions::summary(campaign),
         rig: rig_result,
         rig_error,
         runs: runs.results,
@@ -200,17 +198,9 @@ pub(super) fn analyse_with(
     })
 }
 
-/// Whether a missing rig is worth an error in results.json: the campaign
-/// validates, identifies or gives one.
-fn needs_rig(campaign: &Campaign) -> bool {
-    campaign.runs.iter().any(|r| r.role == Role::Validation)
-        || campaign.identifies_rig()
-        || campaign.given_rig.is_some()
-}
-
-/// What the campaign learns once every run is done: outliers, the canonical
-/// forms, the stiffness sensitivity, the comparisons with published numbers,
-/// and the campaign's own figures.
+/// What the campaign learns once every run is done
+/// (`analysis::campaign`), with the stiffness sensitivity and the
+/// campaign's own figures.
 fn campaign_level(
     campaign: &Campaign,
     mut results: Results,
@@ -219,66 +209,16 @@ fn campaign_level(
     overlay: &[OverlayRun],
     sink: &Sink<'_>,
 ) -> Result<(Results, Vec<PageFigure>), WriteError> {
-    flag_outliers(&mut results.runs);
+    conclusions::compare_runs(campaign, &mut results, rig.as_ref());
     if let Some(rig) = &rig {
-        results.ccf = campaign
-            .runs
-            .iter()
-            .filter_map(|r| ccf_result(rig, r))
-            .collect();
         results.sensitivity =
             super::sensitivity::sensitivity(campaign, rig, &results, noise, sink.cache)?;
     }
-    if let Some(note) = results
-        .sensitivity
-        .as_ref()
-        .and_then(|s| s.monte_carlo_note.as_ref())
-    {
-        results.warnings.push(Warning::new(
-            "sensitivity.monte_carlo: not run",
-            format!("sensitivity.monte_carlo: not run: {note}"),
-        ));
-    }
-    if let Some(w) = stated_cutoff_unused(campaign, &results) {
-        results.warnings.push(w);
-    }
-    results.comparisons = compare(campaign, &results);
+    conclusions::conclude(campaign, &mut results);
     let specs = catalogue::campaign_figures(overlay, results.sensitivity.as_ref());
     let (figures, figure_warnings) = sink.figures(&specs)?;
     results.warnings.extend(figure_warnings);
     Ok((results, figures))
-}
-
-/// A stated `compensator.cutoff_hz` no run's compensator could be designed
-/// with: each run's note says why, and the campaign says it once, naming
-/// the key.
-fn stated_cutoff_unused(campaign: &Campaign, results: &Results) -> Option<Warning> {
-    let fc = campaign.compensator.cutoff_hz?;
-    let outcomes: Vec<(&str, &CompensatorOutcome)> = results
-        .runs
-        .iter()
-        .filter_map(|r| Some((r.id.as_str(), r.tracking.as_ref()?.compensator.as_ref()?)))
-        .collect();
-    if outcomes.iter().any(|(_, c)| c.design.is_some()) {
-        return None;
-    }
-    let notes: Vec<(&str, &str)> = outcomes
-        .iter()
-        .filter_map(|(id, c)| Some((*id, c.note.as_deref()?)))
-        .collect();
-    let (_, why) = notes.first()?;
-    let headline = format!("compensator.cutoff_hz = {fc} Hz: no compensator could be designed");
-    Some(Warning::new(
-        headline,
-        format!(
-            "compensator.cutoff_hz = {fc} Hz: no compensator was designed ({why}, for {})",
-            notes
-                .iter()
-                .map(|(id, _)| format!("run {id}"))
-                .collect::<Vec<_>>()
-                .join(", ")
-        ),
-    ))
 }
 
 /// The runs' outcomes gathered in manifest order.
@@ -317,34 +257,6 @@ impl PerRun {
         }
         all
     }
-}
-
-fn summary(campaign: &Campaign) -> CampaignSummary {
-    CampaignSummary {
-        name: campaign.name.clone(),
-        description: campaign.description.clone(),
-        rig_name: campaign.rig_name.clone(),
-        rig_notes: campaign.rig_notes.clone(),
-        manifest: campaign
-            .file
-            .file_name()
-            .map(|f| f.to_string_lossy().into_owned())
-            .unwrap_or_default(),
-        manifest_sha256: campaign.manifest_sha256.clone(),
-        manifest_path: None,
-        run_table: campaign.run_table.clone(),
-    }
-}
-
-/// Validation runs far worse than the others are flagged (the specimen may
-/// differ from its log's behaviour).
-fn flag_outliers(runs: &mut [RunResult]) {
-    let mut validation: Vec<&mut ValidationMetrics> = runs
-        .iter_mut()
-        .filter(|r| r.role == Role::Validation)
-        .filter_map(|r| r.validation.as_mut())
-        .collect();
-    validate::flag_outliers(&mut validation);
 }
 
 /// What a run is after the first pass.
@@ -419,7 +331,7 @@ fn second_pass(
             // over decide the outcome too.
             let sweep = (
                 &campaign.compensator,
-                campaign.sensitivity.range_n_per_m,
+                campaign.sensitivity.range,
                 campaign.sensitivity.points,
             );
             let parts = keyed
@@ -488,45 +400,4 @@ fn run_once(
         },
     });
     Ok(done)
-}
-
-fn ccf_result(rig: &RigParams, plan: &RunPlan) -> Option<CcfResult> {
-    let SpecimenModel::LinearSdof {
-        mass_kg,
-        damping_ns_per_m,
-        stiffness_n_per_m,
-    } = plan.specimen
-    else {
-        return None;
-    };
-    let rig = rig.at_p_gain(plan.p_gain);
-    let sdof = LinearSdof {
-        mass_kg,
-        damping_ns_per_m,
-        stiffness_n_per_m,
-    };
-    let c = model::ccf_coefficients(&rig, &sdof, 0.0, 0.0);
-    // No poles where the eigenvalues cannot be computed (the run's model
-    // error says why); then the simplified form is not called stable.
-    let poles = |cn| -> Option<Vec<ComplexValue>> {
-        let e = model::ccf_linear_state_space(&rig, &sdof, cn).eigenvalues()?;
-        Some(e.into_iter().map(ComplexValue::from).collect())
-    };
-    let dropped = poles(CnTerm::Dropped);
-    let stable_without_cn = dropped
-        .as_ref()
-        .is_some_and(|p| p.iter().all(|p| p.re < 0.0));
-    let poles_without_cn: Vec<ComplexValue> = dropped.unwrap_or_default();
-    Some(CcfResult {
-        stable_without_cn,
-        run: plan.id.clone(),
-        p_gain: plan.p_gain,
-        C1: c.C1,
-        C2: c.C2,
-        C3: c.C3,
-        C4: c.C4,
-        C5: c.C5,
-        poles_with_cn: poles(CnTerm::Kept).unwrap_or_default(),
-        poles_without_cn,
-    })
 }

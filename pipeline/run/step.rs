@@ -1,34 +1,27 @@
-//! One run's work, pure: from its plan (and its log's bytes, when the cache
-//! read them on the way) to what the campaign keeps of it and what is to be
-//! written for it (figure specs, tables), nothing written here. The log is
-//! read (by `ingest`, through `log_stage`) and dropped inside each step; the
+//! One run's work: its analysis (`analysis::step`), then what is to be
+//! written for it (figure specs, tables) and what the campaign keeps of it,
+//! nothing written here. The log is read and dropped inside each step; the
 //! writing is `sink`'s, as each run's output arrives.
 
-use crate::warning::Warning;
 use std::sync::Arc;
 
-use super::sensitivity::NoiseSource;
 use crate::analysis::evidence::Evidence;
-use crate::analysis::log_stage::{LogStage, LogStageError, OwnTf, own_tf_with};
-use crate::analysis::rig::RigError;
-use crate::analysis::run_result::{
-    CompensatorPlan, Cov4, at_p_gain, compensate, failed, fitted, frf_used, linearity_result,
-    log_info, measured_tracking, models, new_result, predicted_tracking, record,
-};
+use crate::analysis::log_stage::{LogStage, LogStageError};
+use crate::analysis::run_result::{failed, new_result};
+use crate::analysis::sensitivity::NoiseSource;
+use crate::analysis::step::{Validated, Validation};
+use crate::analysis::{self};
 use crate::fit::Intersample;
-use crate::ingest::{IngestError, LogFile};
-use crate::lti::TransferFunction;
-use crate::manifest::{Campaign, Role, RunPlan};
-use crate::model::SpecimenModel;
-use crate::model::{RigParams, Seals};
+use crate::ingest::LogFile;
+use crate::manifest::{Campaign, RunPlan};
+use crate::model::RigParams;
 use crate::report::figures::catalogue::{self, ForceBins, OverlayRun, Prediction};
 use crate::report::tables::RunTables;
 use crate::report::{FigureSpec, Measured};
-use crate::results::{RunResult, RunTracking, SpringForceResult};
-use crate::sensitivity::{self, NoiseProfile};
-use crate::tracking::Reference;
-use crate::validate;
+use crate::results::RunResult;
 use crate::validate::csi::Csi;
+
+pub(super) use crate::analysis::step::RigOutcome;
 
 /// What a run's step is asked to build besides its result: figure specs
 /// (when the job draws figures) and tables (when it writes an output folder),
@@ -123,56 +116,33 @@ fn tables(run: &RunResult, measured: Option<&Measured<'_>>, wants: Wants) -> Opt
         .then(|| RunTables::of(run, measured, wants.intersample))
 }
 
-/// A run that does not need the rig (no-specimen, spring and fit runs):
-/// read, estimated, fitted and checked in the time domain, with what the
-/// rig needs of it (its model and the bins its fit was given). `file` is
-/// its log's bytes when the cache read them on the way.
+/// A run that does not need the rig (no-specimen, spring and fit runs),
+/// analysed (`analysis::step::without_rig`), with its figures and tables.
+/// `file` is its log's bytes when the cache read them on the way.
 pub(super) fn without_rig(
     campaign: &Campaign,
     plan: &RunPlan,
     file: Option<LogFile>,
     wants: Wants,
 ) -> Output {
-    let acq = match own_tf_with(campaign, plan, file) {
-        Ok(a) => a,
+    let done = match analysis::step::without_rig(campaign, plan, file) {
+        Ok(d) => d,
         Err(e) => return Output::unread(new_result(plan), Arc::new(e)),
     };
-    let (tf, cov) = (acq.tf.clone(), acq.cov);
-    let (result, stage, time) = fitted(&campaign.identification, plan, new_result(plan), acq);
-    let estimate = tf.map(|tf| Evidence {
-        tf,
-        cov,
-        data: stage.as_ref().and_then(|st| st.fit_data.clone()),
-        adequacy: result.fit.as_ref().and_then(|f| f.adequacy.clone()),
-        sample_rate_hz: stage.as_ref().map(|st| st.log.sample_rate_hz),
-        cause: stage.as_ref().and_then(|st| st.cause.clone()),
-        friction_signature: stage.as_ref().is_some_and(|st| st.friction_signature()),
-        spring_cubic_n_per_m3: stage
-            .as_ref()
-            .and_then(|st| st.spring)
-            .filter(|s| s.stiffens())
-            .map(|s| s.cubic_n_per_m3),
-        load_cell: stage
-            .as_ref()
-            .and_then(|st| st.spring)
-            .map(|s| (s.stiffness_n_per_m, s.amplitude_m)),
-        slow: stage.as_ref().and_then(|st| st.slow),
-    });
     let mut kept = Kept {
-        estimate,
-        ..Kept::of(result)
+        estimate: done.evidence,
+        noise: done.noise,
+        ..Kept::of(done.result)
     };
     let mut figures = Vec::new();
-    let measured = stage.as_deref().map(Measured::of);
-    if let (Some(st), Some(m)) = (&stage, &measured) {
+    let measured = done.stage.as_deref().map(Measured::of);
+    if let (Some(st), Some(m)) = (&done.stage, &measured) {
         kept.force = ForceBins::of(m);
-        if plan.role == Role::NoSpecimen {
-            kept.noise = noise_profile(plan, st);
-        }
         if wants.figures {
+            let time = done.time.as_ref();
             let (mut specs, overlay) =
-                catalogue::log_figures(&kept.result, m, time.as_ref(), wants.intersample, None);
-            if let Some(t) = &time {
+                catalogue::log_figures(&kept.result, m, time, wants.intersample, None);
+            if let Some(t) = time {
                 specs.extend(catalogue::subspace_figure(
                     &kept.result,
                     &st.log.command_m,
@@ -192,8 +162,8 @@ pub(super) fn without_rig(
     }
 }
 
-/// What a run done without the rig gets once the rig is known: a1b0 at its
-/// P gain, the force model (Eq. 45) and, when figures are wanted and its log
+/// What a run done without the rig gets once the rig is known
+/// (`analysis::step::with_rig`) and, when figures are wanted and its log
 /// had force, the force figure (Figs. 16-17).
 pub(super) fn with_rig(
     kept: &mut Kept,
@@ -201,24 +171,10 @@ pub(super) fn with_rig(
     rig_at_p: Option<&RigParams>,
     wants: Wants,
 ) -> Option<FigureSpec> {
-    let out = &mut kept.result;
-    out.a1b0 = rig_at_p.map(|r| r.a1b0_n_per_m_s2);
-    // The run's own fit stands without the force model: its absence is a
-    // warning, not the run's failure.
-    out.force_tf = match rig_at_p.map(|r| models(r, &plan.specimen)) {
-        Some(Ok((_, f))) => f,
-        Some(Err(e)) => {
-            out.warnings.push(Warning::new(
-                "no force model (Eq. 45)",
-                format!("no force model (Eq. 45): {e}"),
-            ));
-            None
-        }
-        None => None,
-    };
-    match (&kept.force, &out.force_tf) {
+    analysis::step::with_rig(&mut kept.result, plan, rig_at_p);
+    match (&kept.force, &kept.result.force_tf) {
         (Some(bins), Some(model)) if wants.figures => Some(catalogue::force_figure(
-            out,
+            &kept.result,
             bins,
             model,
             wants.intersample,
@@ -228,37 +184,9 @@ pub(super) fn with_rig(
     }
 }
 
-/// The rig as the validation runs read it: its parameters, the covariance
-/// of (beta1, a1b0, a2, a3) when identified and the seals' friction when
-/// the joint fit found it, or why there is none.
-pub(super) type RigOutcome = Result<(RigParams, Option<Cov4>, Option<Seals>), Arc<RigError>>;
-
-/// A validation run's log, read for its own run. `fitted` is the SHA-256 of
-/// the log as the joint fit read it, when it did: the rig was fitted to
-/// those bytes, and a log that has changed since is not what the rig says
-/// it validates.
-fn read_validation_log(
-    campaign: &Campaign,
-    plan: &RunPlan,
-    fitted: Option<&str>,
-    file: Option<LogFile>,
-) -> Result<OwnTf, LogStageError> {
-    let acq = own_tf_with(campaign, plan, file)?;
-    match (fitted, &acq.stage) {
-        (Some(before), Some(st)) if st.log.sha256 != before => {
-            Err(LogStageError::Ingest(IngestError::Changed {
-                path: st.log.path.clone(),
-                before: format!("SHA-256 {before} when the joint fit read it"),
-                after: format!("SHA-256 {} when its run was validated", st.log.sha256),
-            }))
-        }
-        _ => Ok(acq),
-    }
-}
-
-/// A validation run: the identified rig with its specimen, driven by its
-/// measured command (Sec. 4), or the model's prediction alone without a log.
-/// `fitted` is the SHA-256 of the log as the joint fit read it, when it did.
+/// A validation run (`analysis::step::validation`), with its figures and
+/// tables. `fitted` is the SHA-256 of the log as the joint fit read it,
+/// when it did.
 pub(super) fn validation(
     campaign: &Campaign,
     plan: &RunPlan,
@@ -267,130 +195,45 @@ pub(super) fn validation(
     file: Option<LogFile>,
     wants: Wants,
 ) -> Output {
-    let mut out = new_result(plan);
-    // The log's own failure comes first; a good log without a rig still
-    // records what it is.
-    let acq = match read_validation_log(campaign, plan, fitted, file) {
-        Ok(a) => a,
-        Err(e) => {
-            out.a1b0 = rig
-                .as_ref()
-                .ok()
-                .map(|(r, ..)| r.at_p_gain(plan.p_gain).a1b0_n_per_m_s2);
-            return Output::unread(out, Arc::new(e));
+    match analysis::step::validation(campaign, plan, rig, fitted, file) {
+        Validation::Unread(result, error) => Output {
+            kept: Kept::of(result),
+            figures: Vec::new(),
+            tables: None,
+            log_error: Some(error),
+            cacheable: false,
+        },
+        Validation::Unfinished(result, stage) => {
+            Output::unfinished(result, stage.as_deref(), wants)
         }
-    };
-    out.warnings = acq.warnings.clone();
-    out.log = log_info(plan, acq.stage.as_deref());
-    out.frf = acq.stage.as_deref().map(frf_used);
-    out.linearity = acq
-        .stage
-        .as_deref()
-        .and_then(|st| st.linearity.as_ref())
-        .map(linearity_result);
-    out.spring_force = acq.stage.as_deref().and_then(|st| {
-        let s = st.spring?;
-        let SpecimenModel::Spring { stiffness_n_per_m } = plan.specimen else {
-            return None;
-        };
-        Some(SpringForceResult {
-            stiffness_n_per_m: s.stiffness_n_per_m,
-            stated_n_per_m: stiffness_n_per_m,
-            cubic_n_per_m3: s.cubic_n_per_m3,
-            cubic_t: s.cubic_t,
-            amplitude_m: s.amplitude_m,
-            stiffening: s.stiffening,
-            linear: !s.stiffens(),
-        })
-    });
-    let stage = acq.stage.as_deref();
-    let (rig_at_p, rig_cov, seals) = match rig {
-        Ok((r, cov, seals)) => {
-            let (r, cov) = at_p_gain(r, cov.as_ref(), plan.p_gain);
-            (r, cov, *seals)
-        }
-        Err(e) => return Output::unfinished(failed(out, e.clone().into()), stage, wants),
-    };
-    out.a1b0 = Some(rig_at_p.a1b0_n_per_m_s2);
-    match models(&rig_at_p, &plan.specimen) {
-        Ok((tf, force_tf)) => (out.tf, out.force_tf) = (tf, force_tf),
-        Err(e) => return Output::unfinished(failed(out, e), stage, wants),
+        Validation::Predicted(result) => Output {
+            tables: tables(&result, None, wants),
+            ..Output::unfinished(result, None, wants)
+        },
+        Validation::Validated(v) => validated(*v, wants),
     }
-    let Some(st) = stage else {
-        return Output {
-            tables: tables(&out, None, wants),
-            ..Output::unfinished(out, None, wants)
-        };
-    };
-    // The compensator's stiffness sweep covers the sensitivity analysis's
-    // range (a2 does not depend on the P gain).
-    let range = super::sensitivity::stiffness_range(campaign.sensitivity.range_n_per_m, &rig_at_p);
-    let design = CompensatorPlan {
-        settings: &campaign.compensator,
-        range,
-        stiffnesses: sensitivity::log_grid(range, campaign.sensitivity.points),
-    };
-    validated(
-        plan,
-        out,
-        st,
-        (&rig_at_p, seals.as_ref()),
-        rig_cov,
-        &design,
-        wants,
-    )
 }
 
-/// A validation run with its log and model: the time-domain validation
-/// (Eqs. 47-48), its tracking, the control-structure interaction, its
-/// figures and tables.
-fn validated(
-    plan: &RunPlan,
-    mut out: RunResult,
-    st: &LogStage,
-    (rig_at_p, seals): (&RigParams, Option<&Seals>),
-    rig_cov: Option<Cov4>,
-    design: &CompensatorPlan<'_>,
-    wants: Wants,
-) -> Output {
-    let linear = plan.specimen.linear();
-    let time = match validate::validation_run(rig_at_p, &plan.specimen, seals, &record(&st.log)) {
-        Ok(t) => {
-            out.validation = Some(t.metrics.clone());
-            Some(t)
-        }
-        Err(e) => {
-            out = failed(out, e.into());
-            None
-        }
-    };
-    let plant = out
-        .tf
-        .as_ref()
-        .and_then(|tf| TransferFunction::with_delay(&tf.num, &tf.den, tf.delay_s).ok());
-    out.tracking = Some(run_tracking(
-        plan,
-        st,
-        time.as_ref(),
-        plant.as_ref(),
-        (rig_at_p, seals),
-        design,
-    ));
-    let measured = Measured::of(st);
-    let bins = ForceBins::of(&measured);
-    let csi = linear.and_then(|lin| {
-        validate::csi::csi(&plan.id, rig_at_p, &lin, bins.as_ref().map(ForceBins::bins))
-    });
+/// A validated run's figures and tables.
+fn validated(v: Validated, wants: Wants) -> Output {
+    let Validated {
+        result: out,
+        stage: st,
+        time,
+        plant,
+        csi,
+        rig_at_p,
+        rig_cov,
+        specimen,
+    } = v;
+    let measured = Measured::of(&st);
     let figures = if wants.figures {
         // The prediction's band, from the rig's covariance.
-        let prediction = match (rig_cov, linear) {
-            (Some(cov), Some(specimen)) => Some(Prediction {
-                rig: *rig_at_p,
-                cov,
-                specimen,
-            }),
-            _ => None,
-        };
+        let prediction = rig_cov.zip(specimen).map(|(cov, specimen)| Prediction {
+            rig: rig_at_p,
+            cov,
+            specimen,
+        });
         let (mut specs, _) = catalogue::log_figures(
             &out,
             &measured,
@@ -398,8 +241,9 @@ fn validated(
             wants.intersample,
             prediction.as_ref(),
         );
-        if let (Some(bins), Some(model)) = (&bins, &out.force_tf) {
-            let force = catalogue::force_figure(&out, bins, model, wants.intersample, csi.as_ref());
+        if let (Some(bins), Some(model)) = (ForceBins::of(&measured), &out.force_tf) {
+            let force =
+                catalogue::force_figure(&out, &bins, model, wants.intersample, csi.as_ref());
             specs.insert(1, force);
         }
         if let Some(g) = &plant {
@@ -427,68 +271,6 @@ fn validated(
         log_error: None,
         cacheable: true,
     }
-}
-
-/// A validation run's tracking: the log's own, which stands whether or not
-/// the model could be simulated (`time`), the model's prediction for the
-/// same command, and the compensator designed on the identified `plant`,
-/// all measured against one transform of the command.
-fn run_tracking(
-    plan: &RunPlan,
-    st: &LogStage,
-    time: Option<&validate::TimeStage>,
-    plant: Option<&TransferFunction>,
-    (rig_at_p, seals): (&RigParams, Option<&Seals>),
-    design: &CompensatorPlan<'_>,
-) -> RunTracking {
-    let reference = Reference::new(&st.log.command_m);
-    let measured = measured_tracking(&reference, st, time.map(|t| t.windows.as_slice()));
-    let predicted = time.map(|t| predicted_tracking(&reference, st, t, plant));
-    let compensator = match (plan.specimen.linear(), time, plant) {
-        (Some(lin), Some(t), Some(g)) => Some(compensate(
-            plan,
-            (st, &reference),
-            t,
-            (rig_at_p, seals),
-            &lin,
-            g,
-            design,
-        )),
-        _ => None,
-    };
-    RunTracking {
-        model_gap_s: measured
-            .delay_xcorr_s
-            .zip(predicted.as_ref().and_then(|p| p.delay_xcorr_s))
-            .map(|(m, p)| m - p),
-        measured,
-        predicted,
-        compensator,
-    }
-}
-
-/// What run `plan`'s log says of its FRF noise: the bins its fit used and
-/// their variance, the white noise level that implies, the displacement's
-/// quantisation step and the log's hash (for the Monte Carlo, which
-/// replays its command).
-fn noise_profile(plan: &RunPlan, st: &LogStage) -> Option<NoiseSource> {
-    let (fit, data) = (st.fit.as_ref()?, st.fit_data.as_ref()?);
-    let fs = st.log.sample_rate_hz;
-    (!data.freq_hz.is_empty())
-        .then(|| NoiseProfile {
-            run: plan.id.clone(),
-            white_noise: crate::sensitivity::montecarlo::white_noise(&data.variance, &data.suu, fs),
-            freq_hz: data.freq_hz.clone(),
-            variance: data.variance.clone(),
-            sample_rate_hz: fs,
-            delay_s: fit.tf.delay_s,
-            displacement_step_m: crate::ingest::quantum_step(&st.log.displacement_m),
-            log_sha256: st.log.sha256.clone(),
-        })
-        .map(|profile| NoiseSource {
-            profile,
-            frf: st.choice.plan.clone(),
-        })
 }
 
 #[cfg(test)]
