@@ -351,7 +351,7 @@ fn cmd_merge(
 
 /// `servoid check`: the manifest's problems, or ok with its warnings.
 fn cmd_check(manifest: &Path) -> u8 {
-    match run::check(manifest) {
+    match crate::manifest::check(manifest) {
         Ok(checked) => {
             say(&format!("{}: ok ({checked})", manifest.display()));
             for (run, log) in &checked.missing_logs {
@@ -450,7 +450,7 @@ fn cmd_man() -> u8 {
 
 /// `servoid schema`: the JSON Schemas, written into `out_dir`.
 fn cmd_schema(out_dir: &Path) -> u8 {
-    match run::write_schemas(out_dir) {
+    match crate::report::write_schemas(out_dir) {
         Ok(paths) => {
             for p in paths {
                 say(&format!("wrote {}", p.display()));

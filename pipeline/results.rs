@@ -693,3 +693,112 @@ pub struct TruthRun {
     pub log_sha256: String,
     pub n_samples: usize,
 }
+
+impl Results {
+    /// What differs between these results and `other` (recomputed from the
+    /// same manifest): each quantity by its path into results.json, its
+    /// logs' hashes apart, by run.
+    pub fn differences(&self, other: &Results) -> (Vec<Difference>, Vec<LogDifference>) {
+        let mut differences = Vec::new();
+        let a = serde_json::to_value(self).expect("results serialise");
+        let b = serde_json::to_value(other).expect("results serialise");
+        diff("", &a, &b, &mut differences);
+        differences.retain(|d| !is_log_hash(&d.key));
+        (differences, log_differences(self, other))
+    }
+}
+
+/// One quantity that differs: where in results.json, and both values.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Difference {
+    /// A path into results.json, e.g. `runs[3].validation.nrmse_pct`.
+    pub key: String,
+    pub recorded: String,
+    pub recomputed: String,
+}
+
+/// A run's log whose bytes are not those results.json records.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LogDifference {
+    pub run: String,
+    /// The log as the manifest names it.
+    pub file: String,
+    pub recorded: String,
+    /// None when the log cannot be read now.
+    pub now: Option<String>,
+}
+
+/// Whether `key` is a run's log hash (`runs[3].log.sha256`).
+fn is_log_hash(key: &str) -> bool {
+    key.starts_with("runs[") && key.ends_with("].log.sha256")
+}
+
+/// Each run whose log hash differs, with the run and the file named.
+fn log_differences(recorded: &Results, recomputed: &Results) -> Vec<LogDifference> {
+    recorded
+        .runs
+        .iter()
+        .filter_map(|r| {
+            let was = r.log.as_ref()?;
+            let now = recomputed.runs.iter().find(|n| n.id == r.id);
+            let now_sha = now.and_then(|n| n.log.as_ref()).map(|l| l.sha256.clone());
+            (now_sha.as_deref() != Some(was.sha256.as_str())).then(|| LogDifference {
+                run: r.id.clone(),
+                file: was.file.clone(),
+                recorded: was.sha256.clone(),
+                now: now_sha,
+            })
+        })
+        .collect()
+}
+
+/// Every leaf where `a` and `b` differ, with its path.
+fn diff(key: &str, a: &serde_json::Value, b: &serde_json::Value, out: &mut Vec<Difference>) {
+    match (a, b) {
+        (serde_json::Value::Object(x), serde_json::Value::Object(y)) => {
+            let keys: std::collections::BTreeSet<&String> = x.keys().chain(y.keys()).collect();
+            for k in keys {
+                let sub = if key.is_empty() {
+                    k.clone()
+                } else {
+                    format!("{key}.{k}")
+                };
+                let none = serde_json::Value::Null;
+                diff(
+                    &sub,
+                    x.get(k).unwrap_or(&none),
+                    y.get(k).unwrap_or(&none),
+                    out,
+                );
+            }
+        }
+        (serde_json::Value::Array(x), serde_json::Value::Array(y)) if x.len() == y.len() => {
+            for (i, (p, q)) in x.iter().zip(y).enumerate() {
+                diff(&format!("{key}[{i}]"), p, q, out);
+            }
+        }
+        _ if a != b => out.push(Difference {
+            key: key.to_string(),
+            recorded: a.to_string(),
+            recomputed: b.to_string(),
+        }),
+        _ => {}
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn differences_are_named_by_their_path() {
+        let a = serde_json::json!({"rig": {"a2": 1.0, "a3": [1, 2]}, "runs": [{"id": "x"}]});
+        let b = serde_json::json!({"rig": {"a2": 1.5, "a3": [1, 3]}, "runs": [{"id": "x"}, {"id": "y"}]});
+        let mut out = Vec::new();
+        diff("", &a, &b, &mut out);
+        let keys: Vec<&str> = out.iter().map(|d| d.key.as_str()).collect();
+        assert_eq!(keys, ["rig.a2", "rig.a3[1]", "runs"]);
+        assert_eq!(out[0].recorded, "1.0");
+        assert_eq!(out[0].recomputed, "1.5");
+    }
+}

@@ -137,6 +137,29 @@ fn init_proposes_a_manifest_that_reproduces_the_bundled_rig_once_filled() {
     );
 }
 
+/// The campaign is named after the folder its manifest goes into: the
+/// current one, or the one `--out` names, whether or not it exists yet
+/// (the name a lab reads in `reports/<name>/`), each character other than
+/// a letter, digit, `.`, `_` or `-` written `-`.
+#[test]
+fn init_names_the_campaign_after_the_manifests_folder() {
+    let dir = scratch();
+    let (out, _) = simulated(dir.path(), false);
+    let logs = out.join("logs");
+    let logs = logs.to_str().unwrap();
+    for (manifest, name) in [
+        ("frame-a/campaign.toml", "frame-a"),
+        ("Frame B (2026)/campaign.toml", "Frame-B--2026-"),
+    ] {
+        let folder = dir.path().join(manifest).parent().unwrap().to_path_buf();
+        assert!(!folder.exists());
+        let o = servoid(dir.path(), &["init", logs, "--out", manifest]);
+        assert_eq!(o.code, 0, "{manifest}: {}", o.stderr);
+        let t = toml_of(&dir.path().join(manifest));
+        assert_eq!(t["campaign"]["name"].as_str(), Some(name), "{manifest}");
+    }
+}
+
 #[test]
 fn init_on_unnamed_logs_finds_the_channels_and_leaves_the_roles_to_fill() {
     let dir = scratch();

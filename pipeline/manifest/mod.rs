@@ -62,3 +62,52 @@ pub fn load_any(path: &Path) -> Result<Loaded, ManifestError> {
         campaign::load_str(&text, path).map(|c| Loaded::Campaign(Box::new(c)))
     }
 }
+
+/// A manifest checked without running it.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Checked {
+    /// "campaign" or "simulation".
+    pub kind: &'static str,
+    pub name: String,
+    pub runs: usize,
+    /// Runs whose log is not there (yet): each will fail alone when run.
+    pub missing_logs: Vec<(String, std::path::PathBuf)>,
+    /// The manifest's warnings (a run table's logs no row uses, ...), as
+    /// results.json would carry them.
+    pub warnings: Vec<crate::warning::Warning>,
+}
+
+impl std::fmt::Display for Checked {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{} `{}`, {} runs", self.kind, self.name, self.runs)
+    }
+}
+
+/// Check a manifest of either kind, reporting every problem at once.
+pub fn check(path: &Path) -> Result<Checked, ManifestError> {
+    Ok(match load_any(path)? {
+        Loaded::Campaign(c) => Checked {
+            kind: "campaign",
+            name: c.name.clone(),
+            runs: c.runs.len(),
+            missing_logs: c
+                .runs
+                .iter()
+                .filter_map(|r| match &r.source {
+                    RunSource::Log(plan) if !plan.path.exists() => {
+                        Some((r.id.clone(), plan.path.clone()))
+                    }
+                    _ => None,
+                })
+                .collect(),
+            warnings: c.warnings.clone(),
+        },
+        Loaded::Simulation(p) => Checked {
+            kind: "simulation",
+            name: p.manifest.simulation.name.clone(),
+            runs: p.runs.len(),
+            missing_logs: Vec::new(),
+            warnings: Vec::new(),
+        },
+    })
+}

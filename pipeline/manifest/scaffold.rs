@@ -16,8 +16,8 @@ use std::path::{Path, PathBuf};
 
 pub use crate::ingest::naming::{Proposed, ProposedChannels, propose};
 use crate::ingest::{
-    ChannelPlan, Channels, Column, CsvOptions, DEFAULT_MAX_LOG_MIB, Inspected, LogFormat, LogPlan,
-    Repair, Table, TimePlan,
+    ChannelPlan, Channels, Column, CsvOptions, DEFAULT_MAX_LOG_MIB, Inspected, LogColumn,
+    LogFormat, LogPlan, Repair, Table, TimePlan,
 };
 use crate::units::{TimeUnit, Unit};
 
@@ -668,6 +668,144 @@ pub fn log_plan(
         },
         max_bytes: DEFAULT_MAX_LOG_MIB << 20,
     })
+}
+
+/// The logs as the manifest in `base` names them, each with its run id
+/// and, where its columns are not the campaign's, its own channels; and
+/// the campaign's channels (those most logs are proposed).
+pub fn proposed_logs(
+    files: &[(PathBuf, Inspected)],
+    base: &Path,
+    warnings: &mut Vec<String>,
+) -> (Vec<FoundLog>, ProposedChannels) {
+    let ids = unique_ids(files, warnings);
+    let proposed: Vec<ProposedChannels> = files.iter().map(|(_, i)| propose(&i.columns)).collect();
+    let channels = most_common(&proposed).clone();
+    let found = files
+        .iter()
+        .zip(ids)
+        .zip(proposed)
+        .map(|(((path, inspected), id), own)| FoundLog {
+            path: relative(path, base),
+            stem: stem(path),
+            id,
+            channels: (!reads_with(&channels, &inspected.columns)).then_some(own),
+            inspected: inspected.clone(),
+        })
+        .collect();
+    (found, channels)
+}
+
+/// Each log's run id: its stem as an id ([`manifest_name`]);
+/// where several logs would share one (`bare.csv` beside `bare.mat`, the
+/// same name in two folders), each gets its extension and, if that is not
+/// enough, its folder, with a warning: they may be one run twice.
+fn unique_ids(files: &[(PathBuf, Inspected)], warnings: &mut Vec<String>) -> Vec<String> {
+    let id_of = |p: &Path| manifest_name(&stem(p), "run");
+    let mut ids: Vec<String> = files.iter().map(|(p, _)| id_of(p)).collect();
+    let shared = |ids: &[String], i: usize| ids.iter().filter(|x| **x == ids[i]).count() > 1;
+    let clashes: Vec<usize> = (0..ids.len()).filter(|&i| shared(&ids, i)).collect();
+    if clashes.is_empty() {
+        return ids;
+    }
+    let part = |p: &Path, what: fn(&Path) -> Option<&std::ffi::OsStr>| {
+        what(p)
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_default()
+    };
+    for &i in &clashes {
+        let p = &files[i].0;
+        ids[i] = manifest_name(&format!("{}_{}", stem(p), part(p, Path::extension)), "run");
+    }
+    for &i in &clashes {
+        if shared(&ids, i) {
+            let p = &files[i].0;
+            let folder = folder_of(p);
+            ids[i] = manifest_name(
+                &format!("{}_{}", part(&folder, Path::file_name), ids[i]),
+                "run",
+            );
+        }
+    }
+    let mut seen = BTreeSet::new();
+    for id in &mut ids {
+        if !seen.insert(id.clone()) {
+            let k = (2..)
+                .find(|k| !seen.contains(&format!("{id}_{k}")))
+                .expect("a free number");
+            *id = format!("{id}_{k}");
+            seen.insert(id.clone());
+        }
+    }
+    let named: Vec<String> = clashes
+        .iter()
+        .map(|&i| format!("{} as `{}`", files[i].0.display(), ids[i]))
+        .collect();
+    warnings.push(format!(
+        "logs whose names give the same run id are told apart by their extension or folder: {}; check they are different runs (one may be the other exported again)",
+        named.join(", ")
+    ));
+    ids
+}
+
+/// The channels most logs are proposed (the first of the most common).
+fn most_common(proposed: &[ProposedChannels]) -> &ProposedChannels {
+    proposed
+        .iter()
+        .max_by_key(|p| {
+            (
+                proposed.iter().filter(|q| q == p).count(),
+                std::cmp::Reverse(proposed.iter().position(|q| q == *p)),
+            )
+        })
+        .expect("at least one log")
+}
+
+/// Whether every column `channels` names is among `columns`.
+fn reads_with(channels: &ProposedChannels, columns: &[LogColumn]) -> bool {
+    [
+        &channels.time,
+        &channels.command,
+        &channels.displacement,
+        &channels.force,
+    ]
+    .iter()
+    .filter_map(|p| p.column.as_deref())
+    .all(|c| columns.iter().any(|x| x.name == c))
+}
+
+fn stem(path: &Path) -> String {
+    path.file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_default()
+}
+
+/// `[run_table] logs` for `logs`: their folder, as the manifest in `base`
+/// names it, when they share one; else a placeholder.
+pub fn logs_spec(logs: &[&Path], base: &Path) -> String {
+    let folders: BTreeSet<PathBuf> = logs
+        .iter()
+        .map(|p| std::path::absolute(folder_of(p)).unwrap_or_else(|_| folder_of(p)))
+        .collect();
+    match folders.into_iter().collect::<Vec<_>>().as_slice() {
+        [one] => match relative(one, base) {
+            r if r.is_empty() => ".".into(),
+            r => r,
+        },
+        _ => format!(
+            "{} a glob or folder matching the logs (they are in several folders)",
+            PLACEHOLDER
+        ),
+    }
+}
+
+/// `path` as the manifest in `base` names it.
+pub fn relative(path: &Path, base: &Path) -> String {
+    let abs = |p: &Path| std::path::absolute(p).unwrap_or_else(|_| p.to_path_buf());
+    pathdiff::diff_paths(abs(path), abs(base))
+        .unwrap_or_else(|| path.to_path_buf())
+        .to_string_lossy()
+        .replace('\\', "/")
 }
 
 #[cfg(test)]

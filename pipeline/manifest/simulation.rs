@@ -101,6 +101,19 @@ pub enum OutputFormat {
     Tdms,
 }
 
+impl OutputFormat {
+    /// The extension of a log in this format.
+    pub fn extension(self) -> &'static str {
+        match self {
+            OutputFormat::Csv => "csv",
+            OutputFormat::Parquet => "parquet",
+            OutputFormat::Mat | OutputFormat::MatV73 => "mat",
+            OutputFormat::Hdf5 => "h5",
+            OutputFormat::Tdms => "tdms",
+        }
+    }
+}
+
 /// Integrator for nonlinear plants.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[schemars(deny_unknown_fields)]

@@ -43,6 +43,17 @@ pub enum ColumnWriteError {
     },
 }
 
+/// A table that could not be written as the output folder's error: a
+/// write failure as it is, a malformed table as the table's.
+impl From<ColumnWriteError> for WriteError {
+    fn from(e: ColumnWriteError) -> Self {
+        match e {
+            ColumnWriteError::Write(w) => w,
+            other => WriteError::Table(Box::new(other)),
+        }
+    }
+}
+
 impl ColumnWriteError {
     /// This error with every path it names passed through `f`.
     pub fn map_paths(self, f: &dyn Fn(&Path) -> PathBuf) -> Self {
@@ -362,6 +373,44 @@ fn check(path: &Path, columns: &[(&str, &[f64])]) -> Result<usize, ColumnWriteEr
         }
     }
     Ok(first_values.len())
+}
+
+/// A simulated run's log in `format` (`path` only names it in errors).
+pub fn log_bytes(
+    format: crate::manifest::simulation::OutputFormat,
+    path: &Path,
+    s: &crate::analysis::simulated::RunSignals,
+    dt_s: f64,
+) -> Result<Vec<u8>, ColumnWriteError> {
+    let cols: Vec<(&str, &[f64])> = s
+        .columns
+        .iter()
+        .map(|(n, v)| (n.as_str(), v.as_slice()))
+        .collect();
+    let with_units: Vec<UnitColumn<'_>> = s
+        .columns
+        .iter()
+        .zip(&s.units)
+        .map(|((n, v), u)| UnitColumn {
+            name: n,
+            unit: u,
+            values: v,
+        })
+        .collect();
+    use crate::manifest::simulation::OutputFormat;
+    match format {
+        OutputFormat::Csv => csv_bytes(path, &cols),
+        OutputFormat::Parquet => parquet_bytes(path, &cols),
+        OutputFormat::Mat => mat_bytes(path, &with_units),
+        OutputFormat::MatV73 => mat_v73_bytes(path, &with_units),
+        OutputFormat::Hdf5 => hdf5_bytes(path, &with_units),
+        OutputFormat::Tdms => tdms_bytes(
+            path,
+            &with_units,
+            crate::analysis::simulated::TDMS_GROUP,
+            dt_s,
+        ),
+    }
 }
 
 #[cfg(test)]

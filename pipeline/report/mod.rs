@@ -452,3 +452,93 @@ pub fn write_pages(
     write_atomic(&path, pages.campaign(campaign_figures)?.as_bytes())?;
     Ok(path)
 }
+
+/// run.jsonl: when the campaign ran and how long each run's log took. Wall
+/// clocks and durations live here, never in results.json, whose bytes
+/// depend on the inputs alone.
+pub struct RunLog<'a> {
+    pub started: std::time::SystemTime,
+    pub seconds: f64,
+    pub jobs: usize,
+    pub runs: &'a [crate::results::RunResult],
+    pub run_seconds: &'a [f64],
+    pub cached: &'a [bool],
+}
+
+impl RunLog<'_> {
+    pub fn jsonl(&self) -> Vec<u8> {
+        let mut out = Vec::new();
+        let mut line = |v: serde_json::Value| {
+            out.extend_from_slice(v.to_string().as_bytes());
+            out.push(b'\n');
+        };
+        let n = self.runs.len();
+        line(serde_json::json!({
+            "event": "campaign",
+            "started": humantime::format_rfc3339_millis(self.started).to_string(),
+            "seconds": self.seconds,
+            "runs": n,
+            "logs_per_s": n as f64 / self.seconds.max(1e-9),
+            "jobs": self.jobs,
+            "servoid_version": env!("CARGO_PKG_VERSION"),
+        }));
+        for ((run, seconds), cached) in self.runs.iter().zip(self.run_seconds).zip(self.cached) {
+            line(serde_json::json!({
+                "event": "run",
+                "run": run.id,
+                "status": run.status,
+                "cached": cached,
+                "seconds": seconds,
+            }));
+        }
+        out
+    }
+}
+
+/// The files this job's set holds in servoid's own folders (figures, run
+/// pages, tables), relative to the output folder.
+pub fn set_files(
+    results: &crate::results::Results,
+    run_figures: &[Vec<html::PageFigure>],
+    run_tables: &[Vec<String>],
+    campaign_figures: &[html::PageFigure],
+) -> std::collections::BTreeSet<String> {
+    let figures = run_figures
+        .iter()
+        .flatten()
+        .chain(campaign_figures)
+        .flat_map(|f| [&f.png_file, &f.svg_file])
+        .flatten()
+        .cloned();
+    let pages = results.runs.iter().map(|r| html::run_page(&r.id));
+    let tables = run_tables
+        .iter()
+        .flatten()
+        .cloned()
+        .chain([tables::TRACKING_TABLE.to_string()]);
+    figures.chain(pages).chain(tables).collect()
+}
+
+/// Write the JSON Schemas of both manifests and of results.json into `dir`.
+pub fn write_schemas(dir: &Path) -> Result<Vec<PathBuf>, WriteError> {
+    schemas()
+        .into_iter()
+        .map(|(name, value)| {
+            let path = dir.join(name);
+            write_atomic(&path, &json_bytes(&value))?;
+            Ok(path)
+        })
+        .collect()
+}
+
+/// The committed schema files under `schemas/`, with their contents.
+pub fn schemas() -> Vec<(&'static str, serde_json::Value)> {
+    vec![
+        ("manifest.schema.json", crate::manifest::manifest_schema()),
+        ("results.schema.json", crate::results::results_schema()),
+        (
+            "simulation.schema.json",
+            crate::manifest::simulation_schema(),
+        ),
+    ]
+}

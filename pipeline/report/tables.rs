@@ -56,10 +56,7 @@ impl RunTables {
     pub fn write(&self, out_dir: &Path) -> Result<Vec<String>, WriteError> {
         let [frf_name, model_name] = names(&self.id);
         let mut written = Vec::new();
-        let unwrap = |e: ColumnWriteError| match e {
-            ColumnWriteError::Write(w) => w,
-            other => WriteError::Table(Box::new(other)),
-        };
+        let unwrap = WriteError::from;
         if let Some(t) = &self.frf {
             write_frf(&out_dir.join(&frf_name), t).map_err(unwrap)?;
             written.push(frf_name);

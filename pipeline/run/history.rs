@@ -8,7 +8,7 @@ use crate::analysis::history::{self, Extra};
 use crate::drift::Entry;
 use crate::ingest::{self, TableFormat};
 use crate::manifest::Campaign;
-use crate::report::{self, WriteError, columns::ColumnWriteError};
+use crate::report::{self, WriteError};
 use crate::results::Results;
 
 /// A campaign's place in its rig's history.
@@ -194,7 +194,7 @@ fn write_table(
         &columns,
     )
     .and_then(|()| report::history::append_audit(&audit_path(path), audit))
-    .map_err(table_error)
+    .map_err(WriteError::from)
 }
 
 /// The corrections the audit file at `path` records: each replaced entry
@@ -214,13 +214,6 @@ fn corrections(path: &Path) -> Vec<(String, Entry)> {
             Some((by, entry))
         })
         .collect()
-}
-
-fn table_error(e: ColumnWriteError) -> WriteError {
-    match e {
-        ColumnWriteError::Write(w) => w,
-        other => WriteError::Table(Box::new(other)),
-    }
 }
 
 /// The audit file beside the history at `path`.

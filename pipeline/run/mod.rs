@@ -20,14 +20,15 @@ use crate::warning::Warning;
 use std::path::{Path, PathBuf};
 
 pub use crate::analysis::{FailedRun, RigError};
+pub use crate::results::{Difference, LogDifference};
 pub use analyse::{Event, Observer, RunError, Unobserved, analyse};
 pub use shard::{MergeError, Shard, ShardInfo};
-pub use verify::{Difference, FileDifference, LogDifference, Verification, VerifyError};
+pub use verify::{FileDifference, Verification, VerifyError};
 
 use crate::manifest::{self, Campaign, Loaded, ManifestError};
 use crate::report::{self, FigureFiles, OutputFolder, WriteError};
 pub use crate::report::{FigureFormats, RECORD};
-use crate::results::{self, Results, Status};
+use crate::results::{Results, Status};
 use cache::Cache;
 use simulate::{SimulateError, Simulated};
 use sink::Sink;
@@ -169,55 +170,6 @@ pub struct SimulationOutcome {
     /// The campaign run on the logs (`--run`); a campaign that fails to
     /// write fails the whole job, which then replaces nothing.
     pub campaign: Option<CampaignOutcome>,
-}
-
-/// A manifest checked without running it.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct Checked {
-    /// "campaign" or "simulation".
-    pub kind: &'static str,
-    pub name: String,
-    pub runs: usize,
-    /// Runs whose log is not there (yet): each will fail alone when run.
-    pub missing_logs: Vec<(String, PathBuf)>,
-    /// The manifest's warnings (a run table's logs no row uses, ...), as
-    /// results.json would carry them.
-    pub warnings: Vec<Warning>,
-}
-
-impl std::fmt::Display for Checked {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(f, "{} `{}`, {} runs", self.kind, self.name, self.runs)
-    }
-}
-
-/// Check a manifest of either kind, reporting every problem at once.
-pub fn check(path: &Path) -> Result<Checked, ManifestError> {
-    Ok(match manifest::load_any(path)? {
-        Loaded::Campaign(c) => Checked {
-            kind: "campaign",
-            name: c.name.clone(),
-            runs: c.runs.len(),
-            missing_logs: c
-                .runs
-                .iter()
-                .filter_map(|r| match &r.source {
-                    manifest::RunSource::Log(plan) if !plan.path.exists() => {
-                        Some((r.id.clone(), plan.path.clone()))
-                    }
-                    _ => None,
-                })
-                .collect(),
-            warnings: c.warnings.clone(),
-        },
-        Loaded::Simulation(p) => Checked {
-            kind: "simulation",
-            name: p.manifest.simulation.name.clone(),
-            runs: p.runs.len(),
-            missing_logs: Vec::new(),
-            warnings: Vec::new(),
-        },
-    })
 }
 
 /// Run a campaign manifest: analyse, draw the figures, write results.json
@@ -499,27 +451,6 @@ pub fn verify_results(
     pool(jobs)?.install(|| verify::verify(results, manifest))
 }
 
-/// Write the JSON Schemas of both manifests and of results.json into `dir`.
-pub fn write_schemas(dir: &Path) -> Result<Vec<PathBuf>, WriteError> {
-    schemas()
-        .into_iter()
-        .map(|(name, value)| {
-            let path = dir.join(name);
-            report::write_atomic(&path, &report::json_bytes(&value))?;
-            Ok(path)
-        })
-        .collect()
-}
-
-/// The committed schema files under `schemas/`, with their contents.
-pub fn schemas() -> Vec<(&'static str, serde_json::Value)> {
-    vec![
-        ("manifest.schema.json", manifest::manifest_schema()),
-        ("results.schema.json", results::results_schema()),
-        ("simulation.schema.json", manifest::simulation_schema()),
-    ]
-}
-
 fn pool(jobs: Option<usize>) -> Result<rayon::ThreadPool, JobError> {
     Ok(rayon::ThreadPoolBuilder::new()
         .num_threads(jobs.unwrap_or_else(default_jobs))
@@ -589,7 +520,7 @@ fn write_campaign(
     }
     let written = write_set(campaign, set, settings, &analysed, history)?;
     let seconds = clock.elapsed().as_secs_f64();
-    let log = RunLog {
+    let log = report::RunLog {
         started,
         seconds,
         jobs: rayon::current_num_threads(),
@@ -644,10 +575,7 @@ fn write_set(
         &report::models::models_mat(results).map_err(WriteError::from)?,
     )?;
     report::tables::write_tracking(&out_dir.join(report::tables::TRACKING_TABLE), &results.runs)
-        .map_err(|e| match e {
-            report::columns::ColumnWriteError::Write(w) => w,
-            other => WriteError::Table(Box::new(other)),
-        })?;
+        .map_err(WriteError::from)?;
     if let Some(h) = history {
         h.write(&json)?;
     }
@@ -658,7 +586,7 @@ fn write_set(
         settings.figures,
         out_dir,
     )?;
-    let kept = set_files(
+    let kept = report::set_files(
         results,
         &analysed.run_figures,
         &analysed.run_tables,
@@ -677,30 +605,6 @@ fn write_set(
         page,
         recorded,
     })
-}
-
-/// The files this job's set holds in servoid's own folders (figures, run
-/// pages, tables), relative to the output folder.
-fn set_files(
-    results: &Results,
-    run_figures: &[Vec<report::html::PageFigure>],
-    run_tables: &[Vec<String>],
-    campaign_figures: &[report::html::PageFigure],
-) -> std::collections::BTreeSet<String> {
-    let figures = run_figures
-        .iter()
-        .flatten()
-        .chain(campaign_figures)
-        .flat_map(|f| [&f.png_file, &f.svg_file])
-        .flatten()
-        .cloned();
-    let pages = results.runs.iter().map(|r| report::html::run_page(&r.id));
-    let tables = run_tables
-        .iter()
-        .flatten()
-        .cloned()
-        .chain([report::tables::TRACKING_TABLE.to_string()]);
-    figures.chain(pages).chain(tables).collect()
 }
 
 /// Start the output set in `out_dir`, refusing, before any computing, a
@@ -726,48 +630,6 @@ fn begin(out_dir: &Path, wait: Option<std::time::Duration>) -> Result<OutputFold
 /// campaign's): by where it will be, so a rerun finds its stamp.
 fn cache_names(set: &OutputFolder) -> (PathBuf, PathBuf) {
     (set.dir().to_path_buf(), set.resolved().to_path_buf())
-}
-
-/// run.jsonl: when the campaign ran and how long each run's log took. Wall
-/// clocks and durations live here, never in results.json, whose bytes
-/// depend on the inputs alone.
-struct RunLog<'a> {
-    started: std::time::SystemTime,
-    seconds: f64,
-    jobs: usize,
-    runs: &'a [results::RunResult],
-    run_seconds: &'a [f64],
-    cached: &'a [bool],
-}
-
-impl RunLog<'_> {
-    fn jsonl(&self) -> Vec<u8> {
-        let mut out = Vec::new();
-        let mut line = |v: serde_json::Value| {
-            out.extend_from_slice(v.to_string().as_bytes());
-            out.push(b'\n');
-        };
-        let n = self.runs.len();
-        line(serde_json::json!({
-            "event": "campaign",
-            "started": humantime::format_rfc3339_millis(self.started).to_string(),
-            "seconds": self.seconds,
-            "runs": n,
-            "logs_per_s": n as f64 / self.seconds.max(1e-9),
-            "jobs": self.jobs,
-            "servoid_version": env!("CARGO_PKG_VERSION"),
-        }));
-        for ((run, seconds), cached) in self.runs.iter().zip(self.run_seconds).zip(self.cached) {
-            line(serde_json::json!({
-                "event": "run",
-                "run": run.id,
-                "status": run.status,
-                "cached": cached,
-                "seconds": seconds,
-            }));
-        }
-        out
-    }
 }
 
 /// `path` relative to the folder `dir` (`/`-separated), as `servoid verify`

@@ -7,9 +7,9 @@ use std::path::{Path, PathBuf};
 
 use rayon::prelude::*;
 
-use crate::analysis::simulated::{self, RunSignals, SimRunError, TDMS_GROUP};
+use crate::analysis::simulated::{self, RunSignals, SimRunError};
 use crate::ingest::sha256_hex;
-use crate::manifest::simulation::{OutputFormat, SimulationPlan};
+use crate::manifest::simulation::SimulationPlan;
 use crate::report::columns::{self, ColumnWriteError};
 use crate::report::{self, WriteError};
 
@@ -44,51 +44,13 @@ pub struct Simulated {
     pub logs: Vec<PathBuf>,
 }
 
-/// A simulated run's log in `format` (`path` only names it in errors).
-fn log_bytes(
-    format: OutputFormat,
-    path: &Path,
-    s: &RunSignals,
-    dt_s: f64,
-) -> Result<Vec<u8>, columns::ColumnWriteError> {
-    let cols: Vec<(&str, &[f64])> = s
-        .columns
-        .iter()
-        .map(|(n, v)| (n.as_str(), v.as_slice()))
-        .collect();
-    let with_units: Vec<columns::UnitColumn<'_>> = s
-        .columns
-        .iter()
-        .zip(&s.units)
-        .map(|((n, v), u)| columns::UnitColumn {
-            name: n,
-            unit: u,
-            values: v,
-        })
-        .collect();
-    match format {
-        OutputFormat::Csv => columns::csv_bytes(path, &cols),
-        OutputFormat::Parquet => columns::parquet_bytes(path, &cols),
-        OutputFormat::Mat => columns::mat_bytes(path, &with_units),
-        OutputFormat::MatV73 => columns::mat_v73_bytes(path, &with_units),
-        OutputFormat::Hdf5 => columns::hdf5_bytes(path, &with_units),
-        OutputFormat::Tdms => columns::tdms_bytes(path, &with_units, TDMS_GROUP, dt_s),
-    }
-}
-
 /// Simulate every run and write the campaign into `out_dir`.
 pub fn simulate_campaign(
     plan: &SimulationPlan,
     out_dir: &Path,
 ) -> Result<Simulated, SimulateError> {
     let m = &plan.manifest;
-    let ext = match m.simulation.log_format {
-        OutputFormat::Csv => "csv",
-        OutputFormat::Parquet => "parquet",
-        OutputFormat::Mat | OutputFormat::MatV73 => "mat",
-        OutputFormat::Hdf5 => "h5",
-        OutputFormat::Tdms => "tdms",
-    };
+    let ext = m.simulation.log_format.extension();
     // A log's path relative to the output folder, as truth.json names it.
     let log_rel = |s: &RunSignals| format!("logs/{}.{ext}", s.truth.id);
     // Each run is simulated, and its log's bytes made (the shortest
@@ -102,7 +64,7 @@ pub fn simulate_campaign(
         .map(|run| {
             let s = simulated::simulate_run(plan, run)?;
             let path = out_dir.join(log_rel(&s));
-            let bytes = log_bytes(
+            let bytes = columns::log_bytes(
                 m.simulation.log_format,
                 &path,
                 &s,
