@@ -14,7 +14,7 @@ use std::hint::black_box;
 
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use servoid::frf;
-use servoid::frf::{Detrend, Estimator, FrfPlan, Window};
+use servoid::frf::{Detrend, FrfPlan, Keep, Method, Output, Window};
 
 const FS_HZ: f64 = 2048.0;
 const DURATION_S: f64 = 170.0;
@@ -50,19 +50,11 @@ fn synthetic_log() -> (Vec<f64>, Vec<f64>) {
 
 fn bench_frf(c: &mut Criterion) {
     let (u, y) = synthetic_log();
-    let plan = FrfPlan {
-        estimator: Estimator::H1,
-        segment_length: 8192,
-        overlap: 0.5,
-        window: Window::Hann,
-        detrend: Detrend::Mean,
-        transient: None,
-        model_noise: false,
-    };
+    let plan = FrfPlan::new(Method::H1, 8192, 0.5, Window::Hann, Detrend::Mean).unwrap();
     let mut group = c.benchmark_group("frf");
     group.throughput(Throughput::Elements(u.len() as u64));
     group.bench_function("welch_h1/348160_samples/seg8192", |b| {
-        b.iter(|| frf::estimate(black_box(&u), black_box(&y), FS_HZ, &plan).unwrap())
+        b.iter(|| frf::estimate_one(black_box(&u), black_box(&y), FS_HZ, &plan).unwrap())
     });
     // The command's amplitude along the sweep, which every sweep run's
     // bins carry for the friction's describing function.
@@ -70,25 +62,37 @@ fn bench_frf(c: &mut Criterion) {
     group.bench_function("sweep_amplitude/348160_samples", |b| {
         b.iter(|| frf::sweep_amplitude(black_box(&u), FS_HZ).unwrap())
     });
-    let etfe = FrfPlan {
-        estimator: Estimator::Etfe,
-        window: Window::Rectangular,
-        detrend: Detrend::Linear,
-        ..plan
-    };
+    let etfe = FrfPlan::new(
+        Method::Etfe,
+        8192,
+        0.5,
+        Window::Rectangular,
+        Detrend::Linear,
+    )
+    .unwrap();
     group.bench_function("etfe_whole/348160_samples", |b| {
-        b.iter(|| frf::estimate(black_box(&u), black_box(&y), FS_HZ, &etfe).unwrap())
+        b.iter(|| frf::estimate_one(black_box(&u), black_box(&y), FS_HZ, &etfe).unwrap())
     });
-    let kept = (frf::KEPT_MAX_HZ, frf::VARIANCE_REACH_BINS);
+    let kept = Keep::UpTo {
+        hz: frf::KEPT_MAX_HZ,
+        extra_bins: frf::VARIANCE_REACH_BINS,
+    };
+    let one = [Output { y: &y, plan: &etfe }];
     group.bench_function("etfe_up_to_35hz/348160_samples", |b| {
-        b.iter(|| frf::estimate_up_to(black_box(&u), black_box(&y), FS_HZ, &etfe, kept).unwrap())
+        b.iter(|| frf::estimate(black_box(&u), &one, FS_HZ, kept).unwrap())
     });
     // A run's displacement and force FRFs (here the response and its
     // negative), the command's transforms made once for both.
     let force: Vec<f64> = y.iter().map(|v| -v).collect();
-    let outputs = [(&y[..], &etfe), (&force[..], &etfe)];
+    let outputs = [
+        Output { y: &y, plan: &etfe },
+        Output {
+            y: &force,
+            plan: &etfe,
+        },
+    ];
     group.bench_function("etfe_two_outputs_up_to_35hz/348160_samples", |b| {
-        b.iter(|| frf::estimate_many_up_to(black_box(&u), &outputs, FS_HZ, kept).unwrap())
+        b.iter(|| frf::estimate(black_box(&u), &outputs, FS_HZ, kept).unwrap())
     });
     group.finish();
 }

@@ -77,9 +77,9 @@ fn bench_identify(c: &mut Criterion) {
     // The FRF and the fit alone, as analysis/log_stage.rs calls them.
     group.throughput(Throughput::Elements(u.len() as u64));
     group.bench_function("frf_only", |b| {
-        b.iter(|| frf::estimate(black_box(&u), black_box(&y), fs, plan).unwrap())
+        b.iter(|| frf::estimate_one(black_box(&u), black_box(&y), fs, plan).unwrap())
     });
-    let h = frf::estimate(&u, &y, fs, plan).unwrap();
+    let h = frf::estimate_one(&u, &y, fs, plan).unwrap();
     let mask = frf::band_mask(&h, run.band_hz, ident.coherence_min);
     let bins: Vec<usize> = (0..h.freq_hz.len()).filter(|&i| mask[i]).collect();
     group.bench_function("variance_only", |b| {
@@ -92,7 +92,7 @@ fn bench_identify(c: &mut Criterion) {
     });
     group.bench_function("frf_and_fit", |b| {
         b.iter(|| {
-            let h = frf::estimate(black_box(&u), black_box(&y), fs, plan).unwrap();
+            let h = frf::estimate_one(black_box(&u), black_box(&y), fs, plan).unwrap();
             let mask = frf::band_mask(&h, run.band_hz, ident.coherence_min);
             fit(&FitData::of(&h, &mask, plan).input(), &opts).unwrap()
         })
@@ -112,7 +112,7 @@ fn bench_identify(c: &mut Criterion) {
                 let choice = auto
                     .resolve(black_box(u), black_box(y), fs, run.band_hz)
                     .unwrap();
-                let mut h = frf::estimate(u, y, fs, &choice.plan).unwrap();
+                let mut h = frf::estimate_one(u, y, fs, &choice.plan).unwrap();
                 let mask = frf::band_mask(&h, run.band_hz, ident.coherence_min);
                 fit_run(&mut h, &mask, run.band_hz, ident, &choice.plan, fs, None).unwrap()
             })

@@ -19,7 +19,7 @@
 use std::time::Instant;
 
 use servoid::fit::{DelayPlan, Intersample};
-use servoid::frf::{Detrend, Estimator, FrfPlan, Window};
+use servoid::frf::{Detrend, FrfPlan, Method, Window};
 use servoid::manifest::IdentificationPlan;
 use servoid::sensitivity::draws::{McInput, monte_carlo};
 use servoid::simulate::{ChirpLaw, Excitation, Padding, generate};
@@ -61,15 +61,8 @@ fn main() {
     )
     .expect("a valid chirp");
     assert_eq!(command.len(), 120_000);
-    let frf = FrfPlan {
-        estimator: Estimator::Etfe,
-        segment_length: 4096,
-        overlap: 0.5,
-        window: Window::Rectangular,
-        detrend: Detrend::Mean,
-        transient: None,
-        model_noise: false,
-    };
+    let frf = FrfPlan::new(Method::Etfe, 4096, 0.5, Window::Rectangular, Detrend::Mean)
+        .expect("a valid plan");
     let ident = IdentificationPlan {
         band_hz: (0.5, 30.0),
         coherence_min: 0.8,

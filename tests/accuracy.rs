@@ -378,16 +378,14 @@ fn the_noise_variance_matches_the_scatter_of_h_over_seeds_on_a_sweep() {
                 panic!("run {id} has a log")
             };
             let log = servoid::ingest::read_log(log_plan).expect("the log reads");
-            let fr = frf::estimate(
-                &log.command_m,
-                &log.displacement_m,
-                log.sample_rate_hz,
-                &c.identification
-                    .frf
-                    .explicit()
-                    .expect("the campaign names the ETFE"),
-            )
-            .expect("an FRF");
+            let (u, y, fs) = (&log.command_m, &log.displacement_m, log.sample_rate_hz);
+            let choice = c
+                .identification
+                .frf
+                .resolve(u, y, fs, c.identification.band_hz)
+                .expect("the campaign's FRF settings");
+            assert!(!choice.chosen, "the campaign names the ETFE");
+            let fr = frf::estimate_one(u, y, fs, &choice.plan).expect("an FRF");
             if seed == 0 {
                 bins[r] = (0..fr.freq_hz.len())
                     .filter(|&k| (0.5..=30.0).contains(&fr.freq_hz[k]))

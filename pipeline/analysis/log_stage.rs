@@ -272,7 +272,7 @@ fn checked_log(
 }
 
 /// The command's power in `band` (Hz), from the FRF's input spectrum,
-/// against its `total` over every bin but DC ([`frf::estimate_up_to`]); 0
+/// against its `total` over every bin but DC ([`frf::Estimate::input_total`]); 0
 /// without power.
 fn band_power_fraction(h: &Frf, total: f64, (lo, hi): (f64, f64)) -> f64 {
     let in_band: f64 = h
@@ -295,14 +295,14 @@ fn motion_warning(
     band_hz: (f64, f64),
 ) -> Option<Warning> {
     let plan = &choice.plan;
-    if choice.chosen || plan.estimator == frf::Estimator::Lpm {
+    if choice.chosen || plan.method() == frf::Method::Lpm {
         return None;
     }
     let w = frf::rest_window(sample_rate_hz, band_hz.0);
     let (end, ratio) = frf::ends_in_motion(command, w)?;
-    let (estimator, short) = match plan.estimator {
-        frf::Estimator::H1 => ("Welch H1 estimate", "H1"),
-        frf::Estimator::H2 => ("Welch H2 estimate", "H2"),
+    let (estimator, short) = match plan.method() {
+        frf::Method::H1 => ("Welch H1 estimate", "H1"),
+        frf::Method::H2 => ("Welch H2 estimate", "H2"),
         _ => ("ETFE", "ETFE"),
     };
     Some(Warning::new(
@@ -320,7 +320,7 @@ fn motion_warning(
 /// segments than the averages need, a tapered window over a whole sweep.
 fn contradiction(plan: &FrfPlan, excitation: frf::Excitation, n: usize) -> Option<String> {
     let mut why = Vec::new();
-    let welch = matches!(plan.estimator, frf::Estimator::H1 | frf::Estimator::H2);
+    let welch = plan.method().is_welch();
     let sweep = matches!(excitation, frf::Excitation::Sweep { .. });
     if welch && sweep {
         why.push(format!(
@@ -330,20 +330,20 @@ fn contradiction(plan: &FrfPlan, excitation: frf::Excitation, n: usize) -> Optio
         ));
     }
     if welch {
-        let hop =
-            plan.segment_length - (plan.overlap * plan.segment_length as f64).floor() as usize;
-        let segments = n.saturating_sub(plan.segment_length) / hop.max(1) + 1;
+        let l = plan.segment_length();
+        let hop = l - (plan.overlap() * l as f64).floor() as usize;
+        let segments = n.saturating_sub(l) / hop.max(1) + 1;
         if segments < MIN_WELCH_SEGMENTS {
             why.push(format!(
                 "the record of {n} samples holds only {segments} of the {}-sample segments: the coherence and the variances are read from too few averages (at least {MIN_WELCH_SEGMENTS})",
-                plan.segment_length
+                plan.segment_length()
             ));
         }
     }
-    if !welch && plan.window != frf::Window::Rectangular && sweep {
+    if !welch && plan.window() != frf::Window::Rectangular && sweep {
         why.push(format!(
             "a {:?} window over the whole record of {} weighs the sweep's start and end down to nothing",
-            plan.window,
+            plan.window(),
             excitation.describe()
         ));
     }
@@ -874,7 +874,7 @@ fn settings_warning(
         frf::describe(&auto.plan)
     );
     let moved = fit.and_then(|fit| {
-        let mut h = frf::estimate(u, y, fs, &auto.plan).ok()?;
+        let mut h = frf::estimate_one(u, y, fs, &auto.plan).ok()?;
         let mask = frf::band_mask(&h, run.band_hz, ident.coherence_min);
         let (other, _) = fit_run(&mut h, &mask, run.band_hz, ident, &auto.plan, fs, None).ok()?;
         let parts: Vec<String> = fit
@@ -913,7 +913,7 @@ pub fn log_stage_from(
     // `auto`'s fit of a command of sparse lines reads the transient and the
     // noise from the lines between them (`identify::run_fit`), as the
     // reason then says.
-    if choice.chosen && choice.plan.model_noise && frf::sparse_lines(&h, run.band_hz) {
+    if choice.chosen && choice.plan.model_noise() && frf::sparse_lines(&h, run.band_hz) {
         choice.reason += "; the command is sparse lines (a periodic command whose periods the record holds whole): the FRF is taken at its excited lines, the transient and the noise level read from the lines between them";
     }
     let mask = frf::band_mask(&h, run.band_hz, ident.coherence_min);
@@ -1095,21 +1095,30 @@ fn estimate_frfs(
     // Nyquist took half the memory of a 1 GB log's analysis).
     let (lo, hi) = run.band_hz;
     let keep_hz = hi.max(frf::KEPT_MAX_HZ);
-    let kept = (keep_hz, frf::VARIANCE_REACH_BINS);
+    let kept = frf::Keep::UpTo {
+        hz: keep_hz,
+        extra_bins: frf::VARIANCE_REACH_BINS,
+    };
     // The force path's transient is not fitted: its FRF is shown, not
     // fitted run by run. Both FRFs read the one command's transforms.
-    let force_plan = FrfPlan {
-        transient: None,
-        ..choice.plan.clone()
-    };
-    let mut outputs = vec![(&log.displacement_m[..], &choice.plan)];
-    outputs.extend(log.force_n.as_deref().map(|f| (f, &force_plan)));
-    let mut estimates = frf::estimate_many_up_to(&log.command_m, &outputs, fs, kept)
+    let force_plan = choice.plan.clone().without_transient();
+    let mut outputs = vec![frf::Output {
+        y: &log.displacement_m,
+        plan: &choice.plan,
+    }];
+    outputs.extend(log.force_n.as_deref().map(|y| frf::Output {
+        y,
+        plan: &force_plan,
+    }));
+    let mut estimates = frf::estimate(&log.command_m, &outputs, fs, kept)
         .map_err(frf_err)?
         .into_iter();
-    let (h, total) = estimates.next().expect("the displacement's FRF");
-    let force_frf = estimates.next().map(|(ff, _)| ff);
-    let fraction = band_power_fraction(&h, total, run.band_hz);
+    let frf::Estimate {
+        frf: h,
+        input_total,
+    } = estimates.next().expect("the displacement's FRF");
+    let force_frf = estimates.next().map(|e| e.frf);
+    let fraction = band_power_fraction(&h, input_total, run.band_hz);
     if fraction < MIN_BAND_POWER_FRACTION {
         return Err(tf_error(
             path,

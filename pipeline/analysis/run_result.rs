@@ -379,13 +379,13 @@ pub fn frf_used(st: &LogStage) -> FrfUsed {
     let (choice, plan) = (&st.choice, &st.choice.plan);
     FrfUsed {
         chosen_by: if choice.chosen { "auto" } else { "manifest" }.into(),
-        estimator: plan.estimator,
-        window: plan.window,
-        segment_length: plan.segment_length,
-        overlap: plan.overlap,
-        detrend: plan.detrend,
-        transient: plan.transient.is_some(),
-        model_noise: plan.model_noise,
+        estimator: plan.method().into(),
+        window: plan.window(),
+        segment_length: plan.segment_length(),
+        overlap: plan.overlap(),
+        detrend: plan.detrend(),
+        transient: plan.transient().is_some(),
+        model_noise: plan.model_noise(),
         excitation: st.excitation.kind().into(),
         excitation_note: st.excitation.describe(),
         ends: choice.ends.describe(),
@@ -526,7 +526,7 @@ fn own_fit_warnings(summary: &FitSummary, st: &LogStage, fit: &TfFit) -> Vec<War
     if let Some(a) = summary.adequacy.as_ref() {
         if let Some(d) = a.diagnosis_because(
             (!fit.shape.fit_delay).then_some("set identification.delay = \"fit\""),
-            st.choice.plan.estimator.understated_noise(),
+            frf::Estimator::from(st.choice.plan.method()).understated_noise(),
             st.cause.as_deref(),
         ) {
             let likely = super::log_stage::likely(st.cause.as_deref());
@@ -536,7 +536,7 @@ fn own_fit_warnings(summary: &FitSummary, st: &LogStage, fit: &TfFit) -> Vec<War
             ));
         }
         if let Some(o) = a.overstated_because(
-            st.choice.plan.estimator.overstated_noise(),
+            frf::Estimator::from(st.choice.plan.method()).overstated_noise(),
             st.cause.as_deref(),
         ) {
             warnings.push(Warning::new(

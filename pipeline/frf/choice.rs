@@ -15,7 +15,7 @@
 //! "Choosing the FRF estimator".
 
 use super::{
-    Detrend, Estimator, FrfError, FrfPlan, MIN_SEGMENT_LENGTH, Window, ends_against_noise,
+    Detrend, Estimator, FrfError, FrfPlan, MIN_SEGMENT_LENGTH, Method, Window, ends_against_noise,
 };
 
 /// The Welch settings an explicit estimator gets for what the manifest
@@ -54,11 +54,11 @@ impl Default for FrfRequest {
 impl From<FrfPlan> for FrfRequest {
     fn from(plan: FrfPlan) -> Self {
         Self {
-            estimator: plan.estimator,
-            segment_length: Some(plan.segment_length),
-            overlap: Some(plan.overlap),
-            window: Some(plan.window),
-            detrend: Some(plan.detrend),
+            estimator: plan.method().into(),
+            segment_length: Some(plan.segment_length()),
+            overlap: Some(plan.overlap()),
+            window: Some(plan.window()),
+            detrend: Some(plan.detrend()),
         }
     }
 }
@@ -126,16 +126,22 @@ impl FrfRequest {
     /// The settings of an explicit estimator, with Welch's defaults for
     /// what the manifest leaves out (8,192-sample Hann segments, half
     /// overlapping, the mean out); None for `auto`, which needs the log.
-    pub fn explicit(&self) -> Option<FrfPlan> {
-        (self.estimator != Estimator::Auto).then(|| FrfPlan {
-            estimator: self.estimator,
-            segment_length: self.segment_length.unwrap_or(DEFAULT_SEGMENT_LENGTH),
-            overlap: self.overlap.unwrap_or(DEFAULT_OVERLAP),
-            window: self.window.unwrap_or_default(),
-            detrend: self.detrend.unwrap_or_default(),
-            transient: None,
-            model_noise: false,
+    fn explicit(&self) -> Option<Result<FrfPlan, FrfError>> {
+        self.estimator.resolved().map(|method| {
+            FrfPlan::new(
+                method,
+                self.explicit_segment_length(),
+                self.overlap.unwrap_or(DEFAULT_OVERLAP),
+                self.window.unwrap_or_default(),
+                self.detrend.unwrap_or_default(),
+            )
         })
+    }
+
+    /// An explicit estimator's segment length: the manifest's, else
+    /// [`DEFAULT_SEGMENT_LENGTH`].
+    fn explicit_segment_length(&self) -> usize {
+        self.segment_length.unwrap_or(DEFAULT_SEGMENT_LENGTH)
     }
 
     /// The fewest samples a log must hold before its FRF is tried: an
@@ -144,8 +150,10 @@ impl FrfRequest {
     ///
     /// [`resolve`]: FrfRequest::resolve
     pub fn min_samples(&self) -> usize {
-        self.explicit()
-            .map_or(MIN_SEGMENT_LENGTH, |p| p.segment_length)
+        match self.estimator.resolved() {
+            Some(_) => self.explicit_segment_length(),
+            None => MIN_SEGMENT_LENGTH,
+        }
     }
 
     /// The settings of a run whose command is `u` and displacement `y`,
@@ -166,6 +174,7 @@ impl FrfRequest {
     ) -> Result<FrfChoice, FrfError> {
         let ends = Ends::of(u, y, super::rest_window(sample_rate_hz, band_hz.0));
         if let Some(plan) = self.explicit() {
+            let plan = plan?;
             return Ok(FrfChoice {
                 reason: format!("{} (the manifest's)", describe(&plan)),
                 plan,
@@ -191,16 +200,20 @@ impl FrfRequest {
                 .min(n / 2)
                 .max(MIN_SEGMENT_LENGTH),
         };
-        let plan = FrfPlan {
-            estimator: Estimator::Etfe,
+        let plan = FrfPlan::new(
+            Method::Etfe,
             segment_length,
-            overlap: self.overlap.unwrap_or(DEFAULT_OVERLAP),
-            window: self.window.unwrap_or(Window::Rectangular),
-            detrend: self.detrend.unwrap_or(Detrend::Mean),
-            transient: (!ends.at_rest()).then_some(band_hz.1),
-            model_noise: true,
+            self.overlap.unwrap_or(DEFAULT_OVERLAP),
+            self.window.unwrap_or(Window::Rectangular),
+            self.detrend.unwrap_or(Detrend::Mean),
+        )?
+        .with_model_noise(true);
+        let plan = if ends.at_rest() {
+            plan
+        } else {
+            plan.with_transient(band_hz.1)
         };
-        let why = if plan.transient.is_some() {
+        let why = if plan.transient().is_some() {
             format!(
                 "{}: its transient (the states' leakage, a drift's) is fitted beside the model and taken out; the noise level read from what a first fit leaves",
                 ends.describe()
@@ -222,34 +235,26 @@ impl FrfRequest {
 
 /// The plan in words, as a run's page and the command line say it.
 pub fn describe(plan: &FrfPlan) -> String {
-    let window = match plan.window {
+    let window = match plan.window() {
         Window::Rectangular => "rectangular",
         Window::Hann => "Hann",
         Window::Hamming => "Hamming",
         Window::BlackmanHarris => "Blackman-Harris",
     };
-    match plan.estimator {
-        Estimator::H1 | Estimator::H2 => format!(
-            "Welch {} over {}-sample {window} segments",
-            if plan.estimator == Estimator::H1 {
-                "H1"
-            } else {
-                "H2"
-            },
-            plan.segment_length
-        ),
-        Estimator::Etfe | Estimator::Auto => format!(
-            "ETFE over the whole record, {window} window{}, coherence from {}-sample segments",
-            if plan.transient.is_some() {
+    let segment_length = plan.segment_length();
+    match plan.method() {
+        Method::H1 => format!("Welch H1 over {segment_length}-sample {window} segments"),
+        Method::H2 => format!("Welch H2 over {segment_length}-sample {window} segments"),
+        Method::Etfe => format!(
+            "ETFE over the whole record, {window} window{}, coherence from {segment_length}-sample segments",
+            if plan.transient().is_some() {
                 ", transient fitted"
             } else {
                 ""
             },
-            plan.segment_length
         ),
-        Estimator::Lpm => format!(
-            "ETFE with the LPM's transient out, {window} window, coherence from {}-sample segments",
-            plan.segment_length
+        Method::Lpm => format!(
+            "ETFE with the LPM's transient out, {window} window, coherence from {segment_length}-sample segments",
         ),
     }
 }

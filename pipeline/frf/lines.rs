@@ -146,7 +146,7 @@ pub fn at_lines(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::frf::{FrfRequest, band_mask, estimate};
+    use crate::frf::{FrfRequest, band_mask, estimate_one};
     use crate::simulate::Draws;
 
     /// One period of a 58-tone multisine (every 18th bin of a 30 s record
@@ -194,7 +194,7 @@ mod tests {
             .resolve(&u, &y, fs, band)
             .unwrap()
             .plan;
-        let mut h = estimate(&u, &y, fs, &plan).unwrap();
+        let mut h = estimate_one(&u, &y, fs, &plan).unwrap();
         assert!(sparse_lines(&h, band));
         let raw = h.h.clone();
         let mask = band_mask(&h, band, 0.0);

@@ -294,7 +294,7 @@ mod tests {
             h,
             n_averages: 1,
             effective_averages: 1.0,
-            estimator: super::super::Estimator::Etfe,
+            method: super::super::Method::Etfe,
             resolution_hz: 0.1,
             variance: None,
             input_dft: None,

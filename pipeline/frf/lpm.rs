@@ -15,7 +15,7 @@
 use nalgebra::{Complex, SMatrix, SVector};
 use rayon::prelude::*;
 
-use super::{Estimator, Frf};
+use super::{Frf, Method};
 
 /// The polynomials' degree: quadratic, as the ETFE's noise estimate.
 const DEGREE: usize = 2;
@@ -150,6 +150,6 @@ pub(super) fn take_out_transient(mut frf: Frf, u: &[Complex<f64>], y: &[Complex<
     let mut v = vec![f64::INFINITY; frf.h.len()];
     v[..nb].copy_from_slice(&variance);
     frf.variance = Some(v);
-    frf.estimator = Estimator::Lpm;
+    frf.method = Method::Lpm;
     frf
 }

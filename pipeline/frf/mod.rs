@@ -33,7 +33,7 @@ pub use linearity::{Linearity, SlowCubic, SpringForce, linearity, slow_cubic, sp
 pub use lines::{at_lines, sparse_lines};
 pub use local_fits::LocalFits;
 use local_fits::etfe_local_noise_densities;
-pub use settings::{Detrend, Estimator, FrfPlan, Window};
+pub use settings::{Detrend, Estimator, FrfPlan, Method, Window};
 pub use sweep::{SweepAmplitude, sweep_amplitude};
 pub use synthesis::{EtfeSpectra, EtfeSynthesis, Unsynthesizable};
 
@@ -49,7 +49,7 @@ pub struct Frf {
     pub h: Vec<Complex<f64>>,
     /// Ordinary coherence in [0, 1] at each bin (0 where undefined). For the
     /// ETFE it comes from a Welch estimate over the plan's segments,
-    /// interpolated onto the ETFE's finer grid (see [`etfe`]).
+    /// interpolated onto the ETFE's finer grid (see [`Method::Etfe`]).
     pub coherence: Vec<f64>,
     /// One-sided auto-spectral density of u (unit^2/Hz).
     pub suu: Vec<f64>,
@@ -63,7 +63,8 @@ pub struct Frf {
     /// correction (equal to `n_averages` without overlap; 1 for the ETFE).
     /// [`h_variance`] uses it.
     pub effective_averages: f64,
-    pub estimator: Estimator,
+    /// The estimator that made it.
+    pub method: Method,
     /// Bin spacing (Hz): fs / segment_length, or fs / record length for the ETFE.
     pub resolution_hz: f64,
     /// The per-component variance of `h` at each bin where the estimator
@@ -72,7 +73,7 @@ pub struct Frf {
     pub variance: Option<Vec<f64>>,
     /// The command's DFT at each bin (the whole record's transform, as
     /// realfft gives it), kept when the plan fits the record's transient
-    /// (`FrfPlan::transient`), whose columns divide by it.
+    /// ([`FrfPlan::transient`]), whose columns divide by it.
     pub input_dft: Option<Vec<Complex<f64>>>,
     /// The memo of the ETFE noise level's local fits (not part of the
     /// value: see [`LocalFits`]).
@@ -111,8 +112,43 @@ pub enum FrfError {
     },
 }
 
-/// Estimates the FRF u -> y with the plan's estimator and segment settings
-/// (for `Estimator::Etfe` the segments serve its coherence; see [`etfe`]).
+/// One output of a command to estimate the FRF to: its samples, as long as
+/// the command, and the plan that estimates it.
+#[derive(Debug, Clone, Copy)]
+pub struct Output<'a> {
+    pub y: &'a [f64],
+    pub plan: &'a FrfPlan,
+}
+
+/// The bins an estimate keeps.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Keep {
+    /// Every bin, 0 ..= fs/2.
+    All,
+    /// The bins [`Frf::keep_up_to`]`(hz, extra_bins)` keeps, to the bit
+    /// those of the whole estimate. A whole-record estimate forms no others
+    /// (above 35 Hz, 93 % of a 1-kHz record's bins), which saves their pass
+    /// and their memory.
+    UpTo { hz: f64, extra_bins: usize },
+}
+
+/// One output's FRF, as [`estimate`] gives it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Estimate {
+    /// The estimate on the bins the request keeps.
+    pub frf: Frf,
+    /// The input's one-sided density summed over every bin of the whole
+    /// estimate but DC, in bin order, whatever bins are kept: the
+    /// denominator of a band's share of the input's power.
+    pub input_total: f64,
+}
+
+/// Estimates the FRF of the command `u` to each of `outputs`, each with its
+/// own plan, keeping the bins `keep` says. Each output's estimate is the
+/// same bits as made alone. Where every plan is the same whole-record
+/// estimate but for the transient (a run's displacement and force), the
+/// command's whole-record transform and its coherence segments' transforms
+/// are made once for all of them.
 ///
 /// The result is the same bits for the same input on the same machine,
 /// whatever the thread count: Welch segments are accumulated in order on one
@@ -121,181 +157,67 @@ pub enum FrfError {
 /// with another instruction set may differ in the last bits.
 pub fn estimate(
     u: &[f64],
-    y: &[f64],
+    outputs: &[Output<'_>],
     sample_rate_hz: f64,
-    plan: &FrfPlan,
-) -> Result<Frf, FrfError> {
-    if let Some(whole) = whole_record(u, y, sample_rate_hz, plan, None) {
-        return whole.map(|(frf, _)| frf);
-    }
-    welch(
-        u,
-        y,
-        sample_rate_hz,
-        plan.segment_length,
-        plan.overlap,
-        plan.window,
-        plan.detrend,
-        plan.estimator,
-    )
-}
-
-/// [`estimate`] with only the bins [`Frf::keep_up_to`]`(f_hz, extra)` keeps,
-/// and the input's density summed over every bin of the whole estimate but
-/// DC, in bin order (the denominator of a band's share of the input's
-/// power). The kept bins are those of [`estimate`] to the bit. A
-/// whole-record estimate forms no others (above 35 Hz, 93 % of a 1-kHz
-/// record's bins), which saves their pass and their memory.
-pub fn estimate_up_to(
-    u: &[f64],
-    y: &[f64],
-    sample_rate_hz: f64,
-    plan: &FrfPlan,
-    (f_hz, extra): (f64, usize),
-) -> Result<(Frf, f64), FrfError> {
-    if let Some(whole) = whole_record(u, y, sample_rate_hz, plan, Some((f_hz, extra))) {
-        let (frf, total) = whole?;
-        return Ok((frf, total.expect("a kept estimate sums the input's power")));
-    }
-    let mut frf = estimate(u, y, sample_rate_hz, plan)?;
-    let total = frf.suu.iter().skip(1).sum();
-    frf.keep_up_to(f_hz, extra);
-    Ok((frf, total))
-}
-
-/// [`estimate_up_to`] of one command `u` to each of `outputs`, each with
-/// its own plan, every estimate the same bits as made alone. Where every
-/// plan is the same whole-record estimate but for the transient (a run's
-/// displacement and force), the command's whole-record transform and its
-/// coherence segments' transforms are made once for all of them.
-pub fn estimate_many_up_to(
-    u: &[f64],
-    outputs: &[(&[f64], &FrfPlan)],
-    sample_rate_hz: f64,
-    keep: (f64, usize),
-) -> Result<Vec<(Frf, f64)>, FrfError> {
+    keep: Keep,
+) -> Result<Vec<Estimate>, FrfError> {
     // One plan for all (but the transient): a whole-record plan shares
     // the command's transforms.
     let shared = outputs
         .first()
-        .map(|(_, p)| *p)
-        .filter(|first| outputs.iter().all(|(_, p)| same_but_transient(p, first)));
-    let whole = shared.and_then(|plan| {
-        let outputs: Vec<(&[f64], Option<f64>)> =
-            outputs.iter().map(|(y, p)| (*y, p.transient)).collect();
-        whole_record_many(u, &outputs, sample_rate_hz, plan, Some(keep))
-    });
-    match whole {
-        Some(estimates) => Ok(estimates?
-            .into_iter()
-            .map(|(frf, total)| (frf, total.expect("a kept estimate sums the input's power")))
-            .collect()),
-        None => outputs
-            .iter()
-            .map(|(y, plan)| estimate_up_to(u, y, sample_rate_hz, plan, keep))
-            .collect(),
+        .map(|o| o.plan)
+        .filter(|first| outputs.iter().all(|o| o.plan.same_but_transient(first)))
+        .filter(|plan| !plan.method().is_welch());
+    if shared.is_some() {
+        return whole_record(u, outputs, sample_rate_hz, keep);
     }
+    outputs
+        .iter()
+        .map(|o| {
+            if !o.plan.method().is_welch() {
+                let mut one = whole_record(u, std::slice::from_ref(o), sample_rate_hz, keep)?;
+                return Ok(one.pop().expect("one estimate for one output"));
+            }
+            let mut frf = welch(u, o.y, sample_rate_hz, o.plan)?;
+            let input_total = frf.suu.iter().skip(1).sum();
+            if let Keep::UpTo { hz, extra_bins } = keep {
+                frf.keep_up_to(hz, extra_bins);
+            }
+            Ok(Estimate { frf, input_total })
+        })
+        .collect()
 }
 
-/// Whether two plans make the same whole-record estimate of the command,
-/// differing at most in the transient (which decides only whether the
-/// command's transform is kept) and in how the fit reads the noise.
-fn same_but_transient(a: &FrfPlan, b: &FrfPlan) -> bool {
-    let bare = |p: &FrfPlan| FrfPlan {
-        transient: None,
-        model_noise: false,
-        ..p.clone()
-    };
-    bare(a) == bare(b)
-}
-
-/// The plan's whole-record estimate (ETFE or LPM) by [`etfe_or_lpm_up_to`];
-/// `None` for a Welch estimator.
-fn whole_record(
+/// [`estimate`] of the one output `y`, every bin kept.
+pub fn estimate_one(
     u: &[f64],
     y: &[f64],
     sample_rate_hz: f64,
     plan: &FrfPlan,
-    keep: Option<(f64, usize)>,
-) -> Option<Result<(Frf, Option<f64>), FrfError>> {
-    whole_record_many(u, &[(y, plan.transient)], sample_rate_hz, plan, keep)
-        .map(|one| one.map(|mut one| one.pop().expect("one estimate for one output")))
-}
-
-/// Each output's whole-record estimate and, when its bins are kept, the
-/// input's density summed over every bin but DC.
-type Estimates = Vec<(Frf, Option<f64>)>;
-
-/// [`whole_record`] of `u` to each output `y`, each with its own transient
-/// (`keep_input` of [`etfe_or_lpm_many_up_to`]).
-fn whole_record_many(
-    u: &[f64],
-    outputs: &[(&[f64], Option<f64>)],
-    sample_rate_hz: f64,
-    plan: &FrfPlan,
-    keep: Option<(f64, usize)>,
-) -> Option<Result<Estimates, FrfError>> {
-    matches!(plan.estimator, Estimator::Etfe | Estimator::Lpm).then(|| {
-        etfe_or_lpm_many_up_to(
-            u,
-            outputs,
-            sample_rate_hz,
-            plan.window,
-            (plan.detrend, plan.segment_length, plan.overlap),
-            plan.estimator == Estimator::Lpm,
-            keep,
-        )
-    })
-}
-
-/// Welch-averaged FRF (P. D. Welch, IEEE Trans. Audio Electroacoust. 15(2),
-/// 1967, 70-73): segments of `segment_length` samples
-/// starting every `segment_length - floor(overlap * segment_length)` samples
-/// (samples after the last whole segment are not used), each detrended, then
-/// windowed, then transformed; spectra are averaged in segment order.
-///
-/// `Estimator::Etfe` (and `Auto`, which reads as the ETFE here: a resolved
-/// plan is never `Auto`) is passed on to [`etfe`] with these segment
-/// settings for its coherence.
-#[allow(clippy::too_many_arguments)]
-pub fn welch(
-    u: &[f64],
-    y: &[f64],
-    sample_rate_hz: f64,
-    segment_length: usize,
-    overlap: f64,
-    window_kind: Window,
-    detrend_kind: Detrend,
-    estimator: Estimator,
 ) -> Result<Frf, FrfError> {
-    if matches!(
-        estimator,
-        Estimator::Etfe | Estimator::Lpm | Estimator::Auto
-    ) {
-        return etfe_or_lpm(
-            u,
-            y,
-            sample_rate_hz,
-            window_kind,
-            (detrend_kind, segment_length, overlap),
-            (estimator == Estimator::Lpm, None),
-        );
-    }
-    check_inputs(u, y, sample_rate_hz, segment_length, overlap)?;
+    let mut one = estimate(u, &[Output { y, plan }], sample_rate_hz, Keep::All)?;
+    Ok(one.pop().expect("one estimate for one output").frf)
+}
+
+/// The Welch-averaged FRF of a plan of [`Method::H1`] or [`Method::H2`].
+fn welch(u: &[f64], y: &[f64], sample_rate_hz: f64, plan: &FrfPlan) -> Result<Frf, FrfError> {
+    let segment_length = plan.segment_length();
+    check_inputs(u, y, sample_rate_hz, segment_length, plan.overlap())?;
     let segments = Segmenting {
         length: segment_length,
-        overlap,
-        window_kind,
-        detrend_kind,
+        overlap: plan.overlap(),
+        window_kind: plan.window(),
+        detrend_kind: plan.detrend(),
     };
     let spectra = welch_spectra(u, y, sample_rate_hz, &segments);
+    let method = plan.method();
     let h = spectra
         .suu
         .iter()
         .zip(&spectra.syy)
         .zip(&spectra.suy)
-        .map(|((&suu, &syy), &suy)| match estimator {
-            Estimator::H2 => ratio(Complex::new(syy, 0.0), suy.conj()),
+        .map(|((&suu, &syy), &suy)| match method {
+            Method::H2 => ratio(Complex::new(syy, 0.0), suy.conj()),
             _ => ratio(suy, Complex::new(suu, 0.0)),
         })
         .collect();
@@ -310,7 +232,7 @@ pub fn welch(
         suy: spectra.suy,
         n_averages: spectra.n_segments,
         effective_averages: spectra.effective_averages,
-        estimator,
+        method,
         resolution_hz,
         variance: None,
         input_dft: None,
@@ -318,104 +240,27 @@ pub fn welch(
     })
 }
 
-/// Empirical transfer-function estimate Y/U (Ljung, *System Identification*,
-/// 2nd ed., Sec. 6.3): one window over the whole record, one transform, no
-/// averaging, so the resolution is fs / record length and `n_averages` is 1.
-///
-/// A single average has coherence identically 1, which says nothing about
-/// noise; so `coherence` is taken from a Welch estimate with
-/// `coherence_segment_length` and `coherence_overlap` (the plan's segment
-/// settings), linearly interpolated onto the ETFE's bins, and masking works
-/// as for H1. `suu`, `syy` and `suy` are the whole-record periodograms (same
-/// scaling as Welch), so `h = suy / suu`.
-///
-/// For a sweep, prefer `Window::Rectangular`: a tapered window over the whole
-/// record suppresses the frequencies swept at its start and end.
-pub fn etfe(
+/// The whole-record estimate ([`Method::Etfe`], [`Method::Lpm`]) from `u`
+/// to each of `outputs` (at least one), whose plans differ at most in the
+/// transient ([`FrfPlan::transient`]: the command's transform kept in
+/// [`Frf::input_dft`] up to that frequency and [`VARIANCE_REACH_BINS`]
+/// beyond). The command's whole-record transform, its coherence segments'
+/// and the input's summed density are made once, and each output's
+/// estimate is the one it would get alone, to the bit.
+fn whole_record(
     u: &[f64],
-    y: &[f64],
+    outputs: &[Output<'_>],
     sample_rate_hz: f64,
-    window_kind: Window,
-    detrend_kind: Detrend,
-    coherence_segment_length: usize,
-    coherence_overlap: f64,
-) -> Result<Frf, FrfError> {
-    etfe_or_lpm(
-        u,
-        y,
-        sample_rate_hz,
-        window_kind,
-        (detrend_kind, coherence_segment_length, coherence_overlap),
-        (false, None),
-    )
-}
-
-/// [`etfe`], and with `lpm` the transient taken out by [`lpm`] from the
-/// whole-record transforms (which the LPM needs with their phases); with
-/// `keep_input` = Some(f) the command's transform kept in
-/// [`Frf::input_dft`] up to f Hz and [`VARIANCE_REACH_BINS`] beyond.
-fn etfe_or_lpm(
-    u: &[f64],
-    y: &[f64],
-    sample_rate_hz: f64,
-    window_kind: Window,
-    segments: (Detrend, usize, f64),
-    lpm_and_input: (bool, Option<f64>),
-) -> Result<Frf, FrfError> {
-    etfe_or_lpm_up_to(
-        u,
-        y,
-        sample_rate_hz,
-        window_kind,
-        segments,
-        lpm_and_input,
-        None,
-    )
-    .map(|(frf, _)| frf)
-}
-
-/// [`etfe_or_lpm`] with `keep` = Some((f, extra)) computing only the bins
-/// [`Frf::keep_up_to`]`(f, extra)` keeps (and the LPM's noise smoothing
-/// reach beyond, which it cuts afterwards), and then also the input's
-/// density summed over every bin but DC.
-fn etfe_or_lpm_up_to(
-    u: &[f64],
-    y: &[f64],
-    sample_rate_hz: f64,
-    window_kind: Window,
-    segments: (Detrend, usize, f64),
-    (lpm, keep_input): (bool, Option<f64>),
-    keep: Option<(f64, usize)>,
-) -> Result<(Frf, Option<f64>), FrfError> {
-    let mut one = etfe_or_lpm_many_up_to(
-        u,
-        &[(y, keep_input)],
-        sample_rate_hz,
-        window_kind,
-        segments,
-        lpm,
-        keep,
-    )?;
-    Ok(one.pop().expect("one estimate for one output"))
-}
-
-/// [`etfe_or_lpm_up_to`] of `u` to each output `y` (with its `keep_input`):
-/// the command's whole-record transform, its coherence segments' and the
-/// input's summed density are made once, and each output's estimate is
-/// the one it would get alone, to the bit.
-fn etfe_or_lpm_many_up_to(
-    u: &[f64],
-    outputs: &[(&[f64], Option<f64>)],
-    sample_rate_hz: f64,
-    window_kind: Window,
-    (detrend_kind, coherence_segment_length, coherence_overlap): (Detrend, usize, f64),
-    lpm: bool,
-    keep: Option<(f64, usize)>,
-) -> Result<Estimates, FrfError> {
-    for (y, _) in outputs {
+    keep: Keep,
+) -> Result<Vec<Estimate>, FrfError> {
+    let plan = outputs[0].plan;
+    let (window_kind, detrend_kind) = (plan.window(), plan.detrend());
+    let (coherence_segment_length, coherence_overlap) = (plan.segment_length(), plan.overlap());
+    let lpm = plan.method() == Method::Lpm;
+    for o in outputs {
         check_inputs(
             u,
-            y,
+            o.y,
             sample_rate_hz,
             coherence_segment_length,
             coherence_overlap,
@@ -446,7 +291,7 @@ fn etfe_or_lpm_many_up_to(
         transform.run(x, w.as_deref(), detrend_kind, &mut out);
         out
     };
-    let ys: Vec<&[f64]> = outputs.iter().map(|(y, _)| *y).collect();
+    let ys: Vec<&[f64]> = outputs.iter().map(|o| o.y).collect();
     let ((mut u_dft, y_dfts), coarse) = rayon::join(
         || {
             rayon::join(
@@ -456,8 +301,17 @@ fn etfe_or_lpm_many_up_to(
         },
         || welch_spectra_many(u, &ys, sample_rate_hz, &segments),
     );
-    let total = keep.map(|_| input_total(&u_dft, n, scale));
-    let kept_bins = keep.map(|keep| kept_bins(u_dft.len(), n, sample_rate_hz, keep, lpm));
+    let input_total = input_total(&u_dft, n, scale);
+    let kept_bins = match keep {
+        Keep::All => None,
+        Keep::UpTo { hz, extra_bins } => Some(kept_bins(
+            u_dft.len(),
+            n,
+            sample_rate_hz,
+            (hz, extra_bins),
+            lpm,
+        )),
+    };
     // The command's transform becomes each output's H in place: the last
     // output takes it, the others a copy of what they read of it (all of
     // it for the LPM, which works on the whole transforms; else the kept
@@ -477,14 +331,16 @@ fn etfe_or_lpm_many_up_to(
         keep,
     };
     let mut estimates = Vec::with_capacity(outputs.len());
-    for (i, (((_, keep_input), suy), coarse)) in outputs.iter().zip(y_dfts).zip(coarse).enumerate()
-    {
+    for (i, ((o, suy), coarse)) in outputs.iter().zip(y_dfts).zip(coarse).enumerate() {
         let h = if i == last {
             std::mem::take(&mut u_dft)
         } else {
             u_dft[..read].to_vec()
         };
-        estimates.push((finish.estimate(h, suy, &coarse, *keep_input), total));
+        estimates.push(Estimate {
+            frf: finish.estimate(h, suy, &coarse, o.plan.transient()),
+            input_total,
+        });
     }
     Ok(estimates)
 }
@@ -528,20 +384,20 @@ struct Finish {
     coarse_resolution_hz: f64,
     lpm: bool,
     kept_bins: Option<usize>,
-    keep: Option<(f64, usize)>,
+    keep: Keep,
 }
 
 impl Finish {
     /// The estimate from the command's transform `h` and the output's
     /// `suy` (each whole, or the command's cut to the kept bins), the
-    /// output's Welch `coarse` spectra for the coherence and its
-    /// `keep_input`.
+    /// output's Welch `coarse` spectra for the coherence and the top of
+    /// its `transient`, up to which the command's transform is kept.
     fn estimate(
         &self,
         mut h: Vec<Complex<f64>>,
         mut suy: Vec<Complex<f64>>,
         coarse: &Spectra,
-        keep_input: Option<f64>,
+        transient: Option<f64>,
     ) -> Frf {
         let (n, sample_rate_hz) = (self.n, self.sample_rate_hz);
         // The LPM works on the transforms themselves: kept before they
@@ -555,7 +411,7 @@ impl Finish {
         }
         // Up to the band's top only: a copy of a 14 M-sample record's whole
         // transform was 115 MB.
-        let input_dft = keep_input.map(|f_hz| {
+        let input_dft = transient.map(|f_hz| {
             let bins =
                 ((f_hz * n as f64 / sample_rate_hz).floor() as usize + 1 + VARIANCE_REACH_BINS)
                     .min(h.len());
@@ -576,8 +432,8 @@ impl Finish {
             Some((u_k, y_k)) => lpm::take_out_transient(frf, &u_k, &y_k),
             None => frf,
         };
-        if let Some((f_hz, extra)) = self.keep {
-            frf.keep_up_to(f_hz, extra);
+        if let Keep::UpTo { hz, extra_bins } = self.keep {
+            frf.keep_up_to(hz, extra_bins);
         }
         frf
     }
@@ -634,7 +490,7 @@ fn etfe_from_transforms(
         suy,
         n_averages: 1,
         effective_averages: 1.0,
-        estimator: Estimator::Etfe,
+        method: Method::Etfe,
         resolution_hz,
         variance: None,
         input_dft: None,
@@ -737,7 +593,7 @@ impl Frf {
             suy: self.suy[..keep].to_vec(),
             n_averages: self.n_averages,
             effective_averages: self.effective_averages,
-            estimator: self.estimator,
+            method: self.method,
             resolution_hz: self.resolution_hz,
             variance: self
                 .variance
@@ -1039,7 +895,7 @@ pub const ETFE_NOISE_SMOOTH_HALF_WIDTH: usize = 60;
 /// Welch segment; an unexcited ETFE bin or a window without enough excited
 /// bins); zero where the coherence is 1.
 pub fn h_variance_at(frf: &Frf, bins: &[usize]) -> Vec<f64> {
-    if frf.estimator == Estimator::Etfe {
+    if frf.method == Method::Etfe {
         return etfe_variance(frf, bins);
     }
     if let Some(v) = &frf.variance {

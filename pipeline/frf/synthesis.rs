@@ -16,7 +16,7 @@
 use nalgebra::Complex;
 
 use super::{
-    Detrend, Estimator, Frf, FrfError, FrfPlan, LocalFits, SegmentTransform, VARIANCE_REACH_BINS,
+    Detrend, Frf, FrfError, FrfPlan, LocalFits, Method, SegmentTransform, VARIANCE_REACH_BINS,
     Window, accumulate_segment, check_inputs, coherence_of, etfe_from_transforms, to_density,
     window,
 };
@@ -26,7 +26,7 @@ use super::{
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum Unsynthesizable {
     #[error("the {0:?} estimator (only the ETFE is assembled from its transforms)")]
-    Estimator(Estimator),
+    Estimator(Method),
     #[error("a {0:?} window (a tapered window correlates neighbouring noise bins)")]
     Window(Window),
     #[error("linear detrending (the fitted ramp mixes the noise into every bin)")]
@@ -62,7 +62,7 @@ pub struct EtfeSynthesis {
     w: Vec<f64>,
     u: EtfeSpectra,
     /// Whether the FRFs keep the command's DFT for a fit with the record's
-    /// transient (`FrfPlan::transient`): all the bins it keeps.
+    /// transient ([`FrfPlan::transient`]): all the bins it keeps.
     transient: bool,
     /// The memo of the local fits every reading's noise level makes.
     local_fits: LocalFits,
@@ -73,13 +73,13 @@ impl EtfeSynthesis {
     /// can be assembled from transforms (what [`EtfeSynthesis::new`] asks
     /// of the plan before it looks at a signal).
     pub fn check_plan(plan: &FrfPlan) -> Result<(), Unsynthesizable> {
-        if !matches!(plan.estimator, Estimator::Etfe | Estimator::Auto) {
-            return Err(Unsynthesizable::Estimator(plan.estimator));
+        if plan.method() != Method::Etfe {
+            return Err(Unsynthesizable::Estimator(plan.method()));
         }
-        if plan.window != Window::Rectangular {
-            return Err(Unsynthesizable::Window(plan.window));
+        if plan.window() != Window::Rectangular {
+            return Err(Unsynthesizable::Window(plan.window()));
         }
-        if plan.detrend == Detrend::Linear {
+        if plan.detrend() == Detrend::Linear {
             return Err(Unsynthesizable::LinearDetrend);
         }
         Ok(())
@@ -95,9 +95,9 @@ impl EtfeSynthesis {
         max_hz: f64,
     ) -> Result<Self, Unsynthesizable> {
         Self::check_plan(plan)?;
-        check_inputs(u, u, sample_rate_hz, plan.segment_length, plan.overlap)?;
+        check_inputs(u, u, sample_rate_hz, plan.segment_length(), plan.overlap())?;
         let n = u.len();
-        let l = plan.segment_length;
+        let l = plan.segment_length();
         let resolution_hz = sample_rate_hz / n as f64;
         // The bins whose frequency, computed as the ETFE computes it, is
         // at most max_hz, and the variance's reach beyond them.
@@ -111,18 +111,18 @@ impl EtfeSynthesis {
         let last_hz = (keep - 1) as f64 * resolution_hz;
         let coarse_resolution_hz = sample_rate_hz / l as f64;
         let keep_coarse = ((last_hz / coarse_resolution_hz).floor() as usize + 2).min(l / 2 + 1);
-        let hop = l - (plan.overlap * l as f64).floor() as usize;
+        let hop = l - (plan.overlap() * l as f64).floor() as usize;
         let mut synthesis = Self {
             n,
             sample_rate_hz,
-            detrend: plan.detrend,
+            detrend: plan.detrend(),
             segment_length: l,
             hop,
             n_segments: (n - l) / hop + 1,
             keep,
             keep_coarse,
             w: window(Window::Rectangular, l),
-            transient: plan.transient.is_some(),
+            transient: plan.transient().is_some(),
             local_fits: LocalFits::default(),
             u: EtfeSpectra {
                 whole: Vec::new(),

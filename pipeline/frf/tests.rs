@@ -7,6 +7,45 @@ use crate::simulate::Draws;
 use approx::{assert_abs_diff_eq, assert_relative_eq};
 use std::f64::consts::PI;
 
+/// The estimate of `method` over segments of `l` samples (for a
+/// whole-record method, its coherence's), every bin kept.
+#[allow(clippy::too_many_arguments)]
+fn welch(
+    u: &[f64],
+    y: &[f64],
+    fs: f64,
+    l: usize,
+    overlap: f64,
+    window_kind: Window,
+    detrend_kind: Detrend,
+    method: Method,
+) -> Result<Frf, FrfError> {
+    let plan = FrfPlan::new(method, l, overlap, window_kind, detrend_kind)?;
+    estimate_one(u, y, fs, &plan)
+}
+
+/// The ETFE with its coherence from segments of `l` samples.
+fn etfe(
+    u: &[f64],
+    y: &[f64],
+    fs: f64,
+    window_kind: Window,
+    detrend_kind: Detrend,
+    l: usize,
+    overlap: f64,
+) -> Result<Frf, FrfError> {
+    welch(
+        u,
+        y,
+        fs,
+        l,
+        overlap,
+        window_kind,
+        detrend_kind,
+        Method::Etfe,
+    )
+}
+
 fn white(seed: u64, n: usize, sigma: f64) -> Vec<f64> {
     let mut rng = Draws::new(seed, "frf tests");
     (0..n).map(|_| sigma * rng.normal()).collect()
@@ -82,17 +121,7 @@ fn hann_half_overlap_n_eff(k: usize) -> f64 {
 }
 
 fn welch_h1(u: &[f64], y: &[f64], l: usize) -> Frf {
-    welch(
-        u,
-        y,
-        FS_HZ,
-        l,
-        0.5,
-        Window::Hann,
-        Detrend::Mean,
-        Estimator::H1,
-    )
-    .unwrap()
+    welch(u, y, FS_HZ, l, 0.5, Window::Hann, Detrend::Mean, Method::H1).unwrap()
 }
 
 // 1. The naive DFT against analytic pairs.
@@ -221,17 +250,7 @@ fn welch_density_integrates_to_the_variance_of_a_periodic_signal() {
         (256, 0.0, Window::BlackmanHarris),
     ] {
         let (x, variance) = periodic_signal(l, 20 * l);
-        let frf = welch(
-            &x,
-            &x,
-            FS_HZ,
-            l,
-            overlap,
-            kind,
-            Detrend::Mean,
-            Estimator::H1,
-        )
-        .unwrap();
+        let frf = welch(&x, &x, FS_HZ, l, overlap, kind, Detrend::Mean, Method::H1).unwrap();
         assert_relative_eq!(integral(&frf), variance, max_relative = 1e-10);
         assert_relative_eq!(frf.resolution_hz, FS_HZ / l as f64);
     }
@@ -353,9 +372,9 @@ fn input_noise_biases_h1_low_by_suu_over_suu_plus_snn_and_not_h2() {
         )
         .unwrap()
     };
-    let h1 = run(Estimator::H1);
-    let h2 = run(Estimator::H2);
-    assert_eq!(h2.estimator, Estimator::H2);
+    let h1 = run(Method::H1);
+    let h2 = run(Method::H2);
+    assert_eq!(h2.method, Method::H2);
     // g^2 = 0.8 everywhere, so each ratio scatters by sqrt(0.2/(0.8 n_eff))
     // ~ 0.022 with n_eff ~ 240; the mean over 254 bins (correlated in pairs by
     // Hann) has sd ~ 0.002, so the bias is resolved to +-0.01 (5 sigma).
@@ -595,64 +614,58 @@ fn mean_detrend_removes_the_mean_only() {
 #[test]
 fn each_error_names_its_numbers() {
     let ok = vec![0.5; 64];
-    let plan = |segment_length, overlap| FrfPlan {
-        estimator: Estimator::H1,
-        segment_length,
-        overlap,
-        window: Window::Hann,
-        detrend: Detrend::Mean,
-        transient: None,
-        model_noise: false,
+    let plan = |method, segment_length, overlap| {
+        FrfPlan::new(method, segment_length, overlap, Window::Hann, Detrend::Mean)
     };
-    let message =
-        |u: &[f64], y: &[f64], fs: f64, p: FrfPlan| estimate(u, y, fs, &p).unwrap_err().to_string();
+    let message = |u: &[f64], y: &[f64], fs: f64, p: Result<FrfPlan, FrfError>| {
+        p.and_then(|p| estimate_one(u, y, fs, &p))
+            .unwrap_err()
+            .to_string()
+    };
     assert_eq!(
-        message(&ok, &ok[..60], 100.0, plan(32, 0.5)),
+        message(&ok, &ok[..60], 100.0, plan(Method::H1, 32, 0.5)),
         "u and y differ in length: u has 64 samples, y has 60"
     );
     assert_eq!(
-        message(&ok, &ok, 100.0, plan(128, 0.5)),
+        message(&ok, &ok, 100.0, plan(Method::H1, 128, 0.5)),
         "log too short: 64 samples, segment_length 128"
     );
     let mut bad = ok.clone();
     bad[17] = f64::NAN;
     assert_eq!(
-        message(&ok, &bad, 100.0, plan(32, 0.5)),
+        message(&ok, &bad, 100.0, plan(Method::H1, 32, 0.5)),
         "y sample 17 is not finite (NaN)"
     );
     bad[17] = 0.0;
     bad[3] = f64::INFINITY;
     assert_eq!(
-        message(&bad, &ok, 100.0, plan(32, 0.5)),
+        message(&bad, &ok, 100.0, plan(Method::H1, 32, 0.5)),
         "u sample 3 is not finite (inf)"
     );
     assert_eq!(
-        message(&ok, &ok, 0.0, plan(32, 0.5)),
+        message(&ok, &ok, 0.0, plan(Method::H1, 32, 0.5)),
         "sample rate must be finite and positive (got 0 Hz)"
     );
     assert_eq!(
-        message(&ok, &ok, -5.0, plan(32, 0.5)),
+        message(&ok, &ok, -5.0, plan(Method::H1, 32, 0.5)),
         "sample rate must be finite and positive (got -5 Hz)"
     );
     assert_eq!(
-        message(&ok, &ok, 100.0, plan(32, 1.0)),
+        message(&ok, &ok, 100.0, plan(Method::H1, 32, 1.0)),
         "overlap must be in [0, 1) (got 1)"
     );
     assert_eq!(
-        message(&ok, &ok, 100.0, plan(32, -0.25)),
+        message(&ok, &ok, 100.0, plan(Method::H1, 32, -0.25)),
         "overlap must be in [0, 1) (got -0.25)"
     );
     assert_eq!(
-        message(&ok, &ok, 100.0, plan(8, 0.5)),
+        message(&ok, &ok, 100.0, plan(Method::H1, 8, 0.5)),
         "segment_length must be at least 16 (got 8)"
     );
     // The ETFE checks the same things (its coherence needs a segment).
-    let etfe_plan = FrfPlan {
-        estimator: Estimator::Etfe,
-        ..plan(128, 0.5)
-    };
+    let etfe_plan = plan(Method::Etfe, 128, 0.5).unwrap();
     assert!(matches!(
-        estimate(&ok, &ok, 100.0, &etfe_plan),
+        estimate_one(&ok, &ok, 100.0, &etfe_plan),
         Err(FrfError::TooShort {
             samples: 64,
             segment_length: 128
@@ -683,20 +696,12 @@ fn bits(frf: &Frf) -> Vec<u64> {
 #[test]
 fn the_same_input_gives_the_same_bits() {
     let (u, y) = filtered_white(77, 10_000);
-    for estimator in [Estimator::H1, Estimator::H2, Estimator::Etfe] {
-        let plan = FrfPlan {
-            estimator,
-            segment_length: 1000,
-            overlap: 0.6,
-            window: Window::Hamming,
-            detrend: Detrend::Linear,
-            transient: None,
-            model_noise: false,
-        };
-        let a = estimate(&u, &y, FS_HZ, &plan).unwrap();
-        let b = estimate(&u, &y, FS_HZ, &plan).unwrap();
+    for estimator in [Method::H1, Method::H2, Method::Etfe] {
+        let plan = FrfPlan::new(estimator, 1000, 0.6, Window::Hamming, Detrend::Linear).unwrap();
+        let a = estimate_one(&u, &y, FS_HZ, &plan).unwrap();
+        let b = estimate_one(&u, &y, FS_HZ, &plan).unwrap();
         assert_eq!(bits(&a), bits(&b), "{estimator:?}");
-        assert_eq!(a.estimator, estimator);
+        assert_eq!(a.method, estimator);
     }
 }
 
@@ -868,7 +873,7 @@ fn band_mask_keeps_coherent_bins_inside_the_band() {
         suy: vec![Complex::new(1.0, 0.0); 6],
         n_averages: 10,
         effective_averages: 10.0,
-        estimator: Estimator::H1,
+        method: Method::H1,
         resolution_hz: 1.0,
         variance: None,
         input_dft: None,
@@ -1045,10 +1050,10 @@ fn the_lpm_takes_a_transient_and_a_drift_out_of_estimate_and_variance() {
             0.5,
             Window::Rectangular,
             Detrend::Mean,
-            Estimator::Lpm,
+            Method::Lpm,
         )
         .unwrap();
-        assert_eq!(lpm.estimator, Estimator::Lpm);
+        assert_eq!(lpm.method, Method::Lpm);
         for (sum, band) in sums.iter_mut().zip(bands) {
             let (rms_e, _) = scaled_errors(&etfe, band);
             let (rms, mean) = scaled_errors(&lpm, band);
@@ -1160,21 +1165,13 @@ fn the_synthesised_etfe_is_the_etfe_of_the_summed_record() {
     let e = white(8, 30_000, 0.02);
     let y: Vec<f64> = clean.iter().zip(&e).map(|(c, e)| c + e).collect();
     for detrend in [Detrend::Mean, Detrend::None] {
-        let plan = FrfPlan {
-            estimator: Estimator::Etfe,
-            segment_length: 512,
-            overlap: 0.5,
-            window: Window::Rectangular,
-            detrend,
-            transient: None,
-            model_noise: false,
-        };
+        let plan = FrfPlan::new(Method::Etfe, 512, 0.5, Window::Rectangular, detrend).unwrap();
         let synthesis = EtfeSynthesis::new(&u, FS_HZ, &plan, 150.0).unwrap();
         let got = synthesis.frf(
             &synthesis.spectra_of(&clean).unwrap(),
             &synthesis.spectra_of(&e).unwrap(),
         );
-        let mut want = estimate(&u, &y, FS_HZ, &plan).unwrap();
+        let mut want = estimate_one(&u, &y, FS_HZ, &plan).unwrap();
         want.keep_up_to(150.0, VARIANCE_REACH_BINS);
         assert_eq!(got.freq_hz, want.freq_hz);
         let close =
@@ -1215,15 +1212,7 @@ fn the_synthesised_etfe_is_the_etfe_of_the_summed_record() {
 #[test]
 fn synthesised_white_noise_has_the_variance_of_a_white_records_dft() {
     let (u, _) = filtered_white(3, 20_000);
-    let plan = FrfPlan {
-        estimator: Estimator::Etfe,
-        segment_length: 1000,
-        overlap: 0.5,
-        window: Window::Rectangular,
-        detrend: Detrend::Mean,
-        transient: None,
-        model_noise: false,
-    };
+    let plan = FrfPlan::new(Method::Etfe, 1000, 0.5, Window::Rectangular, Detrend::Mean).unwrap();
     let synthesis = EtfeSynthesis::new(&u, FS_HZ, &plan, 80.0).unwrap();
     let sigma = 0.3;
     let mut rng = Draws::new(11, "frf tests");
@@ -1259,70 +1248,68 @@ fn synthesised_white_noise_has_the_variance_of_a_white_records_dft() {
 #[test]
 fn the_synthesis_refuses_what_it_cannot_assemble() {
     let (u, _) = filtered_white(3, 4_000);
-    let plan = |estimator, window, detrend| FrfPlan {
-        estimator,
-        segment_length: 256,
-        overlap: 0.5,
-        window,
-        detrend,
-        transient: None,
-        model_noise: false,
-    };
+    let plan = |method, window, detrend| FrfPlan::new(method, 256, 0.5, window, detrend).unwrap();
     let refuse = |p: FrfPlan| EtfeSynthesis::new(&u, FS_HZ, &p, 50.0).unwrap_err();
     assert_eq!(
-        refuse(plan(Estimator::H1, Window::Rectangular, Detrend::Mean)),
-        Unsynthesizable::Estimator(Estimator::H1)
+        refuse(plan(Method::H1, Window::Rectangular, Detrend::Mean)),
+        Unsynthesizable::Estimator(Method::H1)
     );
     assert_eq!(
-        refuse(plan(Estimator::Lpm, Window::Rectangular, Detrend::Mean)),
-        Unsynthesizable::Estimator(Estimator::Lpm)
+        refuse(plan(Method::Lpm, Window::Rectangular, Detrend::Mean)),
+        Unsynthesizable::Estimator(Method::Lpm)
     );
     assert_eq!(
-        refuse(plan(Estimator::Etfe, Window::Hann, Detrend::Mean)),
+        refuse(plan(Method::Etfe, Window::Hann, Detrend::Mean)),
         Unsynthesizable::Window(Window::Hann)
     );
     assert_eq!(
-        refuse(plan(Estimator::Etfe, Window::Rectangular, Detrend::Linear)),
+        refuse(plan(Method::Etfe, Window::Rectangular, Detrend::Linear)),
         Unsynthesizable::LinearDetrend
     );
 }
 
 #[test]
 fn the_kept_bins_are_the_whole_estimates_to_the_bit() {
-    // `estimate_up_to` against `estimate` then `keep_up_to`, for every
+    // `Keep::UpTo` against every bin then `keep_up_to`, for every
     // estimator (the LPM with its noise smoothing reaching past the cut, the
     // ETFE with the command's DFT kept), and the input's total power
     // against the whole estimate's Suu summed over every bin but DC.
     let (u, y_clean) = filtered_white(41, 20_000);
     let noise = white(42, u.len(), 0.05);
     let y: Vec<f64> = y_clean.iter().zip(&noise).map(|(a, b)| a + b).collect();
-    for (estimator, transient) in [
-        (Estimator::H1, None),
-        (Estimator::H2, None),
-        (Estimator::Etfe, None),
-        (Estimator::Etfe, Some(7.0)),
-        (Estimator::Lpm, None),
+    for (method, transient) in [
+        (Method::H1, None),
+        (Method::H2, None),
+        (Method::Etfe, None),
+        (Method::Etfe, Some(7.0)),
+        (Method::Lpm, None),
     ] {
-        let plan = FrfPlan {
-            estimator,
-            segment_length: 1000,
-            overlap: 0.5,
-            window: Window::Rectangular,
-            detrend: Detrend::Linear,
-            transient,
-            model_noise: false,
+        let plan = FrfPlan::new(method, 1000, 0.5, Window::Rectangular, Detrend::Linear).unwrap();
+        let plan = match transient {
+            Some(top_hz) => plan.with_transient(top_hz),
+            None => plan,
         };
-        for (f_hz, extra) in [(8.0, VARIANCE_REACH_BINS), (8.0, 0), (49.9, 3), (1e9, 0)] {
-            let mut whole = estimate(&u, &y, FS_HZ, &plan).unwrap();
+        let one = [Output { y: &y, plan: &plan }];
+        for (hz, extra_bins) in [(8.0, VARIANCE_REACH_BINS), (8.0, 0), (49.9, 3), (1e9, 0)] {
+            let mut all = estimate(&u, &one, FS_HZ, Keep::All).unwrap();
+            let Estimate {
+                frf: mut whole,
+                input_total: all_total,
+            } = all.pop().unwrap();
             let total: f64 = whole.suu.iter().skip(1).sum();
-            let (kept, got_total) = estimate_up_to(&u, &y, FS_HZ, &plan, (f_hz, extra)).unwrap();
-            whole.keep_up_to(f_hz, extra);
-            let label = format!("{estimator:?} {transient:?} up to {f_hz} Hz + {extra}");
+            assert_eq!(all_total.to_bits(), total.to_bits(), "{method:?}");
+            let keep = Keep::UpTo { hz, extra_bins };
+            let Estimate {
+                frf: kept,
+                input_total: got_total,
+            } = estimate(&u, &one, FS_HZ, keep).unwrap().pop().unwrap();
+            whole.keep_up_to(hz, extra_bins);
+            let label = format!("{method:?} {transient:?} up to {hz} Hz + {extra_bins}");
             assert_eq!(bits(&kept), bits(&whole), "{label}");
             assert_eq!(kept.variance, whole.variance, "{label}");
             assert_eq!(kept.input_dft, whole.input_dft, "{label}");
             assert_eq!(got_total.to_bits(), total.to_bits(), "{label}");
-            if f_hz < 10.0 {
+            if hz < 10.0 {
                 assert!(
                     kept.h.len() * 4 < u.len() / 2,
                     "{label}: {} bins",
@@ -1350,11 +1337,11 @@ fn the_windows_holding_a_bin_are_those_that_hold_it() {
     }
 }
 
-/// One command to several outputs: each estimate and total the bits
-/// `estimate_up_to` gives it alone, whether the command's transforms are
-/// shared (the ETFE and LPM with the transient kept for the first output
-/// only, as a run's displacement and force take them) or each is made on
-/// its own (a Welch estimator; plans that differ beyond the transient).
+/// One command to several outputs: each estimate and total the bits it
+/// gets alone, whether the command's transforms are shared (the ETFE and
+/// LPM with the transient kept for the first output only, as a run's
+/// displacement and force take them) or each is made on its own (a Welch
+/// estimator; plans that differ beyond the transient).
 #[test]
 fn many_outputs_get_the_bits_each_gets_alone() {
     let (u, y_clean) = filtered_white(43, 20_000);
@@ -1368,49 +1355,77 @@ fn many_outputs_get_the_bits_each_gets_alone() {
         .zip(&white(45, u.len(), 0.2))
         .map(|(a, b)| 3.0 * a + b)
         .collect();
-    let plan = |estimator, transient, window| FrfPlan {
-        estimator,
-        segment_length: 1000,
-        overlap: 0.5,
-        window,
-        detrend: Detrend::Linear,
-        transient,
-        model_noise: false,
-    };
+    let plan = |method, window| FrfPlan::new(method, 1000, 0.5, window, Detrend::Linear).unwrap();
     let cases = [
-        (Estimator::Etfe, Window::Rectangular, Window::Rectangular),
-        (Estimator::Etfe, Window::Hann, Window::Hann),
-        (Estimator::Lpm, Window::Rectangular, Window::Rectangular),
-        (Estimator::H1, Window::Hann, Window::Hann),
-        (Estimator::Etfe, Window::Rectangular, Window::Hann),
+        (Method::Etfe, Window::Rectangular, Window::Rectangular),
+        (Method::Etfe, Window::Hann, Window::Hann),
+        (Method::Lpm, Window::Rectangular, Window::Rectangular),
+        (Method::H1, Window::Hann, Window::Hann),
+        (Method::Etfe, Window::Rectangular, Window::Hann),
     ];
-    for (estimator, first_window, second_window) in cases {
-        let first = plan(estimator, Some(7.0), first_window);
-        let second = plan(estimator, None, second_window);
-        for keep in [(8.0, VARIANCE_REACH_BINS), (1e9, 0)] {
-            let label = format!("{estimator:?} {first_window:?}/{second_window:?} {keep:?}");
-            let many = estimate_many_up_to(&u, &[(&y[..], &first), (&f[..], &second)], FS_HZ, keep)
-                .unwrap();
+    for (method, first_window, second_window) in cases {
+        let first = plan(method, first_window).with_transient(7.0);
+        let second = plan(method, second_window);
+        let outputs = [
+            Output {
+                y: &y,
+                plan: &first,
+            },
+            Output {
+                y: &f,
+                plan: &second,
+            },
+        ];
+        for keep in [
+            Keep::UpTo {
+                hz: 8.0,
+                extra_bins: VARIANCE_REACH_BINS,
+            },
+            Keep::UpTo {
+                hz: 1e9,
+                extra_bins: 0,
+            },
+            Keep::All,
+        ] {
+            let label = format!("{method:?} {first_window:?}/{second_window:?} {keep:?}");
+            let many = estimate(&u, &outputs, FS_HZ, keep).unwrap();
             assert_eq!(many.len(), 2, "{label}");
-            for ((got, got_total), (x, p)) in many.iter().zip([(&y, &first), (&f, &second)]) {
-                let (alone, total) = estimate_up_to(&u, x, FS_HZ, p, keep).unwrap();
-                assert_eq!(bits(got), bits(&alone), "{label}");
-                assert_eq!(got.variance, alone.variance, "{label}");
-                assert_eq!(got.input_dft, alone.input_dft, "{label}");
-                assert_eq!(got_total.to_bits(), total.to_bits(), "{label}");
+            for (got, output) in many.iter().zip(&outputs) {
+                let alone = estimate(&u, std::slice::from_ref(output), FS_HZ, keep)
+                    .unwrap()
+                    .pop()
+                    .unwrap();
+                assert_eq!(bits(&got.frf), bits(&alone.frf), "{label}");
+                assert_eq!(got.frf.variance, alone.frf.variance, "{label}");
+                assert_eq!(got.frf.input_dft, alone.frf.input_dft, "{label}");
+                assert_eq!(
+                    got.input_total.to_bits(),
+                    alone.input_total.to_bits(),
+                    "{label}"
+                );
             }
             // The transient keeps the whole-record estimate's command
             // transform for the first output only.
-            let whole_record = estimator != Estimator::H1;
-            assert_eq!(many[0].0.input_dft.is_some(), whole_record, "{label}");
-            assert!(many[1].0.input_dft.is_none(), "{label}");
+            let whole_record = method != Method::H1;
+            assert_eq!(many[0].frf.input_dft.is_some(), whole_record, "{label}");
+            assert!(many[1].frf.input_dft.is_none(), "{label}");
         }
     }
     // An output of the wrong length is refused as alone.
     let short = &f[..f.len() - 1];
-    let p = plan(Estimator::Etfe, None, Window::Rectangular);
+    let p = plan(Method::Etfe, Window::Rectangular);
+    let keep = Keep::UpTo {
+        hz: 8.0,
+        extra_bins: 0,
+    };
     assert_eq!(
-        estimate_many_up_to(&u, &[(&y[..], &p), (short, &p)], FS_HZ, (8.0, 0)).unwrap_err(),
-        estimate_up_to(&u, short, FS_HZ, &p, (8.0, 0)).unwrap_err()
+        estimate(
+            &u,
+            &[Output { y: &y, plan: &p }, Output { y: short, plan: &p }],
+            FS_HZ,
+            keep
+        )
+        .unwrap_err(),
+        estimate(&u, &[Output { y: short, plan: &p }], FS_HZ, keep).unwrap_err()
     );
 }

@@ -182,7 +182,7 @@ impl RunTfError {
 /// unstable or did not converge. The fit's own warnings are in
 /// `TfFit::warnings`.
 ///
-/// With `plan.transient` the record's transient is fitted beside the model
+/// With `plan.transient()` the record's transient is fitted beside the model
 /// (`fit::transient`) and taken out of `h`; the bins' variances are then
 /// estimated again from `h` without it (the ETFE's local noise level
 /// counts a transient as noise) and the model fitted once more with them.
@@ -212,7 +212,7 @@ pub fn fit_run(
         });
     }
     let opts = fit_options(ident, plan, sample_rate_hz);
-    let (fit, data) = if plan.model_noise {
+    let (fit, data) = if plan.model_noise() {
         refined_fit(h, mask, band_hz, plan, &opts, ident.max_delay_s, start)?
     } else {
         let data = FitData::of(h, mask, plan);
@@ -240,11 +240,11 @@ pub fn fit_run(
     Ok((fit, data))
 }
 
-/// [`fit_run`]'s fit as `auto` makes it (`plan.model_noise`). For a
+/// [`fit_run`]'s fit as `auto` makes it (`plan.model_noise()`). For a
 /// command of sparse lines over `band_hz` (`frf::sparse_lines`), the FRF
 /// and its variance at the excited lines from the non-excited ones
 /// (`frf::at_lines`), and the model fitted there. Otherwise, first what
-/// is not the model: the record's transient (when `plan.transient`) and
+/// is not the model: the record's transient (when `plan.transient()`) and
 /// the bins' noise level, from a fit of the model with a delay (up to
 /// `max_delay_s`, whatever the manifest's delay: a sensor's delay the
 /// model lacks would leave the transient's columns wrong and its misfit
@@ -275,7 +275,7 @@ fn refined_fit(
         };
         return Ok((fit, data));
     }
-    let u = h.input_dft.clone().filter(|_| plan.transient.is_some());
+    let u = h.input_dft.clone().filter(|_| plan.transient().is_some());
     let (bins, variance) = FitData::usable(h, mask);
     let data = FitData::at(h, &bins, variance, plan);
     let first = if opts.delay == DelayPlan::None {

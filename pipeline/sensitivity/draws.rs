@@ -321,7 +321,7 @@ fn read(
             }
         })
         .collect();
-    frf::estimate(input.command_m, &y, input.sample_rate_hz, input.frf).map_err(|e| {
+    frf::estimate_one(input.command_m, &y, input.sample_rate_hz, input.frf).map_err(|e| {
         DrawError::Run {
             run: "simulated",
             source: RunTfError::Frf(e),
@@ -333,7 +333,7 @@ fn read(
 mod tests {
     use super::*;
     use crate::fit::{DelayPlan, Intersample};
-    use crate::frf::{Detrend, Estimator, FrfPlan, Window};
+    use crate::frf::{Detrend, FrfPlan, Method, Window};
     use crate::identify::{FitData, fit_options};
     use crate::sensitivity::{CoefficientNoise, NoiseProfile, stiffness_sweep};
 
@@ -376,15 +376,7 @@ mod tests {
 
     /// The ETFE with a rectangular window, as the bundled default states it.
     fn etfe() -> FrfPlan {
-        FrfPlan {
-            estimator: Estimator::Etfe,
-            segment_length: 4096,
-            overlap: 0.5,
-            window: Window::Rectangular,
-            detrend: Detrend::Mean,
-            transient: None,
-            model_noise: false,
-        }
+        FrfPlan::new(Method::Etfe, 4096, 0.5, Window::Rectangular, Detrend::Mean).unwrap()
     }
 
     fn ident() -> IdentificationPlan {
@@ -424,7 +416,7 @@ mod tests {
         for v in &mut y {
             *v += noise.sample(&mut rng);
         }
-        let h = frf::estimate(&u, &y, 1000.0, &frf).unwrap();
+        let h = frf::estimate_one(&u, &y, 1000.0, &frf).unwrap();
         let data = FitData::of(&h, &frf::band_mask(&h, ident.band_hz, 0.0), &frf);
         let profile = NoiseProfile {
             run: "no-specimen".into(),
@@ -539,10 +531,8 @@ mod tests {
         assert!(matches!(Reading::of(&input), Reading::Samples));
         input.step_m = Some(1e-6);
         assert!(matches!(Reading::of(&input), Reading::Spectra { .. }));
-        let welch = FrfPlan {
-            estimator: Estimator::H1,
-            ..etfe()
-        };
+        let welch =
+            FrfPlan::new(Method::H1, 4096, 0.5, Window::Rectangular, Detrend::Mean).unwrap();
         let input = paper_input(&u, &ident, &welch);
         assert!(matches!(Reading::of(&input), Reading::Samples));
     }

@@ -407,7 +407,7 @@ mod tests {
     /// Independent: the noise is drawn here, its rms known.
     #[test]
     fn the_frf_variance_gives_the_white_noise_level_back() {
-        use crate::frf::{self, Detrend, Estimator, FrfPlan, Window};
+        use crate::frf::{self, Detrend, FrfPlan, Method, Window};
         use rand_distr::{Distribution, Normal};
         let fs = 1000.0;
         let n = 60_000;
@@ -422,16 +422,9 @@ mod tests {
                 0.5 * u[i] + 0.3 * prev + sigma * unit.sample(&mut rng)
             })
             .collect();
-        let plan = FrfPlan {
-            estimator: Estimator::Etfe,
-            segment_length: 4096,
-            overlap: 0.5,
-            window: Window::Rectangular,
-            detrend: Detrend::Mean,
-            transient: None,
-            model_noise: false,
-        };
-        let h = frf::estimate(&u, &y, fs, &plan).unwrap();
+        let plan =
+            FrfPlan::new(Method::Etfe, 4096, 0.5, Window::Rectangular, Detrend::Mean).unwrap();
+        let h = frf::estimate_one(&u, &y, fs, &plan).unwrap();
         let bins: Vec<usize> = (0..h.freq_hz.len())
             .filter(|&i| h.freq_hz[i] > 5.0 && h.freq_hz[i] < 400.0)
             .collect();

@@ -18,7 +18,7 @@ use super::{
 };
 use crate::fit::band::response_std;
 use crate::fit::{Intersample, hold_response};
-use crate::frf::Estimator;
+use crate::frf::Method;
 use crate::lti::TransferFunction;
 use crate::lti::complex_vec;
 use crate::manifest::Role;
@@ -286,11 +286,11 @@ fn frf_figure(run: &RunResult, measured: &Measured<'_>, frf: &RunFrf) -> FigureS
             )
         })
         .unwrap_or_default();
-    let estimator = match measured.frf.estimator {
-        Estimator::H1 => "H1",
-        Estimator::H2 => "H2",
-        Estimator::Etfe | Estimator::Auto => "ETFE",
-        Estimator::Lpm => "ETFE, LPM transient out",
+    let estimator = match measured.frf.method {
+        Method::H1 => "H1",
+        Method::H2 => "H2",
+        Method::Etfe => "ETFE",
+        Method::Lpm => "ETFE, LPM transient out",
     };
     FigureSpec {
         id: format!("frf-{}", run.id),
