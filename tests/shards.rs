@@ -138,6 +138,68 @@ fn shards_that_do_not_belong_together_are_refused() {
     refused(&[&s0, &s1], "a shard of another servoid version (0.0.1;");
 }
 
+/// A night's `--date` goes with its shards: each records it, the merge
+/// gives it to the history's entry as one run would, and shards of two
+/// dates, or a merge asked for another, are refused before anything is
+/// written.
+#[test]
+fn a_nights_date_goes_through_its_shards_into_the_history() {
+    use servoid::ingest::{TableFormat, read_table};
+    let dir = scratch();
+    let manifest = campaign(dir.path());
+    let dated = |i: usize, date: &str| -> PathBuf {
+        let out = dir.path().join(format!("shard-{i}-{date}"));
+        let share = format!("{i}/2");
+        let o = servoid_into(
+            dir.path(),
+            "run",
+            &manifest,
+            &out,
+            &["--shard", &share, "--date", date, "--quiet"],
+        );
+        assert_eq!(o.code, 0, "{}", o.stderr);
+        out
+    };
+    let (s0, s1) = (dated(0, "2026-11-02"), dated(1, "2026-11-02"));
+    let o = merge(dir.path(), &[&s0, &s1], "merged");
+    assert_eq!(o.code, 0, "{}", o.stderr);
+    let history = read_table(
+        &dir.path().join("merged/history.parquet"),
+        TableFormat::Parquet,
+    )
+    .unwrap();
+    let k = history.column("date").expect("a date column");
+    assert_eq!(history.rows.len(), 1);
+    assert_eq!(history.rows[0][k].as_deref(), Some("2026-11-02"));
+
+    let other = dated(1, "2026-11-03");
+    let o = merge(dir.path(), &[&s0, &other], "two-dates");
+    assert_eq!(o.code, 2, "{}", o.stderr);
+    assert!(o.stderr.contains("--date"), "{}", o.stderr);
+    assert!(!dir.path().join("two-dates").exists());
+    let out = dir.path().join("asked");
+    let o = servoid(
+        dir.path(),
+        &[
+            "merge",
+            s0.to_str().unwrap(),
+            s1.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+            "--date",
+            "2026-11-03",
+        ],
+    );
+    assert_eq!(o.code, 2, "{}", o.stderr);
+    assert!(
+        o.stderr
+            .contains("the shards were run with --date 2026-11-02"),
+        "{}",
+        o.stderr
+    );
+    assert!(!out.exists());
+}
+
 /// With the validation runs in the joint fit the rig needs every
 /// validation log, which a shard reading only its share cannot give: the
 /// shard is refused as a usage error naming the key, before it writes
