@@ -12,7 +12,7 @@ pub mod joint;
 mod run_fit;
 mod settings;
 
-pub use run_fit::{FitData, RunTfError, fit_options, fit_run};
+pub use run_fit::{FitData, RunTfError, UnstableCause, fit_options, fit_run};
 pub use settings::IdentificationPlan;
 
 use schemars::JsonSchema;

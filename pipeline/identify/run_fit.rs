@@ -155,10 +155,55 @@ pub enum RunTfError {
     Fit(#[from] FitError),
     #[error("the fit did not converge ({termination}); refusing a model that is not an optimum")]
     NotConverged { termination: String },
-    #[error(
-        "the fitted model is unstable (poles {poles}); refusing it. Swapped command and displacement columns give this: check the channels' columns"
-    )]
-    Unstable { poles: String },
+    #[error("the fitted model is unstable (poles {poles}); refusing it. {cause}")]
+    Unstable { poles: String, cause: UnstableCause },
+}
+
+/// What the data say an unstable fit comes from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum UnstableCause {
+    /// The measured FRF leads its command over most of the band, as the
+    /// inverse of an actuator's lag does: displacement read as command.
+    Swapped,
+    /// The fit has a delay: a delay and a pole can trade phase (the lag of
+    /// e^(-s tau) against a pole's), and the band does not set both.
+    DelayTradeOff,
+    /// Neither: the band's bins do not fix a stable model of this order.
+    Underdetermined,
+}
+
+impl std::fmt::Display for UnstableCause {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            UnstableCause::Swapped => {
+                "The measured response leads its command over most of the band, as swapped command and displacement columns give: check the channels' columns"
+            }
+            UnstableCause::DelayTradeOff => {
+                "The fitted delay trades phase with a pole, and the band does not set both: fit without the delay (identification.delay = { mode = \"none\" })"
+            }
+            UnstableCause::Underdetermined => {
+                "The response lags its command, so the columns are not swapped: the band's bins do not fix a stable model of this order; narrow identification.band_hz to where the coherence is high"
+            }
+        })
+    }
+}
+
+impl UnstableCause {
+    /// The cause the fitted bins `h` and the unstable fit's delay point
+    /// to: a lead over most of the bins (median phase above zero) is the
+    /// inverse of an actuator's lag; else a fitted delay; else the bins.
+    fn of(h: &[nalgebra::Complex<f64>], delay_s: f64) -> Self {
+        let mut phase: Vec<f64> = h.iter().map(|h| h.arg()).collect();
+        phase.sort_by(f64::total_cmp);
+        let median = phase.get(phase.len() / 2).copied().unwrap_or(0.0);
+        if median > 0.0 {
+            UnstableCause::Swapped
+        } else if delay_s > 0.0 {
+            UnstableCause::DelayTradeOff
+        } else {
+            UnstableCause::Underdetermined
+        }
+    }
 }
 
 impl RunTfError {
@@ -230,7 +275,10 @@ pub fn fit_run(
             .map(|p| format!("{:.4}{:+.4}j", p.re, p.im))
             .collect::<Vec<_>>()
             .join(", ");
-        return Err(RunTfError::Unstable { poles });
+        return Err(RunTfError::Unstable {
+            cause: UnstableCause::of(&data.h, fit.tf.delay_s),
+            poles,
+        });
     }
     if !fit.converged {
         return Err(RunTfError::NotConverged {
@@ -356,4 +404,48 @@ fn residual_noise(
         }
     }
     FitData::usable(&residual, &mask[..residual.h.len()])
+}
+
+#[cfg(test)]
+mod tests {
+    use super::UnstableCause;
+    use nalgebra::Complex;
+
+    /// The paper's no-specimen x1/u, 3060 / (s^2 + 267 s + 3060) (Sec. 3.1),
+    /// at 0.5-30 Hz.
+    fn actuator() -> Vec<Complex<f64>> {
+        (1..=60)
+            .map(|k| {
+                let s = Complex::new(0.0, 2.0 * std::f64::consts::PI * 0.5 * k as f64);
+                Complex::new(3060.0, 0.0) / (s * s + s * 267.0 + 3060.0)
+            })
+            .collect()
+    }
+
+    /// An unstable fit is put down to swapped columns only where the
+    /// response leads its command (the inverse of the actuator's lag);
+    /// with the actuator's own lag, to a fitted delay where there is one,
+    /// else to the bins; and the message says so.
+    #[test]
+    fn an_unstable_fit_is_put_down_to_what_the_response_shows() {
+        let lag = actuator();
+        let lead: Vec<Complex<f64>> = lag.iter().map(|h| h.inv()).collect();
+        assert_eq!(UnstableCause::of(&lead, 0.0), UnstableCause::Swapped);
+        assert_eq!(UnstableCause::of(&lead, 3e-3), UnstableCause::Swapped);
+        assert_eq!(UnstableCause::of(&lag, 3e-3), UnstableCause::DelayTradeOff);
+        assert_eq!(UnstableCause::of(&lag, 0.0), UnstableCause::Underdetermined);
+        for cause in [UnstableCause::DelayTradeOff, UnstableCause::Underdetermined] {
+            assert!(!cause.to_string().contains("swapped command"), "{cause}");
+        }
+        assert!(
+            UnstableCause::DelayTradeOff
+                .to_string()
+                .contains("identification.delay")
+        );
+        assert!(
+            UnstableCause::Swapped
+                .to_string()
+                .contains("swapped command and displacement")
+        );
+    }
 }
