@@ -15,7 +15,7 @@ use crate::fit::Intersample;
 use crate::ingest::LogFile;
 use crate::manifest::{Campaign, RunPlan};
 use crate::model::RigParams;
-use crate::report::figures::catalogue::{self, ForceBins, OverlayRun, Prediction};
+use crate::report::figures::catalogue::{self, ForceBins, OverlayRun};
 use crate::report::tables::RunTables;
 use crate::report::{FigureSpec, Measured};
 use crate::results::RunResult;
@@ -129,33 +129,22 @@ pub(super) fn without_rig(
         Ok(d) => d,
         Err(e) => return Output::unread(new_result(plan), Arc::new(e)),
     };
-    let mut kept = Kept {
-        estimate: done.evidence,
-        noise: done.noise,
-        ..Kept::of(done.result)
+    let (figures, overlay) = match wants.figures {
+        true => catalogue::fitted_figures(&done, wants.intersample),
+        false => (Vec::new(), None),
     };
-    let mut figures = Vec::new();
     let measured = done.stage.as_deref().map(Measured::of);
-    if let (Some(st), Some(m)) = (&done.stage, &measured) {
-        kept.force = ForceBins::of(m);
-        if wants.figures {
-            let time = done.time.as_ref();
-            let (mut specs, overlay) =
-                catalogue::log_figures(&kept.result, m, time, wants.intersample, None);
-            if let Some(t) = time {
-                specs.extend(catalogue::subspace_figure(
-                    &kept.result,
-                    &st.log.command_m,
-                    t,
-                    st.log.sample_rate_hz,
-                ));
-            }
-            (figures, kept.overlay) = (specs, overlay);
-        }
-    }
+    let force = measured.as_ref().and_then(ForceBins::of);
+    let tables = tables(&done.result, measured.as_ref(), wants);
     Output {
-        tables: tables(&kept.result, measured.as_ref(), wants),
-        kept,
+        kept: Kept {
+            estimate: done.evidence,
+            noise: done.noise,
+            force,
+            overlay,
+            ..Kept::of(done.result)
+        },
+        tables,
         figures,
         log_error: None,
         cacheable: true,
@@ -216,56 +205,16 @@ pub(super) fn validation(
 
 /// A validated run's figures and tables.
 fn validated(v: Validated, wants: Wants) -> Output {
-    let Validated {
-        result: out,
-        stage: st,
-        time,
-        plant,
-        csi,
-        rig_at_p,
-        rig_cov,
-        specimen,
-    } = v;
-    let measured = Measured::of(&st);
-    let figures = if wants.figures {
-        // The prediction's band, from the rig's covariance.
-        let prediction = rig_cov.zip(specimen).map(|(cov, specimen)| Prediction {
-            rig: rig_at_p,
-            cov,
-            specimen,
-        });
-        let (mut specs, _) = catalogue::log_figures(
-            &out,
-            &measured,
-            time.as_ref(),
-            wants.intersample,
-            prediction.as_ref(),
-        );
-        if let (Some(bins), Some(model)) = (ForceBins::of(&measured), &out.force_tf) {
-            let force =
-                catalogue::force_figure(&out, &bins, model, wants.intersample, csi.as_ref());
-            specs.insert(1, force);
-        }
-        if let Some(g) = &plant {
-            specs.extend(catalogue::compensator_figures(&out, g));
-        }
-        if let Some(t) = &time {
-            specs.extend(catalogue::subspace_figure(
-                &out,
-                &st.log.command_m,
-                t,
-                st.log.sample_rate_hz,
-            ));
-        }
-        specs
-    } else {
-        Vec::new()
+    let figures = match wants.figures {
+        true => catalogue::validated_figures(&v, wants.intersample),
+        false => Vec::new(),
     };
+    let tables = tables(&v.result, Some(&Measured::of(&v.stage)), wants);
     Output {
-        tables: tables(&out, Some(&measured), wants),
+        tables,
         kept: Kept {
-            csi,
-            ..Kept::of(out)
+            csi: v.csi,
+            ..Kept::of(v.result)
         },
         figures,
         log_error: None,

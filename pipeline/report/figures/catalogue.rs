@@ -69,6 +69,69 @@ pub fn log_figures(
     (out, overlay)
 }
 
+/// The figures of a run analysed without the rig
+/// (`analysis::step::without_rig`): its log's figures and the state
+/// trajectory of its time-domain check, with what Fig. 15 needs of it.
+pub fn fitted_figures(
+    run: &crate::analysis::step::Fitted,
+    intersample: Intersample,
+) -> (Vec<FigureSpec>, Option<OverlayRun>) {
+    let Some(st) = &run.stage else {
+        return (Vec::new(), None);
+    };
+    let time = run.time.as_ref();
+    let (mut specs, overlay) = log_figures(&run.result, &Measured::of(st), time, intersample, None);
+    if let Some(t) = time {
+        specs.extend(subspace_figure(
+            &run.result,
+            &st.log.command_m,
+            t,
+            st.log.sample_rate_hz,
+        ));
+    }
+    (specs, overlay)
+}
+
+/// The figures of a validated run (`analysis::step::Validated`), in page
+/// order: its FRF with the model's band, the force path (Figs. 16-17) with
+/// the control-structure interaction, its time windows and residual, the
+/// compensator's figures and the state trajectory.
+pub fn validated_figures(
+    v: &crate::analysis::step::Validated,
+    intersample: Intersample,
+) -> Vec<FigureSpec> {
+    let (out, measured) = (&v.result, Measured::of(&v.stage));
+    // The prediction's band, from the rig's covariance.
+    let prediction = v.rig_cov.zip(v.specimen).map(|(cov, specimen)| Prediction {
+        rig: v.rig_at_p,
+        cov,
+        specimen,
+    });
+    let (mut specs, _) = log_figures(
+        out,
+        &measured,
+        v.time.as_ref(),
+        intersample,
+        prediction.as_ref(),
+    );
+    if let (Some(bins), Some(model)) = (ForceBins::of(&measured), &out.force_tf) {
+        let force = force_figure(out, &bins, model, intersample, v.csi.as_ref());
+        specs.insert(1, force);
+    }
+    if let Some(g) = &v.plant {
+        specs.extend(compensator_figures(out, g));
+    }
+    if let Some(t) = &v.time {
+        specs.extend(subspace_figure(
+            out,
+            &v.stage.log.command_m,
+            t,
+            v.stage.log.sample_rate_hz,
+        ));
+    }
+    specs
+}
+
 /// The campaign's own figures: the identification runs together (Fig. 15,
 /// when there are two or more) and the stiffness sensitivity.
 pub fn campaign_figures(
