@@ -112,6 +112,17 @@ fn cases() -> Vec<Case> {
             },
         )
     });
+    // A random-odd multisine with a low crest factor: its period repeated,
+    // faded in over the first and out over the last, between rests.
+    out.push(case(
+        "a random-odd multisine, six 10 s periods between rests",
+        PaperSweep {
+            excitation: Some(
+                "kind = \"odd_multisine\"\nf_min_hz = 0.5\nf_max_hz = 35.0\nperiod_s = 10.0\nrms_m = 0.0015\nduration_s = 60.0\nlead_in_s = 1.0\nlead_out_s = 1.0",
+            ),
+            ..sweep()
+        },
+    ));
     for (name, bits, amplitude_m) in [
         ("a 0.3 mm chirp through 18-bit converters", 18, 3e-4),
         ("a 4 mm chirp through 12-bit converters", 12, 4e-3),

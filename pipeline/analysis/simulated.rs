@@ -75,9 +75,9 @@ pub fn simulate_run(plan: &SimulationPlan, run: &SimRunPlan) -> Result<RunSignal
     // Multisine phases and random bands draw from the campaign seed, per run.
     let exc_seed = seed_for(m.simulation.seed, &format!("excitation/{}", run.id));
     match &mut exc {
-        Excitation::Multisine { seed, .. } | Excitation::RandomBand { seed, .. } => {
-            *seed = exc_seed
-        }
+        Excitation::Multisine { seed, .. }
+        | Excitation::RandomBand { seed, .. }
+        | Excitation::OddMultisine { seed, .. } => *seed = exc_seed,
         Excitation::Chirp { .. } | Excitation::Square { .. } => {}
     }
     let mut u = excitation::generate(&exc, fs, run.padding)

@@ -262,7 +262,8 @@ pub struct ExcitationSpec {
     #[serde(default)]
     pub amplitude_m: Option<f64>,
     /// A square wave's full period (s): it holds each level half a period,
-    /// switching at the sample nearest each edge.
+    /// switching at the sample nearest each edge. An odd multisine's
+    /// period (s): its lines are the odd harmonics of 1 / period_s.
     #[serde(default)]
     pub period_s: Option<f64>,
     /// RMS of a multisine or random signal (m).
@@ -296,6 +297,12 @@ pub enum ExcitationKind {
     RandomBand,
     /// A square wave (servo tuning): `amplitude_m`, `period_s`.
     Square,
+    /// A random-odd multisine with a low crest factor, periodic: flat lines
+    /// on the odd harmonics of 1 / `period_s` in `f_min_hz`-`f_max_hz`, one
+    /// of each three left out (where odd distortion shows), `rms_m`;
+    /// `duration_s` a whole number of periods, at least 3, the first
+    /// fading in and the last out.
+    OddMultisine,
 }
 
 /// Chirp laws (MATLAB `chirp` conventions).
@@ -839,59 +846,108 @@ fn excitation(spec: &ExcitationSpec) -> Excitation {
             period_s: spec.period_s.unwrap_or_default(),
             duration_s: spec.duration_s,
         },
+        ExcitationKind::OddMultisine => Excitation::OddMultisine {
+            f_min_hz: spec.f_min_hz.unwrap_or_default(),
+            f_max_hz: spec.f_max_hz.unwrap_or_default(),
+            rms_m: spec.rms_m.unwrap_or_default(),
+            period_s: spec.period_s.unwrap_or_default(),
+            duration_s: spec.duration_s,
+            seed: 0,
+        },
     }
 }
 
-fn check_excitation(
+/// A required positive key of an excitation: its value, or None with the
+/// problem reported.
+fn needed(
+    e: &ExcitationSpec,
+    p: &KeyPath,
+    key: &str,
+    v: Option<f64>,
+    bad: &mut impl FnMut(KeyPath, String),
+) -> Option<f64> {
+    match v {
+        None => {
+            bad(
+                p.key(key),
+                format!("a {} excitation needs `{key}`", kind_name(e.kind)),
+            );
+            None
+        }
+        Some(x) if !(x.is_finite() && x > 0.0) => {
+            bad(p.key(key), format!("must be positive (got {x})"));
+            None
+        }
+        Some(x) => Some(x),
+    }
+}
+
+/// The band a kind sweeps or fills (its two keys and their values), each
+/// key the kind needs checked.
+type Band = Option<(&'static str, &'static str, Option<f64>, Option<f64>)>;
+
+fn kind_keys(
     e: &ExcitationSpec,
     p: &KeyPath,
     fs: Option<f64>,
     bad: &mut impl FnMut(KeyPath, String),
-) {
-    let nyquist = fs.filter(|f| f.is_finite() && *f > 0.0).map(|f| 0.5 * f);
-    let need = |key: &str, v: Option<f64>, bad: &mut dyn FnMut(KeyPath, String)| -> Option<f64> {
-        match v {
-            None => {
-                bad(
-                    p.key(key),
-                    format!("a {} excitation needs `{key}`", kind_name(e.kind)),
-                );
-                None
-            }
-            Some(x) if !(x.is_finite() && x > 0.0) => {
-                bad(p.key(key), format!("must be positive (got {x})"));
-                None
-            }
-            Some(x) => Some(x),
-        }
-    };
-    // The band a kind sweeps or fills: its two keys and their values.
-    let band = match e.kind {
+) -> Band {
+    let mut need = |key: &str, v: Option<f64>| needed(e, p, key, v, bad);
+    match e.kind {
         ExcitationKind::Chirp => {
-            need("amplitude_m", e.amplitude_m, bad);
+            need("amplitude_m", e.amplitude_m);
             Some((
                 "f0_hz",
                 "f1_hz",
-                need("f0_hz", e.f0_hz, bad),
-                need("f1_hz", e.f1_hz, bad),
+                need("f0_hz", e.f0_hz),
+                need("f1_hz", e.f1_hz),
             ))
         }
         ExcitationKind::Multisine | ExcitationKind::RandomBand => {
-            need("rms_m", e.rms_m, bad);
+            need("rms_m", e.rms_m);
+            let band = Some((
+                "f_min_hz",
+                "f_max_hz",
+                need("f_min_hz", e.f_min_hz),
+                need("f_max_hz", e.f_max_hz),
+            ));
             if e.kind == ExcitationKind::Multisine && e.n_tones.is_none_or(|n| n == 0) {
                 bad(p.key("n_tones"), "a multisine needs `n_tones` >= 1".into());
             }
-            Some((
+            band
+        }
+        ExcitationKind::OddMultisine => {
+            need("rms_m", e.rms_m);
+            let period = need("period_s", e.period_s);
+            let band = Some((
                 "f_min_hz",
                 "f_max_hz",
-                need("f_min_hz", e.f_min_hz, bad),
-                need("f_max_hz", e.f_max_hz, bad),
-            ))
+                need("f_min_hz", e.f_min_hz),
+                need("f_max_hz", e.f_max_hz),
+            ));
+            // Whole periods, one fading in, one at least steady, one
+            // fading out.
+            if let Some(period) = period
+                && e.duration_s.is_finite()
+                && e.duration_s > 0.0
+            {
+                let periods = e.duration_s / period;
+                if (periods - periods.round()).abs() > 1e-9 * periods || periods.round() < 3.0 {
+                    bad(
+                        p.key("duration_s"),
+                        format!(
+                            "{} s is {periods} periods of period_s = {period} s; an odd multisine needs a whole number of periods, at least 3 (one fading in, one steady, one fading out)",
+                            e.duration_s
+                        ),
+                    );
+                }
+            }
+            band
         }
         ExcitationKind::Square => {
-            need("amplitude_m", e.amplitude_m, bad);
+            need("amplitude_m", e.amplitude_m);
             // Two samples a period: one per level at the least.
-            if let Some(period) = need("period_s", e.period_s, bad)
+            if let Some(period) = need("period_s", e.period_s)
                 && let Some(fs) = fs.filter(|f| f.is_finite() && *f > 0.0)
                 && period * fs < 2.0
             {
@@ -905,7 +961,17 @@ fn check_excitation(
             }
             None
         }
-    };
+    }
+}
+
+fn check_excitation(
+    e: &ExcitationSpec,
+    p: &KeyPath,
+    fs: Option<f64>,
+    bad: &mut impl FnMut(KeyPath, String),
+) {
+    let nyquist = fs.filter(|f| f.is_finite() && *f > 0.0).map(|f| 0.5 * f);
+    let band = kind_keys(e, p, fs, bad);
     if let Some((lo_key, hi_key, lo, hi)) = band {
         if let (Some(lo), Some(hi)) = (lo, hi)
             && e.kind != ExcitationKind::Chirp
@@ -946,8 +1012,15 @@ fn check_excitation(
     if e.kind != ExcitationKind::Chirp && e.law.is_some() {
         bad(p.key("law"), "applies only to a chirp".into());
     }
-    if e.kind != ExcitationKind::Square && e.period_s.is_some() {
-        bad(p.key("period_s"), "applies only to a square wave".into());
+    if !matches!(
+        e.kind,
+        ExcitationKind::Square | ExcitationKind::OddMultisine
+    ) && e.period_s.is_some()
+    {
+        bad(
+            p.key("period_s"),
+            "applies only to a square wave or an odd multisine".into(),
+        );
     }
     if let Some(l) = e.limit_m
         && !(l.is_finite() && l > 0.0)
@@ -962,6 +1035,7 @@ fn kind_name(k: ExcitationKind) -> &'static str {
         ExcitationKind::Multisine => "multisine",
         ExcitationKind::RandomBand => "random_band",
         ExcitationKind::Square => "square",
+        ExcitationKind::OddMultisine => "odd_multisine",
     }
 }
 

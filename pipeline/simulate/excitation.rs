@@ -74,6 +74,21 @@ pub enum Excitation {
         period_s: f64,
         duration_s: f64,
     },
+    /// A random-odd multisine (`multisine::odd_multisine`): flat lines on
+    /// the odd harmonics of 1 / period_s in [f_min_hz, f_max_hz], one of
+    /// each three left out to detect odd distortion, its crest factor
+    /// lowered; the period repeated over duration_s (a whole number of
+    /// periods, at least three), faded in over the first period and out
+    /// over the last, so that the command starts and ends at rest. rms_m
+    /// is a whole period's.
+    OddMultisine {
+        f_min_hz: f64,
+        f_max_hz: f64,
+        rms_m: f64,
+        period_s: f64,
+        duration_s: f64,
+        seed: u64,
+    },
 }
 
 /// Zeros before and after the excitation (s).
@@ -135,6 +150,22 @@ pub enum ExcitationError {
         resolution_hz: f64,
     },
     #[error(
+        "duration_s = {duration_s} s is {periods} periods of period_s = {period_s} s; an odd multisine needs a whole number of periods, at least 3 (one fading in, one at least steady, one fading out)"
+    )]
+    Periods {
+        duration_s: f64,
+        period_s: f64,
+        periods: f64,
+    },
+    #[error(
+        "the band {f_min_hz}-{f_max_hz} Hz holds no odd harmonic of 1/period_s = {resolution_hz} Hz; lengthen period_s or widen the band"
+    )]
+    NoOddLine {
+        f_min_hz: f64,
+        f_max_hz: f64,
+        resolution_hz: f64,
+    },
+    #[error(
         "the band {f_min_hz}-{f_max_hz} Hz contains no bin of the {resolution_hz} Hz grid (1/duration_s) above DC; lengthen duration_s or widen the band"
     )]
     EmptyBand {
@@ -180,7 +211,8 @@ impl Excitation {
             Excitation::Chirp { duration_s, .. }
             | Excitation::Multisine { duration_s, .. }
             | Excitation::RandomBand { duration_s, .. }
-            | Excitation::Square { duration_s, .. } => duration_s,
+            | Excitation::Square { duration_s, .. }
+            | Excitation::OddMultisine { duration_s, .. } => duration_s,
         }
     }
 
@@ -262,6 +294,37 @@ impl Excitation {
                         period_s,
                         sample_rate_hz: fs,
                         samples: period_s * fs,
+                    });
+                }
+            }
+            Excitation::OddMultisine {
+                f_min_hz,
+                f_max_hz,
+                rms_m,
+                period_s,
+                duration_s,
+                ..
+            } => {
+                band(f_min_hz, f_max_hz, fs)?;
+                positive("rms_m", rms_m)?;
+                positive("period_s", period_s)?;
+                let periods = duration_s / period_s;
+                if (periods - periods.round()).abs() > 1e-9 * periods || periods.round() < 3.0 {
+                    return Err(ExcitationError::Periods {
+                        duration_s,
+                        period_s,
+                        periods,
+                    });
+                }
+                let res = 1.0 / period_s;
+                // The first odd harmonic at or above f_min_hz.
+                let k = ((f_min_hz / res) * (1.0 - 1e-12)).ceil().max(1.0) as usize;
+                let first_odd = k | 1;
+                if first_odd as f64 * res > f_max_hz * (1.0 + 1e-12) {
+                    return Err(ExcitationError::NoOddLine {
+                        f_min_hz,
+                        f_max_hz,
+                        resolution_hz: res,
                     });
                 }
             }
@@ -388,6 +451,24 @@ pub fn generate(
             }
             body
         }
+        Excitation::OddMultisine {
+            f_min_hz,
+            f_max_hz,
+            rms_m,
+            period_s,
+            seed,
+            ..
+        } => {
+            let len = (period_s * fs).round() as usize;
+            let mut rng = seeded_rng(seed, "excitation/odd_multisine");
+            let m = super::multisine::odd_multisine(f_min_hz, f_max_hz, fs, len, rms_m, &mut rng)
+                .ok_or(ExcitationError::NoOddLine {
+                f_min_hz,
+                f_max_hz,
+                resolution_hz: 1.0 / period_s,
+            })?;
+            faded(&m.period, n)
+        }
     };
     let lead_in = (padding.lead_in_s * fs).round() as usize;
     let lead_out = (padding.lead_out_s * fs).round() as usize;
@@ -396,6 +477,26 @@ pub fn generate(
     u.extend(body);
     u.resize(u.len() + lead_out, 0.0);
     Ok(u)
+}
+
+/// `period` repeated over `n` samples, faded in over the first period and
+/// out over the last by a raised cosine, so that the command leaves rest
+/// and returns to it smoothly.
+fn faded(period: &[f64], n: usize) -> Vec<f64> {
+    let p = period.len();
+    (0..n)
+        .map(|j| {
+            let ramp = |i: usize| 0.5 * (1.0 - (PI * i as f64 / p as f64).cos());
+            let w = if j < p {
+                ramp(j)
+            } else if j >= n - p {
+                ramp(n - j)
+            } else {
+                1.0
+            };
+            w * period[j % p]
+        })
+        .collect()
 }
 
 /// Clamps the command to +-`limit_m`, as a controller's command limit does
@@ -816,6 +917,62 @@ mod tests {
                 format!("limit_m must be positive and finite (got {bad})")
             );
         }
+    }
+
+    /// An odd multisine starts and ends at rest, fading in over its first
+    /// period and out over its last; between them every period is the
+    /// same samples, at the rms asked; and a duration that is not a whole
+    /// number of periods, at least three, is refused by its numbers.
+    #[test]
+    fn an_odd_multisine_repeats_its_period_between_rests() {
+        let fs = 1000.0;
+        let exc = Excitation::OddMultisine {
+            f_min_hz: 0.5,
+            f_max_hz: 30.0,
+            rms_m: 2e-3,
+            period_s: 4.0,
+            duration_s: 20.0,
+            seed: 7,
+        };
+        let u = generate(&exc, fs, Padding::default()).unwrap();
+        let p = 4000;
+        assert_eq!(u.len(), 5 * p);
+        assert_eq!(u[0], 0.0);
+        assert!(u[u.len() - 1].abs() < 1e-5 * 2e-3, "{}", u[u.len() - 1]);
+        for j in 0..p {
+            assert_eq!(u[p + j], u[2 * p + j], "sample {j}");
+            assert_eq!(u[p + j], u[3 * p + j], "sample {j}");
+        }
+        let steady = &u[p..2 * p];
+        let rms = (steady.iter().map(|v| v * v).sum::<f64>() / p as f64).sqrt();
+        assert!((rms / 2e-3 - 1.0).abs() < 1e-12, "rms {rms}");
+        let odd = |duration_s, period_s| Excitation::OddMultisine {
+            f_min_hz: 0.5,
+            f_max_hz: 30.0,
+            rms_m: 2e-3,
+            period_s,
+            duration_s,
+            seed: 7,
+        };
+        for (duration_s, period_s) in [(10.0, 4.0), (8.0, 4.0)] {
+            assert!(matches!(
+                odd(duration_s, period_s).validate(fs),
+                Err(ExcitationError::Periods { .. })
+            ));
+        }
+        let narrow = Excitation::OddMultisine {
+            f_min_hz: 0.55,
+            f_max_hz: 0.7,
+            rms_m: 2e-3,
+            period_s: 4.0,
+            duration_s: 12.0,
+            seed: 7,
+        };
+        // 0.25 Hz apart: 0.5 and 0.75 Hz are outside, 0.25 k for k odd.
+        assert!(matches!(
+            narrow.validate(fs),
+            Err(ExcitationError::NoOddLine { .. })
+        ));
     }
 
     #[test]

@@ -18,6 +18,7 @@ pub mod discrete;
 pub mod excitation;
 mod fft;
 pub mod instrument;
+pub mod multisine;
 pub mod ode;
 pub mod plant;
 pub mod specimen;
