@@ -304,33 +304,44 @@ impl Excitation {
                 period_s,
                 duration_s,
                 ..
-            } => {
-                band(f_min_hz, f_max_hz, fs)?;
-                positive("rms_m", rms_m)?;
-                positive("period_s", period_s)?;
-                let periods = duration_s / period_s;
-                if (periods - periods.round()).abs() > 1e-9 * periods || periods.round() < 3.0 {
-                    return Err(ExcitationError::Periods {
-                        duration_s,
-                        period_s,
-                        periods,
-                    });
-                }
-                let res = 1.0 / period_s;
-                // The first odd harmonic at or above f_min_hz.
-                let k = ((f_min_hz / res) * (1.0 - 1e-12)).ceil().max(1.0) as usize;
-                let first_odd = k | 1;
-                if first_odd as f64 * res > f_max_hz * (1.0 + 1e-12) {
-                    return Err(ExcitationError::NoOddLine {
-                        f_min_hz,
-                        f_max_hz,
-                        resolution_hz: res,
-                    });
-                }
-            }
+            } => odd_multisine_fits(f_min_hz, f_max_hz, rms_m, period_s, duration_s, fs)?,
         }
         Ok(())
     }
+}
+
+/// An odd multisine's settings checked: its band, a whole number of
+/// periods (at least three) and an odd harmonic of 1 / period_s in the band.
+fn odd_multisine_fits(
+    f_min_hz: f64,
+    f_max_hz: f64,
+    rms_m: f64,
+    period_s: f64,
+    duration_s: f64,
+    fs: f64,
+) -> Result<(), ExcitationError> {
+    band(f_min_hz, f_max_hz, fs)?;
+    positive("rms_m", rms_m)?;
+    positive("period_s", period_s)?;
+    let periods = duration_s / period_s;
+    if (periods - periods.round()).abs() > 1e-9 * periods || periods.round() < 3.0 {
+        return Err(ExcitationError::Periods {
+            duration_s,
+            period_s,
+            periods,
+        });
+    }
+    let res = 1.0 / period_s;
+    // The first odd harmonic at or above f_min_hz.
+    let k = ((f_min_hz / res) * (1.0 - 1e-12)).ceil().max(1.0) as usize;
+    if (k | 1) as f64 * res > f_max_hz * (1.0 + 1e-12) {
+        return Err(ExcitationError::NoOddLine {
+            f_min_hz,
+            f_max_hz,
+            resolution_hz: res,
+        });
+    }
+    Ok(())
 }
 
 fn band(f_min_hz: f64, f_max_hz: f64, fs: f64) -> Result<(), ExcitationError> {
@@ -433,24 +444,7 @@ pub fn generate(
             amplitude_m,
             period_s,
             ..
-        } => {
-            // Edge j (at j period_s / 2) falls on sample round(j half);
-            // f64::round takes a tie away from zero, to the later sample.
-            let half = 0.5 * period_s * fs;
-            let mut body = Vec::with_capacity(n);
-            let mut level = amplitude_m;
-            let mut j = 1usize;
-            let mut next = half.round() as usize;
-            for k in 0..n {
-                while k >= next {
-                    level = -level;
-                    j += 1;
-                    next = (j as f64 * half).round() as usize;
-                }
-                body.push(level);
-            }
-            body
-        }
+        } => square(amplitude_m, period_s, fs, n),
         Excitation::OddMultisine {
             f_min_hz,
             f_max_hz,
@@ -477,6 +471,27 @@ pub fn generate(
     u.extend(body);
     u.resize(u.len() + lead_out, 0.0);
     Ok(u)
+}
+
+/// `n` samples of a square wave of levels +-`amplitude_m` and period
+/// `period_s` at `fs`.
+fn square(amplitude_m: f64, period_s: f64, fs: f64, n: usize) -> Vec<f64> {
+    // Edge j (at j period_s / 2) falls on sample round(j half); f64::round
+    // takes a tie away from zero, to the later sample.
+    let half = 0.5 * period_s * fs;
+    let mut body = Vec::with_capacity(n);
+    let mut level = amplitude_m;
+    let mut j = 1usize;
+    let mut next = half.round() as usize;
+    for k in 0..n {
+        while k >= next {
+            level = -level;
+            j += 1;
+            next = (j as f64 * half).round() as usize;
+        }
+        body.push(level);
+    }
+    body
 }
 
 /// `period` repeated over `n` samples, faded in over the first period and
