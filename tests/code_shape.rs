@@ -6,23 +6,12 @@
 //! its layers name every module of lib.rs, and its paragraphs on
 //! `identify/`, `analysis/` and `run/` every file there.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
-use crate::util::root;
+use crate::util::{root, rust_files};
 
 /// The most `//!` lines a module header may have: a screen.
 const MAX_HEADER_LINES: usize = 15;
-
-fn rust_files(dir: &Path, out: &mut Vec<PathBuf>) {
-    for entry in std::fs::read_dir(dir).expect("pipeline/ is readable") {
-        let path = entry.expect("a directory entry").path();
-        if path.is_dir() {
-            rust_files(&path, out);
-        } else if path.extension().is_some_and(|e| e == "rs") {
-            out.push(path);
-        }
-    }
-}
 
 /// How many `//!` lines the file's leading block holds, blank `//!` lines
 /// included: the lines from the top that start with `//!`, blank lines

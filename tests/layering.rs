@@ -5,9 +5,9 @@
 //! allowed. A new top-level module fails the test until it is given a layer.
 
 use std::collections::BTreeSet;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
-use crate::util::root;
+use crate::util::{root, rust_files};
 
 /// The layers, top first, as `pipeline/lib.rs` states them.
 const LAYERS: &[&[&str]] = &[
@@ -59,17 +59,6 @@ fn allowed(from: &str, to: &str) -> bool {
         (Some(a), Some(b)) if b > a => true,
         (Some(a), Some(b)) if a == b => WITHIN_LAYER.contains(&(from, to)),
         _ => false,
-    }
-}
-
-fn rust_files(dir: &Path, out: &mut Vec<PathBuf>) {
-    for entry in std::fs::read_dir(dir).expect("pipeline/ is readable") {
-        let path = entry.expect("a directory entry").path();
-        if path.is_dir() {
-            rust_files(&path, out);
-        } else if path.extension().is_some_and(|e| e == "rs") {
-            out.push(path);
-        }
     }
 }
 

@@ -32,14 +32,23 @@ fn simulated(dir: &Path, monte_carlo: bool) -> PathBuf {
 }
 
 fn shard(dir: &Path, manifest: &Path, i: usize, n: usize) -> PathBuf {
-    let out = dir.join(format!("shard-{i}"));
-    let o = servoid_into(
-        dir,
-        "run",
-        manifest,
-        &out,
-        &["--shard", &format!("{i}/{n}"), "--quiet"],
-    );
+    shard_into(dir, manifest, (i, n), &format!("shard-{i}"), &[])
+}
+
+/// Share `i` of `n` of the campaign run into `dir/name`, with `extra`
+/// arguments.
+fn shard_into(
+    dir: &Path,
+    manifest: &Path,
+    (i, n): (usize, usize),
+    name: &str,
+    extra: &[&str],
+) -> PathBuf {
+    let out = dir.join(name);
+    let share = format!("{i}/{n}");
+    let mut args = vec!["--shard", &share, "--quiet"];
+    args.extend(extra);
+    let o = servoid_into(dir, "run", manifest, &out, &args);
     assert_eq!(o.code, 0, "{}", o.stderr);
     out
 }
@@ -148,17 +157,8 @@ fn a_nights_date_goes_through_its_shards_into_the_history() {
     let dir = scratch();
     let manifest = campaign(dir.path());
     let dated = |i: usize, date: &str| -> PathBuf {
-        let out = dir.path().join(format!("shard-{i}-{date}"));
-        let share = format!("{i}/2");
-        let o = servoid_into(
-            dir.path(),
-            "run",
-            &manifest,
-            &out,
-            &["--shard", &share, "--date", date, "--quiet"],
-        );
-        assert_eq!(o.code, 0, "{}", o.stderr);
-        out
+        let name = format!("shard-{i}-{date}");
+        shard_into(dir.path(), &manifest, (i, 2), &name, &["--date", date])
     };
     let (s0, s1) = (dated(0, "2026-11-02"), dated(1, "2026-11-02"));
     let o = merge(dir.path(), &[&s0, &s1], "merged");

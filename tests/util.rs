@@ -393,3 +393,15 @@ pub fn rewrite_column(path: &Path, col: usize, f: impl Fn(usize, &str) -> String
     }
     std::fs::write(path, out).unwrap();
 }
+
+/// Every `.rs` file under `dir`, into `out`.
+pub fn rust_files(dir: &Path, out: &mut Vec<PathBuf>) {
+    for entry in std::fs::read_dir(dir).expect("the folder is readable") {
+        let path = entry.expect("a directory entry").path();
+        if path.is_dir() {
+            rust_files(&path, out);
+        } else if path.extension().is_some_and(|e| e == "rs") {
+            out.push(path);
+        }
+    }
+}

@@ -26,7 +26,6 @@ use crate::sensitivity::{self, NoiseProfile};
 use crate::tracking::Reference;
 use crate::validate::csi::Csi;
 use crate::validate::{self, TimeStage};
-use nalgebra::Complex;
 
 /// The rig as the validation runs read it: its parameters, the covariance
 /// of (beta1, a1b0, a2, a3) when identified and the seals' friction when
@@ -279,16 +278,12 @@ fn validated(
     ));
     // The measured force FRF at positive frequencies up to the kept top,
     // the bins Figs. 16-17 show it at.
-    let force: Option<(Vec<f64>, Vec<Complex<f64>>)> = st.force_frf.as_ref().map(|ff| {
-        ff.freq_hz
-            .iter()
-            .zip(&ff.h)
-            .filter(|(f, _)| **f > 0.0 && **f <= frf::KEPT_MAX_HZ)
-            .map(|(f, h)| (*f, *h))
-            .unzip()
-    });
+    let force = st
+        .force_frf
+        .as_ref()
+        .map(|ff| ff.positive_up_to(frf::KEPT_MAX_HZ));
     let csi = plan.specimen.linear().and_then(|lin| {
-        let bins = force.as_ref().map(|(f, h)| (f.as_slice(), h.as_slice()));
+        let bins = force.as_ref().map(|(f, h, _)| (f.as_slice(), h.as_slice()));
         validate::csi::csi(&plan.id, rig_at_p, &lin, bins)
     });
     Validated {

@@ -546,6 +546,21 @@ pub const KEPT_MAX_HZ: f64 = 35.0;
 pub const VARIANCE_REACH_BINS: usize = ETFE_NOISE_SMOOTH_HALF_WIDTH + ETFE_LOCAL_HALF_WIDTH + 1;
 
 impl Frf {
+    /// The bins at positive frequencies up to `f_max_hz`: their
+    /// frequencies, estimates and coherences, in order (what a figure shows
+    /// of the estimate, and the control-structure interaction reads).
+    pub fn positive_up_to(&self, f_max_hz: f64) -> (Vec<f64>, Vec<Complex<f64>>, Vec<f64>) {
+        let mut out = (Vec::new(), Vec::new(), Vec::new());
+        for i in 0..self.freq_hz.len() {
+            if self.freq_hz[i] > 0.0 && self.freq_hz[i] <= f_max_hz {
+                out.0.push(self.freq_hz[i]);
+                out.1.push(self.h[i]);
+                out.2.push(self.coherence[i]);
+            }
+        }
+        out
+    }
+
     /// Drop the bins above `f_hz` but `extra` (see [`VARIANCE_REACH_BINS`]),
     /// and free their memory. An ETFE of a long record has a bin per
     /// 1/duration Hz up to Nyquist (7 M bins, 64 bytes each, for 7,000 s at

@@ -930,17 +930,16 @@ fn kind_keys(
             if let Some(period) = period
                 && e.duration_s.is_finite()
                 && e.duration_s > 0.0
+                && !crate::simulate::excitation::whole_periods(e.duration_s, period)
             {
                 let periods = e.duration_s / period;
-                if (periods - periods.round()).abs() > 1e-9 * periods || periods.round() < 3.0 {
-                    bad(
-                        p.key("duration_s"),
-                        format!(
-                            "{} s is {periods} periods of period_s = {period} s; an odd multisine needs a whole number of periods, at least 3 (one fading in, one steady, one fading out)",
-                            e.duration_s
-                        ),
-                    );
-                }
+                bad(
+                    p.key("duration_s"),
+                    format!(
+                        "{} s is {periods} periods of period_s = {period} s; an odd multisine needs a whole number of periods, at least 3 (one fading in, one steady, one fading out)",
+                        e.duration_s
+                    ),
+                );
             }
             band
         }

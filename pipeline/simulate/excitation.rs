@@ -310,6 +310,14 @@ impl Excitation {
     }
 }
 
+/// Whether `duration_s` holds a whole number of periods of `period_s`, at
+/// least three: an odd multisine's first fades in, its last fades out, and
+/// one at least between them is steady.
+pub fn whole_periods(duration_s: f64, period_s: f64) -> bool {
+    let periods = duration_s / period_s;
+    (periods - periods.round()).abs() <= 1e-9 * periods && periods.round() >= 3.0
+}
+
 /// An odd multisine's settings checked: its band, a whole number of
 /// periods (at least three) and an odd harmonic of 1 / period_s in the band.
 fn odd_multisine_fits(
@@ -323,8 +331,8 @@ fn odd_multisine_fits(
     band(f_min_hz, f_max_hz, fs)?;
     positive("rms_m", rms_m)?;
     positive("period_s", period_s)?;
-    let periods = duration_s / period_s;
-    if (periods - periods.round()).abs() > 1e-9 * periods || periods.round() < 3.0 {
+    if !whole_periods(duration_s, period_s) {
+        let periods = duration_s / period_s;
         return Err(ExcitationError::Periods {
             duration_s,
             period_s,

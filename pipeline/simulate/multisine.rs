@@ -130,7 +130,7 @@ impl LpNorm<'_> {
     /// The period, its peak, and sum_j |x_j / peak|^p.
     fn sums(&self, phases: &DVector<f64>) -> (Vec<f64>, f64, f64) {
         let x = synthesise(self.len, self.excited, self.amp, phases.as_slice());
-        let peak = x.iter().fold(0.0_f64, |m, v| m.max(v.abs()));
+        let peak = peak(&x);
         let s = x.iter().map(|v| (v.abs() / peak).powf(self.p)).sum();
         (x, peak, s)
     }
@@ -167,10 +167,14 @@ impl Gradient for LpNorm<'_> {
     }
 }
 
+/// The largest magnitude of `x`.
+fn peak(x: &[f64]) -> f64 {
+    x.iter().fold(0.0_f64, |m, v| m.max(v.abs()))
+}
+
 fn crest_factor(x: &[f64]) -> f64 {
-    let peak = x.iter().fold(0.0_f64, |m, v| m.max(v.abs()));
     let rms = (x.iter().map(|v| v * v).sum::<f64>() / x.len() as f64).sqrt();
-    peak / rms
+    peak(x) / rms
 }
 
 /// A random-odd multisine of `len` samples at `fs` over [`f_min_hz`,
@@ -201,7 +205,7 @@ pub fn odd_multisine(
     let grid = len.min((OVERSAMPLE * top).next_multiple_of(2).max(2 * top + 2));
     for _ in 0..PASSES {
         let x = synthesise(grid, &excited, amp, &phases);
-        let level = CLIP * x.iter().fold(0.0_f64, |m, v| m.max(v.abs()));
+        let level = CLIP * peak(&x);
         let clipped: Vec<f64> = x.iter().map(|v| v.clamp(-level, level)).collect();
         phases = phases_of(&clipped, &excited);
     }

@@ -170,8 +170,7 @@ impl ForceBins {
 
     pub fn of(measured: &Measured<'_>) -> Option<Self> {
         let ff = measured.force_frf?;
-        let (freq_hz, h, coherence) =
-            measured_bins(&ff.freq_hz, &ff.h, &ff.coherence, FORCE_FRF_MAX_HZ);
+        let (freq_hz, h, coherence) = ff.positive_up_to(FORCE_FRF_MAX_HZ);
         Some(Self {
             sample_rate_hz: measured.sample_rate_hz,
             freq_hz,
@@ -179,24 +178,6 @@ impl ForceBins {
             coherence,
         })
     }
-}
-
-/// The bins a figure shows: positive frequencies up to `f_max`.
-fn measured_bins(
-    freq: &[f64],
-    h: &[Complex<f64>],
-    coh: &[f64],
-    f_max: f64,
-) -> (Vec<f64>, Vec<Complex<f64>>, Vec<f64>) {
-    let mut out = (Vec::new(), Vec::new(), Vec::new());
-    for i in 0..freq.len() {
-        if freq[i] > 0.0 && freq[i] <= f_max {
-            out.0.push(freq[i]);
-            out.1.push(h[i]);
-            out.2.push(coh[i]);
-        }
-    }
-    out
 }
 
 /// A predicted model as the measurement sees it: plant, delay and the
@@ -254,12 +235,7 @@ impl RunFrf {
     ) -> Self {
         let fs = measured.sample_rate_hz;
         let f_max = FRF_MAX_HZ.max(run.fit.as_ref().map_or(0.0, |f| f.band_hz[1]));
-        let (freq_hz, h, coherence) = measured_bins(
-            &measured.frf.freq_hz,
-            &measured.frf.h,
-            &measured.frf.coherence,
-            f_max,
-        );
+        let (freq_hz, h, coherence) = measured.frf.positive_up_to(f_max);
         let model = match (measured.fit, run.role) {
             (Some(fit), _) => Some((fit.as_logged(intersample, fs, &freq_hz), "identified model")),
             (None, Role::Validation) => run.tf.as_ref().map(|t| {
