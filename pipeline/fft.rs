@@ -24,6 +24,16 @@ pub fn real_forward(n: usize) -> Arc<dyn RealToComplex<f64>> {
     REAL.with(|p| p.borrow_mut().plan_fft_forward(n))
 }
 
+/// The DFT X_k = sum_j x_j e^{-2 pi i jk/n} of real `x`, k = 0..=n/2.
+pub fn real_spectrum(x: &[f64]) -> Vec<rustfft::num_complex::Complex<f64>> {
+    let mut input = x.to_vec();
+    let fwd = real_forward(x.len());
+    let mut spectrum = fwd.make_output_vec();
+    fwd.process(&mut input, &mut spectrum)
+        .expect("a buffer of the transform's length");
+    spectrum
+}
+
 /// The complex-to-real transform back to `n` samples.
 pub fn real_inverse(n: usize) -> Arc<dyn ComplexToReal<f64>> {
     REAL.with(|p| p.borrow_mut().plan_fft_inverse(n))

@@ -6,16 +6,17 @@
 //! 4. `analysis`: a campaign's identification: checked plans in, results out.
 //! 5. `results`: the output contract (results.json, truth.json).
 //! 6. `manifest`: reads and checks the manifests, builds each stage's settings.
-//! 7. The stages: `ingest` (the only reader of data files), `frf`, `fit`, `identify` (the
-//!    rig: a run's TF fit, Eqs. 18-20, and the joint grey-box fit), `validate`, `sensitivity`,
-//!    `simulate`, `drift`, `tracking`. Within, one way only: identify -> frf, fit; sensitivity
-//!    -> identify, fit, frf, simulate; validate -> simulate; tracking -> validate, simulate.
-//! 8. `model`: the plant of Eq. 10 and its canonical form (Eqs. 34-35).
-//! 9. `lti`: transfer functions and state spaces.
-//! 10. `fft`, `poly`, `units`, `warning`. `tests/layering.rs` checks this list.
+//! 7. The stages: `ingest` (the only reader of data files), `frf`, `fit`, `identify` (a run's
+//!    TF fit, Eqs. 18-20, the joint fit), `validate`, `sensitivity`, `simulate`, `drift`,
+//!    `tracking`, `design`. One way only within: identify -> frf, fit; design -> fit, simulate;
+//!    sensitivity -> identify, fit, frf, simulate; validate -> simulate; tracking -> validate,
+//!    simulate.
+//! 8. `model`: the plant of Eq. 10 and its canonical form (Eqs. 34-35); 9. `lti`: transfer
+//!    functions, state spaces; 10. `fft`, `poly`, `units`, `warning`. tests/layering.rs checks.
 
 pub mod analysis;
 pub mod cli;
+pub mod design;
 pub mod drift;
 pub mod fft;
 pub mod fit;

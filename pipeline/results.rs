@@ -692,6 +692,9 @@ pub struct TruthRun {
     pub log: String,
     pub log_sha256: String,
     pub n_samples: usize,
+    /// The SHA-256 of the command file played, where the run played one.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub command_sha256: Option<String>,
 }
 
 impl Results {

@@ -27,6 +27,7 @@ const LAYERS: &[&[&str]] = &[
         "simulate",
         "drift",
         "tracking",
+        "design",
     ],
     &["model"],
     &["lti"],
@@ -44,6 +45,8 @@ const WITHIN_LAYER: &[(&str, &str)] = &[
     ("validate", "simulate"),
     ("tracking", "validate"),
     ("tracking", "simulate"),
+    ("design", "fit"),
+    ("design", "simulate"),
 ];
 
 fn layer_of(module: &str) -> Option<usize> {

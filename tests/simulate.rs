@@ -562,3 +562,140 @@ fn a_force_beyond_the_supply_names_the_run() {
     assert!(r.stderr.contains("F_max = A P_s = 300 N"), "{}", r.stderr);
     assert!(!out.join("truth.json").exists());
 }
+
+/// BASE with its command logged in metres, unquantised: each log is then
+/// a command file (`time_s`, `command_m`) holding the command exactly.
+fn base_in_metres() -> String {
+    BASE.replace(
+        "[instrument.command]\nunit = \"mm\"",
+        "[instrument.command]\nunit = \"m\"",
+    )
+}
+
+/// Each run of BASE playing the command file `logs/<id>.csv` of `from`.
+fn playing(text: &str, from: &str) -> String {
+    ["bare", "k1", "v1"].iter().fold(text.to_string(), |t, id| {
+        t.replace(
+            &format!("id = \"{id}\"\n"),
+            &format!(
+                "id = \"{id}\"\nexcitation = {{ kind = \"file\", file = \"{from}/logs/{id}.csv\" }}\n"
+            ),
+        )
+    })
+}
+
+/// A command file plays sample for sample: each run replaying the command
+/// its chirp generated (read back from the log, whose text holds every
+/// double exactly) gives the same log bytes as generating it, and truth.json
+/// records the SHA-256 of the file each run played.
+#[test]
+fn a_command_file_plays_as_the_command_it_holds() {
+    let dir = scratch();
+    let text = base_in_metres();
+    assert_ne!(text, BASE, "the command is logged in metres");
+    let generated = write(dir.path(), "generated.toml", &text);
+    let r = servoid_into(
+        dir.path(),
+        "simulate",
+        &generated,
+        &dir.path().join("a"),
+        &[],
+    );
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    let played = write(dir.path(), "played.toml", &playing(&text, "a"));
+    let r = servoid_into(dir.path(), "simulate", &played, &dir.path().join("b"), &[]);
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    let truth = json(&dir.path().join("b/truth.json"));
+    for id in ["bare", "k1", "v1"] {
+        let log =
+            |set: &str| std::fs::read(dir.path().join(format!("{set}/logs/{id}.csv"))).unwrap();
+        assert!(
+            log("a") == log("b"),
+            "{id}: the played log is the generated one"
+        );
+        let sha = run_by_id(&truth, id)["command_sha256"]
+            .as_str()
+            .unwrap()
+            .to_string();
+        assert_eq!(sha, sha256_of(&log("a")), "{id}");
+    }
+    let generated_truth = json(&dir.path().join("a/truth.json"));
+    assert!(
+        run_by_id(&generated_truth, "bare")
+            .get("command_sha256")
+            .is_none()
+    );
+}
+
+/// SHA-256 by the `sha2` crate, independently of servoid's own helper.
+fn sha256_of(bytes: &[u8]) -> String {
+    use sha2::Digest;
+    sha2::Sha256::digest(bytes)
+        .iter()
+        .map(|b| format!("{b:02x}"))
+        .collect()
+}
+
+/// A command file that cannot be played is refused naming the run and the
+/// file: at another rate than the simulation's (both rates said), without
+/// a command_m column, absent; a file excitation without `file` or with a
+/// duration of its own is a manifest problem.
+#[test]
+fn a_command_file_that_cannot_be_played_is_refused() {
+    let dir = scratch();
+    let text = base_in_metres();
+    let generated = write(dir.path(), "generated.toml", &text);
+    let r = servoid_into(
+        dir.path(),
+        "simulate",
+        &generated,
+        &dir.path().join("a"),
+        &[],
+    );
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    let fails = |text: &str, words: &[&str]| {
+        let manifest = write(dir.path(), "played.toml", text);
+        let out = dir.path().join("b");
+        let r = servoid_into(dir.path(), "simulate", &manifest, &out, &[]);
+        assert_ne!(r.code, 0, "{}", r.stdout);
+        for w in words {
+            assert!(r.stderr.contains(w), "expected `{w}` in: {}", r.stderr);
+        }
+        assert!(!out.join("truth.json").exists(), "nothing is written");
+    };
+    let played = playing(&text, "a");
+    fails(
+        &played.replace("sample_rate_hz = 1000.0", "sample_rate_hz = 2000.0"),
+        &["run bare", "bare.csv", "sampled at 1000 Hz", "is 2000 Hz"],
+    );
+    std::fs::create_dir_all(dir.path().join("c/logs")).unwrap();
+    write(
+        dir.path(),
+        "c/logs/bare.csv",
+        "time_s,u_m\n0,0\n0.001,0\n0.002,0\n",
+    );
+    fails(
+        &played.replace("a/logs/bare.csv", "c/logs/bare.csv"),
+        &["run bare", "bare.csv", "command_m"],
+    );
+    fails(
+        &played.replace("a/logs/k1.csv", "nowhere/k1.csv"),
+        &["run k1", "nowhere/k1.csv"],
+    );
+    refused(
+        &text.replace(
+            "id = \"bare\"\n",
+            "id = \"bare\"\nexcitation = { kind = \"file\" }\n",
+        ),
+        "runs[0].excitation.file",
+        "a file excitation needs `file`",
+    );
+    refused(
+        &playing(&text, "a").replace(
+            "file = \"a/logs/bare.csv\"",
+            "file = \"a/logs/bare.csv\", duration_s = 20.0",
+        ),
+        "runs[0].excitation.duration_s",
+        "a command file's length is its own",
+    );
+}

@@ -12,6 +12,7 @@ mod code_shape;
 mod consistency;
 mod corpus;
 mod csi;
+mod design;
 mod diagnosis;
 mod disk_full;
 mod doc_numbers;

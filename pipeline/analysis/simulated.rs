@@ -3,10 +3,13 @@
 //! the truth they were drawn from, and the analysis manifest that reads
 //! their logs back. `run` writes the logs, truth.json and campaign.toml.
 
+use std::path::PathBuf;
+
 use sha2::{Digest, Sha256};
 
 use crate::ingest::Column;
-use crate::manifest::simulation::{OutputFormat, SimRunPlan, SimulationPlan};
+use crate::ingest::command::CommandFile;
+use crate::manifest::simulation::{Command, OutputFormat, SimRunPlan, SimulationPlan};
 use crate::manifest::{
     CampaignInfo, Channel, Channels, Manifest, Reference, Rig, Role, Run, RunData, SCHEMA_VERSION,
     Specimen, SpecimenKind, TimeChannel,
@@ -16,7 +19,7 @@ use crate::results::{Truth, TruthRun};
 use crate::simulate::excitation::{self, Excitation, ExcitationError};
 use crate::simulate::instrument::{self, InstrumentError, Sensor};
 use crate::simulate::{SimError, plant};
-use crate::units::TimeUnit;
+use crate::units::{TimeUnit, format_number};
 
 /// Why one simulated run failed.
 #[derive(Debug, thiserror::Error)]
@@ -39,6 +42,18 @@ pub enum SimRunError {
         #[source]
         source: InstrumentError,
     },
+    #[error(
+        "run {run}: the command file {} is sampled at {} Hz, but simulation.sample_rate_hz is {} Hz: a waveform generator plays one sample per tick, so write the command at the simulation's rate",
+        path.display(), format_number(*file_hz, 9), format_number(*sample_rate_hz, 9)
+    )]
+    CommandRate {
+        run: String,
+        path: PathBuf,
+        file_hz: f64,
+        sample_rate_hz: f64,
+    },
+    #[error("run {run}: the command file {} was not read before the run was simulated", path.display())]
+    CommandNotRead { run: String, path: PathBuf },
     #[error("run {run}: the rig's model with its specimen leaves f64's range: {source}")]
     Model {
         run: String,
@@ -60,8 +75,60 @@ fn column_name(channel: &str, sensor: &Sensor) -> String {
     format!("{channel}_{}", sensor.unit.symbol().to_ascii_lowercase())
 }
 
-/// Simulate one run: command, plant, instruments.
-pub fn simulate_run(plan: &SimulationPlan, run: &SimRunPlan) -> Result<RunSignals, SimRunError> {
+/// The command a run plays before the controller's limit: generated, or
+/// the command file `played` (read for a run whose command is a file) at
+/// the simulation's rate, with the run's padding.
+fn command_signal(
+    plan: &SimulationPlan,
+    run: &SimRunPlan,
+    played: Option<&CommandFile>,
+) -> Result<Vec<f64>, SimRunError> {
+    let m = &plan.manifest;
+    let fs = m.simulation.sample_rate_hz;
+    let id = || run.id.clone();
+    let exc = match (&run.excitation, played) {
+        (Command::Generated(exc), _) => exc,
+        (Command::File(path), None) => {
+            return Err(SimRunError::CommandNotRead {
+                run: id(),
+                path: path.clone(),
+            });
+        }
+        (Command::File(_), Some(file)) => {
+            // A waveform generator plays one sample per tick of the DAQ's
+            // clock: a file at another rate would play faster or slower.
+            if (file.sample_rate_hz - fs).abs() > 1e-6 * fs {
+                return Err(SimRunError::CommandRate {
+                    run: id(),
+                    path: file.path.clone(),
+                    file_hz: file.sample_rate_hz,
+                    sample_rate_hz: fs,
+                });
+            }
+            return excitation::padded(file.command_m.clone(), fs, run.padding)
+                .map_err(|source| SimRunError::Excitation { run: id(), source });
+        }
+    };
+    let mut exc = exc.clone();
+    // Multisine phases and random bands draw from the campaign seed, per run.
+    let exc_seed = seed_for(m.simulation.seed, &format!("excitation/{}", run.id));
+    match &mut exc {
+        Excitation::Multisine { seed, .. }
+        | Excitation::RandomBand { seed, .. }
+        | Excitation::OddMultisine { seed, .. } => *seed = exc_seed,
+        Excitation::Chirp { .. } | Excitation::Square { .. } => {}
+    }
+    excitation::generate(&exc, fs, run.padding)
+        .map_err(|source| SimRunError::Excitation { run: id(), source })
+}
+
+/// Simulate one run: command, plant, instruments. `played` is the run's
+/// command file, read, where its command is one.
+pub fn simulate_run(
+    plan: &SimulationPlan,
+    run: &SimRunPlan,
+    played: Option<&CommandFile>,
+) -> Result<RunSignals, SimRunError> {
     let m = &plan.manifest;
     let fs = m.simulation.sample_rate_hz;
     let id = || run.id.clone();
@@ -71,17 +138,7 @@ pub fn simulate_run(plan: &SimulationPlan, run: &SimRunPlan) -> Result<RunSignal
         specimen: run.specimen,
         unmodelled: plan.unmodelled,
     };
-    let mut exc = run.excitation.clone();
-    // Multisine phases and random bands draw from the campaign seed, per run.
-    let exc_seed = seed_for(m.simulation.seed, &format!("excitation/{}", run.id));
-    match &mut exc {
-        Excitation::Multisine { seed, .. }
-        | Excitation::RandomBand { seed, .. }
-        | Excitation::OddMultisine { seed, .. } => *seed = exc_seed,
-        Excitation::Chirp { .. } | Excitation::Square { .. } => {}
-    }
-    let mut u = excitation::generate(&exc, fs, run.padding)
-        .map_err(|source| SimRunError::Excitation { run: id(), source })?;
+    let mut u = command_signal(plan, run, played)?;
     if let Some(limit_m) = run.limit_m {
         excitation::limit(&mut u, limit_m)
             .map_err(|source| SimRunError::Excitation { run: id(), source })?;
@@ -150,6 +207,7 @@ pub fn simulate_run(plan: &SimulationPlan, run: &SimRunPlan) -> Result<RunSignal
             log: String::new(),
             log_sha256: String::new(),
             n_samples: n,
+            command_sha256: played.map(|f| f.sha256.clone()),
         },
     })
 }

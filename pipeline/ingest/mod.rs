@@ -15,6 +15,7 @@
 
 mod arrays;
 mod clipping;
+pub mod command;
 mod csv;
 mod daq;
 mod discover;

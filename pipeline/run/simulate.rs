@@ -8,8 +8,9 @@ use std::path::{Path, PathBuf};
 use rayon::prelude::*;
 
 use crate::analysis::simulated::{self, RunSignals, SimRunError};
-use crate::ingest::sha256_hex;
-use crate::manifest::simulation::SimulationPlan;
+use crate::ingest::command::{CommandFileError, read_command};
+use crate::ingest::{DEFAULT_MAX_LOG_MIB, sha256_hex};
+use crate::manifest::simulation::{Command, SimulationPlan};
 use crate::report::columns::{self, ColumnWriteError};
 use crate::report::{self, WriteError};
 
@@ -18,6 +19,12 @@ use crate::report::{self, WriteError};
 pub enum SimulateError {
     #[error(transparent)]
     Run(#[from] SimRunError),
+    #[error("run {run}: its command file: {source}")]
+    Command {
+        run: String,
+        #[source]
+        source: Box<CommandFileError>,
+    },
     #[error(transparent)]
     Log(#[from] ColumnWriteError),
     #[error(transparent)]
@@ -62,7 +69,18 @@ pub fn simulate_campaign(
         .par_iter()
         .with_max_len(1)
         .map(|run| {
-            let s = simulated::simulate_run(plan, run)?;
+            let played = match &run.excitation {
+                Command::File(path) => Some(
+                    read_command(path, DEFAULT_MAX_LOG_MIB << 20).map_err(|source| {
+                        SimulateError::Command {
+                            run: run.id.clone(),
+                            source: Box::new(source),
+                        }
+                    })?,
+                ),
+                Command::Generated(_) => None,
+            };
+            let s = simulated::simulate_run(plan, run, played.as_ref())?;
             let path = out_dir.join(log_rel(&s));
             let bytes = columns::log_bytes(
                 m.simulation.log_format,
@@ -73,7 +91,11 @@ pub fn simulate_campaign(
             let sha256 = sha256_hex(&bytes);
             Ok((s, bytes, sha256))
         })
-        .collect::<Result<_, SimulateError>>()?;
+        .collect::<Vec<Result<_, SimulateError>>>()
+        .into_iter()
+        // The first failure in the manifest's order, whichever thread
+        // met it first.
+        .collect::<Result<_, _>>()?;
 
     let mut log_paths = Vec::new();
     let mut truth_runs = Vec::new();

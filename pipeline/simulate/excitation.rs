@@ -472,13 +472,30 @@ pub fn generate(
             faded(&m.period, n)
         }
     };
+    Ok(pad(body, fs, padding))
+}
+
+/// A command `body` sampled at `sample_rate_hz` (a command file's) with
+/// `padding` zeros around it.
+pub fn padded(
+    body: Vec<f64>,
+    sample_rate_hz: f64,
+    padding: Padding,
+) -> Result<Vec<f64>, ExcitationError> {
+    positive("sample_rate_hz", sample_rate_hz)?;
+    non_negative("lead_in_s", padding.lead_in_s)?;
+    non_negative("lead_out_s", padding.lead_out_s)?;
+    Ok(pad(body, sample_rate_hz, padding))
+}
+
+fn pad(body: Vec<f64>, fs: f64, padding: Padding) -> Vec<f64> {
     let lead_in = (padding.lead_in_s * fs).round() as usize;
     let lead_out = (padding.lead_out_s * fs).round() as usize;
     let mut u = vec![0.0; lead_in];
     u.reserve(body.len() + lead_out);
     u.extend(body);
     u.resize(u.len() + lead_out, 0.0);
-    Ok(u)
+    u
 }
 
 /// `n` samples of a square wave of levels +-`amplitude_m` and period

@@ -106,11 +106,7 @@ fn synthesise(len: usize, excited: &[usize], amp: f64, phases: &[f64]) -> Vec<f6
 
 /// The phases of `x`'s `excited` harmonics.
 fn phases_of(x: &[f64], excited: &[usize]) -> Vec<f64> {
-    let mut input = x.to_vec();
-    let fwd = crate::fft::real_forward(x.len());
-    let mut spectrum = fwd.make_output_vec();
-    fwd.process(&mut input, &mut spectrum)
-        .expect("a buffer of the transform's length");
+    let spectrum = crate::fft::real_spectrum(x);
     excited.iter().map(|&k| spectrum[k].arg()).collect()
 }
 
