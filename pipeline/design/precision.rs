@@ -112,9 +112,14 @@ pub fn predict(
             if !(v.is_finite() && v > 0.0) {
                 continue;
             }
-            let g = gradient(rig, &theta, run, f)?;
-            let hold = hold_response(intersample, sample_rate_hz, f);
-            let g = g.map(|x| x * hold);
+            let g = line_gradient(
+                rig,
+                run.specimen,
+                run.p_gain,
+                f,
+                intersample,
+                sample_rate_hz,
+            )?;
             for i in 0..4 {
                 for j in 0..4 {
                     fisher[(i, j)] += 2.0 / v * (g[i].conj() * g[j]).re;
@@ -130,25 +135,30 @@ pub fn predict(
         .then_some(Precision { covariance })
 }
 
-/// dH/dln(theta_j) of x1/u at `f_hz` by central differences (a relative
-/// step of 1e-5: the model is a ratio of polynomials, smooth in each).
-fn gradient(
+/// dH/dln(theta_j) of x1/u at `f_hz`, the command held as `intersample`:
+/// by central differences (a relative step of 1e-5: the model is a ratio
+/// of polynomials, smooth in each).
+pub fn line_gradient(
     rig: &RigParams,
-    theta: &[f64; 4],
-    run: &PlannedRun,
+    specimen: LinearSpecimen,
+    p_gain: f64,
     f_hz: f64,
+    intersample: Intersample,
+    sample_rate_hz: f64,
 ) -> Option<[Complex<f64>; 4]> {
     const STEP: f64 = 1e-5;
+    let theta = values(rig);
     let h = |t: [f64; 4]| -> Option<Complex<f64>> {
-        let at = with_values(rig, t).at_p_gain(run.p_gain);
-        Some(model::tf_x1_u(&at, &run.specimen).ok()?.freq_response(f_hz))
+        let at = with_values(rig, t).at_p_gain(p_gain);
+        Some(model::tf_x1_u(&at, &specimen).ok()?.freq_response(f_hz))
     };
+    let hold = hold_response(intersample, sample_rate_hz, f_hz);
     let mut g = [Complex::new(0.0, 0.0); 4];
     for (j, gj) in g.iter_mut().enumerate() {
-        let (mut up, mut down) = (*theta, *theta);
-        up[j] *= (STEP).exp();
+        let (mut up, mut down) = (theta, theta);
+        up[j] *= STEP.exp();
         down[j] *= (-STEP).exp();
-        *gj = (h(up)? - h(down)?) / (2.0 * STEP);
+        *gj = (h(up)? - h(down)?) / (2.0 * STEP) * hold;
     }
     Some(g)
 }

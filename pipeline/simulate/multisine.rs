@@ -88,13 +88,13 @@ fn lines(
     (excited, detection)
 }
 
-/// The period of length `len` with amplitude `amp` and `phases` on the
+/// The period of length `len` with amplitudes `amps` and `phases` on the
 /// `excited` harmonics, by an inverse real transform.
-fn synthesise(len: usize, excited: &[usize], amp: f64, phases: &[f64]) -> Vec<f64> {
+fn synthesise(len: usize, excited: &[usize], amps: &[f64], phases: &[f64]) -> Vec<f64> {
     let mut spectrum = vec![Complex::new(0.0, 0.0); len / 2 + 1];
     // x_j = sum_k A cos(2 pi k j / len + phi_k): the inverse transform of
     // A/2 e^(i phi) on each line, doubled by its mirror.
-    for (&k, &phi) in excited.iter().zip(phases) {
+    for ((&k, &amp), &phi) in excited.iter().zip(amps).zip(phases) {
         spectrum[k] = Complex::from_polar(0.5 * amp, phi);
     }
     let mut x = vec![0.0; len];
@@ -111,21 +111,21 @@ fn phases_of(x: &[f64], excited: &[usize]) -> Vec<f64> {
 }
 
 /// log ||x||_p of the period the phases make, with its gradient over the
-/// phases: for x_j = sum_k A cos(w_k j + phi_k) and g_j = |x_j|^(p-1)
-/// sign(x_j), d/dphi_k sum_j |x_j|^p = -p A Im(conj(G_k) e^(i phi_k)),
+/// phases: for x_j = sum_k A_k cos(w_k j + phi_k) and g_j = |x_j|^(p-1)
+/// sign(x_j), d/dphi_k sum_j |x_j|^p = -p A_k Im(conj(G_k) e^(i phi_k)),
 /// G the transform of g. Scaled by the peak so that |x / peak|^p stays in
 /// range.
 struct LpNorm<'a> {
     len: usize,
     excited: &'a [usize],
-    amp: f64,
+    amps: &'a [f64],
     p: f64,
 }
 
 impl LpNorm<'_> {
     /// The period, its peak, and sum_j |x_j / peak|^p.
     fn sums(&self, phases: &DVector<f64>) -> (Vec<f64>, f64, f64) {
-        let x = synthesise(self.len, self.excited, self.amp, phases.as_slice());
+        let x = synthesise(self.len, self.excited, self.amps, phases.as_slice());
         let peak = peak(&x);
         let s = x.iter().map(|v| (v.abs() / peak).powf(self.p)).sum();
         (x, peak, s)
@@ -156,9 +156,13 @@ impl Gradient for LpNorm<'_> {
             .expect("a buffer of the transform's length");
         Ok(DVector::from_iterator(
             self.excited.len(),
-            self.excited.iter().zip(phases.iter()).map(|(&k, &phi)| {
-                -self.amp * (spectrum[k].conj() * Complex::from_polar(1.0, phi)).im / (s * peak)
-            }),
+            self.excited
+                .iter()
+                .zip(self.amps)
+                .zip(phases.iter())
+                .map(|((&k, &amp), &phi)| {
+                    -amp * (spectrum[k].conj() * Complex::from_polar(1.0, phi)).im / (s * peak)
+                }),
         ))
     }
 }
@@ -190,7 +194,45 @@ pub fn odd_multisine(
     }
     let f = excited.len() as f64;
     // Each line's cosine has mean square A^2 / 2: the period's is F A^2 / 2.
-    let amp = rms_m * (2.0 / f).sqrt();
+    let amps = vec![rms_m * (2.0 / f).sqrt(); excited.len()];
+    Some(low_crest(len, excited, detection, amps))
+}
+
+/// As [`odd_multisine`], each excited line's share of the mean square
+/// `share(f_hz)` over their sum (a spectrum shaped for the rig): line k's
+/// amplitude is rms_m sqrt(2 w_k / sum w).
+pub fn shaped_odd_multisine(
+    f_min_hz: f64,
+    f_max_hz: f64,
+    fs: f64,
+    len: usize,
+    rms_m: f64,
+    share: impl Fn(f64) -> f64,
+    rng: &mut impl Rng,
+) -> Option<OddMultisine> {
+    let (excited, detection) = lines(f_min_hz, f_max_hz, fs, len, rng);
+    let w: Vec<f64> = excited
+        .iter()
+        .map(|&k| share(k as f64 * fs / len as f64).max(0.0))
+        .collect();
+    let total: f64 = w.iter().sum();
+    if excited.is_empty() || !(total > 0.0 && total.is_finite()) {
+        return None;
+    }
+    let amps = w.iter().map(|w| rms_m * (2.0 * w / total).sqrt()).collect();
+    Some(low_crest(len, excited, detection, amps))
+}
+
+/// The period of `len` samples with `amps` on the `excited` lines, its
+/// phases chosen for a low crest factor: Schroeder's, clipped, then the
+/// Lp norms.
+fn low_crest(
+    len: usize,
+    excited: Vec<usize>,
+    detection: Vec<usize>,
+    amps: Vec<f64>,
+) -> OddMultisine {
+    let f = excited.len() as f64;
     // Schroeder's phases, -pi i (i - 1) / F for the i-th of F lines.
     let mut phases: Vec<f64> = (1..=excited.len())
         .map(|i| -PI * (i * (i - 1)) as f64 / f)
@@ -200,7 +242,7 @@ pub fn odd_multisine(
     let top = excited.last().copied().unwrap_or(1);
     let grid = len.min((OVERSAMPLE * top).next_multiple_of(2).max(2 * top + 2));
     for _ in 0..PASSES {
-        let x = synthesise(grid, &excited, amp, &phases);
+        let x = synthesise(grid, &excited, &amps, &phases);
         let level = CLIP * peak(&x);
         let clipped: Vec<f64> = x.iter().map(|v| v.clamp(-level, level)).collect();
         phases = phases_of(&clipped, &excited);
@@ -209,7 +251,7 @@ pub fn odd_multisine(
         let norm = LpNorm {
             len: grid,
             excited: &excited,
-            amp,
+            amps: &amps,
             p,
         };
         let solver = LBFGS::new(MoreThuenteLineSearch::new(), 7);
@@ -223,14 +265,13 @@ pub fn odd_multisine(
             phases = best.as_slice().to_vec();
         }
     }
-    let best = synthesise(len, &excited, amp, &phases);
-    let best_cf = crest_factor(&best);
-    Some(OddMultisine {
-        crest_factor: best_cf,
+    let best = synthesise(len, &excited, &amps, &phases);
+    OddMultisine {
+        crest_factor: crest_factor(&best),
         period: best,
         excited,
         detection,
-    })
+    }
 }
 
 #[cfg(test)]
