@@ -432,10 +432,45 @@ pub struct RunResult {
     /// A spring run's force against its displacement, when it logs a force.
     #[serde(default)]
     pub spring_force: Option<SpringForceResult>,
+    /// The steady periods of a periodic command (a designed odd
+    /// multisine), which the run's FRF read, with the noise their spread
+    /// gives and the distortion the command's empty lines hold; absent
+    /// for other commands.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub periodic: Option<PeriodicResult>,
     /// A run table row's cells in the lab's own columns (a `notes`, an
     /// `operator`), by column; absent when there are none.
     #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
     pub annotations: BTreeMap<String, String>,
+}
+
+/// A periodic log's steady periods and what they say
+/// (`frf::periodic`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+pub struct PeriodicResult {
+    /// The command's period (s).
+    pub period_s: f64,
+    /// The whole periods that repeat sample for sample, which the FRF
+    /// read.
+    pub periods: usize,
+    /// Where they start, from the log's first sample (s).
+    pub start_s: f64,
+    /// Lines of 1 / period in the band the command excites, and leaves
+    /// empty.
+    pub lines_excited: usize,
+    pub lines_empty: usize,
+    /// The displacement's RMS over the excited lines' mean power (m, from
+    /// the averaged periods), the noise floor (m, the RMS a line's average
+    /// scatters by, from the periods' spread) and the empty lines' RMS (m).
+    pub output_m: f64,
+    pub noise_m: f64,
+    pub empty_m: f64,
+    /// The empty lines' power over the noise floor there: 1 within
+    /// 1 / sqrt(lines_empty) for a linear rig, more where it distorts.
+    pub distortion_to_noise: f64,
+    /// Whether the empty lines hold more than the noise floor
+    /// (distortion_to_noise above 2).
+    pub distorts: bool,
 }
 
 /// Provenance of a run's log.

@@ -78,6 +78,10 @@ pub fn own_tf_with(
 #[derive(Debug, Clone)]
 pub struct LogStage {
     pub log: Log,
+    /// A periodic command's steady periods, to which `log` is cut, and
+    /// what their spread and empty lines say (None: not periodic, or the
+    /// manifest names the estimator).
+    pub periodic: Option<Periodic>,
     /// The FRF settings the run got, and why.
     pub choice: FrfChoice,
     /// What its command holds.
@@ -908,13 +912,26 @@ pub fn log_stage_from(
     let path = &plan.path;
     let (log, mut warnings) = checked_log(run, plan, ident, file)?;
     check_band_below_nyquist(run, &log, path)?;
+    let (log, periodic) = steady_part(log, ident, run.band_hz);
+    warnings.extend(periodic.as_ref().and_then(distortion_warning));
     let fs = log.sample_rate_hz;
     let (mut choice, mut h, force_frf) = estimate_frfs(run, ident, &log, path)?;
     // `auto`'s fit of a command of sparse lines reads the transient and the
     // noise from the lines between them (`identify::run_fit`), as the
     // reason then says.
     if choice.chosen && choice.plan.model_noise() && frf::sparse_lines(&h, run.band_hz) {
-        choice.reason += "; the command is sparse lines (a periodic command whose periods the record holds whole): the FRF is taken at its excited lines, the transient and the noise level read from the lines between them";
+        choice.reason = match &periodic {
+            Some(p) => format!(
+                "the FRF at the excited lines of the command's {} steady periods of {} s (from {} s into the log; the fades and rests around them left out), the noise level read from the lines between them (auto: whole periods of a periodic response hold only lines)",
+                p.steady.count,
+                crate::units::format_number(p.steady.period as f64 / fs, 6),
+                crate::units::format_number(p.start_s, 6),
+            ),
+            None => {
+                choice.reason.clone()
+                    + "; the command is sparse lines (a periodic command whose periods the record holds whole): the FRF is taken at its excited lines, the transient and the noise level read from the lines between them"
+            }
+        };
     }
     let mask = frf::band_mask(&h, run.band_hz, ident.coherence_min);
     displacement_polarity(path, plan, &h, &mask)?;
@@ -973,6 +990,7 @@ pub fn log_stage_from(
     .or_else(|| coarse_quantisation(&log.displacement_m));
     Ok(LogStage {
         log,
+        periodic,
         choice,
         excitation,
         linearity,
@@ -985,6 +1003,89 @@ pub fn log_stage_from(
         fit,
         fit_data,
         warnings,
+    })
+}
+
+/// A periodic log's steady periods and their levels over the band.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Periodic {
+    pub steady: frf::periodic::Steady,
+    /// When the log's sample rate is known, the time its steady periods
+    /// start at, from the log's first sample (s).
+    pub start_s: f64,
+    pub levels: Option<frf::periodic::Levels>,
+}
+
+/// The empty lines' power over the noise floor above which a periodic
+/// log's rig distorts: a linear rig's ratio scatters by 1 / sqrt(lines)
+/// about 1, so this is many times that for a band's worth of lines.
+pub const DISTORTION_RATIO: f64 = 2.0;
+
+/// `log` cut to its command's steady periods where `auto` chooses the
+/// estimator and the command has two or more: whole periods of a
+/// periodic response hold only lines, with no transient between them, so
+/// the FRF is read at the excited lines (`frf::at_lines`); and what the
+/// periods say of the noise and the distortion.
+fn steady_part(
+    log: Log,
+    ident: &IdentificationPlan,
+    band_hz: (f64, f64),
+) -> (Log, Option<Periodic>) {
+    if ident.frf.estimator != frf::Estimator::Auto {
+        return (log, None);
+    }
+    let fs = log.sample_rate_hz;
+    // A period of a tenth of a second at least: shorter ones cannot hold a
+    // band's worth of lines.
+    let Some(steady) = frf::periodic::steady_periods(&log.command_m, fs, 0.1) else {
+        return (log, None);
+    };
+    // Only a command that leaves lines of the band empty (a random-odd
+    // multisine, a square wave) is read on its lines; a repeated sweep
+    // fills every line and keeps its whole record.
+    let Some(levels) =
+        frf::periodic::levels(&log.command_m, &log.displacement_m, steady, fs, band_hz)
+    else {
+        return (log, None);
+    };
+    let (start, end) = (steady.start, steady.start + steady.count * steady.period);
+    let mut cut = log;
+    let keep = |v: &mut Vec<f64>| {
+        v.truncate(end);
+        v.drain(..start);
+    };
+    keep(&mut cut.command_m);
+    keep(&mut cut.displacement_m);
+    if let Some(f) = cut.force_n.as_mut() {
+        keep(f);
+    }
+    cut.n_rows = end - start;
+    cut.t0_s += start as f64 / fs;
+    let periodic = Periodic {
+        steady,
+        start_s: start as f64 / fs,
+        levels: Some(levels),
+    };
+    (cut, Some(periodic))
+}
+
+/// The warning for a periodic log whose empty lines hold more than the
+/// noise floor: the rig's own distortion (friction, a stiffening spring,
+/// the valve's flow law), which the fit counts with the noise.
+fn distortion_warning(p: &Periodic) -> Option<Warning> {
+    let l = p.levels?;
+    let ratio = l.distortion_to_noise();
+    (ratio > DISTORTION_RATIO).then(|| {
+        Warning::new(
+            format!("the rig distorts: the command's empty lines hold {ratio:.1} times the noise"),
+            format!(
+                "the {} lines the periodic command leaves empty in the band hold {} times the noise floor the {} periods' spread gives ({} lines excited): the rig answers the command with its own harmonics, a nonlinearity (seal friction, a stiffening spring, the valve's flow law); the fit counts them with the noise, so its stds include them",
+                l.empty,
+                crate::units::format_number(ratio, 3),
+                p.steady.count,
+                l.excited
+            ),
+        )
     })
 }
 

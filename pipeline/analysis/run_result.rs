@@ -16,8 +16,8 @@ use crate::manifest::{Campaign, CompensatorSettings, IdentificationPlan, RunPlan
 use crate::model::SpecimenModel;
 use crate::model::{self, LinearSpecimen, RigParams, Seals};
 use crate::results::{
-    DelayTestResult, FitSummary, FrfUsed, HarmonicsFound, LinearityResult, LogInfo, RunResult,
-    RunTracking, Status, TfResult, TfSource,
+    DelayTestResult, FitSummary, FrfUsed, HarmonicsFound, LinearityResult, LogInfo, PeriodicResult,
+    RunResult, RunTracking, Status, TfResult, TfSource,
 };
 use crate::tracking::compensator::{self, Compensator, CompensatorOutcome};
 use crate::tracking::{self, FrfBins, Reference, Tracking};
@@ -122,6 +122,7 @@ pub fn new_result(plan: &RunPlan) -> RunResult {
         frf: None,
         linearity: None,
         spring_force: None,
+        periodic: None,
         annotations: plan.annotations.clone(),
     }
 }
@@ -393,6 +394,26 @@ pub fn frf_used(st: &LogStage) -> FrfUsed {
     }
 }
 
+/// A periodic log's steady periods and levels as results.json states
+/// them.
+pub fn periodic_result(st: &LogStage) -> Option<PeriodicResult> {
+    let p = st.periodic.as_ref()?;
+    let fs = st.log.sample_rate_hz;
+    let l = p.levels?;
+    Some(PeriodicResult {
+        period_s: p.steady.period as f64 / fs,
+        periods: p.steady.count,
+        start_s: p.start_s,
+        lines_excited: l.excited,
+        lines_empty: l.empty,
+        output_m: l.output.sqrt(),
+        noise_m: l.noise.sqrt(),
+        empty_m: l.empty_power.sqrt(),
+        distortion_to_noise: l.distortion_to_noise(),
+        distorts: l.distortion_to_noise() > crate::analysis::log_stage::DISTORTION_RATIO,
+    })
+}
+
 /// The share of a fit's excess cost (its reduced chi-square above 1) a
 /// delay must explain for the run's warning to name it.
 const DELAY_EXPLAINS: f64 = 0.5;
@@ -439,6 +460,7 @@ pub fn fitted(
     out.warnings = acq.warnings.clone();
     out.log = log_info(plan, acq.stage.as_deref());
     out.frf = acq.stage.as_deref().map(frf_used);
+    out.periodic = acq.stage.as_deref().and_then(periodic_result);
     let stage = acq.stage;
     let fit = stage.as_ref().and_then(|s| s.fit.as_ref());
     out.tf = acq.tf.as_ref().map(|tf| tf_result(tf, acq.source, fit));

@@ -13,7 +13,7 @@ use super::log_stage::{LogStage, LogStageError, OwnTf, own_tf_with};
 use super::rig::RigError;
 use super::run_result::{
     CompensatorPlan, Cov4, at_p_gain, compensate, failed, fitted, frf_used, linearity_result,
-    log_info, measured_tracking, models, new_result, predicted_tracking, record,
+    log_info, measured_tracking, models, new_result, periodic_result, predicted_tracking, record,
 };
 use super::sensitivity::NoiseSource;
 use crate::frf;
@@ -190,6 +190,7 @@ pub fn validation(
     out.warnings = acq.warnings.clone();
     out.log = log_info(plan, acq.stage.as_deref());
     out.frf = acq.stage.as_deref().map(frf_used);
+    out.periodic = acq.stage.as_deref().and_then(periodic_result);
     out.linearity = acq
         .stage
         .as_deref()

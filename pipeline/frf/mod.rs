@@ -21,6 +21,7 @@ pub mod linearity;
 mod lines;
 mod local_fits;
 mod lpm;
+pub mod periodic;
 mod settings;
 mod sweep;
 mod synthesis;
