@@ -112,7 +112,7 @@ pub fn predict(
             if !(v.is_finite() && v > 0.0) {
                 continue;
             }
-            let g = line_gradient(
+            let info = line_information(
                 rig,
                 run.specimen,
                 run.p_gain,
@@ -120,11 +120,7 @@ pub fn predict(
                 intersample,
                 sample_rate_hz,
             )?;
-            for i in 0..4 {
-                for j in 0..4 {
-                    fisher[(i, j)] += 2.0 / v * (g[i].conj() * g[j]).re;
-                }
-            }
+            fisher += info * (2.0 / v);
         }
     }
     let inverse = fisher.try_inverse()?;
@@ -133,6 +129,21 @@ pub fn predict(
     (0..4)
         .all(|i| covariance[(i, i)].is_finite() && covariance[(i, i)] > 0.0)
         .then_some(Precision { covariance })
+}
+
+/// Re(g^H g) at `f_hz`, g = dH/dln(theta) of x1/u ([`line_gradient`]): a
+/// bin's Fisher information of the logarithms of the four parameters per
+/// unit of 2 / E|dH|^2.
+pub fn line_information(
+    rig: &RigParams,
+    specimen: LinearSpecimen,
+    p_gain: f64,
+    f_hz: f64,
+    intersample: Intersample,
+    sample_rate_hz: f64,
+) -> Option<Matrix4<f64>> {
+    let g = line_gradient(rig, specimen, p_gain, f_hz, intersample, sample_rate_hz)?;
+    Some(Matrix4::from_fn(|i, j| (g[i].conj() * g[j]).re))
 }
 
 /// dH/dln(theta_j) of x1/u at `f_hz`, the command held as `intersample`:

@@ -7,7 +7,7 @@
 
 use nalgebra::Matrix4;
 
-use super::precision::{PlannedRun, line_gradient};
+use super::precision::{self, PlannedRun};
 use crate::fit::Intersample;
 use crate::model::{LinearSpecimen, RigParams};
 
@@ -25,8 +25,8 @@ const PASSES: usize = 2000;
 /// The Fisher information of the logarithms of (beta1, a1b0, a2, a3) that
 /// a line at `f_hz` gives per unit of N_s rms^2 w / lambda (the steady
 /// record's samples, the run's mean square command, the line's share of
-/// it, the noise level there): Re(g^H g) with g = dH/dln(theta), since a
-/// line of amplitude A has v = 4 lambda / (N_s A^2) and A^2 = 2 rms^2 w.
+/// it, the noise level there): Re(g^H g), since a line of amplitude A has
+/// v = 4 lambda / (N_s A^2) and A^2 = 2 rms^2 w.
 pub fn line_information(
     rig: &RigParams,
     run: &RunModel,
@@ -34,15 +34,14 @@ pub fn line_information(
     intersample: Intersample,
     sample_rate_hz: f64,
 ) -> Option<Matrix4<f64>> {
-    let g = line_gradient(
+    precision::line_information(
         rig,
         run.specimen,
         run.p_gain,
         f_hz,
         intersample,
         sample_rate_hz,
-    )?;
-    Some(Matrix4::from_fn(|i, j| (g[i].conj() * g[j]).re))
+    )
 }
 
 /// Each run's shares of its power over `lines_hz` (each run's summing to
