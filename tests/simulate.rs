@@ -572,6 +572,23 @@ fn base_in_metres() -> String {
     )
 }
 
+/// [`base_in_metres`] simulated into `a/` of a scratch folder: the folder
+/// and the manifest's text.
+fn generated_in_metres() -> (tempfile::TempDir, String) {
+    let dir = scratch();
+    let text = base_in_metres();
+    let generated = write(dir.path(), "generated.toml", &text);
+    let r = servoid_into(
+        dir.path(),
+        "simulate",
+        &generated,
+        &dir.path().join("a"),
+        &[],
+    );
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    (dir, text)
+}
+
 /// Each run of BASE playing the command file `logs/<id>.csv` of `from`.
 fn playing(text: &str, from: &str) -> String {
     ["bare", "k1", "v1"].iter().fold(text.to_string(), |t, id| {
@@ -590,18 +607,8 @@ fn playing(text: &str, from: &str) -> String {
 /// records the SHA-256 of the file each run played.
 #[test]
 fn a_command_file_plays_as_the_command_it_holds() {
-    let dir = scratch();
-    let text = base_in_metres();
+    let (dir, text) = generated_in_metres();
     assert_ne!(text, BASE, "the command is logged in metres");
-    let generated = write(dir.path(), "generated.toml", &text);
-    let r = servoid_into(
-        dir.path(),
-        "simulate",
-        &generated,
-        &dir.path().join("a"),
-        &[],
-    );
-    assert_eq!(r.code, 0, "{}", r.stderr);
     let played = write(dir.path(), "played.toml", &playing(&text, "a"));
     let r = servoid_into(dir.path(), "simulate", &played, &dir.path().join("b"), &[]);
     assert_eq!(r.code, 0, "{}", r.stderr);
@@ -642,17 +649,7 @@ fn sha256_of(bytes: &[u8]) -> String {
 /// duration of its own is a manifest problem.
 #[test]
 fn a_command_file_that_cannot_be_played_is_refused() {
-    let dir = scratch();
-    let text = base_in_metres();
-    let generated = write(dir.path(), "generated.toml", &text);
-    let r = servoid_into(
-        dir.path(),
-        "simulate",
-        &generated,
-        &dir.path().join("a"),
-        &[],
-    );
-    assert_eq!(r.code, 0, "{}", r.stderr);
+    let (dir, text) = generated_in_metres();
     let fails = |text: &str, words: &[&str]| {
         let manifest = write(dir.path(), "played.toml", text);
         let out = dir.path().join("b");

@@ -920,18 +920,7 @@ pub fn log_stage_from(
     // noise from the lines between them (`identify::run_fit`), as the
     // reason then says.
     if choice.chosen && choice.plan.model_noise() && frf::sparse_lines(&h, run.band_hz) {
-        choice.reason = match &periodic {
-            Some(p) => format!(
-                "the FRF at the excited lines of the command's {} steady periods of {} s (from {} s into the log; the fades and rests around them left out), the noise level read from the lines between them (auto: whole periods of a periodic response hold only lines)",
-                p.steady.count,
-                crate::units::format_number(p.steady.period as f64 / fs, 6),
-                crate::units::format_number(p.start_s, 6),
-            ),
-            None => {
-                choice.reason.clone()
-                    + "; the command is sparse lines (a periodic command whose periods the record holds whole): the FRF is taken at its excited lines, the transient and the noise level read from the lines between them"
-            }
-        };
+        choice.reason = lines_reason(&choice.reason, periodic.as_ref(), fs);
     }
     let mask = frf::band_mask(&h, run.band_hz, ident.coherence_min);
     displacement_polarity(path, plan, &h, &mask)?;
@@ -1087,6 +1076,23 @@ fn distortion_warning(p: &Periodic) -> Option<Warning> {
             ),
         )
     })
+}
+
+/// `auto`'s reason where it reads a command of sparse lines at its
+/// excited lines: a periodic log's steady periods, or (`reason` said of
+/// the whole record) a record that holds whole periods.
+fn lines_reason(reason: &str, periodic: Option<&Periodic>, fs: f64) -> String {
+    match periodic {
+        Some(p) => format!(
+            "the FRF at the excited lines of the command's {} steady periods of {} s (from {} s into the log; the fades and rests around them left out), the noise level read from the lines between them (auto: whole periods of a periodic response hold only lines)",
+            p.steady.count,
+            crate::units::format_number(p.steady.period as f64 / fs, 6),
+            crate::units::format_number(p.start_s, 6),
+        ),
+        None => format!(
+            "{reason}; the command is sparse lines (a periodic command whose periods the record holds whole): the FRF is taken at its excited lines, the transient and the noise level read from the lines between them"
+        ),
+    }
 }
 
 /// Whether the rig answered the log's sweep linearly. Harmonics a channel's

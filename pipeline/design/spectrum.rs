@@ -22,28 +22,6 @@ pub struct RunModel {
 /// in 1e6 well before on the paper's rigs.
 const PASSES: usize = 2000;
 
-/// The Fisher information of the logarithms of (beta1, a1b0, a2, a3) that
-/// a line at `f_hz` gives per unit of N_s rms^2 w / lambda (the steady
-/// record's samples, the run's mean square command, the line's share of
-/// it, the noise level there): Re(g^H g), since a line of amplitude A has
-/// v = 4 lambda / (N_s A^2) and A^2 = 2 rms^2 w.
-pub fn line_information(
-    rig: &RigParams,
-    run: &RunModel,
-    f_hz: f64,
-    intersample: Intersample,
-    sample_rate_hz: f64,
-) -> Option<Matrix4<f64>> {
-    precision::line_information(
-        rig,
-        run.specimen,
-        run.p_gain,
-        f_hz,
-        intersample,
-        sample_rate_hz,
-    )
-}
-
 /// Each run's shares of its power over `lines_hz` (each run's summing to
 /// one) minimising the trace of the inverse of the summed information,
 /// each run's information weighted by `scale[r]` (its N_s rms^2) and each
@@ -64,8 +42,18 @@ pub fn a_optimal(
             lines_hz
                 .iter()
                 .map(|&f| {
-                    line_information(rig, run, f, intersample, sample_rate_hz)
-                        .map(|m| m * (s / noise(f)))
+                    // A line of amplitude A has v = 4 lambda / (N_s A^2) and
+                    // A^2 = 2 rms^2 w: its information is Re(g^H g) per
+                    // unit of N_s rms^2 w / lambda.
+                    precision::line_information(
+                        rig,
+                        run.specimen,
+                        run.p_gain,
+                        f,
+                        intersample,
+                        sample_rate_hz,
+                    )
+                    .map(|m| m * (s / noise(f)))
                 })
                 .collect::<Option<Vec<_>>>()
         })

@@ -133,7 +133,16 @@ fn the_shares_found_meet_the_equivalence_theorem() {
             lines
                 .iter()
                 .map(|&f| {
-                    line_information(&rig, r, f, Intersample::SampleAndHold, FS).unwrap() / NOISE(f)
+                    precision::line_information(
+                        &rig,
+                        r.specimen,
+                        r.p_gain,
+                        f,
+                        Intersample::SampleAndHold,
+                        FS,
+                    )
+                    .unwrap()
+                        / NOISE(f)
                 })
                 .collect()
         })
