@@ -158,6 +158,11 @@ pub enum Command {
         #[arg(long)]
         manifest: Option<PathBuf>,
     },
+    /// Design tomorrow night's identification runs from a campaign's
+    /// results: each run's command (odd multisines shaped for the rig,
+    /// within its limits) as CSV and MAT, the next night's manifest, a
+    /// simulation manifest that checks them, design.json and a page.
+    Design(DesignArgs),
     /// Rerun the analysis a results.json records (its manifest and logs
     /// checked by their hashes) and list every quantity that differs.
     Verify {
@@ -290,6 +295,7 @@ fn dispatch(command: Command) -> u8 {
             jobs,
         } => cmd_verify(&results, manifest.as_deref(), capped(jobs)),
         Command::Check { manifest } => cmd_check(&manifest),
+        Command::Design(args) => cmd_design(&args),
         Command::Init { logs, out, table } => cmd_init(&logs, &out, table.as_deref()),
         Command::History {
             action:
@@ -307,6 +313,134 @@ fn dispatch(command: Command) -> u8 {
         ),
         Command::Man => cmd_man(),
         Command::Schema { out_dir } => cmd_schema(&out_dir),
+    }
+}
+
+/// `servoid design`'s arguments: the limits and times absent are taken
+/// from the results (or not applied: stroke, velocity, force).
+#[derive(Debug, clap::Args)]
+pub struct DesignArgs {
+    /// The results.json of the campaign to design from, or the output
+    /// folder that holds it.
+    results: PathBuf,
+    /// The output folder (default: reports/<campaign>-design).
+    #[arg(long, short)]
+    out: Option<PathBuf>,
+    /// The command's largest magnitude (mm); default: the largest command
+    /// of last night's identification logs.
+    #[arg(long)]
+    command_mm: Option<f64>,
+    /// The actuator's stroke (mm): the predicted displacement stays within
+    /// +-this.
+    #[arg(long)]
+    stroke_mm: Option<f64>,
+    /// The peak velocity (mm/s), the valve's rated flow over the piston
+    /// area.
+    #[arg(long)]
+    velocity_mm_s: Option<f64>,
+    /// The peak force on the specimen (N).
+    #[arg(long)]
+    force_n: Option<f64>,
+    /// The band of interest, LO,HI (Hz); default: the campaign's
+    /// identification band.
+    #[arg(long, value_delimiter = ',', num_args = 1)]
+    band_hz: Option<Vec<f64>>,
+    /// The DAQ's rate (Hz); default: last night's logs'.
+    #[arg(long)]
+    rate_hz: Option<f64>,
+    /// The time per run, rest included (s); default: the longest of last
+    /// night's identification logs.
+    #[arg(long)]
+    run_s: Option<f64>,
+    /// The time for the night's identification runs together (s), shared
+    /// equally.
+    #[arg(long)]
+    night_s: Option<f64>,
+    /// Rest before and after each command (s).
+    #[arg(long, default_value_t = 1.0)]
+    rest_s: f64,
+    /// The worst relative std to reach (0.001 for 0.1 %): the runs are
+    /// then as long as it needs, or the design names the limit that stops
+    /// it.
+    #[arg(long)]
+    target_std: Option<f64>,
+    /// The seed of the lines left empty for detection.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+}
+
+/// `servoid design`: tomorrow night's runs, written; says where and what
+/// they are predicted to determine.
+fn cmd_design(args: &DesignArgs) -> u8 {
+    let results = if args.results.is_dir() {
+        args.results.join("results.json")
+    } else {
+        args.results.clone()
+    };
+    let band_hz = match args.band_hz.as_deref() {
+        None => None,
+        Some(&[lo, hi]) => Some([lo, hi]),
+        Some(other) => {
+            warn(&format!(
+                "error: --band-hz takes two frequencies, LO,HI (got {other:?})"
+            ));
+            return EXIT_USAGE;
+        }
+    };
+    let ask = run::design::DesignAsk {
+        out: args.out.clone(),
+        command_m: args.command_mm.map(|v| v * 1e-3),
+        stroke_m: args.stroke_mm.map(|v| v * 1e-3),
+        velocity_m_per_s: args.velocity_mm_s.map(|v| v * 1e-3),
+        force_n: args.force_n,
+        band_hz,
+        sample_rate_hz: args.rate_hz,
+        run_s: args.run_s,
+        night_s: args.night_s,
+        rest_s: args.rest_s,
+        target_relative_std: args.target_std,
+        seed: args.seed,
+        wait: None,
+    };
+    match run::design::design_night(&results, &ask) {
+        Ok(d) => {
+            let r = &d.result;
+            say(&format!(
+                "designed {} runs of {:.1} s: odd multisines of {} s x {} periods, {} lines over {}-{} Hz, crest factors {}",
+                r.runs.len(),
+                r.record_s,
+                r.period_s,
+                r.periods,
+                r.lines_excited,
+                r.band_hz[0],
+                r.band_hz[1],
+                r.runs
+                    .iter()
+                    .map(|x| format!("{:.2}", x.crest_factor))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ));
+            for p in &r.parameters {
+                say(&format!(
+                    "  {}: predicted std {:.3e} ({:.3} %)",
+                    p.name,
+                    p.std,
+                    100.0 * p.relative_std
+                ));
+            }
+            if let Some(b) = &r.baseline {
+                say(&format!(
+                    "  against the paper's chirps at the same record and peak: worst std {:.2} times smaller, sum of squared relative stds {:.2} times",
+                    b.worst_ratio, b.squares_ratio
+                ));
+            }
+            say(&format!(
+                "wrote {} (design.html first)",
+                d.out_dir.display()
+            ));
+            EXIT_OK
+        }
+        Err(e) => job_failed(&e, false),
     }
 }
 

@@ -438,6 +438,11 @@ pub struct RunResult {
     /// for other commands.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub periodic: Option<PeriodicResult>,
+    /// The displacement's noise as the run's FRF variance states it, in
+    /// bands over the bins its fit used: what `servoid design` plans the
+    /// next night's precision from; absent for a run without a fit.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub noise: Option<NoiseResult>,
     /// A run table row's cells in the lab's own columns (a `notes`, an
     /// `operator`), by column; absent when there are none.
     #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
@@ -473,6 +478,19 @@ pub struct PeriodicResult {
     pub distorts: bool,
 }
 
+/// The displacement's noise spectrum a run's FRF variance implies: a bin
+/// of E|dH|^2 at an input density Suu holds a noise density Suu E|dH|^2
+/// (times the Welch estimate's degrees of freedom), averaged here over
+/// sixth-octave bands.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+pub struct NoiseResult {
+    /// The bands' centres (Hz), rising.
+    pub freq_hz: Vec<f64>,
+    /// The one-sided power spectral density of the displacement's noise
+    /// in each band (m^2/Hz): white noise of s m RMS at fs gives 2 s^2 / fs.
+    pub psd_m2_per_hz: Vec<f64>,
+}
+
 /// Provenance of a run's log.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 pub struct LogInfo {
@@ -482,6 +500,9 @@ pub struct LogInfo {
     pub sample_rate_hz: f64,
     pub n_samples: usize,
     pub duration_s: f64,
+    /// The command's largest magnitude (m).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub command_peak_m: Option<f64>,
     /// Isolated spikes replaced by their neighbours' line, as a channel's
     /// `repair = "interpolate"` asked.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
@@ -839,4 +860,129 @@ mod tests {
         assert_eq!(out[0].recorded, "1.0");
         assert_eq!(out[0].recomputed, "1.5");
     }
+}
+
+/// What `servoid design` wrote (design.json): tomorrow night's
+/// identification runs, their commands, and what the night is predicted to
+/// determine of the rig.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct DesignResult {
+    /// The servoid version that wrote this file.
+    pub servoid_version: String,
+    /// The results.json designed from (as given) and its SHA-256.
+    pub source: String,
+    pub source_sha256: String,
+    pub campaign: String,
+    pub rig_name: String,
+    /// The rig the night is planned at (the one the results state), a1b0
+    /// at its `p_gain`.
+    pub rig: RigParams,
+    pub sample_rate_hz: f64,
+    pub band_hz: [f64; 2],
+    /// Each run's record, its rest included (s).
+    pub record_s: f64,
+    /// Rest before and after each command (s).
+    pub rest_s: f64,
+    /// The odd multisines' period (s) and the periods in each run (the
+    /// first fading in, the last out).
+    pub period_s: f64,
+    pub periods: usize,
+    /// The A-optimal shares' part of each line's share of the power, the
+    /// rest spread flat.
+    pub optimal_share: f64,
+    /// Which draw of the lines left out for detection (of those tried).
+    pub draw: u64,
+    pub lines_excited: usize,
+    /// Odd lines in the band left empty, where odd distortion shows.
+    pub lines_detection: usize,
+    pub limits: DesignLimits,
+    /// The worst relative std asked for (--target-std).
+    pub target_relative_std: Option<f64>,
+    /// beta1, a1b0, a2, a3: last night's stated std, the designed night's
+    /// predicted one, and the paper's chirps' at the same record and peak.
+    pub parameters: Vec<DesignedParameter>,
+    /// The designed night against the paper's chirps.
+    pub baseline: Option<DesignBaseline>,
+    pub runs: Vec<DesignedRunResult>,
+    /// The displacement noise the night is planned for: the mean of the
+    /// identification runs' (results.json's `noise`).
+    pub noise: NoiseResult,
+    /// Every period and mix tried, with the sum of squared relative stds
+    /// each predicts.
+    pub tried: Vec<crate::design::night::Tried>,
+}
+
+/// The limits a design kept to, as given or taken from the results.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct DesignLimits {
+    /// The command's largest magnitude (m), and where it came from.
+    pub command_m: f64,
+    pub command_from: String,
+    pub stroke_m: Option<f64>,
+    pub velocity_m_per_s: Option<f64>,
+    pub force_n: Option<f64>,
+    /// The time each run may take (s), rest included, and where it came
+    /// from.
+    pub run_s: f64,
+    pub run_from: String,
+}
+
+/// A rig parameter's precision: last night's and tomorrow's.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct DesignedParameter {
+    pub name: String,
+    pub value: f64,
+    /// The std last night's results state.
+    pub last_std: Option<f64>,
+    /// The designed night's predicted std and its ratio to the value.
+    pub std: f64,
+    pub relative_std: f64,
+    /// The paper's chirps' predicted std at the same record and peak.
+    pub chirp_std: Option<f64>,
+}
+
+/// The designed night against the paper's command at the same record and
+/// peak.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct DesignBaseline {
+    pub description: String,
+    /// The chirps' worst relative std over the night's.
+    pub worst_ratio: f64,
+    /// The chirps' sum of squared relative stds over the night's.
+    pub squares_ratio: f64,
+}
+
+/// One designed run.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct DesignedRunResult {
+    pub id: String,
+    pub role: Role,
+    pub description: String,
+    pub p_gain: f64,
+    pub specimen: SpecimenModel,
+    /// Its command, relative to the design's folder: CSV and MAT, each
+    /// with time_s (s) and command_m (m) at sample_rate_hz.
+    pub command_csv: String,
+    pub command_mat: String,
+    /// The log the next night's manifest expects for it.
+    pub log: String,
+    /// The period's peak over its RMS, and the steady periods' RMS (m).
+    pub crest_factor: f64,
+    pub rms_m: f64,
+    /// The peaks the identified plant predicts over the whole command.
+    pub peaks: crate::design::night::Peaks,
+    /// The limit its amplitude reaches.
+    pub bound_by: crate::design::night::Limit,
+    /// Each limit given: the predicted peak over it.
+    pub used: Vec<LimitUsed>,
+}
+
+/// A predicted peak against its limit.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct LimitUsed {
+    pub limit: crate::design::night::Limit,
+    pub peak: f64,
+    pub value: f64,
+    /// peak / value: at most 1.
+    pub share: f64,
 }

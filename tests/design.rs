@@ -220,7 +220,8 @@ fn logged_command_m(path: &std::path::Path) -> Vec<f64> {
 }
 
 /// Twenty seeds of a periodic night, each analysed with the defaults:
-/// the log is read on its steady periods (8 of 2 s), the stated stds are
+/// the log is read on its steady periods (7 of 2 s: the fades and the
+/// period the response settles in are left out), the stated stds are
 /// within 20 % of the ones predicted from the logged commands' steady
 /// periods and the instruments' noise (on average over the seeds), and
 /// each parameter is within 3 stated stds of the truth.
@@ -239,12 +240,12 @@ fn a_periodic_nights_stds_are_the_predicted_ones() {
         for (id, specimen) in ["bare", "k1"].iter().zip(specimens) {
             let run = crate::util::run_by_id(&results, id);
             let p = &run["periodic"];
-            assert_eq!(p["periods"].as_u64(), Some(8), "seed {seed} {id}: {p}");
+            assert_eq!(p["periods"].as_u64(), Some(7), "seed {seed} {id}: {p}");
             assert_eq!(p["period_s"].as_f64(), Some(2.0));
             assert!(!p["distorts"].as_bool().unwrap(), "seed {seed} {id}: {p}");
             let u = logged_command_m(&dir.path().join(format!("out/logs/{id}.csv")));
             let start = (p["start_s"].as_f64().unwrap() * 1000.0).round() as usize;
-            let steady = &u[start..start + 16_000];
+            let steady = &u[start..start + 14_000];
             let (freq_hz, variance) = etfe_variance(steady, 1000.0, [0.5, 30.0], |_| noise);
             runs.push(PlannedRun {
                 specimen,
@@ -268,6 +269,7 @@ fn a_periodic_nights_stds_are_the_predicted_ones() {
             ratios[j] += std / predicted[j] / seeds as f64;
         }
     }
+    eprintln!("stated / predicted {ratios:?}");
     for (name, ratio) in NAMES.iter().zip(ratios) {
         assert!(
             (0.8..1.2).contains(&ratio),
@@ -308,4 +310,291 @@ fn a_periodic_log_tells_distortion_from_noise() {
         .iter()
         .any(|w| w.to_string().contains("the rig distorts"));
     assert!(warned, "{}", run["warnings"]);
+}
+
+/// The bundled default simulated and run, then `servoid design` on its
+/// results (the defaults: last night's peak command and record, no other
+/// limit) into `dir`/design: the design's folder and design.json.
+fn designed_from_the_bundled_default(dir: &std::path::Path, extra: &[&str]) -> serde_json::Value {
+    let last = dir.join("out");
+    let r = servoid_into(
+        dir,
+        "simulate",
+        &bundled_simulation(dir, false),
+        &last,
+        &["--run", "--quiet"],
+    );
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    let mut args = vec![
+        "design",
+        last.to_str().unwrap(),
+        "--out",
+        dir.join("design").to_str().unwrap(),
+    ]
+    .into_iter()
+    .map(String::from)
+    .collect::<Vec<_>>();
+    args.extend(extra.iter().map(|s| s.to_string()));
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
+    let r = crate::util::servoid(dir, &args);
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    serde_json::from_str(&std::fs::read_to_string(dir.join("design/design.json")).unwrap()).unwrap()
+}
+
+/// The design's check.toml with `seed`, simulated and run: results.json
+/// and truth.json.
+fn checked(design: &std::path::Path, seed: u64) -> (serde_json::Value, serde_json::Value) {
+    let text = std::fs::read_to_string(design.join("check.toml")).unwrap();
+    assert!(text.contains("\nseed = 1\n"));
+    let manifest = write(
+        design,
+        &format!("check-{seed}.toml"),
+        &text.replace("\nseed = 1\n", &format!("\nseed = {seed}\n")),
+    );
+    let out = design.join(format!("check-{seed}"));
+    let r = servoid_into(design, "simulate", &manifest, &out, &["--run", "--quiet"]);
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    let read = |name: &str| -> serde_json::Value {
+        serde_json::from_str(&std::fs::read_to_string(out.join(name)).unwrap()).unwrap()
+    };
+    (read("results.json"), read("truth.json"))
+}
+
+/// The loop through the CLI: the bundled default's results, its
+/// design, and the design's check.toml (the commands played on the rig
+/// identified, with the noise measured) simulated and run over 20 seeds
+/// with the defaults. Over the seeds the stated stds are the predicted
+/// ones within 20 % on average, and every parameter's z-scores against
+/// the truth have an RMS within 0.6-1.4 and none beyond 4
+/// (docs/accuracy.md, "The designed night, end to end", gives what it
+/// measured). In prediction the night clears the bar against the
+/// paper's chirps (1.3 and 2); the stated stds over the seeds against the
+/// bundled default's, the chirps' own, are printed for docs/accuracy.md.
+#[test]
+fn a_designed_night_states_the_stds_it_was_designed_for() {
+    let dir = scratch();
+    let design = designed_from_the_bundled_default(dir.path(), &[]);
+    let baseline = &design["baseline"];
+    assert!(
+        baseline["worst_ratio"].as_f64().unwrap() >= 1.3
+            && baseline["squares_ratio"].as_f64().unwrap() >= 2.0,
+        "{baseline}"
+    );
+    let last: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(dir.path().join("out/results.json")).unwrap(),
+    )
+    .unwrap();
+    let predicted: Vec<f64> = (0..4)
+        .map(|j| design["parameters"][j]["std"].as_f64().unwrap())
+        .collect();
+    let truth_key = ["beta1_per_s", "a1b0_n_per_m_s2", "a2_n_per_m", "a3_per_s"];
+    let seeds = 20;
+    let (mut ratio, mut z2, mut beyond, mut largest) = ([0.0; 4], [0.0; 4], 0, 0.0_f64);
+    let mut stated_mean = [0.0; 4];
+    for seed in 1..=seeds {
+        let (results, truth) = checked(&dir.path().join("design"), seed);
+        for (j, name) in NAMES.iter().enumerate() {
+            let e = &results["rig"][*name];
+            let (value, std) = (e["value"].as_f64().unwrap(), e["std"].as_f64().unwrap());
+            let z = (value - truth["rig"][truth_key[j]].as_f64().unwrap()) / std;
+            ratio[j] += std / predicted[j] / seeds as f64;
+            stated_mean[j] += std / seeds as f64;
+            z2[j] += z * z / seeds as f64;
+            beyond += usize::from(z.abs() > 3.0);
+            largest = largest.max(z.abs());
+        }
+    }
+    let rel = |std: [f64; 4]| -> [f64; 4] {
+        std::array::from_fn(|j| std[j] / last["rig"][NAMES[j]]["value"].as_f64().unwrap())
+    };
+    let chirps: [f64; 4] = std::array::from_fn(|j| last["rig"][NAMES[j]]["std"].as_f64().unwrap());
+    let (ours, theirs) = (rel(stated_mean), rel(chirps));
+    let max = |r: [f64; 4]| r.into_iter().fold(0.0, f64::max);
+    let squares = |r: [f64; 4]| r.iter().map(|r| r * r).sum::<f64>();
+    eprintln!(
+        "stated / predicted {ratio:?}; z RMS {:?}; beyond 3: {beyond}; the bundled default's stated stds over the designed night's: worst {:.2}, squares {:.2}",
+        z2.map(f64::sqrt),
+        max(theirs) / max(ours),
+        squares(theirs) / squares(ours)
+    );
+    for (j, name) in NAMES.iter().enumerate() {
+        assert!(
+            (0.8..1.2).contains(&ratio[j]),
+            "{name}: stated {} times the predicted",
+            ratio[j]
+        );
+        assert!(
+            (0.6..1.4).contains(&z2[j].sqrt()),
+            "{name}: z RMS {}",
+            z2[j].sqrt()
+        );
+    }
+    assert!(
+        largest <= 4.0,
+        "{beyond} of 80 beyond 3 stds, the largest {largest}"
+    );
+}
+
+/// The command a design wrote (commands/<run>.csv): time_s and command_m.
+fn written_command(path: &std::path::Path) -> (Vec<f64>, Vec<f64>) {
+    let text = std::fs::read_to_string(path).unwrap();
+    let mut lines = text.lines();
+    assert_eq!(lines.next(), Some("time_s,command_m"));
+    lines
+        .map(|l| {
+            let (t, u) = l.split_once(',').unwrap();
+            (t.parse::<f64>().unwrap(), u.parse::<f64>().unwrap())
+        })
+        .unzip()
+}
+
+/// `servoid design` with a stroke, a velocity and a force given: every
+/// run's predicted peaks are within them and the command written peaks
+/// where design.json says, at the DAQ's rate, from rest to rest. The
+/// commands' MAT files play as the CSV ones do (the same logs), and the
+/// next night's manifest analyses the check's logs as the check did.
+#[test]
+fn a_design_keeps_to_its_limits_and_its_files_play() {
+    let dir = scratch();
+    let design = designed_from_the_bundled_default(
+        dir.path(),
+        &[
+            "--stroke-mm",
+            "1.5",
+            "--velocity-mm-s",
+            "60",
+            "--force-n",
+            "150",
+        ],
+    );
+    let folder = dir.path().join("design");
+    let limits = [("stroke", 1.5e-3), ("velocity", 0.06), ("force", 150.0)];
+    let mut bounds = Vec::new();
+    for run in design["runs"].as_array().unwrap() {
+        let peaks = &run["peaks"];
+        let peak = |k: &str| peaks[k].as_f64();
+        assert!(peak("displacement_m").unwrap() <= limits[0].1, "{run}");
+        assert!(peak("velocity_m_per_s").unwrap() <= limits[1].1, "{run}");
+        assert!(peak("force_n").is_none_or(|f| f <= limits[2].1), "{run}");
+        assert!(peak("command_m").unwrap() <= 0.0040002, "{run}");
+        bounds.push(run["bound_by"].as_str().unwrap().to_string());
+        let (t, u) = written_command(&folder.join(run["command_csv"].as_str().unwrap()));
+        assert!(
+            t.windows(2)
+                .all(|w| ((w[1] - w[0]) * 2048.0 - 1.0).abs() < 1e-9)
+        );
+        assert_eq!((u[0], *u.last().unwrap()), (0.0, 0.0));
+        let largest = u.iter().fold(0.0_f64, |m, v| m.max(v.abs()));
+        assert!((largest / peak("command_m").unwrap() - 1.0).abs() < 1e-12);
+    }
+    assert!(
+        bounds.iter().any(|b| b != "command"),
+        "some run meets a limit other than the command's: {bounds:?}"
+    );
+    let (checked_results, _) = checked(&folder, 1);
+    let mat = std::fs::read_to_string(folder.join("check.toml"))
+        .unwrap()
+        .replace(".csv\"", ".mat\"")
+        .replace("\nseed = 1\n", "\nseed = 1\nlog_format = \"csv\"\n")
+        .replacen("log_format = \"csv\"\n", "", 1);
+    let manifest = write(&folder, "check-mat.toml", &mat);
+    let r = servoid_into(
+        &folder,
+        "simulate",
+        &manifest,
+        &folder.join("check-mat"),
+        &[],
+    );
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    for run in design["runs"].as_array().unwrap() {
+        let log = format!("logs/{}.csv", run["id"].as_str().unwrap());
+        assert_eq!(
+            std::fs::read(folder.join("check-1").join(&log)).unwrap(),
+            std::fs::read(folder.join("check-mat").join(&log)).unwrap(),
+            "{log}"
+        );
+    }
+    std::fs::create_dir_all(folder.join("logs")).unwrap();
+    for run in design["runs"].as_array().unwrap() {
+        let log = run["log"].as_str().unwrap();
+        std::fs::copy(folder.join("check-1").join(log), folder.join(log)).unwrap();
+    }
+    let night = folder.join("night");
+    let r = servoid_into(
+        &folder,
+        "run",
+        &folder.join("campaign.toml"),
+        &night,
+        &["--quiet"],
+    );
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    let results: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(night.join("results.json")).unwrap())
+            .unwrap();
+    for name in NAMES {
+        let (a, b) = (&results["rig"][name], &checked_results["rig"][name]);
+        for key in ["value", "std"] {
+            let (x, y) = (a[key].as_f64().unwrap(), b[key].as_f64().unwrap());
+            assert!((x / y - 1.0).abs() < 1e-9, "{name}.{key}: {x} against {y}");
+        }
+    }
+}
+
+/// `--target-std`: a reachable worst relative std gives the runs the
+/// length it needs (shorter than last night's here) and reaches it in
+/// prediction; one the time per run cannot reach is refused, naming that
+/// limit and the one that sets the amplitudes, and writes nothing; a
+/// limit given wrongly is a usage error naming its flag.
+#[test]
+fn a_target_std_sets_the_record_or_names_what_stops_it() {
+    let dir = scratch();
+    let design = designed_from_the_bundled_default(dir.path(), &["--target-std", "1e-4"]);
+    let worst = design["parameters"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|p| p["relative_std"].as_f64().unwrap())
+        .fold(0.0, f64::max);
+    assert!(worst <= 1e-4 * (1.0 + 1e-9), "worst {worst}");
+    assert!(
+        design["record_s"].as_f64().unwrap() < 172.0,
+        "{}",
+        design["record_s"]
+    );
+    let refused = dir.path().join("refused");
+    let r = crate::util::servoid(
+        dir.path(),
+        &[
+            "design",
+            dir.path().join("out").to_str().unwrap(),
+            "--out",
+            refused.to_str().unwrap(),
+            "--target-std",
+            "1e-6",
+        ],
+    );
+    assert_eq!(r.code, 1, "{}", r.stderr);
+    assert!(
+        r.stderr.contains("--run-s") && r.stderr.contains("the peak command (--command-mm)"),
+        "{}",
+        r.stderr
+    );
+    assert!(!refused.exists(), "nothing written");
+    let results = dir.path().join("out");
+    for (flag, value) in [("--stroke-mm", "0"), ("--band-hz", "30,0.5")] {
+        let r = crate::util::servoid(
+            dir.path(),
+            &[
+                "design",
+                results.to_str().unwrap(),
+                "--out",
+                refused.to_str().unwrap(),
+                flag,
+                value,
+            ],
+        );
+        assert_eq!(r.code, 2, "{flag} {value}: {}", r.stderr);
+        assert!(r.stderr.contains(flag), "{flag}: {}", r.stderr);
+        assert!(!refused.exists(), "nothing written");
+    }
 }

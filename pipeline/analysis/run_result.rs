@@ -16,8 +16,8 @@ use crate::manifest::{Campaign, CompensatorSettings, IdentificationPlan, RunPlan
 use crate::model::SpecimenModel;
 use crate::model::{self, LinearSpecimen, RigParams, Seals};
 use crate::results::{
-    DelayTestResult, FitSummary, FrfUsed, HarmonicsFound, LinearityResult, LogInfo, PeriodicResult,
-    RunResult, RunTracking, Status, TfResult, TfSource,
+    DelayTestResult, FitSummary, FrfUsed, HarmonicsFound, LinearityResult, LogInfo, NoiseResult,
+    PeriodicResult, RunResult, RunTracking, Status, TfResult, TfSource,
 };
 use crate::tracking::compensator::{self, Compensator, CompensatorOutcome};
 use crate::tracking::{self, FrfBins, Reference, Tracking};
@@ -123,6 +123,7 @@ pub fn new_result(plan: &RunPlan) -> RunResult {
         linearity: None,
         spring_force: None,
         periodic: None,
+        noise: None,
         annotations: plan.annotations.clone(),
     }
 }
@@ -371,6 +372,7 @@ pub fn log_info(plan: &RunPlan, stage: Option<&LogStage>) -> Option<LogInfo> {
         sample_rate_hz: st.log.sample_rate_hz,
         n_samples: st.log.n_rows,
         duration_s: st.log.n_rows as f64 / st.log.sample_rate_hz,
+        command_peak_m: Some(st.log.command_m.iter().fold(0.0, |m, u| m.max(u.abs()))),
         repairs: st.log.repairs.clone(),
     })
 }
@@ -411,6 +413,48 @@ pub fn periodic_result(st: &LogStage) -> Option<PeriodicResult> {
         empty_m: l.empty_power.sqrt(),
         distortion_to_noise: l.distortion_to_noise(),
         distorts: l.distortion_to_noise() > crate::analysis::log_stage::DISTORTION_RATIO,
+    })
+}
+
+/// Bands per octave of a run's noise spectrum ([`noise_result`]).
+const NOISE_BANDS_PER_OCTAVE: f64 = 6.0;
+
+/// The displacement's noise spectrum the run's fitted bins state, in
+/// sixth-octave bands from the lowest (`NoiseResult`).
+pub fn noise_result(st: &LogStage) -> Option<NoiseResult> {
+    let data = st.fit_data.as_ref()?;
+    // A Welch bin's E|dH|^2 is the noise density over (n_eff - 1) Suu
+    // (frf::h_variance_at); a whole-record transform's over Suu.
+    let dof = match st.frf.n_averages {
+        1 => 1.0,
+        _ => st.frf.effective_averages - 1.0,
+    };
+    let first = *data.freq_hz.first()?;
+    let mut bands: Vec<(f64, usize)> = Vec::new();
+    for ((&f, &v), &suu) in data.freq_hz.iter().zip(&data.variance).zip(&data.suu) {
+        let psd = v * suu * dof;
+        if !(psd.is_finite() && psd > 0.0 && f > 0.0) {
+            continue;
+        }
+        let band = (NOISE_BANDS_PER_OCTAVE * (f / first).log2()).floor() as usize;
+        if bands.len() <= band {
+            bands.resize(band + 1, (0.0, 0));
+        }
+        bands[band].0 += psd;
+        bands[band].1 += 1;
+    }
+    let (freq_hz, psd_m2_per_hz): (Vec<f64>, Vec<f64>) = bands
+        .iter()
+        .enumerate()
+        .filter(|(_, (_, n))| *n > 0)
+        .map(|(i, (sum, n))| {
+            let centre = first * ((i as f64 + 0.5) / NOISE_BANDS_PER_OCTAVE).exp2();
+            (centre, sum / *n as f64)
+        })
+        .unzip();
+    (!freq_hz.is_empty()).then_some(NoiseResult {
+        freq_hz,
+        psd_m2_per_hz,
     })
 }
 
@@ -461,6 +505,7 @@ pub fn fitted(
     out.log = log_info(plan, acq.stage.as_deref());
     out.frf = acq.stage.as_deref().map(frf_used);
     out.periodic = acq.stage.as_deref().and_then(periodic_result);
+    out.noise = acq.stage.as_deref().and_then(noise_result);
     let stage = acq.stage;
     let fit = stage.as_ref().and_then(|s| s.fit.as_ref());
     out.tf = acq.tf.as_ref().map(|tf| tf_result(tf, acq.source, fit));

@@ -1,7 +1,9 @@
 //! Tomorrow night's runs designed from the rig servoid identified: what a
 //! planned night would determine of the rig ([`precision`]) before the lab
-//! runs it, and the spectrum that determines it best ([`spectrum`]). Pure:
-//! rig, plans and noise in, predictions out.
+//! runs it, the spectrum that determines it best ([`spectrum`]), and the
+//! commands that carry it within the rig's limits ([`night`]). Pure: rig,
+//! plans and noise in, commands and predictions out.
 
+pub mod night;
 pub mod precision;
 pub mod spectrum;

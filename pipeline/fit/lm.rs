@@ -51,6 +51,9 @@ pub struct LevenbergMarquardt {
     stall_limit: Option<u32>,
     /// Accepted steps in a row that lowered the cost by at most `ftol`.
     stalled: u32,
+    /// A predicted reduction below which a point no damping improves on
+    /// is an optimum ([`Self::with_settled_cost`]); None: no such point.
+    settled: Option<f64>,
 }
 
 impl Default for LevenbergMarquardt {
@@ -90,6 +93,7 @@ impl LevenbergMarquardt {
             resume: false,
             stall_limit: None,
             stalled: 0,
+            settled: None,
         }
     }
 
@@ -102,6 +106,17 @@ impl LevenbergMarquardt {
     /// points each; it ends unconverged either way.
     pub fn with_stall_limit(mut self, steps: u32) -> Self {
         self.stall_limit = Some(steps.max(1));
+        self
+    }
+
+    /// Where no damping finds a lower cost and the undamped step predicts
+    /// a reduction of at most `cost`, the run has converged. For a cost in
+    /// chi-square units (residuals over their stds) a reduction of 1e-6
+    /// is a parameter 1e-3 of its std from the optimum: far below what the
+    /// data tell, while the relative `ftol` may ask for digits that
+    /// rounding of a very precise fit's residuals does not hold.
+    pub fn with_settled_cost(mut self, cost: f64) -> Self {
+        self.settled = Some(cost);
         self
     }
 
@@ -401,6 +416,13 @@ impl LevenbergMarquardt {
             }
             *rejected += 1;
             self.lambda *= self.factor;
+        }
+        if let Some(floor) = self.settled
+            && let Some(delta) = self.step(a, g, 0.0, theta)
+            && -(2.0 * g.dot(&delta) + delta.dot(&(a * &delta))) <= floor
+        {
+            self.status = TerminationStatus::Terminated(TerminationReason::SolverConverged);
+            return Ok(None);
         }
         self.status = TerminationStatus::Terminated(TerminationReason::SolverExit(format!(
             "Levenberg-Marquardt: no step lowers the cost (lambda reached {:.1e}); the tolerances may be tighter than the data allow",
@@ -706,6 +728,57 @@ mod tests {
                 &[1.0, 0.0, 0.0, -E * (-p[1]).exp()],
             ))
         }
+    }
+
+    /// Residuals whose last digits do not follow the parameter (a very
+    /// precise fit's residuals, each a difference of two large numbers,
+    /// rounded): 1e3 (x - 1) on steps of 1e-4 that never reach 0, and 1.
+    struct Jittery;
+
+    impl Operator for Jittery {
+        type Param = DVector<f64>;
+        type Output = DVector<f64>;
+        fn apply(&self, p: &DVector<f64>) -> Result<DVector<f64>, Error> {
+            Ok(DVector::from_vec(vec![
+                1e-4 * ((1e7 * (p[0] - 1.0)).floor() + 0.5),
+                1.0,
+            ]))
+        }
+    }
+
+    impl Jacobian for Jittery {
+        type Param = DVector<f64>;
+        type Jacobian = DMatrix<f64>;
+        fn jacobian(&self, _: &DVector<f64>) -> Result<DMatrix<f64>, Error> {
+            Ok(DMatrix::from_row_slice(2, 1, &[1e3, 0.0]))
+        }
+    }
+
+    /// Where the steps hide every further reduction, a run ends with no
+    /// step lowering the cost; with a settled cost of 1e-6 (chi-square
+    /// units) the same point is an optimum, within 1e-7 of x = 1 as the
+    /// steps allow.
+    #[test]
+    fn a_settled_cost_ends_a_run_rounding_stops_as_converged() {
+        let run = |lm: LevenbergMarquardt| {
+            let res = Executor::new(Jittery, lm)
+                .configure(|s| s.param(DVector::from_vec(vec![3.0])).max_iters(200))
+                .run()
+                .unwrap();
+            let st = res.state();
+            (
+                st.get_termination_reason().cloned(),
+                st.get_param().unwrap()[0],
+            )
+        };
+        let (why, _) = run(LevenbergMarquardt::new());
+        assert!(
+            matches!(&why, Some(TerminationReason::SolverExit(w)) if w.contains("no step lowers the cost")),
+            "{why:?}"
+        );
+        let (why, x) = run(LevenbergMarquardt::new().with_settled_cost(1e-6));
+        assert_eq!(why, Some(TerminationReason::SolverConverged));
+        assert!((x - 1.0).abs() <= 1e-7, "{x}");
     }
 
     #[test]

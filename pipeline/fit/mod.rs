@@ -882,6 +882,11 @@ where
 /// first fit; one or two settle them (module docs).
 const ALIAS_PASSES: usize = 4;
 
+/// The predicted reduction (chi-square units) below which a fit no
+/// damping improves on has converged (`LevenbergMarquardt::with_settled_cost`):
+/// a parameter 1e-3 of its std from the optimum.
+pub const SETTLED_COST: f64 = 1e-6;
+
 /// The aliases are followed while evaluating them at the estimate would
 /// move some parameter by this fraction of its stated std or more
 /// (`shift_in_stds`). Where their whole effect is below it (a high
@@ -1077,7 +1082,7 @@ fn refine(prep: &Prepared, opts: &FitOptions, start: Vec<f64>) -> Result<TfFit, 
 /// A Levenberg-Marquardt solver, its delay held to [0, max] (scaled) when
 /// the delay is fitted.
 fn delay_bounded_solver(prep: &Prepared) -> Result<LevenbergMarquardt, FitError> {
-    let solver = LevenbergMarquardt::new();
+    let solver = LevenbergMarquardt::new().with_settled_cost(SETTLED_COST);
     let Some(max_s) = prep.max_delay_s else {
         return Ok(solver);
     };

@@ -9,8 +9,10 @@
 //! around it, whose scatter about it is the noise level:
 //! G(k) = (Y(k) - T^(k)) / U(k), with the variance
 //! sigma_V^2(k) (1 + q(k)) / |U(k)|^2 (Pintelon, Barbe, Vandersteen & Van
-//! Moer 2011). Why not the ETFE's local polynomials: docs/methods.md,
-//! "Periodic commands: the excited lines".
+//! Moer 2011). A record of whole steady periods has no transient: the
+//! lines between hold the periods' spread alone, and G(k) = Y(k) / U(k)
+//! with sigma_V^2(k) / |U(k)|^2. Why not the ETFE's local polynomials:
+//! docs/methods.md, "Periodic commands: the excited lines".
 
 use nalgebra::{Complex, Matrix3, Vector3};
 
@@ -20,10 +22,12 @@ use super::{ETFE_NOISE_SMOOTH_HALF_WIDTH, Frf, UNEXCITED_SHARE};
 /// (bins) they are looked for: 2 x 6 bins leave 9 complex degrees of
 /// freedom after the quadratic, pooled over the lines nearby (below).
 const PER_SIDE: usize = 6;
-const REACH_BINS: usize = 4 * PER_SIDE;
 /// The fewest non-excited lines a line's polynomial needs: two more than
 /// its coefficients.
 const MIN_NEIGHBOURS: usize = 5;
+/// For whole steady periods, which fit nothing: 2 x 24 non-excited lines,
+/// 48 complex degrees of freedom a line.
+const STEADY_PER_SIDE: usize = 24;
 
 /// Whether `frf`'s command is sparse lines over `band_hz`: at least half of
 /// the band's bins hold no excitation (below [`UNEXCITED_SHARE`] of the
@@ -53,12 +57,16 @@ pub fn sparse_lines(frf: &Frf, band_hz: (f64, f64)) -> bool {
 /// interpolated from the non-excited lines taken out of `frf` there, and
 /// E|dH|^2 at each: the bins the fit is given and their variances. A line
 /// with too few non-excited lines around it is left out. None where the
-/// command's DFT is not kept.
+/// command's DFT is not kept. With `steady` (the record whole steady
+/// periods, `frf::periodic`), no transient is fitted: the non-excited
+/// lines' mean power is the noise density.
 pub fn at_lines(
     frf: &mut Frf,
     mask: &[bool],
     band_hz: (f64, f64),
+    steady: bool,
 ) -> Option<(Vec<usize>, Vec<f64>)> {
+    let per_side = if steady { STEADY_PER_SIDE } else { PER_SIDE };
     let u = frf.input_dft.clone()?;
     let nb = frf.h.len().min(u.len()).min(mask.len());
     let (sum, n) = frf
@@ -75,20 +83,25 @@ pub fn at_lines(
     // Per line: (bin, T^, noise density of Y, q).
     let mut found: Vec<(usize, Complex<f64>, f64, f64)> = Vec::new();
     for k in (1..nb).filter(|&k| mask[k] && frf.suu[k] >= floor) {
-        let mut near = Vec::with_capacity(2 * PER_SIDE);
+        let mut near = Vec::with_capacity(2 * per_side);
         let mut below = 0;
         let mut above = 0;
-        for d in 1..=REACH_BINS {
-            if below < PER_SIDE && k > d && quiet(k - d) {
+        for d in 1..=4 * per_side {
+            if below < per_side && k > d && quiet(k - d) {
                 near.push(k - d);
                 below += 1;
             }
-            if above < PER_SIDE && k + d < nb && quiet(k + d) {
+            if above < per_side && k + d < nb && quiet(k + d) {
                 near.push(k + d);
                 above += 1;
             }
         }
         if near.len() < MIN_NEIGHBOURS {
+            continue;
+        }
+        if steady {
+            let power: f64 = near.iter().map(|&j| (frf.h[j] * u[j]).norm_sqr()).sum();
+            found.push((k, Complex::new(0.0, 0.0), power / near.len() as f64, 0.0));
             continue;
         }
         let scale = near.iter().map(|&j| j.abs_diff(k)).max().unwrap_or(1) as f64;
@@ -198,7 +211,7 @@ mod tests {
         assert!(sparse_lines(&h, band));
         let raw = h.h.clone();
         let mask = band_mask(&h, band, 0.0);
-        let (bins, var) = at_lines(&mut h, &mask, band).unwrap();
+        let (bins, var) = at_lines(&mut h, &mask, band, false).unwrap();
         assert!(bins.len() > 40, "{}", bins.len());
         let z2: Vec<f64> = bins
             .iter()

@@ -149,9 +149,11 @@ fn period_of(u: &[f64], min_lag: usize) -> Option<usize> {
 }
 
 /// The lag of at least `min_lag` (and at most half the record) with the
-/// highest normalised correlation, the shortest of those within 1e-3 of
-/// it (a period's multiples correlate as well), if it reaches
-/// [`MIN_CORRELATION`].
+/// highest normalised correlation: of the correlation's peaks within 1e-3
+/// of the highest, the shortest (a period's multiples correlate as well),
+/// if it reaches [`MIN_CORRELATION`]. Peaks, not lags: a command sampled
+/// far above its lines correlates within 1e-3 of the top a sample or two
+/// off the period too.
 fn best_lag(u: &[f64], min_lag: usize) -> Option<usize> {
     let n = u.len();
     let m = (2 * n).next_power_of_two();
@@ -187,7 +189,11 @@ fn best_lag(u: &[f64], min_lag: usize) -> Option<usize> {
     if top < MIN_CORRELATION {
         return None;
     }
-    lags.into_iter().find(|&l| corr(l) >= top - 1e-3)
+    let peak = |l: usize| {
+        let c = corr(l);
+        (l == min_lag || c >= corr(l - 1)) && (l == n / 2 || c >= corr(l + 1))
+    };
+    lags.into_iter().find(|&l| corr(l) >= top - 1e-3 && peak(l))
 }
 
 /// What a periodic log's periods say of its displacement over a band.

@@ -25,6 +25,8 @@ pub struct FrfPlan {
     detrend: Detrend,
     transient: Option<f64>,
     model_noise: bool,
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    steady_periods: bool,
 }
 
 /// What a serialised [`FrfPlan`] holds, checked by [`FrfPlan::new`] on the
@@ -38,6 +40,8 @@ struct PlanFields {
     detrend: Detrend,
     transient: Option<f64>,
     model_noise: bool,
+    #[serde(default)]
+    steady_periods: bool,
 }
 
 impl TryFrom<PlanFields> for FrfPlan {
@@ -51,7 +55,8 @@ impl TryFrom<PlanFields> for FrfPlan {
             f.window,
             f.detrend,
         )?
-        .with_model_noise(f.model_noise);
+        .with_model_noise(f.model_noise)
+        .with_steady_periods(f.steady_periods);
         Ok(match f.transient {
             Some(top_hz) => plan.with_transient(top_hz),
             None => plan,
@@ -87,6 +92,7 @@ impl FrfPlan {
             detrend,
             transient: None,
             model_noise: false,
+            steady_periods: false,
         })
     }
 
@@ -122,6 +128,22 @@ impl FrfPlan {
             model_noise,
             ..self
         }
+    }
+
+    /// The plan for a record of whole steady periods of a periodic
+    /// command (`frf::periodic`) or not: the fit then reads its excited
+    /// lines with no transient between them (`frf::at_lines`).
+    pub fn with_steady_periods(self, steady_periods: bool) -> Self {
+        Self {
+            steady_periods,
+            ..self
+        }
+    }
+
+    /// Whether the record is whole steady periods
+    /// ([`FrfPlan::with_steady_periods`]).
+    pub fn steady_periods(&self) -> bool {
+        self.steady_periods
     }
 
     pub fn method(&self) -> Method {

@@ -1474,7 +1474,8 @@ fn solver(problem: &JointProblem, opts: &JointOptions) -> Result<LevenbergMarqua
     // either way.
     let solver = LevenbergMarquardt::new()
         .with_lambda(1e-3, 3.0)?
-        .with_stall_limit(STALL_STEPS);
+        .with_stall_limit(STALL_STEPS)
+        .with_settled_cost(crate::fit::SETTLED_COST);
     if opts.structure == Structure::Plain {
         return Ok(solver);
     }

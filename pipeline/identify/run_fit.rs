@@ -311,7 +311,7 @@ fn refined_fit(
     start: Option<&[f64]>,
 ) -> Result<(TfFit, FitData), FitError> {
     if frf::sparse_lines(h, band_hz)
-        && let Some((bins, variance)) = frf::at_lines(h, mask, band_hz)
+        && let Some((bins, variance)) = frf::at_lines(h, mask, band_hz, plan.steady_periods())
     {
         // A periodic command's lines: the transient and the noise level
         // from the lines it does not excite (`frf::at_lines`), the model

@@ -20,6 +20,7 @@ use crate::results::{ComparisonStatus, Results, RunResult, Status};
 const CAMPAIGN_TEMPLATE: &str = include_str!("report.html");
 const RUN_TEMPLATE: &str = include_str!("run.html");
 const STYLE: &str = include_str!("style.html");
+const DESIGN_TEMPLATE: &str = include_str!("design.html");
 
 /// A figure as a page shows it.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -48,6 +49,19 @@ impl PageFigure {
 /// A serialisable value as a template value.
 fn ser<T: serde::Serialize>(v: T) -> Value {
     Value::from(Serde(v))
+}
+
+/// `servoid design`'s page (design.html): what to run, what it will
+/// determine, each run's command and predicted peaks.
+pub fn design_page(d: &crate::results::DesignResult) -> Result<String, HtmlError> {
+    let mut env = Environment::new();
+    env.add_filter("num", num);
+    env.add_filter("specimen", specimen);
+    env.add_template("style.html", STYLE)?;
+    env.add_template("design.html", DESIGN_TEMPLATE)?;
+    Ok(env
+        .get_template("design.html")?
+        .render(minijinja::context! { d => ser(d) })?)
 }
 
 /// A run's page, relative to the output folder.

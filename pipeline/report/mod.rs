@@ -23,7 +23,7 @@ pub mod history;
 
 pub mod output_folder;
 
-pub use html::PageFigure;
+pub use html::{PageFigure, design_page};
 pub use output_folder::OutputFolder;
 
 use crate::warning::Warning;

@@ -7,6 +7,7 @@
 
 mod analyse;
 mod cache;
+pub mod design;
 pub mod history;
 pub mod init;
 mod sensitivity;
@@ -84,6 +85,8 @@ pub enum JobError {
     Verify(#[from] VerifyError),
     #[error(transparent)]
     Merge(#[from] MergeError),
+    #[error(transparent)]
+    Design(#[from] design::DesignJobError),
     /// A share of the campaign cannot give the rig the whole campaign
     /// gives: with the validation runs in the joint fit, every shard would
     /// need every validation log.
@@ -126,6 +129,9 @@ impl JobError {
                 | JobError::Write(WriteError::OutFolder { .. })
                 | JobError::Verify(_)
                 | JobError::Merge(_)
+                | JobError::Design(
+                    design::DesignJobError::Flag { .. } | design::DesignJobError::Parse { .. }
+                )
                 | JobError::NotShardable { .. }
                 | JobError::ShardFolderTaken { .. }
         )

@@ -522,7 +522,7 @@ fn square(amplitude_m: f64, period_s: f64, fs: f64, n: usize) -> Vec<f64> {
 /// `period` repeated over `n` samples, faded in over the first period and
 /// out over the last by a raised cosine, so that the command leaves rest
 /// and returns to it smoothly.
-fn faded(period: &[f64], n: usize) -> Vec<f64> {
+pub fn faded(period: &[f64], n: usize) -> Vec<f64> {
     let p = period.len();
     (0..n)
         .map(|j| {

@@ -58,7 +58,7 @@ pub struct OddMultisine {
 /// The odd harmonics k of fs / `len` in [`f_min_hz`, `f_max_hz`] (below
 /// Nyquist), split into the excited ones and one of each [`GROUP`] left out,
 /// chosen by `rng`.
-fn lines(
+pub fn lines(
     f_min_hz: f64,
     f_max_hz: f64,
     fs: f64,
@@ -226,7 +226,7 @@ pub fn shaped_odd_multisine(
 /// The period of `len` samples with `amps` on the `excited` lines, its
 /// phases chosen for a low crest factor: Schroeder's, clipped, then the
 /// Lp norms.
-fn low_crest(
+pub fn low_crest(
     len: usize,
     excited: Vec<usize>,
     detection: Vec<usize>,

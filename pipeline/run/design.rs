@@ -1,0 +1,630 @@
+//! `servoid design RESULTS`: tomorrow night's identification runs from the
+//! rig and noise a campaign's results.json states (`design::night`),
+//! written as one output set: each run's command as the controller's
+//! waveform generator plays it (commands/<run>.csv and .mat, time_s and
+//! command_m at the DAQ's rate, rest to rest), the next night's manifest
+//! for the logs to come (campaign.toml), a simulation manifest that plays
+//! the commands on the identified rig with the noise measured (check.toml,
+//! for `servoid simulate --run` before the lab runs them), design.json and
+//! the page to read first (design.html).
+
+use std::path::{Path, PathBuf};
+
+use crate::design::night::{self, DesignError, Limit, Limits, Night, NightPlan, Noise};
+use crate::design::spectrum::RunModel;
+use crate::manifest::{Manifest, Role, Run, RunData};
+use crate::model::RigParams;
+use crate::report::{self, matlab};
+use crate::results::{
+    DesignBaseline, DesignLimits, DesignResult, DesignedParameter, DesignedRunResult, LimitUsed,
+    NoiseResult, Results, RunResult, Status,
+};
+
+use super::JobError;
+
+/// What the design is asked beside the results: each None is taken from
+/// them (the limits absent are not applied).
+#[derive(Debug, Clone, Default)]
+pub struct DesignAsk {
+    pub out: Option<PathBuf>,
+    pub command_m: Option<f64>,
+    pub stroke_m: Option<f64>,
+    pub velocity_m_per_s: Option<f64>,
+    pub force_n: Option<f64>,
+    pub band_hz: Option<[f64; 2]>,
+    pub sample_rate_hz: Option<f64>,
+    pub run_s: Option<f64>,
+    pub night_s: Option<f64>,
+    pub rest_s: f64,
+    pub target_relative_std: Option<f64>,
+    pub seed: u64,
+    pub wait: Option<std::time::Duration>,
+}
+
+/// Why a design was not written.
+#[derive(Debug, thiserror::Error)]
+pub enum DesignJobError {
+    #[error("{}: cannot read: {source}", path.display())]
+    Read {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    #[error("{}: not a results.json servoid wrote: {source}", path.display())]
+    Parse {
+        path: PathBuf,
+        #[source]
+        source: serde_json::Error,
+    },
+    #[error("{}: the results state no rig to design from ({why})", path.display())]
+    NoRig { path: PathBuf, why: String },
+    #[error(
+        "{}: no identification run (role no_specimen or spring) has a fitted log whose noise the design could plan for",
+        path.display()
+    )]
+    NoRuns { path: PathBuf },
+    #[error("{flag} {value}: {why}")]
+    Flag {
+        flag: &'static str,
+        value: f64,
+        why: String,
+    },
+    #[error("{}: {source}", path.display())]
+    Design {
+        path: PathBuf,
+        #[source]
+        source: DesignError,
+    },
+}
+
+/// What `servoid design` wrote.
+#[derive(Debug, Clone)]
+pub struct Designed {
+    pub out_dir: PathBuf,
+    pub result: DesignResult,
+}
+
+/// A designed run's id, its result, and its last night's manifest entry.
+struct LastRun<'a> {
+    result: &'a RunResult,
+    noise: Noise,
+    model: RunModel,
+}
+
+/// Designs tomorrow night from `results_path` and writes it (see the
+/// module's header).
+pub fn design_night(results_path: &Path, ask: &DesignAsk) -> Result<Designed, JobError> {
+    let bytes = std::fs::read(results_path).map_err(|source| DesignJobError::Read {
+        path: results_path.to_path_buf(),
+        source,
+    })?;
+    let results: Results =
+        serde_json::from_slice(&bytes).map_err(|source| DesignJobError::Parse {
+            path: results_path.to_path_buf(),
+            source,
+        })?;
+    let rig = rig_of(&results).ok_or_else(|| DesignJobError::NoRig {
+        path: results_path.to_path_buf(),
+        why: results
+            .rig_error
+            .clone()
+            .unwrap_or_else(|| "rig is null".into()),
+    })?;
+    let last = last_runs(&results);
+    let Some(first) = last.first() else {
+        return Err(DesignJobError::NoRuns {
+            path: results_path.to_path_buf(),
+        }
+        .into());
+    };
+    let log = |r: &LastRun| r.result.log.clone();
+    let fs = ask
+        .sample_rate_hz
+        .or_else(|| log(first).map(|l| l.sample_rate_hz))
+        .unwrap_or(1000.0);
+    let band_hz = ask
+        .band_hz
+        .unwrap_or(results.manifest.identification.band_hz);
+    let (command_m, command_from) = match ask.command_m {
+        Some(c) => (c, "given (--command-mm)".to_string()),
+        None => (
+            last.iter()
+                .filter_map(|r| log(r)?.command_peak_m)
+                .fold(0.0, f64::max),
+            "the largest command of last night's identification logs".to_string(),
+        ),
+    };
+    let longest = last
+        .iter()
+        .filter_map(|r| log(r).map(|l| l.duration_s))
+        .fold(0.0, f64::max);
+    let (mut run_s, mut run_from) = match ask.run_s {
+        Some(s) => (s, "given (--run-s)".to_string()),
+        None => (
+            longest,
+            "the longest of last night's identification logs".to_string(),
+        ),
+    };
+    if let Some(night_s) = ask.night_s
+        && night_s / last.len() as f64 <= run_s
+    {
+        run_s = night_s / last.len() as f64;
+        run_from = format!("--night-s {night_s} shared by {} runs", last.len());
+    }
+    check_asked(ask, fs, band_hz, command_m, run_s)?;
+    let noise = Noise::mean(&last.iter().map(|r| r.noise.clone()).collect::<Vec<_>>())
+        .expect("at least one run");
+    let plan = NightPlan {
+        rig,
+        runs: last.iter().map(|r| r.model).collect(),
+        noise,
+        band_hz,
+        sample_rate_hz: fs,
+        record_s: run_s,
+        rest_s: ask.rest_s,
+        intersample: results.manifest.identification.command_intersample,
+        limits: Limits {
+            command_m,
+            stroke_m: ask.stroke_m,
+            velocity_m_per_s: ask.velocity_m_per_s,
+            force_n: ask.force_n,
+        },
+        seed: ask.seed,
+    };
+    let designed =
+        night::design(&plan, ask.target_relative_std).map_err(|source| DesignJobError::Design {
+            path: results_path.to_path_buf(),
+            source,
+        })?;
+    let limits = DesignLimits {
+        command_m,
+        command_from,
+        stroke_m: ask.stroke_m,
+        velocity_m_per_s: ask.velocity_m_per_s,
+        force_n: ask.force_n,
+        run_s,
+        run_from,
+    };
+    let source = Source {
+        path: results_path.display().to_string(),
+        sha256: crate::ingest::sha256_hex(&bytes),
+    };
+    let result = design_result(&results, &plan, &designed, &last, limits, ask, &source);
+    let out_dir = ask.out.clone().unwrap_or_else(|| {
+        PathBuf::from("reports").join(format!("{}-design", results.campaign.name))
+    });
+    let set = super::begin(&out_dir, ask.wait)?;
+    write_design(set.dir(), &results, &designed, &result, &last).map_err(|e| set.relocate(e))?;
+    set.commit()?;
+    Ok(Designed { out_dir, result })
+}
+
+/// The results.json designed from.
+struct Source {
+    path: String,
+    sha256: String,
+}
+
+/// The rig the results state, a1b0 at its P gain.
+fn rig_of(results: &Results) -> Option<RigParams> {
+    let r = results.rig.as_ref()?;
+    Some(RigParams {
+        beta1_per_s: r.beta1.value,
+        a1b0_n_per_m_s2: r.a1b0.value,
+        a2_n_per_m: r.a2.value,
+        a3_per_s: r.a3.value,
+        p_gain: r.p_gain,
+    })
+}
+
+/// The identification runs that fitted a log with a linear specimen, in
+/// the results' order: what the night repeats.
+fn last_runs(results: &Results) -> Vec<LastRun<'_>> {
+    results
+        .runs
+        .iter()
+        .filter(|r| matches!(r.role, Role::NoSpecimen | Role::Spring) && r.status == Status::Ok)
+        .filter_map(|r| {
+            let noise = r.noise.as_ref()?;
+            Some(LastRun {
+                result: r,
+                noise: Noise {
+                    freq_hz: noise.freq_hz.clone(),
+                    psd_m2_per_hz: noise.psd_m2_per_hz.clone(),
+                },
+                model: RunModel {
+                    specimen: r.specimen.linear()?,
+                    p_gain: r.p_gain,
+                },
+            })
+        })
+        .collect()
+}
+
+/// Refuses what no design can meet, naming the flag (or, for a value
+/// taken from the results, what it was taken from).
+fn check_asked(
+    ask: &DesignAsk,
+    fs: f64,
+    band_hz: [f64; 2],
+    command_m: f64,
+    run_s: f64,
+) -> Result<(), DesignJobError> {
+    let bad = |flag: &'static str, value: f64, why: &str| DesignJobError::Flag {
+        flag,
+        value,
+        why: why.to_string(),
+    };
+    let positive = |flag, v: Option<f64>| match v {
+        Some(v) if !(v.is_finite() && v > 0.0) => Err(bad(flag, v, "must be a positive number")),
+        _ => Ok(()),
+    };
+    positive("--stroke-mm", ask.stroke_m.map(|v| v * 1e3))?;
+    positive("--velocity-mm-s", ask.velocity_m_per_s.map(|v| v * 1e3))?;
+    positive("--force-n", ask.force_n)?;
+    positive("--rate-hz", Some(fs))?;
+    positive("--command-mm", Some(command_m * 1e3))?;
+    positive("--run-s", Some(run_s))?;
+    positive("--target-std", ask.target_relative_std)?;
+    if !(ask.rest_s.is_finite() && ask.rest_s >= 0.0) {
+        return Err(bad("--rest-s", ask.rest_s, "must be zero or more"));
+    }
+    if !(band_hz[0] > 0.0 && band_hz[0] < band_hz[1] && band_hz[1] < 0.5 * fs) {
+        return Err(bad(
+            "--band-hz",
+            band_hz[1],
+            &format!(
+                "the band {}-{} Hz must rise from above 0 to below half the rate ({} Hz)",
+                band_hz[0],
+                band_hz[1],
+                0.5 * fs
+            ),
+        ));
+    }
+    Ok(())
+}
+
+/// design.json's content.
+fn design_result(
+    results: &Results,
+    plan: &NightPlan,
+    night: &Night,
+    last: &[LastRun],
+    limits: DesignLimits,
+    ask: &DesignAsk,
+    source: &Source,
+) -> DesignResult {
+    let rig = &plan.rig;
+    let std = night.precision.std();
+    let relative = night.precision.relative_std(rig);
+    let chirps = night::chirp_baseline(plan, night.record_s);
+    let chirp_std = chirps.map(|c| c.std());
+    let last_std = results
+        .rig
+        .as_ref()
+        .map(|r| [r.beta1.std, r.a1b0.std, r.a2.std, r.a3.std]);
+    let values = [
+        rig.beta1_per_s,
+        rig.a1b0_n_per_m_s2,
+        rig.a2_n_per_m,
+        rig.a3_per_s,
+    ];
+    let parameters = crate::design::precision::NAMES
+        .iter()
+        .enumerate()
+        .map(|(j, name)| DesignedParameter {
+            name: name.to_string(),
+            value: values[j],
+            last_std: last_std.and_then(|s| s[j]),
+            std: std[j],
+            relative_std: relative[j],
+            chirp_std: chirp_std.map(|c| c[j]),
+        })
+        .collect();
+    let baseline = chirps.map(|c| {
+        let theirs = c.relative_std(rig);
+        let max = |r: [f64; 4]| r.into_iter().fold(0.0, f64::max);
+        let squares = |r: [f64; 4]| r.iter().map(|r| r * r).sum::<f64>();
+        DesignBaseline {
+            description: format!(
+                "the paper's quadratic chirp from {} to {} Hz (Sec. 3.2.2) over the same record at the same peak command, read as an ETFE",
+                plan.band_hz[0] / 5.0,
+                (plan.band_hz[1] * 7.0 / 6.0).min(0.45 * plan.sample_rate_hz)
+            ),
+            worst_ratio: max(theirs) / max(relative),
+            squares_ratio: squares(theirs) / squares(relative),
+        }
+    });
+    let runs = last
+        .iter()
+        .zip(&night.runs)
+        .map(|(l, d)| {
+            let id = &l.result.id;
+            DesignedRunResult {
+                id: id.clone(),
+                role: l.result.role,
+                description: l.result.description.clone(),
+                p_gain: l.result.p_gain,
+                specimen: l.result.specimen,
+                command_csv: format!("commands/{id}.csv"),
+                command_mat: format!("commands/{id}.mat"),
+                log: expected_log(l.result),
+                crest_factor: d.crest_factor,
+                rms_m: d.rms_m,
+                peaks: d.peaks,
+                bound_by: d.bound_by,
+                used: used(&d.peaks, &plan.limits),
+            }
+        })
+        .collect();
+    DesignResult {
+        servoid_version: env!("CARGO_PKG_VERSION").to_string(),
+        source: source.path.clone(),
+        source_sha256: source.sha256.clone(),
+        campaign: results.campaign.name.clone(),
+        rig_name: results.campaign.rig_name.clone(),
+        rig: *rig,
+        sample_rate_hz: plan.sample_rate_hz,
+        band_hz: plan.band_hz,
+        record_s: night.record_s,
+        rest_s: plan.rest_s,
+        period_s: night.period_s,
+        periods: night.periods,
+        optimal_share: night.optimal_share,
+        draw: night.draw,
+        lines_excited: night.lines_hz.len(),
+        lines_detection: night.detection_hz.len(),
+        limits,
+        target_relative_std: ask.target_relative_std,
+        parameters,
+        baseline,
+        runs,
+        noise: NoiseResult {
+            freq_hz: plan.noise.freq_hz.clone(),
+            psd_m2_per_hz: plan.noise.psd_m2_per_hz.clone(),
+        },
+        tried: night.tried.clone(),
+    }
+}
+
+/// Each limit given, with the run's predicted peak against it.
+fn used(p: &night::Peaks, limits: &Limits) -> Vec<LimitUsed> {
+    let all = [
+        (Limit::Command, Some(p.command_m), Some(limits.command_m)),
+        (Limit::Stroke, Some(p.displacement_m), limits.stroke_m),
+        (
+            Limit::Velocity,
+            Some(p.velocity_m_per_s),
+            limits.velocity_m_per_s,
+        ),
+        (Limit::Force, p.force_n, limits.force_n),
+    ];
+    all.into_iter()
+        .filter_map(|(limit, peak, value)| {
+            let (peak, value) = (peak?, value?);
+            Some(LimitUsed {
+                limit,
+                peak,
+                value,
+                share: peak / value,
+            })
+        })
+        .collect()
+}
+
+/// The log the next night's manifest expects for a run: logs/<id> with
+/// last night's log's extension (the DAQ writes the same format).
+fn expected_log(r: &RunResult) -> String {
+    let ext = r
+        .log
+        .as_ref()
+        .and_then(|l| {
+            Path::new(&l.file)
+                .extension()
+                .map(|e| e.to_string_lossy().into_owned())
+        })
+        .unwrap_or_else(|| "csv".to_string());
+    format!("logs/{}.{ext}", r.id)
+}
+
+/// Writes the design's files into `dir` (the output set's work folder).
+fn write_design(
+    dir: &Path,
+    results: &Results,
+    night: &Night,
+    result: &DesignResult,
+    last: &[LastRun],
+) -> Result<(), report::WriteError> {
+    let fs = result.sample_rate_hz;
+    for (run, designed) in result.runs.iter().zip(&night.runs) {
+        report::write_artifact(
+            &dir.join(&run.command_csv),
+            command_csv(&designed.command_m, fs).as_bytes(),
+        )?;
+        report::write_artifact(
+            &dir.join(&run.command_mat),
+            &command_mat(&designed.command_m, fs, &run.id),
+        )?;
+    }
+    report::write_artifact(
+        &dir.join("campaign.toml"),
+        next_manifest(results, result, last).as_bytes(),
+    )?;
+    report::write_artifact(
+        &dir.join("check.toml"),
+        check_manifest(results, result).as_bytes(),
+    )?;
+    report::write_artifact(&dir.join("design.json"), &report::json_bytes(result))?;
+    report::write_artifact(
+        &dir.join("design.html"),
+        report::design_page(result)?.as_bytes(),
+    )?;
+    report::settle(dir)
+}
+
+/// A command as CSV: time_s (s) and command_m (m), a row per sample,
+/// each number in the fewest digits that read back to the same double.
+fn command_csv(u: &[f64], fs: f64) -> String {
+    let mut text = String::with_capacity(u.len() * 32);
+    text.push_str("time_s,command_m\n");
+    for (j, v) in u.iter().enumerate() {
+        text.push_str(&format!("{},{}\n", j as f64 / fs, v));
+    }
+    text
+}
+
+/// A command as a MAT 5 file: column vectors time_s (s) and command_m (m).
+fn command_mat(u: &[f64], fs: f64, id: &str) -> Vec<u8> {
+    let column = |data: Vec<f64>| matlab::MatValue::Matrix {
+        rows: data.len(),
+        cols: 1,
+        data,
+    };
+    let time: Vec<f64> = (0..u.len()).map(|j| j as f64 / fs).collect();
+    matlab::mat_bytes(
+        &format!("servoid design: run {id}'s command, time_s (s) and command_m (m)"),
+        &[
+            ("time_s".to_string(), column(time)),
+            ("command_m".to_string(), column(u.to_vec())),
+        ],
+    )
+    .expect("two plain column vectors with valid names")
+}
+
+/// The next night's manifest: last night's campaign (channels, settings)
+/// with the designed runs, each expecting its log under logs/.
+fn next_manifest(results: &Results, result: &DesignResult, last: &[LastRun]) -> String {
+    let mut m: Manifest = results.manifest.clone();
+    m.campaign.synthetic = None;
+    m.campaign.description = format!(
+        "The identification runs servoid design made from {}: odd multisines of {} s, {} periods a run",
+        result.source, result.period_s, result.periods
+    );
+    m.rig.parameters = None;
+    m.runs = last
+        .iter()
+        .zip(&result.runs)
+        .map(|(l, d)| {
+            let stated = results.manifest.runs.iter().find(|r| r.id == d.id);
+            Run {
+                id: d.id.clone(),
+                role: d.role,
+                description: d.description.clone(),
+                date: None,
+                p_gain: d.p_gain,
+                specimen: stated.and_then(|r| r.specimen.clone()),
+                data: Some(RunData {
+                    log: Some(d.log.clone()),
+                    ..RunData::default()
+                }),
+                channels: stated.and_then(|r| r.channels.clone()),
+                band_hz: stated.and_then(|r| r.band_hz).or(l
+                    .result
+                    .fit
+                    .as_ref()
+                    .map(|f| f.band_hz)),
+            }
+        })
+        .collect();
+    m.references.clear();
+    m.numbered_figures.clear();
+    m.run_table = None;
+    m.history = None;
+    let mut text = format!(
+        "# Tomorrow night's identification runs, designed by `servoid design` from\n# {} (SHA-256 {}).\n# Play commands/<run>.csv (or .mat) on the controller, save each run's log\n# as the run's `log` below, then `servoid run campaign.toml`. Add your\n# nightly [history] as your own manifest has it.\n\n",
+        result.source, result.source_sha256
+    );
+    text.push_str(&toml::to_string(&m).expect("the manifest serialises to TOML"));
+    text
+}
+
+/// A simulation manifest that plays the designed commands on the rig the
+/// results state, with white displacement noise at the level measured
+/// (the mean over the band of the noise planned for).
+fn check_manifest(results: &Results, result: &DesignResult) -> String {
+    use toml::{Table, Value};
+    let fs = result.sample_rate_hz;
+    let psd = &result.noise.psd_m2_per_hz;
+    let rms_mm = (psd.iter().sum::<f64>() / psd.len() as f64 * fs / 2.0).sqrt() * 1e3;
+    let table = |pairs: Vec<(&str, Value)>| -> Value {
+        Value::Table(pairs.into_iter().map(|(k, v)| (k.to_string(), v)).collect())
+    };
+    let s = |v: &str| Value::String(v.to_string());
+    let file =
+        |run: &DesignedRunResult| table(vec![("kind", s("file")), ("file", s(&run.command_csv))]);
+    let mut doc = Table::new();
+    doc.insert("schema_version".into(), Value::Integer(1));
+    doc.insert(
+        "simulation".into(),
+        table(vec![
+            ("name", s(&format!("{}-design-check", result.campaign))),
+            (
+                "description",
+                s("SYNTHETIC: the designed commands played on the rig servoid identified, with the displacement noise it measured"),
+            ),
+            ("sample_rate_hz", Value::Float(fs)),
+            ("seed", Value::Integer(1)),
+            ("log_format", s("csv")),
+        ]),
+    );
+    doc.insert(
+        "rig".into(),
+        table(vec![
+            ("name", s(&result.rig_name)),
+            (
+                "parameters",
+                Value::try_from(result.rig).expect("the rig serialises"),
+            ),
+        ]),
+    );
+    doc.insert("excitation".into(), file(&result.runs[0]));
+    doc.insert(
+        "instrument".into(),
+        table(vec![
+            ("command", table(vec![("unit", s("mm"))])),
+            (
+                "displacement",
+                table(vec![("unit", s("mm")), ("noise_rms", Value::Float(rms_mm))]),
+            ),
+            ("force", table(vec![("unit", s("kN"))])),
+        ]),
+    );
+    doc.insert(
+        "identification".into(),
+        Value::try_from(&results.manifest.identification).expect("the settings serialise"),
+    );
+    let runs = result
+        .runs
+        .iter()
+        .map(|r| {
+            let mut run = Table::new();
+            run.insert("id".into(), s(&r.id));
+            run.insert(
+                "role".into(),
+                Value::try_from(r.role).expect("a role serialises"),
+            );
+            run.insert("p_gain".into(), Value::Float(r.p_gain));
+            if let Some(spec) = results
+                .manifest
+                .runs
+                .iter()
+                .find(|x| x.id == r.id)
+                .and_then(|x| x.specimen.clone())
+            {
+                run.insert(
+                    "specimen".into(),
+                    Value::try_from(spec).expect("a specimen serialises"),
+                );
+            }
+            run.insert("excitation".into(), file(r));
+            Value::Table(run)
+        })
+        .collect();
+    doc.insert("runs".into(), Value::Array(runs));
+    let mut text = format!(
+        "# Checks the design before the lab runs it: `servoid simulate check.toml --run`\n# plays commands/<run>.csv on the rig {} states, with {rms_mm:.3e} mm RMS of\n# white displacement noise (the level it measured). The logs are SYNTHETIC.\n\n",
+        result.source
+    );
+    text.push_str(&toml::to_string(&doc).expect("the check serialises to TOML"));
+    text
+}
