@@ -323,7 +323,7 @@ pub struct DesignArgs {
     /// The results.json of the campaign to design from, or the output
     /// folder that holds it.
     results: PathBuf,
-    /// The output folder (default: reports/<campaign>-design).
+    /// The output folder (default: `reports/<campaign>-design`).
     #[arg(long, short)]
     out: Option<PathBuf>,
     /// The command's largest magnitude (mm); default: the largest command

@@ -903,7 +903,11 @@ pub struct DesignResult {
     pub parameters: Vec<DesignedParameter>,
     /// The designed night against the paper's chirps.
     pub baseline: Option<DesignBaseline>,
+    /// The identification runs, then the runs that settle a question.
     pub runs: Vec<DesignedRunResult>,
+    /// What last night left open, the run added to settle it and what
+    /// each answer would mean.
+    pub questions: Vec<DesignQuestion>,
     /// The displacement noise the night is planned for: the mean of the
     /// identification runs' (results.json's `noise`).
     pub noise: NoiseResult,
@@ -971,10 +975,27 @@ pub struct DesignedRunResult {
     pub rms_m: f64,
     /// The peaks the identified plant predicts over the whole command.
     pub peaks: crate::design::night::Peaks,
-    /// The limit its amplitude reaches.
-    pub bound_by: crate::design::night::Limit,
+    /// The limit its amplitude reaches; none for a run that plays another
+    /// run's command at a share of its amplitude.
+    pub bound_by: Option<crate::design::night::Limit>,
     /// Each limit given: the predicted peak over it.
     pub used: Vec<LimitUsed>,
+    /// The identification run whose command it plays, and at what share
+    /// of its amplitude (a run that settles a question).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub repeats: Option<String>,
+    pub amplitude_share: f64,
+}
+
+/// Something last night's results left open, and the run that settles it.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct DesignQuestion {
+    /// What the results said.
+    pub question: String,
+    /// The run added (in `runs`).
+    pub run: String,
+    /// What each answer would mean.
+    pub answers: String,
 }
 
 /// A predicted peak against its limit.

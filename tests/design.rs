@@ -598,3 +598,88 @@ fn a_target_std_sets_the_record_or_names_what_stops_it() {
         assert!(!refused.exists(), "nothing written");
     }
 }
+
+/// The gain at `f_hz` of a run's own fit, n0 / (s^2 + d1 s + d0).
+fn fitted_gain(run: &serde_json::Value, f_hz: f64) -> f64 {
+    let p: Vec<f64> = run["fit"]["params"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_f64().unwrap())
+        .collect();
+    let w = 2.0 * std::f64::consts::PI * f_hz;
+    p[0] / ((p[2] - w * w).powi(2) + (p[1] * w).powi(2)).sqrt()
+}
+
+/// A night whose rig rubs (the periodic small campaign with 20 N of seal
+/// friction, whose empty lines hold far more than the noise): `servoid
+/// design` adds for each such run the run that plays its command at half
+/// the amplitude (role fit) and says what each answer would mean; both
+/// manifests have it. On the linear rig it adds none. Played on the
+/// rubbing rig (check.toml with the friction added), the half run's gain
+/// at the band's lowest line is lower than the full run's, as the answer
+/// says friction makes it.
+#[test]
+fn a_night_that_distorts_gets_the_run_at_half_the_amplitude() {
+    let friction = "[rig.unmodelled]\npiston_mass_kg = 2.0\nactuator_friction = { coulomb_force_n = 20.0, smoothing_velocity_m_per_s = 0.002 }\n\n";
+    let design = |dir: &std::path::Path, unmodelled: &str| -> serde_json::Value {
+        let manifest = write(dir, "sim.toml", &periodic_campaign(1, unmodelled));
+        stated(dir, &manifest);
+        let r = crate::util::servoid(
+            dir,
+            &[
+                "design",
+                dir.join("out").to_str().unwrap(),
+                "--out",
+                dir.join("design").to_str().unwrap(),
+            ],
+        );
+        assert_eq!(r.code, 0, "{}", r.stderr);
+        serde_json::from_str(&std::fs::read_to_string(dir.join("design/design.json")).unwrap())
+            .unwrap()
+    };
+    let linear = scratch();
+    let d = design(linear.path(), "");
+    assert_eq!(
+        d["questions"].as_array().unwrap().len(),
+        0,
+        "{}",
+        d["questions"]
+    );
+    let rubbing = scratch();
+    let dir = rubbing.path();
+    let d = design(dir, friction);
+    let q = d["questions"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|q| q["run"] == "bare-half")
+        .unwrap_or_else(|| panic!("{}", d["questions"]));
+    assert!(q["answers"].as_str().unwrap().contains("friction"), "{q}");
+    let folder = dir.join("design");
+    let (_, full) = written_command(&folder.join("commands/bare.csv"));
+    let (_, half) = written_command(&folder.join("commands/bare-half.csv"));
+    assert_eq!(full.len(), half.len());
+    assert!(full.iter().zip(&half).all(|(f, h)| *h == 0.5 * f));
+    for manifest in ["campaign.toml", "check.toml"] {
+        let text = std::fs::read_to_string(folder.join(manifest)).unwrap();
+        assert!(text.contains("id = \"bare-half\""), "{manifest}");
+    }
+    let check = std::fs::read_to_string(folder.join("check.toml")).unwrap();
+    let manifest = write(&folder, "rubbing.toml", &format!("{check}\n{friction}"));
+    let out = folder.join("rubbing");
+    let r = servoid_into(&folder, "simulate", &manifest, &out, &["--run", "--quiet"]);
+    assert!(r.code == 0 || r.code == 1, "{}", r.stderr);
+    let results: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("results.json")).unwrap()).unwrap();
+    let run = |id: &str| crate::util::run_by_id(&results, id).clone();
+    for id in ["bare", "bare-half"] {
+        assert_eq!(run(id)["status"], "ok", "{id}: {}", run(id)["error"]);
+    }
+    let (g_full, g_half) = (
+        fitted_gain(&run("bare"), 0.5),
+        fitted_gain(&run("bare-half"), 0.5),
+    );
+    eprintln!("gain at 0.5 Hz: full {g_full}, half {g_half}");
+    assert!(g_half < g_full, "full {g_full}, half {g_half}");
+}

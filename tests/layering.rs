@@ -46,6 +46,7 @@ const WITHIN_LAYER: &[(&str, &str)] = &[
     ("tracking", "validate"),
     ("tracking", "simulate"),
     ("design", "fit"),
+    ("design", "frf"),
     ("design", "simulate"),
 ];
 

@@ -262,7 +262,8 @@ fn checked_log(
         min_samples: ident.frf.min_samples(),
         max_jitter_fraction: MAX_JITTER_FRACTION,
         clip_fraction: CLIP_FRACTION,
-        force_loaded: run.role != Role::NoSpecimen,
+        // Nothing attached loads the force, whatever the run's role.
+        force_loaded: run.role != Role::NoSpecimen && run.specimen != SpecimenModel::None,
     };
     // check_log returns the log's own warnings with its findings, so each
     // warning is listed once.
@@ -1004,6 +1005,8 @@ pub struct Periodic {
     /// start at, from the log's first sample (s).
     pub start_s: f64,
     pub levels: Option<frf::periodic::Levels>,
+    /// The log's samples before it was cut to the steady periods.
+    pub log_rows: usize,
 }
 
 /// The empty lines' power over the noise floor above which a periodic
@@ -1047,6 +1050,7 @@ fn steady_part(
         return (log, None);
     };
     let (start, end) = (steady.start, steady.start + steady.count * steady.period);
+    let log_rows = log.n_rows;
     let mut cut = log;
     let keep = |v: &mut Vec<f64>| {
         v.truncate(end);
@@ -1063,6 +1067,7 @@ fn steady_part(
         steady,
         start_s: start as f64 / fs,
         levels: Some(levels),
+        log_rows,
     };
     (cut, Some(periodic))
 }

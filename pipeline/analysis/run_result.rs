@@ -362,6 +362,8 @@ pub fn log_info(plan: &RunPlan, stage: Option<&LogStage>) -> Option<LogInfo> {
     let (st, RunSource::Log(lp)) = (stage?, &plan.source) else {
         return None;
     };
+    // The whole log's, where the analysis read only its steady periods.
+    let rows = st.periodic.as_ref().map_or(st.log.n_rows, |p| p.log_rows);
     Some(LogInfo {
         file: lp
             .path
@@ -370,8 +372,8 @@ pub fn log_info(plan: &RunPlan, stage: Option<&LogStage>) -> Option<LogInfo> {
             .unwrap_or_default(),
         sha256: st.log.sha256.clone(),
         sample_rate_hz: st.log.sample_rate_hz,
-        n_samples: st.log.n_rows,
-        duration_s: st.log.n_rows as f64 / st.log.sample_rate_hz,
+        n_samples: rows,
+        duration_s: rows as f64 / st.log.sample_rate_hz,
         command_peak_m: Some(st.log.command_m.iter().fold(0.0, |m, u| m.max(u.abs()))),
         repairs: st.log.repairs.clone(),
     })

@@ -216,10 +216,11 @@ pub struct Night {
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum DesignError {
     #[error(
-        "no period of {periods:?} s over the band {lo_hz}-{hi_hz} Hz fits three times in a record of {record_s} s with {rest_s} s of rest at each end and determines the rig; lengthen the record (--run-s) or raise the band's low edge (--band-hz)",
+        "no period of {periods:?} s over the band {lo_hz}-{hi_hz} Hz fits a record of {record_s} s with {rest_s} s of rest at each end often enough to determine the rig (three periods unread: the fades and the one the response settles in; then {cycles} cycles of the band's low edge); lengthen the record (--run-s) or raise the band's low edge (--band-hz)",
         periods = .periods_s,
         lo_hz = .band_hz[0],
-        hi_hz = .band_hz[1]
+        hi_hz = .band_hz[1],
+        cycles = crate::frf::MIN_PERIODS
     )]
     Undetermined {
         periods_s: Vec<f64>,
@@ -338,6 +339,9 @@ fn to_target(plan: &NightPlan, best: Night, target: f64) -> Result<Night, Design
     let needed = (steady * (reached / target).powi(2) * (1.0 - 1e-9))
         .ceil()
         .max(1.0);
+    // No fewer than the FRF stage needs of the band's lowest line.
+    let fewest = (crate::frf::MIN_PERIODS / (plan.band_hz[0] * best.period_s) - 1e-9).ceil();
+    let needed = needed.max(fewest);
     let needed_s = (needed + UNREAD as f64) * best.period_s + 2.0 * plan.rest_s;
     if needed_s > plan.record_s * (1.0 + 1e-12) {
         let mut bounds: Vec<&str> = best.runs.iter().map(|r| r.bound_by.describe()).collect();
@@ -362,7 +366,10 @@ fn candidate(plan: &NightPlan, period_s: f64, mix: f64, draw: u64, record_s: f64
     let rest = (plan.rest_s * fs).round() as usize;
     let total = (record_s * fs).round() as usize;
     let periods = total.checked_sub(2 * rest)? / len;
-    if periods < 4 || len < 4 {
+    // The periods read must hold the band's lowest line MIN_PERIODS times,
+    // as the FRF stage asks of any record.
+    let read_s = periods.saturating_sub(UNREAD) as f64 * len as f64 / fs;
+    if periods <= UNREAD || len < 4 || read_s * plan.band_hz[0] < crate::frf::MIN_PERIODS {
         return None;
     }
     let mut rng = seeded_rng(plan.seed, &format!("design/night/{draw}"));

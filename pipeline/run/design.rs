@@ -1,7 +1,7 @@
 //! `servoid design RESULTS`: tomorrow night's identification runs from the
 //! rig and noise a campaign's results.json states (`design::night`),
 //! written as one output set: each run's command as the controller's
-//! waveform generator plays it (commands/<run>.csv and .mat, time_s and
+//! waveform generator plays it (`commands/<run>.csv` and `.mat`, time_s and
 //! command_m at the DAQ's rate, rest to rest), the next night's manifest
 //! for the logs to come (campaign.toml), a simulation manifest that plays
 //! the commands on the identified rig with the noise measured (check.toml,
@@ -16,8 +16,8 @@ use crate::manifest::{Manifest, Role, Run, RunData};
 use crate::model::RigParams;
 use crate::report::{self, matlab};
 use crate::results::{
-    DesignBaseline, DesignLimits, DesignResult, DesignedParameter, DesignedRunResult, LimitUsed,
-    NoiseResult, Results, RunResult, Status,
+    DesignBaseline, DesignLimits, DesignQuestion, DesignResult, DesignedParameter,
+    DesignedRunResult, LimitUsed, NoiseResult, Results, RunResult, Status,
 };
 
 use super::JobError;
@@ -44,18 +44,6 @@ pub struct DesignAsk {
 /// Why a design was not written.
 #[derive(Debug, thiserror::Error)]
 pub enum DesignJobError {
-    #[error("{}: cannot read: {source}", path.display())]
-    Read {
-        path: PathBuf,
-        #[source]
-        source: std::io::Error,
-    },
-    #[error("{}: not a results.json servoid wrote: {source}", path.display())]
-    Parse {
-        path: PathBuf,
-        #[source]
-        source: serde_json::Error,
-    },
     #[error("{}: the results state no rig to design from ({why})", path.display())]
     NoRig { path: PathBuf, why: String },
     #[error(
@@ -94,15 +82,7 @@ struct LastRun<'a> {
 /// Designs tomorrow night from `results_path` and writes it (see the
 /// module's header).
 pub fn design_night(results_path: &Path, ask: &DesignAsk) -> Result<Designed, JobError> {
-    let bytes = std::fs::read(results_path).map_err(|source| DesignJobError::Read {
-        path: results_path.to_path_buf(),
-        source,
-    })?;
-    let results: Results =
-        serde_json::from_slice(&bytes).map_err(|source| DesignJobError::Parse {
-            path: results_path.to_path_buf(),
-            source,
-        })?;
+    let (bytes, results) = super::verify::read_results(results_path)?;
     let rig = rig_of(&results).ok_or_else(|| DesignJobError::NoRig {
         path: results_path.to_path_buf(),
         why: results
@@ -189,12 +169,24 @@ pub fn design_night(results_path: &Path, ask: &DesignAsk) -> Result<Designed, Jo
         path: results_path.display().to_string(),
         sha256: crate::ingest::sha256_hex(&bytes),
     };
-    let result = design_result(&results, &plan, &designed, &last, limits, ask, &source);
+    let mut result = design_result(&results, &plan, &designed, &last, limits, ask, &source);
+    let mut commands: Vec<Vec<f64>> = designed.runs.iter().map(|r| r.command_m.clone()).collect();
+    for (from, question) in nonlinear_questions(&last) {
+        let (run, q) = second_amplitude(&result.runs[from], question, &plan.limits);
+        commands.push(
+            commands[from]
+                .iter()
+                .map(|u| run.amplitude_share * u)
+                .collect(),
+        );
+        result.runs.push(run);
+        result.questions.push(q);
+    }
     let out_dir = ask.out.clone().unwrap_or_else(|| {
         PathBuf::from("reports").join(format!("{}-design", results.campaign.name))
     });
     let set = super::begin(&out_dir, ask.wait)?;
-    write_design(set.dir(), &results, &designed, &result, &last).map_err(|e| set.relocate(e))?;
+    write_design(set.dir(), &results, &commands, &result, &last).map_err(|e| set.relocate(e))?;
     set.commit()?;
     Ok(Designed { out_dir, result })
 }
@@ -352,8 +344,10 @@ fn design_result(
                 crest_factor: d.crest_factor,
                 rms_m: d.rms_m,
                 peaks: d.peaks,
-                bound_by: d.bound_by,
+                bound_by: Some(d.bound_by),
                 used: used(&d.peaks, &plan.limits),
+                repeats: None,
+                amplitude_share: 1.0,
             }
         })
         .collect();
@@ -379,12 +373,92 @@ fn design_result(
         parameters,
         baseline,
         runs,
+        questions: Vec::new(),
         noise: NoiseResult {
             freq_hz: plan.noise.freq_hz.clone(),
             psd_m2_per_hz: plan.noise.psd_m2_per_hz.clone(),
         },
         tried: night.tried.clone(),
     }
+}
+
+/// The share of its amplitude at which a run whose rig answered it
+/// nonlinearly is played again.
+const SECOND_AMPLITUDE: f64 = 0.5;
+
+/// The identification runs (by index) whose logs said the rig is not
+/// linear at their amplitude, with what they said: harmonics of a
+/// sweep's command, or a periodic command's empty lines above the noise.
+fn nonlinear_questions(last: &[LastRun]) -> Vec<(usize, String)> {
+    last.iter()
+        .enumerate()
+        .filter_map(|(i, l)| {
+            let r = l.result;
+            let said = match (&r.linearity, &r.periodic) {
+                (Some(lin), _) if !lin.linear => lin.note.clone(),
+                (_, Some(p)) if p.distorts => format!(
+                    "the lines its periodic command left empty held {:.3} times the noise floor",
+                    p.distortion_to_noise
+                ),
+                _ => return None,
+            };
+            Some((i, format!("last night's run {}: {said}", r.id)))
+        })
+        .collect()
+}
+
+/// The run that plays `from`'s command again at [`SECOND_AMPLITUDE`] of
+/// its amplitude, and the question it settles.
+fn second_amplitude(
+    from: &DesignedRunResult,
+    question: String,
+    limits: &Limits,
+) -> (DesignedRunResult, DesignQuestion) {
+    let share = SECOND_AMPLITUDE;
+    let id = format!("{}-half", from.id);
+    let scaled = |v: f64| share * v;
+    let peaks = night::Peaks {
+        command_m: scaled(from.peaks.command_m),
+        displacement_m: scaled(from.peaks.displacement_m),
+        velocity_m_per_s: scaled(from.peaks.velocity_m_per_s),
+        force_n: from.peaks.force_n.map(scaled),
+    };
+    let log = match from.log.rsplit_once('.') {
+        Some((_, ext)) => format!("logs/{id}.{ext}"),
+        None => format!("logs/{id}"),
+    };
+    let run = DesignedRunResult {
+        id: id.clone(),
+        role: Role::Fit,
+        description: format!(
+            "{}'s command at {} of its amplitude: is the rig linear?",
+            from.id, share
+        ),
+        p_gain: from.p_gain,
+        specimen: from.specimen,
+        command_csv: format!("commands/{id}.csv"),
+        command_mat: format!("commands/{id}.mat"),
+        log,
+        crest_factor: from.crest_factor,
+        rms_m: scaled(from.rms_m),
+        peaks,
+        bound_by: None,
+        used: used(&peaks, limits),
+        repeats: Some(from.id.clone()),
+        amplitude_share: share,
+    };
+    let answers = format!(
+        "Run {id} plays {from}'s command at half its amplitude and is fitted on its own (role fit). Where the rig is linear its transfer function (results.json's runs[].fit) agrees with {from}'s within their stds, and its empty lines hold the noise floor. Seal friction lowers the gain at low frequencies, more at the lower amplitude (its describing function grows as the amplitude falls: docs/methods.md, \"Seal friction\"); a spring that stiffens is softer at the lower amplitude; the valve's flow law changes the gain with the velocity. Where the two agree, what last night saw was not the rig's amplitude.",
+        from = from.id
+    );
+    (
+        run,
+        DesignQuestion {
+            question,
+            run: id,
+            answers,
+        },
+    )
 }
 
 /// Each limit given, with the run's predicted peak against it.
@@ -412,7 +486,7 @@ fn used(p: &night::Peaks, limits: &Limits) -> Vec<LimitUsed> {
         .collect()
 }
 
-/// The log the next night's manifest expects for a run: logs/<id> with
+/// The log the next night's manifest expects for a run: `logs/<id>` with
 /// last night's log's extension (the DAQ writes the same format).
 fn expected_log(r: &RunResult) -> String {
     let ext = r
@@ -431,19 +505,19 @@ fn expected_log(r: &RunResult) -> String {
 fn write_design(
     dir: &Path,
     results: &Results,
-    night: &Night,
+    commands: &[Vec<f64>],
     result: &DesignResult,
     last: &[LastRun],
 ) -> Result<(), report::WriteError> {
     let fs = result.sample_rate_hz;
-    for (run, designed) in result.runs.iter().zip(&night.runs) {
+    for (run, command) in result.runs.iter().zip(commands) {
         report::write_artifact(
             &dir.join(&run.command_csv),
-            command_csv(&designed.command_m, fs).as_bytes(),
+            command_csv(command, fs).as_bytes(),
         )?;
         report::write_artifact(
             &dir.join(&run.command_mat),
-            &command_mat(&designed.command_m, fs, &run.id),
+            &command_mat(command, fs, &run.id),
         )?;
     }
     report::write_artifact(
@@ -501,11 +575,15 @@ fn next_manifest(results: &Results, result: &DesignResult, last: &[LastRun]) -> 
         result.source, result.period_s, result.periods
     );
     m.rig.parameters = None;
-    m.runs = last
+    m.runs = result
+        .runs
         .iter()
-        .zip(&result.runs)
-        .map(|(l, d)| {
-            let stated = results.manifest.runs.iter().find(|r| r.id == d.id);
+        .map(|d| {
+            // A run that settles a question has the specimen, channels and
+            // band of the run it repeats.
+            let like = d.repeats.as_deref().unwrap_or(&d.id);
+            let stated = results.manifest.runs.iter().find(|r| r.id == like);
+            let l = last.iter().find(|l| l.result.id == like);
             Run {
                 id: d.id.clone(),
                 role: d.role,
@@ -518,11 +596,9 @@ fn next_manifest(results: &Results, result: &DesignResult, last: &[LastRun]) -> 
                     ..RunData::default()
                 }),
                 channels: stated.and_then(|r| r.channels.clone()),
-                band_hz: stated.and_then(|r| r.band_hz).or(l
-                    .result
-                    .fit
-                    .as_ref()
-                    .map(|f| f.band_hz)),
+                band_hz: stated
+                    .and_then(|r| r.band_hz)
+                    .or(l.and_then(|l| l.result.fit.as_ref()).map(|f| f.band_hz)),
             }
         })
         .collect();
@@ -604,11 +680,12 @@ fn check_manifest(results: &Results, result: &DesignResult) -> String {
                 Value::try_from(r.role).expect("a role serialises"),
             );
             run.insert("p_gain".into(), Value::Float(r.p_gain));
+            let like = r.repeats.as_deref().unwrap_or(&r.id);
             if let Some(spec) = results
                 .manifest
                 .runs
                 .iter()
-                .find(|x| x.id == r.id)
+                .find(|x| x.id == like)
                 .and_then(|x| x.specimen.clone())
             {
                 run.insert(

@@ -129,9 +129,7 @@ impl JobError {
                 | JobError::Write(WriteError::OutFolder { .. })
                 | JobError::Verify(_)
                 | JobError::Merge(_)
-                | JobError::Design(
-                    design::DesignJobError::Flag { .. } | design::DesignJobError::Parse { .. }
-                )
+                | JobError::Design(design::DesignJobError::Flag { .. })
                 | JobError::NotShardable { .. }
                 | JobError::ShardFolderTaken { .. }
         )

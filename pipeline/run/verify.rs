@@ -89,18 +89,23 @@ impl Verification {
     }
 }
 
+/// A results.json's bytes and what they hold.
+pub(super) fn read_results(path: &Path) -> Result<(Vec<u8>, Results), VerifyError> {
+    let bytes = std::fs::read(path).map_err(|source| VerifyError::Read {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    let results = serde_json::from_slice(&bytes).map_err(|source| VerifyError::Parse {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    Ok((bytes, results))
+}
+
 /// Rerun the analysis `results_path` records and compare (on the current
 /// rayon pool).
 pub fn verify(results_path: &Path, manifest: Option<&Path>) -> Result<Verification, JobError> {
-    let bytes = std::fs::read(results_path).map_err(|source| VerifyError::Read {
-        path: results_path.to_path_buf(),
-        source,
-    })?;
-    let recorded: Results =
-        serde_json::from_slice(&bytes).map_err(|source| VerifyError::Parse {
-            path: results_path.to_path_buf(),
-            source,
-        })?;
+    let (_, recorded) = read_results(results_path)?;
     let folder = results_path.parent().unwrap_or(Path::new(""));
     let manifest = match manifest {
         Some(m) => m.to_path_buf(),
