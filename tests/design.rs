@@ -575,7 +575,9 @@ fn a_target_std_sets_the_record_or_names_what_stops_it() {
     );
     assert_eq!(r.code, 1, "{}", r.stderr);
     assert!(
-        r.stderr.contains("--run-s") && r.stderr.contains("the peak command (--command-mm)"),
+        r.stderr.contains("--run-s")
+            && r.stderr
+                .contains("the peak command (--command-mm, [design] command_m)"),
         "{}",
         r.stderr
     );
@@ -682,4 +684,67 @@ fn a_night_that_distorts_gets_the_run_at_half_the_amplitude() {
     );
     eprintln!("gain at 0.5 Hz: full {g_full}, half {g_half}");
     assert!(g_half < g_full, "full {g_full}, half {g_half}");
+}
+
+/// A campaign's `[design]` section sets the limits `servoid design` keeps
+/// to (here a 1 mm stroke, which then bounds a run), a flag overrides
+/// it (0.8 mm), and `servoid check` names a limit given wrongly by its
+/// key.
+#[test]
+fn a_campaigns_design_section_sets_the_limits_and_a_flag_overrides_it() {
+    let dir = scratch();
+    let dir = dir.path();
+    stated(dir, &write(dir, "sim.toml", &periodic_campaign(1, "")));
+    let manifest = dir.join("out/campaign.toml");
+    let text = std::fs::read_to_string(&manifest).unwrap();
+    let with = write(
+        &dir.join("out"),
+        "night.toml",
+        &format!("{text}\n[design]\nstroke_m = 0.001\n"),
+    );
+    let r = servoid_into(dir, "run", &with, &dir.join("night"), &["--quiet"]);
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    let design = |out: &str, extra: &[&str]| -> serde_json::Value {
+        let mut args = vec![
+            "design".to_string(),
+            dir.join("night").to_str().unwrap().to_string(),
+            "--out".into(),
+            dir.join(out).to_str().unwrap().to_string(),
+        ];
+        args.extend(extra.iter().map(|s| s.to_string()));
+        let args: Vec<&str> = args.iter().map(String::as_str).collect();
+        let r = crate::util::servoid(dir, &args);
+        assert_eq!(r.code, 0, "{}", r.stderr);
+        serde_json::from_str(&std::fs::read_to_string(dir.join(out).join("design.json")).unwrap())
+            .unwrap()
+    };
+    for (out, extra, stroke) in [
+        ("from-section", &[][..], 0.001),
+        ("from-flag", &["--stroke-mm", "0.8"][..], 0.0008),
+    ] {
+        let d = design(out, extra);
+        assert_eq!(d["limits"]["stroke_m"].as_f64(), Some(stroke), "{out}");
+        let runs = d["runs"].as_array().unwrap();
+        for run in runs {
+            let x = run["peaks"]["displacement_m"].as_f64().unwrap();
+            assert!(x <= stroke, "{out}: {run}");
+        }
+        assert!(
+            runs.iter().any(|r| r["bound_by"] == "stroke"),
+            "{out}: a run meets the stroke"
+        );
+    }
+    let wrong = write(
+        &dir.join("out"),
+        "wrong.toml",
+        &format!("{text}\n[design]\nstroke_m = -1.0\n"),
+    );
+    let r = crate::util::servoid(dir, &["check", wrong.to_str().unwrap()]);
+    assert_eq!(r.code, 2, "{}", r.stderr);
+    assert!(
+        format!("{}{}", r.stdout, r.stderr).contains("design.stroke_m"),
+        "{}{}",
+        r.stdout,
+        r.stderr
+    );
 }

@@ -394,6 +394,7 @@ fn analysis_manifest(plan: &SimulationPlan, truth: &Truth) -> Manifest {
         sensitivity: m.sensitivity.clone(),
         compensator: None,
         limits: None,
+        design: None,
         numbered_figures: m.numbered_figures.clone(),
     }
 }

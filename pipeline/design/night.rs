@@ -88,14 +88,14 @@ pub enum Limit {
 
 impl Limit {
     /// The limit as the design page and its errors name it, with the flag
-    /// that sets it.
+    /// and the manifest key that set it.
     pub fn describe(self) -> &'static str {
         match self {
-            Limit::Command => "the peak command (--command-mm)",
-            Limit::Stroke => "the stroke (--stroke-mm)",
-            Limit::Velocity => "the peak velocity (--velocity-mm-s)",
-            Limit::Force => "the peak force (--force-n)",
-            Limit::RunTime => "the time per run (--run-s)",
+            Limit::Command => "the peak command (--command-mm, [design] command_m)",
+            Limit::Stroke => "the stroke (--stroke-mm, [design] stroke_m)",
+            Limit::Velocity => "the peak velocity (--velocity-mm-s, [design] velocity_m_per_s)",
+            Limit::Force => "the peak force (--force-n, [design] force_n)",
+            Limit::RunTime => "the time per run (--run-s, [design] run_s)",
         }
     }
 }

@@ -18,9 +18,10 @@ use super::identification::check_identification;
 use super::keypath::KeyPath;
 use super::problem::{ManifestError, Problem, TablePlace};
 use super::raw::{
-    CampaignInfo, Channel, Channels as RawChannels, CompareMode, CompensatorSettings, History,
-    Identification, JointSettings, Limits, Manifest, MonteCarloSettings, NumberedFigure, Reference,
-    Rig, Role, Run, RunData, RunTable, SCHEMA_VERSION, SensitivitySettings, manifest_schema,
+    CampaignInfo, Channel, Channels as RawChannels, CompareMode, CompensatorSettings,
+    DesignSettings, History, Identification, JointSettings, Limits, Manifest, MonteCarloSettings,
+    NumberedFigure, Reference, Rig, Role, Run, RunData, RunTable, SCHEMA_VERSION,
+    SensitivitySettings, manifest_schema,
 };
 use super::table::{CheckedTable, RowKey, RunTableInfo, TableRun, check_table};
 use crate::drift::{MIN_HISTORY, Rule};
@@ -227,6 +228,7 @@ pub fn load_str(text: &str, path: &Path) -> Result<Campaign, ManifestError> {
         sensitivity: doc.section::<SensitivitySettings>("sensitivity"),
         compensator: doc.section::<CompensatorSettings>("compensator"),
         limits: doc.section::<Limits>("limits"),
+        design: doc.section::<DesignSettings>("design"),
         numbered_figures: doc.array::<NumberedFigure>("numbered_figures"),
     };
     doc.begin_checks();
@@ -257,6 +259,7 @@ struct Partial {
     sensitivity: Option<SensitivitySettings>,
     compensator: Option<CompensatorSettings>,
     limits: Option<Limits>,
+    design: Option<DesignSettings>,
     numbered_figures: Vec<Option<NumberedFigure>>,
 }
 
@@ -290,6 +293,7 @@ fn validate(
     let history = check_history(partial.history.as_ref(), base_dir, &mut bad);
     let sensitivity = check_sensitivity(partial.sensitivity.as_ref(), &mut bad);
     let compensator = check_compensator(partial.compensator.as_ref(), &mut bad);
+    check_design(partial.design.as_ref(), &mut bad);
     check_numbered_figures(&partial.numbered_figures, &mut bad);
     let channels = partial.channels.clone().unwrap_or_default();
     check_channels(&channels, &root.key("channels"), &mut bad);
@@ -436,6 +440,7 @@ fn campaign_of(partial: Partial, checked: Checked, file: &Path, bytes: &[u8]) ->
         sensitivity: partial.sensitivity,
         compensator: partial.compensator,
         limits: partial.limits,
+        design: partial.design,
         numbered_figures: partial.numbered_figures.into_iter().flatten().collect(),
     };
     let cutoff_warning = cutoff_below_band(&checked.compensator, checked.ident_plan.band_hz);
@@ -594,6 +599,38 @@ fn check_compensator(
         );
     }
     c
+}
+
+/// `[design]`: every limit and time positive, the band rising from
+/// above 0.
+fn check_design(d: Option<&DesignSettings>, bad: &mut impl FnMut(KeyPath, String)) {
+    let Some(d) = d else {
+        return;
+    };
+    let key = |k: &str| KeyPath::root().key("design").key(k);
+    for (name, v) in [
+        ("command_m", d.command_m),
+        ("stroke_m", d.stroke_m),
+        ("velocity_m_per_s", d.velocity_m_per_s),
+        ("force_n", d.force_n),
+        ("run_s", d.run_s),
+        ("night_s", d.night_s),
+        ("target_relative_std", d.target_relative_std),
+    ] {
+        if let Some(v) = v
+            && !(v.is_finite() && v > 0.0)
+        {
+            bad(key(name), format!("must be a positive number (got {v})"));
+        }
+    }
+    if let Some([lo, hi]) = d.band_hz
+        && !(lo.is_finite() && hi.is_finite() && lo > 0.0 && lo < hi)
+    {
+        bad(
+            key("band_hz"),
+            format!("must be [low, high] with 0 < low < high (got [{lo}, {hi}])"),
+        );
+    }
 }
 
 /// A stated cut-off below the identification band's top: the

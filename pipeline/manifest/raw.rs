@@ -68,6 +68,10 @@ pub struct Manifest {
     /// Resource limits (defaults apply when the table is absent).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub limits: Option<Limits>,
+    /// What `servoid design` keeps the next night within (the command
+    /// line's flags override each).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub design: Option<DesignSettings>,
     /// A publication's figures by their numbers (the paper's Fig. 8, ...),
     /// each standing for one the campaign draws.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
@@ -158,6 +162,43 @@ impl Default for Limits {
 
 fn default_max_log_mib() -> u64 {
     crate::ingest::DEFAULT_MAX_LOG_MIB
+}
+
+/// The limits and times `servoid design` plans the next night within.
+/// Each one absent is taken from the campaign's results (the command's
+/// peak, each run's record, the band) or not applied (the stroke, the
+/// velocity, the force).
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[schemars(deny_unknown_fields)]
+pub struct DesignSettings {
+    /// The command's largest magnitude (m).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub command_m: Option<f64>,
+    /// The actuator's stroke: the predicted displacement stays within
+    /// +-this (m).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub stroke_m: Option<f64>,
+    /// The peak velocity: the valve's rated flow over the piston area
+    /// (m/s).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub velocity_m_per_s: Option<f64>,
+    /// The peak force on the specimen (N).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub force_n: Option<f64>,
+    /// The band of interest [low, high] (Hz).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub band_hz: Option<[f64; 2]>,
+    /// The time each run may take, its rest included (s).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub run_s: Option<f64>,
+    /// The time the night's identification runs may take together (s),
+    /// shared equally.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub night_s: Option<f64>,
+    /// The worst relative std to reach (0.001 for 0.1 %): the runs are
+    /// then as long as it needs.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub target_relative_std: Option<f64>,
 }
 
 /// The stiffness sensitivity (paper Sec. 2.3): which stiffnesses to sweep

@@ -12,7 +12,7 @@ use std::path::{Path, PathBuf};
 
 use crate::design::night::{self, DesignError, Limit, Limits, Night, NightPlan, Noise};
 use crate::design::spectrum::RunModel;
-use crate::manifest::{Manifest, Role, Run, RunData};
+use crate::manifest::{DesignSettings, Manifest, Role, Run, RunData};
 use crate::model::RigParams;
 use crate::report::{self, matlab};
 use crate::results::{
@@ -83,19 +83,60 @@ struct LastRun<'a> {
 /// module's header).
 pub fn design_night(results_path: &Path, ask: &DesignAsk) -> Result<Designed, JobError> {
     let (bytes, results) = super::verify::read_results(results_path)?;
-    let rig = rig_of(&results).ok_or_else(|| DesignJobError::NoRig {
+    let ask = &with_settings(ask, results.manifest.design.as_ref());
+    let last = last_runs(&results);
+    let (plan, limits) = night_plan(results_path, &results, &last, ask)?;
+    let designed =
+        night::design(&plan, ask.target_relative_std).map_err(|source| DesignJobError::Design {
+            path: results_path.to_path_buf(),
+            source,
+        })?;
+    let source = Source {
+        path: results_path.display().to_string(),
+        sha256: crate::ingest::sha256_hex(&bytes),
+    };
+    let mut result = design_result(&results, &plan, &designed, &last, limits, ask, &source);
+    let mut commands: Vec<Vec<f64>> = designed.runs.iter().map(|r| r.command_m.clone()).collect();
+    for (from, question) in nonlinear_questions(&last) {
+        let (run, q) = second_amplitude(&result.runs[from], question, &plan.limits);
+        commands.push(
+            commands[from]
+                .iter()
+                .map(|u| run.amplitude_share * u)
+                .collect(),
+        );
+        result.runs.push(run);
+        result.questions.push(q);
+    }
+    let out_dir = ask.out.clone().unwrap_or_else(|| {
+        PathBuf::from("reports").join(format!("{}-design", results.campaign.name))
+    });
+    let set = super::begin(&out_dir, ask.wait)?;
+    write_design(set.dir(), &results, &commands, &result, &last).map_err(|e| set.relocate(e))?;
+    set.commit()?;
+    Ok(Designed { out_dir, result })
+}
+
+/// The night to design from the results' rig and `last` night's runs,
+/// within what `ask` gives and, where it is silent, what last night's
+/// logs did; and the limits as design.json states them.
+fn night_plan(
+    results_path: &Path,
+    results: &Results,
+    last: &[LastRun],
+    ask: &DesignAsk,
+) -> Result<(NightPlan, DesignLimits), DesignJobError> {
+    let rig = rig_of(results).ok_or_else(|| DesignJobError::NoRig {
         path: results_path.to_path_buf(),
         why: results
             .rig_error
             .clone()
             .unwrap_or_else(|| "rig is null".into()),
     })?;
-    let last = last_runs(&results);
     let Some(first) = last.first() else {
         return Err(DesignJobError::NoRuns {
             path: results_path.to_path_buf(),
-        }
-        .into());
+        });
     };
     let log = |r: &LastRun| r.result.log.clone();
     let fs = ask
@@ -106,7 +147,7 @@ pub fn design_night(results_path: &Path, ask: &DesignAsk) -> Result<Designed, Jo
         .band_hz
         .unwrap_or(results.manifest.identification.band_hz);
     let (command_m, command_from) = match ask.command_m {
-        Some(c) => (c, "given (--command-mm)".to_string()),
+        Some(c) => (c, "given (--command-mm or [design] command_m)".to_string()),
         None => (
             last.iter()
                 .filter_map(|r| log(r)?.command_peak_m)
@@ -119,7 +160,7 @@ pub fn design_night(results_path: &Path, ask: &DesignAsk) -> Result<Designed, Jo
         .filter_map(|r| log(r).map(|l| l.duration_s))
         .fold(0.0, f64::max);
     let (mut run_s, mut run_from) = match ask.run_s {
-        Some(s) => (s, "given (--run-s)".to_string()),
+        Some(s) => (s, "given (--run-s or [design] run_s)".to_string()),
         None => (
             longest,
             "the longest of last night's identification logs".to_string(),
@@ -151,11 +192,6 @@ pub fn design_night(results_path: &Path, ask: &DesignAsk) -> Result<Designed, Jo
         },
         seed: ask.seed,
     };
-    let designed =
-        night::design(&plan, ask.target_relative_std).map_err(|source| DesignJobError::Design {
-            path: results_path.to_path_buf(),
-            source,
-        })?;
     let limits = DesignLimits {
         command_m,
         command_from,
@@ -165,30 +201,26 @@ pub fn design_night(results_path: &Path, ask: &DesignAsk) -> Result<Designed, Jo
         run_s,
         run_from,
     };
-    let source = Source {
-        path: results_path.display().to_string(),
-        sha256: crate::ingest::sha256_hex(&bytes),
+    Ok((plan, limits))
+}
+
+/// `ask` with what the campaign's `[design]` says wherever the command
+/// line does not.
+fn with_settings(ask: &DesignAsk, settings: Option<&DesignSettings>) -> DesignAsk {
+    let Some(d) = settings else {
+        return ask.clone();
     };
-    let mut result = design_result(&results, &plan, &designed, &last, limits, ask, &source);
-    let mut commands: Vec<Vec<f64>> = designed.runs.iter().map(|r| r.command_m.clone()).collect();
-    for (from, question) in nonlinear_questions(&last) {
-        let (run, q) = second_amplitude(&result.runs[from], question, &plan.limits);
-        commands.push(
-            commands[from]
-                .iter()
-                .map(|u| run.amplitude_share * u)
-                .collect(),
-        );
-        result.runs.push(run);
-        result.questions.push(q);
+    DesignAsk {
+        command_m: ask.command_m.or(d.command_m),
+        stroke_m: ask.stroke_m.or(d.stroke_m),
+        velocity_m_per_s: ask.velocity_m_per_s.or(d.velocity_m_per_s),
+        force_n: ask.force_n.or(d.force_n),
+        band_hz: ask.band_hz.or(d.band_hz),
+        run_s: ask.run_s.or(d.run_s),
+        night_s: ask.night_s.or(d.night_s),
+        target_relative_std: ask.target_relative_std.or(d.target_relative_std),
+        ..ask.clone()
     }
-    let out_dir = ask.out.clone().unwrap_or_else(|| {
-        PathBuf::from("reports").join(format!("{}-design", results.campaign.name))
-    });
-    let set = super::begin(&out_dir, ask.wait)?;
-    write_design(set.dir(), &results, &commands, &result, &last).map_err(|e| set.relocate(e))?;
-    set.commit()?;
-    Ok(Designed { out_dir, result })
 }
 
 /// The results.json designed from.

@@ -197,7 +197,8 @@ fn a_target_sets_the_record_or_names_the_limit_that_stops_it() {
     let err = design(&plan(rig, command_only(0.004), 40.0), Some(target / 10.0)).unwrap_err();
     let text = err.to_string();
     assert!(
-        text.contains("--run-s") && text.contains("the peak command (--command-mm)"),
+        text.contains("--run-s")
+            && text.contains("the peak command (--command-mm, [design] command_m)"),
         "{text}"
     );
     let DesignError::TargetOutOfReach { needed_s, .. } = err else {
