@@ -389,16 +389,18 @@ fn cmd_design(args: &DesignArgs) -> u8 {
     };
     let ask = run::design::DesignAsk {
         out: args.out.clone(),
-        command_m: args.command_mm.map(|v| v * 1e-3),
-        stroke_m: args.stroke_mm.map(|v| v * 1e-3),
-        velocity_m_per_s: args.velocity_mm_s.map(|v| v * 1e-3),
-        force_n: args.force_n,
-        band_hz,
+        limits: crate::manifest::DesignSettings {
+            command_m: args.command_mm.map(|v| v * 1e-3),
+            stroke_m: args.stroke_mm.map(|v| v * 1e-3),
+            velocity_m_per_s: args.velocity_mm_s.map(|v| v * 1e-3),
+            force_n: args.force_n,
+            band_hz,
+            run_s: args.run_s,
+            night_s: args.night_s,
+            target_relative_std: args.target_std,
+        },
         sample_rate_hz: args.rate_hz,
-        run_s: args.run_s,
-        night_s: args.night_s,
         rest_s: args.rest_s,
-        target_relative_std: args.target_std,
         seed: args.seed,
         wait: None,
     };

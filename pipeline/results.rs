@@ -442,7 +442,7 @@ pub struct RunResult {
     /// bands over the bins its fit used: what `servoid design` plans the
     /// next night's precision from; absent for a run without a fit.
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub noise: Option<NoiseResult>,
+    pub noise: Option<crate::design::night::Noise>,
     /// A run table row's cells in the lab's own columns (a `notes`, an
     /// `operator`), by column; absent when there are none.
     #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
@@ -476,19 +476,6 @@ pub struct PeriodicResult {
     /// Whether the empty lines hold more than the noise floor
     /// (distortion_to_noise above 2).
     pub distorts: bool,
-}
-
-/// The displacement's noise spectrum a run's FRF variance implies: a bin
-/// of E|dH|^2 at an input density Suu holds a noise density Suu E|dH|^2
-/// (times the Welch estimate's degrees of freedom), averaged here over
-/// sixth-octave bands.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
-pub struct NoiseResult {
-    /// The bands' centres (Hz), rising.
-    pub freq_hz: Vec<f64>,
-    /// The one-sided power spectral density of the displacement's noise
-    /// in each band (m^2/Hz): white noise of s m RMS at fs gives 2 s^2 / fs.
-    pub psd_m2_per_hz: Vec<f64>,
 }
 
 /// Provenance of a run's log.
@@ -910,7 +897,7 @@ pub struct DesignResult {
     pub questions: Vec<DesignQuestion>,
     /// The displacement noise the night is planned for: the mean of the
     /// identification runs' (results.json's `noise`).
-    pub noise: NoiseResult,
+    pub noise: crate::design::night::Noise,
     /// Every period and mix tried, with the sum of squared relative stds
     /// each predicts.
     pub tried: Vec<crate::design::night::Tried>,

@@ -1004,7 +1004,7 @@ pub struct Periodic {
     /// When the log's sample rate is known, the time its steady periods
     /// start at, from the log's first sample (s).
     pub start_s: f64,
-    pub levels: Option<frf::periodic::Levels>,
+    pub levels: frf::periodic::Levels,
     /// The log's samples before it was cut to the steady periods.
     pub log_rows: usize,
 }
@@ -1066,7 +1066,7 @@ fn steady_part(
     let periodic = Periodic {
         steady,
         start_s: start as f64 / fs,
-        levels: Some(levels),
+        levels,
         log_rows,
     };
     (cut, Some(periodic))
@@ -1076,7 +1076,7 @@ fn steady_part(
 /// noise floor: the rig's own distortion (friction, a stiffening spring,
 /// the valve's flow law), which the fit counts with the noise.
 fn distortion_warning(p: &Periodic) -> Option<Warning> {
-    let l = p.levels?;
+    let l = p.levels;
     let ratio = l.distortion_to_noise();
     (ratio > DISTORTION_RATIO).then(|| {
         Warning::new(

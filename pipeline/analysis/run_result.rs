@@ -6,6 +6,7 @@
 use super::evidence::{RigInput, ValidationEvidence};
 use super::log_stage::{LogStage, LogStageError, OwnTf, own_tf_with};
 use super::rig::RigError;
+use crate::design::night::Noise;
 use crate::fit::adequacy::{self, Adequacy, Residuals};
 use crate::fit::{self, DelayPlan, TfFit};
 use crate::frf::{self, Frf};
@@ -16,8 +17,8 @@ use crate::manifest::{Campaign, CompensatorSettings, IdentificationPlan, RunPlan
 use crate::model::SpecimenModel;
 use crate::model::{self, LinearSpecimen, RigParams, Seals};
 use crate::results::{
-    DelayTestResult, FitSummary, FrfUsed, HarmonicsFound, LinearityResult, LogInfo, NoiseResult,
-    PeriodicResult, RunResult, RunTracking, Status, TfResult, TfSource,
+    DelayTestResult, FitSummary, FrfUsed, HarmonicsFound, LinearityResult, LogInfo, PeriodicResult,
+    RunResult, RunTracking, Status, TfResult, TfSource,
 };
 use crate::tracking::compensator::{self, Compensator, CompensatorOutcome};
 use crate::tracking::{self, FrfBins, Reference, Tracking};
@@ -403,7 +404,7 @@ pub fn frf_used(st: &LogStage) -> FrfUsed {
 pub fn periodic_result(st: &LogStage) -> Option<PeriodicResult> {
     let p = st.periodic.as_ref()?;
     let fs = st.log.sample_rate_hz;
-    let l = p.levels?;
+    let l = p.levels;
     Some(PeriodicResult {
         period_s: p.steady.period as f64 / fs,
         periods: p.steady.count,
@@ -422,8 +423,8 @@ pub fn periodic_result(st: &LogStage) -> Option<PeriodicResult> {
 const NOISE_BANDS_PER_OCTAVE: f64 = 6.0;
 
 /// The displacement's noise spectrum the run's fitted bins state, in
-/// sixth-octave bands from the lowest (`NoiseResult`).
-pub fn noise_result(st: &LogStage) -> Option<NoiseResult> {
+/// sixth-octave bands from the lowest.
+pub fn noise_result(st: &LogStage) -> Option<Noise> {
     let data = st.fit_data.as_ref()?;
     // A Welch bin's E|dH|^2 is the noise density over (n_eff - 1) Suu
     // (frf::h_variance_at); a whole-record transform's over Suu.
@@ -454,7 +455,7 @@ pub fn noise_result(st: &LogStage) -> Option<NoiseResult> {
             (centre, sum / *n as f64)
         })
         .unzip();
-    (!freq_hz.is_empty()).then_some(NoiseResult {
+    (!freq_hz.is_empty()).then_some(Noise {
         freq_hz,
         psd_m2_per_hz,
     })

@@ -20,11 +20,17 @@ use crate::model::{self, LinearSpecimen, RigParams};
 use crate::simulate::excitation::{self, ChirpLaw, Excitation, Padding};
 use crate::simulate::{discrete, multisine, seeded_rng};
 
-/// The displacement's noise a night is planned for: its one-sided power
-/// spectral density (m^2/Hz) at rising frequencies.
-#[derive(Debug, Clone, PartialEq)]
+/// The displacement's noise spectrum a run's FRF variance implies, which
+/// a night is planned for: a bin of E|dH|^2 at an input density Suu holds
+/// a noise density Suu E|dH|^2 (times a Welch estimate's degrees of
+/// freedom), averaged over sixth-octave bands (results.json's
+/// `runs[].noise`).
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize, schemars::JsonSchema)]
 pub struct Noise {
+    /// The bands' centres (Hz), rising.
     pub freq_hz: Vec<f64>,
+    /// The one-sided power spectral density of the displacement's noise
+    /// in each band (m^2/Hz): white noise of s m RMS at fs gives 2 s^2 / fs.
     pub psd_m2_per_hz: Vec<f64>,
 }
 
@@ -131,7 +137,8 @@ pub struct Peaks {
 }
 
 impl Peaks {
-    fn scaled(&self, a: f64) -> Peaks {
+    /// The peaks of the same command scaled by `a`: the plant is linear.
+    pub fn scaled(&self, a: f64) -> Peaks {
         Peaks {
             command_m: a * self.command_m,
             displacement_m: a * self.displacement_m,
@@ -274,9 +281,9 @@ pub fn design(plan: &NightPlan, target: Option<f64>) -> Result<Night, DesignErro
         .map(|&(period_s, mix, draw)| candidate(plan, period_s, mix, draw, plan.record_s))
         .collect();
     let mut tried = Vec::new();
-    let mut best: Option<Night> = None;
+    let mut best: Option<(f64, Night)> = None;
     for ((period_s, mix, draw), night) in grid.into_iter().zip(nights) {
-        let criterion = night.as_ref().map(criterion_of(plan));
+        let criterion = night.as_ref().map(|n| criterion_of(plan, n));
         tried.push(Tried {
             period_s,
             optimal_share: mix,
@@ -287,12 +294,12 @@ pub fn design(plan: &NightPlan, target: Option<f64>) -> Result<Night, DesignErro
             criterion,
         });
         if let (Some(night), Some(c)) = (night, criterion)
-            && best.as_ref().is_none_or(|b| c < criterion_of(plan)(b))
+            && best.as_ref().is_none_or(|(b, _)| c < *b)
         {
-            best = Some(night);
+            best = Some((c, night));
         }
     }
-    let Some(mut best) = best else {
+    let Some((_, mut best)) = best else {
         return Err(DesignError::Undetermined {
             periods_s: PERIODS.iter().map(|k| k / plan.band_hz[0]).collect(),
             band_hz: plan.band_hz,
@@ -308,15 +315,13 @@ pub fn design(plan: &NightPlan, target: Option<f64>) -> Result<Night, DesignErro
 }
 
 /// The sum of the four squared relative stds a night predicts.
-fn criterion_of(plan: &NightPlan) -> impl Fn(&Night) -> f64 + '_ {
-    |night| {
-        night
-            .precision
-            .relative_std(&plan.rig)
-            .iter()
-            .map(|r| r * r)
-            .sum()
-    }
+fn criterion_of(plan: &NightPlan, night: &Night) -> f64 {
+    night
+        .precision
+        .relative_std(&plan.rig)
+        .iter()
+        .map(|r| r * r)
+        .sum()
 }
 
 /// The worst relative std a night predicts.
@@ -459,16 +464,26 @@ pub fn peaks(rig: &RigParams, model: &RunModel, u: &[f64], fs: f64) -> Option<Pe
     })
 }
 
+/// The baseline chirp's start and end (Hz): a fifth of the band's low
+/// edge and 7/6 of its top, below 0.45 of the rate.
+pub fn chirp_band_hz(plan: &NightPlan) -> [f64; 2] {
+    [
+        plan.band_hz[0] / 5.0,
+        (plan.band_hz[1] * 7.0 / 6.0).min(0.45 * plan.sample_rate_hz),
+    ]
+}
+
 /// The paper's command over the same records at the same peak command:
 /// a quadratic chirp from a fifth of the band's low edge to 7/6 of its
 /// high one (0.1-35 Hz for 0.5-30 Hz, Sec. 3.2.2), each run an ETFE over
 /// its whole record, for the night to be compared with.
 pub fn chirp_baseline(plan: &NightPlan, record_s: f64) -> Option<Precision> {
     let fs = plan.sample_rate_hz;
+    let [f0_hz, f1_hz] = chirp_band_hz(plan);
     let chirp = Excitation::Chirp {
         law: ChirpLaw::Quadratic,
-        f0_hz: plan.band_hz[0] / 5.0,
-        f1_hz: (plan.band_hz[1] * 7.0 / 6.0).min(0.45 * fs),
+        f0_hz,
+        f1_hz,
         duration_s: record_s - 2.0 * plan.rest_s,
         amplitude_m: plan.limits.command_m,
     };

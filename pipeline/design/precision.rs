@@ -44,7 +44,8 @@ impl Precision {
     }
 }
 
-fn values(rig: &RigParams) -> [f64; 4] {
+/// The rig's (beta1, a1b0, a2, a3), in [`NAMES`]' order.
+pub fn values(rig: &RigParams) -> [f64; 4] {
     [
         rig.beta1_per_s,
         rig.a1b0_n_per_m_s2,

@@ -201,6 +201,25 @@ pub struct DesignSettings {
     pub target_relative_std: Option<f64>,
 }
 
+impl DesignSettings {
+    /// These settings, each absent one taken from `under`.
+    pub fn or(self, under: Option<&DesignSettings>) -> DesignSettings {
+        let Some(u) = under else {
+            return self;
+        };
+        DesignSettings {
+            command_m: self.command_m.or(u.command_m),
+            stroke_m: self.stroke_m.or(u.stroke_m),
+            velocity_m_per_s: self.velocity_m_per_s.or(u.velocity_m_per_s),
+            force_n: self.force_n.or(u.force_n),
+            band_hz: self.band_hz.or(u.band_hz),
+            run_s: self.run_s.or(u.run_s),
+            night_s: self.night_s.or(u.night_s),
+            target_relative_std: self.target_relative_std.or(u.target_relative_std),
+        }
+    }
+}
+
 /// The stiffness sensitivity (paper Sec. 2.3): which stiffnesses to sweep
 /// and the relative standard deviation the recommendation aims at.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]

@@ -11,32 +11,28 @@
 use std::path::{Path, PathBuf};
 
 use crate::design::night::{self, DesignError, Limit, Limits, Night, NightPlan, Noise};
+use crate::design::precision;
 use crate::design::spectrum::RunModel;
 use crate::manifest::{DesignSettings, Manifest, Role, Run, RunData};
 use crate::model::RigParams;
 use crate::report::{self, matlab};
 use crate::results::{
     DesignBaseline, DesignLimits, DesignQuestion, DesignResult, DesignedParameter,
-    DesignedRunResult, LimitUsed, NoiseResult, Results, RunResult, Status,
+    DesignedRunResult, LimitUsed, Results, RunResult, Status,
 };
 
 use super::JobError;
 
-/// What the design is asked beside the results: each None is taken from
-/// them (the limits absent are not applied).
+/// What the design is asked beside the results: the limits and times
+/// (each absent one taken from the campaign's `[design]`, then from the
+/// results, or not applied), the rate (default: the logs'), the rest
+/// around each command, the seed of the detection lines.
 #[derive(Debug, Clone, Default)]
 pub struct DesignAsk {
     pub out: Option<PathBuf>,
-    pub command_m: Option<f64>,
-    pub stroke_m: Option<f64>,
-    pub velocity_m_per_s: Option<f64>,
-    pub force_n: Option<f64>,
-    pub band_hz: Option<[f64; 2]>,
+    pub limits: DesignSettings,
     pub sample_rate_hz: Option<f64>,
-    pub run_s: Option<f64>,
-    pub night_s: Option<f64>,
     pub rest_s: f64,
-    pub target_relative_std: Option<f64>,
     pub seed: u64,
     pub wait: Option<std::time::Duration>,
 }
@@ -72,10 +68,11 @@ pub struct Designed {
     pub result: DesignResult,
 }
 
-/// A designed run's id, its result, and its last night's manifest entry.
+/// Last night's identification run a designed run repeats: its result,
+/// the noise it measured and its model.
 struct LastRun<'a> {
     result: &'a RunResult,
-    noise: Noise,
+    noise: &'a Noise,
     model: RunModel,
 }
 
@@ -83,14 +80,18 @@ struct LastRun<'a> {
 /// module's header).
 pub fn design_night(results_path: &Path, ask: &DesignAsk) -> Result<Designed, JobError> {
     let (bytes, results) = super::verify::read_results(results_path)?;
-    let ask = &with_settings(ask, results.manifest.design.as_ref());
+    let ask = &DesignAsk {
+        limits: ask.limits.clone().or(results.manifest.design.as_ref()),
+        ..ask.clone()
+    };
     let last = last_runs(&results);
     let (plan, limits) = night_plan(results_path, &results, &last, ask)?;
-    let designed =
-        night::design(&plan, ask.target_relative_std).map_err(|source| DesignJobError::Design {
+    let designed = night::design(&plan, ask.limits.target_relative_std).map_err(|source| {
+        DesignJobError::Design {
             path: results_path.to_path_buf(),
             source,
-        })?;
+        }
+    })?;
     let source = Source {
         path: results_path.display().to_string(),
         sha256: crate::ingest::sha256_hex(&bytes),
@@ -144,9 +145,10 @@ fn night_plan(
         .or_else(|| log(first).map(|l| l.sample_rate_hz))
         .unwrap_or(1000.0);
     let band_hz = ask
+        .limits
         .band_hz
         .unwrap_or(results.manifest.identification.band_hz);
-    let (command_m, command_from) = match ask.command_m {
+    let (command_m, command_from) = match ask.limits.command_m {
         Some(c) => (c, "given (--command-mm or [design] command_m)".to_string()),
         None => (
             last.iter()
@@ -159,14 +161,14 @@ fn night_plan(
         .iter()
         .filter_map(|r| log(r).map(|l| l.duration_s))
         .fold(0.0, f64::max);
-    let (mut run_s, mut run_from) = match ask.run_s {
+    let (mut run_s, mut run_from) = match ask.limits.run_s {
         Some(s) => (s, "given (--run-s or [design] run_s)".to_string()),
         None => (
             longest,
             "the longest of last night's identification logs".to_string(),
         ),
     };
-    if let Some(night_s) = ask.night_s
+    if let Some(night_s) = ask.limits.night_s
         && night_s / last.len() as f64 <= run_s
     {
         run_s = night_s / last.len() as f64;
@@ -186,41 +188,22 @@ fn night_plan(
         intersample: results.manifest.identification.command_intersample,
         limits: Limits {
             command_m,
-            stroke_m: ask.stroke_m,
-            velocity_m_per_s: ask.velocity_m_per_s,
-            force_n: ask.force_n,
+            stroke_m: ask.limits.stroke_m,
+            velocity_m_per_s: ask.limits.velocity_m_per_s,
+            force_n: ask.limits.force_n,
         },
         seed: ask.seed,
     };
     let limits = DesignLimits {
         command_m,
         command_from,
-        stroke_m: ask.stroke_m,
-        velocity_m_per_s: ask.velocity_m_per_s,
-        force_n: ask.force_n,
+        stroke_m: ask.limits.stroke_m,
+        velocity_m_per_s: ask.limits.velocity_m_per_s,
+        force_n: ask.limits.force_n,
         run_s,
         run_from,
     };
     Ok((plan, limits))
-}
-
-/// `ask` with what the campaign's `[design]` says wherever the command
-/// line does not.
-fn with_settings(ask: &DesignAsk, settings: Option<&DesignSettings>) -> DesignAsk {
-    let Some(d) = settings else {
-        return ask.clone();
-    };
-    DesignAsk {
-        command_m: ask.command_m.or(d.command_m),
-        stroke_m: ask.stroke_m.or(d.stroke_m),
-        velocity_m_per_s: ask.velocity_m_per_s.or(d.velocity_m_per_s),
-        force_n: ask.force_n.or(d.force_n),
-        band_hz: ask.band_hz.or(d.band_hz),
-        run_s: ask.run_s.or(d.run_s),
-        night_s: ask.night_s.or(d.night_s),
-        target_relative_std: ask.target_relative_std.or(d.target_relative_std),
-        ..ask.clone()
-    }
 }
 
 /// The results.json designed from.
@@ -252,10 +235,7 @@ fn last_runs(results: &Results) -> Vec<LastRun<'_>> {
             let noise = r.noise.as_ref()?;
             Some(LastRun {
                 result: r,
-                noise: Noise {
-                    freq_hz: noise.freq_hz.clone(),
-                    psd_m2_per_hz: noise.psd_m2_per_hz.clone(),
-                },
+                noise,
                 model: RunModel {
                     specimen: r.specimen.linear()?,
                     p_gain: r.p_gain,
@@ -283,13 +263,16 @@ fn check_asked(
         Some(v) if !(v.is_finite() && v > 0.0) => Err(bad(flag, v, "must be a positive number")),
         _ => Ok(()),
     };
-    positive("--stroke-mm", ask.stroke_m.map(|v| v * 1e3))?;
-    positive("--velocity-mm-s", ask.velocity_m_per_s.map(|v| v * 1e3))?;
-    positive("--force-n", ask.force_n)?;
+    positive("--stroke-mm", ask.limits.stroke_m.map(|v| v * 1e3))?;
+    positive(
+        "--velocity-mm-s",
+        ask.limits.velocity_m_per_s.map(|v| v * 1e3),
+    )?;
+    positive("--force-n", ask.limits.force_n)?;
     positive("--rate-hz", Some(fs))?;
     positive("--command-mm", Some(command_m * 1e3))?;
     positive("--run-s", Some(run_s))?;
-    positive("--target-std", ask.target_relative_std)?;
+    positive("--target-std", ask.limits.target_relative_std)?;
     if !(ask.rest_s.is_finite() && ask.rest_s >= 0.0) {
         return Err(bad("--rest-s", ask.rest_s, "must be zero or more"));
     }
@@ -318,6 +301,43 @@ fn design_result(
     ask: &DesignAsk,
     source: &Source,
 ) -> DesignResult {
+    let (parameters, baseline) = precision_table(results, plan, night);
+    DesignResult {
+        servoid_version: env!("CARGO_PKG_VERSION").to_string(),
+        source: source.path.clone(),
+        source_sha256: source.sha256.clone(),
+        campaign: results.campaign.name.clone(),
+        rig_name: results.campaign.rig_name.clone(),
+        rig: plan.rig,
+        sample_rate_hz: plan.sample_rate_hz,
+        band_hz: plan.band_hz,
+        record_s: night.record_s,
+        rest_s: plan.rest_s,
+        period_s: night.period_s,
+        periods: night.periods,
+        optimal_share: night.optimal_share,
+        draw: night.draw,
+        lines_excited: night.lines_hz.len(),
+        lines_detection: night.detection_hz.len(),
+        limits,
+        target_relative_std: ask.limits.target_relative_std,
+        parameters,
+        baseline,
+        runs: designed_runs(night, last, &plan.limits),
+        questions: Vec::new(),
+        noise: plan.noise.clone(),
+        tried: night.tried.clone(),
+    }
+}
+
+/// Each rig parameter's std: last night's stated, the designed night's
+/// predicted and the paper's chirps' at the same record and peak; and
+/// the night against the chirps.
+fn precision_table(
+    results: &Results,
+    plan: &NightPlan,
+    night: &Night,
+) -> (Vec<DesignedParameter>, Option<DesignBaseline>) {
     let rig = &plan.rig;
     let std = night.precision.std();
     let relative = night.precision.relative_std(rig);
@@ -327,13 +347,8 @@ fn design_result(
         .rig
         .as_ref()
         .map(|r| [r.beta1.std, r.a1b0.std, r.a2.std, r.a3.std]);
-    let values = [
-        rig.beta1_per_s,
-        rig.a1b0_n_per_m_s2,
-        rig.a2_n_per_m,
-        rig.a3_per_s,
-    ];
-    let parameters = crate::design::precision::NAMES
+    let values = precision::values(rig);
+    let parameters = precision::NAMES
         .iter()
         .enumerate()
         .map(|(j, name)| DesignedParameter {
@@ -349,18 +364,21 @@ fn design_result(
         let theirs = c.relative_std(rig);
         let max = |r: [f64; 4]| r.into_iter().fold(0.0, f64::max);
         let squares = |r: [f64; 4]| r.iter().map(|r| r * r).sum::<f64>();
+        let [f0, f1] = night::chirp_band_hz(plan);
         DesignBaseline {
             description: format!(
-                "the paper's quadratic chirp from {} to {} Hz (Sec. 3.2.2) over the same record at the same peak command, read as an ETFE",
-                plan.band_hz[0] / 5.0,
-                (plan.band_hz[1] * 7.0 / 6.0).min(0.45 * plan.sample_rate_hz)
+                "the paper's quadratic chirp from {f0} to {f1} Hz (Sec. 3.2.2) over the same record at the same peak command, read as an ETFE"
             ),
             worst_ratio: max(theirs) / max(relative),
             squares_ratio: squares(theirs) / squares(relative),
         }
     });
-    let runs = last
-        .iter()
+    (parameters, baseline)
+}
+
+/// The designed identification runs as design.json states them.
+fn designed_runs(night: &Night, last: &[LastRun], limits: &Limits) -> Vec<DesignedRunResult> {
+    last.iter()
         .zip(&night.runs)
         .map(|(l, d)| {
             let id = &l.result.id;
@@ -372,46 +390,17 @@ fn design_result(
                 specimen: l.result.specimen,
                 command_csv: format!("commands/{id}.csv"),
                 command_mat: format!("commands/{id}.mat"),
-                log: expected_log(l.result),
+                log: log_like(id, l.result.log.as_ref().map_or("", |g| &g.file)),
                 crest_factor: d.crest_factor,
                 rms_m: d.rms_m,
                 peaks: d.peaks,
                 bound_by: Some(d.bound_by),
-                used: used(&d.peaks, &plan.limits),
+                used: used(&d.peaks, limits),
                 repeats: None,
                 amplitude_share: 1.0,
             }
         })
-        .collect();
-    DesignResult {
-        servoid_version: env!("CARGO_PKG_VERSION").to_string(),
-        source: source.path.clone(),
-        source_sha256: source.sha256.clone(),
-        campaign: results.campaign.name.clone(),
-        rig_name: results.campaign.rig_name.clone(),
-        rig: *rig,
-        sample_rate_hz: plan.sample_rate_hz,
-        band_hz: plan.band_hz,
-        record_s: night.record_s,
-        rest_s: plan.rest_s,
-        period_s: night.period_s,
-        periods: night.periods,
-        optimal_share: night.optimal_share,
-        draw: night.draw,
-        lines_excited: night.lines_hz.len(),
-        lines_detection: night.detection_hz.len(),
-        limits,
-        target_relative_std: ask.target_relative_std,
-        parameters,
-        baseline,
-        runs,
-        questions: Vec::new(),
-        noise: NoiseResult {
-            freq_hz: plan.noise.freq_hz.clone(),
-            psd_m2_per_hz: plan.noise.psd_m2_per_hz.clone(),
-        },
-        tried: night.tried.clone(),
-    }
+        .collect()
 }
 
 /// The share of its amplitude at which a run whose rig answered it
@@ -448,17 +437,7 @@ fn second_amplitude(
 ) -> (DesignedRunResult, DesignQuestion) {
     let share = SECOND_AMPLITUDE;
     let id = format!("{}-half", from.id);
-    let scaled = |v: f64| share * v;
-    let peaks = night::Peaks {
-        command_m: scaled(from.peaks.command_m),
-        displacement_m: scaled(from.peaks.displacement_m),
-        velocity_m_per_s: scaled(from.peaks.velocity_m_per_s),
-        force_n: from.peaks.force_n.map(scaled),
-    };
-    let log = match from.log.rsplit_once('.') {
-        Some((_, ext)) => format!("logs/{id}.{ext}"),
-        None => format!("logs/{id}"),
-    };
+    let peaks = from.peaks.scaled(share);
     let run = DesignedRunResult {
         id: id.clone(),
         role: Role::Fit,
@@ -470,9 +449,9 @@ fn second_amplitude(
         specimen: from.specimen,
         command_csv: format!("commands/{id}.csv"),
         command_mat: format!("commands/{id}.mat"),
-        log,
+        log: log_like(&id, &from.log),
         crest_factor: from.crest_factor,
-        rms_m: scaled(from.rms_m),
+        rms_m: share * from.rms_m,
         peaks,
         bound_by: None,
         used: used(&peaks, limits),
@@ -518,19 +497,14 @@ fn used(p: &night::Peaks, limits: &Limits) -> Vec<LimitUsed> {
         .collect()
 }
 
-/// The log the next night's manifest expects for a run: `logs/<id>` with
-/// last night's log's extension (the DAQ writes the same format).
-fn expected_log(r: &RunResult) -> String {
-    let ext = r
-        .log
-        .as_ref()
-        .and_then(|l| {
-            Path::new(&l.file)
-                .extension()
-                .map(|e| e.to_string_lossy().into_owned())
-        })
-        .unwrap_or_else(|| "csv".to_string());
-    format!("logs/{}.{ext}", r.id)
+/// The log the next night's manifest expects for run `id`: `logs/<id>`
+/// with the extension of `like`, a log of last night's (the DAQ writes
+/// the same format), CSV where it has none.
+fn log_like(id: &str, like: &str) -> String {
+    let ext = Path::new(like)
+        .extension()
+        .map_or("csv".into(), |e| e.to_string_lossy());
+    format!("logs/{id}.{ext}")
 }
 
 /// Writes the design's files into `dir` (the output set's work folder).
