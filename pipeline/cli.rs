@@ -320,9 +320,10 @@ fn dispatch(command: Command) -> u8 {
 /// from the results (or not applied: stroke, velocity, force).
 #[derive(Debug, clap::Args)]
 pub struct DesignArgs {
-    /// The results.json of the campaign to design from, or the output
-    /// folder that holds it.
-    results: PathBuf,
+    /// The results.json of the campaign to design from, the output folder
+    /// that holds it, or a campaign manifest (.toml) whose
+    /// [rig.parameters] give the rig's nominal values.
+    from: PathBuf,
     /// The output folder (default: `reports/<campaign>-design`).
     #[arg(long, short)]
     out: Option<PathBuf>,
@@ -348,6 +349,10 @@ pub struct DesignArgs {
     /// The DAQ's rate (Hz); default: last night's logs'.
     #[arg(long)]
     rate_hz: Option<f64>,
+    /// The displacement's noise (mm RMS at the rate), taken as white;
+    /// default: the noise last night's logs measured.
+    #[arg(long)]
+    noise_mm: Option<f64>,
     /// The time per run, rest included (s); default: the longest of last
     /// night's identification logs.
     #[arg(long)]
@@ -372,11 +377,6 @@ pub struct DesignArgs {
 /// `servoid design`: tomorrow night's runs, written; says where and what
 /// they are predicted to determine.
 fn cmd_design(args: &DesignArgs) -> u8 {
-    let results = if args.results.is_dir() {
-        args.results.join("results.json")
-    } else {
-        args.results.clone()
-    };
     let band_hz = match args.band_hz.as_deref() {
         None => None,
         Some(&[lo, hi]) => Some([lo, hi]),
@@ -398,13 +398,14 @@ fn cmd_design(args: &DesignArgs) -> u8 {
             run_s: args.run_s,
             night_s: args.night_s,
             target_relative_std: args.target_std,
+            sample_rate_hz: args.rate_hz,
+            displacement_noise_m: args.noise_mm.map(|v| v * 1e-3),
         },
-        sample_rate_hz: args.rate_hz,
         rest_s: args.rest_s,
         seed: args.seed,
         wait: None,
     };
-    match run::design::design_night(&results, &ask) {
+    match run::design::design_night(&args.from, &ask) {
         Ok(d) => {
             let r = &d.result;
             say(&format!(

@@ -150,6 +150,49 @@ pub struct RigEstimates {
     pub covariance: Option<[[f64; 4]; 4]>,
 }
 
+/// An experiment that would settle which of the structures the data could
+/// not tell apart is the rig's (`servoid design` adds its run).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
+#[serde(rename_all = "snake_case")]
+pub enum Settle {
+    /// A run at another P gain in the fit: a mode in the loop moves with it.
+    PGain,
+    /// A sweep to higher frequencies: a delay's phase lag grows with
+    /// frequency, a mode's gain falls off.
+    WiderBand,
+    /// Runs of other stiffness or mass in the fit: the piston's mode moves
+    /// with the specimen.
+    Specimen,
+    /// A run with a load cell in the fit: a mode in the command path
+    /// reaches the force.
+    LoadCell,
+    /// A longer or stronger excitation.
+    Longer,
+}
+
+impl Settle {
+    /// The experiment in words, as the ambiguity warning gives it.
+    pub fn text(self) -> &'static str {
+        match self {
+            Settle::PGain => {
+                "add a run at another P gain to the fit (a validation run at a P gain the identification runs lack, with identification.joint.include_validation = true): a mode in the loop changes x1/u with the P gain, one outside the loop does not"
+            }
+            Settle::WiderBand => {
+                "sweep to higher frequencies (the excitation and identification.band_hz): a delay's phase lag grows in proportion to frequency, a mode's gain falls off"
+            }
+            Settle::Specimen => {
+                "add runs of other stiffness or mass (springs, identification.joint.include_validation with SDOF specimens): the piston's mode moves with the specimen, a mode in the valve or the command path does not"
+            }
+            Settle::LoadCell => {
+                "add a run with a load cell to the fit (identification.joint.include_validation): a mode in the command path reaches the force, one on the displacement channel does not"
+            }
+            Settle::Longer => {
+                "a longer or stronger excitation over the band, which narrows every fit's std"
+            }
+        }
+    }
+}
+
 /// The joint grey-box fit of the rig across the identification runs
 ///: the structures tried, the one chosen and why, its rig with
 /// the sequential one beside it, and the adequacy tests.
@@ -183,6 +226,9 @@ pub struct JointResult {
     /// places: which, what they move, and the experiment that would settle
     /// it (also among the warnings).
     pub ambiguity: Option<String>,
+    /// The experiments that would settle the ambiguity, as it names them.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub settle: Vec<Settle>,
     /// When the chosen structure fails its adequacy tests and the runs
     /// pull the rig apart: by how much, and that the stds include it (also
     /// among the warnings).
@@ -856,14 +902,16 @@ mod tests {
 pub struct DesignResult {
     /// The servoid version that wrote this file.
     pub servoid_version: String,
-    /// The results.json designed from (as given) and its SHA-256.
+    /// The results.json or manifest designed from (as given) and its
+    /// SHA-256.
     pub source: String,
     pub source_sha256: String,
     pub campaign: String,
     pub rig_name: String,
-    /// The rig the night is planned at (the one the results state), a1b0
-    /// at its `p_gain`.
+    /// The rig the night is planned at, a1b0 at its `p_gain`, and where it
+    /// came from (the results' rig, or a manifest's nominal values).
     pub rig: RigParams,
+    pub rig_from: String,
     pub sample_rate_hz: f64,
     pub band_hz: [f64; 2],
     /// Each run's record, its rest included (s).
@@ -895,9 +943,11 @@ pub struct DesignResult {
     /// What last night left open, the run added to settle it and what
     /// each answer would mean.
     pub questions: Vec<DesignQuestion>,
-    /// The displacement noise the night is planned for: the mean of the
-    /// identification runs' (results.json's `noise`).
+    /// The displacement noise the night is planned for (the mean of the
+    /// identification runs' results.json `noise`, or white at a level
+    /// given), and where it came from.
     pub noise: crate::design::night::Noise,
+    pub noise_from: String,
     /// Every period and mix tried, with the sum of squared relative stds
     /// each predicts.
     pub tried: Vec<crate::design::night::Tried>,
@@ -972,6 +1022,9 @@ pub struct DesignedRunResult {
     #[serde(skip_serializing_if = "Option::is_none")]
     pub repeats: Option<String>,
     pub amplitude_share: f64,
+    /// The band it is fitted over where it is not the campaign's (Hz).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub band_hz: Option<[f64; 2]>,
 }
 
 /// Something last night's results left open, and the run that settles it.

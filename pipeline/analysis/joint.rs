@@ -21,7 +21,7 @@ use crate::identify::{Estimate, FitData, IdentificationPlan};
 use crate::manifest::{Campaign, JointRig, Role, RunPlan};
 use crate::model::{RigParams, Seals};
 use crate::results::{
-    FTestResult, JointCandidate, JointParameter, JointResult, RigEstimates, RunAdequacy,
+    FTestResult, JointCandidate, JointParameter, JointResult, RigEstimates, RunAdequacy, Settle,
 };
 use crate::warning::Warning;
 
@@ -456,10 +456,11 @@ fn describe(
     result.r1 = ident.r1();
     result.covariance = Some(cov);
     result.structure_covariance = spread.as_ref().map(|s| s.covariance);
-    if let Some(text) = spread
+    if let Some((text, settle)) = spread
         .as_ref()
         .and_then(|s| ambiguity(fit, s, &sel.candidates, split))
     {
+        result.settle = settle;
         warnings.push(Warning::new(
             "rig: the data cannot tell two structures apart; the stds include the spread",
             format!("rig: {text}"),
@@ -541,6 +542,7 @@ fn table(
         covariance: None,
         structure_covariance: None,
         ambiguity: None,
+        settle: Vec::new(),
         misfit: None,
         adequacy: None,
         per_run: Vec::new(),
@@ -649,13 +651,14 @@ fn use_decision(
 }
 
 /// The warning when structures the data cannot tell apart move the rig:
-/// which, by how much, and what would settle it.
+/// which, by how much, and what would settle it (in words and as the
+/// experiments).
 fn ambiguity(
     fit: &JointFit,
     spread: &StructureSpread,
     candidates: &[Candidate],
     split: bool,
-) -> Option<String> {
+) -> Option<(String, Vec<Settle>)> {
     if spread.rivals.is_empty() {
         return None;
     }
@@ -699,47 +702,41 @@ fn ambiguity(
     text.push_str(
         "; the rig's stds include that spread (the structure std; results.json keeps the statistical, structure and total stds). To settle it: ",
     );
-    text.push_str(&settle(fit, spread).join("; or "));
-    Some(text)
+    let settle = settle(fit, spread);
+    let words: Vec<&str> = settle.iter().map(|s| s.text()).collect();
+    text.push_str(&words.join("; or "));
+    Some((text, settle))
 }
 
 /// What would settle which of the structures `fit` and `spread`'s rivals is
 /// the rig's: the experiments that tell their places apart.
-fn settle(fit: &JointFit, spread: &StructureSpread) -> Vec<&'static str> {
-    let mut settle: Vec<&'static str> = Vec::new();
+fn settle(fit: &JointFit, spread: &StructureSpread) -> Vec<Settle> {
+    let mut settle = Vec::new();
     let places: Vec<Option<Place>> = std::iter::once(fit.structure)
         .chain(spread.rivals.iter().map(|r| r.structure))
         .map(Structure::place)
         .collect();
     let has = |p: Option<Place>| places.contains(&p);
     if has(Some(Place::Loop)) && places.iter().any(|p| *p != Some(Place::Loop)) {
-        settle.push(
-            "add a run at another P gain to the fit (a validation run at a P gain the identification runs lack, with identification.joint.include_validation = true): a mode in the loop changes x1/u with the P gain, one outside the loop does not",
-        );
+        settle.push(Settle::PGain);
     }
     let delay_only = std::iter::once(fit.structure)
         .chain(spread.rivals.iter().map(|r| r.structure))
         .any(|s| matches!(s, Structure::Plain | Structure::Delay));
     if delay_only && places.iter().any(Option::is_some) {
-        settle.push(
-            "sweep to higher frequencies (the excitation and identification.band_hz): a delay's phase lag grows in proportion to frequency, a mode's gain falls off",
-        );
+        settle.push(Settle::WiderBand);
     }
     let piston = std::iter::once(fit.structure)
         .chain(spread.rivals.iter().map(|r| r.structure))
         .any(Structure::piston);
     if piston {
-        settle.push(
-            "add runs of other stiffness or mass (springs, identification.joint.include_validation with SDOF specimens): the piston's mode moves with the specimen, a mode in the valve or the command path does not",
-        );
+        settle.push(Settle::Specimen);
     }
     if has(Some(Place::Command)) && has(Some(Place::Measurement)) {
-        settle.push(
-            "add a run with a load cell to the fit (identification.joint.include_validation): a mode in the command path reaches the force, one on the displacement channel does not",
-        );
+        settle.push(Settle::LoadCell);
     }
     if settle.is_empty() {
-        settle.push("a longer or stronger excitation over the band, which narrows every fit's std");
+        settle.push(Settle::Longer);
     }
     settle
 }

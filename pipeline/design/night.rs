@@ -56,6 +56,15 @@ impl Noise {
         0.5 * self.psd(f_hz) * sample_rate_hz
     }
 
+    /// White noise of `rms_m` RMS sampled at `sample_rate_hz`: one band,
+    /// held everywhere.
+    pub fn white(rms_m: f64, sample_rate_hz: f64, band_hz: [f64; 2]) -> Noise {
+        Noise {
+            freq_hz: vec![(band_hz[0] * band_hz[1]).sqrt()],
+            psd_m2_per_hz: vec![2.0 * rms_m * rms_m / sample_rate_hz],
+        }
+    }
+
     /// The mean of several runs' spectra, on the first one's bands.
     pub fn mean(all: &[Noise]) -> Option<Noise> {
         let first = all.first()?;
@@ -148,7 +157,7 @@ impl Peaks {
     }
 
     /// The largest scale inside `limits`, and the limit that sets it.
-    fn largest_scale(&self, limits: &Limits) -> (f64, Limit) {
+    pub fn largest_scale(&self, limits: &Limits) -> (f64, Limit) {
         let mut best = (limits.command_m / self.command_m, Limit::Command);
         let others = [
             (limits.stroke_m, Some(self.displacement_m), Limit::Stroke),
@@ -439,6 +448,22 @@ fn candidate(plan: &NightPlan, period_s: f64, mix: f64, draw: u64, record_s: f64
         record_s: (periods * len + 2 * rest) as f64 / fs,
         tried: Vec::new(),
     })
+}
+
+/// Command `u` played on `model`: scaled to the largest amplitude inside
+/// `limits`, with the scale, its peaks and the limit that sets them.
+pub fn replayed(
+    rig: &RigParams,
+    model: &RunModel,
+    u: &[f64],
+    fs: f64,
+    limits: &Limits,
+) -> Option<(f64, Vec<f64>, Peaks, Limit)> {
+    let at = peaks(rig, model, u, fs)?;
+    let (scale, bound_by) = at.largest_scale(limits);
+    // A part in 1e9 below the limit, as `candidate` keeps it.
+    let a = scale * (1.0 - 1e-9);
+    Some((a, u.iter().map(|v| a * v).collect(), at.scaled(a), bound_by))
 }
 
 /// The peaks of command `u`, and of the displacement, velocity and force

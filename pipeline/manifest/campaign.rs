@@ -616,6 +616,8 @@ fn check_design(d: Option<&DesignSettings>, bad: &mut impl FnMut(KeyPath, String
         ("run_s", d.run_s),
         ("night_s", d.night_s),
         ("target_relative_std", d.target_relative_std),
+        ("sample_rate_hz", d.sample_rate_hz),
+        ("displacement_noise_m", d.displacement_noise_m),
     ] {
         if let Some(v) = v
             && !(v.is_finite() && v > 0.0)

@@ -166,8 +166,10 @@ fn default_max_log_mib() -> u64 {
 
 /// The limits and times `servoid design` plans the next night within.
 /// Each one absent is taken from the campaign's results (the command's
-/// peak, each run's record, the band) or not applied (the stroke, the
-/// velocity, the force).
+/// peak, each run's record, the band, the rate, the noise) or not applied
+/// (the stroke, the velocity, the force). A design from a manifest's
+/// nominal `rig.parameters` has no results: it needs the command's peak,
+/// the time per run (or the night's), the rate and the noise.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[schemars(deny_unknown_fields)]
 pub struct DesignSettings {
@@ -199,6 +201,13 @@ pub struct DesignSettings {
     /// then as long as it needs.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub target_relative_std: Option<f64>,
+    /// The DAQ's rate (Hz), the commands' too.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sample_rate_hz: Option<f64>,
+    /// The displacement channel's noise (m RMS at the DAQ's rate), taken
+    /// as white; in place of the noise the results measured.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub displacement_noise_m: Option<f64>,
 }
 
 impl DesignSettings {
@@ -216,6 +225,8 @@ impl DesignSettings {
             run_s: self.run_s.or(u.run_s),
             night_s: self.night_s.or(u.night_s),
             target_relative_std: self.target_relative_std.or(u.target_relative_std),
+            sample_rate_hz: self.sample_rate_hz.or(u.sample_rate_hz),
+            displacement_noise_m: self.displacement_noise_m.or(u.displacement_noise_m),
         }
     }
 }

@@ -1,37 +1,41 @@
-//! `servoid design RESULTS`: tomorrow night's identification runs from the
-//! rig and noise a campaign's results.json states (`design::night`),
-//! written as one output set: each run's command as the controller's
-//! waveform generator plays it (`commands/<run>.csv` and `.mat`, time_s and
-//! command_m at the DAQ's rate, rest to rest), the next night's manifest
-//! for the logs to come (campaign.toml), a simulation manifest that plays
-//! the commands on the identified rig with the noise measured (check.toml,
-//! for `servoid simulate --run` before the lab runs them), design.json and
-//! the page to read first (design.html).
+//! `servoid design RESULTS|MANIFEST`: tomorrow night's identification
+//! runs (`design::night`) from the rig and noise a campaign's results.json
+//! states, or from a campaign manifest's nominal `rig.parameters` with the
+//! noise and limits given, written as one output set: each run's command
+//! as the controller's waveform generator plays it (`commands/<run>.csv`
+//! and `.mat`, time_s and command_m at the DAQ's rate, rest to rest), the
+//! next night's manifest for the logs to come (campaign.toml), a simulation
+//! manifest that plays the commands on the rig planned at (check.toml, for
+//! `servoid simulate --run` before the lab runs them), design.json and the
+//! page to read first (design.html).
 
 use std::path::{Path, PathBuf};
 
 use crate::design::night::{self, DesignError, Limit, Limits, Night, NightPlan, Noise};
 use crate::design::precision;
 use crate::design::spectrum::RunModel;
-use crate::manifest::{DesignSettings, Manifest, Role, Run, RunData};
-use crate::model::RigParams;
+use crate::manifest::{
+    self, Campaign, DesignSettings, Loaded, Manifest, Role, Run, RunData, RunSource,
+};
+use crate::model::{RigParams, SpecimenModel};
 use crate::report::{self, matlab};
 use crate::results::{
-    DesignBaseline, DesignLimits, DesignQuestion, DesignResult, DesignedParameter,
-    DesignedRunResult, LimitUsed, Results, RunResult, Status,
+    DesignBaseline, DesignLimits, DesignResult, DesignedParameter, DesignedRunResult, LimitUsed,
+    LogInfo, Results, RunResult, Status,
 };
 
 use super::JobError;
 
-/// What the design is asked beside the results: the limits and times
-/// (each absent one taken from the campaign's `[design]`, then from the
-/// results, or not applied), the rate (default: the logs'), the rest
-/// around each command, the seed of the detection lines.
+mod questions;
+
+/// What the design is asked beside its source: the limits, times, rate
+/// and noise (each absent one taken from the campaign's `[design]`, then
+/// from the results, or not applied), the rest around each command, the
+/// seed of the detection lines.
 #[derive(Debug, Clone, Default)]
 pub struct DesignAsk {
     pub out: Option<PathBuf>,
     pub limits: DesignSettings,
-    pub sample_rate_hz: Option<f64>,
     pub rest_s: f64,
     pub seed: u64,
     pub wait: Option<std::time::Duration>,
@@ -40,13 +44,15 @@ pub struct DesignAsk {
 /// Why a design was not written.
 #[derive(Debug, thiserror::Error)]
 pub enum DesignJobError {
-    #[error("{}: the results state no rig to design from ({why})", path.display())]
+    #[error("{}: states no rig to design from ({why})", path.display())]
     NoRig { path: PathBuf, why: String },
-    #[error(
-        "{}: no identification run (role no_specimen or spring) has a fitted log whose noise the design could plan for",
-        path.display()
-    )]
-    NoRuns { path: PathBuf },
+    #[error("{}: no identification run (role no_specimen or spring) {why}", path.display())]
+    NoRuns { path: PathBuf, why: &'static str },
+    #[error("{}: a design from nominal values needs {}", path.display(), missing.join("; "))]
+    Missing {
+        path: PathBuf,
+        missing: Vec<&'static str>,
+    },
     #[error("{flag} {value}: {why}")]
     Flag {
         flag: &'static str,
@@ -68,181 +74,394 @@ pub struct Designed {
     pub result: DesignResult,
 }
 
-/// Last night's identification run a designed run repeats: its result,
-/// the noise it measured and its model.
-struct LastRun<'a> {
-    result: &'a RunResult,
-    noise: &'a Noise,
-    model: RunModel,
+/// What a design starts from: the rig, the identification runs it
+/// repeats and, from results, what last night's logs measured.
+struct Basis {
+    /// The results.json or manifest designed from, and its SHA-256.
+    path: PathBuf,
+    sha256: String,
+    /// The campaign's manifest: the next night keeps its channels and
+    /// settings.
+    manifest: Manifest,
+    campaign: String,
+    rig_name: String,
+    rig: RigParams,
+    /// Where the rig came from, in words.
+    rig_from: &'static str,
+    /// Last night's stated stds of beta1, a1b0, a2, a3 (from results).
+    last_std: Option<[Option<f64>; 4]>,
+    /// The identification runs the night repeats.
+    runs: Vec<BasisRun>,
+    /// Last night's validation runs with linear specimens: specimens and
+    /// P gains the lab has.
+    validation: Vec<BasisRun>,
+    /// What last night's joint fit could not tell apart, and the
+    /// experiments that would settle it.
+    ambiguity: Option<String>,
+    settle: Vec<crate::results::Settle>,
 }
 
-/// Designs tomorrow night from `results_path` and writes it (see the
+/// An identification run the night repeats.
+struct BasisRun {
+    id: String,
+    role: Role,
+    description: String,
+    p_gain: f64,
+    specimen: SpecimenModel,
+    model: RunModel,
+    /// Its log as the manifest names it (last night's, or expected).
+    log_file: Option<String>,
+    /// From results: what its log was, the noise it measured, its fit's
+    /// band, and what it said of the rig's linearity where it said the
+    /// rig is not linear.
+    log: Option<LogInfo>,
+    noise: Option<Noise>,
+    fit_band_hz: Option<[f64; 2]>,
+    nonlinear: Option<String>,
+}
+
+/// Designs tomorrow night from `from` (a results.json, the output folder
+/// that holds one, or a campaign manifest) and writes it (see the
 /// module's header).
-pub fn design_night(results_path: &Path, ask: &DesignAsk) -> Result<Designed, JobError> {
-    let (bytes, results) = super::verify::read_results(results_path)?;
+pub fn design_night(from: &Path, ask: &DesignAsk) -> Result<Designed, JobError> {
+    let basis = if from.extension().is_some_and(|e| e == "toml") {
+        from_manifest(from)?
+    } else if from.is_dir() {
+        from_results(&from.join("results.json"))?
+    } else {
+        from_results(from)?
+    };
     let ask = &DesignAsk {
-        limits: ask.limits.clone().or(results.manifest.design.as_ref()),
+        limits: ask.limits.clone().or(basis.manifest.design.as_ref()),
         ..ask.clone()
     };
-    let last = last_runs(&results);
-    let (plan, limits) = night_plan(results_path, &results, &last, ask)?;
+    let (plan, limits, noise_from) = night_plan(&basis, ask)?;
     let designed = night::design(&plan, ask.limits.target_relative_std).map_err(|source| {
         DesignJobError::Design {
-            path: results_path.to_path_buf(),
+            path: basis.path.clone(),
             source,
         }
     })?;
-    let source = Source {
-        path: results_path.display().to_string(),
-        sha256: crate::ingest::sha256_hex(&bytes),
-    };
-    let mut result = design_result(&results, &plan, &designed, &last, limits, ask, &source);
+    let mut result = design_result(&basis, &plan, &designed, limits, noise_from, ask);
     let mut commands: Vec<Vec<f64>> = designed.runs.iter().map(|r| r.command_m.clone()).collect();
-    for (from, question) in nonlinear_questions(&last) {
-        let (run, q) = second_amplitude(&result.runs[from], question, &plan.limits);
-        commands.push(
-            commands[from]
-                .iter()
-                .map(|u| run.amplitude_share * u)
-                .collect(),
-        );
-        result.runs.push(run);
-        result.questions.push(q);
+    for added in questions::added(&basis, &plan, &designed, &result.runs) {
+        commands.push(added.command);
+        result.runs.push(added.run);
+        result.questions.push(added.question);
     }
-    let out_dir = ask.out.clone().unwrap_or_else(|| {
-        PathBuf::from("reports").join(format!("{}-design", results.campaign.name))
-    });
+    let out_dir = ask
+        .out
+        .clone()
+        .unwrap_or_else(|| PathBuf::from("reports").join(format!("{}-design", basis.campaign)));
     let set = super::begin(&out_dir, ask.wait)?;
-    write_design(set.dir(), &results, &commands, &result, &last).map_err(|e| set.relocate(e))?;
+    write_design(set.dir(), &basis, &commands, &result).map_err(|e| set.relocate(e))?;
     set.commit()?;
     Ok(Designed { out_dir, result })
 }
 
-/// The night to design from the results' rig and `last` night's runs,
-/// within what `ask` gives and, where it is silent, what last night's
-/// logs did; and the limits as design.json states them.
-fn night_plan(
-    results_path: &Path,
-    results: &Results,
-    last: &[LastRun],
-    ask: &DesignAsk,
-) -> Result<(NightPlan, DesignLimits), DesignJobError> {
-    let rig = rig_of(results).ok_or_else(|| DesignJobError::NoRig {
-        path: results_path.to_path_buf(),
-        why: results
-            .rig_error
-            .clone()
-            .unwrap_or_else(|| "rig is null".into()),
-    })?;
-    let Some(first) = last.first() else {
-        return Err(DesignJobError::NoRuns {
-            path: results_path.to_path_buf(),
-        });
-    };
-    let log = |r: &LastRun| r.result.log.clone();
-    let fs = ask
-        .sample_rate_hz
-        .or_else(|| log(first).map(|l| l.sample_rate_hz))
-        .unwrap_or(1000.0);
-    let band_hz = ask
-        .limits
-        .band_hz
-        .unwrap_or(results.manifest.identification.band_hz);
-    let (command_m, command_from) = match ask.limits.command_m {
-        Some(c) => (c, "given (--command-mm or [design] command_m)".to_string()),
-        None => (
-            last.iter()
-                .filter_map(|r| log(r)?.command_peak_m)
-                .fold(0.0, f64::max),
-            "the largest command of last night's identification logs".to_string(),
-        ),
-    };
-    let longest = last
-        .iter()
-        .filter_map(|r| log(r).map(|l| l.duration_s))
-        .fold(0.0, f64::max);
-    let (mut run_s, mut run_from) = match ask.limits.run_s {
-        Some(s) => (s, "given (--run-s or [design] run_s)".to_string()),
-        None => (
-            longest,
-            "the longest of last night's identification logs".to_string(),
-        ),
-    };
-    if let Some(night_s) = ask.limits.night_s
-        && night_s / last.len() as f64 <= run_s
-    {
-        run_s = night_s / last.len() as f64;
-        run_from = format!("--night-s {night_s} shared by {} runs", last.len());
-    }
-    check_asked(ask, fs, band_hz, command_m, run_s)?;
-    let noise = Noise::mean(&last.iter().map(|r| r.noise.clone()).collect::<Vec<_>>())
-        .expect("at least one run");
-    let plan = NightPlan {
+/// The basis a campaign's results give: the rig they state and the
+/// identification runs that fitted a log with a linear specimen.
+fn from_results(path: &Path) -> Result<Basis, JobError> {
+    let (bytes, results) = super::verify::read_results(path)?;
+    let Results {
+        campaign,
+        manifest,
         rig,
-        runs: last.iter().map(|r| r.model).collect(),
+        rig_error,
+        runs,
+        ..
+    } = results;
+    let rig_stated = rig.as_ref().ok_or_else(|| DesignJobError::NoRig {
+        path: path.to_path_buf(),
+        why: rig_error.unwrap_or_else(|| "rig is null".into()),
+    })?;
+    let rig = RigParams {
+        beta1_per_s: rig_stated.beta1.value,
+        a1b0_n_per_m_s2: rig_stated.a1b0.value,
+        a2_n_per_m: rig_stated.a2.value,
+        a3_per_s: rig_stated.a3.value,
+        p_gain: rig_stated.p_gain,
+    };
+    let last_std = Some([
+        rig_stated.beta1.std,
+        rig_stated.a1b0.std,
+        rig_stated.a2.std,
+        rig_stated.a3.std,
+    ]);
+    let (ambiguity, settle) = rig_stated.joint.as_ref().map_or((None, Vec::new()), |j| {
+        (j.ambiguity.clone(), j.settle.clone())
+    });
+    let all: Vec<BasisRun> = runs.into_iter().filter_map(basis_run).collect();
+    let (runs, validation): (Vec<BasisRun>, Vec<BasisRun>) = all
+        .into_iter()
+        .filter(|r| r.role == Role::Validation || r.noise.is_some())
+        .partition(|r| r.role != Role::Validation);
+    if runs.is_empty() {
+        return Err(DesignJobError::NoRuns {
+            path: path.to_path_buf(),
+            why: "has a fitted log whose noise the design could plan for",
+        }
+        .into());
+    }
+    Ok(Basis {
+        path: path.to_path_buf(),
+        sha256: crate::ingest::sha256_hex(&bytes),
+        manifest,
+        rig_name: campaign.rig_name,
+        campaign: campaign.name,
+        rig,
+        rig_from: "the rig the results state",
+        last_std,
+        runs,
+        validation,
+        ambiguity,
+        settle,
+    })
+}
+
+/// A run of last night's as the design may repeat it: one with a linear
+/// specimen; an identification run's noise only where it fitted.
+fn basis_run(r: RunResult) -> Option<BasisRun> {
+    let model = RunModel {
+        specimen: r.specimen.linear()?,
+        p_gain: r.p_gain,
+    };
+    let nonlinear = match (&r.linearity, &r.periodic) {
+        (Some(lin), _) if !lin.linear => Some(lin.note.clone()),
+        (_, Some(p)) if p.distorts => Some(format!(
+            "the lines its periodic command left empty held {:.3} times the noise floor",
+            p.distortion_to_noise
+        )),
+        _ => None,
+    };
+    let identifies = matches!(r.role, Role::NoSpecimen | Role::Spring) && r.status == Status::Ok;
+    Some(BasisRun {
+        log_file: r.log.as_ref().map(|l| l.file.clone()),
+        fit_band_hz: r.fit.as_ref().map(|f| f.band_hz),
+        noise: r.noise.filter(|_| identifies),
+        id: r.id,
+        role: r.role,
+        description: r.description,
+        p_gain: r.p_gain,
+        specimen: r.specimen,
+        model,
+        log: r.log,
+        nonlinear,
+    })
+}
+
+/// The basis a campaign manifest gives: its nominal `rig.parameters` and
+/// its identification runs with linear specimens.
+fn from_manifest(path: &Path) -> Result<Basis, JobError> {
+    let c: Campaign = match manifest::load_any(path)? {
+        Loaded::Campaign(c) => *c,
+        Loaded::Simulation(_) => {
+            return Err(JobError::WrongKind {
+                file: path.to_path_buf(),
+                found: "simulation",
+                hint: "run it (`servoid simulate MANIFEST --run`) and design from its results, or design from a campaign manifest with nominal [rig.parameters]".into(),
+            });
+        }
+    };
+    let rig = c.given_rig.ok_or_else(|| DesignJobError::NoRig {
+        path: path.to_path_buf(),
+        why: "a design from a manifest needs the rig's nominal values in [rig.parameters]; or design from a campaign's results.json".into(),
+    })?;
+    let runs: Vec<BasisRun> = c
+        .runs
+        .into_iter()
+        .filter(|r| matches!(r.role, Role::NoSpecimen | Role::Spring))
+        .filter_map(|r| {
+            let model = RunModel {
+                specimen: r.specimen.linear()?,
+                p_gain: r.p_gain,
+            };
+            let log_file = match &r.source {
+                RunSource::Log(plan) => Some(plan.path.display().to_string()),
+                _ => None,
+            };
+            Some(BasisRun {
+                id: r.id,
+                role: r.role,
+                description: r.description,
+                p_gain: r.p_gain,
+                specimen: r.specimen,
+                model,
+                log_file,
+                log: None,
+                noise: None,
+                fit_band_hz: None,
+                nonlinear: None,
+            })
+        })
+        .collect();
+    if runs.is_empty() {
+        return Err(DesignJobError::NoRuns {
+            path: path.to_path_buf(),
+            why: "has a linear specimen the design could plan for",
+        }
+        .into());
+    }
+    Ok(Basis {
+        path: path.to_path_buf(),
+        sha256: c.manifest_sha256,
+        manifest: c.manifest,
+        campaign: c.name,
+        rig_name: c.rig_name,
+        rig,
+        rig_from: "the manifest's nominal rig.parameters",
+        last_std: None,
+        runs,
+        validation: Vec::new(),
+        ambiguity: None,
+        settle: Vec::new(),
+    })
+}
+
+/// The night to design from the basis's rig and runs, within what `ask`
+/// gives and, where it is silent, what last night's logs did; the limits
+/// as design.json states them; and where the noise came from.
+fn night_plan(
+    basis: &Basis,
+    ask: &DesignAsk,
+) -> Result<(NightPlan, DesignLimits, String), DesignJobError> {
+    let given = &ask.limits;
+    let logs: Vec<&LogInfo> = basis.runs.iter().filter_map(|r| r.log.as_ref()).collect();
+    let largest = |v: Vec<f64>| v.into_iter().reduce(f64::max);
+    let band_hz = given
+        .band_hz
+        .unwrap_or(basis.manifest.identification.band_hz);
+    let fs = given
+        .sample_rate_hz
+        .or_else(|| logs.first().map(|l| l.sample_rate_hz))
+        .or(basis
+            .manifest
+            .channels
+            .time
+            .as_ref()
+            .and_then(|t| t.sample_rate_hz));
+    let command = match given.command_m {
+        Some(c) => Some((c, "given (--command-mm or [design] command_m)".to_string())),
+        None => largest(logs.iter().filter_map(|l| l.command_peak_m).collect()).map(|c| {
+            (
+                c,
+                "the largest command of last night's identification logs".to_string(),
+            )
+        }),
+    };
+    let n = basis.runs.len();
+    let mut run = match given.run_s {
+        Some(s) => Some((s, "given (--run-s or [design] run_s)".to_string())),
+        None => largest(logs.iter().map(|l| l.duration_s).collect()).map(|s| {
+            (
+                s,
+                "the longest of last night's identification logs".to_string(),
+            )
+        }),
+    };
+    if let Some(night_s) = given.night_s
+        && run.as_ref().is_none_or(|(s, _)| night_s / n as f64 <= *s)
+    {
+        run = Some((
+            night_s / n as f64,
+            format!("--night-s {night_s} shared by {n} runs"),
+        ));
+    }
+    let noise = planned_noise(basis, given.displacement_noise_m, fs, band_hz);
+    let lacking = (command.is_none(), run.is_none());
+    let (
+        Some(fs),
+        Some((command_m, command_from)),
+        Some((run_s, run_from)),
+        Some((noise, noise_from)),
+    ) = (fs, command, run, noise)
+    else {
+        return Err(missing(basis, fs, lacking.0, lacking.1, given));
+    };
+    check_asked(ask, fs, band_hz, command_m, run_s)?;
+    let plan = NightPlan {
+        rig: basis.rig,
+        runs: basis.runs.iter().map(|r| r.model).collect(),
         noise,
         band_hz,
         sample_rate_hz: fs,
         record_s: run_s,
         rest_s: ask.rest_s,
-        intersample: results.manifest.identification.command_intersample,
+        intersample: basis.manifest.identification.command_intersample,
         limits: Limits {
             command_m,
-            stroke_m: ask.limits.stroke_m,
-            velocity_m_per_s: ask.limits.velocity_m_per_s,
-            force_n: ask.limits.force_n,
+            stroke_m: given.stroke_m,
+            velocity_m_per_s: given.velocity_m_per_s,
+            force_n: given.force_n,
         },
         seed: ask.seed,
     };
     let limits = DesignLimits {
         command_m,
         command_from,
-        stroke_m: ask.limits.stroke_m,
-        velocity_m_per_s: ask.limits.velocity_m_per_s,
-        force_n: ask.limits.force_n,
+        stroke_m: given.stroke_m,
+        velocity_m_per_s: given.velocity_m_per_s,
+        force_n: given.force_n,
         run_s,
         run_from,
     };
-    Ok((plan, limits))
+    Ok((plan, limits, noise_from))
 }
 
-/// The results.json designed from.
-struct Source {
-    path: String,
-    sha256: String,
-}
-
-/// The rig the results state, a1b0 at its P gain.
-fn rig_of(results: &Results) -> Option<RigParams> {
-    let r = results.rig.as_ref()?;
-    Some(RigParams {
-        beta1_per_s: r.beta1.value,
-        a1b0_n_per_m_s2: r.a1b0.value,
-        a2_n_per_m: r.a2.value,
-        a3_per_s: r.a3.value,
-        p_gain: r.p_gain,
+/// The noise to plan for, and where it came from: white at the level
+/// given, else the mean of what last night's runs measured.
+fn planned_noise(
+    basis: &Basis,
+    rms_m: Option<f64>,
+    fs: Option<f64>,
+    band_hz: [f64; 2],
+) -> Option<(Noise, String)> {
+    if let (Some(rms), Some(fs)) = (rms_m, fs) {
+        return Some((
+            Noise::white(rms, fs, band_hz),
+            format!(
+                "given: white displacement noise of {} mm RMS at {fs} Hz (--noise-mm or [design] displacement_noise_m)",
+                rms * 1e3
+            ),
+        ));
+    }
+    let measured: Vec<Noise> = basis.runs.iter().filter_map(|r| r.noise.clone()).collect();
+    Noise::mean(&measured).map(|n| {
+        (
+            n,
+            "the mean of last night's identification logs' noise spectra".to_string(),
+        )
     })
 }
 
-/// The identification runs that fitted a log with a linear specimen, in
-/// the results' order: what the night repeats.
-fn last_runs(results: &Results) -> Vec<LastRun<'_>> {
-    results
-        .runs
-        .iter()
-        .filter(|r| matches!(r.role, Role::NoSpecimen | Role::Spring) && r.status == Status::Ok)
-        .filter_map(|r| {
-            let noise = r.noise.as_ref()?;
-            Some(LastRun {
-                result: r,
-                noise,
-                model: RunModel {
-                    specimen: r.specimen.linear()?,
-                    p_gain: r.p_gain,
-                },
-            })
-        })
-        .collect()
+/// What a design from nominal values lacks, every piece at once with its
+/// flag and key.
+fn missing(
+    basis: &Basis,
+    fs: Option<f64>,
+    no_command: bool,
+    no_run: bool,
+    given: &DesignSettings,
+) -> DesignJobError {
+    let mut missing = Vec::new();
+    if no_command {
+        missing.push("the command's peak (--command-mm or [design] command_m)");
+    }
+    if no_run {
+        missing.push("the time per run (--run-s or [design] run_s) or for the night (--night-s or [design] night_s)");
+    }
+    if fs.is_none() {
+        missing.push(
+            "the DAQ's rate (--rate-hz, [design] sample_rate_hz or [channels.time] sample_rate_hz)",
+        );
+    }
+    if given.displacement_noise_m.is_none() && basis.runs.iter().all(|r| r.noise.is_none()) {
+        missing.push("the displacement's noise (--noise-mm or [design] displacement_noise_m, m RMS at the rate)");
+    }
+    DesignJobError::Missing {
+        path: basis.path.clone(),
+        missing,
+    }
 }
 
 /// Refuses what no design can meet, naming the flag (or, for a value
@@ -273,6 +492,10 @@ fn check_asked(
     positive("--command-mm", Some(command_m * 1e3))?;
     positive("--run-s", Some(run_s))?;
     positive("--target-std", ask.limits.target_relative_std)?;
+    positive(
+        "--noise-mm",
+        ask.limits.displacement_noise_m.map(|v| v * 1e3),
+    )?;
     if !(ask.rest_s.is_finite() && ask.rest_s >= 0.0) {
         return Err(bad("--rest-s", ask.rest_s, "must be zero or more"));
     }
@@ -293,22 +516,22 @@ fn check_asked(
 
 /// design.json's content.
 fn design_result(
-    results: &Results,
+    basis: &Basis,
     plan: &NightPlan,
     night: &Night,
-    last: &[LastRun],
     limits: DesignLimits,
+    noise_from: String,
     ask: &DesignAsk,
-    source: &Source,
 ) -> DesignResult {
-    let (parameters, baseline) = precision_table(results, plan, night);
+    let (parameters, baseline) = precision_table(basis.last_std, plan, night);
     DesignResult {
         servoid_version: env!("CARGO_PKG_VERSION").to_string(),
-        source: source.path.clone(),
-        source_sha256: source.sha256.clone(),
-        campaign: results.campaign.name.clone(),
-        rig_name: results.campaign.rig_name.clone(),
+        source: basis.path.display().to_string(),
+        source_sha256: basis.sha256.clone(),
+        campaign: basis.campaign.clone(),
+        rig_name: basis.rig_name.clone(),
         rig: plan.rig,
+        rig_from: basis.rig_from.to_string(),
         sample_rate_hz: plan.sample_rate_hz,
         band_hz: plan.band_hz,
         record_s: night.record_s,
@@ -323,9 +546,10 @@ fn design_result(
         target_relative_std: ask.limits.target_relative_std,
         parameters,
         baseline,
-        runs: designed_runs(night, last, &plan.limits),
+        runs: designed_runs(night, &basis.runs, &plan.limits),
         questions: Vec::new(),
         noise: plan.noise.clone(),
+        noise_from,
         tried: night.tried.clone(),
     }
 }
@@ -334,7 +558,7 @@ fn design_result(
 /// predicted and the paper's chirps' at the same record and peak; and
 /// the night against the chirps.
 fn precision_table(
-    results: &Results,
+    last_std: Option<[Option<f64>; 4]>,
     plan: &NightPlan,
     night: &Night,
 ) -> (Vec<DesignedParameter>, Option<DesignBaseline>) {
@@ -343,10 +567,6 @@ fn precision_table(
     let relative = night.precision.relative_std(rig);
     let chirps = night::chirp_baseline(plan, night.record_s);
     let chirp_std = chirps.map(|c| c.std());
-    let last_std = results
-        .rig
-        .as_ref()
-        .map(|r| [r.beta1.std, r.a1b0.std, r.a2.std, r.a3.std]);
     let values = precision::values(rig);
     let parameters = precision::NAMES
         .iter()
@@ -377,20 +597,20 @@ fn precision_table(
 }
 
 /// The designed identification runs as design.json states them.
-fn designed_runs(night: &Night, last: &[LastRun], limits: &Limits) -> Vec<DesignedRunResult> {
-    last.iter()
+fn designed_runs(night: &Night, runs: &[BasisRun], limits: &Limits) -> Vec<DesignedRunResult> {
+    runs.iter()
         .zip(&night.runs)
         .map(|(l, d)| {
-            let id = &l.result.id;
+            let id = &l.id;
             DesignedRunResult {
                 id: id.clone(),
-                role: l.result.role,
-                description: l.result.description.clone(),
-                p_gain: l.result.p_gain,
-                specimen: l.result.specimen,
+                role: l.role,
+                description: l.description.clone(),
+                p_gain: l.p_gain,
+                specimen: l.specimen,
                 command_csv: format!("commands/{id}.csv"),
                 command_mat: format!("commands/{id}.mat"),
-                log: log_like(id, l.result.log.as_ref().map_or("", |g| &g.file)),
+                log: log_like(id, l.log_file.as_deref().unwrap_or("")),
                 crest_factor: d.crest_factor,
                 rms_m: d.rms_m,
                 peaks: d.peaks,
@@ -398,78 +618,10 @@ fn designed_runs(night: &Night, last: &[LastRun], limits: &Limits) -> Vec<Design
                 used: used(&d.peaks, limits),
                 repeats: None,
                 amplitude_share: 1.0,
+                band_hz: None,
             }
         })
         .collect()
-}
-
-/// The share of its amplitude at which a run whose rig answered it
-/// nonlinearly is played again.
-const SECOND_AMPLITUDE: f64 = 0.5;
-
-/// The identification runs (by index) whose logs said the rig is not
-/// linear at their amplitude, with what they said: harmonics of a
-/// sweep's command, or a periodic command's empty lines above the noise.
-fn nonlinear_questions(last: &[LastRun]) -> Vec<(usize, String)> {
-    last.iter()
-        .enumerate()
-        .filter_map(|(i, l)| {
-            let r = l.result;
-            let said = match (&r.linearity, &r.periodic) {
-                (Some(lin), _) if !lin.linear => lin.note.clone(),
-                (_, Some(p)) if p.distorts => format!(
-                    "the lines its periodic command left empty held {:.3} times the noise floor",
-                    p.distortion_to_noise
-                ),
-                _ => return None,
-            };
-            Some((i, format!("last night's run {}: {said}", r.id)))
-        })
-        .collect()
-}
-
-/// The run that plays `from`'s command again at [`SECOND_AMPLITUDE`] of
-/// its amplitude, and the question it settles.
-fn second_amplitude(
-    from: &DesignedRunResult,
-    question: String,
-    limits: &Limits,
-) -> (DesignedRunResult, DesignQuestion) {
-    let share = SECOND_AMPLITUDE;
-    let id = format!("{}-half", from.id);
-    let peaks = from.peaks.scaled(share);
-    let run = DesignedRunResult {
-        id: id.clone(),
-        role: Role::Fit,
-        description: format!(
-            "{}'s command at {} of its amplitude: is the rig linear?",
-            from.id, share
-        ),
-        p_gain: from.p_gain,
-        specimen: from.specimen,
-        command_csv: format!("commands/{id}.csv"),
-        command_mat: format!("commands/{id}.mat"),
-        log: log_like(&id, &from.log),
-        crest_factor: from.crest_factor,
-        rms_m: share * from.rms_m,
-        peaks,
-        bound_by: None,
-        used: used(&peaks, limits),
-        repeats: Some(from.id.clone()),
-        amplitude_share: share,
-    };
-    let answers = format!(
-        "Run {id} plays {from}'s command at half its amplitude and is fitted on its own (role fit). Where the rig is linear its transfer function (results.json's runs[].fit) agrees with {from}'s within their stds, and its empty lines hold the noise floor. Seal friction lowers the gain at low frequencies, more at the lower amplitude (its describing function grows as the amplitude falls: docs/methods.md, \"Seal friction\"); a spring that stiffens is softer at the lower amplitude; the valve's flow law changes the gain with the velocity. Where the two agree, what last night saw was not the rig's amplitude.",
-        from = from.id
-    );
-    (
-        run,
-        DesignQuestion {
-            question,
-            run: id,
-            answers,
-        },
-    )
 }
 
 /// Each limit given, with the run's predicted peak against it.
@@ -510,10 +662,9 @@ fn log_like(id: &str, like: &str) -> String {
 /// Writes the design's files into `dir` (the output set's work folder).
 fn write_design(
     dir: &Path,
-    results: &Results,
+    basis: &Basis,
     commands: &[Vec<f64>],
     result: &DesignResult,
-    last: &[LastRun],
 ) -> Result<(), report::WriteError> {
     let fs = result.sample_rate_hz;
     for (run, command) in result.runs.iter().zip(commands) {
@@ -528,11 +679,11 @@ fn write_design(
     }
     report::write_artifact(
         &dir.join("campaign.toml"),
-        next_manifest(results, result, last).as_bytes(),
+        next_manifest(basis, result).as_bytes(),
     )?;
     report::write_artifact(
         &dir.join("check.toml"),
-        check_manifest(results, result).as_bytes(),
+        check_manifest(basis, result).as_bytes(),
     )?;
     report::write_artifact(&dir.join("design.json"), &report::json_bytes(result))?;
     report::write_artifact(
@@ -573,8 +724,8 @@ fn command_mat(u: &[f64], fs: f64, id: &str) -> Vec<u8> {
 
 /// The next night's manifest: last night's campaign (channels, settings)
 /// with the designed runs, each expecting its log under logs/.
-fn next_manifest(results: &Results, result: &DesignResult, last: &[LastRun]) -> String {
-    let mut m: Manifest = results.manifest.clone();
+fn next_manifest(basis: &Basis, result: &DesignResult) -> String {
+    let mut m: Manifest = basis.manifest.clone();
     m.campaign.synthetic = None;
     m.campaign.description = format!(
         "The identification runs servoid design made from {}: odd multisines of {} s, {} periods a run",
@@ -588,26 +739,28 @@ fn next_manifest(results: &Results, result: &DesignResult, last: &[LastRun]) -> 
             // A run that settles a question has the specimen, channels and
             // band of the run it repeats.
             let like = d.repeats.as_deref().unwrap_or(&d.id);
-            let stated = results.manifest.runs.iter().find(|r| r.id == like);
-            let l = last.iter().find(|l| l.result.id == like);
+            let stated = basis.manifest.runs.iter().find(|r| r.id == like);
+            let l = basis.runs.iter().find(|l| l.id == like);
             Run {
                 id: d.id.clone(),
                 role: d.role,
                 description: d.description.clone(),
                 date: None,
                 p_gain: d.p_gain,
-                specimen: stated.and_then(|r| r.specimen.clone()),
+                specimen: stated_specimen(&d.specimen),
                 data: Some(RunData {
                     log: Some(d.log.clone()),
                     ..RunData::default()
                 }),
                 channels: stated.and_then(|r| r.channels.clone()),
-                band_hz: stated
-                    .and_then(|r| r.band_hz)
-                    .or(l.and_then(|l| l.result.fit.as_ref()).map(|f| f.band_hz)),
+                band_hz: d
+                    .band_hz
+                    .or(stated.and_then(|r| r.band_hz))
+                    .or(l.and_then(|l| l.fit_band_hz)),
             }
         })
         .collect();
+    m.identification = identification(basis, result);
     m.references.clear();
     m.numbered_figures.clear();
     m.run_table = None;
@@ -620,10 +773,34 @@ fn next_manifest(results: &Results, result: &DesignResult, last: &[LastRun]) -> 
     text
 }
 
-/// A simulation manifest that plays the designed commands on the rig the
-/// results state, with white displacement noise at the level measured
+/// The next night's identification settings: last night's, with the
+/// validation runs in the joint fit where a run added to settle a
+/// structure is one.
+fn identification(basis: &Basis, result: &DesignResult) -> manifest::Identification {
+    let mut ident = basis.manifest.identification.clone();
+    if result.runs.iter().any(|r| r.role == Role::Validation) {
+        ident.joint.include_validation = true;
+    }
+    ident
+}
+
+/// A designed run's linear specimen as a manifest states it; None for no
+/// specimen.
+fn stated_specimen(specimen: &SpecimenModel) -> Option<manifest::Specimen> {
+    let (m, c, k) = specimen.linear_mck()?;
+    let given = |v: f64| (v != 0.0).then_some(v);
+    (k != 0.0 || m != 0.0).then(|| manifest::Specimen {
+        mass_kg: given(m),
+        damping_ns_per_m: given(c),
+        stiffness_n_per_m: given(k),
+        ..manifest::Specimen::default()
+    })
+}
+
+/// A simulation manifest that plays the designed commands on the rig
+/// planned at, with white displacement noise at the level measured
 /// (the mean over the band of the noise planned for).
-fn check_manifest(results: &Results, result: &DesignResult) -> String {
+fn check_manifest(basis: &Basis, result: &DesignResult) -> String {
     use toml::{Table, Value};
     let fs = result.sample_rate_hz;
     let psd = &result.noise.psd_m2_per_hz;
@@ -673,7 +850,7 @@ fn check_manifest(results: &Results, result: &DesignResult) -> String {
     );
     doc.insert(
         "identification".into(),
-        Value::try_from(&results.manifest.identification).expect("the settings serialise"),
+        Value::try_from(identification(basis, result)).expect("the settings serialise"),
     );
     let runs = result
         .runs
@@ -686,14 +863,7 @@ fn check_manifest(results: &Results, result: &DesignResult) -> String {
                 Value::try_from(r.role).expect("a role serialises"),
             );
             run.insert("p_gain".into(), Value::Float(r.p_gain));
-            let like = r.repeats.as_deref().unwrap_or(&r.id);
-            if let Some(spec) = results
-                .manifest
-                .runs
-                .iter()
-                .find(|x| x.id == like)
-                .and_then(|x| x.specimen.clone())
-            {
+            if let Some(spec) = stated_specimen(&r.specimen) {
                 run.insert(
                     "specimen".into(),
                     Value::try_from(spec).expect("a specimen serialises"),
