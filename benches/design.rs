@@ -33,6 +33,7 @@ fn paper_night() -> NightPlan {
         })
         .collect();
     NightPlan {
+        extension: Default::default(),
         rig: model::PAPER_RIG,
         runs,
         noise: Noise {

@@ -948,6 +948,13 @@ pub struct DesignResult {
     /// given), and where it came from.
     pub noise: crate::design::night::Noise,
     pub noise_from: String,
+    /// The noise density's largest band over its smallest: check.toml
+    /// plays white noise at their mean, which reads as planned only where
+    /// this is near 1.
+    pub noise_spread: f64,
+    /// Each identification run's displacement at the excited lines and
+    /// the noise it has to clear there (the page's figure).
+    pub lines: crate::design::night::LineLevels,
     /// Every period and mix tried, with the sum of squared relative stds
     /// each predicts.
     pub tried: Vec<crate::design::night::Tried>,
@@ -980,6 +987,9 @@ pub struct DesignedParameter {
     pub relative_std: f64,
     /// The paper's chirps' predicted std at the same record and peak.
     pub chirp_std: Option<f64>,
+    /// The designed night's predicted std under check.toml's white noise:
+    /// what the check should state.
+    pub check_std: Option<f64>,
 }
 
 /// The designed night against the paper's command at the same record and
@@ -1025,6 +1035,10 @@ pub struct DesignedRunResult {
     /// The band it is fitted over where it is not the campaign's (Hz).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub band_hz: Option<[f64; 2]>,
+    /// The command in the campaign's log format, where that is another
+    /// (Parquet, HDF5, TDMS).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub command_log: Option<String>,
 }
 
 /// Something last night's results left open, and the run that settles it.

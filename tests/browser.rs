@@ -61,7 +61,14 @@ fn run_campaign(dir: &Path, manifest: &Path, code: i32) -> PathBuf {
 /// Open the report, assert that nothing on it is broken, save the
 /// screenshot and check it is a PNG of the page's size.
 fn open_clean(b: &mut Browser, out: &Path) {
-    b.open(&out.join("report.html")).unwrap();
+    open_clean_page(b, &out.join("report.html"));
+}
+
+/// Open `page`, assert that nothing on it is broken, save the screenshot
+/// beside it and check it is a PNG of the page's size.
+fn open_clean_page(b: &mut Browser, page: &Path) {
+    let out = page.parent().unwrap();
+    b.open(page).unwrap();
     let errors = b.errors().unwrap();
     assert!(errors.is_empty(), "console errors:\n{}", errors.join("\n"));
     let images = b.images().unwrap();
@@ -160,6 +167,62 @@ fn paper_report_renders_without_errors() {
         Some(references as u64 + 1),
         "a header row and one row per reference"
     );
+    b.close().unwrap();
+}
+
+/// `servoid design`'s page (here from a campaign manifest's nominal rig)
+/// in Chromium: nothing broken, its figure drawn at its size, a row per
+/// designed run and per parameter, each command linked to a file there.
+#[test]
+fn a_design_page_renders_with_its_figure_and_tables() {
+    let dir = scratch();
+    let manifest = write(
+        dir.path(),
+        "nominal.toml",
+        &std::fs::read_to_string(root().join("tests/fixtures/nominal-campaign.toml")).unwrap(),
+    );
+    let out = dir.path().join("design");
+    let o = servoid(
+        dir.path(),
+        &[
+            "design",
+            manifest.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+            "--rate-hz",
+            "1000",
+            "--noise-mm",
+            "0.002",
+        ],
+    );
+    assert_eq!(o.code, 0, "{}", o.stderr);
+    let Some(mut b) = browser("a_design_page_renders_with_its_figure_and_tables") else {
+        return;
+    };
+    open_clean_page(&mut b, &out.join("design.html"));
+    assert_eq!(
+        text(b.evaluate("document.title").unwrap()),
+        "servoid design: first-night"
+    );
+    let figure = b
+        .evaluate("[document.querySelectorAll('figure img').length, document.querySelector('#lines img').naturalWidth]")
+        .unwrap();
+    assert_eq!(figure, serde_json::json!([1, 1200]));
+    let rows = b
+        .evaluate("[document.querySelectorAll('#design-runs tr').length, document.querySelectorAll('#design-precision tr').length]")
+        .unwrap();
+    assert_eq!(
+        rows,
+        serde_json::json!([3, 5]),
+        "a header and a row per run, per parameter"
+    );
+    let links = b
+        .evaluate("Array.from(document.querySelectorAll('#design-runs a')).map(a => a.getAttribute('href'))")
+        .unwrap();
+    for link in links.as_array().unwrap() {
+        let file = out.join(link.as_str().unwrap());
+        assert!(file.is_file(), "{}", file.display());
+    }
     b.close().unwrap();
 }
 

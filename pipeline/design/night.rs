@@ -119,8 +119,10 @@ impl Limit {
 /// them.
 #[derive(Debug, Clone, PartialEq)]
 pub struct NightPlan {
-    /// The rig, a1b0 at its own P gain.
+    /// The rig, a1b0 at its own P gain, and what the joint fit found
+    /// beyond the paper's model (estimated beside it).
     pub rig: RigParams,
+    pub extension: precision::Extension,
     pub runs: Vec<RunModel>,
     pub noise: Noise,
     pub band_hz: [f64; 2],
@@ -397,6 +399,7 @@ fn candidate(plan: &NightPlan, period_s: f64, mix: f64, draw: u64, record_s: f64
     let noise = |f: f64| plan.noise.level(f, fs);
     let optimal = spectrum::a_optimal(
         &plan.rig,
+        &plan.extension,
         &plan.runs,
         &vec![1.0; plan.runs.len()],
         &lines_hz,
@@ -435,7 +438,8 @@ fn candidate(plan: &NightPlan, period_s: f64, mix: f64, draw: u64, record_s: f64
     let scale: Vec<f64> = runs.iter().map(|r| steady * r.rms_m * r.rms_m).collect();
     let shares: Vec<Vec<f64>> = runs.iter().map(|r| r.shares.clone()).collect();
     let planned = spectrum::planned(&plan.runs, &scale, &lines_hz, &shares, noise);
-    let precision = precision::predict(&plan.rig, &planned, plan.intersample, fs)?;
+    let precision =
+        precision::predict_extended(&plan.rig, &plan.extension, &planned, plan.intersample, fs)?;
     Some(Night {
         period_s: len as f64 / fs,
         periods,
@@ -464,6 +468,70 @@ pub fn replayed(
     // A part in 1e9 below the limit, as `candidate` keeps it.
     let a = scale * (1.0 - 1e-9);
     Some((a, u.iter().map(|v| a * v).collect(), at.scaled(a), bound_by))
+}
+
+/// The night's predicted precision with `noise` in place of the plan's:
+/// what a check that plays other noise should state.
+pub fn precision_under(plan: &NightPlan, night: &Night, noise: &Noise) -> Option<Precision> {
+    let fs = plan.sample_rate_hz;
+    let len = (night.period_s * fs).round();
+    let steady = night.periods.saturating_sub(UNREAD) as f64 * len;
+    let scale: Vec<f64> = night
+        .runs
+        .iter()
+        .map(|r| steady * r.rms_m * r.rms_m)
+        .collect();
+    let shares: Vec<Vec<f64>> = night.runs.iter().map(|r| r.shares.clone()).collect();
+    let planned = spectrum::planned(&plan.runs, &scale, &night.lines_hz, &shares, |f| {
+        noise.level(f, fs)
+    });
+    precision::predict_extended(&plan.rig, &plan.extension, &planned, plan.intersample, fs)
+}
+
+/// What each run's displacement holds at the night's excited lines, and
+/// the noise it has to clear there: the page's figure.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct LineLevels {
+    /// The excited lines (Hz).
+    pub freq_hz: Vec<f64>,
+    /// Per run, the displacement's amplitude at each line (m): the
+    /// command's, rms sqrt(2 share), through |x1/u| (Eq. 17).
+    pub displacement_m: Vec<Vec<f64>>,
+    /// The noise's amplitude at a line of the periods read (m), sqrt(2
+    /// psd / T) for T s read: a line at this amplitude is read with a
+    /// signal-to-noise ratio of 1.
+    pub noise_m: Vec<f64>,
+}
+
+/// The night's line levels (see [`LineLevels`]).
+pub fn line_levels(plan: &NightPlan, night: &Night) -> LineLevels {
+    let read_s = night.periods.saturating_sub(UNREAD) as f64 * night.period_s;
+    let displacement_m = plan
+        .runs
+        .iter()
+        .zip(&night.runs)
+        .map(|(model, run)| {
+            let x1 = model::tf_x1_u(&plan.rig.at_p_gain(model.p_gain), &model.specimen).ok();
+            night
+                .lines_hz
+                .iter()
+                .zip(&run.shares)
+                .map(|(&f, &w)| {
+                    let gain = x1.as_ref().map_or(f64::NAN, |h| h.freq_response(f).norm());
+                    gain * run.rms_m * (2.0 * w).sqrt()
+                })
+                .collect()
+        })
+        .collect();
+    LineLevels {
+        noise_m: night
+            .lines_hz
+            .iter()
+            .map(|&f| (2.0 * plan.noise.psd(f) / read_s).sqrt())
+            .collect(),
+        freq_hz: night.lines_hz.clone(),
+        displacement_m,
+    }
 }
 
 /// The peaks of command `u`, and of the displacement, velocity and force
@@ -529,7 +597,7 @@ pub fn chirp_baseline(plan: &NightPlan, record_s: f64) -> Option<Precision> {
             variance: variance.clone(),
         })
         .collect();
-    precision::predict(&plan.rig, &runs, plan.intersample, fs)
+    precision::predict_extended(&plan.rig, &plan.extension, &runs, plan.intersample, fs)
 }
 
 #[cfg(test)]

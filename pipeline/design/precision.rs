@@ -1,10 +1,11 @@
 //! The rig's precision a planned night would reach: the Cramer-Rao
-//! covariance of (beta1, a1b0, a2, a3) from the joint fit's Fisher
-//! information at the current rig, each run's FRF variance from its command
-//! and the displacement's measured noise. The derivation: docs/methods.md,
-//! "Predicted precision".
+//! covariance of (beta1, a1b0, a2, a3), and of the delay, mode and piston
+//! mass the joint fit found beyond the paper's model, from the joint fit's
+//! Fisher information at the current rig, each run's FRF variance from its
+//! command and the displacement's measured noise. The derivation:
+//! docs/methods.md, "Predicted precision".
 
-use nalgebra::{Complex, Matrix4, Vector4};
+use nalgebra::{Complex, DMatrix, Matrix4, Vector4};
 
 use crate::fft;
 use crate::fit::Intersample;
@@ -24,10 +25,121 @@ pub struct PlannedRun {
     pub variance: Vec<f64>,
 }
 
-/// The predicted covariance of (beta1, a1b0 at the rig's P gain, a2, a3).
-#[derive(Debug, Clone, Copy, PartialEq)]
+/// The predicted covariance of (beta1, a1b0 at the rig's P gain, a2, a3),
+/// with the extension's parameters estimated beside them; and the
+/// extension's own stds.
+#[derive(Debug, Clone, PartialEq)]
 pub struct Precision {
     pub covariance: Matrix4<f64>,
+    /// The extension's parameters (name, value, predicted std), in
+    /// [`Extension::values`]' order.
+    pub extension: Vec<(&'static str, f64, f64)>,
+}
+
+/// What the joint fit found beyond the paper's model, as it enters x1/u
+/// (identify::joint's structures): a delay, a second-order mode in the
+/// loop or outside it, the piston's mass on the oil column.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct Extension {
+    pub delay_s: Option<f64>,
+    pub mode: Option<Mode>,
+    pub piston_mass_kg: Option<f64>,
+}
+
+/// Where a mode sits (identify::joint's places).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Place {
+    /// Inside the position loop: it multiplies the valve's gain.
+    Loop,
+    /// In the command path: a factor on x1/u.
+    Command,
+    /// On the logged displacement: a factor on x1/u.
+    Measurement,
+}
+
+/// A second-order mode V = w^2 / (s^2 + 2 zeta w s + w^2): in the loop it
+/// multiplies the valve's gain, outside it x1/u.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Mode {
+    pub place: Place,
+    pub hz: f64,
+    pub damping: f64,
+}
+
+impl Extension {
+    /// Its parameters (name as results.json's rig.joint.parameters gives
+    /// it, value), after the rig's four.
+    pub fn values(&self) -> Vec<(&'static str, f64)> {
+        let mut v = Vec::new();
+        if let Some(t) = self.delay_s {
+            v.push(("delay_s", t));
+        }
+        if let Some(m) = self.mode {
+            let (hz, damping) = match m.place {
+                Place::Loop => ("valve_hz", "valve_damping"),
+                _ => ("mode_hz", "mode_damping"),
+            };
+            v.push((hz, m.hz));
+            v.push((damping, m.damping));
+        }
+        if let Some(m) = self.piston_mass_kg {
+            v.push(("piston_mass_kg", m));
+        }
+        v
+    }
+
+    /// The extension at `v`, values in [`Self::values`]' order.
+    fn with_values(&self, v: &[f64]) -> Extension {
+        let mut v = v.iter().copied();
+        Extension {
+            delay_s: self.delay_s.and(v.next()),
+            mode: self.mode.and_then(|m| {
+                Some(Mode {
+                    hz: v.next()?,
+                    damping: v.next()?,
+                    ..m
+                })
+            }),
+            piston_mass_kg: self.piston_mass_kg.and(v.next()),
+        }
+    }
+}
+
+/// x1/u at `f_hz` of the rig `at` (a1b0 at the run's P gain) with `ext`:
+/// the joint fit's model (identify::joint), the specimen's S(s) = m s^2 +
+/// c s + k (Eq. 15) plus the piston's m_p s^2, Q = (s + a3) S + a2 s,
+/// D = (s + beta1) Q + a1b0 V in the loop (a1b0 with V outside it), the
+/// numerator a1b0 V, times exp(-s tau).
+pub fn x1_u(at: &RigParams, ext: &Extension, specimen: LinearSpecimen, f_hz: f64) -> Complex<f64> {
+    let s = Complex::new(0.0, 2.0 * std::f64::consts::PI * f_hz);
+    let (m, c, k) = match specimen {
+        LinearSpecimen::None => (0.0, 0.0, 0.0),
+        LinearSpecimen::Spring { stiffness_n_per_m } => (0.0, 0.0, stiffness_n_per_m),
+        LinearSpecimen::Sdof {
+            mass_kg,
+            damping_ns_per_m,
+            stiffness_n_per_m,
+        } => (mass_kg, damping_ns_per_m, stiffness_n_per_m),
+    };
+    let sp = s * s * (m + ext.piston_mass_kg.unwrap_or(0.0)) + s * c + k;
+    let q = (s + at.a3_per_s) * sp + s * at.a2_n_per_m;
+    let a = at.a1b0_n_per_m_s2;
+    let sbq = (s + at.beta1_per_s) * q;
+    let h = match ext.mode {
+        Some(mode) => {
+            let w = 2.0 * std::f64::consts::PI * mode.hz;
+            let v = w * w / (s * s + s * (2.0 * mode.damping * w) + w * w);
+            match mode.place {
+                Place::Loop => a * v / (sbq + a * v),
+                _ => a * v / (sbq + a),
+            }
+        }
+        None => a / (sbq + a),
+    };
+    match ext.delay_s {
+        Some(tau) => h * (-s * tau).exp(),
+        None => h,
+    }
 }
 
 impl Precision {
@@ -129,7 +241,118 @@ pub fn predict(
     let covariance = d * inverse * d;
     (0..4)
         .all(|i| covariance[(i, i)].is_finite() && covariance[(i, i)] > 0.0)
-        .then_some(Precision { covariance })
+        .then_some(Precision {
+            covariance,
+            extension: Vec::new(),
+        })
+}
+
+/// [`predict`] for a rig with `ext` beyond the paper's model, whose
+/// parameters the fit estimates beside the rig's four: the Fisher
+/// information of all their logarithms, inverted whole, so that the
+/// rig's stds carry what the extension takes from them.
+pub fn predict_extended(
+    rig: &RigParams,
+    ext: &Extension,
+    runs: &[PlannedRun],
+    intersample: Intersample,
+    sample_rate_hz: f64,
+) -> Option<Precision> {
+    if *ext == Extension::default() {
+        return predict(rig, runs, intersample, sample_rate_hz);
+    }
+    let theta: Vec<f64> = values(rig)
+        .into_iter()
+        .chain(ext.values().into_iter().map(|(_, v)| v))
+        .collect();
+    let n = theta.len();
+    let mut fisher = DMatrix::<f64>::zeros(n, n);
+    for run in runs {
+        for (&f, &v) in run.freq_hz.iter().zip(&run.variance) {
+            if !(v.is_finite() && v > 0.0) {
+                continue;
+            }
+            let info = information(
+                rig,
+                ext,
+                run.specimen,
+                run.p_gain,
+                f,
+                intersample,
+                sample_rate_hz,
+            )?;
+            fisher += info * (2.0 / v);
+        }
+    }
+    let inverse = fisher.try_inverse()?;
+    let cov = |i: usize, j: usize| theta[i] * inverse[(i, j)] * theta[j];
+    let covariance = Matrix4::from_fn(cov);
+    let extension: Vec<(&'static str, f64, f64)> = ext
+        .values()
+        .into_iter()
+        .enumerate()
+        .map(|(k, (name, value))| (name, value, cov(4 + k, 4 + k).sqrt()))
+        .collect();
+    ((0..n).all(|i| cov(i, i).is_finite() && cov(i, i) > 0.0)).then_some(Precision {
+        covariance,
+        extension,
+    })
+}
+
+/// A bin's Fisher information of the logarithms of the rig's four
+/// parameters and the extension's, per unit of 2 / E|dH|^2: Re(g^H g),
+/// g = dH/dln(theta), the command held as `intersample`.
+pub fn information(
+    rig: &RigParams,
+    ext: &Extension,
+    specimen: LinearSpecimen,
+    p_gain: f64,
+    f_hz: f64,
+    intersample: Intersample,
+    sample_rate_hz: f64,
+) -> Option<DMatrix<f64>> {
+    if *ext == Extension::default() {
+        let m = line_information(rig, specimen, p_gain, f_hz, intersample, sample_rate_hz)?;
+        return Some(DMatrix::from_fn(4, 4, |i, j| m[(i, j)]));
+    }
+    let theta: Vec<f64> = values(rig)
+        .into_iter()
+        .chain(ext.values().into_iter().map(|(_, v)| v))
+        .collect();
+    let g = extended_gradient(rig, ext, &theta, specimen, p_gain, f_hz)?;
+    let hold = hold_response(intersample, sample_rate_hz, f_hz).norm_sqr();
+    let n = theta.len();
+    Some(DMatrix::from_fn(n, n, |i, j| {
+        (g[i].conj() * g[j]).re * hold
+    }))
+}
+
+/// dH/dln(theta_j) of the extended x1/u at `f_hz` for each of `theta`
+/// (the rig's four, then the extension's), by central differences.
+fn extended_gradient(
+    rig: &RigParams,
+    ext: &Extension,
+    theta: &[f64],
+    specimen: LinearSpecimen,
+    p_gain: f64,
+    f_hz: f64,
+) -> Option<Vec<Complex<f64>>> {
+    const STEP: f64 = 1e-5;
+    let h = |t: &[f64]| -> Complex<f64> {
+        let r = with_values(rig, [t[0], t[1], t[2], t[3]]).at_p_gain(p_gain);
+        x1_u(&r, &ext.with_values(&t[4..]), specimen, f_hz)
+    };
+    let g: Vec<Complex<f64>> = (0..theta.len())
+        .map(|j| {
+            let (mut up, mut down) = (theta.to_vec(), theta.to_vec());
+            up[j] *= STEP.exp();
+            down[j] *= (-STEP).exp();
+            (h(&up) - h(&down)) / (2.0 * STEP)
+        })
+        .collect();
+    g.iter()
+        .all(|g| g.re.is_finite() && g.im.is_finite())
+        .then_some(g)
 }
 
 /// Re(g^H g) at `f_hz`, g = dH/dln(theta) of x1/u ([`line_gradient`]): a

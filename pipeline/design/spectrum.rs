@@ -5,9 +5,9 @@
 //! Torsney (1978) with the exponent 1/2 of Yu (2010), each run's shares
 //! summing to one. The derivation: docs/methods.md, "Shaped spectra".
 
-use nalgebra::Matrix4;
+use nalgebra::DMatrix;
 
-use super::precision::{self, PlannedRun};
+use super::precision::{self, Extension, PlannedRun};
 use crate::fit::Intersample;
 use crate::model::{LinearSpecimen, RigParams};
 
@@ -23,11 +23,15 @@ pub struct RunModel {
 const PASSES: usize = 2000;
 
 /// Each run's shares of its power over `lines_hz` (each run's summing to
-/// one) minimising the trace of the inverse of the summed information,
-/// each run's information weighted by `scale[r]` (its N_s rms^2) and each
-/// line's by 1 / `noise(f)`. None where no share determines the rig.
+/// one) minimising the rig's four parameters' part of the trace of the
+/// inverse of the summed information (the extension's parameters
+/// estimated beside them), each run's information weighted by `scale[r]`
+/// (its N_s rms^2) and each line's by 1 / `noise(f)`. None where no share
+/// determines the rig.
+#[allow(clippy::too_many_arguments)]
 pub fn a_optimal(
     rig: &RigParams,
+    ext: &Extension,
     runs: &[RunModel],
     scale: &[f64],
     lines_hz: &[f64],
@@ -35,7 +39,7 @@ pub fn a_optimal(
     intersample: Intersample,
     sample_rate_hz: f64,
 ) -> Option<Vec<Vec<f64>>> {
-    let info: Vec<Vec<Matrix4<f64>>> = runs
+    let info: Vec<Vec<DMatrix<f64>>> = runs
         .iter()
         .zip(scale)
         .map(|(run, s)| {
@@ -45,8 +49,9 @@ pub fn a_optimal(
                     // A line of amplitude A has v = 4 lambda / (N_s A^2) and
                     // A^2 = 2 rms^2 w: its information is Re(g^H g) per
                     // unit of N_s rms^2 w / lambda.
-                    precision::line_information(
+                    precision::information(
                         rig,
+                        ext,
                         run.specimen,
                         run.p_gain,
                         f,
@@ -60,8 +65,9 @@ pub fn a_optimal(
         .collect::<Option<_>>()?;
     let flat = 1.0 / lines_hz.len() as f64;
     let mut shares = vec![vec![flat; lines_hz.len()]; runs.len()];
-    let total = |shares: &[Vec<f64>]| -> Matrix4<f64> {
-        let mut m = Matrix4::zeros();
+    let n = info.first()?.first()?.nrows();
+    let total = |shares: &[Vec<f64>]| -> DMatrix<f64> {
+        let mut m = DMatrix::zeros(n, n);
         for (w, i) in shares.iter().zip(&info) {
             for (w, i) in w.iter().zip(i) {
                 m += i * *w;
@@ -72,12 +78,13 @@ pub fn a_optimal(
     total(&shares).try_inverse()?;
     for _ in 0..PASSES {
         let inverse = total(&shares).try_inverse()?;
-        let square = inverse * inverse;
+        // M^-1 A M^-1, A selecting the rig's four.
+        let rig_part = inverse.columns(0, 4) * inverse.rows(0, 4);
         for (w, i) in shares.iter_mut().zip(&info) {
-            // d_k = tr(M^-1 I_k M^-1): how much the criterion falls per
+            // d_k = tr(M^-1 A M^-1 I_k): how much the criterion falls per
             // unit share on line k; at the optimum it is equal on every
             // line a run keeps.
-            let d: Vec<f64> = i.iter().map(|i| (square * i).trace().max(0.0)).collect();
+            let d: Vec<f64> = i.iter().map(|i| rig_part.dot(i).max(0.0)).collect();
             let sum: f64 = w.iter().zip(&d).map(|(w, d)| w * d.sqrt()).sum();
             for (w, d) in w.iter_mut().zip(&d) {
                 *w *= d.sqrt() / sum;

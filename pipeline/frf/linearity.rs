@@ -118,14 +118,6 @@ pub fn linearity(
         checked += 1;
         let xx = power(&x[range.clone()]);
         let ff = force.map(|(f, _)| power(&f[range.clone()]));
-        let band = |s: &[f64], c: usize| s[c - BINS..=c + BINS].iter().sum::<f64>();
-        let floor = |s: &[f64]| {
-            let mut tail = s[floor_from..].to_vec();
-            let mid = tail.len() / 2;
-            *tail.select_nth_unstable_by(mid, f64::total_cmp).1 / std::f64::consts::LN_2
-                * (2 * BINS + 1) as f64
-        };
-        // (signal, what drives it linearly, its amplitude in the block)
         let amplitude = |v: &[f64]| {
             let (lo, hi) = v
                 .iter()
@@ -144,30 +136,13 @@ pub fn linearity(
             pairs.push((ff, &xx, amplitude(&f[range.clone()]), carried));
         }
         for (k, (s, drive, a, gain)) in pairs.into_iter().enumerate() {
-            let (s1, d1) = (band(s, p), band(drive, p));
-            if s1 <= 0.0 || d1 <= 0.0 {
-                continue;
-            }
-            let noise = floor(s);
-            let total: f64 = s.iter().skip(1).sum();
-            let mut best: Option<(f64, usize)> = None;
-            for h in [2, 3] {
-                let linear = band(drive, h * p) * s1 / d1 * gain[h - 2];
-                let sh = band(s, h * p);
-                if sh > SIGNIFICANT * (noise + linear) && linear.is_finite() {
-                    // The harmonic's share of the block's signal, by its
-                    // power's share (a Blackman-Harris band of 9 bins holds
-                    // a line's power whole).
-                    let ratio = ((sh - noise - linear) / total).sqrt();
-                    if ratio * a <= steps[k] {
-                        continue;
-                    }
-                    if best.is_none_or(|(r, _)| ratio > r) {
-                        best = Some((ratio, h));
-                    }
-                }
-            }
-            if let Some((ratio, h)) = best {
+            let block = Block {
+                signal: s,
+                drive,
+                fundamental: p,
+                floor_from,
+            };
+            if let Some((ratio, h)) = block.harmonic(gain, a, steps[k]) {
                 let f = found[k].get_or_insert(Found {
                     blocks: 0,
                     largest: 0.0,
@@ -188,6 +163,66 @@ pub fn linearity(
         displacement: found[0],
         force: found[1],
     })
+}
+
+/// One block's powers for the harmonic search: a signal, what drives it
+/// linearly, the fundamental's bin and where the noise floor is read.
+struct Block<'a> {
+    signal: &'a [f64],
+    drive: &'a [f64],
+    fundamental: usize,
+    floor_from: usize,
+}
+
+impl Block<'_> {
+    /// The power in the band of `BINS` either side of bin `c`.
+    fn band(s: &[f64], c: usize) -> f64 {
+        s[c - BINS..=c + BINS].iter().sum()
+    }
+
+    /// The noise's power in a band, from the median of the bins above
+    /// the harmonics (a chi-square with 2 degrees of freedom has its
+    /// median at ln 2 times its mean).
+    fn floor(&self) -> f64 {
+        let mut tail = self.signal[self.floor_from..].to_vec();
+        let mid = tail.len() / 2;
+        *tail.select_nth_unstable_by(mid, f64::total_cmp).1 / std::f64::consts::LN_2
+            * (2 * BINS + 1) as f64
+    }
+
+    /// The larger of the second and third harmonics beyond the noise and
+    /// what the drive's own carry through the linear gain (`gain`: its
+    /// power at twice and three times the fundamental over the
+    /// fundamental's), as its share of the block's signal, with its
+    /// order; None where neither shows, or where the share of the signal's
+    /// amplitude `amplitude` is within the converter's `step`.
+    fn harmonic(&self, gain: [f64; 2], amplitude: f64, step: f64) -> Option<(f64, usize)> {
+        let (s, p) = (self.signal, self.fundamental);
+        let (s1, d1) = (Self::band(s, p), Self::band(self.drive, p));
+        if s1 <= 0.0 || d1 <= 0.0 {
+            return None;
+        }
+        let noise = self.floor();
+        let total: f64 = s.iter().skip(1).sum();
+        let mut best: Option<(f64, usize)> = None;
+        for h in [2, 3] {
+            let linear = Self::band(self.drive, h * p) * s1 / d1 * gain[h - 2];
+            let sh = Self::band(s, h * p);
+            if sh > SIGNIFICANT * (noise + linear) && linear.is_finite() {
+                // The harmonic's share of the block's signal, by its
+                // power's share (a Blackman-Harris band of 9 bins holds a
+                // line's power whole).
+                let ratio = ((sh - noise - linear) / total).sqrt();
+                if ratio * amplitude <= step {
+                    continue;
+                }
+                if best.is_none_or(|(r, _)| ratio > r) {
+                    best = Some((ratio, h));
+                }
+            }
+        }
+        best
+    }
 }
 
 /// A spring's force against its displacement: f = k x + k3 x^3 + c x' +

@@ -382,11 +382,6 @@ pub fn log_bytes(
     s: &crate::analysis::simulated::RunSignals,
     dt_s: f64,
 ) -> Result<Vec<u8>, ColumnWriteError> {
-    let cols: Vec<(&str, &[f64])> = s
-        .columns
-        .iter()
-        .map(|(n, v)| (n.as_str(), v.as_slice()))
-        .collect();
     let with_units: Vec<UnitColumn<'_>> = s
         .columns
         .iter()
@@ -397,16 +392,28 @@ pub fn log_bytes(
             values: v,
         })
         .collect();
+    columns_bytes(format, path, &with_units, dt_s)
+}
+
+/// Columns sampled every `dt_s` as a log in `format` (`path` only names
+/// it in errors).
+pub fn columns_bytes(
+    format: crate::manifest::simulation::OutputFormat,
+    path: &Path,
+    with_units: &[UnitColumn<'_>],
+    dt_s: f64,
+) -> Result<Vec<u8>, ColumnWriteError> {
+    let cols = names_and_values(with_units);
     use crate::manifest::simulation::OutputFormat;
     match format {
         OutputFormat::Csv => csv_bytes(path, &cols),
         OutputFormat::Parquet => parquet_bytes(path, &cols),
-        OutputFormat::Mat => mat_bytes(path, &with_units),
-        OutputFormat::MatV73 => mat_v73_bytes(path, &with_units),
-        OutputFormat::Hdf5 => hdf5_bytes(path, &with_units),
+        OutputFormat::Mat => mat_bytes(path, with_units),
+        OutputFormat::MatV73 => mat_v73_bytes(path, with_units),
+        OutputFormat::Hdf5 => hdf5_bytes(path, with_units),
         OutputFormat::Tdms => tdms_bytes(
             path,
-            &with_units,
+            with_units,
             crate::analysis::simulated::TDMS_GROUP,
             dt_s,
         ),

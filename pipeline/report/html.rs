@@ -53,15 +53,19 @@ fn ser<T: serde::Serialize>(v: T) -> Value {
 
 /// `servoid design`'s page (design.html): what to run, what it will
 /// determine, each run's command and predicted peaks.
-pub fn design_page(d: &crate::results::DesignResult) -> Result<String, HtmlError> {
+pub fn design_page(
+    d: &crate::results::DesignResult,
+    figures: &[PageFigure],
+    notes: &[crate::warning::Warning],
+) -> Result<String, HtmlError> {
     let mut env = Environment::new();
     env.add_filter("num", num);
     env.add_filter("specimen", specimen);
     env.add_template("style.html", STYLE)?;
     env.add_template("design.html", DESIGN_TEMPLATE)?;
-    Ok(env
-        .get_template("design.html")?
-        .render(minijinja::context! { d => ser(d) })?)
+    Ok(env.get_template("design.html")?.render(
+        minijinja::context! { d => ser(d), figures => ser(figures), notes => ser(notes) },
+    )?)
 }
 
 /// A run's page, relative to the output folder.

@@ -88,6 +88,10 @@ struct Basis {
     rig: RigParams,
     /// Where the rig came from, in words.
     rig_from: &'static str,
+    /// What the joint fit found beyond the paper's model, where the
+    /// campaign uses it, with last night's stds of its parameters.
+    extension: precision::Extension,
+    extension_std: Vec<(String, f64)>,
     /// Last night's stated stds of beta1, a1b0, a2, a3 (from results).
     last_std: Option<[Option<f64>; 4]>,
     /// The identification runs the night repeats.
@@ -191,6 +195,14 @@ fn from_results(path: &Path) -> Result<Basis, JobError> {
     let (ambiguity, settle) = rig_stated.joint.as_ref().map_or((None, Vec::new()), |j| {
         (j.ambiguity.clone(), j.settle.clone())
     });
+    // A structure the data did not settle is not planned for: shaping the
+    // night for one candidate tunes it away from the others.
+    let (extension, extension_std) = rig_stated
+        .joint
+        .as_ref()
+        .filter(|j| j.used && j.ambiguity.is_none())
+        .map(extension_of)
+        .unwrap_or_default();
     let all: Vec<BasisRun> = runs.into_iter().filter_map(basis_run).collect();
     let (runs, validation): (Vec<BasisRun>, Vec<BasisRun>) = all
         .into_iter()
@@ -211,12 +223,56 @@ fn from_results(path: &Path) -> Result<Basis, JobError> {
         campaign: campaign.name,
         rig,
         rig_from: "the rig the results state",
+        extension,
+        extension_std,
         last_std,
         runs,
         validation,
         ambiguity,
         settle,
     })
+}
+
+/// What the joint fit `j` found beyond the paper's model (its delay,
+/// mode and piston mass; not the seals' friction, whose describing
+/// function depends on the amplitude), and each parameter's stated std.
+fn extension_of(j: &crate::results::JointResult) -> (precision::Extension, Vec<(String, f64)>) {
+    let value = |name: &str| {
+        j.parameters
+            .iter()
+            .find(|p| p.name == name)
+            .map(|p| p.value)
+    };
+    use crate::identify::joint::Place as Joint;
+    let place = j.structure.and_then(|s| s.place()).map(|p| match p {
+        Joint::Loop => precision::Place::Loop,
+        Joint::Command => precision::Place::Command,
+        Joint::Measurement => precision::Place::Measurement,
+    });
+    let (hz, damping) = match place {
+        Some(precision::Place::Loop) => ("valve_hz", "valve_damping"),
+        _ => ("mode_hz", "mode_damping"),
+    };
+    let extension = precision::Extension {
+        delay_s: value("delay_s").filter(|t| *t > 0.0),
+        mode: place.and_then(|place| {
+            Some(precision::Mode {
+                place,
+                hz: value(hz)?,
+                damping: value(damping)?,
+            })
+        }),
+        piston_mass_kg: value("piston_mass_kg").filter(|m| *m > 0.0),
+    };
+    let stds = extension
+        .values()
+        .into_iter()
+        .filter_map(|(name, _)| {
+            let p = j.parameters.iter().find(|p| p.name == name)?;
+            Some((name.to_string(), p.total_std))
+        })
+        .collect();
+    (extension, stds)
 }
 
 /// A run of last night's as the design may repeat it: one with a linear
@@ -310,6 +366,8 @@ fn from_manifest(path: &Path) -> Result<Basis, JobError> {
         rig_name: c.rig_name,
         rig,
         rig_from: "the manifest's nominal rig.parameters",
+        extension: precision::Extension::default(),
+        extension_std: Vec::new(),
         last_std: None,
         runs,
         validation: Vec::new(),
@@ -381,6 +439,7 @@ fn night_plan(
     check_asked(ask, fs, band_hz, command_m, run_s)?;
     let plan = NightPlan {
         rig: basis.rig,
+        extension: basis.extension,
         runs: basis.runs.iter().map(|r| r.model).collect(),
         noise,
         band_hz,
@@ -523,7 +582,7 @@ fn design_result(
     noise_from: String,
     ask: &DesignAsk,
 ) -> DesignResult {
-    let (parameters, baseline) = precision_table(basis.last_std, plan, night);
+    let (parameters, baseline) = precision_table(basis, plan, night);
     DesignResult {
         servoid_version: env!("CARGO_PKG_VERSION").to_string(),
         source: basis.path.display().to_string(),
@@ -550,6 +609,12 @@ fn design_result(
         questions: Vec::new(),
         noise: plan.noise.clone(),
         noise_from,
+        noise_spread: {
+            let psd = &plan.noise.psd_m2_per_hz;
+            psd.iter().fold(0.0, |m: f64, &p| m.max(p))
+                / psd.iter().fold(f64::INFINITY, |m, &p| m.min(p))
+        },
+        lines: night::line_levels(plan, night),
         tried: night.tried.clone(),
     }
 }
@@ -558,17 +623,21 @@ fn design_result(
 /// predicted and the paper's chirps' at the same record and peak; and
 /// the night against the chirps.
 fn precision_table(
-    last_std: Option<[Option<f64>; 4]>,
+    basis: &Basis,
     plan: &NightPlan,
     night: &Night,
 ) -> (Vec<DesignedParameter>, Option<DesignBaseline>) {
-    let rig = &plan.rig;
+    let (rig, last_std) = (&plan.rig, basis.last_std);
     let std = night.precision.std();
     let relative = night.precision.relative_std(rig);
     let chirps = night::chirp_baseline(plan, night.record_s);
-    let chirp_std = chirps.map(|c| c.std());
+    let chirp_std = chirps.as_ref().map(|c| c.std());
+    let fs = plan.sample_rate_hz;
+    let white = Noise::white(check_noise_rms_m(&plan.noise, fs), fs, plan.band_hz);
+    let check = night::precision_under(plan, night, &white);
+    let check_std = check.as_ref().map(|c| c.std());
     let values = precision::values(rig);
-    let parameters = precision::NAMES
+    let mut parameters: Vec<DesignedParameter> = precision::NAMES
         .iter()
         .enumerate()
         .map(|(j, name)| DesignedParameter {
@@ -578,8 +647,25 @@ fn precision_table(
             std: std[j],
             relative_std: relative[j],
             chirp_std: chirp_std.map(|c| c[j]),
+            check_std: check_std.map(|c| c[j]),
         })
         .collect();
+    // The extension's parameters, estimated beside the rig's.
+    for (k, &(name, value, std)) in night.precision.extension.iter().enumerate() {
+        parameters.push(DesignedParameter {
+            name: name.to_string(),
+            value,
+            last_std: basis
+                .extension_std
+                .iter()
+                .find(|(n, _)| n == name)
+                .map(|(_, s)| *s),
+            std,
+            relative_std: std / value.abs(),
+            chirp_std: chirps.as_ref().and_then(|c| Some(c.extension.get(k)?.2)),
+            check_std: check.as_ref().and_then(|c| Some(c.extension.get(k)?.2)),
+        });
+    }
     let baseline = chirps.map(|c| {
         let theirs = c.relative_std(rig);
         let max = |r: [f64; 4]| r.into_iter().fold(0.0, f64::max);
@@ -619,6 +705,7 @@ fn designed_runs(night: &Night, runs: &[BasisRun], limits: &Limits) -> Vec<Desig
                 repeats: None,
                 amplitude_share: 1.0,
                 band_hz: None,
+                command_log: command_log_file(id, l.log_file.as_deref().unwrap_or("")),
             }
         })
         .collect()
@@ -676,6 +763,12 @@ fn write_design(
             &dir.join(&run.command_mat),
             &command_mat(command, fs, &run.id),
         )?;
+        if let Some(file) = &run.command_log {
+            let path = dir.join(file);
+            let bytes = command_log(command, fs, &path)
+                .map_err(|e| report::WriteError::Table(Box::new(e)))?;
+            report::write_artifact(&path, &bytes)?;
+        }
     }
     report::write_artifact(
         &dir.join("campaign.toml"),
@@ -686,9 +779,12 @@ fn write_design(
         check_manifest(basis, result).as_bytes(),
     )?;
     report::write_artifact(&dir.join("design.json"), &report::json_bytes(result))?;
+    let files = report::FigureFiles::new(dir, report::FigureFormats::All)
+        .expect("all formats draw figures");
+    let (figures, notes) = files.write(&[report::figures::catalogue::design_figure(result)])?;
     report::write_artifact(
         &dir.join("design.html"),
-        report::design_page(result)?.as_bytes(),
+        report::design_page(result, &figures, &notes)?.as_bytes(),
     )?;
     report::settle(dir)
 }
@@ -702,6 +798,53 @@ fn command_csv(u: &[f64], fs: f64) -> String {
         text.push_str(&format!("{},{}\n", j as f64 / fs, v));
     }
     text
+}
+
+/// The format of last night's logs where the design writes the commands
+/// in it too (CSV and MAT 5 it writes for every run).
+fn log_format(log: &str) -> Option<crate::manifest::simulation::OutputFormat> {
+    use crate::manifest::simulation::OutputFormat;
+    match Path::new(log).extension()?.to_str()? {
+        "parquet" => Some(OutputFormat::Parquet),
+        "h5" | "hdf5" => Some(OutputFormat::Hdf5),
+        "tdms" => Some(OutputFormat::Tdms),
+        _ => None,
+    }
+}
+
+/// The command file for a run whose log is `log`, in the log's format,
+/// where that is another than CSV and MAT.
+fn command_log_file(id: &str, log: &str) -> Option<String> {
+    log_format(log).map(|f| format!("commands/{id}.{}", f.extension()))
+}
+
+/// A command in the format `path`'s extension names: columns time_s (s)
+/// and command_m (m).
+fn command_log(
+    u: &[f64],
+    fs: f64,
+    path: &Path,
+) -> Result<Vec<u8>, report::columns::ColumnWriteError> {
+    let time: Vec<f64> = (0..u.len()).map(|j| j as f64 / fs).collect();
+    let format = log_format(&path.display().to_string())
+        .expect("a command log is written only in a format log_format names");
+    report::columns::columns_bytes(
+        format,
+        path,
+        &[
+            report::columns::UnitColumn {
+                name: "time_s",
+                unit: "s",
+                values: &time,
+            },
+            report::columns::UnitColumn {
+                name: "command_m",
+                unit: "m",
+                values: u,
+            },
+        ],
+        1.0 / fs,
+    )
 }
 
 /// A command as a MAT 5 file: column vectors time_s (s) and command_m (m).
@@ -773,6 +916,35 @@ fn next_manifest(basis: &Basis, result: &DesignResult) -> String {
     text
 }
 
+/// The white noise check.toml plays (m RMS at `fs`): the planned
+/// density's mean over its bands.
+fn check_noise_rms_m(noise: &Noise, fs: f64) -> f64 {
+    let psd = &noise.psd_m2_per_hz;
+    (psd.iter().sum::<f64>() / psd.len() as f64 * fs / 2.0).sqrt()
+}
+
+/// The extension's mode and piston as a simulation manifest's
+/// `[rig.unmodelled]` gives them (its delay is the displacement's).
+fn unmodelled(ext: &precision::Extension) -> toml::Table {
+    use toml::Value;
+    let mut t = toml::Table::new();
+    if let Some(m) = ext.mode {
+        let key = match m.place {
+            precision::Place::Loop => "valve_mode",
+            precision::Place::Command => "command_mode",
+            precision::Place::Measurement => "measurement_mode",
+        };
+        let mut mode = toml::Table::new();
+        mode.insert("natural_frequency_hz".into(), Value::Float(m.hz));
+        mode.insert("damping_ratio".into(), Value::Float(m.damping));
+        t.insert(key.into(), Value::Table(mode));
+    }
+    if let Some(mp) = ext.piston_mass_kg {
+        t.insert("piston_mass_kg".into(), Value::Float(mp));
+    }
+    t
+}
+
 /// The next night's identification settings: last night's, with the
 /// validation runs in the joint fit where a run added to settle a
 /// structure is one.
@@ -803,8 +975,7 @@ fn stated_specimen(specimen: &SpecimenModel) -> Option<manifest::Specimen> {
 fn check_manifest(basis: &Basis, result: &DesignResult) -> String {
     use toml::{Table, Value};
     let fs = result.sample_rate_hz;
-    let psd = &result.noise.psd_m2_per_hz;
-    let rms_mm = (psd.iter().sum::<f64>() / psd.len() as f64 * fs / 2.0).sqrt() * 1e3;
+    let rms_mm = check_noise_rms_m(&result.noise, fs) * 1e3;
     let table = |pairs: Vec<(&str, Value)>| -> Value {
         Value::Table(pairs.into_iter().map(|(k, v)| (k.to_string(), v)).collect())
     };
@@ -826,25 +997,29 @@ fn check_manifest(basis: &Basis, result: &DesignResult) -> String {
             ("log_format", s("csv")),
         ]),
     );
-    doc.insert(
-        "rig".into(),
-        table(vec![
-            ("name", s(&result.rig_name)),
-            (
-                "parameters",
-                Value::try_from(result.rig).expect("the rig serialises"),
-            ),
-        ]),
-    );
+    let mut rig = vec![
+        ("name", s(&result.rig_name)),
+        (
+            "parameters",
+            Value::try_from(result.rig).expect("the rig serialises"),
+        ),
+    ];
+    let unmodelled = unmodelled(&basis.extension);
+    if !unmodelled.is_empty() {
+        rig.push(("unmodelled", Value::Table(unmodelled)));
+    }
+    doc.insert("rig".into(), table(rig));
     doc.insert("excitation".into(), file(&result.runs[0]));
+    let ext = &basis.extension;
+    let mut displacement = vec![("unit", s("mm")), ("noise_rms", Value::Float(rms_mm))];
+    if let Some(tau) = ext.delay_s {
+        displacement.push(("delay_s", Value::Float(tau)));
+    }
     doc.insert(
         "instrument".into(),
         table(vec![
             ("command", table(vec![("unit", s("mm"))])),
-            (
-                "displacement",
-                table(vec![("unit", s("mm")), ("noise_rms", Value::Float(rms_mm))]),
-            ),
+            ("displacement", table(displacement)),
             ("force", table(vec![("unit", s("kN"))])),
         ]),
     );
@@ -875,9 +1050,16 @@ fn check_manifest(basis: &Basis, result: &DesignResult) -> String {
         .collect();
     doc.insert("runs".into(), Value::Array(runs));
     let mut text = format!(
-        "# Checks the design before the lab runs it: `servoid simulate check.toml --run`\n# plays commands/<run>.csv on the rig {} states, with {rms_mm:.3e} mm RMS of\n# white displacement noise (the level it measured). The logs are SYNTHETIC.\n\n",
+        "# Checks the design before the lab runs it: `servoid simulate check.toml --run`\n# plays commands/<run>.csv on the rig {} states, with {rms_mm:.3e} mm RMS of\n# white displacement noise (the level it measured). The logs are SYNTHETIC.\n",
         result.source
     );
+    if result.noise_spread > 2.0 {
+        text.push_str(&format!(
+            "# The noise planned for is not white (its density spans {:.1} times over the\n# band): this white noise at its mean level is more at some lines and less at\n# others, so the stds this check states are design.json's check_std, not its\n# std (what the measured noise gives).\n",
+            result.noise_spread
+        ));
+    }
+    text.push('\n');
     text.push_str(&toml::to_string(&doc).expect("the check serialises to TOML"));
     text
 }

@@ -37,6 +37,7 @@ fn paper_runs() -> Vec<RunModel> {
 
 fn plan(rig: RigParams, limits: Limits, record_s: f64) -> NightPlan {
     NightPlan {
+        extension: Default::default(),
         rig,
         runs: paper_runs(),
         noise: white(2e-6, FS),

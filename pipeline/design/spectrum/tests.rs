@@ -6,6 +6,7 @@ use crate::design::precision::{etfe_variance, predict};
 use crate::simulate::excitation::{ChirpLaw, Excitation, Padding, generate};
 use crate::simulate::multisine::{odd_multisine, shaped_odd_multisine};
 use crate::simulate::seeded_rng;
+use nalgebra::Matrix4;
 
 const FS: f64 = 2048.0;
 
@@ -107,6 +108,7 @@ fn a_optimal_shares(lines: &[f64], scale: f64) -> Vec<Vec<f64>> {
     let runs = paper_runs();
     a_optimal(
         &crate::model::PAPER_RIG,
+        &Default::default(),
         &runs,
         &vec![scale; runs.len()],
         lines,

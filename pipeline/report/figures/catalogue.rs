@@ -1159,3 +1159,54 @@ fn monte_carlo_figures(mc: &MonteCarlo, springs: &[f64]) -> Vec<FigureSpec> {
         },
     ]
 }
+
+/// `servoid design`'s figure: each designed run's displacement at the
+/// night's excited lines, against the noise it has to clear over the
+/// periods read (`design::night::LineLevels`).
+pub fn design_figure(d: &crate::results::DesignResult) -> FigureSpec {
+    let lines = &d.lines;
+    let mm = |v: &[f64]| -> Vec<f64> { v.iter().map(|v| 1e3 * v).collect() };
+    let mut series: Vec<XySeries> = d
+        .runs
+        .iter()
+        .zip(&lines.displacement_m)
+        .enumerate()
+        .map(|(i, (run, x))| XySeries {
+            label: run.id.clone(),
+            x: lines.freq_hz.clone(),
+            y: mm(x),
+            trace: Trace::Model,
+            palette_index: Some(i),
+        })
+        .collect();
+    series.push(XySeries {
+        label: "noise over the periods read".into(),
+        x: lines.freq_hz.clone(),
+        y: mm(&lines.noise_m),
+        trace: Trace::Reference,
+        palette_index: None,
+    });
+    FigureSpec {
+        id: "lines".into(),
+        title: "The night's lines".into(),
+        caption: format!(
+            "Each identification run's displacement at the {} lines its command excites, as the plant at {} predicts it (the command's amplitude at the line through |x1/u|, Eq. 17), against the displacement noise's amplitude at a line over the {} periods read ({}): the ratio is the line's signal-to-noise ratio.",
+            lines.freq_hz.len(),
+            d.rig_from,
+            d.periods.saturating_sub(crate::design::night::UNREAD),
+            d.noise_from
+        ),
+        figure: Figure::Lines(LinesFigure {
+            title: format!("{}: displacement at the excited lines", d.campaign),
+            x_label: "Frequency (Hz)".into(),
+            y_label: "Amplitude (mm)".into(),
+            series,
+            x_range: None,
+            y_range: None,
+            log_x: true,
+            log_y: true,
+            zero_line: false,
+        }),
+        size: (1200, 600),
+    }
+}

@@ -83,6 +83,7 @@ fn second_amplitude(
         repeats: Some(from.id.clone()),
         amplitude_share: share,
         band_hz: None,
+        command_log: super::command_log_file(&id, &from.log),
     };
     let answers = format!(
         "Run {id} plays {from}'s command at half its amplitude and is fitted on its own (role fit). Where the rig is linear its transfer function (results.json's runs[].fit) agrees with {from}'s within their stds, and its empty lines hold the noise floor. Seal friction lowers the gain at low frequencies, more at the lower amplitude (its describing function grows as the amplitude falls: docs/methods.md, \"Seal friction\"); a spring that stiffens is softer at the lower amplitude; the valve's flow law changes the gain with the velocity. Where the two agree, what last night saw was not the rig's amplitude.",
@@ -211,7 +212,7 @@ fn in_the_fit(
     let played = &night.runs[base];
     let (a, command, peaks, bound_by) =
         night::replayed(&plan.rig, &model, &played.command_m, fs, &plan.limits)?;
-    let run = DesignedRunResult {
+    let mut run = DesignedRunResult {
         description: format!(
             "{}'s command with {} ({why}), in the joint fit: which structure is the rig's?",
             from.id,
@@ -232,7 +233,9 @@ fn in_the_fit(
         repeats: None,
         amplitude_share: 1.0,
         band_hz: None,
+        command_log: None,
     };
+    run.command_log = super::command_log_file(&run.id, &run.log);
     Some((run, command))
 }
 
@@ -258,7 +261,7 @@ fn wider_band(
     let r = designed.runs.swap_remove(base);
     let from = &basis.runs[base];
     let id = format!("{}-wide", from.id);
-    let run = DesignedRunResult {
+    let mut run = DesignedRunResult {
         description: format!(
             "{}'s specimen and P gain over {lo}-{top} Hz: a delay or a mode?",
             from.id
@@ -278,7 +281,9 @@ fn wider_band(
         repeats: Some(from.id.clone()),
         amplitude_share: 1.0,
         band_hz: Some([lo, top]),
+        command_log: None,
     };
+    run.command_log = super::command_log_file(&run.id, &run.log);
     Some((run, r.command_m))
 }
 
