@@ -5,7 +5,9 @@
 //! x 4 draws of the detection lines) gets its A-optimal shares, three
 //! multisines with lowered crest factors, three commands simulated
 //! through the plant for their peaks (x1, velocity, force) and its
-//! predicted precision; the best is kept (`design::night::design`).
+//! predicted precision; the best is kept (`design::night::design`). The
+//! same night on a rig with a 0.6 ms delay and a valve mode at 150 Hz
+//! (damping 0.7) estimated beside the rig: seven parameters' information.
 //!
 //! `cargo bench --bench design`
 
@@ -13,6 +15,7 @@ use std::hint::black_box;
 
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use servoid::design::night::{Limits, NightPlan, Noise, design};
+use servoid::design::precision::{Extension, Mode, Place};
 use servoid::design::spectrum::RunModel;
 use servoid::fit::Intersample;
 use servoid::model::{self, LinearSpecimen};
@@ -62,6 +65,21 @@ fn bench_design(c: &mut Criterion) {
     group.throughput(Throughput::Elements(24));
     group.bench_function("paper_night_24_candidates", |b| {
         b.iter(|| design(black_box(&plan), None).expect("a night"))
+    });
+    let extended = NightPlan {
+        extension: Extension {
+            delay_s: Some(6e-4),
+            mode: Some(Mode {
+                place: Place::Loop,
+                hz: 150.0,
+                damping: 0.7,
+            }),
+            piston_mass_kg: None,
+        },
+        ..plan.clone()
+    };
+    group.bench_function("delay_and_valve_mode_24_candidates", |b| {
+        b.iter(|| design(black_box(&extended), None).expect("a night"))
     });
     group.finish();
 }
