@@ -325,20 +325,27 @@ fn designed_from_the_bundled_default(dir: &std::path::Path, extra: &[&str]) -> s
         &["--run", "--quiet"],
     );
     assert_eq!(r.code, 0, "{}", r.stderr);
+    designed(dir, &last, &dir.join("design"), extra)
+}
+
+/// `servoid design FROM --out OUT EXTRA...` run in `cwd`, which must
+/// succeed: the design.json it wrote.
+fn designed(
+    cwd: &std::path::Path,
+    from: &std::path::Path,
+    out: &std::path::Path,
+    extra: &[&str],
+) -> serde_json::Value {
     let mut args = vec![
         "design",
-        last.to_str().unwrap(),
+        from.to_str().unwrap(),
         "--out",
-        dir.join("design").to_str().unwrap(),
-    ]
-    .into_iter()
-    .map(String::from)
-    .collect::<Vec<_>>();
-    args.extend(extra.iter().map(|s| s.to_string()));
-    let args: Vec<&str> = args.iter().map(String::as_str).collect();
-    let r = crate::util::servoid(dir, &args);
+        out.to_str().unwrap(),
+    ];
+    args.extend_from_slice(extra);
+    let r = crate::util::servoid(cwd, &args);
     assert_eq!(r.code, 0, "{}", r.stderr);
-    serde_json::from_str(&std::fs::read_to_string(dir.join("design/design.json")).unwrap()).unwrap()
+    serde_json::from_str(&std::fs::read_to_string(out.join("design.json")).unwrap()).unwrap()
 }
 
 /// The design's check.toml with `seed`, simulated and run: results.json
@@ -627,18 +634,7 @@ fn a_night_that_distorts_gets_the_run_at_half_the_amplitude() {
     let design = |dir: &std::path::Path, unmodelled: &str| -> serde_json::Value {
         let manifest = write(dir, "sim.toml", &periodic_campaign(1, unmodelled));
         stated(dir, &manifest);
-        let r = crate::util::servoid(
-            dir,
-            &[
-                "design",
-                dir.join("out").to_str().unwrap(),
-                "--out",
-                dir.join("design").to_str().unwrap(),
-            ],
-        );
-        assert_eq!(r.code, 0, "{}", r.stderr);
-        serde_json::from_str(&std::fs::read_to_string(dir.join("design/design.json")).unwrap())
-            .unwrap()
+        designed(dir, &dir.join("out"), &dir.join("design"), &[])
     };
     let linear = scratch();
     let d = design(linear.path(), "");
@@ -781,22 +777,12 @@ fn a_manifests_nominal_rig_gives_a_night_and_names_what_it_lacks() {
     assert!(!r.stderr.contains("--command-mm"), "{}", r.stderr);
     assert!(!out.exists());
 
-    let r = crate::util::servoid(
+    let design = designed(
         dir.path(),
-        &[
-            "design",
-            m,
-            "--out",
-            o,
-            "--rate-hz",
-            "1000",
-            "--noise-mm",
-            "0.002",
-        ],
+        &manifest,
+        &out,
+        &["--rate-hz", "1000", "--noise-mm", "0.002"],
     );
-    assert_eq!(r.code, 0, "{}", r.stderr);
-    let design: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("design.json")).unwrap()).unwrap();
     assert!(design["rig_from"].as_str().unwrap().contains("nominal"));
     for (key, v) in [
         ("beta1_per_s", 267.0),
@@ -939,22 +925,8 @@ specimen = {{ mass_kg = 3.8, damping_ns_per_m = 5.0, stiffness_n_per_m = 129400.
     let results = stated(dir, &write(dir, "last.toml", &last));
     let joint = &results["rig"]["joint"];
     assert!(joint["ambiguity"].is_string(), "{joint}");
-    let r = crate::util::servoid(
-        dir,
-        &[
-            "design",
-            dir.join("out").to_str().unwrap(),
-            "--out",
-            dir.join("design").to_str().unwrap(),
-            "--run-s",
-            "40",
-        ],
-    );
-    assert_eq!(r.code, 0, "{}", r.stderr);
     let folder = dir.join("design");
-    let design: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(folder.join("design.json")).unwrap())
-            .unwrap();
+    let design = designed(dir, &dir.join("out"), &folder, &["--run-s", "40"]);
     let q = &design["questions"][0];
     assert_eq!(q["run"], "sdof", "{}", design["questions"]);
     assert!(q["answers"].as_str().unwrap().contains("joint fit"), "{q}");
@@ -1085,21 +1057,12 @@ specimen = {{ mass_kg = 3.8, damping_ns_per_m = 5.0, stiffness_n_per_m = 129400.
             s.iter().map(|s| s.as_str().unwrap()).collect()
         });
     assert!(!settle.is_empty(), "{}", results["rig"]["joint"]);
-    let r = crate::util::servoid(
+    let design = designed(
         dir,
-        &[
-            "design",
-            folder.join("without-2").to_str().unwrap(),
-            "--out",
-            dir.join("design-2").to_str().unwrap(),
-            "--run-s",
-            "40",
-        ],
+        &folder.join("without-2"),
+        &dir.join("design-2"),
+        &["--run-s", "40"],
     );
-    assert_eq!(r.code, 0, "{}", r.stderr);
-    let design: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(dir.join("design-2/design.json")).unwrap())
-            .unwrap();
     let a2 = results["rig"]["a2"]["value"].as_f64().unwrap();
     for s in settle {
         let run = match s {
@@ -1152,19 +1115,7 @@ fn a_rig_with_a_delay_and_a_mode_is_predicted_with_them() {
     )
     .unwrap();
     stated(dir, &write(dir, "rich.toml", &text));
-    let r = crate::util::servoid(
-        dir,
-        &[
-            "design",
-            dir.join("out").to_str().unwrap(),
-            "--out",
-            dir.join("design").to_str().unwrap(),
-        ],
-    );
-    assert_eq!(r.code, 0, "{}", r.stderr);
-    let design: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(dir.join("design/design.json")).unwrap())
-            .unwrap();
+    let design = designed(dir, &dir.join("out"), &dir.join("design"), &[]);
     let names: Vec<&str> = design["parameters"]
         .as_array()
         .unwrap()

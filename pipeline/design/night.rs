@@ -435,11 +435,7 @@ fn candidate(plan: &NightPlan, period_s: f64, mix: f64, draw: u64, record_s: f64
             bound_by,
         });
     }
-    let scale: Vec<f64> = runs.iter().map(|r| steady * r.rms_m * r.rms_m).collect();
-    let shares: Vec<Vec<f64>> = runs.iter().map(|r| r.shares.clone()).collect();
-    let planned = spectrum::planned(&plan.runs, &scale, &lines_hz, &shares, noise);
-    let precision =
-        precision::predict_extended(&plan.rig, &plan.extension, &planned, plan.intersample, fs)?;
+    let precision = predicted(plan, &runs, &lines_hz, steady, noise)?;
     Some(Night {
         period_s: len as f64 / fs,
         periods,
@@ -474,18 +470,31 @@ pub fn replayed(
 /// what a check that plays other noise should state.
 pub fn precision_under(plan: &NightPlan, night: &Night, noise: &Noise) -> Option<Precision> {
     let fs = plan.sample_rate_hz;
-    let len = (night.period_s * fs).round();
-    let steady = night.periods.saturating_sub(UNREAD) as f64 * len;
-    let scale: Vec<f64> = night
-        .runs
-        .iter()
-        .map(|r| steady * r.rms_m * r.rms_m)
-        .collect();
-    let shares: Vec<Vec<f64>> = night.runs.iter().map(|r| r.shares.clone()).collect();
-    let planned = spectrum::planned(&plan.runs, &scale, &night.lines_hz, &shares, |f| {
+    let steady = night.periods.saturating_sub(UNREAD) as f64 * (night.period_s * fs).round();
+    predicted(plan, &night.runs, &night.lines_hz, steady, |f| {
         noise.level(f, fs)
-    });
-    precision::predict_extended(&plan.rig, &plan.extension, &planned, plan.intersample, fs)
+    })
+}
+
+/// The predicted precision of designed `runs` whose lines `lines_hz` are
+/// read over `steady` samples, the noise's level per sample `noise(f)`.
+fn predicted(
+    plan: &NightPlan,
+    runs: &[DesignedRun],
+    lines_hz: &[f64],
+    steady: f64,
+    noise: impl Fn(f64) -> f64,
+) -> Option<Precision> {
+    let scale: Vec<f64> = runs.iter().map(|r| steady * r.rms_m * r.rms_m).collect();
+    let shares: Vec<Vec<f64>> = runs.iter().map(|r| r.shares.clone()).collect();
+    let planned = spectrum::planned(&plan.runs, &scale, lines_hz, &shares, noise);
+    precision::predict_extended(
+        &plan.rig,
+        &plan.extension,
+        &planned,
+        plan.intersample,
+        plan.sample_rate_hz,
+    )
 }
 
 /// What each run's displacement holds at the night's excited lines, and

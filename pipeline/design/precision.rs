@@ -5,7 +5,7 @@
 //! command and the displacement's measured noise. The derivation:
 //! docs/methods.md, "Predicted precision".
 
-use nalgebra::{Complex, DMatrix, Matrix4, Vector4};
+use nalgebra::{Complex, DMatrix, Matrix4};
 
 use crate::fft;
 use crate::fit::Intersample;
@@ -218,33 +218,13 @@ pub fn predict(
     intersample: Intersample,
     sample_rate_hz: f64,
 ) -> Option<Precision> {
-    let theta = values(rig);
-    let mut fisher = Matrix4::<f64>::zeros();
-    for run in runs {
-        for (&f, &v) in run.freq_hz.iter().zip(&run.variance) {
-            if !(v.is_finite() && v > 0.0) {
-                continue;
-            }
-            let info = line_information(
-                rig,
-                run.specimen,
-                run.p_gain,
-                f,
-                intersample,
-                sample_rate_hz,
-            )?;
-            fisher += info * (2.0 / v);
-        }
-    }
-    let inverse = fisher.try_inverse()?;
-    let d = Matrix4::from_diagonal(&Vector4::from(theta));
-    let covariance = d * inverse * d;
-    (0..4)
-        .all(|i| covariance[(i, i)].is_finite() && covariance[(i, i)] > 0.0)
-        .then_some(Precision {
-            covariance,
-            extension: Vec::new(),
-        })
+    predict_extended(
+        rig,
+        &Extension::default(),
+        runs,
+        intersample,
+        sample_rate_hz,
+    )
 }
 
 /// [`predict`] for a rig with `ext` beyond the paper's model, whose
@@ -258,13 +238,7 @@ pub fn predict_extended(
     intersample: Intersample,
     sample_rate_hz: f64,
 ) -> Option<Precision> {
-    if *ext == Extension::default() {
-        return predict(rig, runs, intersample, sample_rate_hz);
-    }
-    let theta: Vec<f64> = values(rig)
-        .into_iter()
-        .chain(ext.values().into_iter().map(|(_, v)| v))
-        .collect();
+    let theta = parameters(rig, ext);
     let n = theta.len();
     let mut fisher = DMatrix::<f64>::zeros(n, n);
     for run in runs {
@@ -315,16 +289,21 @@ pub fn information(
         let m = line_information(rig, specimen, p_gain, f_hz, intersample, sample_rate_hz)?;
         return Some(DMatrix::from_fn(4, 4, |i, j| m[(i, j)]));
     }
-    let theta: Vec<f64> = values(rig)
-        .into_iter()
-        .chain(ext.values().into_iter().map(|(_, v)| v))
-        .collect();
+    let theta = parameters(rig, ext);
     let g = extended_gradient(rig, ext, &theta, specimen, p_gain, f_hz)?;
     let hold = hold_response(intersample, sample_rate_hz, f_hz).norm_sqr();
     let n = theta.len();
     Some(DMatrix::from_fn(n, n, |i, j| {
         (g[i].conj() * g[j]).re * hold
     }))
+}
+
+/// The rig's four parameters, then the extension's.
+fn parameters(rig: &RigParams, ext: &Extension) -> Vec<f64> {
+    values(rig)
+        .into_iter()
+        .chain(ext.values().into_iter().map(|(_, v)| v))
+        .collect()
 }
 
 /// dH/dln(theta_j) of the extended x1/u at `f_hz` for each of `theta`
