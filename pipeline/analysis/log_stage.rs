@@ -1220,16 +1220,17 @@ fn estimate_frfs(
         hz: keep_hz,
         extra_bins: frf::VARIANCE_REACH_BINS,
     };
-    // The force path's transient is not fitted: its FRF is shown, not
-    // fitted run by run. Both FRFs read the one command's transforms.
-    let force_plan = choice.plan.clone().without_transient();
+    // Both FRFs read the one command's transforms, and keep the same band
+    // of the command's: a validation run's force FRF in the joint fit is
+    // read at a periodic command's lines as its displacement's is
+    // (`identify::FitData::at_lines`).
     let mut outputs = vec![frf::Output {
         y: &log.displacement_m,
         plan: &choice.plan,
     }];
     outputs.extend(log.force_n.as_deref().map(|y| frf::Output {
         y,
-        plan: &force_plan,
+        plan: &choice.plan,
     }));
     let mut estimates = frf::estimate(&log.command_m, &outputs, fs, kept)
         .map_err(frf_err)?

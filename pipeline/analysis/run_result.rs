@@ -137,17 +137,22 @@ pub fn validation_evidence(campaign: &Campaign, plan: &RunPlan) -> RigInput {
     if !matches!(plan.source, RunSource::Log(_)) {
         return RigInput::Nothing;
     }
-    let Ok(Some(st)) = own_tf_with(campaign, plan, None).map(|a| a.stage) else {
+    let Ok(Some(mut st)) = own_tf_with(campaign, plan, None).map(|a| a.stage) else {
         return RigInput::Nothing;
     };
     let coherence_min = campaign.identification.coherence_min;
-    let data = |h: &Frf| {
-        FitData::of(
-            h,
-            &frf::band_mask(h, plan.band_hz, coherence_min),
-            &st.choice.plan,
-        )
+    // A periodic command's FRFs are read at its excited lines, their
+    // variances from the lines it does not excite, as the identification
+    // runs' are (`FitData::at_lines`): between the lines the ETFE's
+    // neighbours hold noise over a command of nothing.
+    let frf_plan = st.choice.plan.clone();
+    let data = |h: &mut Frf| {
+        let mask = frf::band_mask(h, plan.band_hz, coherence_min);
+        FitData::at_lines(h, &mask, plan.band_hz, &frf_plan)
+            .unwrap_or_else(|| FitData::of(h, &mask, &frf_plan))
     };
+    let displacement = data(&mut st.frf);
+    let force = st.force_frf.as_mut().map(data);
     // Both FRFs' bins carry the displacement's amplitude along a sweep,
     // which the friction's describing function needs should the joint fit
     // find friction.
@@ -157,8 +162,8 @@ pub fn validation_evidence(campaign: &Campaign, plan: &RunPlan) -> RigInput {
         None => d,
     };
     RigInput::Validation(Box::new(ValidationEvidence {
-        displacement: with_amplitude(data(&st.frf)),
-        force: st.force_frf.as_ref().map(data).map(with_amplitude),
+        displacement: with_amplitude(displacement),
+        force: force.map(with_amplitude),
         sample_rate_hz: st.log.sample_rate_hz,
         sha256: st.log.sha256.clone(),
     }))

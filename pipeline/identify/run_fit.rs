@@ -38,6 +38,24 @@ impl FitData {
         Self::at(h, &bins, variance, plan)
     }
 
+    /// For a command of sparse lines over `band_hz` (`frf::sparse_lines`),
+    /// the excited lines of `mask` with the transient taken out of `h` there
+    /// and the variances the lines it does not excite give
+    /// (`frf::at_lines`). None for any other command, or where no line has
+    /// the neighbours its noise level needs.
+    pub fn at_lines(
+        h: &mut Frf,
+        mask: &[bool],
+        band_hz: (f64, f64),
+        plan: &FrfPlan,
+    ) -> Option<Self> {
+        if !frf::sparse_lines(h, band_hz) {
+            return None;
+        }
+        let (bins, variance) = frf::at_lines(h, mask, band_hz, plan.steady_periods())?;
+        Some(Self::at(h, &bins, variance, plan))
+    }
+
     /// The bins of `mask` whose variance is defined, and E|dH|^2 there.
     fn usable(h: &Frf, mask: &[bool]) -> (Vec<usize>, Vec<f64>) {
         let masked: Vec<usize> = (0..h.freq_hz.len()).filter(|&i| mask[i]).collect();
@@ -310,13 +328,10 @@ fn refined_fit(
     max_delay_s: f64,
     start: Option<&[f64]>,
 ) -> Result<(TfFit, FitData), FitError> {
-    if frf::sparse_lines(h, band_hz)
-        && let Some((bins, variance)) = frf::at_lines(h, mask, band_hz, plan.steady_periods())
-    {
+    if let Some(data) = FitData::at_lines(h, mask, band_hz, plan) {
         // A periodic command's lines: the transient and the noise level
-        // from the lines it does not excite (`frf::at_lines`), the model
-        // fitted at the excited ones alone.
-        let data = FitData::at(h, &bins, variance, plan);
+        // from the lines it does not excite, the model fitted at the
+        // excited ones alone.
         let fit = match start {
             Some(start) => fit::fit_from(&data.input(), opts, start)?,
             None => fit::fit(&data.input(), opts)?,
