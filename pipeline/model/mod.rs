@@ -12,6 +12,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::lti::{LtiError, StateSpace, TransferFunction};
 
+pub mod flow;
 pub mod specimen;
 pub use specimen::{BoucWen, Duffing, Friction, ParameterError, SpecimenModel};
 

@@ -1469,6 +1469,67 @@ mod tests {
         }
     }
 
+    /// A sine command on a spring under the flow-pressure law: the steady
+    /// fundamental of x1 (a DFT over whole periods, after the slow pole
+    /// has died out) is x1/u of Eq. 14 times the law's describing-function
+    /// factor (`model::flow::flow_factor` at the displacement amplitude the
+    /// plant reached) and the command's hold, (1 - e^{-sT}) / (sT), where
+    /// Eq. 14 alone misses it by the law's effect: the describing function
+    /// leaves out the harmonics the law makes, which the loop feeds back
+    /// to the fundamental only at second order.
+    #[test]
+    fn a_sine_on_a_loaded_rig_is_its_describing_function() {
+        let rig = crate::model::PAPER_RIG;
+        let k = 116_640.0;
+        let fs = 2000.0;
+        let u0 = 4e-3;
+        for (f0, load) in [(1.0, 0.05), (1.0, 0.3), (5.0, 0.15), (20.0, 0.3)] {
+            let period = (fs / f0) as usize;
+            let settle = (3.0 * fs) as usize;
+            let n = settle + 4 * period;
+            let w = 2.0 * std::f64::consts::PI * f0;
+            let u: Vec<f64> = (0..n).map(|i| u0 * (w * i as f64 / fs).sin()).collect();
+            let s = Complex::new(0.0, w);
+            let hold = (Complex::new(1.0, 0.0) - (-s / fs).exp()) / (s / fs);
+            let linear = crate::model::tf_x1_u(
+                &rig,
+                &LinearSpecimen::Spring {
+                    stiffness_n_per_m: k,
+                },
+            )
+            .unwrap()
+            .eval(s)
+                * hold;
+            // F_max from the load asked for at the linear amplitude.
+            let fmax = k * u0 * linear.norm() / load;
+            let r = simulate(&with_supply(spring(k), fmax), &u, fs, [0.0; 2], TIGHT).unwrap();
+            let fundamental = |x: &[f64]| -> Complex<f64> {
+                let tail = &x[settle..];
+                tail.iter()
+                    .enumerate()
+                    .map(|(i, v)| Complex::from_polar(*v, -w * (settle + i) as f64 / fs))
+                    .sum::<Complex<f64>>()
+                    * (2.0 / tail.len() as f64)
+            };
+            // u0 sin = u0 cos(. - pi/2): the command's phasor is -j u0.
+            let h = fundamental(&r.x1_m) / Complex::new(0.0, -u0);
+            let amplitude = h.norm() * u0;
+            let factor =
+                crate::model::flow::flow_factor(&rig, s, Complex::new(k, 0.0), amplitude, fmax)
+                    .unwrap();
+            let df = (h - linear * factor).norm() / h.norm();
+            let eq14 = (h - linear).norm() / h.norm();
+            eprintln!(
+                "{f0} Hz at {load}: the law moves x1/u by {eq14:.2e}, its describing function misses by {df:.2e}"
+            );
+            assert!(
+                eq14 > 5e-3,
+                "{f0} Hz at {load}: the law must matter ({eq14})"
+            );
+            assert!(df < 0.05 * eq14, "{f0} Hz at {load}: {df} against {eq14}");
+        }
+    }
+
     /// The paper's linear plant (states `ss`) run beside its first-order
     /// departure under the flow-pressure law: docs/model.md's extra flow
     /// -|r| f / (2 F_max), of the linear trajectory's r and f, enters

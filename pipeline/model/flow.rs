@@ -1,0 +1,261 @@
+//! The servo-valve's flow-pressure law (Merritt, Hydraulic Control Systems,
+//! ch. 5; docs/model.md): the flow reaching the chamber is
+//! r sqrt(1 - sign(r) f / F_max), F_max = A P_s, where Eq. 10 has r. On a
+//! sinusoid its fundamental is N r with N the describing function of the
+//! force amplitude over F_max and the phase between flow and force
+//! ([`flow_gain`]). N multiplies the valve's flow inside the loop, so with
+//! D = (s + beta1) Q + a1b0 (Eqs. 12-17) x1/u becomes
+//! a1b0 N / ((s + beta1) Q + a1b0 N) ([`flow_factor`]): the equivalent
+//! linear rig at a run's load.
+
+use std::sync::OnceLock;
+
+use nalgebra::Complex;
+
+/// Gauss-Legendre nodes on (-pi/2, pi/2): the half-cycle integrand of
+/// [`flow_gain`] is analytic there for rho < 1, its nearest singularity
+/// acosh(1 / rho) off the real axis (0.47 at rho = 0.9), where 64 nodes
+/// give N to 1e-12.
+const NODES: usize = 64;
+
+/// The describing function N of the flow-pressure law and its derivatives
+/// with respect to rho and phi.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FlowGain {
+    pub n: Complex<f64>,
+    pub d_rho: Complex<f64>,
+    pub d_phi: Complex<f64>,
+}
+
+/// The fundamental of r sqrt(1 - sign(r) f / F_max) over r's, for
+/// r = R cos t and f = F cos(t - phi) (the force lagging the flow by phi),
+/// rho = F / F_max < 1: N = (1/pi) int_0^2pi cos t sqrt(1 - sign(cos t)
+/// rho cos(t - phi)) e^{-jt} dt. The half-cycle where r < 0 is the other
+/// half shifted by pi (both cosines change sign, and so does e^{-jt}), so
+/// N is twice the integral over (-pi/2, pi/2), where the root is smooth.
+/// To first order N = 1 - (rho / pi)(e^{-j phi} + e^{j phi} / 3): a loss in
+/// phase with the flow and a lead or lag in quadrature. None at rho >= 1,
+/// where the valve passes no flow against the load for part of the cycle.
+pub fn flow_gain(rho: f64, phi: f64) -> Option<FlowGain> {
+    if !(0.0..1.0).contains(&rho) || !phi.is_finite() {
+        return None;
+    }
+    let (nodes, weights) = gauss_legendre();
+    let half = std::f64::consts::FRAC_PI_2;
+    let (mut n, mut d_rho, mut d_phi) =
+        (Complex::default(), Complex::default(), Complex::default());
+    for (&x, &w) in nodes.iter().zip(weights) {
+        let t = half * x;
+        let (sin, cos) = t.sin_cos();
+        let (sin_lag, cos_lag) = (t - phi).sin_cos();
+        let root = (1.0 - rho * cos_lag).sqrt();
+        let e = Complex::new(cos, -sin) * (w * cos);
+        n += e * root;
+        d_rho += e * (-0.5 * cos_lag / root);
+        d_phi += e * (-0.5 * rho * sin_lag / root);
+    }
+    // (2 / pi) int over (-pi/2, pi/2), whose Jacobian from (-1, 1) is pi/2.
+    Some(FlowGain { n, d_rho, d_phi })
+}
+
+/// The factor the flow-pressure law puts on x1/u at `s` = j w for a load
+/// `sp` on the piston (the specimen's S(s) = m s^2 + c s + k, and whatever
+/// else the chamber's force drives) moving with displacement amplitude
+/// `amplitude_m`: with Q = (s + a3) S + a2 s, D = (s + beta1) Q + a1b0 and
+/// N at rho = |S| X / F_max and the flow's lead over the force
+/// phi = arg(Q / (N S)) (N found with phi, by fixed-point iteration),
+/// x1/u = a1b0 N / ((s + beta1) Q + a1b0 N), which is Eq. 17's times
+/// D N / ((s + beta1) Q + a1b0 N). None where the force reaches F_max; 1
+/// without a load (f = 0: the law has nothing to act on).
+pub fn flow_factor(
+    rig: &super::RigParams,
+    s: Complex<f64>,
+    sp: Complex<f64>,
+    amplitude_m: f64,
+    max_force_n: f64,
+) -> Option<Complex<f64>> {
+    let one = Complex::new(1.0, 0.0);
+    if sp.norm() == 0.0 || amplitude_m == 0.0 {
+        return Some(one);
+    }
+    let q = (s + rig.a3_per_s) * sp + s * rig.a2_n_per_m;
+    let n = loaded_gain(q / sp, sp.norm() * amplitude_m / max_force_n)?.n;
+    let sbq = (s + rig.beta1_per_s) * q;
+    let a = rig.a1b0_n_per_m_s2;
+    Some((sbq + a) * n / (sbq + a * n))
+}
+
+/// N where the flow leads the force by arg(`q_over_s` / N), with its
+/// partial derivatives there: the fixed point of
+/// phi -> arg(q_over_s) - arg(N(rho, phi)), a contraction whose slope
+/// |dN/dphi| / |N| is about 2 rho / (3 pi).
+pub fn loaded_gain(q_over_s: Complex<f64>, rho: f64) -> Option<FlowGain> {
+    let base = q_over_s.arg();
+    let mut gain = flow_gain(rho, base)?;
+    for _ in 0..100 {
+        let next = flow_gain(rho, base - gain.n.arg())?;
+        let done = (next.n - gain.n).norm() < 1e-14;
+        gain = next;
+        if done {
+            break;
+        }
+    }
+    Some(gain)
+}
+
+/// The change of the loaded gain N (at its fixed point, `gain`) when rho
+/// changes by `d_rho` and arg(Q / S) by `d_phi0`: dN = N_rho d_rho +
+/// N_phi (d_phi0 - Im(dN / N)), solved for dN's two real parts.
+pub fn loaded_change(gain: &FlowGain, d_rho: f64, d_phi0: f64) -> Complex<f64> {
+    let n = gain.n;
+    let c = gain.d_rho * d_rho + gain.d_phi * d_phi0;
+    // dN = N (a + j b): N a + (j N + N_phi) b = c.
+    let col_b = Complex::new(0.0, 1.0) * n + gain.d_phi;
+    let det = n.re * col_b.im - n.im * col_b.re;
+    let a = (c.re * col_b.im - c.im * col_b.re) / det;
+    let b = (n.re * c.im - n.im * c.re) / det;
+    n * Complex::new(a, b)
+}
+
+/// Gauss-Legendre nodes and weights on (-1, 1), scaled by 2/pi * pi/2 = 1
+/// (the half-cycle's interval and N's (2 / pi) cancel): Newton's iteration
+/// on P_n from Chebyshev's estimates (Golub & Welsch give the same).
+fn gauss_legendre() -> (&'static [f64], &'static [f64]) {
+    static TABLE: OnceLock<(Vec<f64>, Vec<f64>)> = OnceLock::new();
+    let (x, w) = TABLE.get_or_init(|| {
+        let n = NODES;
+        let mut x = vec![0.0; n];
+        let mut w = vec![0.0; n];
+        for i in 0..n.div_ceil(2) {
+            let mut z = (std::f64::consts::PI * (i as f64 + 0.75) / (n as f64 + 0.5)).cos();
+            let mut dp = 0.0;
+            for _ in 0..100 {
+                // P_n(z) by the three-term recurrence, and P_n'(z).
+                let (mut p0, mut p1) = (1.0, z);
+                for k in 2..=n {
+                    let p2 = ((2 * k - 1) as f64 * z * p1 - (k - 1) as f64 * p0) / k as f64;
+                    p0 = p1;
+                    p1 = p2;
+                }
+                dp = n as f64 * (z * p1 - p0) / (z * z - 1.0);
+                let step = p1 / dp;
+                z -= step;
+                if step.abs() < 1e-15 {
+                    break;
+                }
+            }
+            let weight = 2.0 / ((1.0 - z * z) * dp * dp);
+            x[i] = -z;
+            x[n - 1 - i] = z;
+            w[i] = weight;
+            w[n - 1 - i] = weight;
+        }
+        (x, w)
+    });
+    (x, w)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::f64::consts::PI;
+
+    /// N by brute force over the whole cycle, the sign function and all: the
+    /// fundamental of the sampled r sqrt(1 - sign(r) f / F_max) (a Riemann
+    /// sum of 2^20 points, exact for a trigonometric polynomial and within
+    /// 1e-10 here, where the integrand has kinks only at r = 0 and is
+    /// continuous there).
+    fn brute(rho: f64, phi: f64) -> Complex<f64> {
+        let m = 1 << 20;
+        let mut sum = Complex::default();
+        for i in 0..m {
+            let t = 2.0 * PI * i as f64 / m as f64;
+            let r = t.cos();
+            let f = rho * (t - phi).cos();
+            let y = r * (1.0 - r.signum() * f).sqrt();
+            sum += Complex::new(t.cos(), -t.sin()) * y;
+        }
+        sum * (2.0 / m as f64)
+    }
+
+    #[test]
+    fn the_describing_function_is_the_fundamental_of_the_law() {
+        for &(rho, phi) in &[
+            (0.05, 0.3),
+            (0.3, 1.2),
+            (0.3, -0.7),
+            (0.6, PI / 2.0),
+            (0.9, 2.5),
+        ] {
+            let n = flow_gain(rho, phi).unwrap().n;
+            let want = brute(rho, phi);
+            assert!(
+                (n - want).norm() < 1e-9,
+                "rho {rho}, phi {phi}: {n} vs {want}"
+            );
+        }
+        assert!((flow_gain(0.0, 0.4).unwrap().n - 1.0).norm() < 1e-14);
+        assert!(flow_gain(1.0, 0.0).is_none());
+    }
+
+    /// To first order in rho, N = 1 - (rho / pi)(e^{-j phi} + e^{j phi} / 3)
+    /// (the fundamental of |cos t| cos(t - phi), from |cos t|'s Fourier
+    /// series 2/pi + (4 / 3 pi) cos 2t + ...): the second-order remainder
+    /// is within rho^2 / 4.
+    #[test]
+    fn at_small_loads_the_gain_is_the_first_order_term() {
+        for &phi in &[0.0, 0.8, PI / 2.0, 2.0, -1.1] {
+            let rho = 1e-3;
+            let n = flow_gain(rho, phi).unwrap().n;
+            let first = Complex::new(1.0, 0.0)
+                - (Complex::from_polar(1.0, -phi) + Complex::from_polar(1.0, phi) / 3.0)
+                    * (rho / PI);
+            assert!(
+                (n - first).norm() < rho * rho / 4.0,
+                "phi {phi}: {n} vs {first}"
+            );
+        }
+    }
+
+    #[test]
+    fn the_derivatives_are_the_gains_slopes() {
+        let (rho, phi) = (0.4, 1.1);
+        let g = flow_gain(rho, phi).unwrap();
+        let h = 1e-6;
+        let by_rho =
+            (flow_gain(rho + h, phi).unwrap().n - flow_gain(rho - h, phi).unwrap().n) / (2.0 * h);
+        let by_phi =
+            (flow_gain(rho, phi + h).unwrap().n - flow_gain(rho, phi - h).unwrap().n) / (2.0 * h);
+        assert!((g.d_rho - by_rho).norm() < 1e-8, "{} vs {by_rho}", g.d_rho);
+        assert!((g.d_phi - by_phi).norm() < 1e-8, "{} vs {by_phi}", g.d_phi);
+    }
+
+    /// The loaded gain is the fixed point: N(rho, arg(Q/S) - arg N) = N.
+    #[test]
+    fn the_loaded_gain_is_consistent_with_its_phase() {
+        let q_over_s = Complex::from_polar(3.0, 1.3);
+        let n = loaded_gain(q_over_s, 0.5).unwrap().n;
+        let again = flow_gain(0.5, q_over_s.arg() - n.arg()).unwrap().n;
+        assert!((n - again).norm() < 1e-12, "{n} vs {again}");
+        assert!(loaded_gain(q_over_s, 1.2).is_none());
+    }
+
+    /// The loaded gain's change is its finite difference.
+    #[test]
+    fn the_loaded_gains_change_is_its_slope() {
+        let (q_over_s, rho) = (Complex::from_polar(2.0, 1.0), 0.35);
+        let gain = loaded_gain(q_over_s, rho).unwrap();
+        let h = 1e-6;
+        let by_rho = (loaded_gain(q_over_s, rho + h).unwrap().n
+            - loaded_gain(q_over_s, rho - h).unwrap().n)
+            / (2.0 * h);
+        let turned = |d: f64| q_over_s * Complex::from_polar(1.0, d);
+        let by_phi = (loaded_gain(turned(h), rho).unwrap().n
+            - loaded_gain(turned(-h), rho).unwrap().n)
+            / (2.0 * h);
+        let d_rho = loaded_change(&gain, 1.0, 0.0);
+        let d_phi = loaded_change(&gain, 0.0, 1.0);
+        assert!((d_rho - by_rho).norm() < 1e-7, "{d_rho} vs {by_rho}");
+        assert!((d_phi - by_phi).norm() < 1e-7, "{d_phi} vs {by_phi}");
+    }
+}
