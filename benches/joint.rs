@@ -136,6 +136,9 @@ fn bench_joint(c: &mut Criterion) {
         seal_damping: false,
         command_gain: false,
         command_gain_start: 1.0,
+        flow_law: false,
+        try_flow_law: false,
+        max_force_start_n: f64::INFINITY,
     };
     // Fail loudly rather than time a fit that does not work.
     let fit = joint_fit(&runs, &start, &opts).unwrap();

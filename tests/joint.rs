@@ -1823,3 +1823,56 @@ fn a_sensor_that_lags_or_drifts_is_not_a_stiffening_spring() {
         );
     }
 }
+
+/// The servo-valve's flow-pressure law on the paper's night (its two
+/// springs and Exp1 as a validation run, a 4 mm chirp) at the ShoreWestern
+/// actuator's F_max (2.387e-4 m^2 at 20.7 MPa, 4.94 kN) and at half of it
+/// (the springs' forces then some 8 and 16 % of F_max): the joint fit
+/// takes the law, F_max within 10 % of the truth, and the rig it states,
+/// the zero-load one, within 1 % or 3 of its stds.
+#[test]
+fn the_flow_law_is_fitted_and_the_rig_is_the_zero_load_one() {
+    let cases = [
+        (
+            "supply_pressure_pa = 2.07e7\npiston_area_m2 = 2.387e-4",
+            2.387e-4 * 2.07e7,
+            1,
+        ),
+        (
+            "supply_pressure_pa = 2.07e7\npiston_area_m2 = 1.2077e-4",
+            1.2077e-4 * 2.07e7,
+            2,
+        ),
+    ];
+    for (rig, fmax, seed) in cases {
+        let text = crate::util::PaperSweep {
+            rig,
+            seed,
+            validation: true,
+            ..crate::util::PaperSweep::default()
+        }
+        .text();
+        let results = identify(&text);
+        let r = results.rig.as_ref().expect("the rig is identified");
+        let joint = r.joint.as_ref().expect("a joint fit");
+        let found = joint_parameter(joint, "max_force_n");
+        eprintln!(
+            "F_max {fmax:.0} N: {:?} ({}), F_max found {found:?}",
+            joint.structure, joint.use_note
+        );
+        let (value, _) = found.unwrap_or_else(|| panic!("no flow law: {:?}", results.warnings));
+        assert!(
+            (value / fmax - 1.0).abs() < 0.1,
+            "F_max {value} against {fmax}"
+        );
+        for ((name, truth), est) in crate::util::PAPER_TRUTH
+            .iter()
+            .zip([&r.beta1, &r.a1b0, &r.a2, &r.a3])
+        {
+            let std = est.std.expect("a std");
+            let (e, z) = (est.value / truth - 1.0, (est.value - truth) / std);
+            eprintln!("  {name}: {:+.3} %, {z:+.2} stds", 100.0 * e);
+            assert!(e.abs() < 0.01 || z.abs() < 3.0, "{name}: {e}, {z}");
+        }
+    }
+}

@@ -78,7 +78,10 @@ const SAME_RATE: f64 = 1e-6;
 /// from the sequential rig `start`: what it found, and whether the campaign
 /// uses it. Warnings (a failed or inadequate fit, a manifest structure the
 /// data reject) go to `warnings`. None when no run has bins to fit
-/// (published models only).
+/// (published models only). `load_gain`: the loaded runs' slow gain shows
+/// the load changing it, the servo-valve's flow-pressure law's signature,
+/// where the law is tried.
+#[allow(clippy::too_many_arguments)]
 pub fn joint(
     campaign: &Campaign,
     evidence: &[(&RunPlan, &Evidence)],
@@ -86,6 +89,7 @@ pub fn joint(
     start: &RigParams,
     sequential: &RigEstimates,
     known: Option<&str>,
+    load_gain: bool,
     warnings: &mut Vec<Warning>,
 ) -> Option<JointResult> {
     let (fitted, identification_frfs) = fitted_frfs(evidence, validation)?;
@@ -114,6 +118,7 @@ pub fn joint(
         .collect();
     let mut opts = options(&campaign.identification, start, fs);
     opts.friction = evidence.iter().any(|(_, e)| e.friction_signature);
+    opts.try_flow_law = load_gain;
     opts.friction_smoothing_m_per_s = campaign.joint.friction_smoothing_m_per_s;
     let choice = campaign.joint.structure;
     let band_top = fitted.iter().map(|(p, ..)| p.band_hz.1).fold(0.0, f64::max);
@@ -231,6 +236,9 @@ fn options(ident: &IdentificationPlan, start: &RigParams, fs: f64) -> JointOptio
         seal_damping: false,
         command_gain: false,
         command_gain_start: 1.0,
+        flow_law: false,
+        try_flow_law: false,
+        max_force_start_n: f64::INFINITY,
     }
 }
 
@@ -319,6 +327,17 @@ fn command_gain_note(fit: &JointFit) -> Option<String> {
         "; the logged command's gain, fitted because the F test takes it over the 1 the rig has at rest (p < 0.001), is {g:.6} +- {:.6}: the logged command reads {:+.4} % from the command the loop follows (another converter's or calibration's scale, or a command of few levels, each level quantised)",
         fit.std[k],
         100.0 * (1.0 / g - 1.0)
+    ))
+}
+
+/// The flow-pressure law the fit found, in words: F_max with its std, and
+/// what it means for the rig at a run's load.
+fn flow_law_note(fit: &JointFit) -> Option<String> {
+    let fmax = fit.max_force_n?;
+    let k = fit.names.iter().position(|n| *n == joint::FLOW_LAW)?;
+    Some(format!(
+        "the rig is not linear at this amplitude: the servo-valve's flow falls with the load pressure (Merritt's orifice law, r sqrt(1 - sign(r) f / F_max)), which the F test takes over the linear valve (p < 0.001): the joint fit models it by its describing function at each bin's force amplitude, F_max = A P_s = {fmax:.0} +- {:.0} N. The rig's parameters are the zero-load ones; at a run's load its equivalent linear rig differs (the valve's gain falls and its phase moves by about 4 / (3 pi) of the force over F_max), more where the force is a larger share of F_max",
+        fit.std[k]
     ))
 }
 
@@ -428,6 +447,15 @@ fn describe(
     };
     let cov = ident.rig_covariance().expect("a structure is chosen");
     result.parameters = parameters(fit, sequential, spread.as_ref(), misfit);
+    if let Some(note) = flow_law_note(fit) {
+        warnings.push(Warning::new(
+            format!(
+                "rig: the valve's flow falls with the load: F_max = {:.0} N fitted; the rig is the zero-load one",
+                fit.max_force_n.unwrap_or(f64::NAN)
+            ),
+            format!("rig: {note}"),
+        ));
+    }
     // With the friction fitted, its harmonics are what remains unexplained.
     let known = if let Some(note) = friction_note(fit, ids) {
         warnings.push(Warning::new(

@@ -128,6 +128,7 @@ pub fn establish<'a>(
         &ident.params(),
         &sequential,
         known.as_deref(),
+        matches!(slow, Some(SlowGain::Load { .. })),
         warnings,
     );
     let (source, chosen) = match joint.as_ref().and_then(super::joint::used_estimates) {

@@ -238,6 +238,15 @@ pub const SEAL_DAMPING: &str = "seal_damping_ns_per_m";
 /// multiplies every run's FRF, displacement and force alike.
 pub const COMMAND_GAIN: &str = "command_gain";
 
+/// The name of the servo-valve's F_max = A P_s (N), the last parameter
+/// when the flow-pressure law is fitted (theta holds ln(1 / F_max)). The
+/// chamber's flow is r sqrt(1 - sign(r) f / F_max); on a sweep each bin
+/// sees it as its describing function N at the force amplitude |S| X
+/// there (`model::flow`), a factor on the valve's flow inside the loop:
+/// A becomes A N in D and in the numerator. The rig is then the zero-load
+/// one.
+pub const FLOW_LAW: &str = "max_force_n";
+
 /// How to fit.
 #[derive(Debug, Clone, Copy)]
 pub struct JointOptions {
@@ -272,6 +281,15 @@ pub struct JointOptions {
     /// and where it starts.
     pub command_gain: bool,
     pub command_gain_start: f64,
+    /// Whether the servo-valve's flow-pressure law ([`FLOW_LAW`]) is
+    /// fitted (on the runs with amplitudes), and the F_max (N) it starts at.
+    pub flow_law: bool,
+    pub max_force_start_n: f64,
+    /// Whether the law is tried at all: only where the loaded runs' slow
+    /// gain shows the load changing it (the law's signature, which
+    /// `analysis::rig` reads), since any misfit of another cause (an FRF
+    /// setting, a reading's nonlinearity) would otherwise buy its F_max.
+    pub try_flow_law: bool,
 }
 
 /// The joint estimate.
@@ -295,6 +313,9 @@ pub struct JointFit {
     pub seal_damping_ns_per_m: Option<f64>,
     /// The logged command's gain ([`COMMAND_GAIN`]), when fitted.
     pub command_gain: Option<f64>,
+    /// F_max = A P_s (N) of the flow-pressure law ([`FLOW_LAW`]), when
+    /// fitted.
+    pub max_force_n: Option<f64>,
     /// beta1, a1b0, a2, a3, then delay (s), valve frequency (Hz) and
     /// damping as the structure has them, then the force FRFs' delay.
     pub params: Vec<f64>,
@@ -419,6 +440,9 @@ struct Bin {
     /// Coulomb friction's describing function per newton at the bin's
     /// amplitude, j 4 / (pi X) (0 where none is fitted).
     coulomb: Complex<f64>,
+    /// The displacement's amplitude X (m) at the bin, where the
+    /// flow-pressure law is fitted (0: no load it could act on).
+    amplitude_m: f64,
 }
 
 /// A run's specimen polynomial S(s) = m s^2 + c s + k, its P / P_ref and
@@ -449,6 +473,8 @@ struct JointProblem {
     seal_damping: Option<usize>,
     /// Where the command's log gain is in theta, when it is fitted.
     command_gain: Option<usize>,
+    /// Where ln(1 / F_max) is in theta, when the flow law is fitted.
+    flow_law: Option<usize>,
     /// The sample period (s): the delay's unit in theta.
     period_s: f64,
     /// The command's intersample behaviour, for the aliases.
@@ -465,9 +491,14 @@ struct BinEval {
 }
 
 /// The most parameters a fit has: the valve-and-piston structure's eight,
-/// the force FRFs' delay, the friction, the seals' damping and the
-/// command's gain.
-const MAX_PARAMS: usize = 12;
+/// the force FRFs' delay, the friction, the seals' damping, the command's
+/// gain and the flow law's F_max.
+const MAX_PARAMS: usize = 13;
+
+/// The largest force amplitude over F_max the flow law's describing
+/// function is taken at: at 1 the valve passes no flow against the load
+/// for part of each cycle, where a fit's trial F_max may go.
+const FLOW_RHO_MAX: f64 = 0.95;
 
 /// The physical values at a point theta, computed once per pass over the
 /// bins.
@@ -491,6 +522,8 @@ struct Point {
     cv: f64,
     /// The logged command's gain, 1 when not fitted.
     g: f64,
+    /// 1 / F_max (1/N) of the flow law, 0 when not fitted.
+    kappa: f64,
 }
 
 impl Point {
@@ -509,6 +542,7 @@ impl Point {
             fc: 0.0,
             cv: 0.0,
             g: 1.0,
+            kappa: 0.0,
         }
     }
 }
@@ -525,6 +559,7 @@ impl JointProblem {
             + usize::from(self.friction.is_some())
             + usize::from(self.seal_damping.is_some())
             + usize::from(self.command_gain.is_some())
+            + usize::from(self.flow_law.is_some())
     }
 
     fn names(&self) -> Vec<&'static str> {
@@ -540,6 +575,9 @@ impl JointProblem {
         }
         if self.command_gain.is_some() {
             names.push(COMMAND_GAIN);
+        }
+        if self.flow_law.is_some() {
+            names.push(FLOW_LAW);
         }
         names
     }
@@ -566,6 +604,7 @@ impl JointProblem {
             friction: self.friction,
             seal_damping: self.seal_damping,
             command_gain: self.command_gain,
+            flow_law: self.flow_law,
             period_s: self.period_s,
             intersample: self.intersample,
         }
@@ -595,6 +634,7 @@ impl JointProblem {
             fc: self.friction.map_or(0.0, |k| theta[k]),
             cv: self.seal_damping.map_or(0.0, |k| theta[k]),
             g: self.command_gain.map_or(1.0, |k| theta[k].exp()),
+            kappa: self.flow_law.map_or(0.0, |k| theta[k].exp()),
         }
     }
 
@@ -731,8 +771,17 @@ impl JointProblem {
             sp += s * x.cv;
         }
         let q = (s + x.a3) * sp + s * x.a2;
-        let a = x.a1b0 * run.p_ratio;
         let one = Complex::new(1.0, 0.0);
+        // The flow law's describing function at the bin's force amplitude
+        // |S| X scales the valve's gain A (`model::flow`); past F_max
+        // (which the fit may try) it is held at the edge of the law.
+        let flow = (x.kappa != 0.0 && bin.amplitude_m > 0.0 && sp.norm() > 0.0)
+            .then(|| {
+                let rho = (x.kappa * sp.norm() * bin.amplitude_m).min(FLOW_RHO_MAX);
+                model::flow::loaded_gain(q / sp, rho).map(|g| (g, rho))
+            })
+            .flatten();
+        let a = flow.map_or(one, |(g, _)| g.n) * (x.a1b0 * run.p_ratio);
         let sb = s + x.b1;
         let sbq = sb * q;
         // Where the bin has the mode: every bin but a force's under a
@@ -754,7 +803,7 @@ impl JointProblem {
                     (sbq + a, av, inv)
                 }
             }
-            _ => (sbq + a, Complex::new(a, 0.0), one),
+            _ => (sbq + a, a, one),
         };
         // exp(-s tau) on the imaginary axis: a rotation by -w tau.
         let tau = if bin.force { x.tau_force } else { x.tau };
@@ -777,6 +826,33 @@ impl JointProblem {
             grad[1] = av;
             grad[2] = -h_d * sb * s * x.a2;
             grad[3] = -h_d * sb * sp * x.a3;
+            if let Some((gain, rho)) = flow {
+                // N moves with ln(1 / F_max) through rho, and with a2, a3
+                // (and the piston's load) through the flow's lead over the
+                // force, arg(Q / S); its log-derivative of H is A's.
+                let by_n = av / gain.n;
+                let change = |d_rho: f64, dq: Complex<f64>, dsp: Complex<f64>| {
+                    let d_phi0 = (dq / q - dsp / sp).im;
+                    let d_rho = d_rho + rho * (dsp / sp).re;
+                    by_n * model::flow::loaded_change(&gain, d_rho, d_phi0)
+                };
+                let zero = Complex::default();
+                grad[2] += change(0.0, s * x.a2, zero);
+                grad[3] += change(0.0, sp * x.a3, zero);
+                if let Some(k) = self.flow_law {
+                    grad[k] = change(rho, zero, zero);
+                }
+                if self.structure.piston() {
+                    let dsp = s * s * x.mp;
+                    grad[self.structure.piston_index()] += change(0.0, (s + x.a3) * dsp, dsp);
+                }
+                if let Some(k) = self.friction {
+                    grad[k] += change(0.0, (s + x.a3) * bin.coulomb, bin.coulomb);
+                }
+                if let Some(k) = self.seal_damping {
+                    grad[k] += change(0.0, (s + x.a3) * s, s);
+                }
+            }
             if self.structure != Structure::Plain {
                 let k = match (bin.force, self.force_delay) {
                     (true, Some(k)) => k,
@@ -1071,6 +1147,10 @@ fn problem(runs: &[JointRun<'_>], opts: &JointOptions) -> Result<JointProblem, F
                 weight: (2.0 / v).sqrt(),
                 run: r,
                 coulomb,
+                amplitude_m: match run.amplitude_m {
+                    Some(a) if opts.flow_law => a[i],
+                    _ => 0.0,
+                },
             });
         }
     }
@@ -1086,6 +1166,13 @@ fn problem(runs: &[JointRun<'_>], opts: &JointOptions) -> Result<JointProblem, F
             + usize::from(friction.is_some())
             + usize::from(seal_damping.is_some())
     });
+    let flow_law = (opts.flow_law && runs.iter().any(|r| r.amplitude_m.is_some())).then(|| {
+        opts.structure.n_params()
+            + usize::from(force_delay.is_some())
+            + usize::from(friction.is_some())
+            + usize::from(seal_damping.is_some())
+            + usize::from(command_gain.is_some())
+    });
     Ok(JointProblem {
         bins,
         runs: models,
@@ -1096,6 +1183,7 @@ fn problem(runs: &[JointRun<'_>], opts: &JointOptions) -> Result<JointProblem, F
         friction,
         seal_damping,
         command_gain,
+        flow_law,
         period_s: 1.0 / opts.sample_rate_hz,
         intersample: opts.intersample,
     })
@@ -1243,6 +1331,9 @@ fn start_theta(
     }
     if problem.command_gain.is_some() {
         theta0.push(opts.command_gain_start.ln());
+    }
+    if problem.flow_law.is_some() {
+        theta0.push(-opts.max_force_start_n.ln());
     }
     if !theta0.iter().all(|t| t.is_finite()) {
         return Err(FitError::NoSolution);
@@ -1394,6 +1485,7 @@ fn finish(
         friction_n: problem.friction.map(|k| params[k]),
         seal_damping_ns_per_m: problem.seal_damping.map(|k| params[k]),
         command_gain: problem.command_gain.map(|k| params[k]),
+        max_force_n: problem.flow_law.map(|k| params[k]),
         params,
         names,
         covariance,
@@ -1445,6 +1537,12 @@ fn physical(problem: &JointProblem, theta: &[f64], opts: &JointOptions) -> (Vec<
     if let Some(k) = problem.command_gain {
         params.push(theta[k].exp());
         factors.push(theta[k].exp());
+    }
+    if let Some(k) = problem.flow_law {
+        // F_max = exp(-theta): dF = -F dtheta.
+        let fmax = (-theta[k]).exp();
+        params.push(fmax);
+        factors.push(-fmax);
     }
     (params, factors)
 }

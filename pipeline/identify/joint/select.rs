@@ -11,6 +11,7 @@
 //! Hausman 1978). The derivation, the weights and the starts:
 //! docs/methods.md, "The joint fit".
 
+use nalgebra::Complex;
 use rayon::prelude::*;
 use schemars::JsonSchema;
 use serde::{Deserialize, Deserializer, Serialize, Serializer};
@@ -310,6 +311,10 @@ pub struct Moved {
 /// structure is fitted and chosen again with it: a gain the rig does not
 /// have is left at 1, so the fit is the paper's unless the logged command's
 /// scale is shown to differ.
+///
+/// Last the servo-valve's flow-pressure law ([`super::FLOW_LAW`]) the same
+/// way, where the runs' bins carry their amplitudes: its F_max where the
+/// data take it, the rig then the zero-load one.
 pub fn select(
     runs: &[JointRun<'_>],
     start: &RigParams,
@@ -330,20 +335,76 @@ pub fn select(
             damped,
         )
     };
-    if opts.command_gain {
-        return selection;
-    }
-    match command_gain_taken(runs, &selection, &opts) {
+    let gain = if opts.command_gain {
+        None
+    } else {
+        command_gain_taken(runs, &selection, &opts)
+    };
+    let (selection, opts) = match gain {
         Some(gain) => {
             let gained = JointOptions {
                 command_gain: true,
                 command_gain_start: gain,
                 ..opts
             };
-            select_among(runs, start, &gained, choice, band_top_hz)
+            (
+                select_among(runs, start, &gained, choice, band_top_hz),
+                gained,
+            )
+        }
+        None => (selection, opts),
+    };
+    if opts.flow_law || !opts.try_flow_law {
+        return selection;
+    }
+    match flow_law_taken(runs, &selection, &opts) {
+        Some(max_force_n) => {
+            let loaded = JointOptions {
+                flow_law: true,
+                max_force_start_n: max_force_n,
+                ..opts
+            };
+            select_among(runs, start, &loaded, choice, band_top_hz)
         }
         None => selection,
     }
+}
+
+/// F_max (N) of the flow-pressure law, where the chosen fit refitted with
+/// the law freed is taken ([`refit_taken`]) at an F_max the data determine
+/// (its std below its value) beyond every force the runs reached. The
+/// refit starts at five times the largest force amplitude of any bin
+/// (|S| X), where the law moves x1/u by some 8 %.
+fn flow_law_taken(
+    runs: &[JointRun<'_>],
+    selection: &Selection,
+    opts: &JointOptions,
+) -> Option<f64> {
+    let peak = peak_force_n(runs)?;
+    let freed = JointOptions {
+        flow_law: true,
+        max_force_start_n: 5.0 * peak,
+        ..*opts
+    };
+    let refit = refit_taken(runs, selection.fit()?, &freed)?;
+    let fmax = refit.max_force_n?;
+    let k = refit.names.iter().position(|n| *n == super::FLOW_LAW)?;
+    (fmax > peak && refit.std[k] < fmax).then_some(fmax)
+}
+
+/// The largest force amplitude (N) the runs' bins carry, |S(jw)| X: None
+/// where no run with a specimen has amplitudes.
+fn peak_force_n(runs: &[JointRun<'_>]) -> Option<f64> {
+    let mut peak = 0.0_f64;
+    for run in runs {
+        let Some(x) = run.amplitude_m else { continue };
+        let (m, c, k) = run.specimen.mck();
+        for (&f, &x) in run.freq_hz.iter().zip(x) {
+            let w = 2.0 * std::f64::consts::PI * f;
+            peak = peak.max(Complex::new(k - m * w * w, c * w).norm() * x);
+        }
+    }
+    (peak > 0.0).then_some(peak)
 }
 
 /// The logged command's gain, where the chosen fit refitted with the gain
@@ -568,6 +629,7 @@ fn fit_valve_piston(
         force_delay_start_s: valve.force_delay_s.unwrap_or(valve.delay_s),
         friction_start_n: valve.friction_n.unwrap_or(opts.friction_start_n),
         command_gain_start: valve.command_gain.unwrap_or(opts.command_gain_start),
+        max_force_start_n: valve.max_force_n.unwrap_or(opts.max_force_start_n),
         ..*opts
     };
     joint_fit_staged(runs, &valve.rig, &both, GRID_STRIDE)
@@ -754,6 +816,9 @@ fn fit_mode(
     let command_gain_start = delay_fit
         .and_then(|f| f.command_gain)
         .unwrap_or(opts.command_gain_start);
+    let max_force_start_n = delay_fit
+        .and_then(|f| f.max_force_n)
+        .unwrap_or(opts.max_force_start_n);
     let base = JointOptions {
         structure,
         friction_start_n,
@@ -807,6 +872,11 @@ fn fit_mode(
     if coarse.command_gain.is_some() {
         for (theta, _) in &mut grid {
             theta.push(command_gain_start.ln());
+        }
+    }
+    if coarse.flow_law.is_some() {
+        for (theta, _) in &mut grid {
+            theta.push(-max_force_start_n.ln());
         }
     }
     let mut scored: Vec<ValveStart> = grid

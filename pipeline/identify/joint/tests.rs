@@ -75,6 +75,9 @@ fn options(structure: Structure) -> JointOptions {
         seal_damping: false,
         command_gain: false,
         command_gain_start: 1.0,
+        flow_law: false,
+        try_flow_law: false,
+        max_force_start_n: f64::INFINITY,
     }
 }
 
