@@ -815,7 +815,7 @@ pub fn cause_name(cause: &str) -> Option<&'static str> {
         Some((run, rest)) if run.starts_with("run ") => rest,
         _ => cause,
     };
-    let named: [(&str, &str); 9] = [
+    let named: [(&str, &str); 10] = [
         (SETTINGS_CAUSE, "the FRF settings"),
         (STIFFNESS_CAUSE, "the stated stiffness"),
         (NONLINEAR_CAUSE, "a nonlinear rig"),
@@ -831,6 +831,7 @@ pub fn cause_name(cause: &str) -> Option<&'static str> {
         ("a gain that depends on the load", "a load-dependent gain"),
         ("the springs' disagreement", "the springs' disagreement"),
         ("the seal friction's harmonics", "seal friction's harmonics"),
+        ("the valve flow law's harmonics", "the flow law's harmonics"),
     ];
     named
         .iter()
