@@ -112,15 +112,7 @@ impl Extension {
 /// numerator a1b0 V, times exp(-s tau).
 pub fn x1_u(at: &RigParams, ext: &Extension, specimen: LinearSpecimen, f_hz: f64) -> Complex<f64> {
     let s = Complex::new(0.0, 2.0 * std::f64::consts::PI * f_hz);
-    let (m, c, k) = match specimen {
-        LinearSpecimen::None => (0.0, 0.0, 0.0),
-        LinearSpecimen::Spring { stiffness_n_per_m } => (0.0, 0.0, stiffness_n_per_m),
-        LinearSpecimen::Sdof {
-            mass_kg,
-            damping_ns_per_m,
-            stiffness_n_per_m,
-        } => (mass_kg, damping_ns_per_m, stiffness_n_per_m),
-    };
+    let (m, c, k) = specimen.mck();
     let sp = s * s * (m + ext.piston_mass_kg.unwrap_or(0.0)) + s * c + k;
     let q = (s + at.a3_per_s) * sp + s * at.a2_n_per_m;
     let a = at.a1b0_n_per_m_s2;

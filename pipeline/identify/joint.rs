@@ -547,6 +547,25 @@ impl Point {
     }
 }
 
+/// The flow law's loaded gain and rho at `bin` for the point `x`, the
+/// piston's load `sp` and Q = `q` there: its describing function at the
+/// bin's force amplitude |S| X (`model::flow`); past F_max (which the fit
+/// may try) it is held at the edge of the law. None without the law, an
+/// amplitude or a load.
+#[inline(always)]
+fn flow_at(
+    bin: &Bin,
+    x: &Point,
+    sp: Complex<f64>,
+    q: Complex<f64>,
+) -> Option<(model::flow::FlowGain, f64)> {
+    if !(x.kappa != 0.0 && bin.amplitude_m > 0.0 && sp.norm() > 0.0) {
+        return None;
+    }
+    let rho = (x.kappa * sp.norm() * bin.amplitude_m).min(FLOW_RHO_MAX);
+    model::flow::loaded_gain(q / sp, rho).map(|g| (g, rho))
+}
+
 /// Bins per chunk of a parallel pass: each chunk's sums are formed on one
 /// thread and the chunks' added in their order, so the bits do not depend
 /// on the thread count.
@@ -752,6 +771,47 @@ impl JointProblem {
         true
     }
 
+    /// The flow law's share of the log-derivatives at one bin (`sp` and `q`
+    /// the piston's load and Q there, `by_a` A's log-derivative of H times
+    /// H, `flow` the loaded gain and rho): N moves with ln(1 / F_max)
+    /// through rho, and with a2, a3 (and the piston's load) through the
+    /// flow's lead over the force, arg(Q / S); its log-derivative of H is
+    /// A's.
+    #[inline(always)]
+    fn add_flow_gradient(
+        &self,
+        grad: &mut [Complex<f64>; MAX_PARAMS],
+        bin: &Bin,
+        x: &Point,
+        (sp, q): (Complex<f64>, Complex<f64>),
+        by_a: Complex<f64>,
+        (gain, rho): (model::flow::FlowGain, f64),
+    ) {
+        let s = bin.s;
+        let by_n = by_a / gain.n;
+        let change = |d_rho: f64, dq: Complex<f64>, dsp: Complex<f64>| {
+            let d_phi0 = (dq / q - dsp / sp).im;
+            let d_rho = d_rho + rho * (dsp / sp).re;
+            by_n * model::flow::loaded_change(&gain, d_rho, d_phi0)
+        };
+        let zero = Complex::default();
+        grad[2] += change(0.0, s * x.a2, zero);
+        grad[3] += change(0.0, sp * x.a3, zero);
+        if let Some(k) = self.flow_law {
+            grad[k] = change(rho, zero, zero);
+        }
+        if self.structure.piston() {
+            let dsp = s * s * x.mp;
+            grad[self.structure.piston_index()] += change(0.0, (s + x.a3) * dsp, dsp);
+        }
+        if let Some(k) = self.friction {
+            grad[k] += change(0.0, (s + x.a3) * bin.coulomb, bin.coulomb);
+        }
+        if let Some(k) = self.seal_damping {
+            grad[k] += change(0.0, (s + x.a3) * s, s);
+        }
+    }
+
     /// The model at one bin, and with `GRAD` its log-derivatives (inlined
     /// into the passes over the bins, where it is nearly all the work).
     #[inline(always)]
@@ -772,15 +832,8 @@ impl JointProblem {
         }
         let q = (s + x.a3) * sp + s * x.a2;
         let one = Complex::new(1.0, 0.0);
-        // The flow law's describing function at the bin's force amplitude
-        // |S| X scales the valve's gain A (`model::flow`); past F_max
-        // (which the fit may try) it is held at the edge of the law.
-        let flow = (x.kappa != 0.0 && bin.amplitude_m > 0.0 && sp.norm() > 0.0)
-            .then(|| {
-                let rho = (x.kappa * sp.norm() * bin.amplitude_m).min(FLOW_RHO_MAX);
-                model::flow::loaded_gain(q / sp, rho).map(|g| (g, rho))
-            })
-            .flatten();
+        // The flow law's describing function scales the valve's gain A.
+        let flow = flow_at(bin, x, sp, q);
         let a = flow.map_or(one, |(g, _)| g.n) * (x.a1b0 * run.p_ratio);
         let sb = s + x.b1;
         let sbq = sb * q;
@@ -826,32 +879,8 @@ impl JointProblem {
             grad[1] = av;
             grad[2] = -h_d * sb * s * x.a2;
             grad[3] = -h_d * sb * sp * x.a3;
-            if let Some((gain, rho)) = flow {
-                // N moves with ln(1 / F_max) through rho, and with a2, a3
-                // (and the piston's load) through the flow's lead over the
-                // force, arg(Q / S); its log-derivative of H is A's.
-                let by_n = av / gain.n;
-                let change = |d_rho: f64, dq: Complex<f64>, dsp: Complex<f64>| {
-                    let d_phi0 = (dq / q - dsp / sp).im;
-                    let d_rho = d_rho + rho * (dsp / sp).re;
-                    by_n * model::flow::loaded_change(&gain, d_rho, d_phi0)
-                };
-                let zero = Complex::default();
-                grad[2] += change(0.0, s * x.a2, zero);
-                grad[3] += change(0.0, sp * x.a3, zero);
-                if let Some(k) = self.flow_law {
-                    grad[k] = change(rho, zero, zero);
-                }
-                if self.structure.piston() {
-                    let dsp = s * s * x.mp;
-                    grad[self.structure.piston_index()] += change(0.0, (s + x.a3) * dsp, dsp);
-                }
-                if let Some(k) = self.friction {
-                    grad[k] += change(0.0, (s + x.a3) * bin.coulomb, bin.coulomb);
-                }
-                if let Some(k) = self.seal_damping {
-                    grad[k] += change(0.0, (s + x.a3) * s, s);
-                }
+            if let Some(flow) = flow {
+                self.add_flow_gradient(&mut grad, bin, x, (sp, q), av, flow);
             }
             if self.structure != Structure::Plain {
                 let k = match (bin.force, self.force_delay) {
