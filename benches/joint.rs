@@ -27,6 +27,11 @@
 //! fit 13.3 -> 35.2 ms, `select` 133 -> 236 ms and with friction 181 ->
 //! 285 ms: a cost still to be brought down.
 //!
+//! With the valve's flow-pressure law held at a nameplate F_max, one
+//! delay-and-valve fit is `seven_runs_delay_valve_flow_law_held`: the
+//! describing function at every bin (a fixed point of 64-node
+//! Gauss-Legendre sums) is the law's cost.
+//!
 //! `cargo bench --bench joint`
 
 use std::hint::black_box;
@@ -139,6 +144,8 @@ fn bench_joint(c: &mut Criterion) {
         flow_law: false,
         try_flow_law: false,
         max_force_start_n: f64::INFINITY,
+        max_force_nameplate_n: None,
+        flow_law_held: false,
     };
     // Fail loudly rather than time a fit that does not work.
     let fit = joint_fit(&runs, &start, &opts).unwrap();
@@ -199,6 +206,21 @@ fn bench_joint(c: &mut Criterion) {
                 30.0,
             )
         })
+    });
+    // The valve's flow-pressure law held at the ShoreWestern's nameplate
+    // F_max (4.94 kN): at every bin its describing function at the bin's
+    // force amplitude, found by fixed-point iteration, and its share of
+    // the Jacobian. What one fit with the law costs against
+    // `seven_runs_delay_valve`.
+    let held = JointOptions {
+        max_force_nameplate_n: Some(2.387e-4 * 2.07e7),
+        flow_law_held: true,
+        ..opts
+    };
+    let fit = joint_fit(&with_amplitude, &start, &held).unwrap();
+    assert!(fit.converged && fit.max_force_n.is_some());
+    group.bench_function("seven_runs_delay_valve_flow_law_held", |b| {
+        b.iter(|| joint_fit(black_box(&with_amplitude), &start, &held).unwrap())
     });
     group.finish();
 }

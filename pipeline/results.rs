@@ -240,6 +240,11 @@ pub struct JointResult {
     pub used: bool,
     /// Why they do or do not.
     pub use_note: String,
+    /// F_max (N) the valve's flow-pressure law is held at where the runs do
+    /// not determine it: the nameplate's (`rig.supply_pressure_pa` times
+    /// `rig.piston_area_m2`). A fitted F_max is among `parameters`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub flow_law_held_n: Option<f64>,
 }
 
 /// One row of the structure table.

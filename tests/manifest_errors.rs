@@ -374,6 +374,37 @@ fn a_manifest_of_the_other_kind_names_the_command_that_takes_it() {
     assert!(!out.exists(), "nothing written");
 }
 
+/// The nameplate's flow law needs both its numbers, each positive: the
+/// key named is the one missing or wrong.
+#[test]
+fn a_nameplate_without_its_area_or_with_a_pressure_not_positive() {
+    for (lines, want) in [
+        (
+            "supply_pressure_pa = 2.07e7\n",
+            "rig.piston_area_m2: the flow-pressure law needs the piston area beside `supply_pressure_pa` (F_max = A P_s)",
+        ),
+        (
+            "supply_pressure_pa = -1.0\npiston_area_m2 = 2.387e-4\n",
+            "rig.supply_pressure_pa: must be positive (got -1)",
+        ),
+    ] {
+        let text = BASE.replacen(
+            "[rig]\nname = \"test rig\"\n",
+            &format!("[rig]\nname = \"test rig\"\n{lines}"),
+            1,
+        );
+        assert_ne!(text, BASE);
+        let c = check(&text);
+        assert_eq!(c.code, 2, "{}", c.stderr);
+        assert!(
+            c.stderr.contains(want),
+            "missing {want:?} in:\n{}",
+            c.stderr
+        );
+        assert!(!c.wrote_output);
+    }
+}
+
 #[test]
 fn a_history_window_too_short_and_a_threshold_not_positive() {
     let text = format!("{BASE}\n[history]\nwindow = 2\nthreshold = 0.0\nfile = \"\"\n");

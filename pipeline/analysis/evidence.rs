@@ -8,6 +8,7 @@ use super::log_stage::LogStageError;
 use crate::fit::adequacy::Adequacy;
 use crate::identify::FitData;
 use crate::lti::TransferFunction;
+use crate::manifest::RunPlan;
 
 /// What a run gives the rig's identification.
 #[derive(Debug, Clone)]
@@ -67,4 +68,22 @@ pub struct ValidationEvidence {
     /// The log's SHA-256, which the second pass's own read of the log must
     /// find again (the rig was fitted to these bytes).
     pub sha256: String,
+}
+
+/// Whether the displacements' harmonics of the command are the load's:
+/// some loaded run has them and the unloaded runs, read, have none. Seal
+/// friction acts on the piston whether or not a specimen loads it (most
+/// where the chamber's force is least, unloaded); the valve's flow law
+/// acts only on the force, so a run without a specimen has none of it.
+pub fn harmonics_under_load_only(evidence: &[(&RunPlan, &Evidence)]) -> bool {
+    let read = |e: &Evidence| e.slow.is_some();
+    let mut unloaded = evidence
+        .iter()
+        .filter(|(p, e)| !p.specimen.loads() && read(e))
+        .peekable();
+    unloaded.peek().is_some()
+        && !unloaded.any(|(_, e)| e.friction_signature)
+        && evidence
+            .iter()
+            .any(|(p, e)| p.specimen.loads() && e.friction_signature)
 }

@@ -19,7 +19,7 @@ use crate::identify::joint::{
 };
 use crate::identify::{Estimate, FitData, IdentificationPlan};
 use crate::manifest::{Campaign, JointRig, Role, RunPlan};
-use crate::model::{RigParams, Seals};
+use crate::model::{RigExtras, RigParams, Seals};
 use crate::results::{
     FTestResult, JointCandidate, JointParameter, JointResult, RigEstimates, RunAdequacy, Settle,
 };
@@ -117,8 +117,17 @@ pub fn joint(
         })
         .collect();
     let mut opts = options(&campaign.identification, start, fs);
-    opts.friction = evidence.iter().any(|(_, e)| e.friction_signature);
-    opts.try_flow_law = load_gain;
+    // Harmonics in the loaded runs alone, of springs that do not stiffen,
+    // are the flow law's: it is tried, and no friction is fitted for them.
+    // Where the unloaded run has them too the friction is fitted, and the
+    // law, whose harmonics the friction's hide, is tried beside it.
+    let stiffening = evidence
+        .iter()
+        .any(|(_, e)| e.spring_cubic_n_per_m3.is_some());
+    let under_load = !stiffening && super::evidence::harmonics_under_load_only(evidence);
+    opts.friction = evidence.iter().any(|(_, e)| e.friction_signature) && !under_load;
+    opts.try_flow_law = load_gain || under_load || (opts.friction && !stiffening);
+    opts.max_force_nameplate_n = campaign.manifest.rig.max_force_n();
     opts.friction_smoothing_m_per_s = campaign.joint.friction_smoothing_m_per_s;
     let choice = campaign.joint.structure;
     let band_top = fitted.iter().map(|(p, ..)| p.band_hz.1).fold(0.0, f64::max);
@@ -239,6 +248,8 @@ fn options(ident: &IdentificationPlan, start: &RigParams, fs: f64) -> JointOptio
         flow_law: false,
         try_flow_law: false,
         max_force_start_n: f64::INFINITY,
+        max_force_nameplate_n: None,
+        flow_law_held: false,
     }
 }
 
@@ -364,8 +375,15 @@ fn friction_note(fit: &JointFit, ids: &[String]) -> Option<String> {
         .seal_damping_ns_per_m
         .zip(fit.names.iter().position(|n| *n == joint::SEAL_DAMPING))
         .map_or(String::new(), |(c, k)| {
+            // Taken before the flow law, the damping may have stood in for
+            // the law's leakage, and be nil beside it.
+            let taken = if fit.max_force_n.is_some() && c.abs() < 2.0 * fit.std[k] {
+                "which the data took before the valve's flow law and which, beside it, is nil within its std"
+            } else {
+                "which the data take"
+            };
             format!(
-                ", with the seals' viscous damping, which the data take: c_v = {c:.1} +- {:.1} N s/m",
+                ", with the seals' viscous damping, {taken}: c_v = {c:.1} +- {:.1} N s/m",
                 fit.std[k]
             )
         });
@@ -453,6 +471,14 @@ fn describe(
     };
     let cov = ident.rig_covariance().expect("a structure is chosen");
     result.parameters = parameters(fit, sequential, spread.as_ref(), misfit);
+    result.flow_law_held_n = fit
+        .max_force_n
+        .filter(|_| !fit.names.contains(&joint::FLOW_LAW));
+    if let Some(f) = result.flow_law_held_n {
+        result.explanation.push_str(&format!(
+            " The valve's flow law is held at the nameplate's F_max = A P_s = {f:.0} N, which the runs do not determine (the F test does not take it freed, or its std is not below it): the rig is the zero-load one."
+        ));
+    }
     if let Some(note) = flow_law_note(fit) {
         warnings.push(Warning::new(
             format!(
@@ -585,6 +611,7 @@ fn table(
         per_run: Vec::new(),
         used: false,
         use_note: String::new(),
+        flow_law_held_n: None,
     }
 }
 
@@ -885,11 +912,25 @@ pub fn used_estimates(r: &JointResult) -> Option<RigEstimates> {
     })
 }
 
+/// What a validation run's prediction carries besides the rig, when the
+/// campaign uses the joint estimate: the seals' friction (`seals`) and the
+/// flow law's F_max, fitted or held at the nameplate's.
+pub fn extras(r: &JointResult, smoothing: Option<f64>) -> RigExtras {
+    let fitted = r
+        .parameters
+        .iter()
+        .find(|p| p.name == joint::FLOW_LAW)
+        .map(|p| p.value);
+    RigExtras {
+        seals: seals(r, smoothing),
+        max_force_n: r.used.then_some(fitted.or(r.flow_law_held_n)).flatten(),
+    }
+}
+
 /// The seals' friction (and the piston's mass with it) the joint fit found,
 /// when the campaign uses the joint estimate, with the zero-crossing width
-/// `smoothing` the manifest states: what a validation run's prediction
-/// carries besides the rig.
-pub fn seals(r: &JointResult, smoothing: Option<f64>) -> Option<Seals> {
+/// `smoothing` the manifest states.
+fn seals(r: &JointResult, smoothing: Option<f64>) -> Option<Seals> {
     if !r.used {
         return None;
     }

@@ -352,16 +352,20 @@ enum SlowGain {
 /// The pattern of the identification runs' slow gains, when one is
 /// significant (`frf::SlowCubic::significant`). Without an unloaded run
 /// whose slow gain was read, or with a spring whose load cell finds it
-/// stiffening, or with friction's harmonics in a displacement, a change has
-/// no single cause here and None is given (its own fit names what it
-/// found).
+/// stiffening, or with friction's harmonics in a displacement (harmonics
+/// in the loaded runs alone are the load's,
+/// `evidence::harmonics_under_load_only`),
+/// a change has no single cause here and None is given (its own fit names
+/// what it found).
 fn slow_gain_pattern(evidence: &[(&RunPlan, &Evidence)]) -> Option<SlowGain> {
     let (unloaded, loaded): (Vec<_>, Vec<_>) = evidence
         .iter()
         .filter(|(_, e)| e.slow.is_some())
         .partition(|(p, _)| !p.specimen.loads());
     // Friction changes the slow gain as well, loaded or not.
-    if evidence.iter().any(|(_, e)| e.friction_signature) {
+    if evidence.iter().any(|(_, e)| e.friction_signature)
+        && !super::evidence::harmonics_under_load_only(evidence)
+    {
         return None;
     }
     if unloaded

@@ -15,7 +15,8 @@ use crate::ingest::Log;
 use crate::lti::TransferFunction;
 use crate::manifest::{Campaign, CompensatorSettings, IdentificationPlan, RunPlan, RunSource};
 use crate::model::SpecimenModel;
-use crate::model::{self, LinearSpecimen, RigParams, Seals};
+use crate::model::flow::RigAtLoad;
+use crate::model::{self, LinearSpecimen, RigExtras, RigParams};
 use crate::results::{
     DelayTestResult, FitSummary, FrfUsed, HarmonicsFound, LinearityResult, LogInfo, PeriodicResult,
     RunResult, RunTracking, Status, TfResult, TfSource,
@@ -261,14 +262,15 @@ pub fn predicted_tracking(
 }
 
 /// The compensator for the run's specimen on the identified plant `plant`
-/// (x1/u, Eqs. 34-35), its tracking over the run's band with and without
-/// it, on the run's measured command (the desired displacement) through the
-/// plant's state space, and over the sensitivity's stiffnesses.
+/// (x1/u, Eqs. 34-35, the rig at the run's load), its tracking over the
+/// run's band with and without it, on the run's measured command (the
+/// desired displacement) through the plant's state space, and over the
+/// sensitivity's stiffnesses, each at its own load.
 pub fn compensate(
     plan: &RunPlan,
     (st, reference): (&LogStage, &Reference<'_>),
     time: &validate::TimeStage,
-    (rig_at_p, seals): (&RigParams, Option<&Seals>),
+    (at_load, extras): (&RigAtLoad, &RigExtras),
     specimen: &LinearSpecimen,
     plant: &TransferFunction,
     design: &CompensatorPlan<'_>,
@@ -297,6 +299,7 @@ pub fn compensate(
         }
     };
     let compensated = compensator::band_tracking(plant, Some(&c), band, fs);
+    let rig_at_p = &at_load.for_specimen(specimen).unwrap_or(at_load.rig);
     let ss = model::state_space(rig_at_p, specimen);
     let (predicted, peak, note) =
         match compensator::compensated_displacement(&ss, &c, &st.log.command_m) {
@@ -319,7 +322,7 @@ pub fn compensate(
             ),
         };
     let peak_desired = st.log.command_m.iter().fold(0.0_f64, |m, v| m.max(v.abs()));
-    let seals = match seals {
+    let seals = match &extras.seals {
         Some(seals) if peak_desired > 0.0 => compensator::seals_tracking(
             plant,
             &c,
@@ -332,9 +335,9 @@ pub fn compensate(
         _ => Vec::new(),
     };
     CompensatorOutcome {
-        stiffness: compensator::stiffness_sweep(rig_at_p, specimen, &c, &design.stiffnesses, band),
+        stiffness: compensator::stiffness_sweep(at_load, specimen, &c, &design.stiffnesses, band),
         target_stiffness_n_per_m: compensator::target_stiffness(
-            rig_at_p,
+            at_load,
             specimen,
             &c,
             design.range,

@@ -372,6 +372,8 @@ fn analysis_manifest(plan: &SimulationPlan, truth: &Truth) -> Manifest {
             name: m.rig.name.clone(),
             notes: m.rig.notes.clone(),
             parameters: None,
+            supply_pressure_pa: None,
+            piston_area_m2: None,
         },
         channels: Channels {
             time: Some(TimeChannel {

@@ -20,7 +20,8 @@ use crate::frf;
 use crate::ingest::{IngestError, LogFile};
 use crate::lti::TransferFunction;
 use crate::manifest::{Campaign, Role, RunPlan};
-use crate::model::{LinearSpecimen, RigParams, Seals, SpecimenModel};
+use crate::model::flow::{LoadLaw, RigAtLoad};
+use crate::model::{self, LinearSpecimen, RigExtras, RigParams, SpecimenModel};
 use crate::results::{RunResult, RunTracking, SpringForceResult};
 use crate::sensitivity::{self, NoiseProfile};
 use crate::tracking::Reference;
@@ -28,9 +29,10 @@ use crate::validate::csi::Csi;
 use crate::validate::{self, TimeStage};
 
 /// The rig as the validation runs read it: its parameters, the covariance
-/// of (beta1, a1b0, a2, a3) when identified and the seals' friction when
-/// the joint fit found it, or why there is none.
-pub type RigOutcome = Result<(RigParams, Option<Cov4>, Option<Seals>), Arc<RigError>>;
+/// of (beta1, a1b0, a2, a3) when identified and what the joint fit found
+/// beyond Eq. 10 (the seals' friction, the valve's flow law), or why there
+/// is none.
+pub type RigOutcome = Result<(RigParams, Option<Cov4>, RigExtras), Arc<RigError>>;
 
 /// A run analysed without the rig.
 pub struct Fitted {
@@ -212,10 +214,10 @@ pub fn validation(
         })
     });
     let stage = acq.stage;
-    let (rig_at_p, rig_cov, seals) = match rig {
-        Ok((r, cov, seals)) => {
+    let (rig_at_p, rig_cov, extras) = match rig {
+        Ok((r, cov, extras)) => {
             let (r, cov) = at_p_gain(r, cov.as_ref(), plan.p_gain);
-            (r, cov, *seals)
+            (r, cov, *extras)
         }
         Err(e) => return Validation::Unfinished(failed(out, e.clone().into()), stage),
     };
@@ -239,7 +241,7 @@ pub fn validation(
         plan,
         out,
         st,
-        (&rig_at_p, seals.as_ref()),
+        (&rig_at_p, &extras),
         rig_cov,
         &design,
     )))
@@ -251,11 +253,11 @@ fn validated(
     plan: &RunPlan,
     mut out: RunResult,
     st: Box<LogStage>,
-    (rig_at_p, seals): (&RigParams, Option<&Seals>),
+    (rig_at_p, extras): (&RigParams, &RigExtras),
     rig_cov: Option<Cov4>,
     design: &CompensatorPlan<'_>,
 ) -> Validated {
-    let time = match validate::validation_run(rig_at_p, &plan.specimen, seals, &record(&st.log)) {
+    let time = match validate::validation_run(rig_at_p, &plan.specimen, extras, &record(&st.log)) {
         Ok(t) => {
             out.validation = Some(t.metrics.clone());
             Some(t)
@@ -265,16 +267,29 @@ fn validated(
             None
         }
     };
-    let plant = out
-        .tf
-        .as_ref()
-        .and_then(|tf| TransferFunction::with_delay(&tf.num, &tf.den, tf.delay_s).ok());
+    let at_load = rig_at_load(rig_at_p, extras, &st.log.command_m, plan.band_hz);
+    let lin = plan.specimen.linear();
+    // The plant the tracking and the compensator take: the rig at the
+    // run's load where the valve's flow law was found.
+    let plant = match (&at_load.law, lin) {
+        (Some(law), Some(lin)) => {
+            let rig = at_load.for_specimen(&lin);
+            if let Some(load) = out.validation.as_mut().and_then(|v| v.load.as_mut()) {
+                (load.amplitude_m, load.equivalent_rig) = (Some(law.amplitude_m), rig);
+            }
+            rig.and_then(|r| model::tf_x1_u(&r, &lin).ok())
+        }
+        _ => out
+            .tf
+            .as_ref()
+            .and_then(|tf| TransferFunction::with_delay(&tf.num, &tf.den, tf.delay_s).ok()),
+    };
     out.tracking = Some(run_tracking(
         plan,
         &st,
         time.as_ref(),
         plant.as_ref(),
-        (rig_at_p, seals),
+        (&at_load, extras),
         design,
     ));
     // The measured force FRF at positive frequencies up to the kept top,
@@ -299,6 +314,36 @@ fn validated(
     }
 }
 
+/// The rig at a validation run's load: with the valve's flow law, the
+/// equivalent linear rig at the amplitude of the run's command (half its
+/// range), fitted over 100 frequencies spaced evenly in log over its band.
+fn rig_at_load(
+    rig_at_p: &RigParams,
+    extras: &RigExtras,
+    command_m: &[f64],
+    band_hz: (f64, f64),
+) -> RigAtLoad {
+    let Some(max_force_n) = extras.max_force_n else {
+        return RigAtLoad::zero_load(*rig_at_p);
+    };
+    let (lo, hi) = command_m
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &u| {
+            (a.min(u), b.max(u))
+        });
+    let ratio = band_hz.1 / band_hz.0;
+    RigAtLoad {
+        rig: *rig_at_p,
+        law: Some(LoadLaw {
+            max_force_n,
+            amplitude_m: 0.5 * (hi - lo).max(0.0),
+            freqs_hz: (0..100)
+                .map(|i| band_hz.0 * ratio.powf(f64::from(i) / 99.0))
+                .collect(),
+        }),
+    }
+}
+
 /// A validation run's tracking: the log's own, which stands whether or not
 /// the model could be simulated (`time`), the model's prediction for the
 /// same command, and the compensator designed on the identified `plant`,
@@ -308,7 +353,7 @@ fn run_tracking(
     st: &LogStage,
     time: Option<&TimeStage>,
     plant: Option<&TransferFunction>,
-    (rig_at_p, seals): (&RigParams, Option<&Seals>),
+    (at_load, extras): (&RigAtLoad, &RigExtras),
     design: &CompensatorPlan<'_>,
 ) -> RunTracking {
     let reference = Reference::new(&st.log.command_m);
@@ -319,7 +364,7 @@ fn run_tracking(
             plan,
             (st, &reference),
             t,
-            (rig_at_p, seals),
+            (at_load, extras),
             &lin,
             g,
             design,

@@ -285,11 +285,18 @@ pub struct JointOptions {
     /// fitted (on the runs with amplitudes), and the F_max (N) it starts at.
     pub flow_law: bool,
     pub max_force_start_n: f64,
-    /// Whether the law is tried at all: only where the loaded runs' slow
-    /// gain shows the load changing it (the law's signature, which
-    /// `analysis::rig` reads), since any misfit of another cause (an FRF
+    /// Whether the law is tried at all: only where the data show its
+    /// signature (the loaded runs' slow gain changing with the load, or
+    /// harmonics in the loaded runs alone, which `analysis` reads) or the
+    /// seals' friction is fitted, since any misfit of another cause (an FRF
     /// setting, a reading's nonlinearity) would otherwise buy its F_max.
     pub try_flow_law: bool,
+    /// The rig's nameplate F_max = A P_s (N), when the manifest gives it:
+    /// the law is then tried whatever the slow gain shows, freed from the
+    /// nameplate, and held at it where the runs do not determine F_max.
+    pub max_force_nameplate_n: Option<f64>,
+    /// Whether the law is held at the nameplate's F_max (not fitted).
+    pub flow_law_held: bool,
 }
 
 /// The joint estimate.
@@ -314,7 +321,7 @@ pub struct JointFit {
     /// The logged command's gain ([`COMMAND_GAIN`]), when fitted.
     pub command_gain: Option<f64>,
     /// F_max = A P_s (N) of the flow-pressure law ([`FLOW_LAW`]), when
-    /// fitted.
+    /// fitted (among `names`) or held at the nameplate's (not among them).
     pub max_force_n: Option<f64>,
     /// beta1, a1b0, a2, a3, then delay (s), valve frequency (Hz) and
     /// damping as the structure has them, then the force FRFs' delay.
@@ -475,6 +482,8 @@ struct JointProblem {
     command_gain: Option<usize>,
     /// Where ln(1 / F_max) is in theta, when the flow law is fitted.
     flow_law: Option<usize>,
+    /// 1 / F_max (1/N) where the law is held at the nameplate's, else 0.
+    kappa_held: f64,
     /// The sample period (s): the delay's unit in theta.
     period_s: f64,
     /// The command's intersample behaviour, for the aliases.
@@ -624,6 +633,7 @@ impl JointProblem {
             seal_damping: self.seal_damping,
             command_gain: self.command_gain,
             flow_law: self.flow_law,
+            kappa_held: self.kappa_held,
             period_s: self.period_s,
             intersample: self.intersample,
         }
@@ -653,7 +663,7 @@ impl JointProblem {
             fc: self.friction.map_or(0.0, |k| theta[k]),
             cv: self.seal_damping.map_or(0.0, |k| theta[k]),
             g: self.command_gain.map_or(1.0, |k| theta[k].exp()),
-            kappa: self.flow_law.map_or(0.0, |k| theta[k].exp()),
+            kappa: self.flow_law.map_or(self.kappa_held, |k| theta[k].exp()),
         }
     }
 
@@ -1177,7 +1187,7 @@ fn problem(runs: &[JointRun<'_>], opts: &JointOptions) -> Result<JointProblem, F
                 run: r,
                 coulomb,
                 amplitude_m: match run.amplitude_m {
-                    Some(a) if opts.flow_law => a[i],
+                    Some(a) if opts.flow_law || opts.flow_law_held => a[i],
                     _ => 0.0,
                 },
             });
@@ -1213,6 +1223,10 @@ fn problem(runs: &[JointRun<'_>], opts: &JointOptions) -> Result<JointProblem, F
         seal_damping,
         command_gain,
         flow_law,
+        kappa_held: match opts.max_force_nameplate_n {
+            Some(f) if opts.flow_law_held && !opts.flow_law => 1.0 / f,
+            _ => 0.0,
+        },
         period_s: 1.0 / opts.sample_rate_hz,
         intersample: opts.intersample,
     })
@@ -1514,7 +1528,10 @@ fn finish(
         friction_n: problem.friction.map(|k| params[k]),
         seal_damping_ns_per_m: problem.seal_damping.map(|k| params[k]),
         command_gain: problem.command_gain.map(|k| params[k]),
-        max_force_n: problem.flow_law.map(|k| params[k]),
+        max_force_n: problem
+            .flow_law
+            .map(|k| params[k])
+            .or((problem.kappa_held > 0.0).then(|| 1.0 / problem.kappa_held)),
         params,
         names,
         covariance,

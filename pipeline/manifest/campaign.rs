@@ -10,8 +10,8 @@ use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 
 use super::checks::{
-    P_GAIN_RANGE, check_band, check_channels, check_date, check_slug, check_specimen, plausible,
-    positive,
+    P_GAIN_RANGE, check_band, check_channels, check_date, check_nameplate, check_slug,
+    check_specimen, plausible, positive,
 };
 use super::document::{Document, read};
 use super::identification::check_identification;
@@ -801,6 +801,12 @@ fn check_header(partial: &Partial, bad: &mut impl FnMut(KeyPath, String)) {
         if rig.name.trim().is_empty() {
             bad(root.key("rig").key("name"), "must not be empty".into());
         }
+        check_nameplate(
+            rig.supply_pressure_pa,
+            rig.piston_area_m2,
+            &root.key("rig"),
+            bad,
+        );
         if let Some(p) = &rig.parameters {
             let base = root.key("rig").key("parameters");
             for (k, v) in [

@@ -213,6 +213,31 @@ pub(super) fn plausible(
     false
 }
 
+/// The flow-pressure law's nameplate under `rig` (`supply_pressure_pa`
+/// and `piston_area_m2`): both or neither, each positive.
+pub(super) fn check_nameplate(
+    supply_pressure_pa: Option<f64>,
+    piston_area_m2: Option<f64>,
+    rig: &KeyPath,
+    bad: &mut impl FnMut(KeyPath, String),
+) {
+    match (supply_pressure_pa, piston_area_m2) {
+        (Some(ps), Some(a)) => {
+            positive(ps, &rig.key("supply_pressure_pa"), bad);
+            positive(a, &rig.key("piston_area_m2"), bad);
+        }
+        (Some(_), None) => bad(
+            rig.key("piston_area_m2"),
+            "the flow-pressure law needs the piston area beside `supply_pressure_pa` (F_max = A P_s)".into(),
+        ),
+        (None, Some(_)) => bad(
+            rig.key("supply_pressure_pa"),
+            "the flow-pressure law needs the supply pressure beside `piston_area_m2` (F_max = A P_s)".into(),
+        ),
+        (None, None) => {}
+    }
+}
+
 pub(super) fn positive(v: f64, path: &KeyPath, bad: &mut impl FnMut(KeyPath, String)) -> bool {
     if v.is_finite() && v > 0.0 {
         true

@@ -418,6 +418,24 @@ pub struct Rig {
     /// campaign must identify the rig from a no-specimen run and spring runs.
     #[serde(default)]
     pub parameters: Option<RigParams>,
+    /// Supply pressure P_s (Pa) from the nameplate, with `piston_area_m2`:
+    /// the servo-valve's flow falls with the load pressure as
+    /// sqrt(1 - sign(r) f / F_max), F_max = A P_s (docs/model.md). The joint
+    /// fit starts the law at this F_max and holds it there where the runs
+    /// do not determine it; without the nameplate the law is fitted only
+    /// where the loaded runs show it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub supply_pressure_pa: Option<f64>,
+    /// Piston area A (m^2) from the nameplate, with `supply_pressure_pa`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub piston_area_m2: Option<f64>,
+}
+
+impl Rig {
+    /// The nameplate's F_max = A P_s (N), when the manifest gives both.
+    pub fn max_force_n(&self) -> Option<f64> {
+        Some(self.piston_area_m2? * self.supply_pressure_pa?)
+    }
 }
 
 /// Mapping from log columns to the physical channels.

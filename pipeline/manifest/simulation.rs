@@ -13,7 +13,7 @@ use serde_json::Value;
 
 use super::campaign::{check_numbered_figures, check_sensitivity};
 use super::checks::{
-    P_GAIN_RANGE, STIFFNESS_RANGE, check_slug, check_specimen, plausible, positive,
+    P_GAIN_RANGE, STIFFNESS_RANGE, check_nameplate, check_slug, check_specimen, plausible, positive,
 };
 use super::document::{Document, read};
 use super::identification::check_identification;
@@ -583,21 +583,12 @@ fn check_rig(r: &SimRig, bad: &mut impl FnMut(KeyPath, String)) {
             );
         }
     }
-    match (r.supply_pressure_pa, r.piston_area_m2) {
-        (Some(ps), Some(a)) => {
-            positive(ps, &root.key("rig").key("supply_pressure_pa"), bad);
-            positive(a, &root.key("rig").key("piston_area_m2"), bad);
-        }
-        (Some(_), None) => bad(
-            root.key("rig").key("piston_area_m2"),
-            "the flow-pressure law needs the piston area beside `supply_pressure_pa` (F_max = A P_s)".into(),
-        ),
-        (None, Some(_)) => bad(
-            root.key("rig").key("supply_pressure_pa"),
-            "the flow-pressure law needs the supply pressure beside `piston_area_m2` (F_max = A P_s)".into(),
-        ),
-        (None, None) => {}
-    }
+    check_nameplate(
+        r.supply_pressure_pa,
+        r.piston_area_m2,
+        &root.key("rig"),
+        bad,
+    );
     let Some(u) = &r.unmodelled else { return };
     let up = root.key("rig").key("unmodelled");
     for (key, mode) in [

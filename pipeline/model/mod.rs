@@ -239,6 +239,17 @@ pub struct Seals {
     pub seal_damping_ns_per_m: Option<f64>,
 }
 
+/// Everything beyond Eq. 10's rig that a validation run's prediction
+/// carries, as the joint fit found it: the seals' friction and the
+/// servo-valve's flow-pressure law (docs/model.md).
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct RigExtras {
+    pub seals: Option<Seals>,
+    /// F_max = A P_s (N) of the flow-pressure law, fitted or, where the
+    /// runs do not determine it, the nameplate's.
+    pub max_force_n: Option<f64>,
+}
+
 /// v0 of the seals' friction F tanh(x2 / v0) a prediction simulates where
 /// the manifest states none. The describing function the joint fit then
 /// uses holds a sign function, which an ODE solver cannot step across;

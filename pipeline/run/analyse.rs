@@ -133,11 +133,12 @@ pub(super) fn analyse_with(
         .as_ref()
         .map(|(p, r)| {
             let smoothing = campaign.joint.friction_smoothing_m_per_s;
-            let seals = r
+            let extras = r
                 .joint
                 .as_ref()
-                .and_then(|j| crate::analysis::joint::seals(j, smoothing));
-            (*p, r.covariance, seals)
+                .map(|j| crate::analysis::joint::extras(j, smoothing))
+                .unwrap_or_default();
+            (*p, r.covariance, extras)
         })
         .map_err(Arc::clone);
 
@@ -321,8 +322,8 @@ fn second_pass(
                 RigInput::Validation(e) => Some(e.sha256.as_str()),
                 _ => None,
             };
-            // The key holds the rig at this run's P gain and the seals'
-            // friction: a new rig redoes the run.
+            // The key holds the rig at this run's P gain and what the
+            // prediction carries beyond it: a new rig redoes the run.
             let keyed = rig
                 .as_ref()
                 .ok()

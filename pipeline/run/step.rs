@@ -255,7 +255,7 @@ mod tests {
             panic!("the joint fit reads the validation run");
         };
         assert!(read.force.is_some() && !read.displacement.freq_hz.is_empty());
-        let rig = Ok((crate::model::PAPER_RIG, None, None));
+        let rig = Ok((crate::model::PAPER_RIG, None, Default::default()));
         let wants = Wants {
             figures: false,
             tables: false,

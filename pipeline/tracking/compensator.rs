@@ -19,6 +19,7 @@ use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
 use crate::lti::{StateSpace, TransferFunction, zoh_response};
+use crate::model::flow::RigAtLoad;
 use crate::model::{self, LinearSpecimen, RigParams};
 use crate::poly;
 use crate::simulate::SimError;
@@ -478,6 +479,11 @@ pub fn seals_tracking(
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, JsonSchema)]
 pub struct StiffnessPoint {
     pub stiffness_n_per_m: f64,
+    /// With the valve's flow law, the largest force this specimen takes
+    /// over the band at the run's amplitude, over F_max: the load whose
+    /// equivalent rig the line's plant is built on.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub load_fraction: Option<f64>,
     pub uncompensated: BandTracking,
     pub compensated: BandTracking,
 }
@@ -503,10 +509,11 @@ pub fn with_stiffness(specimen: &LinearSpecimen, k: f64) -> LinearSpecimen {
 }
 
 /// `comp`, designed for `specimen` on `rig`, on the plant with each of the
-/// stiffnesses `ks` instead (Eqs. 34-35); a stiffness whose plant leaves
-/// f64's range is left out.
+/// stiffnesses `ks` instead (Eqs. 34-35), the rig at each one's load; a
+/// stiffness whose plant leaves f64's range, or whose load reaches F_max,
+/// is left out.
 pub fn stiffness_sweep(
-    rig: &RigParams,
+    rig: &RigAtLoad,
     specimen: &LinearSpecimen,
     comp: &Compensator,
     ks: &[f64],
@@ -519,9 +526,11 @@ pub fn stiffness_sweep(
     );
     ks.iter()
         .filter_map(|&k| {
-            let plant = model::tf_x1_u(rig, &with_stiffness(specimen, k)).ok()?;
+            let line = with_stiffness(specimen, k);
+            let plant = model::tf_x1_u(&rig.for_specimen(&line)?, &line).ok()?;
             Some(StiffnessPoint {
                 stiffness_n_per_m: k,
+                load_fraction: rig.load_fraction(&line),
                 uncompensated: band_tracking_on(&bare, &plant, fs),
                 compensated: band_tracking_on(&with, &plant, fs),
             })
@@ -536,7 +545,7 @@ pub fn stiffness_sweep(
 /// compensator misses the targets on its own specimen. A bound equal to
 /// the range's end means the targets hold that far at least.
 pub fn target_stiffness(
-    rig: &RigParams,
+    rig: &RigAtLoad,
     specimen: &LinearSpecimen,
     comp: &Compensator,
     range_n_per_m: (f64, f64),
@@ -545,10 +554,12 @@ pub fn target_stiffness(
     let fs = comp.sample_rate_hz;
     let grid = band_grid(band_hz, fs, Some(comp));
     let meets = |k: f64| {
-        model::tf_x1_u(rig, &with_stiffness(specimen, k))
-            .is_ok_and(|g| band_tracking_on(&grid, &g, fs).meets_target())
+        let line = with_stiffness(specimen, k);
+        rig.for_specimen(&line)
+            .and_then(|r| model::tf_x1_u(&r, &line).ok())
+            .is_some_and(|g| band_tracking_on(&grid, &g, fs).meets_target())
     };
-    let own = model::tf_x1_u(rig, specimen).ok()?;
+    let own = model::tf_x1_u(&rig.for_specimen(specimen)?, specimen).ok()?;
     if !band_tracking_on(&grid, &own, fs).meets_target() {
         return None;
     }

@@ -510,7 +510,14 @@ fn the_target_stiffness_range_ends_where_the_hand_loop_reaches_the_target() {
         stiffness_n_per_m: 129_400.0,
     };
     let c = compensator::design(&exp1(), fs, 30.0, None, true).unwrap();
-    let [lo, hi] = compensator::target_stiffness(&rig, &spec, &c, (1e3, 1e7), (0.5, 30.0)).unwrap();
+    let [lo, hi] = compensator::target_stiffness(
+        &crate::model::flow::RigAtLoad::zero_load(rig),
+        &spec,
+        &c,
+        (1e3, 1e7),
+        (0.5, 30.0),
+    )
+    .unwrap();
     assert!(lo < 129_400.0 && hi > 129_400.0, "{lo} .. {hi}");
     for (edge, outward) in [(lo, 0.99), (hi, 1.01)] {
         let at = |k: f64| {

@@ -18,6 +18,6 @@ pub use metrics::{
     Errors, PAPER_WINDOWS, Window, errors, instantaneous_frequency, locate_windows, window_range,
 };
 pub use timedomain::{
-    Record, SimplifiedCcf, TimeStage, ValidateError, ValidationMetrics, WindowErrors, fitted_run,
-    flag_outliers, validation_run,
+    LoadPrediction, Record, SimplifiedCcf, TimeStage, ValidateError, ValidationMetrics,
+    WindowErrors, fitted_run, flag_outliers, validation_run,
 };

@@ -16,7 +16,7 @@ use serde::{Deserialize, Serialize};
 use super::metrics::{self as validate, Errors, Window};
 use crate::lti::{StateSpace, TransferFunction};
 use crate::model::SpecimenModel;
-use crate::model::{self, CnTerm, LinearSdof, RigParams, Seals};
+use crate::model::{self, CnTerm, LinearSdof, RigExtras, RigParams, Seals};
 use crate::simulate::SimError;
 use crate::simulate::discrete::simulate_linear;
 use crate::simulate::ode::Integrator;
@@ -86,6 +86,32 @@ pub struct ValidationMetrics {
     /// friction was found.
     #[serde(default)]
     pub seals: Option<SealsPrediction>,
+    /// The valve's flow-pressure law the joint fit found, which the
+    /// prediction above carries (the rig at the run's load), with the
+    /// errors of the zero-load rig's prediction; absent without the law.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub load: Option<LoadPrediction>,
+}
+
+/// A prediction with the valve's flow-pressure law: the rig at the load the
+/// run reached, where the zero-load rig's valve passes more flow.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+pub struct LoadPrediction {
+    /// F_max = A P_s (N) the prediction holds.
+    pub max_force_n: f64,
+    /// The largest force the prediction reaches (N), and its share of F_max.
+    pub peak_force_n: f64,
+    pub load_fraction: f64,
+    /// Measured against the zero-load rig's linear prediction (Eqs. 47-48).
+    pub zero_load: Errors,
+    /// The command's amplitude (m, half its range) and the equivalent
+    /// linear rig at the load the run's specimen takes there, fitted over
+    /// the run's band (`model::flow::equivalent_rig`, a1b0 at the run's P
+    /// gain): what its tracking prediction and compensator are built on.
+    #[serde(default)]
+    pub amplitude_m: Option<f64>,
+    #[serde(default)]
+    pub equivalent_rig: Option<RigParams>,
 }
 
 /// A prediction with the seals' friction.
@@ -181,15 +207,16 @@ fn compare(
     Some((whole, per_window, offset, centred))
 }
 
-/// The identified rig with a linear specimen and the seals' friction: the
+/// The identified rig with a linear specimen and what the prediction
+/// carries beyond Eq. 10 (the seals' friction, the valve's flow law): the
 /// nonlinear plant (docs/model.md) driven by u - u[0] from rest, plus the
 /// linear model's steady output under u[0] (as [`simulate`] does), so the
-/// friction's transient at the start is the rig's own. Outputs x1 and the
-/// load cell's force.
-fn simulate_with_seals(
+/// nonlinearity's transient at the start is the rig's own. Outputs x1 and
+/// the load cell's force.
+fn simulate_nonlinear(
     rig_at_p: &RigParams,
     specimen: &SpecimenModel,
-    seals: &Seals,
+    (seals, max_force_n): (Option<&Seals>, Option<f64>),
     ss: &StateSpace,
     rec: &Record<'_>,
 ) -> Result<(Vec<f64>, Vec<f64>), SimError> {
@@ -197,13 +224,14 @@ fn simulate_with_seals(
         rig: *rig_at_p,
         specimen: *specimen,
         unmodelled: Unmodelled {
-            piston_mass_kg: seals.piston_mass_kg,
-            actuator_friction: Some(ActuatorFriction {
+            piston_mass_kg: seals.and_then(|s| s.piston_mass_kg),
+            actuator_friction: seals.map(|seals| ActuatorFriction {
                 coulomb_force_n: seals.coulomb_friction_n,
                 smoothing_velocity_m_per_s: seals.smoothing(),
                 // A damping fitted below zero within its noise is none.
                 viscous_ns_per_m: seals.seal_damping_ns_per_m.unwrap_or(0.0).max(0.0),
             }),
+            max_force_n,
             ..Unmodelled::default()
         },
     };
@@ -258,59 +286,113 @@ fn rig_response(
     }
 }
 
-/// A prediction with the seals' friction: x1, the force and what it
-/// records beside them.
-type WithSeals = (Vec<f64>, Vec<f64>, SealsPrediction);
+/// A prediction with what the rig carries beyond Eq. 10: x1, the force and
+/// what it records beside them.
+struct Beyond {
+    x1: Vec<f64>,
+    force: Vec<f64>,
+    seals: Option<SealsPrediction>,
+    load: Option<LoadPrediction>,
+}
 
-/// The prediction with the seals' friction, where there is one to make (a
-/// linear specimen and friction found), with the errors of the linear
-/// prediction `linear_x1` beside it; for a run with nothing to move under
-/// the friction, none and the note why.
-fn seals_response(
+/// The prediction with the seals' friction and the valve's flow law, where
+/// there is one to make (a linear specimen and either found), with the
+/// errors of the linear prediction `linear_x1` beside it, and a note where
+/// one is left out: the friction on a run with nothing to move under it,
+/// the law where the prediction's force reaches F_max.
+fn nonlinear_response(
     rig_at_p: &RigParams,
     specimen: &SpecimenModel,
-    seals: Option<&Seals>,
+    extras: &RigExtras,
     linear_x1: &[f64],
     rec: &Record<'_>,
-) -> Result<(Option<WithSeals>, Option<String>), ValidateError> {
-    let (Some(seals), Some(lin)) = (seals, specimen.linear()) else {
+) -> Result<(Option<Beyond>, Option<String>), ValidateError> {
+    let Some(lin) = specimen.linear() else {
         return Ok((None, None));
     };
     // The friction's force balance needs a moving mass: the specimen's or
     // the piston's.
-    if lin.mck().0 + seals.piston_mass_kg.unwrap_or(0.0) <= 0.0 {
-        return Ok((None, Some(MASSLESS_SEALS.to_string())));
+    let (seals, note) = match &extras.seals {
+        Some(s) if lin.mck().0 + s.piston_mass_kg.unwrap_or(0.0) <= 0.0 => {
+            (None, Some(MASSLESS_SEALS.to_string()))
+        }
+        other => (other.as_ref(), None),
+    };
+    if seals.is_none() && extras.max_force_n.is_none() {
+        return Ok((None, note));
     }
     let ss = model::state_space(rig_at_p, &lin);
-    let (x, f) = simulate_with_seals(rig_at_p, specimen, seals, &ss, rec)?;
-    let without = compare(rec.displacement_m, linear_x1, rec.sample_rate_hz, &[])
+    let (x1, force) = match simulate_nonlinear(
+        rig_at_p,
+        specimen,
+        (seals, extras.max_force_n),
+        &ss,
+        rec,
+    ) {
+        Ok(r) => r,
+        Err(SimError::BeyondSupply {
+            force_n,
+            max_force_n,
+            t_s,
+        }) => {
+            return Ok((
+                None,
+                Some(format!(
+                    "the valve's flow law is not in this prediction: with it the force reaches {force_n:.0} N at {t_s:.3} s, F_max = {max_force_n:.0} N, where the valve passes no flow against the load (the prediction is the zero-load rig's)"
+                )),
+            ));
+        }
+        Err(e) => return Err(e.into()),
+    };
+    let zero = compare(rec.displacement_m, linear_x1, rec.sample_rate_hz, &[])
         .ok_or(ValidateError::ZeroDisplacement)?
         .0;
-    let prediction = SealsPrediction {
+    let seals = seals.map(|seals| SealsPrediction {
         coulomb_friction_n: seals.coulomb_friction_n,
         smoothing_velocity_m_per_s: seals.smoothing(),
         piston_mass_kg: seals.piston_mass_kg,
-        without_friction: without,
-    };
-    Ok((Some((x, f, prediction)), None))
+        without_friction: zero,
+    });
+    let load = extras.max_force_n.map(|max_force_n| {
+        let peak = force.iter().fold(0.0_f64, |m, f| m.max(f.abs()));
+        LoadPrediction {
+            max_force_n,
+            peak_force_n: peak,
+            load_fraction: peak / max_force_n,
+            zero_load: zero,
+            amplitude_m: None,
+            equivalent_rig: None,
+        }
+    });
+    Ok((
+        Some(Beyond {
+            x1,
+            force,
+            seals,
+            load,
+        }),
+        note,
+    ))
 }
 
 /// A validation run: the identified rig at the run's P gain with its
-/// specimen, and with the seals' friction when the joint fit found it.
+/// specimen, and with the seals' friction and the valve's flow law when the
+/// joint fit found them.
 pub fn validation_run(
     rig_at_p: &RigParams,
     specimen: &SpecimenModel,
-    seals: Option<&Seals>,
+    extras: &RigExtras,
     rec: &Record<'_>,
 ) -> Result<TimeStage, ValidateError> {
     let fs = rec.sample_rate_hz;
     let windows = validate::locate_windows(rec.command_m, fs);
-    // With the seals' friction the prediction is the nonlinear plant's; the
-    // linear one stays for the canonical forms' check and the comparison.
+    // With the friction or the law the prediction is the nonlinear plant's;
+    // the linear one stays for the canonical forms' check and the
+    // comparison.
     let (linear_x1, linear_force) = rig_response(rig_at_p, specimen, rec)?;
-    let (with_seals, note) = seals_response(rig_at_p, specimen, seals, &linear_x1, rec)?;
-    let (x1, force) = match &with_seals {
-        Some((x, f, _)) => (x.as_slice(), f.as_slice()),
+    let (beyond, note) = nonlinear_response(rig_at_p, specimen, extras, &linear_x1, rec)?;
+    let (x1, force) = match &beyond {
+        Some(b) => (b.x1.as_slice(), b.force.as_slice()),
         None => (linear_x1.as_slice(), linear_force.as_slice()),
     };
     let (whole, per_window, offset, centred) =
@@ -340,19 +422,16 @@ pub fn validation_run(
         Some(c) => (Some(c.check), c.consistency, c.x1_simplified),
         None => (None, None, None),
     };
-    let (x1, seals) = match with_seals {
-        Some((x, _, prediction)) => (x, Some(prediction)),
-        None => (linear_x1, None),
+    let (x1, seals, load) = match beyond {
+        Some(b) => (b.x1, b.seals, b.load),
+        None => (linear_x1, None, None),
     };
     Ok(TimeStage {
         metrics: ValidationMetrics {
             nrmse_pct: whole.nrmse_pct,
             nae_pct: whole.nae_pct,
             fit_pct: whole.fit_pct,
-            model: match &seals {
-                Some(_) => "identified rig with the run's specimen and the seals' friction (Eq. 10, friction F tanh(x2 / v0) on the piston)".into(),
-                None => "identified rig with the run's specimen (Eq. 10)".into(),
-            },
+            model: prediction_model(seals.is_some(), load.is_some()).into(),
             offset_removed_m: offset,
             windows: per_window,
             force: force_errors,
@@ -361,12 +440,29 @@ pub fn validation_run(
             outlier: false,
             note,
             seals,
+            load,
         },
         windows,
         x1_measured: centred,
         x1_simulated: x1,
         x1_simplified: simplified,
     })
+}
+
+/// What a validation run's prediction simulated, in words.
+fn prediction_model(seals: bool, load: bool) -> &'static str {
+    match (seals, load) {
+        (false, false) => "identified rig with the run's specimen (Eq. 10)",
+        (true, false) => {
+            "identified rig with the run's specimen and the seals' friction (Eq. 10, friction F tanh(x2 / v0) on the piston)"
+        }
+        (false, true) => {
+            "identified rig with the run's specimen at its load (Eq. 10, the valve's flow r sqrt(1 - sign(r) f / F_max))"
+        }
+        (true, true) => {
+            "identified rig with the run's specimen at its load and the seals' friction (Eq. 10, the valve's flow r sqrt(1 - sign(r) f / F_max), friction F tanh(x2 / v0) on the piston)"
+        }
+    }
 }
 
 /// The canonical forms of a linear SDOF validation run (Eqs. 34-35).
@@ -469,6 +565,7 @@ pub fn fitted_run(tf: &TransferFunction, rec: &Record<'_>) -> Result<TimeStage, 
             outlier: false,
             note: None,
             seals: None,
+            load: None,
         },
         windows,
         x1_measured: centred,
@@ -527,6 +624,7 @@ mod tests {
             outlier: false,
             note: None,
             seals: None,
+            load: None,
         }
     }
 
@@ -547,6 +645,63 @@ mod tests {
             .expect("simulates");
         let f = y.pop().expect("force");
         [u, y.pop().expect("x1"), f]
+    }
+
+    fn with(seals: Seals) -> RigExtras {
+        RigExtras {
+            seals: Some(seals),
+            max_force_n: None,
+        }
+    }
+
+    /// With the valve's flow law a spring's run is predicted at its load:
+    /// the prediction states the force it reached, below the zero-load
+    /// rig's (the valve passes less flow against the load; at some 18 % of
+    /// F_max by a few %), and departs from the zero-load rig's own log.
+    /// Where the law's force would reach F_max the prediction is the
+    /// zero-load rig's, and says so.
+    #[test]
+    fn a_run_is_predicted_at_its_load_or_says_why_not() {
+        let rig = model::PAPER_RIG;
+        let specimen = SpecimenModel::Spring {
+            stiffness_n_per_m: 116_640.0,
+        };
+        let signals = signals_of(&rig, &specimen);
+        let law = |max_force_n| RigExtras {
+            seals: None,
+            max_force_n: Some(max_force_n),
+        };
+        let stage = validation_run(&rig, &specimen, &law(1000.0), &record(&signals)).unwrap();
+        let m = &stage.metrics;
+        let load = m.load.as_ref().expect("predicted at its load");
+        // The zero-load rig's own force (its log) peaks higher: against
+        // the load the valve passes less flow.
+        let zero_load_peak = signals[2].iter().fold(0.0_f64, |p, f| p.max(f.abs()));
+        let ratio = load.peak_force_n / zero_load_peak;
+        assert!(ratio < 1.0 && ratio > 0.9, "{ratio}");
+        assert!((load.load_fraction - load.peak_force_n / 1000.0).abs() < 1e-12);
+        assert!(load.zero_load.nrmse_pct < 1e-6);
+        assert!(m.nrmse_pct > 0.1, "{}", m.nrmse_pct);
+        assert!(m.model.contains("at its load"), "{}", m.model);
+        // A 50 kg mass's inertia drives the chamber's force past a 300 N
+        // F_max against the flow (simulate::plant's test of the same).
+        let heavy = SpecimenModel::LinearSdof {
+            mass_kg: 50.0,
+            damping_ns_per_m: 5.0,
+            stiffness_n_per_m: 129_400.0,
+        };
+        let signals = signals_of(&rig, &heavy);
+        let stage = validation_run(&rig, &heavy, &law(300.0), &record(&signals)).unwrap();
+        let m = &stage.metrics;
+        assert!(m.load.is_none());
+        assert!(m.nrmse_pct < 1e-6, "{}", m.nrmse_pct);
+        assert!(
+            m.note
+                .as_deref()
+                .is_some_and(|n| n.contains("F_max = 300 N")),
+            "{:?}",
+            m.note
+        );
     }
 
     fn record(s: &[Vec<f64>; 3]) -> Record<'_> {
@@ -583,7 +738,7 @@ mod tests {
             smoothing_velocity_m_per_s: None,
             seal_damping_ns_per_m: None,
         };
-        let stage = validation_run(&rig, &specimen, Some(&seals), &record(&signals)).unwrap();
+        let stage = validation_run(&rig, &specimen, &with(seals), &record(&signals)).unwrap();
         let m = &stage.metrics;
         assert!(m.seals.is_none());
         assert!(m.nrmse_pct < 1e-6, "{}", m.nrmse_pct);
@@ -593,7 +748,7 @@ mod tests {
             m.note
         );
         seals.piston_mass_kg = Some(0.5);
-        let stage = validation_run(&rig, &specimen, Some(&seals), &record(&signals)).unwrap();
+        let stage = validation_run(&rig, &specimen, &with(seals), &record(&signals)).unwrap();
         let m = &stage.metrics;
         let with = m.seals.as_ref().expect("simulated with the friction");
         assert_eq!(
@@ -614,7 +769,8 @@ mod tests {
             stiffness_n_per_m: 129_400.0,
         };
         let signals = signals_of(&rig, &specimen);
-        let stage = validation_run(&rig, &specimen, None, &record(&signals)).unwrap();
+        let stage =
+            validation_run(&rig, &specimen, &RigExtras::default(), &record(&signals)).unwrap();
         let m = &stage.metrics;
         assert!(m.nrmse_pct < 1e-6, "full model NRMSE {}", m.nrmse_pct);
         assert!(m.ccf_consistency.unwrap() < 1e-9);
@@ -647,7 +803,8 @@ mod tests {
             stiffness_n_per_m: 129_400.0,
         };
         let signals = signals_of(&rig, &specimen);
-        let stage = validation_run(&rig, &specimen, None, &record(&signals)).unwrap();
+        let stage =
+            validation_run(&rig, &specimen, &RigExtras::default(), &record(&signals)).unwrap();
         let s = stage.metrics.simplified_ccf.as_ref().unwrap();
         assert!(s.stable);
         assert!(

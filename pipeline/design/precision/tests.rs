@@ -34,6 +34,8 @@ fn options() -> JointOptions {
         flow_law: false,
         try_flow_law: false,
         max_force_start_n: f64::INFINITY,
+        max_force_nameplate_n: None,
+        flow_law_held: false,
     }
 }
 

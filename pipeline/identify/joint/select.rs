@@ -314,7 +314,8 @@ pub struct Moved {
 ///
 /// Last the servo-valve's flow-pressure law ([`super::FLOW_LAW`]) the same
 /// way, where the runs' bins carry their amplitudes: its F_max where the
-/// data take it, the rig then the zero-load one.
+/// data take it, else the nameplate's where the manifest gives one, the
+/// rig then the zero-load one.
 pub fn select(
     runs: &[JointRun<'_>],
     start: &RigParams,
@@ -354,27 +355,33 @@ pub fn select(
         }
         None => (selection, opts),
     };
-    if opts.flow_law || !opts.try_flow_law {
+    if opts.flow_law || !(opts.try_flow_law || opts.max_force_nameplate_n.is_some()) {
         return selection;
     }
-    match flow_law_taken(runs, &selection, &opts) {
-        Some(max_force_n) => {
-            let loaded = JointOptions {
-                flow_law: true,
-                max_force_start_n: max_force_n,
-                ..opts
-            };
-            select_among(runs, start, &loaded, choice, band_top_hz)
-        }
-        None => selection,
-    }
+    let loaded = match (
+        flow_law_taken(runs, &selection, &opts),
+        opts.max_force_nameplate_n,
+    ) {
+        (Some(max_force_n), _) => JointOptions {
+            flow_law: true,
+            max_force_start_n: max_force_n,
+            ..opts
+        },
+        (None, Some(_)) => JointOptions {
+            flow_law_held: true,
+            ..opts
+        },
+        (None, None) => return selection,
+    };
+    select_among(runs, start, &loaded, choice, band_top_hz)
 }
 
 /// F_max (N) of the flow-pressure law, where the chosen fit refitted with
 /// the law freed is taken ([`refit_taken`]) at an F_max the data determine
 /// (its std below its value) beyond every force the runs reached. The
-/// refit starts at five times the largest force amplitude of any bin
-/// (|S| X), where the law moves x1/u by some 8 %.
+/// refit starts at the nameplate's F_max where the manifest gives it, else
+/// at five times the largest force amplitude of any bin (|S| X), where the
+/// law moves x1/u by some 8 %.
 fn flow_law_taken(
     runs: &[JointRun<'_>],
     selection: &Selection,
@@ -383,7 +390,7 @@ fn flow_law_taken(
     let peak = peak_force_n(runs)?;
     let freed = JointOptions {
         flow_law: true,
-        max_force_start_n: 5.0 * peak,
+        max_force_start_n: opts.max_force_nameplate_n.unwrap_or(5.0 * peak),
         ..*opts
     };
     let refit = refit_taken(runs, selection.fit()?, &freed)?;

@@ -78,6 +78,8 @@ fn options(structure: Structure) -> JointOptions {
         flow_law: false,
         try_flow_law: false,
         max_force_start_n: f64::INFINITY,
+        max_force_nameplate_n: None,
+        flow_law_held: false,
     }
 }
 
