@@ -40,22 +40,62 @@ pub fn flow_gain(rho: f64, phi: f64) -> Option<FlowGain> {
     if !(0.0..1.0).contains(&rho) || !phi.is_finite() {
         return None;
     }
-    let (nodes, weights) = gauss_legendre();
-    let half = std::f64::consts::FRAC_PI_2;
+    let (sin_phi, cos_phi) = phi.sin_cos();
     let (mut n, mut d_rho, mut d_phi) =
         (Complex::default(), Complex::default(), Complex::default());
-    for (&x, &w) in nodes.iter().zip(weights) {
-        let t = half * x;
-        let (sin, cos) = t.sin_cos();
-        let (sin_lag, cos_lag) = (t - phi).sin_cos();
+    for node in half_cycle() {
+        // cos(t - phi) and sin(t - phi) from t's, tabled, and phi's.
+        let cos_lag = node.cos * cos_phi + node.sin * sin_phi;
+        let sin_lag = node.sin * cos_phi - node.cos * sin_phi;
         let root = (1.0 - rho * cos_lag).sqrt();
-        let e = Complex::new(cos, -sin) * (w * cos);
-        n += e * root;
-        d_rho += e * (-0.5 * cos_lag / root);
-        d_phi += e * (-0.5 * rho * sin_lag / root);
+        n += node.e * root;
+        d_rho += node.e * (-0.5 * cos_lag / root);
+        d_phi += node.e * (-0.5 * rho * sin_lag / root);
     }
-    // (2 / pi) int over (-pi/2, pi/2), whose Jacobian from (-1, 1) is pi/2.
     Some(FlowGain { n, d_rho, d_phi })
+}
+
+/// N alone, as [`flow_gain`] gives it: what the fixed point of
+/// [`loaded_gain`] iterates on.
+fn flow_n(rho: f64, phi: f64) -> Option<Complex<f64>> {
+    if !(0.0..1.0).contains(&rho) || !phi.is_finite() {
+        return None;
+    }
+    let (sin_phi, cos_phi) = phi.sin_cos();
+    Some(half_cycle().iter().fold(Complex::default(), |n, node| {
+        n + node.e * (1.0 - rho * (node.cos * cos_phi + node.sin * sin_phi)).sqrt()
+    }))
+}
+
+/// A node of the half-cycle's quadrature: sin t, cos t and the weight
+/// times cos t e^{-jt}, the integrand's part that does not depend on rho
+/// or phi.
+struct Node {
+    sin: f64,
+    cos: f64,
+    e: Complex<f64>,
+}
+
+/// [`gauss_legendre`]'s nodes on (-pi/2, pi/2) with what [`flow_gain`]
+/// needs of t at each, computed once: (2 / pi) int over (-pi/2, pi/2),
+/// whose Jacobian from (-1, 1) is pi/2.
+fn half_cycle() -> &'static [Node] {
+    static TABLE: OnceLock<Vec<Node>> = OnceLock::new();
+    TABLE.get_or_init(|| {
+        let (nodes, weights) = gauss_legendre();
+        nodes
+            .iter()
+            .zip(weights)
+            .map(|(&x, &w)| {
+                let (sin, cos) = (std::f64::consts::FRAC_PI_2 * x).sin_cos();
+                Node {
+                    sin,
+                    cos,
+                    e: Complex::new(cos, -sin) * (w * cos),
+                }
+            })
+            .collect()
+    })
 }
 
 /// The factor the flow-pressure law puts on x1/u at `s` = j w for a load
@@ -237,16 +277,16 @@ fn linear_x1_u(rig: &super::RigParams, s: Complex<f64>, sp: Complex<f64>) -> Com
 /// |dN/dphi| / |N| is about 2 rho / (3 pi).
 pub fn loaded_gain(q_over_s: Complex<f64>, rho: f64) -> Option<FlowGain> {
     let base = q_over_s.arg();
-    let mut gain = flow_gain(rho, base)?;
+    let mut n = flow_n(rho, base)?;
     for _ in 0..100 {
-        let next = flow_gain(rho, base - gain.n.arg())?;
-        let done = (next.n - gain.n).norm() < 1e-14;
-        gain = next;
+        let next = flow_n(rho, base - n.arg())?;
+        let done = (next - n).norm() < 1e-14;
+        n = next;
         if done {
             break;
         }
     }
-    Some(gain)
+    flow_gain(rho, base - n.arg())
 }
 
 /// The change of the loaded gain N (at its fixed point, `gain`) when rho
