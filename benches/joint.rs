@@ -30,11 +30,12 @@
 //! With the valve's flow-pressure law held at a nameplate F_max, one
 //! delay-and-valve fit is `seven_runs_delay_valve_flow_law_held`: the
 //! describing function at every bin (a fixed point of 64-node
-//! Gauss-Legendre sums) is the law's cost. On 7 December 2026: 222 ms
-//! against 14.0 ms without the law (1.18 s while each sum took two
-//! sin_cos a node and every step of the fixed point its derivatives; t's
-//! part of each node is now tabled and the derivatives taken once, at the
-//! fixed point). Still 16 times the linear fit: a cost to bring down.
+//! Gauss-Legendre sums) is the law's cost. On 7 December 2026: 106 ms
+//! against 14.0 ms without the law (1.18 s while each sum took 64 nodes
+//! and two sin_cos a node and every step of the fixed point its
+//! derivatives; t's part of each node is now tabled, the rule has 16, 32
+//! or 64 nodes as rho needs, and the derivatives are taken once, at the
+//! fixed point).
 //!
 //! `cargo bench --bench joint`
 
