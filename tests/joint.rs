@@ -1955,14 +1955,7 @@ fn the_flow_law_is_fitted_and_the_rig_is_the_zero_load_one() {
         ),
     ];
     for (rig, fmax, seed) in cases {
-        let text = crate::util::PaperSweep {
-            rig,
-            seed,
-            validation: true,
-            ..crate::util::PaperSweep::default()
-        }
-        .text();
-        let results = identify(&text);
+        let results = identify(&law_night(rig, seed));
         let r = results.rig.as_ref().expect("the rig is identified");
         let joint = r.joint.as_ref().expect("a joint fit");
         let found = joint_parameter(joint, "max_force_n");
@@ -1986,6 +1979,19 @@ fn the_flow_law_is_fitted_and_the_rig_is_the_zero_load_one() {
         }
         closer_at_its_load(&results, "exp1");
     }
+}
+
+/// The paper's night (its springs, Exp1 as a validation run) on a rig
+/// with the `[rig]` lines `rig` (the flow law's supply pressure and piston
+/// area): the simulation manifest.
+fn law_night(rig: &'static str, seed: u64) -> String {
+    crate::util::PaperSweep {
+        rig,
+        seed,
+        validation: true,
+        ..crate::util::PaperSweep::default()
+    }
+    .text()
 }
 
 /// A validation run predicted at its load (the rig with the flow law) is
@@ -2040,16 +2046,9 @@ fn the_nameplate_starts_the_flow_law_or_holds_it() {
         ),
     ] {
         let ps = 2.07e7;
-        let text = crate::util::PaperSweep {
-            rig,
-            seed,
-            validation: true,
-            ..crate::util::PaperSweep::default()
-        }
-        .text();
         let dir = scratch();
-        let plan =
-            load_simulation_str(&text, &dir.path().join("sim.toml")).expect("a valid simulation");
+        let plan = load_simulation_str(&law_night(rig, seed), &dir.path().join("sim.toml"))
+            .expect("a valid simulation");
         let sim = simulate_campaign(&plan, dir.path()).expect("simulates");
         let blind = analyse(&load(&sim.manifest).expect("loads"));
         let generated = std::fs::read_to_string(&sim.manifest).expect("the manifest");

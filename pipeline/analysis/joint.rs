@@ -341,6 +341,28 @@ fn command_gain_note(fit: &JointFit) -> Option<String> {
     ))
 }
 
+/// The valve's flow law as the chosen fit has it: held at the nameplate's
+/// F_max (in `result`, said in its explanation), or fitted (a warning).
+fn report_flow_law(fit: &JointFit, result: &mut JointResult, warnings: &mut Vec<Warning>) {
+    result.flow_law_held_n = fit
+        .max_force_n
+        .filter(|_| !fit.names.contains(&joint::FLOW_LAW));
+    if let Some(f) = result.flow_law_held_n {
+        result.explanation.push_str(&format!(
+            " The valve's flow law is held at the nameplate's F_max = A P_s = {f:.0} N, which the runs do not determine (the F test does not take it freed, or its std is not below it): the rig is the zero-load one."
+        ));
+    }
+    if let Some(note) = flow_law_note(fit) {
+        warnings.push(Warning::new(
+            format!(
+                "rig: the valve's flow falls with the load: F_max = {:.0} N fitted; the rig is the zero-load one",
+                fit.max_force_n.unwrap_or(f64::NAN)
+            ),
+            format!("rig: {note}"),
+        ));
+    }
+}
+
 /// The flow-pressure law the fit found, in words: F_max with its std, and
 /// what it means for the rig at a run's load.
 fn flow_law_note(fit: &JointFit) -> Option<String> {
@@ -471,23 +493,7 @@ fn describe(
     };
     let cov = ident.rig_covariance().expect("a structure is chosen");
     result.parameters = parameters(fit, sequential, spread.as_ref(), misfit);
-    result.flow_law_held_n = fit
-        .max_force_n
-        .filter(|_| !fit.names.contains(&joint::FLOW_LAW));
-    if let Some(f) = result.flow_law_held_n {
-        result.explanation.push_str(&format!(
-            " The valve's flow law is held at the nameplate's F_max = A P_s = {f:.0} N, which the runs do not determine (the F test does not take it freed, or its std is not below it): the rig is the zero-load one."
-        ));
-    }
-    if let Some(note) = flow_law_note(fit) {
-        warnings.push(Warning::new(
-            format!(
-                "rig: the valve's flow falls with the load: F_max = {:.0} N fitted; the rig is the zero-load one",
-                fit.max_force_n.unwrap_or(f64::NAN)
-            ),
-            format!("rig: {note}"),
-        ));
-    }
+    report_flow_law(fit, &mut result, warnings);
     // With the friction or the flow law fitted, what its describing
     // function leaves out is what remains unexplained.
     let known = if let Some(note) = friction_note(fit, ids) {
