@@ -135,6 +135,11 @@ pub struct RigResult {
     /// The joint grey-box fit, when the campaign identifies the rig.
     #[serde(default)]
     pub joint: Option<JointResult>,
+    /// The identification runs that repeat a specimen at other amplitudes:
+    /// how x1/u moves with the amplitude and which nonlinear candidate the
+    /// movement fits.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub amplitude_series: Vec<crate::identify::amplitude::AmplitudeSeries>,
 }
 
 /// The four rig parameters and R1 with their stds and covariance.

@@ -7,6 +7,7 @@
 //! the valve mode's state space is checked against the transfer function
 //! in the unit tests of `identify::joint`).
 
+use servoid::identify::amplitude::Movement;
 use servoid::identify::joint::Structure;
 use servoid::manifest::simulation::load_simulation_str;
 use servoid::manifest::{Campaign, load};
@@ -2112,5 +2113,99 @@ fn the_nameplate_starts_the_flow_law_or_holds_it() {
             load.zero_load.nrmse_pct
         );
         assert!(v.nrmse_pct <= load.zero_load.nrmse_pct * 1.001);
+    }
+}
+
+/// The amplitude series: the paper's rig (its two springs, the no-specimen
+/// run) with the no-specimen run and the first spring repeated at 1 mm
+/// beside the 4 mm of the campaign, on four rigs: linear; with the seals'
+/// 8 N of friction (tanh(v / 2 mm/s), a 0.5 kg piston); with the flow law
+/// at F_max = 4 kN (the spring's 4 mm reach 11.7 % of it, its 1 mm
+/// 2.9 %); with springs that stiffen 2 % at 4 mm. Each series must name the
+/// candidate the rig holds, and none on the linear rig or for the law
+/// without a specimen (no force for it to act on). F_max and k3 come out
+/// within 1 % (4,025 +- 41 N, 1.443e8 +- 4.4e6 N/m^3 against 1.458e8;
+/// asserted within 3 stds or 2 %). The friction comes out 7.2-7.3 N, 8-10 %
+/// low, and its std (0.02 N) does not cover it: the describing function's
+/// bias in the closed loop, which the joint fit's friction shares
+/// (docs/accuracy.md); asserted within 15 %.
+#[test]
+fn an_amplitude_series_names_what_moves_the_rig() {
+    let small = |id: &str, role: &str, specimen: &str| {
+        format!(
+            "\n[[runs]]\nid = \"{id}\"\nrole = \"{role}\"\np_gain = 1.0\n{specimen}excitation = {{ kind = \"chirp\", law = \"quadratic\", f0_hz = 0.1, f1_hz = 35.0, duration_s = 120.0, amplitude_m = 0.001, lead_in_s = 1.0, lead_out_s = 1.0 }}\n"
+        )
+    };
+    let k1 = PAPER.springs[0];
+    let cubic = 0.02;
+    type Truth = [(Option<Movement>, Option<f64>); 2];
+    let cases: [(&str, Extras, Truth); 4] = [
+        (
+            "linear",
+            base(None, None, None, 0.0, 0.0, 0.0),
+            [(None, None), (None, None)],
+        ),
+        (
+            "friction 8 N",
+            Extras {
+                unmodelled: friction_lines(0.5, 8.0),
+                ..base(None, None, None, 0.0, 0.0, 0.0)
+            },
+            [
+                (Some(Movement::SealFriction), Some(8.0)),
+                (Some(Movement::SealFriction), Some(8.0)),
+            ],
+        ),
+        (
+            "flow law F_max 4 kN",
+            Extras {
+                rig: "supply_pressure_pa = 2.07e7\npiston_area_m2 = 1.93237e-4",
+                ..base(None, None, None, 0.0, 0.0, 0.0)
+            },
+            [(None, None), (Some(Movement::FlowLaw), Some(4000.0))],
+        ),
+        (
+            "springs stiffening 2 % at 4 mm",
+            Extras {
+                spring_cubic: cubic,
+                ..base(None, None, None, 0.0, 0.0, 0.0)
+            },
+            [
+                (None, None),
+                (
+                    Some(Movement::Stiffening),
+                    Some(cubic * k1 / 0.004f64.powi(2)),
+                ),
+            ],
+        ),
+    ];
+    for (name, x, truth) in cases {
+        let spring = if x.spring_cubic == 0.0 {
+            format!("specimen = {{ stiffness_n_per_m = {k1} }}\n")
+        } else {
+            format!(
+                "specimen = {{ model = \"duffing\", stiffness_n_per_m = {k1}, cubic_stiffness_n_per_m3 = {:e} }}\n",
+                x.spring_cubic * k1 / (0.004f64 * 0.004)
+            )
+        };
+        let text = manifest(900, &PAPER, &x)
+            + &small("bare-1mm", "no_specimen", "")
+            + &small("k1-1mm", "spring", &spring);
+        let results = identify(&text);
+        let series = &results.rig.as_ref().unwrap().amplitude_series;
+        assert_eq!(series.len(), 2, "{name}: {series:#?}");
+        for (s, (fits, value)) in series.iter().zip(truth) {
+            eprintln!("{name}: {}", s.finding);
+            assert_eq!(s.fits, fits, "{name}: {}", s.finding);
+            if let (Some(f), Some(v)) = (fits, value) {
+                let c = s.candidates.iter().find(|c| c.candidate == f).unwrap();
+                let (got, std) = (c.value.unwrap(), c.std.unwrap());
+                let ok = match f {
+                    Movement::SealFriction => (got / v - 1.0).abs() < 0.15,
+                    _ => (got - v).abs() < 3.0 * std || (got / v - 1.0).abs() < 0.02,
+                };
+                assert!(ok, "{name}: {got} +- {std} against {v}");
+            }
+        }
     }
 }

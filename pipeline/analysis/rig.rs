@@ -157,8 +157,70 @@ pub fn establish<'a>(
         covariance: chosen.covariance,
         sequential: Some(sequential),
         joint,
+        amplitude_series: amplitude_series(&runs.evidence, &params),
     };
     Ok((params, result))
+}
+
+/// Runs whose amplitudes differ by less than this factor repeat a run; they
+/// do not make a series.
+const SERIES_SPREAD: f64 = 1.2;
+
+/// The identification runs that repeat a specimen (the same role, specimen
+/// and P gain) at amplitudes a fifth or more apart, each group's movement
+/// with the amplitude against the rig `params` (`identify::amplitude`).
+/// Only sweeps' bins carry the displacement's amplitude.
+fn amplitude_series(
+    evidence: &[(&RunPlan, &Evidence)],
+    params: &RigParams,
+) -> Vec<identify::amplitude::AmplitudeSeries> {
+    let mut groups: Vec<Vec<(&RunPlan, &identify::FitData, &[f64])>> = Vec::new();
+    for (p, e) in evidence {
+        let Some((d, x)) = e
+            .data
+            .as_ref()
+            .and_then(|d| Some((d, d.amplitude_m.as_deref()?)))
+        else {
+            continue;
+        };
+        let same =
+            |q: &RunPlan| q.role == p.role && q.specimen == p.specimen && q.p_gain == p.p_gain;
+        match groups.iter_mut().find(|g| same(g[0].0)) {
+            Some(g) => g.push((p, d, x)),
+            None => groups.push(vec![(p, d, x)]),
+        }
+    }
+    groups
+        .into_iter()
+        .filter(|g| {
+            let m: Vec<f64> = g
+                .iter()
+                .map(|r| identify::amplitude::largest(r.2))
+                .collect();
+            let (lo, hi) = m
+                .iter()
+                .fold((f64::INFINITY, 0.0_f64), |(l, h), &v| (l.min(v), h.max(v)));
+            lo > 0.0 && hi >= SERIES_SPREAD * lo
+        })
+        .filter_map(|g| {
+            let plan = g[0].0;
+            let runs: Vec<identify::amplitude::SeriesRun<'_>> = g
+                .iter()
+                .map(|(p, d, x)| identify::amplitude::SeriesRun {
+                    id: &p.id,
+                    freq_hz: &d.freq_hz,
+                    h: &d.h,
+                    variance: &d.variance,
+                    amplitude_m: x,
+                })
+                .collect();
+            identify::amplitude::series(
+                &params.at_p_gain(plan.p_gain),
+                &plan.specimen.linear()?,
+                &runs,
+            )
+        })
+        .collect()
 }
 
 /// What the identification runs give the rig, sorted by role.
@@ -599,5 +661,6 @@ fn given_result(p: &RigParams) -> RigResult {
         covariance: None,
         sequential: None,
         joint: None,
+        amplitude_series: Vec::new(),
     }
 }

@@ -7,6 +7,7 @@
 //! experiments, so their covariances form a block-diagonal Sigma, and the
 //! shared no-specimen run correlates the springs (J is taken over everything).
 
+pub mod amplitude;
 pub mod consistency;
 pub mod joint;
 mod run_fit;
