@@ -250,6 +250,46 @@ pub struct JointResult {
     /// `rig.piston_area_m2`). A fitted F_max is among `parameters`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub flow_law_held_n: Option<f64>,
+    /// The seals' friction corrected for the describing function's bias,
+    /// where friction is fitted (`coulomb_friction_n` among `parameters`
+    /// is then the corrected value).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub friction_correction: Option<FrictionCorrection>,
+}
+
+/// The seals' friction corrected for the describing function's bias by
+/// simulating the fitted rig through the runs' own commands
+/// (docs/methods.md, "The friction's bias").
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[schemars(deny_unknown_fields)]
+pub struct FrictionCorrection {
+    /// The describing function's friction and its statistical std (N).
+    pub describing_function_n: f64,
+    pub describing_function_std_n: f64,
+    /// The friction reported (N): the middle of the corrected values.
+    pub value_n: f64,
+    /// Its statistical std (N), the describing function's scaled by the
+    /// correction.
+    pub std_n: f64,
+    /// Half the corrected values' range over the widths (N), added to the
+    /// std: the friction's zero-crossing width, which the FRFs do not see.
+    pub width_std_n: f64,
+    /// Per width simulated.
+    pub widths: Vec<WidthCorrection>,
+}
+
+/// The correction at one zero-crossing width.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[schemars(deny_unknown_fields)]
+pub struct WidthCorrection {
+    /// v0 (m/s) of the friction F tanh(v / v0) simulated.
+    pub smoothing_m_per_s: f64,
+    /// The friction the joint fit finds in the simulation with the friction
+    /// found, F (N).
+    pub refit_n: f64,
+    /// F^2 / `refit_n` (N): the friction whose fit reads F, the bias being
+    /// in proportion to the friction.
+    pub corrected_n: f64,
 }
 
 /// One row of the structure table.
@@ -323,6 +363,10 @@ pub struct JointParameter {
     /// "model error" when the two differ by more than 2 combined stds,
     /// else "statistical".
     pub dominant: Option<String>,
+    /// The friction's std from its zero-crossing width
+    /// ([`FrictionCorrection::width_std_n`]), in `total_std`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub correction_std: Option<f64>,
 }
 
 /// A run's adequacy tests under a fit.

@@ -157,6 +157,12 @@ pub fn joint(
     let mut result = describe(
         &ident, known, &ids, campaign, sequential, seq_chi2, warnings,
     );
+    if ids.len() == identification_frfs {
+        let plans: Vec<&RunPlan> = fitted.iter().map(|f| f.0).collect();
+        if let Some(c) = super::friction::corrected(campaign, &plans, &ident, &opts) {
+            super::friction::apply(c, &mut result, warnings);
+        }
+    }
     if ids.len() > identification_frfs {
         result.explanation.push_str(&format!(
             "; the validation runs' FRFs are in the fit (identification.joint.include_validation: {}), so their validation is not independent of the rig",
@@ -499,7 +505,8 @@ fn describe(
     let known = if let Some(note) = friction_note(fit, ids) {
         warnings.push(Warning::new(
             format!(
-                "rig: seal friction, not linear at this amplitude: F = {:.1} N fitted",
+                "{}: F = {:.1} N fitted",
+                super::friction::FRICTION_HEADLINE,
                 fit.friction_n.unwrap_or(f64::NAN)
             ),
             format!("rig: {note}"),
@@ -618,6 +625,7 @@ fn table(
         used: false,
         use_note: String::new(),
         flow_law_held_n: None,
+        friction_correction: None,
     }
 }
 
@@ -891,6 +899,7 @@ fn parameters(
                         "statistical".into()
                     }
                 }),
+                correction_std: None,
             }
         })
         .collect()

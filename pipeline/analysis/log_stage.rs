@@ -904,6 +904,34 @@ fn settings_warning(
     Some(Warning::new(headline, text))
 }
 
+/// A run's bins as its own log stage makes them, with the logged
+/// displacement replaced by `displacement` of the checked log (a
+/// simulation driven by its own command); None where the run has no log or
+/// `displacement` gives none.
+pub fn fit_data_with(
+    campaign: &Campaign,
+    run: &RunPlan,
+    displacement: impl Fn(&Log) -> Option<Vec<f64>>,
+) -> Result<Option<FitData>, LogStageError> {
+    let RunSource::Log(plan) = &run.source else {
+        return Ok(None);
+    };
+    let ident = &campaign.identification;
+    let file = LogFile::read(&plan.path, plan.max_bytes)?;
+    let (log, _) = checked_log(run, plan, ident, file)?;
+    let (mut log, _) = steady_part(log, ident, run.band_hz);
+    let Some(x) = displacement(&log) else {
+        return Ok(None);
+    };
+    log.displacement_m = x;
+    let (choice, mut h, _) = estimate_frfs(run, ident, &log, &plan.path)?;
+    let mask = frf::band_mask(&h, run.band_hz, ident.coherence_min);
+    let fs = log.sample_rate_hz;
+    let (_, data) = fit_run(&mut h, &mask, run.band_hz, ident, &choice.plan, fs, None)
+        .map_err(|source| tf_error(&plan.path, source))?;
+    Ok(Some(data))
+}
+
 /// The log stage of one run whose log file is already read.
 pub fn log_stage_from(
     run: &RunPlan,

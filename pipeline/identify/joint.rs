@@ -1643,7 +1643,7 @@ fn solver(problem: &JointProblem, opts: &JointOptions) -> Result<LevenbergMarqua
 mod select;
 pub use select::{
     Candidate, Choice, FTest, HAUSMAN_Z, JointIdentification, P_SIGNIFICANT, RunSpread, Selection,
-    StructureSpread, WEIGHT_FLOOR, identify, run_spread, select,
+    StructureSpread, WEIGHT_FLOOR, identify, refit, run_spread, select,
 };
 
 #[cfg(test)]

@@ -473,6 +473,34 @@ fn from_optimum(fit: &JointFit, opts: &JointOptions) -> JointOptions {
     }
 }
 
+/// `fit`'s structure and extras (friction, seal damping, command gain,
+/// flow law) fitted again to other bins of the same runs, from `fit`'s
+/// optimum: the fit a simulation of the fitted rig gets, whose departure
+/// from the rig simulated is the estimator's bias there.
+pub fn refit(
+    runs: &[JointRun<'_>],
+    fit: &JointFit,
+    opts: &JointOptions,
+) -> Result<JointFit, FitError> {
+    let law = fit.names.contains(&super::FLOW_LAW);
+    let o = JointOptions {
+        friction: fit.friction_n.is_some(),
+        friction_start_n: fit.friction_n.unwrap_or(0.0),
+        seal_damping: fit.seal_damping_ns_per_m.is_some(),
+        command_gain: fit.command_gain.is_some(),
+        command_gain_start: fit.command_gain.unwrap_or(1.0),
+        flow_law: law,
+        max_force_start_n: if law {
+            fit.max_force_n.unwrap_or(f64::INFINITY)
+        } else {
+            opts.max_force_start_n
+        },
+        flow_law_held: !law && fit.max_force_n.is_some(),
+        ..from_optimum(fit, opts)
+    };
+    joint_fit(runs, &fit.rig, &o)
+}
+
 /// [`select`] with the seals' viscous damping as `opts` says.
 fn select_among(
     runs: &[JointRun<'_>],
