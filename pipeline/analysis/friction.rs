@@ -41,34 +41,34 @@ pub fn corrected(
 ) -> Option<FrictionCorrection> {
     let fit = ident.selection.fit()?;
     let (friction, std) = (fit.friction_n?, friction_std(fit)?);
-    if plans.len() != ident.runs.len() || friction <= 0.0 {
+    if !simulable(plans, ident, fit) || friction <= 0.0 {
         return None;
     }
-    if plans.iter().any(|p| {
-        p.specimen
-            .linear()
-            .is_none_or(|s| s.mck().0 + fit.piston_mass_kg.unwrap_or(0.0) <= 0.0)
-    }) {
-        return None;
-    }
-    let widths: Vec<f64> = match opts.friction_smoothing_m_per_s {
-        Some(v0) => vec![v0],
-        None => WIDTHS_M_PER_S.to_vec(),
-    };
+    let widths = widths(opts);
     // The bias is in proportion to F (-6.6 and -6.7 % at 7.69 and 8 N; a
     // secant step through a second refit at F^2 / F' moved the suite's
     // frictions by under 0.1 %), so the friction whose fit reads F is
     // F^2 / F'.
-    let cases: Vec<(f64, f64)> = widths.iter().map(|&w| (w, friction)).collect();
-    let rows: Vec<WidthCorrection> = widths
+    let cases: Vec<Case> = widths
+        .iter()
+        .map(|&v0| Case {
+            friction_n: friction,
+            smoothing_m_per_s: v0,
+            max_force_n: fit.max_force_n,
+        })
+        .collect();
+    let mut rows = Vec::with_capacity(widths.len());
+    for (&v0, refit) in widths
         .iter()
         .zip(refits(campaign, plans, ident, opts, &cases)?)
-        .map(|(&v0, refit)| WidthCorrection {
+    {
+        let refit = refit.friction_n.filter(|&r| r > 0.0)?;
+        rows.push(WidthCorrection {
             smoothing_m_per_s: v0,
             refit_n: refit,
             corrected_n: friction * friction / refit,
-        })
-        .collect();
+        });
+    }
     let lo = rows
         .iter()
         .map(|r| r.corrected_n)
@@ -83,6 +83,62 @@ pub fn corrected(
         width_std_n: 0.5 * (hi - lo),
         widths: rows,
     })
+}
+
+/// Whether every fitted FRF is an identification run's (`plans`) with a
+/// moving mass for the friction to act on: the specimen's or the piston's.
+fn simulable(plans: &[&RunPlan], ident: &JointIdentification<'_>, fit: &JointFit) -> bool {
+    plans.len() == ident.runs.len()
+        && plans.iter().all(|p| {
+            p.specimen
+                .linear()
+                .is_some_and(|s| s.mck().0 + fit.piston_mass_kg.unwrap_or(0.0) > 0.0)
+        })
+}
+
+/// The widths v0 (m/s) simulated: the manifest's, else [`WIDTHS_M_PER_S`].
+fn widths(opts: &JointOptions) -> Vec<f64> {
+    match opts.friction_smoothing_m_per_s {
+        Some(v0) => vec![v0],
+        None => WIDTHS_M_PER_S.to_vec(),
+    }
+}
+
+/// The flow law the chosen fit took beside the friction, where it is what
+/// the friction's describing function leaves and not the valve's: the
+/// fitted rig simulated with the friction alone at each width, fitted
+/// again with the law freed, reads an F_max too, and the data's 1 / F_max
+/// is within 3 of its stds of the largest such reading. Returns the
+/// data's F_max and the simulations' smallest; None where the law is not
+/// fitted beside friction, the nameplate gives F_max, or the rig cannot be
+/// simulated.
+pub fn law_artifact(
+    campaign: &Campaign,
+    plans: &[&RunPlan],
+    ident: &JointIdentification<'_>,
+    opts: &JointOptions,
+) -> Option<(f64, f64)> {
+    let fit = ident.selection.fit()?;
+    let k = fit.names.iter().position(|n| *n == joint::FLOW_LAW)?;
+    let (friction, max_force) = (fit.friction_n?, fit.max_force_n?);
+    if opts.max_force_nameplate_n.is_some() || !simulable(plans, ident, fit) {
+        return None;
+    }
+    let cases: Vec<Case> = widths(opts)
+        .into_iter()
+        .map(|v0| Case {
+            friction_n: friction,
+            smoothing_m_per_s: v0,
+            max_force_n: None,
+        })
+        .collect();
+    // A refit that finds no law (or fails) reads 1 / F_max = 0.
+    let read = refits(campaign, plans, ident, opts, &cases)?
+        .iter()
+        .map(|r| r.max_force_n.map_or(0.0, |f| 1.0 / f))
+        .fold(0.0, f64::max);
+    let (kappa, std) = (1.0 / max_force, fit.std[k] / (max_force * max_force));
+    (read > 0.0 && kappa < read + 3.0 * std).then(|| (max_force, 1.0 / read))
 }
 
 /// `c` into `result`: the friction parameter corrected, with the width's
@@ -132,30 +188,35 @@ pub fn apply(c: FrictionCorrection, result: &mut JointResult, warnings: &mut [Wa
 /// How the friction's warning begins (`analysis::joint`).
 pub const FRICTION_HEADLINE: &str = "rig: seal friction, not linear at this amplitude";
 
-/// The friction the chosen fit finds, fitted again from its optimum on each
-/// identification run simulated with each (v0, F) of `cases`; None where a
-/// simulation, its log stage or its refit fails, or a refit finds none.
+/// What the fitted rig is simulated with beyond its linear part: the
+/// friction F tanh(v / v0) and, where given, the flow law's F_max.
+#[derive(Debug, Clone, Copy)]
+struct Case {
+    friction_n: f64,
+    smoothing_m_per_s: f64,
+    max_force_n: Option<f64>,
+}
+
+/// The chosen fit fitted again from its optimum on every identification
+/// run simulated with each of `cases`; None where a simulation, its log
+/// stage or its refit fails.
 fn refits(
     campaign: &Campaign,
     plans: &[&RunPlan],
     ident: &JointIdentification<'_>,
     opts: &JointOptions,
-    cases: &[(f64, f64)],
-) -> Option<Vec<f64>> {
+    cases: &[Case],
+) -> Option<Vec<JointFit>> {
     let fit = ident.selection.fit()?;
     // Every simulation side by side, gathered in (case, run) order: the
     // same bits on any number of threads.
-    let tasks: Vec<(f64, f64, usize)> = cases
+    let tasks: Vec<(Case, usize)> = cases
         .iter()
-        .flat_map(|&(v0, f)| (0..plans.len()).map(move |i| (v0, f, i)))
+        .flat_map(|&c| (0..plans.len()).map(move |i| (c, i)))
         .collect();
     let simulated: Vec<Result<Option<FitData>, LogStageError>> = tasks
         .par_iter()
-        .map(|&(v0, f, i)| {
-            fit_data_with(campaign, plans[i], |log| {
-                simulate(fit, plans[i], (f, v0), log)
-            })
-        })
+        .map(|&(c, i)| fit_data_with(campaign, plans[i], |log| simulate(fit, plans[i], c, log)))
         .collect();
     simulated
         .chunks(plans.len())
@@ -182,10 +243,7 @@ fn refits(
                     ..*r
                 })
                 .collect();
-            joint::refit(&runs, fit, opts)
-                .ok()?
-                .friction_n
-                .filter(|&r| r > 0.0)
+            joint::refit(&runs, fit, opts).ok()
         })
         .collect()
 }
@@ -240,17 +298,12 @@ fn align(measured: &JointRun<'_>, sim: &FitData) -> Aligned {
     a
 }
 
-/// The fitted rig's displacement through `log`'s command with the friction
-/// F tanh(x2 / v0) of `(F, v0)`: the rig at the run's P gain with the chosen
+/// The fitted rig's displacement through `log`'s command with `case`'s
+/// friction and flow law: the rig at the run's P gain with the chosen
 /// structure's mode at its place, the piston's mass, the seals' damping,
 /// the flow law where fitted, and the sensor's delay. The command's first
 /// sample is the rest the rig starts from (its static response added).
-fn simulate(
-    fit: &JointFit,
-    plan: &RunPlan,
-    (friction, v0): (f64, f64),
-    log: &Log,
-) -> Option<Vec<f64>> {
+fn simulate(fit: &JointFit, plan: &RunPlan, case: Case, log: &Log) -> Option<Vec<f64>> {
     let mode = fit.mode.map(|(hz, zeta)| ValveMode {
         natural_frequency_hz: hz,
         damping_ratio: zeta,
@@ -266,11 +319,11 @@ fn simulate(
             measurement_mode: at(Place::Measurement),
             piston_mass_kg: fit.piston_mass_kg,
             actuator_friction: Some(ActuatorFriction {
-                coulomb_force_n: friction,
-                smoothing_velocity_m_per_s: v0,
+                coulomb_force_n: case.friction_n,
+                smoothing_velocity_m_per_s: case.smoothing_m_per_s,
                 viscous_ns_per_m: fit.seal_damping_ns_per_m.unwrap_or(0.0).max(0.0),
             }),
-            max_force_n: fit.max_force_n,
+            max_force_n: case.max_force_n,
         },
     };
     let u0 = *log.command_m.first()?;

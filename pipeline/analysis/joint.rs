@@ -131,7 +131,17 @@ pub fn joint(
     opts.friction_smoothing_m_per_s = campaign.joint.friction_smoothing_m_per_s;
     let choice = campaign.joint.structure;
     let band_top = fitted.iter().map(|(p, ..)| p.band_hz.1).fold(0.0, f64::max);
-    let ident = joint::identify(runs, start, &opts, choice, band_top);
+    let mut ident = joint::identify(runs.clone(), start, &opts, choice, band_top);
+    // Only identification runs can be simulated through their own logs.
+    let plans: Vec<&RunPlan> = fitted.iter().map(|f| f.0).collect();
+    let simulable = fitted.len() == identification_frfs;
+    let artifact = simulable
+        .then(|| super::friction::law_artifact(campaign, &plans, &ident, &opts))
+        .flatten();
+    if artifact.is_some() {
+        opts.try_flow_law = false;
+        ident = joint::identify(runs, start, &opts, choice, band_top);
+    }
     if ident.stiffening_rejected {
         warnings.push(Warning::new(
             "rig: the springs' cubic term is not borne out by their FRFs; the stated k are used",
@@ -157,11 +167,13 @@ pub fn joint(
     let mut result = describe(
         &ident, known, &ids, campaign, sequential, seq_chi2, warnings,
     );
-    if ids.len() == identification_frfs {
-        let plans: Vec<&RunPlan> = fitted.iter().map(|f| f.0).collect();
-        if let Some(c) = super::friction::corrected(campaign, &plans, &ident, &opts) {
-            super::friction::apply(c, &mut result, warnings);
-        }
+    if let Some((data, simulated)) = artifact {
+        result.explanation.push_str(&format!(
+            "; the valve's flow law the F test took beside the friction (F_max = {data:.0} N) is left out: the rig simulated with its friction alone and fitted again reads a law as strong (F_max = {simulated:.0} N), so it is what the friction's describing function leaves, not the valve's"
+        ));
+    }
+    if simulable && let Some(c) = super::friction::corrected(campaign, &plans, &ident, &opts) {
+        super::friction::apply(c, &mut result, warnings);
     }
     if ids.len() > identification_frfs {
         result.explanation.push_str(&format!(
