@@ -20,6 +20,15 @@
 //!   leaves), on the record as logged (at rest at both ends) and cut 1.5 s
 //!   before its end (in motion: the transient fitted beside each model).
 //!
+//! - `campaign/*`: the rig from the bundled default's three identification
+//!   runs (no specimen, k1, k2; no validation runs, no sensitivity), linear
+//!   and with a 0.5 kg piston under 8 N of seal friction (tanh(v / 2 mm/s)),
+//!   whose friction is then corrected by simulating the fitted rig at three
+//!   widths (`analysis::friction`): what a campaign with friction pays for
+//!   a friction whose std covers it (throughput in log samples/s).
+//!   Measured on two cores (7 December 2026): linear 362 ms, with friction
+//!   5.83 s, of which the correction 5.3 s (537 ms with it switched off).
+//!
 //! `cargo bench --bench identify`
 
 use std::hint::black_box;
@@ -121,5 +130,59 @@ fn bench_identify(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(benches, bench_identify);
+/// The bundled default's three identification runs as a campaign, with
+/// `unmodelled` in `[rig.unmodelled]`, simulated into `dir`: the campaign
+/// and its logs' samples.
+fn identification_campaign(
+    root: &std::path::Path,
+    dir: &std::path::Path,
+    unmodelled: &str,
+) -> (servoid::manifest::Campaign, u64) {
+    let text = std::fs::read_to_string(root.join("experiments/maghareh2018/simulation.toml"))
+        .expect("the bundled default");
+    let runs = text.find("[[runs]]\nid = \"exp1\"").expect("exp1");
+    let sensitivity = text.find("[sensitivity]").expect("its sensitivity");
+    let identification = text.find("[[runs]]").expect("runs");
+    let text = format!(
+        "{}{}",
+        &text[..sensitivity].replace("[excitation]", &format!("{unmodelled}\n[excitation]")),
+        &text[identification..runs],
+    );
+    let plan = load_simulation_str(&text, &dir.join("simulation.toml")).unwrap();
+    let sim = simulate_campaign(&plan, dir).expect("simulates");
+    let campaign = load(&sim.manifest).expect("the generated manifest loads");
+    let samples = 3 * (172.0 * 2048.0) as u64;
+    (campaign, samples)
+}
+
+fn bench_campaign(c: &mut Criterion) {
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+    let mut group = c.benchmark_group("campaign");
+    group.sample_size(10);
+    for (name, unmodelled) in [
+        ("linear", ""),
+        (
+            "seal_friction",
+            "[rig.unmodelled]\npiston_mass_kg = 0.5\nactuator_friction = { coulomb_force_n = 8.0, smoothing_velocity_m_per_s = 0.002 }\n",
+        ),
+    ] {
+        let dir = tempfile::tempdir().expect("a temporary folder");
+        let (campaign, samples) = identification_campaign(root, dir.path(), unmodelled);
+        // Fail loudly rather than time a campaign that does not do its work.
+        let results = servoid::run::analyse(&campaign);
+        let joint = results
+            .rig
+            .as_ref()
+            .and_then(|r| r.joint.as_ref())
+            .expect("a joint fit");
+        assert_eq!(joint.friction_correction.is_some(), !unmodelled.is_empty());
+        group.throughput(Throughput::Elements(samples));
+        group.bench_function(name, |b| {
+            b.iter(|| servoid::run::analyse(black_box(&campaign)))
+        });
+    }
+    group.finish();
+}
+
+criterion_group!(benches, bench_identify, bench_campaign);
 criterion_main!(benches);

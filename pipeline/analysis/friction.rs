@@ -25,7 +25,7 @@ use crate::warning::Warning;
 /// The zero-crossing widths v0 (m/s) the fitted rig is simulated at where
 /// the manifest states none: from a seal that reverses within a quarter of
 /// a millimetre per second to one that rounds off over 4 mm/s, the range
-/// over which the bias moves from -12 to -5 % (docs/accuracy.md).
+/// over which an 8 N friction's bias moves from -13 to -7 % (docs/accuracy.md).
 pub const WIDTHS_M_PER_S: [f64; 3] = [2.5e-4, 1e-3, 4e-3];
 
 /// The chosen fit's friction corrected for its bias, where it has one and
