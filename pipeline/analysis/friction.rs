@@ -272,20 +272,7 @@ fn align(measured: &JointRun<'_>, sim: &FitData) -> Aligned {
         amplitude_m: measured.amplitude_m.map(|_| Vec::new()),
     };
     for (k, &f) in measured.freq_hz.iter().enumerate() {
-        let Ok(j) = sim
-            .freq_hz
-            .binary_search_by(|g| g.total_cmp(&f))
-            .or_else(|j| {
-                [j.wrapping_sub(1), j]
-                    .into_iter()
-                    .find(|&j| {
-                        sim.freq_hz
-                            .get(j)
-                            .is_some_and(|g| (g / f - 1.0).abs() < 1e-9)
-                    })
-                    .ok_or(())
-            })
-        else {
+        let Some(j) = crate::frf::bin_at(&sim.freq_hz, f, 1e-9) else {
             continue;
         };
         a.freq_hz.push(f);

@@ -782,6 +782,18 @@ fn noise_std(x: &[f64], w: usize) -> (f64, f64) {
     (sigma.max(1e-9 * rms), rms)
 }
 
+/// The index of the bin at `f_hz` in the ascending grid `freq_hz`: the
+/// same frequency within `rel_tol` of it, as two FRFs of the same record
+/// length and rate share their bins. None where the grid has no such bin.
+pub fn bin_at(freq_hz: &[f64], f_hz: f64, rel_tol: f64) -> Option<usize> {
+    let j = freq_hz.partition_point(|&g| g < f_hz);
+    [j.wrapping_sub(1), j].into_iter().find(|&j| {
+        freq_hz
+            .get(j)
+            .is_some_and(|g| (g / f_hz - 1.0).abs() <= rel_tol)
+    })
+}
+
 /// Bins to fit: inside `band_hz` (inclusive), coherence at least
 /// `coherence_min`, a finite, non-zero estimate, and for a single record
 /// (the ETFE) an input there: a bin whose |U|^2 is below

@@ -1429,3 +1429,18 @@ fn many_outputs_get_the_bits_each_gets_alone() {
         estimate(&u, &[Output { y: short, plan: &p }], FS_HZ, keep).unwrap_err()
     );
 }
+
+/// A bin is found at its own frequency, or a hair off it, at either end of
+/// the grid, and not between bins or beyond the grid.
+#[test]
+fn a_bin_is_found_at_its_frequency_only() {
+    let grid = [0.1, 0.2, 0.3];
+    assert_eq!(bin_at(&grid, 0.1, 1e-9), Some(0));
+    assert_eq!(bin_at(&grid, 0.2 * (1.0 + 1e-12), 1e-9), Some(1));
+    assert_eq!(bin_at(&grid, 0.2 * (1.0 - 1e-12), 1e-9), Some(1));
+    assert_eq!(bin_at(&grid, 0.3, 1e-9), Some(2));
+    assert_eq!(bin_at(&grid, 0.25, 1e-9), None);
+    assert_eq!(bin_at(&grid, 0.05, 1e-9), None);
+    assert_eq!(bin_at(&grid, 0.4, 1e-9), None);
+    assert_eq!(bin_at(&[], 0.1, 1e-9), None);
+}

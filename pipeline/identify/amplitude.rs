@@ -212,21 +212,7 @@ fn shared_bins(run: &SeriesRun<'_>, reference: &SeriesRun<'_>) -> Shared {
         .iter()
         .enumerate()
         .filter_map(|(i, &f)| {
-            let j = reference
-                .freq_hz
-                .binary_search_by(|g| g.total_cmp(&f))
-                .or_else(|j| {
-                    [j.wrapping_sub(1), j]
-                        .into_iter()
-                        .find(|&j| {
-                            reference
-                                .freq_hz
-                                .get(j)
-                                .is_some_and(|g| (g / f - 1.0).abs() < 1e-6)
-                        })
-                        .ok_or(())
-                })
-                .ok()?;
+            let j = crate::frf::bin_at(reference.freq_hz, f, 1e-6)?;
             let (a, b) = (run.h[i], reference.h[j]);
             let rel = run.variance[i] / a.norm_sqr() + reference.variance[j] / b.norm_sqr();
             (rel > 0.0 && rel.is_finite()).then(|| {
