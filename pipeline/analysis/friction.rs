@@ -16,7 +16,7 @@ use super::log_stage::{LogStageError, fit_data_with};
 use crate::identify::FitData;
 use crate::identify::joint::{self, JointFit, JointIdentification, JointOptions, JointRun, Place};
 use crate::ingest::Log;
-use crate::manifest::{Campaign, RunPlan};
+use crate::manifest::{Campaign, Role, RunPlan};
 use crate::results::{FrictionCorrection, JointResult, WidthCorrection};
 use crate::simulate::ode::Integrator;
 use crate::simulate::plant::{self, ActuatorFriction, PlantSpec, Unmodelled, ValveMode};
@@ -85,14 +85,17 @@ pub fn corrected(
     })
 }
 
-/// Whether every fitted FRF is an identification run's (`plans`) with a
-/// moving mass for the friction to act on: the specimen's or the piston's.
+/// Whether every fitted FRF (`plans`, one per FRF) is an identification
+/// run's, which can be simulated through its own log (a validation run's
+/// FRFs in the fit cannot), with a moving mass for the friction to act on:
+/// the specimen's or the piston's.
 fn simulable(plans: &[&RunPlan], ident: &JointIdentification<'_>, fit: &JointFit) -> bool {
     plans.len() == ident.runs.len()
         && plans.iter().all(|p| {
-            p.specimen
-                .linear()
-                .is_some_and(|s| s.mck().0 + fit.piston_mass_kg.unwrap_or(0.0) > 0.0)
+            p.role != Role::Validation
+                && p.specimen
+                    .linear()
+                    .is_some_and(|s| s.mck().0 + fit.piston_mass_kg.unwrap_or(0.0) > 0.0)
         })
 }
 
@@ -208,28 +211,29 @@ fn refits(
     cases: &[Case],
 ) -> Option<Vec<JointFit>> {
     let fit = ident.selection.fit()?;
-    // Every simulation side by side, gathered in (case, run) order: the
-    // same bits on any number of threads.
-    let tasks: Vec<(Case, usize)> = cases
-        .iter()
-        .flat_map(|&c| (0..plans.len()).map(move |i| (c, i)))
-        .collect();
-    let simulated: Vec<Result<Option<FitData>, LogStageError>> = tasks
+    // Each run's log read once and every case simulated through it, side
+    // by side, gathered in (run, case) order: the same bits on any number
+    // of threads.
+    let simulated: Vec<Result<Option<Vec<Option<FitData>>>, LogStageError>> = plans
         .par_iter()
-        .map(|&(c, i)| fit_data_with(campaign, plans[i], |log| simulate(fit, plans[i], c, log)))
+        .map(|&p| {
+            fit_data_with(campaign, p, cases.len(), |log, c| {
+                simulate(fit, p, cases[c], log)
+            })
+        })
         .collect();
-    simulated
-        .chunks(plans.len())
-        .map(|chunk| {
-            let data: Vec<FitData> = chunk
-                .iter()
-                .map(|r| r.as_ref().ok().cloned().flatten())
-                .collect::<Option<_>>()?;
+    let by_run: Vec<Vec<FitData>> = simulated
+        .into_iter()
+        .map(|r| r.ok().flatten()?.into_iter().collect::<Option<Vec<_>>>())
+        .collect::<Option<_>>()?;
+    (0..cases.len())
+        .map(|c| {
+            let data: Vec<&FitData> = by_run.iter().map(|run| &run[c]).collect();
             let aligned: Vec<Aligned> = ident
                 .runs
                 .iter()
                 .zip(&data)
-                .map(|(r, d)| align(r, d))
+                .map(|(r, &d)| align(r, d))
                 .collect();
             let runs: Vec<JointRun<'_>> = ident
                 .runs

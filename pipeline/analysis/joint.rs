@@ -116,28 +116,12 @@ pub fn joint(
             spring_cubic_n_per_m3: *cubic,
         })
         .collect();
-    let mut opts = options(&campaign.identification, start, fs);
-    // Harmonics in the loaded runs alone, of springs that do not stiffen,
-    // are the flow law's: it is tried, and no friction is fitted for them.
-    // Where the unloaded run has them too the friction is fitted, and the
-    // law, whose harmonics the friction's hide, is tried beside it.
-    let stiffening = evidence
-        .iter()
-        .any(|(_, e)| e.spring_cubic_n_per_m3.is_some());
-    let under_load = !stiffening && super::evidence::harmonics_under_load_only(evidence);
-    opts.friction = evidence.iter().any(|(_, e)| e.friction_signature) && !under_load;
-    opts.try_flow_law = load_gain || under_load || (opts.friction && !stiffening);
-    opts.max_force_nameplate_n = campaign.manifest.rig.max_force_n();
-    opts.friction_smoothing_m_per_s = campaign.joint.friction_smoothing_m_per_s;
+    let mut opts = campaign_options(campaign, evidence, start, fs, load_gain);
     let choice = campaign.joint.structure;
     let band_top = fitted.iter().map(|(p, ..)| p.band_hz.1).fold(0.0, f64::max);
     let mut ident = joint::identify(runs.clone(), start, &opts, choice, band_top);
-    // Only identification runs can be simulated through their own logs.
     let plans: Vec<&RunPlan> = fitted.iter().map(|f| f.0).collect();
-    let simulable = fitted.len() == identification_frfs;
-    let artifact = simulable
-        .then(|| super::friction::law_artifact(campaign, &plans, &ident, &opts))
-        .flatten();
+    let artifact = super::friction::law_artifact(campaign, &plans, &ident, &opts);
     if artifact.is_some() {
         opts.try_flow_law = false;
         ident = joint::identify(runs, start, &opts, choice, band_top);
@@ -172,7 +156,7 @@ pub fn joint(
             "; the valve's flow law the F test took beside the friction (F_max = {data:.0} N) is left out: the rig simulated with its friction alone and fitted again reads a law as strong (F_max = {simulated:.0} N), so it is what the friction's describing function leaves, not the valve's"
         ));
     }
-    if simulable && let Some(c) = super::friction::corrected(campaign, &plans, &ident, &opts) {
+    if let Some(c) = super::friction::corrected(campaign, &plans, &ident, &opts) {
         super::friction::apply(c, &mut result, warnings);
     }
     if ids.len() > identification_frfs {
@@ -241,6 +225,32 @@ fn fitted_frfs<'a>(
         }
     }
     Some((fitted, identification_frfs))
+}
+
+/// The campaign's joint-fit options: [`options`] with the friction and the
+/// flow law tried as the runs' evidence says, and the manifest's nameplate
+/// and friction width.
+fn campaign_options(
+    campaign: &Campaign,
+    evidence: &[(&RunPlan, &Evidence)],
+    start: &RigParams,
+    fs: f64,
+    load_gain: bool,
+) -> JointOptions {
+    let mut opts = options(&campaign.identification, start, fs);
+    // Harmonics in the loaded runs alone, of springs that do not stiffen,
+    // are the flow law's: it is tried, and no friction is fitted for them.
+    // Where the unloaded run has them too the friction is fitted, and the
+    // law, whose harmonics the friction's hide, is tried beside it.
+    let stiffening = evidence
+        .iter()
+        .any(|(_, e)| e.spring_cubic_n_per_m3.is_some());
+    let under_load = !stiffening && super::evidence::harmonics_under_load_only(evidence);
+    opts.friction = evidence.iter().any(|(_, e)| e.friction_signature) && !under_load;
+    opts.try_flow_law = load_gain || under_load || (opts.friction && !stiffening);
+    opts.max_force_nameplate_n = campaign.manifest.rig.max_force_n();
+    opts.friction_smoothing_m_per_s = campaign.joint.friction_smoothing_m_per_s;
+    opts
 }
 
 /// The joint fit's options from the campaign's identification settings,

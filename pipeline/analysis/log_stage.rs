@@ -905,30 +905,43 @@ fn settings_warning(
 }
 
 /// A run's bins as its own log stage makes them, with the logged
-/// displacement replaced by `displacement` of the checked log (a
-/// simulation driven by its own command); None where the run has no log or
-/// `displacement` gives none.
+/// displacement replaced, in turn, by each of `n` displacements
+/// `displacement(log, i)` of the checked log (simulations driven by its
+/// own command), side by side; the log is read and checked once. Each is
+/// None where `displacement` gives none; the whole None where the run has
+/// no log.
 pub fn fit_data_with(
     campaign: &Campaign,
     run: &RunPlan,
-    displacement: impl Fn(&Log) -> Option<Vec<f64>>,
-) -> Result<Option<FitData>, LogStageError> {
+    n: usize,
+    displacement: impl Fn(&Log, usize) -> Option<Vec<f64>> + Sync,
+) -> Result<Option<Vec<Option<FitData>>>, LogStageError> {
+    use rayon::prelude::*;
     let RunSource::Log(plan) = &run.source else {
         return Ok(None);
     };
     let ident = &campaign.identification;
     let file = LogFile::read(&plan.path, plan.max_bytes)?;
     let (log, _) = checked_log(run, plan, ident, file)?;
-    let (mut log, _) = steady_part(log, ident, run.band_hz);
-    let Some(x) = displacement(&log) else {
-        return Ok(None);
-    };
-    log.displacement_m = x;
-    let (choice, mut h, _) = estimate_frfs(run, ident, &log, &plan.path)?;
-    let mask = frf::band_mask(&h, run.band_hz, ident.coherence_min);
+    let (log, _) = steady_part(log, ident, run.band_hz);
     let fs = log.sample_rate_hz;
-    let (_, data) = fit_run(&mut h, &mask, run.band_hz, ident, &choice.plan, fs, None)
-        .map_err(|source| tf_error(&plan.path, source))?;
+    let data = (0..n)
+        .into_par_iter()
+        .map(|i| {
+            let Some(displacement_m) = displacement(&log, i) else {
+                return Ok(None);
+            };
+            let log = Log {
+                displacement_m,
+                ..log.clone()
+            };
+            let (choice, mut h, _) = estimate_frfs(run, ident, &log, &plan.path)?;
+            let mask = frf::band_mask(&h, run.band_hz, ident.coherence_min);
+            let (_, data) = fit_run(&mut h, &mask, run.band_hz, ident, &choice.plan, fs, None)
+                .map_err(|source| tf_error(&plan.path, source))?;
+            Ok(Some(data))
+        })
+        .collect::<Result<Vec<_>, LogStageError>>()?;
     Ok(Some(data))
 }
 
