@@ -2,10 +2,11 @@
 //! logs, 120 s at 1 kHz each, written by `servoid simulate` and run by one
 //! `servoid run` process, timed as a whole process the way a lab's cron job
 //! runs it. For CSV and Parquet logs, without figures (`--figures none`)
-//! and with PNG figures (`--figures png`), it reports the wall time, logs/s, MB/s
-//! of log files, the CPU time (user + system) over the wall time, and the
-//! peak RSS, which GNU time (`/usr/bin/time -v`) reads from the kernel; then
-//! the cached rerun into the same output folder. Criterion is not used: it
+//! and with the default figures (no `--figures`: the summary's, PNG), it
+//! reports the wall time, logs/s, MB/s of log files, the CPU time (user +
+//! system) over the wall time, the peak RSS, which GNU time
+//! (`/usr/bin/time -v`) reads from the kernel, and what the job wrote (kB
+//! a log); then the cached rerun into the same output folder. Criterion is not used: it
 //! times closures in its own process, and neither the peak RSS nor a
 //! process's start-up is visible from there.
 //!
@@ -24,6 +25,8 @@
 //! - `SERVOID_NIGHT_REPEATS`: runs of each measurement (default 3; the
 //!   table gives medians and ranges);
 //! - `SERVOID_NIGHT_FORMATS`: `csv,parquet` (the default) or either alone;
+//! - `SERVOID_NIGHT_FIGURES`: the figure choices, `none,default` (the
+//!   default), any of `none`, `default`, `summary`, `png`, `svg`, `all`;
 //! - `SERVOID_NIGHT_JOBS`: passed as `--jobs` (default: servoid's, two
 //!   workers per core);
 //! - `SERVOID_NIGHT_MAX_OTHERS`: on a shared machine, measure a run again
@@ -57,10 +60,16 @@ const LOG_SECONDS: f64 = 120.0;
 /// stiffer one; the others spread over 60-160 kN/m.
 const SPRINGS_N_PER_M: [f64; 3] = [116_640.0, 88_540.0, 150_000.0];
 /// The project's targets for a night on two cores, without figures and
-/// with PNG figures.
+/// with the default figures, and what the default figures' night may
+/// write a log (kB = 1,000 bytes).
 const TARGET_LOGS_PER_S: f64 = 100.0;
-const TARGET_FIGURES_LOGS_PER_S: f64 = 40.0;
+const TARGET_FIGURES_LOGS_PER_S: f64 = 25.0;
+const TARGET_KB_PER_LOG: f64 = 500.0;
 const TARGET_PEAK_RSS_KB: u64 = 1_000_000;
+/// The largest night's peak RSS over the smallest's, at most.
+const TARGET_RSS_GROWTH: f64 = 1.25;
+/// The figure choices the bench knows: `default` passes no `--figures`.
+const FIGURES: [&str; 6] = ["none", "default", "summary", "png", "svg", "all"];
 /// "Both cores busy": CPU time over wall time at least this share of the
 /// cores.
 const TARGET_CPU_SHARE: f64 = 0.9;
@@ -89,6 +98,7 @@ struct Config {
     sizes: Vec<usize>,
     repeats: usize,
     formats: Vec<Format>,
+    figures: Vec<&'static str>,
     jobs: Option<usize>,
     /// Measure a run again when the rest of the machine used more than
     /// this many cores meanwhile.
@@ -107,6 +117,8 @@ struct Sample {
     /// CPU time the rest of the machine used meanwhile (s): other builds
     /// and benchmarks on the same cores; None where /proc/stat is missing.
     other_cpu_s: Option<f64>,
+    /// Bytes in the output folder once the job is done.
+    out_bytes: u64,
     /// None when the process exited with 0; else how it ended and the last
     /// line of its stderr.
     failure: Option<String>,
@@ -189,6 +201,15 @@ fn config() -> Result<Config, String> {
             )),
         })
         .collect::<Result<Vec<_>, _>>()?;
+    let figures = env_list::<String>("SERVOID_NIGHT_FIGURES", "none,default")?
+        .iter()
+        .map(|f| {
+            FIGURES.iter().copied().find(|k| k == f).ok_or(format!(
+                "SERVOID_NIGHT_FIGURES: `{f}` is not one of {}",
+                FIGURES.join(", ")
+            ))
+        })
+        .collect::<Result<Vec<_>, _>>()?;
     let jobs = env_list::<usize>("SERVOID_NIGHT_JOBS", "")?
         .first()
         .copied();
@@ -217,6 +238,7 @@ fn config() -> Result<Config, String> {
         sizes,
         repeats,
         formats,
+        figures,
         jobs,
         max_others,
         dir,
@@ -415,7 +437,10 @@ fn measure(config: &Config, campaign: &Path, out: &Path, figures: &str) -> Resul
         .arg(campaign)
         .arg("--out")
         .arg(out)
-        .args(["--figures", figures, "--quiet"]);
+        .arg("--quiet");
+    if figures != "default" {
+        cmd.args(["--figures", figures]);
+    }
     if let Some(j) = config.jobs {
         cmd.args(["--jobs", &j.to_string()]);
     }
@@ -472,8 +497,24 @@ fn measure(config: &Config, campaign: &Path, out: &Path, figures: &str) -> Resul
         other_cpu_s: busy_before
             .zip(busy_after)
             .map(|(a, b)| (b - a - user_s - system_s).max(0.0)),
+        out_bytes: folder_bytes(out),
         failure,
     })
+}
+
+/// The bytes of the files under `dir`, its subfolders (the cache) included.
+fn folder_bytes(dir: &Path) -> u64 {
+    let Ok(entries) = std::fs::read_dir(dir) else {
+        return 0;
+    };
+    entries
+        .flatten()
+        .map(|e| match e.file_type() {
+            Ok(t) if t.is_dir() => folder_bytes(&e.path()),
+            Ok(_) => e.metadata().map_or(0, |m| m.len()),
+            Err(_) => 0,
+        })
+        .sum()
 }
 
 /// CPU time every core of the machine has spent busy since boot (s), from
@@ -504,8 +545,7 @@ fn night(config: &Config) -> Result<(), String> {
         for &format in &config.formats {
             let (campaign, log_bytes) = generate(config, n, format)?;
             let base = campaign.parent().expect("a folder");
-            let mut these: Vec<Row> = ["none", "png"]
-                .iter()
+            let mut these: Vec<Row> = (config.figures.iter())
                 .flat_map(|&figures| {
                     [false, true].map(|cached| Row {
                         logs: n,
@@ -632,9 +672,9 @@ fn table(config: &Config, rows: &[Row], cores: usize, total_s: f64) -> String {
     );
     let _ = writeln!(
         t,
-        "| logs | format | MB of logs | figures | run | wall s | logs/s | MB/s of logs | CPU/wall | peak RSS kB | others' CPU/wall | failed |"
+        "| logs | format | MB of logs | figures | run | wall s | logs/s | MB/s of logs | CPU/wall | peak RSS kB | kB written a log | others' CPU/wall | failed |"
     );
-    let _ = writeln!(t, "|---|---|---|---|---|---|---|---|---|---|---|---|");
+    let _ = writeln!(t, "|---|---|---|---|---|---|---|---|---|---|---|---|---|");
     let mut redone = 0;
     for row in rows {
         let n = row.logs as f64;
@@ -642,7 +682,7 @@ fn table(config: &Config, rows: &[Row], cores: usize, total_s: f64) -> String {
         let failures = row.failures();
         let _ = writeln!(
             t,
-            "| {} | {} | {mb:.0} | {} | {} | {} | {} | {} | {} | {} | {} | {} |",
+            "| {} | {} | {mb:.0} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |",
             row.logs,
             row.format.name(),
             row.figures,
@@ -657,6 +697,7 @@ fn table(config: &Config, rows: &[Row], cores: usize, total_s: f64) -> String {
             },
             spread(&row.samples, cpu_share, 2),
             spread(&row.samples, |s| s.peak_rss_kb as f64, 0),
+            spread(&row.samples, |s| s.out_bytes as f64 / 1e3 / n, 0),
             if row.samples.iter().all(|s| s.other_cpu_s.is_some()) {
                 spread(&row.samples, |s| s.other_cpu_s.unwrap_or(0.0) / s.wall_s, 2)
             } else {
@@ -693,7 +734,7 @@ fn table(config: &Config, rows: &[Row], cores: usize, total_s: f64) -> String {
     // The targets.
     let _ = writeln!(
         t,
-        "\n### Targets ({cores} cores)\n\nParquet at least {TARGET_LOGS_PER_S} logs/s without figures and {TARGET_FIGURES_LOGS_PER_S} with PNG figures, with CPU/wall at least {:.1}; peak RSS under {TARGET_PEAK_RSS_KB} kB, and not growing with the number of logs.\n",
+        "\n### Targets ({cores} cores)\n\nParquet at least {TARGET_LOGS_PER_S} logs/s without figures and {TARGET_FIGURES_LOGS_PER_S} with the default figures, writing at most {TARGET_KB_PER_LOG} kB a log, with CPU/wall at least {:.1}; peak RSS under {TARGET_PEAK_RSS_KB} kB, and the largest night's at most {TARGET_RSS_GROWTH} times the smallest's.\n",
         TARGET_CPU_SHARE * cores as f64
     );
     for row in rows
@@ -715,9 +756,15 @@ fn table(config: &Config, rows: &[Row], cores: usize, total_s: f64) -> String {
         } else {
             let logs_s = median(row.ok().map(|s| row.logs as f64 / s.wall_s).collect());
             let cpu = median(row.ok().map(cpu_share).collect());
-            let ok = logs_s >= target && cpu >= TARGET_CPU_SHARE * cores as f64;
+            let kb = median(
+                row.ok()
+                    .map(|s| s.out_bytes as f64 / 1e3 / row.logs as f64)
+                    .collect(),
+            );
+            let small = row.figures == "none" || kb <= TARGET_KB_PER_LOG;
+            let ok = logs_s >= target && cpu >= TARGET_CPU_SHARE * cores as f64 && small;
             format!(
-                "{logs_s:.0} logs/s, CPU/wall {cpu:.2}: {}",
+                "{logs_s:.0} logs/s, CPU/wall {cpu:.2}, {kb:.0} kB written a log: {}",
                 if ok { "met" } else { "NOT met" }
             )
         };
@@ -742,7 +789,29 @@ fn table(config: &Config, rows: &[Row], cores: usize, total_s: f64) -> String {
     }
     if config.sizes.len() > 1 {
         for &format in &config.formats {
-            for figures in ["none", "png"] {
+            for &figures in &config.figures {
+                let kb_at = |n: usize| {
+                    let r = rows.iter().find(|r| {
+                        r.logs == n && r.format == format && r.figures == figures && !r.cached
+                    })?;
+                    Some(median(
+                        r.samples.iter().map(|s| s.peak_rss_kb as f64).collect(),
+                    ))
+                };
+                let (first, last) = (config.sizes[0], config.sizes[config.sizes.len() - 1]);
+                if let (Some(a), Some(b)) = (kb_at(first), kb_at(last)) {
+                    let growth = b / a;
+                    let _ = writeln!(
+                        t,
+                        "- peak RSS at {last} logs over {first}, {} figures {figures}: {growth:.2}: {}",
+                        format.name(),
+                        if growth <= TARGET_RSS_GROWTH {
+                            "met"
+                        } else {
+                            "NOT met"
+                        }
+                    );
+                }
                 let per_size: Vec<String> = config
                     .sizes
                     .iter()

@@ -49,7 +49,7 @@ fn campaign(n: usize) -> Results {
 /// Every page of `results`; their total length (so nothing is optimised
 /// away).
 fn render(results: &Results) -> usize {
-    let pages = Pages::new(results, Some("no figures (bench)")).expect("templates");
+    let pages = Pages::new(results, servoid::report::FigureFormats::None).expect("templates");
     let mut bytes = pages.campaign(&[]).expect("campaign page").len();
     for run in &results.runs {
         bytes += pages.run(run, &[]).expect("run page").len();

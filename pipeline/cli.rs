@@ -87,9 +87,11 @@ fn night_date(text: &str) -> Result<String, String> {
 pub struct RunArgs {
     #[command(flatten)]
     job: JobArgs,
-    /// Which figure files to draw.
-    #[arg(long, value_enum, default_value_t = FigureFormats::All)]
-    figures: FigureFormats,
+    /// Which figures to draw, and as which files. Default: the manifest's
+    /// `report.figures`, else `summary`, or `all` for a campaign that
+    /// numbers a publication's figures.
+    #[arg(long, value_enum)]
+    figures: Option<FigureFormats>,
     /// Do the i-th of n shares of the per-log work (0 <= i < n) into its
     /// own folder, for `servoid merge` (e.g. one Slurm array task each).
     #[arg(long, value_name = "I/N")]
@@ -137,9 +139,11 @@ pub enum Command {
         run: bool,
         #[command(flatten)]
         args: JobArgs,
-        /// Which figure files the campaign's run draws (with --run).
-        #[arg(long, value_enum, default_value_t = FigureFormats::All)]
-        figures: FigureFormats,
+        /// Which figures the campaign's run draws, and as which files (with
+        /// --run). Default: as `servoid run` chooses for the generated
+        /// manifest.
+        #[arg(long, value_enum)]
+        figures: Option<FigureFormats>,
     },
     /// Merge the folders of `servoid run --shard i/n` into the campaign's
     /// results and pages, as one run over all the logs writes them.
@@ -474,7 +478,7 @@ fn cmd_merge(
 ) -> u8 {
     let watch = Watch::new(args);
     let merge = run::MergeSettings {
-        job: settings(args, FigureFormats::All),
+        job: settings(args, None),
         figures,
         manifest,
     };
@@ -677,7 +681,7 @@ fn cmd_verify(results: &Path, manifest: Option<&Path>, jobs: Option<usize>) -> u
     }
 }
 
-fn settings(args: &JobArgs, figures: FigureFormats) -> Settings {
+fn settings(args: &JobArgs, figures: Option<FigureFormats>) -> Settings {
     Settings {
         out: args.out.clone(),
         jobs: capped(args.jobs),
@@ -724,8 +728,13 @@ fn job_failed(e: &JobError, json: bool) -> u8 {
     code
 }
 
-fn cmd_simulate(manifest: &Path, then_run: bool, args: &JobArgs, figures: FigureFormats) -> u8 {
-    if figures != FigureFormats::All && !then_run {
+fn cmd_simulate(
+    manifest: &Path,
+    then_run: bool,
+    args: &JobArgs,
+    figures: Option<FigureFormats>,
+) -> u8 {
+    if figures.is_some() && !then_run {
         warn("error: --figures draws a campaign's figures; it needs --run");
         return EXIT_USAGE;
     }

@@ -1,5 +1,6 @@
-//! `--figures all|png|svg|none`: which figure files a run writes, what the
-//! page shows of them, and that results.json does not depend on the choice.
+//! `--figures summary|all|png|svg|none` and the manifest's `[report]
+//! figures`: which figure files a run writes, what the page shows of them,
+//! and that results.json does not depend on the choice.
 
 use std::path::Path;
 
@@ -87,7 +88,8 @@ fn figures_without_run_and_an_unknown_choice_are_usage_errors() {
     );
     assert_eq!(o.code, 2, "{}", o.stderr);
     assert!(
-        o.stderr.contains("possible values: all, png, svg, none"),
+        o.stderr
+            .contains("possible values: all, png, svg, summary, none"),
         "{}",
         o.stderr
     );
@@ -229,5 +231,90 @@ fn a_rerun_leaves_no_figure_page_or_table_of_an_earlier_one() {
     assert_eq!(
         std::fs::read_to_string(out.join("notes.txt")).unwrap(),
         "the lab's own"
+    );
+}
+
+/// A campaign that numbers no publication's figures draws the summary's by
+/// default, as PNG: each run's FRF, a validation run's time windows and the
+/// campaign's own figures, the run's page saying how to draw the rest;
+/// `[report] figures = "all"` and `--figures all` draw every figure in both
+/// formats, with the same results.json.
+#[test]
+fn a_night_draws_the_summary_and_all_draws_every_figure() {
+    let dir = scratch();
+    let manifest = crate::shards::campaign(dir.path());
+    let text = std::fs::read_to_string(&manifest).unwrap();
+    let cut = text
+        .find("[[numbered_figures]]")
+        .expect("the bundled campaign numbers the paper's figures, last");
+    let night = dir.path().join("sim/night.toml");
+    std::fs::write(&night, &text[..cut]).unwrap();
+    let every = dir.path().join("sim/every.toml");
+    std::fs::write(
+        &every,
+        format!("{}\n[report]\nfigures = \"all\"\n", &text[..cut]),
+    )
+    .unwrap();
+    let run = |manifest: &Path, name: &str, args: &[&str]| {
+        let out = dir.path().join(name);
+        let mut all = args.to_vec();
+        all.push("--quiet");
+        let o = servoid_into(dir.path(), "run", manifest, &out, &all);
+        assert_eq!(o.code, 0, "{name}: {}", o.stderr);
+        out
+    };
+    let summary = run(&night, "summary", &[]);
+    let results: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(summary.join("results.json")).unwrap()).unwrap();
+    let runs: Vec<(String, String)> = results["runs"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|r| {
+            (
+                r["id"].as_str().unwrap().into(),
+                r["role"].as_str().unwrap().into(),
+            )
+        })
+        .collect();
+    assert!(
+        runs.iter().any(|(_, role)| role == "validation"),
+        "{runs:?}"
+    );
+    let mut expected: Vec<String> = runs
+        .iter()
+        .flat_map(|(id, role)| {
+            let mut f = vec![format!("frf-{id}.png")];
+            if role == "validation" {
+                f.push(format!("time-{id}.png"));
+            }
+            f
+        })
+        .chain(["identification-frf.png", "sensitivity.png"].map(String::from))
+        .collect();
+    expected.sort();
+    assert_eq!(listed(&summary, "figures"), expected);
+    let page = std::fs::read_to_string(summary.join("runs/exp1.html")).unwrap();
+    assert!(
+        page.contains("id=\"more-figures\""),
+        "the run's page says how to draw the rest"
+    );
+
+    // Every figure, by the manifest's key and by the command line alike.
+    let by_key = listed(&run(&every, "by-key", &[]), "figures");
+    let all = run(&night, "all", &["--figures", "all"]);
+    assert_eq!(listed(&all, "figures"), by_key);
+    for f in &expected {
+        assert!(by_key.contains(f), "{f} in the summary but not in all");
+        assert!(by_key.contains(&f.replace(".png", ".svg")), "{f}'s SVG");
+    }
+    for id in ["exp1", "spring-k1"] {
+        assert!(by_key.contains(&format!("residual-{id}.png")), "{by_key:?}");
+    }
+    assert!(by_key.contains(&"compensator-exp1.png".to_string()));
+    assert!(
+        std::fs::read(all.join("results.json")).unwrap()
+            == std::fs::read(summary.join("results.json")).unwrap(),
+        "results.json does not depend on the figures"
     );
 }

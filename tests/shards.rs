@@ -85,7 +85,8 @@ fn three_shards_merge_into_the_bytes_of_one_run() {
             .unwrap()
             .flatten()
             .any(|e| {
-                let text = std::fs::read_to_string(e.path()).unwrap();
+                let packed = std::fs::read(e.path()).unwrap();
+                let text = String::from_utf8(zstd::decode_all(packed.as_slice()).unwrap()).unwrap();
                 text.contains("\"excitation_run\"") && text.contains("\"agreement\"")
             })
     };

@@ -396,6 +396,7 @@ fn analysis_manifest(plan: &SimulationPlan, truth: &Truth) -> Manifest {
         sensitivity: m.sensitivity.clone(),
         compensator: None,
         limits: None,
+        report: None,
         design: None,
         numbered_figures: m.numbered_figures.clone(),
     }

@@ -330,9 +330,32 @@ fn per_spring(springs: &[SpringRun], est: &dyn Fn(usize) -> Estimate) -> Vec<Per
         .collect()
 }
 
+/// The Jacobian of [`compute`] by rows, each input's row holding only the
+/// outputs it moves, in ascending order, as (output, derivative): a
+/// spring's outputs do not depend on another spring's fit, so with n
+/// springs a row holds O(1) entries but the no-specimen runs', and the
+/// propagation below costs O(n^2), not O(n^3).
+type Jacobian = Vec<Vec<(usize, f64)>>;
+
+/// The products a * c * b of two rows' entries at the outputs both hold,
+/// in ascending output order.
+fn common<'a>(
+    a: &'a [(usize, f64)],
+    b: &'a [(usize, f64)],
+    c: f64,
+) -> impl Iterator<Item = (usize, f64)> + 'a {
+    let mut j = 0;
+    a.iter().filter_map(move |&(o, x)| {
+        while j < b.len() && b[j].0 < o {
+            j += 1;
+        }
+        (j < b.len() && b[j].0 == o).then(|| (o, x * c * b[j].1))
+    })
+}
+
 /// Standard deviations of the `m` outputs of [`compute`] by first-order
 /// propagation through its Jacobian `jac` of the runs' covariances `covs`.
-fn propagate(jac: &[Vec<f64>], covs: &[[[f64; 3]; 3]], m: usize) -> Vec<f64> {
+fn propagate(jac: &Jacobian, covs: &[[[f64; 3]; 3]], m: usize) -> Vec<f64> {
     let mut var = vec![0.0; m];
     for (b, cov) in covs.iter().enumerate() {
         for p in 0..3 {
@@ -341,8 +364,8 @@ fn propagate(jac: &[Vec<f64>], covs: &[[[f64; 3]; 3]], m: usize) -> Vec<f64> {
                 if c == 0.0 {
                     continue;
                 }
-                for (o, v) in var.iter_mut().enumerate() {
-                    *v += jac[3 * b + p][o] * c * jac[3 * b + q][o];
+                for (o, v) in common(&jac[3 * b + p], &jac[3 * b + q], c) {
+                    var[o] += v;
                 }
             }
         }
@@ -360,13 +383,9 @@ fn run_covariances(no_spec: &[TfEstimate], springs: &[SpringRun]) -> Option<Vec<
         .collect()
 }
 
-/// jac[i][o] = d out_o / d theta_i of [`compute`], by central differences.
-fn jacobian(
-    theta: &[f64],
-    no_spec: &[TfEstimate],
-    springs: &[SpringRun],
-    p_ref: f64,
-) -> Vec<Vec<f64>> {
+/// jac[i] = d out / d theta_i of [`compute`], by central differences, the
+/// outputs theta_i leaves exactly unchanged left out.
+fn jacobian(theta: &[f64], no_spec: &[TfEstimate], springs: &[SpringRun], p_ref: f64) -> Jacobian {
     let mut jac = Vec::with_capacity(theta.len());
     let mut t = theta.to_vec();
     for i in 0..theta.len() {
@@ -377,35 +396,53 @@ fn jacobian(
         let minus = compute(&t, no_spec, springs, p_ref);
         t[i] = theta[i];
         jac.push(
-            plus.iter()
-                .zip(&minus)
-                .map(|(p, m)| (p - m) / (2.0 * h))
+            (plus.iter().zip(&minus).enumerate())
+                .filter(|(_, (p, m))| p != m)
+                .map(|(o, (p, m))| (o, (p - m) / (2.0 * h)))
                 .collect(),
         );
     }
     jac
 }
 
-/// J C J' restricted to the outputs `at`, C block-diagonal by run.
-fn propagated(jac: &[Vec<f64>], covs: &[[[f64; 3]; 3]], at: &[usize]) -> nalgebra::DMatrix<f64> {
-    nalgebra::DMatrix::from_fn(at.len(), at.len(), |a, b| {
-        let mut c = 0.0;
-        for (r, cov) in covs.iter().enumerate() {
-            for p in 0..3 {
-                for q in 0..3 {
-                    c += jac[3 * r + p][at[a]] * cov[p][q] * jac[3 * r + q][at[b]];
+/// J C J' restricted to the outputs `at`, C block-diagonal by run. Each
+/// entry sums its runs' terms in their order; the terms of a run that
+/// moves neither output are zero, and left out.
+fn propagated(jac: &Jacobian, covs: &[[[f64; 3]; 3]], at: &[usize]) -> nalgebra::DMatrix<f64> {
+    let mut place = std::collections::HashMap::new();
+    for (k, &o) in at.iter().enumerate() {
+        place.insert(o, k);
+    }
+    let mut c = nalgebra::DMatrix::zeros(at.len(), at.len());
+    let mut rows: [Vec<(usize, f64)>; 3] = Default::default();
+    for (r, cov) in covs.iter().enumerate() {
+        // Run r's rows at the outputs asked for, by their place in `at`.
+        for (p, row) in rows.iter_mut().enumerate() {
+            row.clear();
+            row.extend(
+                jac[3 * r + p]
+                    .iter()
+                    .filter_map(|&(o, v)| Some((*place.get(&o)?, v))),
+            );
+        }
+        for p in 0..3 {
+            for q in 0..3 {
+                for &(a, x) in &rows[p] {
+                    for &(b, y) in &rows[q] {
+                        c[(a, b)] += x * cov[p][q] * y;
+                    }
                 }
             }
         }
-        c
-    })
+    }
+    c
 }
 
 /// The joint covariance over the springs of each of a1b0, a2 and a3 (Eq.
 /// 20) for `n` springs, by first-order propagation: the springs share the
 /// no-specimen run, so their values are correlated.
 fn spring_covariances(
-    jac: &[Vec<f64>],
+    jac: &Jacobian,
     covs: &[[[f64; 3]; 3]],
     n: usize,
 ) -> [nalgebra::DMatrix<f64>; 3] {

@@ -19,9 +19,9 @@ use super::keypath::KeyPath;
 use super::problem::{ManifestError, Problem, TablePlace};
 use super::raw::{
     CampaignInfo, Channel, Channels as RawChannels, CompareMode, CompensatorSettings,
-    DesignSettings, History, Identification, JointSettings, Limits, Manifest, MonteCarloSettings,
-    NumberedFigure, Reference, Rig, Role, Run, RunData, RunTable, SCHEMA_VERSION,
-    SensitivitySettings, manifest_schema,
+    DesignSettings, FigureFormats, History, Identification, JointSettings, Limits, Manifest,
+    MonteCarloSettings, NumberedFigure, Reference, ReportSettings, Rig, Role, Run, RunData,
+    RunTable, SCHEMA_VERSION, SensitivitySettings, manifest_schema,
 };
 use super::table::{CheckedTable, RowKey, RunTableInfo, TableRun, check_table};
 use crate::drift::{MIN_HISTORY, Rule};
@@ -110,6 +110,18 @@ pub struct HistoryPlan {
 }
 
 impl Campaign {
+    /// The figures the manifest asks for (`report.figures`), else the
+    /// summary's, or every figure for a publication's campaign (one that
+    /// numbers its figures): those numbers copy figures the summary leaves
+    /// out, and a paper's reader wants SVG.
+    pub fn figures(&self) -> FigureFormats {
+        let asked = self.manifest.report.as_ref().and_then(|r| r.figures);
+        asked.unwrap_or(match self.manifest.numbered_figures.is_empty() {
+            true => FigureFormats::Summary,
+            false => FigureFormats::All,
+        })
+    }
+
     /// Give `date` (normalised by [`crate::manifest::normalise_date`]) to every run the
     /// manifest and run table leave undated: the night a job records, for
     /// a nightly manifest that is the same every night. A run's own date
@@ -228,6 +240,7 @@ pub fn load_str(text: &str, path: &Path) -> Result<Campaign, ManifestError> {
         sensitivity: doc.section::<SensitivitySettings>("sensitivity"),
         compensator: doc.section::<CompensatorSettings>("compensator"),
         limits: doc.section::<Limits>("limits"),
+        report: doc.section::<ReportSettings>("report"),
         design: doc.section::<DesignSettings>("design"),
         numbered_figures: doc.array::<NumberedFigure>("numbered_figures"),
     };
@@ -259,6 +272,7 @@ struct Partial {
     sensitivity: Option<SensitivitySettings>,
     compensator: Option<CompensatorSettings>,
     limits: Option<Limits>,
+    report: Option<ReportSettings>,
     design: Option<DesignSettings>,
     numbered_figures: Vec<Option<NumberedFigure>>,
 }
@@ -440,6 +454,7 @@ fn campaign_of(partial: Partial, checked: Checked, file: &Path, bytes: &[u8]) ->
         sensitivity: partial.sensitivity,
         compensator: partial.compensator,
         limits: partial.limits,
+        report: partial.report,
         design: partial.design,
         numbered_figures: partial.numbered_figures.into_iter().flatten().collect(),
     };

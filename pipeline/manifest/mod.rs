@@ -37,10 +37,10 @@ pub use keypath::{KeyPath, Seg};
 pub use problem::{ManifestError, Problem, TablePlace};
 pub use raw::{
     BoucWenParams, CampaignInfo, Channel, Channels, CompareMode, CompensatorSettings, DelayMode,
-    DelaySettings, DesignSettings, FrfSettings, Identification, JointRig, JointSettings, Manifest,
-    ModelOrders, MonteCarloSettings, NumberedFigure, PublishedTf, Reference, Rig, Role, Run,
-    RunData, RunTable, SCHEMA_VERSION, SensitivitySettings, Specimen, SpecimenKind, TimeChannel,
-    manifest_schema,
+    DelaySettings, DesignSettings, FigureFormats, FrfSettings, Identification, JointRig,
+    JointSettings, Manifest, ModelOrders, MonteCarloSettings, NumberedFigure, PublishedTf,
+    Reference, ReportSettings, Rig, Role, Run, RunData, RunTable, SCHEMA_VERSION,
+    SensitivitySettings, Specimen, SpecimenKind, TimeChannel, manifest_schema,
 };
 pub use simulation::{SimulationPlan, load_simulation, simulation_schema};
 pub use table::RunTableInfo;

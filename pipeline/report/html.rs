@@ -89,15 +89,13 @@ pub struct Pages<'a> {
     /// Each run's canonical form, by run id.
     ccf_of: HashMap<&'a str, usize>,
     figures_note: Option<&'static str>,
+    figures_more: Option<&'static str>,
 }
 
 impl<'a> Pages<'a> {
-    /// `figures_note` says why the pages have no figures, when none were
-    /// drawn.
-    pub fn new(
-        results: &'a Results,
-        figures_note: Option<&'static str>,
-    ) -> Result<Self, HtmlError> {
+    /// `choice` is what the figures were drawn as: a page without figures
+    /// says why, and one with the summary's says how to draw the others.
+    pub fn new(results: &'a Results, choice: super::FigureFormats) -> Result<Self, HtmlError> {
         let mut env = Environment::new();
         env.add_filter("num", num);
         env.add_filter("pm", pm);
@@ -115,7 +113,8 @@ impl<'a> Pages<'a> {
             ccf_of: (results.ccf.iter().enumerate())
                 .map(|(i, c)| (c.run.as_str(), i))
                 .collect(),
-            figures_note,
+            figures_note: choice.note(),
+            figures_more: choice.more(),
         })
     }
 
@@ -159,6 +158,7 @@ impl<'a> Pages<'a> {
             figures => ser(own),
             notice => results.manifest.campaign.synthetic.as_deref(),
             figures_note => self.figures_note,
+            figures_more => self.figures_more,
             failed => failed,
             flagged => flagged,
             not_computed => not_computed,
@@ -182,6 +182,7 @@ impl<'a> Pages<'a> {
             ccf => ser(ccf),
             figures => ser(figures),
             figures_note => self.figures_note,
+            figures_more => self.figures_more,
         };
         Ok(self.env.get_template("run.html")?.render(ctx)?)
     }

@@ -130,32 +130,7 @@ impl<'a> Measured<'a> {
     }
 }
 
-/// Which figure files a run writes beside its pages, which show them from
-/// there (PNG where there is one, else SVG). The command line's `--figures`
-/// takes the same names (lowercase), with these lines as its help.
-#[derive(
-    Debug,
-    Clone,
-    Copy,
-    Default,
-    PartialEq,
-    Eq,
-    serde::Serialize,
-    serde::Deserialize,
-    clap::ValueEnum,
-)]
-#[serde(rename_all = "lowercase")]
-pub enum FigureFormats {
-    /// PNG and SVG files.
-    #[default]
-    All,
-    /// PNG files.
-    Png,
-    /// SVG files.
-    Svg,
-    /// No figure is drawn at all.
-    None,
-}
+pub use crate::manifest::FigureFormats;
 
 impl FigureFormats {
     /// As `--figures` names it.
@@ -164,15 +139,21 @@ impl FigureFormats {
             FigureFormats::All => "all",
             FigureFormats::Png => "png",
             FigureFormats::Svg => "svg",
+            FigureFormats::Summary => "summary",
             FigureFormats::None => "none",
         }
+    }
+
+    /// Whether every figure is drawn, not only the summary's.
+    pub fn every(self) -> bool {
+        self != FigureFormats::Summary
     }
 
     /// What to render, or None when nothing is drawn.
     fn formats(self) -> Option<figures::Formats> {
         let (png, svg) = match self {
             FigureFormats::All => (true, true),
-            FigureFormats::Png => (true, false),
+            FigureFormats::Png | FigureFormats::Summary => (true, false),
             FigureFormats::Svg => (false, true),
             FigureFormats::None => return None,
         };
@@ -183,6 +164,16 @@ impl FigureFormats {
     fn note(self) -> Option<&'static str> {
         (self == FigureFormats::None)
             .then_some("No figures were drawn for this report (--figures none).")
+    }
+
+    /// What a page says below its figures when only the summary's were
+    /// drawn.
+    fn more(self) -> Option<&'static str> {
+        (self == FigureFormats::Summary).then_some(
+            "The summary's figures (--figures summary, the default of a campaign that numbers no publication's figures). \
+             `--figures all`, or report.figures = \"all\" in the manifest, also draws each run's residual, \
+             state trajectory and force path, a validation run's compensator, and SVG files.",
+        )
     }
 }
 
@@ -322,6 +313,51 @@ pub fn write_artifact(path: &Path, bytes: &[u8]) -> Result<(), WriteError> {
 }
 
 fn replace(path: &Path, bytes: &[u8], sync: bool) -> Result<(), WriteError> {
+    replace_with(path, sync, |f| f.write_all(bytes))
+}
+
+/// Write `value` as indented JSON (as [`json_bytes`] gives it) to `path`
+/// atomically and durably, streamed: a night's results.json of 3,000 runs
+/// is 130 MB, which the job need not hold as text besides the results.
+/// Returns the file's SHA-256, taken on the way.
+pub fn write_json(path: &Path, value: &impl serde::Serialize) -> Result<String, WriteError> {
+    use sha2::Digest;
+    struct Hashing<W> {
+        inner: W,
+        hash: sha2::Sha256,
+    }
+    impl<W: Write> Write for Hashing<W> {
+        fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+            let n = self.inner.write(buf)?;
+            self.hash.update(&buf[..n]);
+            Ok(n)
+        }
+        fn flush(&mut self) -> std::io::Result<()> {
+            self.inner.flush()
+        }
+    }
+    let mut sha = String::new();
+    replace_with(path, true, |f| {
+        let mut w = Hashing {
+            inner: std::io::BufWriter::with_capacity(1 << 16, f),
+            hash: sha2::Sha256::new(),
+        };
+        serde_json::to_writer_pretty(&mut w, value).map_err(std::io::Error::from)?;
+        w.write_all(b"\n")?;
+        w.flush()?;
+        sha = format!("{:x}", w.hash.finalize());
+        Ok(())
+    })?;
+    Ok(sha)
+}
+
+/// Write `path` through a temporary file beside it, renamed into place
+/// (`sync`: fsync'd first), the temporary file removed on failure.
+fn replace_with(
+    path: &Path,
+    sync: bool,
+    write: impl FnOnce(&mut std::fs::File) -> std::io::Result<()>,
+) -> Result<(), WriteError> {
     let io = |source| WriteError::Io {
         path: path.to_path_buf(),
         source,
@@ -335,7 +371,7 @@ fn replace(path: &Path, bytes: &[u8], sync: bool) -> Result<(), WriteError> {
     let tmp = dir.join(format!(".{name}.tmp-{}", std::process::id()));
     let result = (|| {
         let mut f = std::fs::File::create(&tmp)?;
-        f.write_all(bytes)?;
+        write(&mut f)?;
         if sync {
             f.sync_all()?;
         }
@@ -442,7 +478,7 @@ pub fn write_pages(
     choice: FigureFormats,
     out_dir: &Path,
 ) -> Result<PathBuf, WriteError> {
-    let pages = html::Pages::new(results, choice.note())?;
+    let pages = html::Pages::new(results, choice)?;
     for (run, figures) in results.runs.iter().zip(run_figures) {
         let page = pages.run(run, figures)?;
         write_artifact(&out_dir.join(html::run_page(&run.id)), page.as_bytes())?;

@@ -126,7 +126,8 @@ pub(super) fn analyse_with(
     // What the manifest found (an unused log matched by the run table's
     // glob, say), then what the analysis finds.
     let mut warnings = campaign.warnings.clone();
-    let inputs: Vec<RigInput> = first.iter().map(FirstPass::rig_input).collect();
+    let mut first = first;
+    let inputs: Vec<RigInput> = first.iter_mut().map(FirstPass::rig_input).collect();
     let rig = rig::establish(campaign, inputs.iter(), &mut warnings).map_err(Arc::new);
     drop(inputs);
     let rig_for_runs: RigOutcome = rig
@@ -270,13 +271,15 @@ enum FirstPass {
 }
 
 impl FirstPass {
-    /// What the run gives the rig's identification.
-    fn rig_input(&self) -> RigInput {
+    /// What the run gives the rig's identification: its estimate moves
+    /// there (nothing after the rig reads it; the cache has stored it), so
+    /// the identification runs' FRFs are held once.
+    fn rig_input(&mut self) -> RigInput {
         match self {
             FirstPass::Waiting(read) => read.clone(),
-            FirstPass::Done(d) => match (&d.log_error, &d.kept.estimate) {
+            FirstPass::Done(d) => match (&d.log_error, d.kept.estimate.take()) {
                 (Some(e), _) => RigInput::Failed(e.clone()),
-                (None, Some(e)) => RigInput::Estimate(Box::new(e.clone())),
+                (None, Some(e)) => RigInput::Estimate(Box::new(e)),
                 (None, None) => RigInput::Nothing,
             },
         }

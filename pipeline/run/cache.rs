@@ -1,18 +1,18 @@
 //! Incremental reruns: each run's outcome kept under a key made of what
-//! decides it (the servoid version and its outcome format, the run's checked plan, the campaign's
-//! identification settings, the figure formats, the SHA-256 of its log and,
-//! for a run that needs the rig, the rig's parameters to the last bit), so
-//! a rerun with nothing changed does no per-log work, and a changed log
-//! recomputes its own run and what depends on it (a changed identification
-//! log changes the rig, and with it every validation run's key).
+//! decides it (the servoid version and outcome format, the run's checked
+//! plan, the identification settings, the figures, its log's SHA-256 and,
+//! for a run that needs the rig, the rig to the last bit), so a rerun with
+//! nothing changed does no per-log work, and a changed log recomputes its
+//! run and what depends on it (a changed identification log changes the
+//! rig, and with it every validation run's key).
 //!
-//! The cache is the orchestrator's own state, kept in `.cache/` inside the
-//! output folder: `runs/<key>.json` per run outcome, and `stamps.json`, the
-//! size and modification time each log had when it was hashed, so that an
-//! unchanged log is not even read (as make and git do). Entries are JSON
-//! with shortest round-trip floats, so a cached outcome gives the same
-//! results.json bytes as a fresh one. Entries the campaign no longer uses
-//! are removed when it finishes. Anything unreadable is a miss.
+//! The cache is the orchestrator's own state in `.cache/` inside the output
+//! folder: `runs/<key>.json.zst` per run outcome (zstd'd JSON with shortest
+//! round-trip floats: a cached outcome gives the same results.json bytes as
+//! a fresh one), and `stamps.json`, each log's size and modification time
+//! when it was hashed, so an unchanged log is not even read (as make and
+//! git do). Entries the campaign no longer uses are removed when it
+//! finishes (the cache holds one night). Anything unreadable is a miss.
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
@@ -139,7 +139,8 @@ impl Cache {
         if self.fresh {
             return None;
         }
-        let entry: T = read_json(&self.entry(key))?;
+        let bytes = zstd::decode_all(std::fs::read(self.entry(key)).ok()?.as_slice()).ok()?;
+        let entry: T = serde_json::from_slice(&bytes).ok()?;
         if !usable(&entry) {
             return None;
         }
@@ -155,7 +156,10 @@ impl Cache {
         if key.is_empty() {
             return Ok(());
         }
-        report::write_artifact(&self.entry(key), &report::json_bytes(value))?;
+        let json = serde_json::to_vec(value).expect("servoid's outcomes serialise to JSON");
+        let packed =
+            zstd::encode_all(json.as_slice(), ENTRY_LEVEL).expect("zstd compresses in memory");
+        report::write_artifact(&self.entry(key), &packed)?;
         self.used
             .lock()
             .expect("the used keys' lock")
@@ -171,7 +175,7 @@ impl Cache {
         if let Ok(entries) = std::fs::read_dir(self.dir.join("runs")) {
             for e in entries.flatten() {
                 let name = e.file_name().to_string_lossy().into_owned();
-                let key = name.trim_end_matches(".json");
+                let key = name.trim_end_matches(ENTRY_EXTENSION);
                 if !used.contains(key) {
                     let _ = std::fs::remove_file(e.path());
                 }
@@ -181,7 +185,9 @@ impl Cache {
     }
 
     fn entry(&self, key: &str) -> PathBuf {
-        self.dir.join("runs").join(format!("{key}.json"))
+        self.dir
+            .join("runs")
+            .join(format!("{key}{ENTRY_EXTENSION}"))
     }
 }
 
@@ -206,6 +212,14 @@ pub(super) fn merge_stamps(out_dir: &Path, dirs: &[PathBuf]) -> Result<(), Write
     }
     report::write_atomic(&path, &report::json_bytes(&stamps))
 }
+
+/// A stored outcome's file name after its key.
+const ENTRY_EXTENSION: &str = ".json.zst";
+
+/// zstd's level for the entries: level 3, its default, packs an
+/// identification run's entry 3.9 times (compact JSON 0.95 MB, 0.24 MB);
+/// level 19 packs it 5.2 times at many times the CPU.
+const ENTRY_LEVEL: i32 = 3;
 
 /// What a run's outcome holds, counted up whenever a change between
 /// releases adds to it or computes it differently: the version alone

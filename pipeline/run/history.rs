@@ -138,8 +138,8 @@ impl History {
     /// the table it replaces (read cleanly: this history came from it) is
     /// kept as `<file>.prev` first when the update changes it, the good
     /// copy an unreadable table's message points to.
-    pub(super) fn write(mut self, results_json: &[u8]) -> Result<(), WriteError> {
-        self.entry.results_sha256 = ingest::sha256_hex(results_json);
+    pub(super) fn write(mut self, results_sha256: String) -> Result<(), WriteError> {
+        self.entry.results_sha256 = results_sha256;
         // The entry of the same night this one corrects, when it replaces
         // one it is not a rerun of (its inputs differ): for the audit.
         let audit: Vec<serde_json::Value> = self

@@ -41,8 +41,9 @@ pub struct Settings {
     pub out: Option<PathBuf>,
     /// Worker threads (default: two per core); the output does not depend on it.
     pub jobs: Option<usize>,
-    /// Which figure files to draw.
-    pub figures: FigureFormats,
+    /// Which figures to draw, and as which files (None: as the manifest
+    /// says, [`Campaign::figures`]).
+    pub figures: Option<FigureFormats>,
     /// Ignore the cache of earlier runs (it is refreshed).
     pub force: bool,
     /// How long to wait for another job writing the same output folder
@@ -306,12 +307,13 @@ pub fn run_shard(
     let clock = std::time::Instant::now();
     let workers = pool(settings.jobs)?;
     let work = set.dir();
-    let files = FigureFiles::new(work, settings.figures);
+    let figures = settings.figures.unwrap_or(campaign.figures());
+    let files = FigureFiles::new(work, figures);
     let cache = Cache::open(work, settings.force, cache_names(&set));
     let sink = Sink {
         out_dir: Some(work),
         files: files.as_ref(),
-        choice: settings.figures,
+        choice: figures,
         intersample: share.identification.intersample,
         cache: Some(&cache),
     };
@@ -326,7 +328,7 @@ pub fn run_shard(
         manifest: std::path::absolute(&campaign.file).unwrap_or_else(|_| campaign.file.clone()),
         shard,
         runs: share.runs.iter().map(|r| r.id.clone()).collect(),
-        figures: settings.figures,
+        figures,
         date: settings.date.clone(),
     };
     shard::write_info(work, &info).map_err(|e| relocate(e.into()))?;
@@ -374,7 +376,7 @@ pub fn merge(
         .into());
     }
     let settings = &Settings {
-        figures: first.figures,
+        figures: Some(first.figures),
         date: first.date.clone(),
         ..merge.job.clone()
     };
@@ -489,12 +491,13 @@ fn write_campaign(
     let started = std::time::SystemTime::now();
     let clock = std::time::Instant::now();
     let out_dir = set.dir();
-    let files = FigureFiles::new(out_dir, settings.figures);
+    let figures = settings.figures.unwrap_or(campaign.figures());
+    let files = FigureFiles::new(out_dir, figures);
     let cache = Cache::open(out_dir, settings.force, cache_names(set));
     let sink = Sink {
         out_dir: Some(out_dir),
         files: files.as_ref(),
-        choice: settings.figures,
+        choice: figures,
         intersample: campaign.identification.intersample,
         cache: Some(&cache),
     };
@@ -522,7 +525,7 @@ fn write_campaign(
         analysed.campaign_figures.extend(figures);
         results.warnings.extend(warnings);
     }
-    let written = write_set(campaign, set, settings, &analysed, history)?;
+    let written = write_set(campaign, set, figures, &analysed, history)?;
     let seconds = clock.elapsed().as_secs_f64();
     let log = report::RunLog {
         started,
@@ -563,16 +566,15 @@ struct Written {
 fn write_set(
     campaign: &Campaign,
     set: &OutputFolder,
-    settings: &Settings,
+    figures: FigureFormats,
     analysed: &analyse::Analysed,
     history: Option<history::History>,
 ) -> Result<Written, JobError> {
     let out_dir = set.dir();
     let results = &analysed.results;
-    let json = report::json_bytes(results);
     let results_path = out_dir.join("results.json");
     report::settle(out_dir)?;
-    report::write_atomic(&results_path, &json)?;
+    let results_sha256 = report::write_json(&results_path, results)?;
     report::output_folder::fault("results");
     report::write_atomic(
         &out_dir.join("models.mat"),
@@ -581,13 +583,13 @@ fn write_set(
     report::tables::write_tracking(&out_dir.join(report::tables::TRACKING_TABLE), &results.runs)
         .map_err(WriteError::from)?;
     if let Some(h) = history {
-        h.write(&json)?;
+        h.write(results_sha256)?;
     }
     let page = report::write_pages(
         results,
         &analysed.run_figures,
         &analysed.campaign_figures,
-        settings.figures,
+        figures,
         out_dir,
     )?;
     let kept = report::set_files(

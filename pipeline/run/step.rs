@@ -29,6 +29,8 @@ pub(super) use crate::analysis::step::RigOutcome;
 #[derive(Debug, Clone, Copy)]
 pub(super) struct Wants {
     pub figures: bool,
+    /// Every figure, not only the summary's.
+    pub every_figure: bool,
     pub tables: bool,
     pub intersample: Intersample,
 }
@@ -95,7 +97,16 @@ impl Output {
     fn unfinished(result: RunResult, stage: Option<&LogStage>, wants: Wants) -> Self {
         let figures = match stage {
             Some(st) if wants.figures => {
-                catalogue::log_figures(&result, &Measured::of(st), None, wants.intersample, None).0
+                let m = Measured::of(st);
+                catalogue::log_figures(
+                    &result,
+                    &m,
+                    None,
+                    wants.intersample,
+                    None,
+                    wants.every_figure,
+                )
+                .0
             }
             _ => Vec::new(),
         };
@@ -130,11 +141,14 @@ pub(super) fn without_rig(
         Err(e) => return Output::unread(new_result(plan), Arc::new(e)),
     };
     let (figures, overlay) = match wants.figures {
-        true => catalogue::fitted_figures(&done, wants.intersample),
+        true => catalogue::fitted_figures(&done, wants.intersample, wants.every_figure),
         false => (Vec::new(), None),
     };
     let measured = done.stage.as_deref().map(Measured::of);
-    let force = measured.as_ref().and_then(ForceBins::of);
+    // Kept for the force figure, drawn once the rig is known.
+    let force = (measured.as_ref())
+        .filter(|_| wants.figures && wants.every_figure)
+        .and_then(ForceBins::of);
     let tables = tables(&done.result, measured.as_ref(), wants);
     Output {
         kept: Kept {
@@ -162,13 +176,9 @@ pub(super) fn with_rig(
 ) -> Option<FigureSpec> {
     analysis::step::with_rig(&mut kept.result, plan, rig_at_p);
     match (&kept.force, &kept.result.force_tf) {
-        (Some(bins), Some(model)) if wants.figures => Some(catalogue::force_figure(
-            &kept.result,
-            bins,
-            model,
-            wants.intersample,
-            None,
-        )),
+        (Some(bins), Some(model)) if wants.figures && wants.every_figure => Some(
+            catalogue::force_figure(&kept.result, bins, model, wants.intersample, None),
+        ),
         _ => None,
     }
 }
@@ -206,7 +216,7 @@ pub(super) fn validation(
 /// A validated run's figures and tables.
 fn validated(v: Validated, wants: Wants) -> Output {
     let figures = match wants.figures {
-        true => catalogue::validated_figures(&v, wants.intersample),
+        true => catalogue::validated_figures(&v, wants.intersample, wants.every_figure),
         false => Vec::new(),
     };
     let tables = tables(&v.result, Some(&Measured::of(&v.stage)), wants);
@@ -258,6 +268,7 @@ mod tests {
         let rig = Ok((crate::model::PAPER_RIG, None, Default::default()));
         let wants = Wants {
             figures: false,
+            every_figure: false,
             tables: false,
             intersample: campaign.identification.intersample,
         };

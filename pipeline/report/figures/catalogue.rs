@@ -41,14 +41,16 @@ const _: () = assert!(FRF_MAX_HZ <= crate::frf::KEPT_MAX_HZ);
 
 /// A run's figures that do not depend on the rig, drawn as soon as its log
 /// is analysed: the FRF (for a validation run the caller passes the
-/// result with the rig's model), the time windows and the residual. For an
-/// identification run, also what Fig. 15 needs of it.
+/// result with the rig's model), the time windows and the residual; of
+/// them only the FRF, with a validation run's time windows, unless
+/// `every`. For an identification run, also what Fig. 15 needs of it.
 pub fn log_figures(
     run: &RunResult,
     measured: &Measured<'_>,
     time: Option<&TimeStage>,
     intersample: Intersample,
     prediction: Option<&Prediction>,
+    every: bool,
 ) -> (Vec<FigureSpec>, Option<OverlayRun>) {
     let frf = RunFrf::new(run, measured, intersample, prediction);
     let mut out = vec![frf_figure(run, measured, &frf)];
@@ -63,25 +65,32 @@ pub fn log_figures(
     };
     if let Some(time) = time {
         let fs = measured.sample_rate_hz;
-        out.extend(time_figure(run, time, fs));
-        out.push(residual_figure(run, time, fs));
+        if every || run.role == Role::Validation {
+            out.extend(time_figure(run, time, fs));
+        }
+        if every {
+            out.push(residual_figure(run, time, fs));
+        }
     }
     (out, overlay)
 }
 
 /// The figures of a run analysed without the rig
-/// (`analysis::step::without_rig`): its log's figures and the state
-/// trajectory of its time-domain check, with what Fig. 15 needs of it.
+/// (`analysis::step::without_rig`): its log's figures and, with `every`,
+/// the state trajectory of its time-domain check, with what Fig. 15 needs
+/// of it.
 pub fn fitted_figures(
     run: &crate::analysis::step::Fitted,
     intersample: Intersample,
+    every: bool,
 ) -> (Vec<FigureSpec>, Option<OverlayRun>) {
     let Some(st) = &run.stage else {
         return (Vec::new(), None);
     };
     let time = run.time.as_ref();
-    let (mut specs, overlay) = log_figures(&run.result, &Measured::of(st), time, intersample, None);
-    if let Some(t) = time {
+    let measured = Measured::of(st);
+    let (mut specs, overlay) = log_figures(&run.result, &measured, time, intersample, None, every);
+    if let Some(t) = time.filter(|_| every) {
         specs.extend(subspace_figure(
             &run.result,
             &st.log.command_m,
@@ -95,10 +104,12 @@ pub fn fitted_figures(
 /// The figures of a validated run (`analysis::step::Validated`), in page
 /// order: its FRF with the model's band, the force path (Figs. 16-17) with
 /// the control-structure interaction, its time windows and residual, the
-/// compensator's figures and the state trajectory.
+/// compensator's figures and the state trajectory; the FRF and the time
+/// windows alone unless `every`.
 pub fn validated_figures(
     v: &crate::analysis::step::Validated,
     intersample: Intersample,
+    every: bool,
 ) -> Vec<FigureSpec> {
     let (out, measured) = (&v.result, Measured::of(&v.stage));
     // The prediction's band, from the rig's covariance.
@@ -113,7 +124,11 @@ pub fn validated_figures(
         v.time.as_ref(),
         intersample,
         prediction.as_ref(),
+        every,
     );
+    if !every {
+        return specs;
+    }
     if let (Some(bins), Some(model)) = (ForceBins::of(&measured), &out.force_tf) {
         let force = force_figure(out, &bins, model, intersample, v.csi.as_ref());
         specs.insert(1, force);

@@ -151,15 +151,21 @@ fn render_lines(fig: &LinesFigure, size: (u32, u32)) -> Result<Files, FigureErro
 
 // ------------------------------------------------------------- readers
 
-/// Decoded 8-bit RGB PNG: (width, height, RGB bytes).
+/// Decoded 8-bit PNG, a palette expanded: (width, height, RGB bytes).
 fn decode_png(bytes: &[u8]) -> (u32, u32, Vec<u8>) {
-    let decoder = png::Decoder::new(std::io::Cursor::new(bytes));
+    let mut decoder = png::Decoder::new(std::io::Cursor::new(bytes));
+    decoder.set_transformations(png::Transformations::EXPAND);
     let mut reader = decoder.read_info().expect("PNG header");
     let mut buf = vec![0; reader.output_buffer_size().expect("PNG size")];
     let info = reader.next_frame(&mut buf).expect("PNG data");
     buf.truncate(info.buffer_size());
     assert_eq!(info.color_type, png::ColorType::Rgb);
     assert_eq!(info.bit_depth, png::BitDepth::Eight);
+    let raw = reader.info().color_type;
+    assert!(
+        matches!(raw, png::ColorType::Rgb | png::ColorType::Indexed),
+        "{raw:?}"
+    );
     (info.width, info.height, buf)
 }
 
