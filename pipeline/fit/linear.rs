@@ -41,6 +41,32 @@ pub struct ScaledFactors {
     pub svd: SVD<f64, Dyn, Dyn>,
 }
 
+/// The SVD of a column-scaled matrix's triangle R (right singular vectors
+/// requested), after checking that it has full column rank: the right
+/// singular vector of the smallest singular value is the direction the
+/// data cannot see; its largest component names the parameter.
+pub fn rank_checked(r: DMatrix<f64>) -> Result<SVD<f64, Dyn, Dyn>, RankDeficient> {
+    let p = r.ncols();
+    let svd = r.svd(false, true);
+    let sv = &svd.singular_values;
+    let (imin, smin) =
+        sv.iter().enumerate().fold(
+            (0, f64::INFINITY),
+            |acc, (i, &v)| if v < acc.1 { (i, v) } else { acc },
+        );
+    let smax = sv.iter().fold(0.0_f64, |m, &v| m.max(v));
+    let ratio = smin / smax;
+    if ratio < RANK_TOL || !ratio.is_finite() {
+        let v_t = svd.v_t.as_ref().expect("V^T was requested");
+        let row = v_t.row(imin);
+        let column = (0..p)
+            .max_by(|&x, &y| row[x].abs().total_cmp(&row[y].abs()))
+            .unwrap_or(0);
+        return Err(RankDeficient { column, ratio });
+    }
+    Ok(svd)
+}
+
 impl ScaledFactors {
     /// Factors `a` after checking that it has full column rank: the right
     /// singular vector of the smallest singular value is the direction the
@@ -61,23 +87,7 @@ impl ScaledFactors {
             col /= norms[j];
         }
         let qr = a.qr();
-        let svd = qr.r().svd(false, true);
-        let sv = &svd.singular_values;
-        let (imin, smin) =
-            sv.iter().enumerate().fold(
-                (0, f64::INFINITY),
-                |acc, (i, &v)| if v < acc.1 { (i, v) } else { acc },
-            );
-        let smax = sv.iter().fold(0.0_f64, |m, &v| m.max(v));
-        let ratio = smin / smax;
-        if ratio < RANK_TOL || !ratio.is_finite() {
-            let v_t = svd.v_t.as_ref().expect("V^T was requested");
-            let row = v_t.row(imin);
-            let column = (0..p)
-                .max_by(|&x, &y| row[x].abs().total_cmp(&row[y].abs()))
-                .unwrap_or(0);
-            return Err(RankDeficient { column, ratio });
-        }
+        let svd = rank_checked(qr.r())?;
         Ok(Self { norms, qr, svd })
     }
 

@@ -657,11 +657,67 @@ pub fn fit_with_transient(
 /// uncertainty grows with the misfit instead of claiming a precision the
 /// residuals contradict.
 pub fn covariance(jac: &DMatrix<f64>, scale: f64) -> Result<DMatrix<f64>, RankDeficient> {
-    let factors = linear::ScaledFactors::of(jac.clone())?;
-    let norms = &factors.norms;
-    let svd = &factors.svd;
+    covariance_of(jac.clone(), scale)
+}
+
+/// As [`covariance`], factoring `jac` where it lies: a joint fit's
+/// Jacobian over every bin of a night of 600 springs is 0.24 GB, which a
+/// copy would double.
+pub fn covariance_of(jac: DMatrix<f64>, scale: f64) -> Result<DMatrix<f64>, RankDeficient> {
+    let factors = linear::ScaledFactors::of(jac)?;
+    Ok(assembled(&factors.norms, &factors.svd, scale))
+}
+
+/// As [`covariance_of`], from J given as row blocks (`blocks` hands its
+/// argument each block in turn, the same blocks on every call), holding a
+/// block and a p x p triangle, never J: the columns' norms from a first
+/// pass, then the scaled J's R from a Householder QR of the triangle so far
+/// stacked on each block. R is unique up to the signs of its rows, which
+/// the covariance does not see; its bits are not [`covariance_of`]'s.
+pub fn covariance_streamed(
+    p: usize,
+    blocks: impl Fn(&mut dyn FnMut(DMatrix<f64>)),
+    scale: f64,
+) -> Result<DMatrix<f64>, RankDeficient> {
+    let mut squares = vec![0.0; p];
+    let mut rows = 0;
+    blocks(&mut |b| {
+        rows += b.nrows();
+        for (s, c) in squares.iter_mut().zip(b.column_iter()) {
+            *s += c.norm_squared();
+        }
+    });
+    let norms: Vec<f64> = squares.iter().map(|s| s.sqrt()).collect();
+    if let Some(column) = norms.iter().position(|&n| n == 0.0 || !n.is_finite()) {
+        return Err(RankDeficient { column, ratio: 0.0 });
+    }
+    if rows < p {
+        return Err(RankDeficient {
+            column: p - 1,
+            ratio: 0.0,
+        });
+    }
+    let mut r = DMatrix::<f64>::zeros(0, p);
+    blocks(&mut |b| {
+        let above = r.nrows();
+        let stacked = DMatrix::from_fn(above + b.nrows(), p, |i, j| match i < above {
+            true => r[(i, j)],
+            false => b[(i - above, j)] / norms[j],
+        });
+        r = stacked.qr().r();
+    });
+    let svd = linear::rank_checked(r)?;
+    Ok(assembled(&norms, &svd, scale))
+}
+
+/// The covariance from the scaled J's SVD and the columns' norms.
+fn assembled(
+    norms: &[f64],
+    svd: &nalgebra::SVD<f64, nalgebra::Dyn, nalgebra::Dyn>,
+    scale: f64,
+) -> DMatrix<f64> {
     let v_t = svd.v_t.as_ref().expect("V^T was requested");
-    let p = jac.ncols();
+    let p = norms.len();
     let mut cov = DMatrix::zeros(p, p);
     for k in 0..p {
         let inv_s2 = 1.0 / (svd.singular_values[k] * svd.singular_values[k]);
@@ -676,7 +732,7 @@ pub fn covariance(jac: &DMatrix<f64>, scale: f64) -> Result<DMatrix<f64>, RankDe
             cov[(i, j)] *= scale / (norms[i] * norms[j]);
         }
     }
-    Ok(cov)
+    cov
 }
 
 /// The covariance of a weighted least-squares estimate whose bins' errors

@@ -737,3 +737,47 @@ fn the_sandwich_covers_the_mean_of_correlated_errors() {
     let ratio = spread(&plain) / spread(&z);
     assert!((ratio - 1.6 / 1.36f64.sqrt()).abs() < 0.06, "plain {ratio}");
 }
+
+/// The covariance from J's row blocks, each stacked on the triangle so
+/// far, against J factored whole: a tall J with columns of scales 1e-6 to
+/// 1e6, in blocks of uneven sizes (the first smaller than its columns);
+/// and a J with a column of zeros, named as the whole J names it.
+#[test]
+fn the_covariance_from_blocks_is_the_whole_jacobian_s() {
+    let (n, p) = (997, 5);
+    let scales = [1e-6, 1.0, 3e2, 1e6, 0.5];
+    let jac = DMatrix::from_fn(n, p, |i, j| {
+        let t = (i * 7 + j * 13) as f64;
+        scales[j] * ((0.37 * t).sin() + 0.2 * (1.3 * t * (j + 1) as f64).cos())
+    });
+    let cuts = [0, 3, 200, 201, 640, n];
+    let blocks = |jac: &DMatrix<f64>| {
+        let jac = jac.clone();
+        move |emit: &mut dyn FnMut(DMatrix<f64>)| {
+            for w in cuts.windows(2) {
+                emit(jac.rows(w[0], w[1] - w[0]).into_owned());
+            }
+        }
+    };
+    let whole = covariance(&jac, 2.5).unwrap();
+    let streamed = covariance_streamed(p, blocks(&jac), 2.5).unwrap();
+    for i in 0..p {
+        for j in 0..p {
+            let scale = (whole[(i, i)] * whole[(j, j)]).sqrt();
+            assert!(
+                (streamed[(i, j)] - whole[(i, j)]).abs() <= 1e-10 * scale,
+                "({i}, {j}): {} against {}",
+                streamed[(i, j)],
+                whole[(i, j)]
+            );
+        }
+    }
+    let mut flat = jac.clone();
+    flat.column_mut(3).fill(0.0);
+    assert_eq!(
+        covariance_streamed(p, blocks(&flat), 1.0)
+            .unwrap_err()
+            .column,
+        covariance(&flat, 1.0).unwrap_err().column
+    );
+}

@@ -552,6 +552,20 @@ fn assess(
     }
 }
 
+/// The most bins of independent fits over the same runs that are fitted
+/// side by side. Each fit holds its own problem, about 130 bytes a bin:
+/// below this it is small beside the logs in flight, and the fits'
+/// sequential stretches overlap (one at a time, the 300-log night's rig
+/// took 15 % longer); above it one problem at a time bounds the rig's
+/// memory (a 3,000-log night's 601 FRFs hold 2.1 M bins, 270 MB a problem:
+/// its peak fell from 1.56 to 1.06 GB).
+const SIDE_BY_SIDE_MAX_BINS: usize = 500_000;
+
+/// Whether independent fits over `runs` go side by side.
+fn side_by_side(runs: &[JointRun<'_>]) -> bool {
+    runs.iter().map(|r| r.h.len()).sum::<usize>() <= SIDE_BY_SIDE_MAX_BINS
+}
+
 /// Every candidate's fit, in the order the choice reads them: the paper's
 /// model, the delay, then the piston and each place of a mode.
 fn fit_candidates(
@@ -568,22 +582,13 @@ fn fit_candidates(
         force_delay_start_s: 0.0,
         ..*opts
     };
-    // The two smaller structures are independent fits: side by side (each
-    // is the same computation on any thread count).
-    let (plain, delay) = rayon::join(
-        || {
-            assess(
-                Structure::Plain,
-                joint_fit_staged(runs, start, &with(Structure::Plain), GRID_STRIDE),
-            )
-        },
-        || {
-            assess(
-                Structure::Delay,
-                joint_fit_staged(runs, start, &with(Structure::Delay), GRID_STRIDE),
-            )
-        },
-    );
+    // The two smaller structures are independent fits: side by side where
+    // they are small (each is the same computation on any thread count).
+    let staged = |s: Structure| assess(s, joint_fit_staged(runs, start, &with(s), GRID_STRIDE));
+    let (plain, delay) = match side_by_side(runs) {
+        true => rayon::join(|| staged(Structure::Plain), || staged(Structure::Delay)),
+        false => (staged(Structure::Plain), staged(Structure::Delay)),
+    };
     // The measurement path differs from the command path only on force
     // FRFs: without them the two are one model, fitted once.
     let has_force = runs.iter().any(|r| r.output == Output::Force);
@@ -601,16 +606,16 @@ fn fit_candidates(
     // pass) overlap another's parallel passes.
     let extensions: Vec<Candidate> = {
         let delay_fit = delay.usable();
-        places
-            .par_iter()
-            .with_max_len(1)
-            .map(|&place| {
-                assess(
-                    place,
-                    fit_mode(runs, start, delay_fit, opts, band_top_hz, place),
-                )
-            })
-            .collect()
+        let fit = |&place: &Structure| {
+            assess(
+                place,
+                fit_mode(runs, start, delay_fit, opts, band_top_hz, place),
+            )
+        };
+        match side_by_side(runs) {
+            true => places.par_iter().with_max_len(1).map(fit).collect(),
+            false => places.iter().map(fit).collect(),
+        }
     };
     let usable = |s: Structure| {
         extensions
@@ -1193,22 +1198,27 @@ pub fn run_spread(
     }
     let from = from_optimum(fit, opts);
     let groups = runs.len().min(JACKKNIFE_GROUPS);
-    // Side by side, a refit per task (each is a whole joint fit), gathered
-    // in group order: the same bits on any number of threads.
-    let refits: Vec<Option<[f64; 4]>> = (0..groups)
-        .into_par_iter()
-        .with_max_len(1)
-        .map(|g| {
-            let rest: Vec<JointRun<'_>> = runs
-                .iter()
-                .enumerate()
-                .filter(|(j, _)| j % groups != g)
-                .map(|(_, r)| *r)
-                .collect();
-            let f = joint_fit(&rest, &fit.rig, &from).ok()?;
-            f.converged.then(|| std::array::from_fn(|k| f.params[k]))
-        })
-        .collect();
+    // A refit per group (each a whole joint fit), side by side where they
+    // are small, gathered in group order: the same bits on any number of
+    // threads.
+    let refit = |g: usize| {
+        let rest: Vec<JointRun<'_>> = runs
+            .iter()
+            .enumerate()
+            .filter(|(j, _)| j % groups != g)
+            .map(|(_, r)| *r)
+            .collect();
+        let f = joint_fit(&rest, &fit.rig, &from).ok()?;
+        f.converged.then(|| std::array::from_fn(|k| f.params[k]))
+    };
+    let refits: Vec<Option<[f64; 4]>> = match side_by_side(runs) {
+        true => (0..groups)
+            .into_par_iter()
+            .with_max_len(1)
+            .map(refit)
+            .collect(),
+        false => (0..groups).map(refit).collect(),
+    };
     let refits: Vec<[f64; 4]> = refits.into_iter().collect::<Option<_>>()?;
     let n = refits.len() as f64;
     let mut jackknife_std = [0.0; 4];

@@ -303,7 +303,7 @@ fn the_normal_pass_is_the_formed_jacobians_product() {
                 assert!((n.a[(i, j)] - a[(i, j)]).abs() < 1e-12 * scale);
             }
         }
-        let from_j = covariance(&jac, 1.0).unwrap();
+        let from_j = crate::fit::covariance(&jac, 1.0).unwrap();
         let from_normal = covariance_from_normal(&n.a, 1.0).unwrap();
         for i in 0..theta.len() {
             let rel = (from_normal[(i, i)] / from_j[(i, i)]).sqrt() - 1.0;
