@@ -657,23 +657,16 @@ pub fn fit_with_transient(
 /// uncertainty grows with the misfit instead of claiming a precision the
 /// residuals contradict.
 pub fn covariance(jac: &DMatrix<f64>, scale: f64) -> Result<DMatrix<f64>, RankDeficient> {
-    covariance_of(jac.clone(), scale)
-}
-
-/// As [`covariance`], factoring `jac` where it lies: a joint fit's
-/// Jacobian over every bin of a night of 600 springs is 0.24 GB, which a
-/// copy would double.
-pub fn covariance_of(jac: DMatrix<f64>, scale: f64) -> Result<DMatrix<f64>, RankDeficient> {
-    let factors = linear::ScaledFactors::of(jac)?;
+    let factors = linear::ScaledFactors::of(jac.clone())?;
     Ok(assembled(&factors.norms, &factors.svd, scale))
 }
 
-/// As [`covariance_of`], from J given as row blocks (`blocks` hands its
+/// As [`covariance`], from J given as row blocks (`blocks` hands its
 /// argument each block in turn, the same blocks on every call), holding a
 /// block and a p x p triangle, never J: the columns' norms from a first
 /// pass, then the scaled J's R from a Householder QR of the triangle so far
 /// stacked on each block. R is unique up to the signs of its rows, which
-/// the covariance does not see; its bits are not [`covariance_of`]'s.
+/// the covariance does not see; its bits are not [`covariance`]'s.
 pub fn covariance_streamed(
     p: usize,
     blocks: impl Fn(&mut dyn FnMut(DMatrix<f64>)),

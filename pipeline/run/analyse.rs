@@ -111,7 +111,7 @@ pub(super) fn analyse_with(
     // it works through alone once started, so a block of slow runs (spring
     // runs with their delay test) holds one core while the other has
     // nothing left to take.
-    let first: Vec<FirstPass> = campaign
+    let mut first: Vec<FirstPass> = campaign
         .runs
         .par_iter()
         .with_max_len(1)
@@ -126,7 +126,6 @@ pub(super) fn analyse_with(
     // What the manifest found (an unused log matched by the run table's
     // glob, say), then what the analysis finds.
     let mut warnings = campaign.warnings.clone();
-    let mut first = first;
     let inputs: Vec<RigInput> = first.iter_mut().map(FirstPass::rig_input).collect();
     let rig = rig::establish(campaign, inputs.iter(), &mut warnings).map_err(Arc::new);
     drop(inputs);

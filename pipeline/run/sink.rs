@@ -83,7 +83,7 @@ impl Sink<'_> {
     pub(super) fn wants(&self) -> Wants {
         Wants {
             figures: self.files.is_some(),
-            every_figure: self.choice.every(),
+            every_figure: self.files.is_some() && self.choice.every(),
             tables: self.out_dir.is_some(),
             intersample: self.intersample,
         }

@@ -29,7 +29,7 @@ pub(super) use crate::analysis::step::RigOutcome;
 #[derive(Debug, Clone, Copy)]
 pub(super) struct Wants {
     pub figures: bool,
-    /// Every figure, not only the summary's.
+    /// Every figure, not only the summary's (false when none is drawn).
     pub every_figure: bool,
     pub tables: bool,
     pub intersample: Intersample,
@@ -147,7 +147,7 @@ pub(super) fn without_rig(
     let measured = done.stage.as_deref().map(Measured::of);
     // Kept for the force figure, drawn once the rig is known.
     let force = (measured.as_ref())
-        .filter(|_| wants.figures && wants.every_figure)
+        .filter(|_| wants.every_figure)
         .and_then(ForceBins::of);
     let tables = tables(&done.result, measured.as_ref(), wants);
     Output {
@@ -176,9 +176,13 @@ pub(super) fn with_rig(
 ) -> Option<FigureSpec> {
     analysis::step::with_rig(&mut kept.result, plan, rig_at_p);
     match (&kept.force, &kept.result.force_tf) {
-        (Some(bins), Some(model)) if wants.figures && wants.every_figure => Some(
-            catalogue::force_figure(&kept.result, bins, model, wants.intersample, None),
-        ),
+        (Some(bins), Some(model)) if wants.every_figure => Some(catalogue::force_figure(
+            &kept.result,
+            bins,
+            model,
+            wants.intersample,
+            None,
+        )),
         _ => None,
     }
 }

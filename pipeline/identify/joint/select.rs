@@ -584,8 +584,9 @@ fn fit_candidates(
     };
     // The two smaller structures are independent fits: side by side where
     // they are small (each is the same computation on any thread count).
+    let together = side_by_side(runs);
     let staged = |s: Structure| assess(s, joint_fit_staged(runs, start, &with(s), GRID_STRIDE));
-    let (plain, delay) = match side_by_side(runs) {
+    let (plain, delay) = match together {
         true => rayon::join(|| staged(Structure::Plain), || staged(Structure::Delay)),
         false => (staged(Structure::Plain), staged(Structure::Delay)),
     };
@@ -612,7 +613,7 @@ fn fit_candidates(
                 fit_mode(runs, start, delay_fit, opts, band_top_hz, place),
             )
         };
-        match side_by_side(runs) {
+        match together {
             true => places.par_iter().with_max_len(1).map(fit).collect(),
             false => places.iter().map(fit).collect(),
         }
