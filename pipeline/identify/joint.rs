@@ -427,16 +427,16 @@ impl JointFit {
     }
 }
 
-/// One bin of one run.
-#[derive(Debug, Clone)]
+/// One bin of one run, as a pass reads it: made from the run's FRF where
+/// it lies and the bin's known factor ([`JointProblem::bin`]).
+#[derive(Debug, Clone, Copy)]
 struct Bin {
     s: Complex<f64>,
     /// The run's specimen polynomial S(s) at `s`.
     sp: Complex<f64>,
     h: Complex<f64>,
-    /// The known factors: the hold's response, times S(s) for a force.
-    held: Complex<f64>,
-    /// `held` times the aliases at the model they were evaluated for.
+    /// The hold's response (times S(s) for a force) times the aliases at
+    /// the model they were evaluated for.
     known: Complex<f64>,
     /// Whether the bin is of a force FRF (its delay is the force's).
     force: bool,
@@ -461,11 +461,35 @@ struct RunModel {
     force: bool,
 }
 
-/// The least-squares problem over every bin of every run.
+/// A run's bins in a problem: its FRF where the run holds it, and which
+/// of its bins the problem weighs.
 #[derive(Debug, Clone)]
-struct JointProblem {
-    /// Run by run, each run's bins together.
-    bins: Vec<Bin>,
+struct RunBins<'a> {
+    frf: JointRun<'a>,
+    /// The indices into the FRF of the bins weighed: those with a finite,
+    /// positive variance (every stride-th of them in a coarse problem).
+    at: Vec<u32>,
+}
+
+/// The least-squares problem over every bin of every run. A bin is its
+/// run's FRF read in place and its known factor, 16 bytes of its own
+/// (with its index, 4; and its friction's load, 8, where one is fitted):
+/// whole bins of 128 bytes would hold a night's 2 M in 0.27 GB a problem.
+#[derive(Debug, Clone)]
+struct JointProblem<'a> {
+    frfs: Vec<RunBins<'a>>,
+    /// Where each run's bins start in the problem's order, then their
+    /// count: run by run, each run's bins together.
+    starts: Vec<usize>,
+    /// Each bin's known factor, in the problem's order.
+    known: Vec<Complex<f64>>,
+    /// Each bin's Coulomb describing function per newton over j
+    /// ([`Bin::coulomb`]) where friction is fitted; else empty.
+    coulomb: Vec<f64>,
+    /// Whether bins carry their amplitude for the flow law.
+    amplitudes: bool,
+    /// The hold's sample rate (Hz), for the known factors.
+    sample_rate_hz: f64,
     runs: Vec<RunModel>,
     /// Each run's FRF grid spacing (Hz).
     bin_hz: Vec<f64>,
@@ -585,7 +609,7 @@ fn flow_at(
 /// on the thread count.
 const CHUNK: usize = 2048;
 
-impl JointProblem {
+impl<'a> JointProblem<'a> {
     fn n_params(&self) -> usize {
         self.structure.n_params()
             + usize::from(self.force_delay.is_some())
@@ -615,20 +639,110 @@ impl JointProblem {
         names
     }
 
+    /// The number of bins.
+    fn len(&self) -> usize {
+        self.known.len()
+    }
+
+    /// Run `r`'s bin `k` (its `k`-th in the problem): its s and its load S(s),
+    /// with a spring's stiffening at the bin's amplitude.
+    #[inline(always)]
+    fn load(&self, r: usize, k: usize) -> (usize, Complex<f64>, Complex<f64>) {
+        let frf = &self.frfs[r].frf;
+        let i = self.frfs[r].at[k] as usize;
+        let s = Complex::new(0.0, 2.0 * std::f64::consts::PI * frf.freq_hz[i]);
+        let (m, c, stiffness) = self.runs[r].mck;
+        let stiffening = match (frf.spring_cubic_n_per_m3, frf.amplitude_m) {
+            (Some(k3), Some(a)) => 0.75 * k3 * a[i] * a[i],
+            _ => 0.0,
+        };
+        (i, s, s * s * m + s * c + (stiffness + stiffening))
+    }
+
+    /// Run `r`'s bin `k`: the hold's response at its frequency, times S(s)
+    /// for a force.
+    fn held(&self, r: usize, k: usize) -> Complex<f64> {
+        let (i, _, sp) = self.load(r, k);
+        let f = self.frfs[r].frf.freq_hz[i];
+        let hold = hold_response(self.intersample, self.sample_rate_hz, f);
+        if self.runs[r].force { hold * sp } else { hold }
+    }
+
+    /// Run `r`'s bin `k` as the passes read it.
+    #[inline(always)]
+    fn bin(&self, r: usize, k: usize) -> Bin {
+        let (i, s, sp) = self.load(r, k);
+        let frf = &self.frfs[r].frf;
+        let flat = self.starts[r] + k;
+        Bin {
+            s,
+            sp,
+            h: frf.h[i],
+            known: self.known[flat],
+            force: self.runs[r].force,
+            weight: (2.0 / frf.variance[i]).sqrt(),
+            run: r,
+            coulomb: Complex::new(0.0, self.coulomb.get(flat).copied().unwrap_or(0.0)),
+            amplitude_m: match frf.amplitude_m {
+                Some(a) if self.amplitudes => a[i],
+                _ => 0.0,
+            },
+        }
+    }
+
+    /// The bin at `flat` in the problem's order.
+    fn bin_at(&self, flat: usize) -> Bin {
+        let r = self.starts.partition_point(|&s| s <= flat) - 1;
+        self.bin(r, flat - self.starts[r])
+    }
+
+    /// The bins in `range` of the problem's order, run by run.
+    fn bins_in(&self, range: std::ops::Range<usize>) -> impl Iterator<Item = Bin> + '_ {
+        let (lo, hi) = (range.start, range.end);
+        let first = self.starts.partition_point(|&s| s <= lo).saturating_sub(1);
+        (first..self.frfs.len())
+            .take_while(move |&r| self.starts[r] < hi)
+            .flat_map(move |r| {
+                let start = self.starts[r];
+                let span = lo.max(start) - start..hi.min(self.starts[r + 1]) - start;
+                span.map(move |k| self.bin(r, k))
+            })
+    }
+
+    /// The runs that have bins.
+    fn runs_with_bins(&self) -> Vec<usize> {
+        (0..self.frfs.len())
+            .filter(|&r| self.starts[r + 1] > self.starts[r])
+            .collect()
+    }
+
     /// The problem over every `stride`-th bin of each run, run by run.
-    fn every(&self, stride: usize) -> JointProblem {
-        // One pass sorts the bins into their runs (a pass per run over all
-        // the bins was 101 passes over 357,641 on a 500-log night).
-        let mut by_run: Vec<Vec<&Bin>> = vec![Vec::new(); self.runs.len()];
-        for b in &self.bins {
-            by_run[b.run].push(b);
+    fn every(&self, stride: usize) -> JointProblem<'a> {
+        let stride = stride.max(1);
+        let mut known = Vec::with_capacity(self.len() / stride + self.runs.len());
+        let mut coulomb = Vec::new();
+        let mut starts = Vec::with_capacity(self.starts.len());
+        let mut frfs = Vec::with_capacity(self.frfs.len());
+        for (r, run) in self.frfs.iter().enumerate() {
+            starts.push(known.len());
+            let span = self.starts[r]..self.starts[r + 1];
+            known.extend(span.clone().step_by(stride).map(|i| self.known[i]));
+            if !self.coulomb.is_empty() {
+                coulomb.extend(span.step_by(stride).map(|i| self.coulomb[i]));
+            }
+            frfs.push(RunBins {
+                frf: run.frf,
+                at: run.at.iter().step_by(stride).copied().collect(),
+            });
         }
-        let mut bins = Vec::with_capacity(self.bins.len() / stride.max(1) + self.runs.len());
-        for run in &by_run {
-            bins.extend(run.iter().step_by(stride.max(1)).map(|&b| b.clone()));
-        }
+        starts.push(known.len());
         JointProblem {
-            bins,
+            frfs,
+            starts,
+            known,
+            coulomb,
+            amplitudes: self.amplitudes,
+            sample_rate_hz: self.sample_rate_hz,
             runs: self.runs.clone(),
             bin_hz: self.bin_hz.iter().map(|h| h * stride as f64).collect(),
             lag: self.lag.clone(),
@@ -716,35 +830,77 @@ impl JointProblem {
         if self.intersample == Intersample::None {
             return None;
         }
-        let fs = 1.0 / self.period_s;
-        let mut spans = Vec::with_capacity(self.runs.len());
-        let mut start = 0;
-        while start < self.bins.len() {
-            let r = self.bins[start].run;
-            let end = start + self.bins[start..].partition_point(|b| b.run == r);
-            spans.push((r, start..end));
-            start = end;
-        }
-        let per_run: Option<Vec<KnownAt>> = spans
+        let per_run: Option<Vec<KnownAt>> = self
+            .runs_with_bins()
             .into_par_iter()
             .with_max_len(1)
-            .map(|(r, span)| {
+            .map(|r| {
                 let tf = self.run_tf(r, x).ok()?;
-                let at: Vec<usize> = span.step_by(stride).collect();
-                let f: Vec<f64> = at
-                    .iter()
-                    .map(|&i| self.bins[i].s.im / (2.0 * std::f64::consts::PI))
+                let at: Vec<usize> = (0..self.starts[r + 1] - self.starts[r])
+                    .step_by(stride)
                     .collect();
-                let alias = alias_factor(self.intersample, fs, &tf, &f);
+                let known = self.run_known(r, &tf, &at);
                 Some(
                     at.into_iter()
-                        .zip(alias)
-                        .map(|(i, a)| (i, self.bins[i].held * a))
+                        .map(|k| self.starts[r] + k)
+                        .zip(known)
                         .collect(),
                 )
             })
             .collect();
         Some(per_run?.concat())
+    }
+
+    /// Run `r`'s known factors at its bins `at` for its model `tf`: the
+    /// hold (times S(s) for a force) times the aliases ([`alias_factor`]).
+    fn run_known(&self, r: usize, tf: &TransferFunction, at: &[usize]) -> Vec<Complex<f64>> {
+        let f: Vec<f64> = at
+            .iter()
+            .map(|&k| self.load(r, k).1.im / (2.0 * std::f64::consts::PI))
+            .collect();
+        let alias = alias_factor(self.intersample, 1.0 / self.period_s, tf, &f);
+        at.iter()
+            .zip(alias)
+            .map(|(&k, a)| self.held(r, k) * a)
+            .collect()
+    }
+
+    /// Sets every bin's known factor to [`Self::exact_known`]'s at `x`, in
+    /// place, run by run side by side. Whether it set them (not without a
+    /// hold, or for a point that gives some run no model).
+    fn set_exact_known(&mut self, x: &Point) -> bool {
+        if self.intersample == Intersample::None {
+            return false;
+        }
+        let runs = self.runs_with_bins();
+        let tfs: Option<Vec<TransferFunction>> =
+            runs.iter().map(|&r| self.run_tf(r, x).ok()).collect();
+        let Some(tfs) = tfs else {
+            return false;
+        };
+        let mut known = std::mem::take(&mut self.known);
+        let this = &*self;
+        let mut slices = Vec::with_capacity(runs.len());
+        let mut rest = known.as_mut_slice();
+        let mut at = 0;
+        for &r in &runs {
+            let (skip, tail) = rest.split_at_mut(this.starts[r] - at);
+            let (mine, tail) = tail.split_at_mut(this.starts[r + 1] - this.starts[r]);
+            debug_assert!(skip.is_empty());
+            slices.push((r, mine));
+            rest = tail;
+            at = this.starts[r + 1];
+        }
+        slices
+            .into_par_iter()
+            .zip(tfs)
+            .with_max_len(1)
+            .for_each(|((r, out), tf)| {
+                let at: Vec<usize> = (0..out.len()).collect();
+                out.copy_from_slice(&this.run_known(r, &tf, &at));
+            });
+        self.known = known;
+        true
     }
 
     /// Sets the known factors to the aliases at `x` where they would
@@ -760,7 +916,7 @@ impl JointProblem {
         let mut a = DMatrix::zeros(p, p);
         let mut b = DVector::zeros(p);
         for &(i, new) in &probe {
-            let bin = &self.bins[i];
+            let bin = &self.bin_at(i);
             let e = self.eval_at::<true>(bin, x);
             let d = e.model * (new / bin.known - 1.0) * bin.weight;
             for j in 0..p {
@@ -772,18 +928,12 @@ impl JointProblem {
                 }
             }
         }
-        let share = probe.len() as f64 / self.bins.len() as f64;
+        let share = probe.len() as f64 / self.len() as f64;
         let shift = crate::fit::shift_in_stds(&a, &b, share, scale);
         if !shift.is_some_and(|z| z.iter().any(|&z| z >= crate::fit::ALIAS_SETTLED)) {
             return false;
         }
-        let Some(known) = self.exact_known(x, 1) else {
-            return false;
-        };
-        for (i, k) in known {
-            self.bins[i].known = k;
-        }
-        true
+        self.set_exact_known(x)
     }
 
     /// The flow law's share of the log-derivatives at one bin (`sp` and `q`
@@ -932,10 +1082,10 @@ impl JointProblem {
     #[cfg(test)]
     fn residuals(&self, theta: &[f64]) -> DVector<f64> {
         let x = self.point(theta);
-        let n = self.bins.len();
+        let n = self.len();
         let mut r = DVector::zeros(2 * n);
-        for (i, b) in self.bins.iter().enumerate() {
-            let e = (b.h - self.eval_at::<false>(b, &x).model) * b.weight;
+        for (i, b) in self.bins_in(0..n).enumerate() {
+            let e = (b.h - self.eval_at::<false>(&b, &x).model) * b.weight;
             r[i] = e.re;
             r[n + i] = e.im;
         }
@@ -948,11 +1098,13 @@ impl JointProblem {
     fn jacobian_blocks(&self, theta: &[f64], emit: &mut dyn FnMut(DMatrix<f64>)) {
         let x = self.point(theta);
         let p = self.n_params();
-        for chunk in self.bins.chunks(JACOBIAN_BLOCK) {
-            let m = chunk.len();
+        let n = self.len();
+        for start in (0..n).step_by(JACOBIAN_BLOCK) {
+            let block = start..(start + JACOBIAN_BLOCK).min(n);
+            let m = block.len();
             let mut jac = DMatrix::zeros(2 * m, p);
-            for (i, b) in chunk.iter().enumerate() {
-                let g = self.eval_at::<true>(b, &x).grad;
+            for (i, b) in self.bins_in(block).enumerate() {
+                let g = self.eval_at::<true>(&b, &x).grad;
                 for j in 0..p {
                     jac[(i, j)] = -g[j].re * b.weight;
                     jac[(m + i, j)] = -g[j].im * b.weight;
@@ -965,11 +1117,11 @@ impl JointProblem {
     #[cfg(test)]
     fn jacobian_matrix(&self, theta: &[f64]) -> DMatrix<f64> {
         let x = self.point(theta);
-        let n = self.bins.len();
+        let n = self.len();
         let p = self.n_params();
         let mut jac = DMatrix::zeros(2 * n, p);
-        for (i, b) in self.bins.iter().enumerate() {
-            let g = self.eval_at::<true>(b, &x).grad;
+        for (i, b) in self.bins_in(0..n).enumerate() {
+            let g = self.eval_at::<true>(&b, &x).grad;
             for j in 0..p {
                 jac[(i, j)] = -g[j].re * b.weight;
                 jac[(n + i, j)] = -g[j].im * b.weight;
@@ -978,17 +1130,24 @@ impl JointProblem {
         jac
     }
 
+    /// The problem's bins in chunks of [`CHUNK`], side by side.
+    fn chunks(&self) -> impl IndexedParallelIterator<Item = std::ops::Range<usize>> + '_ {
+        let n = self.len();
+        (0..n.div_ceil(CHUNK))
+            .into_par_iter()
+            .map(move |c| c * CHUNK..((c + 1) * CHUNK).min(n))
+    }
+
     /// The weighted cost r^T r, in one parallel pass (bin by bin and chunk
     /// by chunk in the order [`Self::normal`] adds it).
     fn cost(&self, theta: &[f64]) -> f64 {
         let x = self.point(theta);
         let partial: Vec<f64> = self
-            .bins
-            .par_chunks(CHUNK)
+            .chunks()
             .map(|chunk| {
                 let mut cost = 0.0;
-                for b in chunk {
-                    cost += ((b.h - self.eval_at::<false>(b, &x).model) * b.weight).norm_sqr();
+                for b in self.bins_in(chunk) {
+                    cost += ((b.h - self.eval_at::<false>(&b, &x).model) * b.weight).norm_sqr();
                 }
                 cost
             })
@@ -1026,14 +1185,13 @@ impl JointProblem {
         debug_assert_eq!(P, self.n_params());
         let x = self.point(theta);
         let partial: Vec<(f64, [[f64; P]; P], [f64; P])> = self
-            .bins
-            .par_chunks(CHUNK)
+            .chunks()
             .map(|chunk| {
                 let mut cost = 0.0;
                 let mut a = [[0.0; P]; P];
                 let mut g = [0.0; P];
-                for b in chunk {
-                    let e = self.eval_at::<true>(b, &x);
+                for b in self.bins_in(chunk) {
+                    let e = self.eval_at::<true>(&b, &x);
                     let r = (b.h - e.model) * b.weight;
                     // As [`Self::cost`] adds it, to the bit.
                     cost += r.norm_sqr();
@@ -1075,7 +1233,7 @@ impl JointProblem {
     }
 }
 
-impl JointProblem {
+impl JointProblem<'_> {
     /// [`crate::fit::correlated_covariance`] at `theta`: each bin's score, and
     /// its place along its run's FRF in bins, paired up to its run's lag
     /// less one bins apart (the lag being the first at which bins are
@@ -1088,10 +1246,11 @@ impl JointProblem {
     ) -> DMatrix<f64> {
         let x = self.point(theta);
         let p = self.n_params();
-        let mut scores = DMatrix::zeros(self.bins.len(), p);
-        let mut position = Vec::with_capacity(self.bins.len());
-        for (i, b) in self.bins.iter().enumerate() {
-            let e = self.eval_at::<true>(b, &x);
+        let n = self.len();
+        let mut scores = DMatrix::zeros(n, p);
+        let mut position = Vec::with_capacity(n);
+        for (i, b) in self.bins_in(0..n).enumerate() {
+            let e = self.eval_at::<true>(&b, &x);
             let r = (b.h - e.model) * b.weight;
             for k in 0..p {
                 scores[(i, k)] = (e.grad[k].re * r.re + e.grad[k].im * r.im) * b.weight;
@@ -1100,14 +1259,7 @@ impl JointProblem {
             position.push((b.run, f / self.bin_hz[b.run]));
         }
         let reach: Vec<f64> = self.lag.iter().map(|l| (l - 1) as f64).collect();
-        crate::fit::correlated_covariance(
-            &scores,
-            &position,
-            &reach,
-            a_inv,
-            2 * self.bins.len(),
-            dof,
-        )
+        crate::fit::correlated_covariance(&scores, &position, &reach, a_inv, 2 * n, dof)
     }
 
     /// Whether any run's bins share data with their neighbours.
@@ -1120,14 +1272,12 @@ impl JointProblem {
     fn adequacy(&self, theta: &[f64]) -> (Adequacy, Vec<Adequacy>) {
         let x = self.point(theta);
         let p = self.n_params();
-        let total = self.bins.len().max(1);
+        let total = self.len().max(1);
         let mut pooled = Sums::default();
         let mut per_run = Vec::with_capacity(self.runs.len());
-        let mut start = 0;
         for (r, &bin_hz) in self.bin_hz.iter().enumerate() {
             let lag = self.lag[r];
-            let end = start + self.bins[start..].iter().take_while(|b| b.run == r).count();
-            let bins = &self.bins[start..end];
+            let bins: Vec<Bin> = self.bins_in(self.starts[r]..self.starts[r + 1]).collect();
             let freq: Vec<f64> = bins
                 .iter()
                 .map(|b| b.s.im / (2.0 * std::f64::consts::PI))
@@ -1152,21 +1302,18 @@ impl JointProblem {
             let share = (p * bins.len()).div_ceil(total);
             per_run.push(sums.finish(share, lag));
             pooled += sums;
-            start = end;
         }
         let widest = self.lag.iter().copied().max().unwrap_or(1);
         (pooled.finish(p, widest), per_run)
     }
 }
 
-fn problem(runs: &[JointRun<'_>], opts: &JointOptions) -> Result<JointProblem, FitError> {
-    // Sized once: grown by doubling, a night's 2 M bins took twice their
-    // 0.27 GB.
-    let mut bins = Vec::with_capacity(runs.iter().map(|r| r.h.len()).sum());
-    let mut models = Vec::with_capacity(runs.len());
-    let bin_hz = runs.iter().map(|r| r.bin_hz).collect();
-    let lag = runs.iter().map(|r| r.lag.max(1)).collect();
-    for (r, run) in runs.iter().enumerate() {
+fn problem<'a>(runs: &[JointRun<'a>], opts: &JointOptions) -> Result<JointProblem<'a>, FitError> {
+    let mut frfs = Vec::with_capacity(runs.len());
+    let mut starts = Vec::with_capacity(runs.len() + 1);
+    let mut coulomb = Vec::new();
+    let mut n = 0;
+    for run in runs {
         if run.freq_hz.len() != run.h.len() || run.h.len() != run.variance.len() {
             return Err(FitError::LengthMismatch {
                 freq: run.freq_hz.len(),
@@ -1174,53 +1321,39 @@ fn problem(runs: &[JointRun<'_>], opts: &JointOptions) -> Result<JointProblem, F
                 variance: run.variance.len(),
             });
         }
-        models.push(RunModel {
+        let at: Vec<u32> = (0..run.h.len())
+            .filter(|&i| run.variance[i].is_finite() && run.variance[i] > 0.0)
+            .map(|i| u32::try_from(i).expect("an FRF of fewer than 2^32 bins"))
+            .collect();
+        if let (true, Some(a)) = (opts.friction, run.amplitude_m) {
+            coulomb.resize(n, 0.0);
+            coulomb.extend(at.iter().map(|&i| {
+                let (f, a) = (run.freq_hz[i as usize], a[i as usize]);
+                if a > 0.0 {
+                    model::coulomb_load_per_newton(f, a, opts.friction_smoothing_m_per_s)
+                } else {
+                    0.0
+                }
+            }));
+        }
+        starts.push(n);
+        n += at.len();
+        frfs.push(RunBins { frf: *run, at });
+    }
+    starts.push(n);
+    if !coulomb.is_empty() {
+        coulomb.resize(n, 0.0);
+    }
+    let models = runs
+        .iter()
+        .map(|run| RunModel {
             mck: run.specimen.mck(),
             p_ratio: run.p_gain / opts.p_ref,
             force: run.output == Output::Force,
-        });
-        for i in 0..run.h.len() {
-            let f = run.freq_hz[i];
-            let v = run.variance[i];
-            if !(v.is_finite() && v > 0.0) {
-                continue;
-            }
-            let s = Complex::new(0.0, 2.0 * std::f64::consts::PI * f);
-            let (m, c, k) = models[r].mck;
-            let stiffening = match (run.spring_cubic_n_per_m3, run.amplitude_m) {
-                (Some(k3), Some(a)) => 0.75 * k3 * a[i] * a[i],
-                _ => 0.0,
-            };
-            let sp = s * s * m + s * c + (k + stiffening);
-            let hold = hold_response(opts.intersample, opts.sample_rate_hz, f);
-            let coulomb = match run.amplitude_m {
-                Some(a) if opts.friction && a[i] > 0.0 => Complex::new(
-                    0.0,
-                    model::coulomb_load_per_newton(f, a[i], opts.friction_smoothing_m_per_s),
-                ),
-                _ => Complex::default(),
-            };
-            let held = match run.output {
-                Output::Displacement => hold,
-                Output::Force => hold * sp,
-            };
-            bins.push(Bin {
-                s,
-                sp,
-                h: run.h[i],
-                held,
-                known: held,
-                force: run.output == Output::Force,
-                weight: (2.0 / v).sqrt(),
-                run: r,
-                coulomb,
-                amplitude_m: match run.amplitude_m {
-                    Some(a) if opts.flow_law || opts.flow_law_held => a[i],
-                    _ => 0.0,
-                },
-            });
-        }
-    }
+        })
+        .collect();
+    let bin_hz = runs.iter().map(|r| r.bin_hz).collect();
+    let lag = runs.iter().map(|r| r.lag.max(1)).collect();
     let has_force = runs.iter().any(|r| r.output == Output::Force);
     let force_delay =
         (has_force && opts.structure != Structure::Plain).then(|| opts.structure.n_params());
@@ -1240,8 +1373,13 @@ fn problem(runs: &[JointRun<'_>], opts: &JointOptions) -> Result<JointProblem, F
             + usize::from(seal_damping.is_some())
             + usize::from(command_gain.is_some())
     });
-    Ok(JointProblem {
-        bins,
+    let mut problem = JointProblem {
+        frfs,
+        starts,
+        known: Vec::new(),
+        coulomb,
+        amplitudes: opts.flow_law || opts.flow_law_held,
+        sample_rate_hz: opts.sample_rate_hz,
         runs: models,
         bin_hz,
         lag,
@@ -1257,7 +1395,14 @@ fn problem(runs: &[JointRun<'_>], opts: &JointOptions) -> Result<JointProblem, F
         },
         period_s: 1.0 / opts.sample_rate_hz,
         intersample: opts.intersample,
-    })
+    };
+    // Sized once: grown by doubling, it took twice its size.
+    let mut known = Vec::with_capacity(n);
+    for r in 0..runs.len() {
+        known.extend((0..problem.starts[r + 1] - problem.starts[r]).map(|k| problem.held(r, k)));
+    }
+    problem.known = known;
+    Ok(problem)
 }
 
 /// Fit the rig jointly to `runs`, starting from `start` (the sequential
@@ -1329,7 +1474,7 @@ fn settle(
         )
     };
     let mut optimum = leg(problem, theta0, 0)?.optimum;
-    let dof = (2 * problem.bins.len())
+    let dof = (2 * problem.len())
         .saturating_sub(problem.n_params())
         .max(1);
     for _ in 0..ALIAS_PASSES {
@@ -1356,11 +1501,11 @@ struct Optimum {
 
 /// The solver's view of a problem borrowed rather than copied (the valve
 /// mode's two starts share one).
-struct Borrowed<'a>(&'a JointProblem);
+struct Borrowed<'a, 'b>(&'a JointProblem<'b>);
 
 /// The solver sees the cost and the normal equations together
 /// ([`Normal`]): the bins far outnumber the parameters.
-impl Jacobian for Borrowed<'_> {
+impl Jacobian for Borrowed<'_, '_> {
     type Param = DVector<f64>;
     type Jacobian = Normal;
 
@@ -1409,7 +1554,7 @@ fn start_theta(
     if !theta0.iter().all(|t| t.is_finite()) {
         return Err(FitError::NoSolution);
     }
-    if 2 * problem.bins.len() <= p {
+    if 2 * problem.len() <= p {
         return Err(FitError::NoSolution);
     }
     Ok(theta0)
@@ -1507,7 +1652,7 @@ fn finish(
     } = optimum;
     let p = problem.n_params();
     let names = problem.names();
-    let dof = 2 * problem.bins.len() - p;
+    let dof = 2 * problem.len() - p;
     let scale = cost / dof as f64;
     // From the normal equations the solver formed at the optimum when they
     // are well conditioned enough; otherwise from J itself, formed here.
@@ -1516,7 +1661,7 @@ fn finish(
         None => covariance_streamed(p, |emit| problem.jacobian_blocks(&theta, emit), scale)
             .map_err(|e| FitError::NotIdentifiable {
                 parameter: names[e.column].to_string(),
-                bins: problem.bins.len(),
+                bins: problem.len(),
                 matrix: "joint fit's Jacobian at the optimum",
                 ratio: e.ratio,
             })?,

@@ -553,12 +553,12 @@ fn assess(
 }
 
 /// The most bins of independent fits over the same runs that are fitted
-/// side by side. Each fit holds its own problem, about 130 bytes a bin:
-/// below this it is small beside the logs in flight, and the fits'
-/// sequential stretches overlap (one at a time, the 300-log night's rig
-/// took 15 % longer); above it one problem at a time bounds the rig's
-/// memory (a 3,000-log night's 601 FRFs hold 2.1 M bins, 270 MB a problem:
-/// its peak fell from 1.56 to 1.06 GB).
+/// side by side. Each fit holds its own problem, about 20 bytes a bin
+/// besides the FRFs it reads: below this it is small beside the logs in
+/// flight, and the fits' sequential stretches overlap (one at a time, the
+/// 300-log night's rig took 15 % longer); above it one problem at a time
+/// bounds the rig's memory (a 3,000-log night's 601 FRFs hold 2.1 M bins,
+/// 42 MB a problem, and six candidates side by side would take 0.25 GB).
 const SIDE_BY_SIDE_MAX_BINS: usize = 500_000;
 
 /// Whether independent fits over `runs` go side by side.

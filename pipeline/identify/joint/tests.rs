@@ -464,13 +464,12 @@ fn a_validation_runs_displacement_and_force_join_the_fit() {
     assert_eq!(p.names().last(), Some(&FORCE_DELAY));
     let jac = p.jacobian_matrix(&theta);
     let force_rows: Vec<usize> = p
-        .bins
-        .iter()
+        .bins_in(0..p.len())
         .enumerate()
         .filter(|(_, b)| b.run == 4)
         .map(|(i, _)| i)
         .collect();
-    let n = p.bins.len();
+    let n = p.len();
     for j in 0..theta.len() {
         let fd = central_difference(&p, &theta, j);
         let (mut num, mut den) = (0.0, 0.0);
@@ -1223,46 +1222,38 @@ fn the_grouped_jackknife_gives_the_spread_between_campaigns() {
     assert!((0.7..1.4).contains(&ratio), "ratio {ratio}");
 }
 
-/// The coarse problem holds every `stride`-th bin of each run, run by
-/// run, as filtering the bins run by run gives them, even with the runs'
-/// bins interleaved.
+/// A problem weighs each run's bins that have a variance, read from the
+/// run's FRF; the coarse problem holds every `stride`-th of them in each
+/// run, with its known factor.
 #[test]
 fn the_coarse_problem_takes_every_strideth_bin_of_each_run() {
     let c = Campaign::new(None, 0.002);
-    let mut p = problem(&c.runs(), &options(Structure::Delay)).unwrap();
-    // Interleave the runs' bins (each run's own order kept) to show the
-    // selection does not lean on their being grouped.
-    let runs = p.runs.len();
-    let mut queues: Vec<Vec<Bin>> = vec![Vec::new(); runs];
-    for b in p.bins.drain(..) {
-        queues[b.run].push(b);
+    let mut runs = c.runs();
+    let mut variance = runs[1].variance.to_vec();
+    for v in variance.iter_mut().step_by(5) {
+        *v = f64::NAN;
     }
-    let mut heads = vec![0; runs];
-    while heads.iter().zip(&queues).any(|(h, q)| *h < q.len()) {
-        for r in 0..runs {
-            if let Some(b) = queues[r].get(heads[r]) {
-                p.bins.push(b.clone());
-                heads[r] += 1;
+    runs[1].variance = &variance;
+    let p = problem(&runs, &options(Structure::Delay)).unwrap();
+    let all: Vec<Bin> = p.bins_in(0..p.len()).collect();
+    let mut want_all = Vec::new();
+    for (r, run) in runs.iter().enumerate() {
+        for i in 0..run.h.len() {
+            if run.variance[i].is_finite() && run.variance[i] > 0.0 {
+                want_all.push((r, run.h[i], (2.0 / run.variance[i]).sqrt()));
             }
         }
     }
+    let got_all: Vec<_> = all.iter().map(|b| (b.run, b.h, b.weight)).collect();
+    assert_eq!(got_all, want_all);
     for stride in [1, 2, 3, 7] {
-        let got: Vec<(usize, u64)> = p
-            .every(stride)
-            .bins
-            .iter()
-            .map(|b| (b.run, b.s.im.to_bits()))
-            .collect();
-        let want: Vec<(usize, u64)> = (0..runs)
-            .flat_map(|r| {
-                p.bins
-                    .iter()
-                    .filter(move |b| b.run == r)
-                    .step_by(stride)
-                    .map(|b| (b.run, b.s.im.to_bits()))
-            })
+        let coarse = p.every(stride);
+        let key = |b: &Bin| (b.run, b.s.im.to_bits(), b.known.re.to_bits());
+        let got: Vec<_> = coarse.bins_in(0..coarse.len()).map(|b| key(&b)).collect();
+        let want: Vec<_> = (0..runs.len())
+            .flat_map(|r| all.iter().filter(move |b| b.run == r).step_by(stride))
+            .map(key)
             .collect();
         assert_eq!(got, want, "stride {stride}");
-        assert!(got.len() * stride >= p.bins.len(), "stride {stride}");
     }
 }
