@@ -320,7 +320,10 @@ fn save_examples(figs: &[(Figure, (u32, u32))], dir: &str) {
         (9, "lines-residual"),
     ];
     std::fs::create_dir_all(dir).expect("create the examples directory");
-    let picked: Vec<(Figure, (u32, u32))> = wanted.iter().map(|&(i, _)| figs[i].clone()).collect();
+    let picked: Vec<(&Figure, (u32, u32))> = wanted
+        .iter()
+        .map(|&(i, _)| (&figs[i].0, figs[i].1))
+        .collect();
     let all = Formats {
         png: true,
         svg: true,
@@ -339,6 +342,7 @@ fn bench(c: &mut Criterion) {
     if let Ok(dir) = std::env::var("SERVOID_FIGURE_EXAMPLES") {
         save_examples(&figs, &dir);
     }
+    let figs: Vec<(&Figure, (u32, u32))> = figs.iter().map(|(f, s)| (f, *s)).collect();
     let mut g = c.benchmark_group("figures");
     g.sample_size(10);
     g.throughput(Throughput::Elements(figs.len() as u64));

@@ -210,8 +210,8 @@ impl<'a> FigureFiles<'a> {
         &self,
         specs: &[FigureSpec],
     ) -> Result<(Vec<PageFigure>, Vec<Warning>), WriteError> {
-        let jobs: Vec<(figures::Figure, (u32, u32))> =
-            specs.iter().map(|s| (s.figure.clone(), s.size)).collect();
+        let jobs: Vec<(&figures::Figure, (u32, u32))> =
+            specs.iter().map(|s| (&s.figure, s.size)).collect();
         let rendered = figures::render_many(&jobs, self.formats);
         let mut page = Vec::new();
         let mut warnings = Vec::new();

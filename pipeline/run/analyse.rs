@@ -177,7 +177,7 @@ pub(super) fn analyse_with(
     };
     let rig = rig_for_runs.ok().map(|(p, ..)| p);
     let (mut results, mut campaign_figures) =
-        campaign_level(campaign, results, rig, noise.as_ref(), &runs.overlay, sink)?;
+        campaign_level(campaign, results, rig, noise.as_ref(), runs.overlay, sink)?;
     let drawn: Vec<&PageFigure> = runs
         .figures
         .iter()
@@ -207,7 +207,7 @@ fn campaign_level(
     mut results: Results,
     rig: Option<RigParams>,
     noise: Option<&NoiseSource>,
-    overlay: &[OverlayRun],
+    overlay: Vec<OverlayRun>,
     sink: &Sink<'_>,
 ) -> Result<(Results, Vec<PageFigure>), WriteError> {
     conclusions::compare_runs(campaign, &mut results, rig.as_ref());

@@ -150,7 +150,7 @@ pub fn validated_figures(
 /// The campaign's own figures: the identification runs together (Fig. 15,
 /// when there are two or more) and the stiffness sensitivity.
 pub fn campaign_figures(
-    overlay: &[OverlayRun],
+    overlay: Vec<OverlayRun>,
     sensitivity: Option<&SensitivityResult>,
 ) -> Vec<FigureSpec> {
     let mut out = Vec::new();
@@ -895,13 +895,13 @@ pub struct OverlayRun {
 }
 
 /// Fig. 15: every identification run together, 0-15 Hz.
-fn overlay_figure(runs: &[OverlayRun]) -> FigureSpec {
-    let mut series = Vec::new();
-    for (k, r) in runs.iter().enumerate() {
+fn overlay_figure(runs: Vec<OverlayRun>) -> FigureSpec {
+    let mut series = Vec::with_capacity(2 * runs.len());
+    for (k, r) in runs.into_iter().enumerate() {
         series.push(BodeSeries {
             label: format!("{} (experimental)", r.id),
             freq_hz: r.freq_hz.clone(),
-            h: r.measured.clone(),
+            h: r.measured,
             coherence: None,
             trace: Trace::Measured,
             palette_index: Some(k),
@@ -909,8 +909,8 @@ fn overlay_figure(runs: &[OverlayRun]) -> FigureSpec {
         });
         series.push(BodeSeries {
             label: format!("{} (identified)", r.id),
-            freq_hz: r.freq_hz.clone(),
-            h: r.model.clone(),
+            freq_hz: r.freq_hz,
+            h: r.model,
             coherence: None,
             trace: Trace::Model,
             palette_index: Some(k),

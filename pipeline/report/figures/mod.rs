@@ -289,7 +289,7 @@ pub fn render(fig: &Figure, size: (u32, u32), formats: Formats) -> Result<Render
 /// is left with a block of them; results come back in input order and each
 /// figure's bytes do not depend on the number of threads.
 pub fn render_many(
-    figs: &[(Figure, (u32, u32))],
+    figs: &[(&Figure, (u32, u32))],
     formats: Formats,
 ) -> Vec<Result<Rendered, FigureError>> {
     figs.par_iter()
@@ -348,8 +348,8 @@ fn check_bode(name: &str, fig: &BodeFigure, size: (u32, u32)) -> Result<(f64, f6
     Ok(range)
 }
 
-/// Each series' magnitude (dB), unwrapped phase (rad) and line style, in
-/// the figure's order.
+/// Each series' magnitude (dB), unwrapped phase (rad; none without a
+/// phase panel) and line style, in the figure's order.
 struct BodeTraces {
     mag: Vec<Vec<f64>>,
     phase: Vec<Vec<f64>>,
@@ -363,11 +363,15 @@ impl BodeTraces {
             .iter()
             .map(|s| s.h.iter().map(|h| 20.0 * h.norm().log10()).collect())
             .collect();
-        let phase = fig
-            .series
-            .iter()
-            .map(|s| unwrap_phase(&s.freq_hz, &s.h, f0, f1))
-            .collect();
+        // Only a phase panel reads the phase.
+        let phase = if fig.phase {
+            fig.series
+                .iter()
+                .map(|s| unwrap_phase(&s.freq_hz, &s.h, f0, f1))
+                .collect()
+        } else {
+            Vec::new()
+        };
         let styles = fig
             .series
             .iter()
@@ -510,7 +514,7 @@ fn bode_legend(
                 false,
             )
         };
-        if in_range(&traces.mag[i]) || in_range(&traces.phase[i]) {
+        if in_range(&traces.mag[i]) || (fig.phase && in_range(&traces.phase[i])) {
             push_legend(&mut legend, &s.label, traces.styles[i]);
         }
     }

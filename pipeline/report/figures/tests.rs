@@ -544,8 +544,9 @@ fn same_data_same_bytes_whatever_the_thread_count() {
             .build()
             .unwrap()
     };
-    let one = pool(1).install(|| render_many(&figs, ALL));
-    let two = pool(2).install(|| render_many(&figs, ALL));
+    let refs: Vec<(&Figure, (u32, u32))> = figs.iter().map(|(f, s)| (f, *s)).collect();
+    let one = pool(1).install(|| render_many(&refs, ALL));
+    let two = pool(2).install(|| render_many(&refs, ALL));
     for ((a, b), c) in one.into_iter().zip(two).zip(&once) {
         let (a, b) = (a.unwrap(), b.unwrap());
         assert_eq!(&a, c);
