@@ -104,6 +104,9 @@ pub struct LogStage {
     pub frf: Frf,
     /// Command to force, when the log has a force channel.
     pub force_frf: Option<Frf>,
+    /// The command's whole one-sided DFT less its mean, where the FRF's
+    /// is the one the tracking reads ([`LogStage::reference`]).
+    pub command_dft: Option<Vec<nalgebra::Complex<f64>>>,
     /// The bins the fit used (band and coherence).
     pub mask: Vec<bool>,
     pub fit: Option<TfFit>,
@@ -114,6 +117,15 @@ pub struct LogStage {
 }
 
 impl LogStage {
+    /// The command as the tracking measures against it, with the FRF's
+    /// transform of it where there is one: one transform for both.
+    pub fn reference(&self) -> crate::tracking::Reference<'_> {
+        match &self.command_dft {
+            Some(dft) => crate::tracking::Reference::with_spectrum(&self.log.command_m, dft),
+            None => crate::tracking::Reference::new(&self.log.command_m),
+        }
+    }
+
     /// Whether the displacement holds harmonics of the command (seal
     /// friction's signature, `frf::linearity`): the joint fit then fits
     /// the friction.
@@ -935,7 +947,7 @@ pub fn fit_data_with(
                 displacement_m,
                 ..log.clone()
             };
-            let (choice, mut h, _) = estimate_frfs(run, ident, &log, &plan.path)?;
+            let Frfs { choice, mut h, .. } = estimate_frfs(run, ident, &log, &plan.path)?;
             let mask = frf::band_mask(&h, run.band_hz, ident.coherence_min);
             let (_, data) = fit_run(&mut h, &mask, run.band_hz, ident, &choice.plan, fs, None)
                 .map_err(|source| tf_error(&plan.path, source))?;
@@ -958,7 +970,12 @@ pub fn log_stage_from(
     let (log, periodic) = steady_part(log, ident, run.band_hz);
     warnings.extend(periodic.as_ref().and_then(distortion_warning));
     let fs = log.sample_rate_hz;
-    let (mut choice, mut h, force_frf) = estimate_frfs(run, ident, &log, path)?;
+    let Frfs {
+        mut choice,
+        mut h,
+        force_frf,
+        command_dft,
+    } = estimate_frfs(run, ident, &log, path)?;
     // `auto`'s fit of a command of sparse lines reads the transient and the
     // noise from the lines between them (`identify::run_fit`), as the
     // reason then says.
@@ -1032,6 +1049,7 @@ pub fn log_stage_from(
         cause,
         frf: h,
         force_frf,
+        command_dft,
         mask,
         fit,
         fit_data,
@@ -1245,7 +1263,7 @@ fn estimate_frfs(
     ident: &IdentificationPlan,
     log: &Log,
     path: &std::path::Path,
-) -> Result<(FrfChoice, Frf, Option<Frf>), LogStageError> {
+) -> Result<Frfs, LogStageError> {
     let fs = log.sample_rate_hz;
     let frf_err = |source: FrfError| tf_error(path, RunTfError::Frf(source));
     let choice = ident
@@ -1274,9 +1292,9 @@ fn estimate_frfs(
         y,
         plan: &choice.plan,
     }));
-    let mut estimates = frf::estimate(&log.command_m, &outputs, fs, kept)
-        .map_err(frf_err)?
-        .into_iter();
+    let (estimates, command_dft) =
+        frf::estimate_sharing(&log.command_m, &outputs, fs, kept, true).map_err(frf_err)?;
+    let mut estimates = estimates.into_iter();
     let frf::Estimate {
         frf: h,
         input_total,
@@ -1289,7 +1307,22 @@ fn estimate_frfs(
             RunTfError::NoExcitation { lo, hi, fraction },
         ));
     }
-    Ok((choice, h, force_frf))
+    Ok(Frfs {
+        choice,
+        h,
+        force_frf,
+        command_dft,
+    })
+}
+
+/// What [`estimate_frfs`] gives.
+struct Frfs {
+    choice: FrfChoice,
+    h: Frf,
+    force_frf: Option<Frf>,
+    /// The command's whole transform, where the FRF's is the tracking's
+    /// ([`frf::estimate_sharing`]).
+    command_dft: Option<Vec<nalgebra::Complex<f64>>>,
 }
 
 /// Warn of what the log shows wrong (a stiffness the spring's force

@@ -543,7 +543,7 @@ pub fn fitted(
             .as_ref()
             .map(|t: &validate::TimeStage| t.windows.as_slice());
         out.tracking = Some(RunTracking {
-            measured: measured_tracking(&Reference::new(&st.log.command_m), st, windows),
+            measured: measured_tracking(&st.reference(), st, windows),
             predicted: None,
             model_gap_s: None,
             compensator: None,

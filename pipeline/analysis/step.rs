@@ -24,7 +24,6 @@ use crate::model::flow::{LoadLaw, RigAtLoad};
 use crate::model::{self, LinearSpecimen, RigExtras, RigParams, SpecimenModel};
 use crate::results::{RunResult, RunTracking, SpringForceResult};
 use crate::sensitivity::{self, NoiseProfile};
-use crate::tracking::Reference;
 use crate::validate::csi::Csi;
 use crate::validate::{self, TimeStage};
 
@@ -356,7 +355,7 @@ fn run_tracking(
     (at_load, extras): (&RigAtLoad, &RigExtras),
     design: &CompensatorPlan<'_>,
 ) -> RunTracking {
-    let reference = Reference::new(&st.log.command_m);
+    let reference = st.reference();
     let measured = measured_tracking(&reference, st, time.map(|t| t.windows.as_slice()));
     let predicted = time.map(|t| predicted_tracking(&reference, st, t, plant));
     let compensator = match (plan.specimen.linear(), time, plant) {

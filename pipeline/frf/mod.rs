@@ -162,6 +162,25 @@ pub fn estimate(
     sample_rate_hz: f64,
     keep: Keep,
 ) -> Result<Vec<Estimate>, FrfError> {
+    Ok(estimate_sharing(u, outputs, sample_rate_hz, keep, false)?.0)
+}
+
+/// Each output's estimate, and the command's whole transform where
+/// [`estimate_sharing`] gives it.
+pub type Sharing = (Vec<Estimate>, Option<Vec<Complex<f64>>>);
+
+/// [`estimate`], and with `share` the command's whole one-sided DFT less
+/// its mean where the estimate made it (a whole-record plan, its window
+/// rectangular and its detrending the mean's): the transform the
+/// tracking's cross-correlation reads (`tracking::Reference::with_spectrum`),
+/// made once for both.
+pub fn estimate_sharing(
+    u: &[f64],
+    outputs: &[Output<'_>],
+    sample_rate_hz: f64,
+    keep: Keep,
+    share: bool,
+) -> Result<Sharing, FrfError> {
     // One plan for all (but the transient): a whole-record plan shares
     // the command's transforms.
     let shared = outputs
@@ -170,13 +189,14 @@ pub fn estimate(
         .filter(|first| outputs.iter().all(|o| o.plan.same_but_transient(first)))
         .filter(|plan| !plan.method().is_welch());
     if shared.is_some() {
-        return whole_record(u, outputs, sample_rate_hz, keep);
+        return whole_record(u, outputs, sample_rate_hz, keep, share);
     }
-    outputs
+    let estimates = outputs
         .iter()
         .map(|o| {
             if !o.plan.method().is_welch() {
-                let mut one = whole_record(u, std::slice::from_ref(o), sample_rate_hz, keep)?;
+                let (mut one, _) =
+                    whole_record(u, std::slice::from_ref(o), sample_rate_hz, keep, false)?;
                 return Ok(one.pop().expect("one estimate for one output"));
             }
             let mut frf = welch(u, o.y, sample_rate_hz, o.plan)?;
@@ -186,7 +206,8 @@ pub fn estimate(
             }
             Ok(Estimate { frf, input_total })
         })
-        .collect()
+        .collect::<Result<_, FrfError>>()?;
+    Ok((estimates, None))
 }
 
 /// [`estimate`] of the one output `y`, every bin kept.
@@ -247,13 +268,15 @@ fn welch(u: &[f64], y: &[f64], sample_rate_hz: f64, plan: &FrfPlan) -> Result<Fr
 /// [`Frf::input_dft`] up to that frequency and [`VARIANCE_REACH_BINS`]
 /// beyond). The command's whole-record transform, its coherence segments'
 /// and the input's summed density are made once, and each output's
-/// estimate is the one it would get alone, to the bit.
+/// estimate is the one it would get alone, to the bit. With `share`, the
+/// command's transform as [`estimate_sharing`] gives it.
 fn whole_record(
     u: &[f64],
     outputs: &[Output<'_>],
     sample_rate_hz: f64,
     keep: Keep,
-) -> Result<Vec<Estimate>, FrfError> {
+    share: bool,
+) -> Result<Sharing, FrfError> {
     let plan = outputs[0].plan;
     let (window_kind, detrend_kind) = (plan.window(), plan.detrend());
     let (coherence_segment_length, coherence_overlap) = (plan.segment_length(), plan.overlap());
@@ -331,9 +354,10 @@ fn whole_record(
         kept_bins,
         keep,
     };
+    let share = share && w.is_none() && detrend_kind == Detrend::Mean;
     let mut estimates = Vec::with_capacity(outputs.len());
     for (i, ((o, suy), coarse)) in outputs.iter().zip(y_dfts).zip(coarse).enumerate() {
-        let h = if i == last {
+        let h = if i == last && !share {
             std::mem::take(&mut u_dft)
         } else {
             u_dft[..read].to_vec()
@@ -343,7 +367,7 @@ fn whole_record(
             input_total,
         });
     }
-    Ok(estimates)
+    Ok((estimates, share.then_some(u_dft)))
 }
 
 /// The input's density summed over every bin of its whole transform `u`

@@ -80,7 +80,7 @@ pub enum FeiNote {
 pub struct Reference<'a> {
     samples: &'a [f64],
     mean: f64,
-    spectrum: Vec<Complex<f64>>,
+    spectrum: std::borrow::Cow<'a, [Complex<f64>]>,
     fei: OnceLock<FeiTerms>,
     autocorrelation: OnceLock<[f64; delay::LAGS]>,
     parts: Mutex<Vec<(Range<usize>, Arc<Reference<'a>>)>>,
@@ -105,7 +105,27 @@ impl<'a> Reference<'a> {
         Self {
             samples: command,
             mean,
-            spectrum: centred_spectrum(command, mean),
+            spectrum: centred_spectrum(command, mean).into(),
+            fei: OnceLock::new(),
+            autocorrelation: OnceLock::new(),
+            parts: Mutex::new(Vec::new()),
+        }
+    }
+
+    /// As [`Self::new`], with the command's one-sided DFT less its mean
+    /// already made (the whole-record FRF's, `frf::estimate_sharing`):
+    /// the same transform, its mean summed in another order, so the
+    /// measures may differ in their last bits. A `spectrum` of another
+    /// length than the command's is not it, and the command is
+    /// transformed here.
+    pub fn with_spectrum(command: &'a [f64], spectrum: &'a [Complex<f64>]) -> Self {
+        if spectrum.len() != command.len() / 2 + 1 || command.is_empty() {
+            return Self::new(command);
+        }
+        Self {
+            samples: command,
+            mean: mean(command),
+            spectrum: spectrum.into(),
             fei: OnceLock::new(),
             autocorrelation: OnceLock::new(),
             parts: Mutex::new(Vec::new()),

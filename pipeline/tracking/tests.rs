@@ -632,3 +632,54 @@ fn the_friction_factor_is_what_the_nonlinear_plant_gives_at_a_sine() {
         "the friction moves the response by {moved:?}: the test needs it to matter"
     );
 }
+
+/// The whole-record FRF's transform of the command, shared with the
+/// tracking (`frf::estimate_sharing`), is the tracking's own less its mean
+/// summed in another order: the delay of 2.37 samples and the FEI come out
+/// as accurate from it as from the tracking's own transform, and the same
+/// to 1e-12 of a sample. A windowed plan's transform is not the tracking's,
+/// and is not shared.
+#[test]
+fn the_frfs_command_transform_gives_the_trackings_measures() {
+    use crate::frf::{self, Detrend, FrfPlan, Method, Window};
+    let tau = 2.37 / FS;
+    let n = 20_000;
+    let u: Vec<f64> = multisine(n, 0.0).iter().map(|v| v + 0.25).collect();
+    let x = multisine(n, tau);
+    let frf_of = |window| {
+        let plan = FrfPlan::new(Method::Etfe, 2048, 0.5, window, Detrend::Mean).unwrap();
+        let outputs = [frf::Output { y: &x, plan: &plan }];
+        frf::estimate_sharing(&u, &outputs, FS, frf::Keep::All, true)
+            .unwrap()
+            .1
+    };
+    assert!(frf_of(Window::Hann).is_none());
+    let dft = frf_of(Window::Rectangular).expect("a rectangular whole-record plan shares");
+    let own = centred_spectrum(&u, mean(&u));
+    let scale = own.iter().map(|c| c.norm()).fold(0.0, f64::max);
+    let worst = dft
+        .iter()
+        .zip(&own)
+        .map(|(a, b)| (a - b).norm())
+        .fold(0.0, f64::max);
+    assert!(worst < 1e-12 * scale, "{worst:e} of {scale:e}");
+    let (shared, separate) = (Reference::with_spectrum(&u, &dft), Reference::new(&u));
+    let d_shared = xcorr_delay(&shared, &x, FS, MAX_DELAY_S).unwrap();
+    let d_own = xcorr_delay(&separate, &x, FS, MAX_DELAY_S).unwrap();
+    assert!(
+        (d_shared * FS - 2.37).abs() < 1e-4,
+        "{} samples",
+        d_shared * FS
+    );
+    assert!(
+        ((d_shared - d_own) * FS).abs() < 1e-12,
+        "{d_shared} {d_own}"
+    );
+    let f_shared = frequency_evaluation(&shared, &x, FS).unwrap();
+    let f_own = frequency_evaluation(&separate, &x, FS).unwrap();
+    assert!((f_shared.amplitude - f_own.amplitude).abs() < 1e-12);
+    assert!((f_shared.delay_s - f_own.delay_s).abs() < 1e-15);
+    // A transform of another length is not the command's.
+    let other = Reference::with_spectrum(&u, &dft[..dft.len() - 1]);
+    assert_eq!(xcorr_delay(&other, &x, FS, MAX_DELAY_S).unwrap(), d_own);
+}
