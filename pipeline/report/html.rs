@@ -8,7 +8,7 @@
 //!
 //! Rendering is linear in the number of runs: the results become a
 //! template value once, and nothing in a template searches the runs. The
-//! campaign's page takes each run's row ([`RunRow`]), not its arrays: as a
+//! campaign's page takes each run's row (`RunRow`), not its arrays: as a
 //! template value a 3,000-log night's whole results would take 0.15 GB.
 
 use crate::units::format_number;
