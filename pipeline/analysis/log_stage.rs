@@ -947,7 +947,7 @@ pub fn fit_data_with(
                 displacement_m,
                 ..log.clone()
             };
-            let Frfs { choice, mut h, .. } = estimate_frfs(run, ident, &log, &plan.path)?;
+            let Frfs { choice, mut h, .. } = estimate_frfs(run, ident, &log, &plan.path, false)?;
             let mask = frf::band_mask(&h, run.band_hz, ident.coherence_min);
             let (_, data) = fit_run(&mut h, &mask, run.band_hz, ident, &choice.plan, fs, None)
                 .map_err(|source| tf_error(&plan.path, source))?;
@@ -975,7 +975,7 @@ pub fn log_stage_from(
         mut h,
         force_frf,
         command_dft,
-    } = estimate_frfs(run, ident, &log, path)?;
+    } = estimate_frfs(run, ident, &log, path, true)?;
     // `auto`'s fit of a command of sparse lines reads the transient and the
     // noise from the lines between them (`identify::run_fit`), as the
     // reason then says.
@@ -1257,12 +1257,14 @@ fn check_band_below_nyquist(
 /// The FRF settings the run gets, its command-to-displacement FRF and,
 /// when the log has a force, its command-to-force FRF, each kept up to
 /// what is read of it; refused when the band holds too little of the
-/// command's power.
+/// command's power. With `share`, the command's transform for the
+/// tracking where the FRF's is it.
 fn estimate_frfs(
     run: &RunPlan,
     ident: &IdentificationPlan,
     log: &Log,
     path: &std::path::Path,
+    share: bool,
 ) -> Result<Frfs, LogStageError> {
     let fs = log.sample_rate_hz;
     let frf_err = |source: FrfError| tf_error(path, RunTfError::Frf(source));
@@ -1293,7 +1295,7 @@ fn estimate_frfs(
         plan: &choice.plan,
     }));
     let (estimates, command_dft) =
-        frf::estimate_sharing(&log.command_m, &outputs, fs, kept, true).map_err(frf_err)?;
+        frf::estimate_sharing(&log.command_m, &outputs, fs, kept, share).map_err(frf_err)?;
     let mut estimates = estimates.into_iter();
     let frf::Estimate {
         frf: h,

@@ -663,6 +663,11 @@ impl<'a> JointProblem<'a> {
     /// for a force.
     fn held(&self, r: usize, k: usize) -> Complex<f64> {
         let (i, _, sp) = self.load(r, k);
+        self.held_at(r, i, sp)
+    }
+
+    /// [`Self::held`] at run `r`'s FRF bin `i`, its load `sp` there.
+    fn held_at(&self, r: usize, i: usize, sp: Complex<f64>) -> Complex<f64> {
         let f = self.frfs[r].frf.freq_hz[i];
         let hold = hold_response(self.intersample, self.sample_rate_hz, f);
         if self.runs[r].force { hold * sp } else { hold }
@@ -854,14 +859,16 @@ impl<'a> JointProblem<'a> {
     /// Run `r`'s known factors at its bins `at` for its model `tf`: the
     /// hold (times S(s) for a force) times the aliases ([`alias_factor`]).
     fn run_known(&self, r: usize, tf: &TransferFunction, at: &[usize]) -> Vec<Complex<f64>> {
-        let f: Vec<f64> = at
+        let loads: Vec<_> = at.iter().map(|&k| self.load(r, k)).collect();
+        let f: Vec<f64> = loads
             .iter()
-            .map(|&k| self.load(r, k).1.im / (2.0 * std::f64::consts::PI))
+            .map(|(_, s, _)| s.im / (2.0 * std::f64::consts::PI))
             .collect();
         let alias = alias_factor(self.intersample, 1.0 / self.period_s, tf, &f);
-        at.iter()
+        loads
+            .into_iter()
             .zip(alias)
-            .map(|(&k, a)| self.held(r, k) * a)
+            .map(|((i, _, sp), a)| self.held_at(r, i, sp) * a)
             .collect()
     }
 
@@ -880,16 +887,16 @@ impl<'a> JointProblem<'a> {
         };
         let mut known = std::mem::take(&mut self.known);
         let this = &*self;
+        // Each run's known factors, split off in order (a run without bins
+        // has an empty span, and no model to evaluate).
         let mut slices = Vec::with_capacity(runs.len());
         let mut rest = known.as_mut_slice();
-        let mut at = 0;
-        for &r in &runs {
-            let (skip, tail) = rest.split_at_mut(this.starts[r] - at);
-            let (mine, tail) = tail.split_at_mut(this.starts[r + 1] - this.starts[r]);
-            debug_assert!(skip.is_empty());
-            slices.push((r, mine));
+        for r in 0..this.frfs.len() {
+            let (mine, tail) = rest.split_at_mut(this.starts[r + 1] - this.starts[r]);
+            if !mine.is_empty() {
+                slices.push((r, mine));
+            }
             rest = tail;
-            at = this.starts[r + 1];
         }
         slices
             .into_par_iter()
@@ -1396,7 +1403,7 @@ fn problem<'a>(runs: &[JointRun<'a>], opts: &JointOptions) -> Result<JointProble
         period_s: 1.0 / opts.sample_rate_hz,
         intersample: opts.intersample,
     };
-    // Sized once: grown by doubling, it took twice its size.
+    // Sized once: grown by doubling it could take twice its size.
     let mut known = Vec::with_capacity(n);
     for r in 0..runs.len() {
         known.extend((0..problem.starts[r + 1] - problem.starts[r]).map(|k| problem.held(r, k)));
