@@ -1661,18 +1661,7 @@ fn finish(
     let names = problem.names();
     let dof = 2 * problem.len() - p;
     let scale = cost / dof as f64;
-    // From the normal equations the solver formed at the optimum when they
-    // are well conditioned enough; otherwise from J itself, formed here.
-    let cov_theta = match covariance_from_normal(&normal.a, scale) {
-        Some(cov) => cov,
-        None => covariance_streamed(p, |emit| problem.jacobian_blocks(&theta, emit), scale)
-            .map_err(|e| FitError::NotIdentifiable {
-                parameter: names[e.column].to_string(),
-                bins: problem.len(),
-                matrix: "joint fit's Jacobian at the optimum",
-                ratio: e.ratio,
-            })?,
-    };
+    let cov_theta = theta_covariance(problem, &theta, &normal, scale)?;
     // Bins that share data (a window's kernel, the LPM's transient) have
     // correlated errors: the sandwich over their range.
     let cov_theta = if problem.correlated() && scale > 0.0 {
@@ -1722,6 +1711,58 @@ fn finish(
         adequacy,
         per_run,
     })
+}
+
+/// The covariance of theta at the optimum `theta` (`normal` the solver's
+/// last normal equations there, `scale` the reduced chi-square): from the
+/// normal equations when they are well conditioned enough, otherwise from
+/// J itself, formed here. An error names the parameter the bins do not
+/// determine.
+fn theta_covariance(
+    problem: &JointProblem,
+    theta: &[f64],
+    normal: &Normal,
+    scale: f64,
+) -> Result<DMatrix<f64>, FitError> {
+    if let Some(cov) = covariance_from_normal(&normal.a, scale) {
+        return Ok(cov);
+    }
+    covariance_streamed(
+        problem.n_params(),
+        |emit| problem.jacobian_blocks(theta, emit),
+        scale,
+    )
+    .map_err(|e| FitError::NotIdentifiable {
+        parameter: problem.names()[e.column].to_string(),
+        bins: problem.len(),
+        matrix: "joint fit's Jacobian at the optimum",
+        ratio: e.ratio,
+    })
+}
+
+/// [`joint_fit`]'s parameters (physical units) and whether it converged,
+/// without the covariance's sandwich or the adequacy tests, which cost a
+/// pass over the bins and a run's worth of arrays each: what a jackknife's
+/// refit uses. It fails where [`joint_fit`] would.
+pub(super) fn joint_fit_params(
+    runs: &[JointRun<'_>],
+    start: &RigParams,
+    opts: &JointOptions,
+) -> Result<(Vec<f64>, bool), FitError> {
+    let mut problem = problem(runs, opts)?;
+    let theta0 = start_theta(&problem, start, opts)?;
+    let optimum = settle(&mut problem, opts, theta0)?;
+    let dof = 2 * problem.len() - problem.n_params();
+    theta_covariance(
+        &problem,
+        &optimum.theta,
+        &optimum.normal,
+        optimum.cost / dof as f64,
+    )?;
+    Ok((
+        physical(&problem, &optimum.theta, opts).0,
+        optimum.converged,
+    ))
 }
 
 /// The parameters at `theta` in physical units, and each one's derivative

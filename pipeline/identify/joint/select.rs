@@ -19,7 +19,7 @@ use statrs::distribution::{ContinuousCDF, FisherSnedecor};
 
 use super::{
     FitError, JointFit, JointOptions, JointProblem, JointRun, Leg, Output, Point, Structure,
-    finish, joint_fit, joint_fit_staged, problem, rig_theta, settle,
+    finish, joint_fit, joint_fit_params, joint_fit_staged, problem, rig_theta, settle,
 };
 use crate::identify::Estimate;
 use crate::model::RigParams;
@@ -1199,7 +1199,7 @@ pub fn run_spread(
     }
     let from = from_optimum(fit, opts);
     let groups = runs.len().min(JACKKNIFE_GROUPS);
-    // A refit per group (each a whole joint fit), side by side where they
+    // A refit per group (each a joint fit to its optimum), side by side where they
     // are small, gathered in group order: the same bits on any number of
     // threads.
     let refit = |g: usize| {
@@ -1209,8 +1209,8 @@ pub fn run_spread(
             .filter(|(j, _)| j % groups != g)
             .map(|(_, r)| *r)
             .collect();
-        let f = joint_fit(&rest, &fit.rig, &from).ok()?;
-        f.converged.then(|| std::array::from_fn(|k| f.params[k]))
+        let (params, converged) = joint_fit_params(&rest, &fit.rig, &from).ok()?;
+        converged.then(|| std::array::from_fn(|k| params[k]))
     };
     let refits: Vec<Option<[f64; 4]>> = match side_by_side(runs) {
         true => (0..groups)
