@@ -1420,10 +1420,21 @@ pub fn joint_fit(
     start: &RigParams,
     opts: &JointOptions,
 ) -> Result<JointFit, FitError> {
+    let (problem, optimum) = fit_to_optimum(runs, start, opts)?;
+    finish(&problem, optimum, opts)
+}
+
+/// The problem over `runs` and its optimum from `start` (as [`joint_fit`]
+/// reaches it), its aliases those of the optimum's last leg.
+fn fit_to_optimum<'a>(
+    runs: &[JointRun<'a>],
+    start: &RigParams,
+    opts: &JointOptions,
+) -> Result<(JointProblem<'a>, Optimum), FitError> {
     let mut problem = problem(runs, opts)?;
     let theta0 = start_theta(&problem, start, opts)?;
     let optimum = settle(&mut problem, opts, theta0)?;
-    finish(&problem, optimum, opts)
+    Ok((problem, optimum))
 }
 
 /// As [`joint_fit`], by way of the optimum on every `stride`-th bin: from
@@ -1749,9 +1760,7 @@ pub(super) fn joint_fit_params(
     start: &RigParams,
     opts: &JointOptions,
 ) -> Result<(Vec<f64>, bool), FitError> {
-    let mut problem = problem(runs, opts)?;
-    let theta0 = start_theta(&problem, start, opts)?;
-    let optimum = settle(&mut problem, opts, theta0)?;
+    let (problem, optimum) = fit_to_optimum(runs, start, opts)?;
     let dof = 2 * problem.len() - problem.n_params();
     theta_covariance(
         &problem,

@@ -102,10 +102,16 @@ struct FeiTerms {
 impl<'a> Reference<'a> {
     pub fn new(command: &'a [f64]) -> Self {
         let mean = mean(command);
+        Self::of(command, mean, centred_spectrum(command, mean).into())
+    }
+
+    /// The command with its mean and its spectrum less the mean, nothing
+    /// else made yet.
+    fn of(samples: &'a [f64], mean: f64, spectrum: std::borrow::Cow<'a, [Complex<f64>]>) -> Self {
         Self {
-            samples: command,
+            samples,
             mean,
-            spectrum: centred_spectrum(command, mean).into(),
+            spectrum,
             fei: OnceLock::new(),
             autocorrelation: OnceLock::new(),
             parts: Mutex::new(Vec::new()),
@@ -122,14 +128,7 @@ impl<'a> Reference<'a> {
         if spectrum.len() != command.len() / 2 + 1 || command.is_empty() {
             return Self::new(command);
         }
-        Self {
-            samples: command,
-            mean: mean(command),
-            spectrum: spectrum.into(),
-            fei: OnceLock::new(),
-            autocorrelation: OnceLock::new(),
-            parts: Mutex::new(Vec::new()),
-        }
+        Self::of(command, mean(command), spectrum.into())
     }
 
     /// The command's samples.
