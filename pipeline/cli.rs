@@ -246,7 +246,7 @@ pub const EXIT_USAGE: u8 = 2;
 pub const EXIT_ALARM: u8 = 3;
 
 pub fn main() -> ExitCode {
-    tune_malloc();
+    crate::run::allocator::tune();
     // A panic inside a log reader (polars, hdf5-pure, matfile) on a damaged
     // log is caught and reported as the run's error; its raw panic message
     // would only confuse the log.
@@ -265,40 +265,6 @@ pub fn main() -> ExitCode {
         }
     };
     ExitCode::from(dispatch(cli.command))
-}
-
-/// glibc gives each thread that meets a locked arena an arena of its own,
-/// up to eight per core, and each keeps what its thread freed: a night's
-/// four workers on two cores held four runs' working sets. One arena per
-/// core lowers a night's peak by a sixth to a quarter; small blocks still
-/// come from each thread's own cache without a lock. Fewer arenas trim
-/// their tops more often, and a figure's raster freed and taken again
-/// then faults its pages back in: blocks up to 32 MiB stay in the arenas,
-/// which keep up to 64 MiB free at their tops (the largest that glibc's
-/// own sliding thresholds reach). With both, a night runs as fast as
-/// before, or faster (docs/accuracy.md, "The memory a night takes"). A
-/// setting of the user's (`MALLOC_*`, `GLIBC_TUNABLES`) leaves all of
-/// them as glibc has them.
-fn tune_malloc() {
-    #[cfg(all(target_os = "linux", target_env = "gnu"))]
-    {
-        let users = std::env::vars_os().any(|(k, _)| {
-            let k = k.to_string_lossy();
-            k.starts_with("MALLOC_") || k == "GLIBC_TUNABLES"
-        });
-        if users {
-            return;
-        }
-        let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
-        let arenas = libc::c_int::try_from(cores).unwrap_or(libc::c_int::MAX);
-        // SAFETY: mallopt only sets the allocator's parameters; this runs
-        // before any thread of ours exists.
-        unsafe {
-            libc::mallopt(libc::M_ARENA_MAX, arenas);
-            libc::mallopt(libc::M_MMAP_THRESHOLD, 32 << 20);
-            libc::mallopt(libc::M_TRIM_THRESHOLD, 64 << 20);
-        }
-    }
 }
 
 /// A line on stdout; a closed pipe (`servoid run ... | head -1`) drops it

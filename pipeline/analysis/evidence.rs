@@ -31,7 +31,8 @@ pub struct Evidence {
     /// fitted.
     pub tf: TransferFunction,
     pub cov: Option<[[f64; 3]; 3]>,
-    /// The bins its fit was given (None for a published model).
+    /// The bins its fit was given (None for a published model), without
+    /// the input's spectrum ([`FitData::for_rig`]).
     pub data: Option<FitData>,
     /// Its own fit's adequacy tests.
     pub adequacy: Option<Adequacy>,

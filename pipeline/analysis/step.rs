@@ -17,6 +17,7 @@ use super::run_result::{
 };
 use super::sensitivity::NoiseSource;
 use crate::frf;
+use crate::identify::FitData;
 use crate::ingest::{IngestError, LogFile};
 use crate::lti::TransferFunction;
 use crate::manifest::{Campaign, Role, RunPlan};
@@ -62,7 +63,9 @@ pub fn without_rig(
     let evidence = tf.map(|tf| Evidence {
         tf,
         cov,
-        data: stage.as_ref().and_then(|st| st.fit_data.clone()),
+        data: (stage.as_ref())
+            .and_then(|st| st.fit_data.as_ref())
+            .map(FitData::for_rig),
         adequacy: result.fit.as_ref().and_then(|f| f.adequacy.clone()),
         sample_rate_hz: stage.as_ref().map(|st| st.log.sample_rate_hz),
         cause: stage.as_ref().and_then(|st| st.cause.clone()),

@@ -39,8 +39,6 @@ pub enum WriteError {
     Html(#[from] html::HtmlError),
     #[error(transparent)]
     Table(Box<columns::ColumnWriteError>),
-    #[error("models.mat: {0}")]
-    Models(#[from] matlab::MatWriteError),
     #[error("{}: {source}", path.display())]
     Io {
         path: PathBuf,
@@ -86,7 +84,7 @@ impl WriteError {
                 source: Box::new(source.map_paths(f)),
             },
             Self::Table(e) => Self::Table(Box::new(e.map_paths(f))),
-            e @ (Self::Html(_) | Self::Models(_)) => e,
+            e @ Self::Html(_) => e,
         }
     }
 }
@@ -349,6 +347,20 @@ pub fn write_json(path: &Path, value: &impl serde::Serialize) -> Result<String, 
         Ok(())
     })?;
     Ok(sha)
+}
+
+/// Write `path` atomically and durably, as [`write_atomic`] does, its
+/// bytes streamed by `write` through a buffer that may seek (models.mat
+/// writes its runs' size once they are written).
+pub fn write_streamed(
+    path: &Path,
+    write: impl FnOnce(&mut std::io::BufWriter<&mut std::fs::File>) -> std::io::Result<()>,
+) -> Result<(), WriteError> {
+    replace_with(path, true, |f| {
+        let mut w = std::io::BufWriter::with_capacity(1 << 16, f);
+        write(&mut w)?;
+        w.flush()
+    })
 }
 
 /// Write `path` through a temporary file beside it, renamed into place

@@ -14,30 +14,29 @@
 //!   (Sec. 3.2.2); a validation run's compensator (`filter(b, a, x)` at
 //!   `fs`). What a run does not have is `[]`.
 
-use super::matlab::{MatValue, MatWriteError, mat_bytes};
+use super::matlab::{MatValue, MatWriter};
 use crate::model::SpecimenModel;
 use crate::model::{self, CnTerm, LinearSdof, LinearSpecimen, RigParams};
 use crate::results::{FitSummary, Results, RigResult, RunResult, Status, TfResult, TfSource};
 use crate::tracking::compensator::CompensatorOutcome;
+use std::io::{Seek, Write};
 
-/// The bytes of `models.mat` for `results`. The header names the servoid
-/// version and nothing that changes from one run to the next (no date), so
-/// the same results give the same bytes.
-pub fn models_mat(results: &Results) -> Result<Vec<u8>, MatWriteError> {
+/// `models.mat` for `results`, written to `w` a run at a time. The header
+/// names the servoid version and nothing that changes from one run to the
+/// next (no date), so the same results give the same bytes.
+pub fn write_models_mat<W: Write + Seek>(w: W, results: &Results) -> std::io::Result<W> {
     let head = format!(
         "MATLAB 5.0 MAT-file, Platform: servoid {}, identified models of campaign {}",
         results.servoid_version, results.campaign.name
     );
     let rig = results.rig.as_ref();
-    let vars = vec![
-        ("servoid".to_string(), about(results)),
-        (
-            "rig".to_string(),
-            rig.map_or_else(MatValue::empty, rig_value),
-        ),
-        ("runs".to_string(), runs(&results.runs, rig)),
-    ];
-    mat_bytes(&head, &vars)
+    let mut mat = MatWriter::new(w, &head)?;
+    mat.var("servoid", &about(results))?;
+    mat.var("rig", &rig.map_or_else(MatValue::empty, rig_value))?;
+    mat.struct_array("runs", &RUN_FIELDS, results.runs.len(), |i| {
+        run_value(&results.runs[i], rig)
+    })?;
+    Ok(mat.into_inner())
 }
 
 fn text(s: &str) -> MatValue {
@@ -127,13 +126,6 @@ const RUN_FIELDS: [&str; 11] = [
     "compensator",
     "error",
 ];
-
-fn runs(runs: &[RunResult], rig: Option<&RigResult>) -> MatValue {
-    MatValue::StructArray {
-        fields: RUN_FIELDS.iter().map(|s| s.to_string()).collect(),
-        elements: runs.iter().map(|r| run_value(r, rig)).collect(),
-    }
-}
 
 fn run_value(run: &RunResult, rig: Option<&RigResult>) -> Vec<MatValue> {
     let rig_at_p = rig.map(|r| rig_params(r).at_p_gain(run.p_gain));

@@ -117,6 +117,8 @@ pub(super) fn analyse_with(
         .with_max_len(1)
         .map(|plan| first_pass(campaign, plan, sink, observer).map_err(|e| e.in_run(&plan.id)))
         .collect::<Result<_, _>>()?;
+    // The workers' logs are freed beneath what the runs keep.
+    super::allocator::give_back();
 
     // The first no-specimen run's noise, in manifest order.
     let noise = first.iter().find_map(|f| match f {
@@ -129,6 +131,8 @@ pub(super) fn analyse_with(
     let inputs: Vec<RigInput> = first.iter_mut().map(FirstPass::rig_input).collect();
     let rig = rig::establish(campaign, inputs.iter(), &mut warnings).map_err(Arc::new);
     drop(inputs);
+    // The rig's fit and the FRFs it read are freed beneath the runs' results.
+    super::allocator::give_back();
     let rig_for_runs: RigOutcome = rig
         .as_ref()
         .map(|(p, r)| {

@@ -5,6 +5,7 @@
 //! outputs (through `report`, which also decides what each figure shows). It never prints: each entry point returns what it did,
 //! or a [`JobError`] that says why nothing was written, for `cli` to report.
 
+pub mod allocator;
 mod analyse;
 mod cache;
 pub mod design;
@@ -576,10 +577,9 @@ fn write_set(
     report::settle(out_dir)?;
     let results_sha256 = report::write_json(&results_path, results)?;
     report::output_folder::fault("results");
-    report::write_atomic(
-        &out_dir.join("models.mat"),
-        &report::models::models_mat(results).map_err(WriteError::from)?,
-    )?;
+    report::write_streamed(&out_dir.join("models.mat"), |w| {
+        report::models::write_models_mat(w, results).map(drop)
+    })?;
     report::tables::write_tracking(&out_dir.join(report::tables::TRACKING_TABLE), &results.runs)
         .map_err(WriteError::from)?;
     if let Some(h) = history {
