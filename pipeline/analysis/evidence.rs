@@ -60,7 +60,8 @@ pub struct Evidence {
 
 /// What a validation run gives the joint fit: the band's bins of its x1/u
 /// and, with a force channel, of its f/u (each with the coherence test the
-/// identification runs pass).
+/// identification runs pass), without their input spectra
+/// ([`FitData::for_rig`]).
 #[derive(Debug, Clone)]
 pub struct ValidationEvidence {
     pub displacement: FitData,

@@ -163,8 +163,8 @@ pub fn validation_evidence(campaign: &Campaign, plan: &RunPlan) -> RigInput {
         None => d,
     };
     RigInput::Validation(Box::new(ValidationEvidence {
-        displacement: with_amplitude(displacement),
-        force: force.map(with_amplitude),
+        displacement: with_amplitude(displacement).for_rig(),
+        force: force.map(|f| with_amplitude(f).for_rig()),
         sample_rate_hz: st.log.sample_rate_hz,
         sha256: st.log.sha256.clone(),
     }))

@@ -87,15 +87,10 @@ impl FitData {
     /// input's spectrum (`suu` left empty), which only the run's own noise
     /// level reads, a sixth of what a bin holds: 17 MB of a 3,000-log
     /// night's 600 spring FRFs, held until the rig is fitted.
-    pub fn for_rig(&self) -> Self {
+    pub fn for_rig(self) -> Self {
         Self {
-            freq_hz: self.freq_hz.clone(),
-            h: self.h.clone(),
-            variance: self.variance.clone(),
             suu: Vec::new(),
-            bin_hz: self.bin_hz,
-            lag: self.lag,
-            amplitude_m: self.amplitude_m.clone(),
+            ..self
         }
     }
 

@@ -48,7 +48,7 @@ pub fn tune() {
 /// rig's FRFs, the rig's fit beneath the runs' results) stays resident
 /// through the rest of the night otherwise. On the bench's 3,000-log night
 /// the peak falls from 277 to 238 MiB, and the RSS through its validation
-/// runs from 265-275 to 150-215 MB, at the same speed (docs/accuracy.md,
+/// runs from 253-259 to 145-210 MiB, at the same speed (docs/accuracy.md,
 /// "The memory a night takes").
 pub fn give_back() {
     #[cfg(all(target_os = "linux", target_env = "gnu"))]
