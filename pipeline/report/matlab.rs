@@ -145,10 +145,15 @@ pub fn mat_bytes(text: &str, vars: &[(String, MatValue)]) -> Result<Vec<u8>, Mat
     let mut out = Vec::with_capacity(4096);
     out.extend_from_slice(&header(text));
     for (name, value) in vars {
-        check_name(name)?;
-        out.extend(matrix(name, value)?);
+        out.extend(variable(name, value)?);
     }
     Ok(out)
+}
+
+/// A top-level variable's `miMATRIX` element, its name checked.
+fn variable(name: &str, value: &MatValue) -> Result<Vec<u8>, MatWriteError> {
+    check_name(name)?;
+    matrix(name, value)
 }
 
 /// The file's 128-byte header: `text` in 116 bytes, no subsystem data,
@@ -181,8 +186,7 @@ impl<W: Write + Seek> MatWriter<W> {
 
     /// A whole variable.
     pub fn var(&mut self, name: &str, value: &MatValue) -> std::io::Result<()> {
-        check_name(name).map_err(std::io::Error::other)?;
-        let bytes = matrix(name, value).map_err(std::io::Error::other)?;
+        let bytes = variable(name, value).map_err(std::io::Error::other)?;
         self.w.write_all(&bytes)
     }
 
@@ -207,26 +211,12 @@ impl<W: Write + Seek> MatWriter<W> {
         self.w.write_all(&head)?;
         let mut len = head.len();
         for i in 0..n {
-            let values = element(i);
-            if values.len() != fields.len() {
-                return Err(fail(MatWriteError::Fields {
-                    name: name.into(),
-                    element: i + 1,
-                    got: values.len(),
-                    want: fields.len(),
-                }));
-            }
-            for v in &values {
-                let bytes = matrix("", v).map_err(fail)?;
-                self.w.write_all(&bytes)?;
-                len += bytes.len();
-            }
+            let bytes = struct_element(name, i, &element(i), fields.len()).map_err(fail)?;
+            self.w.write_all(&bytes)?;
+            len += bytes.len();
         }
         // Every element is padded to 8 bytes, so the body is too.
-        let len = u32::try_from(len)
-            .ok()
-            .filter(|&l| l <= i32::MAX as u32)
-            .ok_or_else(|| fail(MatWriteError::TooLarge { name: name.into() }))?;
+        let len = body_len(name, len).map_err(fail)?;
         let end = self.w.stream_position()?;
         self.w.seek(SeekFrom::Start(tag + 4))?;
         self.w.write_all(&len.to_le_bytes())?;
@@ -280,7 +270,6 @@ fn matrix(name: &str, value: &MatValue) -> Result<Vec<u8>, MatWriteError> {
         MatValue::Cell(items) => (MX_CELL, [1, items.len()]),
     };
     array_head(&mut body, name, class, dims)?;
-    let too_large = || MatWriteError::TooLarge { name: name.into() };
     match value {
         MatValue::Matrix { data, .. } => {
             let bytes: Vec<u8> = data.iter().flat_map(|v| v.to_le_bytes()).collect();
@@ -303,17 +292,7 @@ fn matrix(name: &str, value: &MatValue) -> Result<Vec<u8>, MatWriteError> {
             // Element after element (column-major over the 1 x n array),
             // each element's fields in the order named.
             for (i, values) in elements.iter().enumerate() {
-                if values.len() != fields.len() {
-                    return Err(MatWriteError::Fields {
-                        name: name.into(),
-                        element: i + 1,
-                        got: values.len(),
-                        want: fields.len(),
-                    });
-                }
-                for v in values {
-                    body.extend(matrix("", v)?);
-                }
+                body.extend(struct_element(name, i, values, fields.len())?);
             }
         }
         MatValue::Cell(items) => {
@@ -322,12 +301,42 @@ fn matrix(name: &str, value: &MatValue) -> Result<Vec<u8>, MatWriteError> {
             }
         }
     }
-    if u32::try_from(body.len()).is_err() || body.len() > i32::MAX as usize {
-        return Err(too_large());
-    }
+    body_len(name, body.len())?;
     let mut out = Vec::with_capacity(body.len() + 8);
     element(&mut out, MI_MATRIX, &body);
     Ok(out)
+}
+
+/// Element `i` (from 0) of struct array `name`: one unnamed matrix for each
+/// of its `values`, which must be one for each of the `fields` named.
+fn struct_element(
+    name: &str,
+    i: usize,
+    values: &[MatValue],
+    fields: usize,
+) -> Result<Vec<u8>, MatWriteError> {
+    if values.len() != fields {
+        return Err(MatWriteError::Fields {
+            name: name.into(),
+            element: i + 1,
+            got: values.len(),
+            want: fields,
+        });
+    }
+    let mut out = Vec::new();
+    for v in values {
+        out.extend(matrix("", v)?);
+    }
+    Ok(out)
+}
+
+/// The byte count a `miMATRIX` tag holds for a body of `len` bytes, which
+/// MATLAB reads as a signed 32-bit count.
+fn body_len(name: &str, len: usize) -> Result<u32, MatWriteError> {
+    u32::try_from(len)
+        .ok()
+        .filter(|&l| l <= i32::MAX as u32)
+        .ok_or_else(|| MatWriteError::TooLarge { name: name.into() })
 }
 
 /// A `miMATRIX` element's array flags (`class`), dimensions and name.

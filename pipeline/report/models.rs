@@ -24,7 +24,7 @@ use std::io::{Seek, Write};
 /// `models.mat` for `results`, written to `w` a run at a time. The header
 /// names the servoid version and nothing that changes from one run to the
 /// next (no date), so the same results give the same bytes.
-pub fn write_models_mat<W: Write + Seek>(w: W, results: &Results) -> std::io::Result<W> {
+pub fn write_models_mat<W: Write + Seek>(w: W, results: &Results) -> std::io::Result<()> {
     let head = format!(
         "MATLAB 5.0 MAT-file, Platform: servoid {}, identified models of campaign {}",
         results.servoid_version, results.campaign.name
@@ -35,8 +35,7 @@ pub fn write_models_mat<W: Write + Seek>(w: W, results: &Results) -> std::io::Re
     mat.var("rig", &rig.map_or_else(MatValue::empty, rig_value))?;
     mat.struct_array("runs", &RUN_FIELDS, results.runs.len(), |i| {
         run_value(&results.runs[i], rig)
-    })?;
-    Ok(mat.into_inner())
+    })
 }
 
 fn text(s: &str) -> MatValue {

@@ -20,6 +20,7 @@ use rayon::prelude::*;
 
 use super::sink::{Done, Probed, Sink};
 use super::step::{self, Output, RigOutcome};
+use crate::analysis::RigError;
 use crate::analysis::conclusions;
 use crate::analysis::evidence::RigInput;
 use crate::analysis::rig;
@@ -29,7 +30,7 @@ use crate::manifest::{Campaign, Role, RunPlan};
 use crate::model::RigParams;
 use crate::report::figures::catalogue::{self, OverlayRun};
 use crate::report::{FigureFormats, PageFigure, WriteError};
-use crate::results::{RESULTS_SCHEMA_VERSION, Results, RunResult, Status};
+use crate::results::{RESULTS_SCHEMA_VERSION, Results, RigResult, RunResult, Status};
 use crate::validate::csi::Csi;
 
 pub use crate::analysis::run_result::RunError;
@@ -128,23 +129,8 @@ pub(super) fn analyse_with(
     // What the manifest found (an unused log matched by the run table's
     // glob, say), then what the analysis finds.
     let mut warnings = campaign.warnings.clone();
-    let inputs: Vec<RigInput> = first.iter_mut().map(FirstPass::rig_input).collect();
-    let rig = rig::establish(campaign, inputs.iter(), &mut warnings).map_err(Arc::new);
-    drop(inputs);
-    // The rig's fit and the FRFs it read are freed beneath the runs' results.
-    super::allocator::give_back();
-    let rig_for_runs: RigOutcome = rig
-        .as_ref()
-        .map(|(p, r)| {
-            let smoothing = campaign.joint.friction_smoothing_m_per_s;
-            let extras = r
-                .joint
-                .as_ref()
-                .map(|j| crate::analysis::joint::extras(j, smoothing))
-                .unwrap_or_default();
-            (*p, r.covariance, extras)
-        })
-        .map_err(Arc::clone);
+    let rig = establish_rig(campaign, &mut first, &mut warnings);
+    let rig_for_runs = for_runs(campaign, &rig);
 
     let second: Vec<Done> = campaign
         .runs
@@ -201,6 +187,40 @@ pub(super) fn analyse_with(
         seconds: runs.seconds,
         cached: runs.cached,
     })
+}
+
+/// The rig from what the first pass's runs give it (their estimates move
+/// there and are freed with its fit).
+fn establish_rig(
+    campaign: &Campaign,
+    first: &mut [FirstPass],
+    warnings: &mut Vec<Warning>,
+) -> Result<(RigParams, RigResult), Arc<RigError>> {
+    let inputs: Vec<RigInput> = first.iter_mut().map(FirstPass::rig_input).collect();
+    let rig = rig::establish(campaign, inputs.iter(), warnings).map_err(Arc::new);
+    drop(inputs);
+    // The rig's fit and the FRFs it read are freed beneath the runs' results.
+    super::allocator::give_back();
+    rig
+}
+
+/// What each run's second pass reads of the rig: its parameters, their
+/// covariance and what the prediction carries beyond them (the seals).
+fn for_runs(
+    campaign: &Campaign,
+    rig: &Result<(RigParams, RigResult), Arc<RigError>>,
+) -> RigOutcome {
+    rig.as_ref()
+        .map(|(p, r)| {
+            let smoothing = campaign.joint.friction_smoothing_m_per_s;
+            let extras = r
+                .joint
+                .as_ref()
+                .map(|j| crate::analysis::joint::extras(j, smoothing))
+                .unwrap_or_default();
+            (*p, r.covariance, extras)
+        })
+        .map_err(Arc::clone)
 }
 
 /// What the campaign learns once every run is done

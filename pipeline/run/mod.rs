@@ -578,7 +578,7 @@ fn write_set(
     let results_sha256 = report::write_json(&results_path, results)?;
     report::output_folder::fault("results");
     report::write_streamed(&out_dir.join("models.mat"), |w| {
-        report::models::write_models_mat(w, results).map(drop)
+        report::models::write_models_mat(w, results)
     })?;
     report::tables::write_tracking(&out_dir.join(report::tables::TRACKING_TABLE), &results.runs)
         .map_err(WriteError::from)?;
