@@ -44,6 +44,7 @@ use std::hint::black_box;
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use nalgebra::Complex;
 use servoid::fit::Intersample;
+use servoid::identify::bins::Bins;
 use servoid::identify::joint::{
     Choice, JointOptions, JointRun, Output, Structure, joint_fit, select,
 };
@@ -113,12 +114,9 @@ fn bench_joint(c: &mut Criterion) {
             specimen: *s,
             p_gain: *p,
             output: Output::Displacement,
-            freq_hz: &f,
-            h,
-            variance: &var,
+            bins: Bins::held(&f, h, &var, None),
             bin_hz: f[1] - f[0],
             lag: 1,
-            amplitude_m: None,
             spring_cubic_n_per_m3: None,
         })
         .collect();
@@ -175,15 +173,15 @@ fn bench_joint(c: &mut Criterion) {
     // displacement amplitude its gain times a 4 mm command): what the
     // friction's parameter costs. The data have none: it comes out within
     // its noise of zero.
-    let amplitude: Vec<Vec<f64>> = runs
+    let amplitude: Vec<Vec<f64>> = data
         .iter()
-        .map(|r| r.h.iter().map(|h| 0.004 * h.norm()).collect())
+        .map(|(_, _, h)| h.iter().map(|h| 0.004 * h.norm()).collect())
         .collect();
     let with_amplitude: Vec<JointRun<'_>> = runs
         .iter()
-        .zip(&amplitude)
-        .map(|(r, a)| JointRun {
-            amplitude_m: Some(a),
+        .zip(data.iter().zip(&amplitude))
+        .map(|(r, ((_, _, h), a))| JointRun {
+            bins: Bins::held(&f, h, &var, Some(a)),
             ..*r
         })
         .collect();

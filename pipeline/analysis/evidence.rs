@@ -7,6 +7,7 @@ use std::sync::Arc;
 use super::log_stage::LogStageError;
 use crate::fit::adequacy::Adequacy;
 use crate::identify::FitData;
+use crate::identify::bins::{Bins, StoredFit};
 use crate::lti::TransferFunction;
 use crate::manifest::RunPlan;
 
@@ -34,6 +35,11 @@ pub struct Evidence {
     /// The bins its fit was given (None for a published model), without
     /// the input's spectrum ([`FitData::for_rig`]).
     pub data: Option<FitData>,
+    /// Where `data`'s bins are when the run module has moved them off the
+    /// heap (`data` is then None). Never cached: the cache keeps a run's
+    /// evidence before its bins move, and a store lasts one job.
+    #[serde(skip)]
+    pub stored: Option<StoredFit>,
     /// Its own fit's adequacy tests.
     pub adequacy: Option<Adequacy>,
     pub sample_rate_hz: Option<f64>,
@@ -56,6 +62,27 @@ pub struct Evidence {
     /// is slow (`log_stage::LogStage::slow`).
     #[serde(default)]
     pub slow: Option<crate::frf::SlowCubic>,
+}
+
+impl Evidence {
+    /// The bins its fit was given, wherever they are, with the FRF's grid
+    /// spacing (Hz) and independent lag (bins).
+    pub fn bins(&self) -> Option<(Bins<'_>, f64, usize)> {
+        match (&self.data, &self.stored) {
+            (Some(d), _) => Some((d.bins(), d.bin_hz, d.lag)),
+            (None, Some(s)) => Some((s.bins(), s.bin_hz, s.lag)),
+            (None, None) => None,
+        }
+    }
+
+    /// Its bins moved off the heap by `keep`; where `keep` cannot take
+    /// them (None) they stay.
+    pub fn move_bins(&mut self, keep: impl FnOnce(&FitData) -> Option<StoredFit>) {
+        if let Some(stored) = self.data.as_ref().and_then(keep) {
+            self.data = None;
+            self.stored = Some(stored);
+        }
+    }
 }
 
 /// What a validation run gives the joint fit: the band's bins of its x1/u

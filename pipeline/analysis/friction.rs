@@ -14,6 +14,7 @@ use rayon::prelude::*;
 
 use super::log_stage::{LogStageError, fit_data_with};
 use crate::identify::FitData;
+use crate::identify::bins::Bins;
 use crate::identify::joint::{self, JointFit, JointIdentification, JointOptions, JointRun, Place};
 use crate::ingest::Log;
 use crate::manifest::{Campaign, Role, RunPlan};
@@ -240,10 +241,7 @@ fn refits(
                 .iter()
                 .zip(&aligned)
                 .map(|(r, a)| JointRun {
-                    freq_hz: &a.freq_hz,
-                    h: &a.h,
-                    variance: &a.variance,
-                    amplitude_m: a.amplitude_m.as_deref(),
+                    bins: Bins::held(&a.freq_hz, &a.h, &a.variance, a.amplitude_m.as_deref()),
                     ..*r
                 })
                 .collect();
@@ -269,11 +267,12 @@ struct Aligned {
 }
 
 fn align(measured: &JointRun<'_>, sim: &FitData) -> Aligned {
+    let measured = measured.bins.all();
     let mut a = Aligned {
         freq_hz: Vec::new(),
         h: Vec::new(),
         variance: Vec::new(),
-        amplitude_m: measured.amplitude_m.map(|_| Vec::new()),
+        amplitude_m: measured.amplitude_m.as_ref().map(|_| Vec::new()),
     };
     for (k, &f) in measured.freq_hz.iter().enumerate() {
         let Some(j) = crate::frf::bin_at(&sim.freq_hz, f, 1e-9) else {
@@ -282,7 +281,7 @@ fn align(measured: &JointRun<'_>, sim: &FitData) -> Aligned {
         a.freq_hz.push(f);
         a.h.push(sim.h[j]);
         a.variance.push(measured.variance[k]);
-        if let (Some(out), Some(x)) = (a.amplitude_m.as_mut(), measured.amplitude_m) {
+        if let (Some(out), Some(x)) = (a.amplitude_m.as_mut(), &measured.amplitude_m) {
             out.push(x[k]);
         }
     }

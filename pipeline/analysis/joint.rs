@@ -13,6 +13,7 @@
 
 use super::evidence::{Evidence, ValidationEvidence};
 use crate::fit::adequacy::Adequacy;
+use crate::identify::bins::Bins;
 use crate::identify::joint::{
     self, Candidate, Choice, JointFit, JointIdentification, JointOptions, JointRun, Output,
     P_SIGNIFICANT, Place, RunSpread, Selection, Structure, StructureSpread,
@@ -103,16 +104,13 @@ pub fn joint(
     }
     let runs: Vec<JointRun<'_>> = fitted
         .iter()
-        .map(|(p, output, d, _, cubic)| JointRun {
+        .map(|(p, output, (bins, bin_hz, lag), _, cubic)| JointRun {
             specimen: p.specimen.linear().expect("filtered"),
             p_gain: p.p_gain,
             output: *output,
-            freq_hz: &d.freq_hz,
-            h: &d.h,
-            variance: &d.variance,
-            bin_hz: d.bin_hz,
-            lag: d.lag,
-            amplitude_m: d.amplitude_m.as_deref(),
+            bins: *bins,
+            bin_hz: *bin_hz,
+            lag: *lag,
             spring_cubic_n_per_m3: *cubic,
         })
         .collect();
@@ -181,9 +179,16 @@ fn frf_ids(fitted: &[Fitted<'_>]) -> Vec<String> {
         .collect()
 }
 
-/// An FRF the joint fit is given: its run, what it measures, its bins, the
-/// log's sample rate and a stiffening spring's cubic term (N/m^3).
-type Fitted<'a> = (&'a RunPlan, Output, &'a FitData, f64, Option<f64>);
+/// An FRF the joint fit is given: its run, what it measures, its bins
+/// (with their grid spacing and independent lag), the log's sample rate
+/// and a stiffening spring's cubic term (N/m^3).
+type Fitted<'a> = (
+    &'a RunPlan,
+    Output,
+    (Bins<'a>, f64, usize),
+    f64,
+    Option<f64>,
+);
 
 /// Each FRF the joint fit is given, the identification runs' first, then
 /// the validation runs' (their count is the second value). None when no
@@ -198,7 +203,7 @@ fn fitted_frfs<'a>(
             Some((
                 *p,
                 Output::Displacement,
-                e.data.as_ref()?,
+                e.bins()?,
                 e.sample_rate_hz?,
                 e.spring_cubic_n_per_m3,
             ))
@@ -213,15 +218,16 @@ fn fitted_frfs<'a>(
         if p.specimen.linear().is_none() {
             continue;
         }
+        let held = |d: &'a FitData| (d.bins(), d.bin_hz, d.lag);
         fitted.push((
             p,
             Output::Displacement,
-            &v.displacement,
+            held(&v.displacement),
             v.sample_rate_hz,
             None,
         ));
         if let Some(force) = &v.force {
-            fitted.push((p, Output::Force, force, v.sample_rate_hz, None));
+            fitted.push((p, Output::Force, held(force), v.sample_rate_hz, None));
         }
     }
     Some((fitted, identification_frfs))

@@ -10,6 +10,7 @@ use super::evidence::{Evidence, RigInput, ValidationEvidence};
 use super::log_stage::LogStageError;
 use super::log_stage::STIFFNESS_MISMATCH;
 use crate::frf;
+use crate::identify::bins::{Bins, Span};
 use crate::identify::consistency::Consistency;
 use crate::identify::{self, Estimate, IdentifyError, SecondOrder, SpringRun, TfEstimate};
 use crate::manifest::{Campaign, Role, RunPlan};
@@ -174,44 +175,46 @@ fn amplitude_series(
     evidence: &[(&RunPlan, &Evidence)],
     params: &RigParams,
 ) -> Vec<identify::amplitude::AmplitudeSeries> {
-    let mut groups: Vec<Vec<(&RunPlan, &identify::FitData, &[f64])>> = Vec::new();
+    // Each run's largest amplitude first, its bins read one run at a time:
+    // only a series' runs are read together.
+    let mut groups: Vec<Vec<(&RunPlan, Bins<'_>, f64)>> = Vec::new();
     for (p, e) in evidence {
-        let Some((d, x)) = e
-            .data
-            .as_ref()
-            .and_then(|d| Some((d, d.amplitude_m.as_deref()?)))
-        else {
+        let Some((bins, ..)) = e.bins().filter(|(b, ..)| b.has_amplitudes()) else {
             continue;
         };
+        let largest = bins
+            .all()
+            .amplitude_m
+            .map_or(0.0, |x| identify::amplitude::largest(&x));
         let same =
             |q: &RunPlan| q.role == p.role && q.specimen == p.specimen && q.p_gain == p.p_gain;
         match groups.iter_mut().find(|g| same(g[0].0)) {
-            Some(g) => g.push((p, d, x)),
-            None => groups.push(vec![(p, d, x)]),
+            Some(g) => g.push((p, bins, largest)),
+            None => groups.push(vec![(p, bins, largest)]),
         }
     }
     groups
         .into_iter()
         .filter(|g| {
-            let m: Vec<f64> = g
-                .iter()
-                .map(|r| identify::amplitude::largest(r.2))
-                .collect();
-            let (lo, hi) = m
-                .iter()
-                .fold((f64::INFINITY, 0.0_f64), |(l, h), &v| (l.min(v), h.max(v)));
+            let (lo, hi) = g.iter().fold((f64::INFINITY, 0.0_f64), |(l, h), r| {
+                (l.min(r.2), h.max(r.2))
+            });
             lo > 0.0 && hi >= SERIES_SPREAD * lo
         })
         .filter_map(|g| {
             let plan = g[0].0;
+            let read: Vec<Span<'_>> = g.iter().map(|(_, bins, _)| bins.all()).collect();
             let runs: Vec<identify::amplitude::SeriesRun<'_>> = g
                 .iter()
-                .map(|(p, d, x)| identify::amplitude::SeriesRun {
-                    id: &p.id,
-                    freq_hz: &d.freq_hz,
-                    h: &d.h,
-                    variance: &d.variance,
-                    amplitude_m: x,
+                .zip(&read)
+                .filter_map(|((p, ..), d)| {
+                    Some(identify::amplitude::SeriesRun {
+                        id: &p.id,
+                        freq_hz: &d.freq_hz,
+                        h: &d.h,
+                        variance: &d.variance,
+                        amplitude_m: d.amplitude_m.as_deref()?,
+                    })
                 })
                 .collect();
             identify::amplitude::series(

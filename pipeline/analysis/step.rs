@@ -66,6 +66,7 @@ pub fn without_rig(
         data: (stage.as_ref())
             .and_then(|st| st.fit_data.clone())
             .map(FitData::for_rig),
+        stored: None,
         adequacy: result.fit.as_ref().and_then(|f| f.adequacy.clone()),
         sample_rate_hz: stage.as_ref().map(|st| st.log.sample_rate_hz),
         cause: stage.as_ref().and_then(|st| st.cause.clone()),

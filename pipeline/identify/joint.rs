@@ -21,6 +21,8 @@ use crate::fit::adequacy::{Adequacy, Residuals, Sums};
 use crate::fit::lm::{LevenbergMarquardt, Normal};
 use crate::fit::problem::{alias_factor, hold_response};
 use crate::fit::{FitError, covariance_from_normal, covariance_streamed};
+use crate::identify::FitData;
+use crate::identify::bins::{Bins, Span};
 use crate::lti::TransferFunction;
 use crate::model::{self, LinearSpecimen, RigParams};
 use crate::poly;
@@ -43,10 +45,11 @@ pub struct JointRun<'a> {
     pub specimen: LinearSpecimen,
     pub p_gain: f64,
     pub output: Output,
-    pub freq_hz: &'a [f64],
-    pub h: &'a [Complex<f64>],
-    /// E|dH|^2 at each bin.
-    pub variance: &'a [f64],
+    /// Its bins: frequency, H, E|dH|^2 and, from a sweep
+    /// (`frf::sweep_amplitude`) where the run's seal friction is fitted, the
+    /// displacement's amplitude (m), on which the friction's describing
+    /// function depends.
+    pub bins: Bins<'a>,
     /// The FRF's grid spacing (Hz): the residual correlation test pairs
     /// bins on it.
     pub bin_hz: f64,
@@ -55,10 +58,6 @@ pub struct JointRun<'a> {
     /// correlation test pairs its bins this far apart, and bins closer
     /// share data in the sandwich covariance.
     pub lag: usize,
-    /// The displacement's amplitude (m) at each bin, from a sweep
-    /// (`frf::sweep_amplitude`), where the run's seal friction is fitted:
-    /// its describing function depends on it.
-    pub amplitude_m: Option<&'a [f64]>,
     /// A spring that stiffens, its cubic term k3 (N/m^3) from its force
     /// against its displacement: at each bin its describing function
     /// k + 3/4 k3 X^2 at the bin's amplitude X stands for its k (where the
@@ -469,6 +468,10 @@ struct RunBins<'a> {
     /// The indices into the FRF of the bins weighed: those with a finite,
     /// positive variance (every stride-th of them in a coarse problem).
     at: Vec<u32>,
+    /// A coarse problem's own copy of a stored run's bins weighed (`at`
+    /// then indexes it): its passes would otherwise read every bin of the
+    /// run to weigh one in `stride`.
+    own: Option<FitData>,
 }
 
 /// The least-squares problem over every bin of every run. A bin is its
@@ -644,16 +647,36 @@ impl<'a> JointProblem<'a> {
         self.known.len()
     }
 
-    /// Run `r`'s bin `k` (its `k`-th in the problem): its s and its load S(s),
-    /// with a spring's stiffening at the bin's amplitude.
+    /// Run `r`'s FRF where its problem bins `ks` (its `k`-th to its
+    /// last) lie: read once for them, from wherever the run keeps its bins.
+    fn span(&self, r: usize, ks: std::ops::Range<usize>) -> Span<'_> {
+        let run = &self.frfs[r];
+        let range = match ks.is_empty() {
+            true => 0..0,
+            false => run.at[ks.start] as usize..run.at[ks.end - 1] as usize + 1,
+        };
+        match &run.own {
+            Some(own) => own.bins().span(range),
+            None => run.frf.bins.span(range),
+        }
+    }
+
+    /// [`Self::span`] over all of run `r`'s problem bins.
+    fn run_span(&self, r: usize) -> Span<'_> {
+        self.span(r, 0..self.starts[r + 1] - self.starts[r])
+    }
+
+    /// Run `r`'s bin `k` (its `k`-th in the problem), `view` holding it: its
+    /// s and its load S(s), with a spring's stiffening at the bin's
+    /// amplitude.
     #[inline(always)]
-    fn load(&self, r: usize, k: usize) -> (usize, Complex<f64>, Complex<f64>) {
+    fn load(&self, view: &Span, r: usize, k: usize) -> (usize, Complex<f64>, Complex<f64>) {
         let frf = &self.frfs[r].frf;
         let i = self.frfs[r].at[k] as usize;
-        let s = Complex::new(0.0, 2.0 * std::f64::consts::PI * frf.freq_hz[i]);
+        let s = Complex::new(0.0, 2.0 * std::f64::consts::PI * view.freq(i));
         let (m, c, stiffness) = self.runs[r].mck;
-        let stiffening = match (frf.spring_cubic_n_per_m3, frf.amplitude_m) {
-            (Some(k3), Some(a)) => 0.75 * k3 * a[i] * a[i],
+        let stiffening = match (frf.spring_cubic_n_per_m3, view.amplitude(i)) {
+            (Some(k3), Some(a)) => 0.75 * k3 * a * a,
             _ => 0.0,
         };
         (i, s, s * s * m + s * c + (stiffness + stiffening))
@@ -661,47 +684,40 @@ impl<'a> JointProblem<'a> {
 
     /// Run `r`'s bin `k`: the hold's response at its frequency, times S(s)
     /// for a force.
-    fn held(&self, r: usize, k: usize) -> Complex<f64> {
-        let (i, _, sp) = self.load(r, k);
-        self.held_at(r, i, sp)
+    fn held(&self, view: &Span, r: usize, k: usize) -> Complex<f64> {
+        let (i, _, sp) = self.load(view, r, k);
+        self.held_at(view, r, i, sp)
     }
 
     /// [`Self::held`] at run `r`'s FRF bin `i`, its load `sp` there.
-    fn held_at(&self, r: usize, i: usize, sp: Complex<f64>) -> Complex<f64> {
-        let f = self.frfs[r].frf.freq_hz[i];
-        let hold = hold_response(self.intersample, self.sample_rate_hz, f);
+    fn held_at(&self, view: &Span, r: usize, i: usize, sp: Complex<f64>) -> Complex<f64> {
+        let hold = hold_response(self.intersample, self.sample_rate_hz, view.freq(i));
         if self.runs[r].force { hold * sp } else { hold }
     }
 
-    /// Run `r`'s bin `k` as the passes read it.
+    /// Run `r`'s bin `k` as the passes read it, `view` holding it.
     #[inline(always)]
-    fn bin(&self, r: usize, k: usize) -> Bin {
-        let (i, s, sp) = self.load(r, k);
-        let frf = &self.frfs[r].frf;
+    fn bin(&self, view: &Span, r: usize, k: usize) -> Bin {
+        let (i, s, sp) = self.load(view, r, k);
         let flat = self.starts[r] + k;
         Bin {
             s,
             sp,
-            h: frf.h[i],
+            h: view.h(i),
             known: self.known[flat],
             force: self.runs[r].force,
-            weight: (2.0 / frf.variance[i]).sqrt(),
+            weight: (2.0 / view.variance(i)).sqrt(),
             run: r,
             coulomb: Complex::new(0.0, self.coulomb.get(flat).copied().unwrap_or(0.0)),
-            amplitude_m: match frf.amplitude_m {
-                Some(a) if self.amplitudes => a[i],
+            amplitude_m: match view.amplitude(i) {
+                Some(a) if self.amplitudes => a,
                 _ => 0.0,
             },
         }
     }
 
-    /// The bin at `flat` in the problem's order.
-    fn bin_at(&self, flat: usize) -> Bin {
-        let r = self.starts.partition_point(|&s| s <= flat) - 1;
-        self.bin(r, flat - self.starts[r])
-    }
-
-    /// The bins in `range` of the problem's order, run by run.
+    /// The bins in `range` of the problem's order, run by run, each run's
+    /// read once for them.
     fn bins_in(&self, range: std::ops::Range<usize>) -> impl Iterator<Item = Bin> + '_ {
         let (lo, hi) = (range.start, range.end);
         let first = self.starts.partition_point(|&s| s <= lo).saturating_sub(1);
@@ -710,7 +726,8 @@ impl<'a> JointProblem<'a> {
             .flat_map(move |r| {
                 let start = self.starts[r];
                 let span = lo.max(start) - start..hi.min(self.starts[r + 1]) - start;
-                span.map(move |k| self.bin(r, k))
+                let view = self.span(r, span.clone());
+                span.map(move |k| self.bin(&view, r, k))
             })
     }
 
@@ -728,17 +745,14 @@ impl<'a> JointProblem<'a> {
         let mut coulomb = Vec::new();
         let mut starts = Vec::with_capacity(self.starts.len());
         let mut frfs = Vec::with_capacity(self.frfs.len());
-        for (r, run) in self.frfs.iter().enumerate() {
+        for r in 0..self.frfs.len() {
             starts.push(known.len());
             let span = self.starts[r]..self.starts[r + 1];
             known.extend(span.clone().step_by(stride).map(|i| self.known[i]));
             if !self.coulomb.is_empty() {
                 coulomb.extend(span.step_by(stride).map(|i| self.coulomb[i]));
             }
-            frfs.push(RunBins {
-                frf: run.frf,
-                at: run.at.iter().step_by(stride).copied().collect(),
-            });
+            frfs.push(self.coarse_bins(r, stride));
         }
         starts.push(known.len());
         JointProblem {
@@ -760,6 +774,39 @@ impl<'a> JointProblem<'a> {
             kappa_held: self.kappa_held,
             period_s: self.period_s,
             intersample: self.intersample,
+        }
+    }
+
+    /// Run `r`'s every `stride`-th bin weighed, a stored run's copied.
+    fn coarse_bins(&self, r: usize, stride: usize) -> RunBins<'a> {
+        let run = &self.frfs[r];
+        let at: Vec<u32> = run.at.iter().step_by(stride).copied().collect();
+        let stored = matches!(run.frf.bins, Bins::Stored { .. }) && run.own.is_none();
+        if !stored || at.is_empty() {
+            return RunBins {
+                frf: run.frf,
+                at,
+                own: run.own.clone(),
+            };
+        }
+        let view = self.run_span(r);
+        let picked = |v: &dyn Fn(usize) -> f64| at.iter().map(|&i| v(i as usize)).collect();
+        let own = FitData {
+            freq_hz: picked(&|i| view.freq(i)),
+            h: at.iter().map(|&i| view.h(i as usize)).collect(),
+            variance: picked(&|i| view.variance(i)),
+            suu: Vec::new(),
+            bin_hz: run.frf.bin_hz,
+            lag: run.frf.lag,
+            amplitude_m: view
+                .amplitude_m
+                .is_some()
+                .then(|| picked(&|i| view.amplitude(i).unwrap_or(0.0))),
+        };
+        RunBins {
+            frf: run.frf,
+            at: (0..at.len() as u32).collect(),
+            own: Some(own),
         }
     }
 
@@ -859,7 +906,8 @@ impl<'a> JointProblem<'a> {
     /// Run `r`'s known factors at its bins `at` for its model `tf`: the
     /// hold (times S(s) for a force) times the aliases ([`alias_factor`]).
     fn run_known(&self, r: usize, tf: &TransferFunction, at: &[usize]) -> Vec<Complex<f64>> {
-        let loads: Vec<_> = at.iter().map(|&k| self.load(r, k)).collect();
+        let view = self.run_span(r);
+        let loads: Vec<_> = at.iter().map(|&k| self.load(&view, r, k)).collect();
         let f: Vec<f64> = loads
             .iter()
             .map(|(_, s, _)| s.im / (2.0 * std::f64::consts::PI))
@@ -868,7 +916,7 @@ impl<'a> JointProblem<'a> {
         loads
             .into_iter()
             .zip(alias)
-            .map(|((i, _, sp), a)| self.held_at(r, i, sp) * a)
+            .map(|((i, _, sp), a)| self.held_at(&view, r, i, sp) * a)
             .collect()
     }
 
@@ -922,8 +970,15 @@ impl<'a> JointProblem<'a> {
         let p = self.n_params();
         let mut a = DMatrix::zeros(p, p);
         let mut b = DVector::zeros(p);
+        // The probe goes run by run: each run's FRF is read once for it.
+        let mut view: Option<(usize, Span)> = None;
         for &(i, new) in &probe {
-            let bin = &self.bin_at(i);
+            let r = self.starts.partition_point(|&s| s <= i) - 1;
+            if view.as_ref().is_none_or(|(at, _)| *at != r) {
+                view = Some((r, self.run_span(r)));
+            }
+            let (_, v) = view.as_ref().expect("just read");
+            let bin = &self.bin(v, r, i - self.starts[r]);
             let e = self.eval_at::<true>(bin, x);
             let d = e.model * (new / bin.known - 1.0) * bin.weight;
             for j in 0..p {
@@ -1321,21 +1376,19 @@ fn problem<'a>(runs: &[JointRun<'a>], opts: &JointOptions) -> Result<JointProble
     let mut coulomb = Vec::new();
     let mut n = 0;
     for run in runs {
-        if run.freq_hz.len() != run.h.len() || run.h.len() != run.variance.len() {
-            return Err(FitError::LengthMismatch {
-                freq: run.freq_hz.len(),
-                h: run.h.len(),
-                variance: run.variance.len(),
-            });
+        let (freq, h, variance) = run.bins.lengths();
+        if freq != h || h != variance {
+            return Err(FitError::LengthMismatch { freq, h, variance });
         }
-        let at: Vec<u32> = (0..run.h.len())
-            .filter(|&i| run.variance[i].is_finite() && run.variance[i] > 0.0)
+        let all = run.bins.all();
+        let at: Vec<u32> = (0..h)
+            .filter(|&i| all.variance(i).is_finite() && all.variance(i) > 0.0)
             .map(|i| u32::try_from(i).expect("an FRF of fewer than 2^32 bins"))
             .collect();
-        if let (true, Some(a)) = (opts.friction, run.amplitude_m) {
+        if let (true, Some(a)) = (opts.friction, &all.amplitude_m) {
             coulomb.resize(n, 0.0);
             coulomb.extend(at.iter().map(|&i| {
-                let (f, a) = (run.freq_hz[i as usize], a[i as usize]);
+                let (f, a) = (all.freq(i as usize), a[i as usize]);
                 if a > 0.0 {
                     model::coulomb_load_per_newton(f, a, opts.friction_smoothing_m_per_s)
                 } else {
@@ -1345,7 +1398,11 @@ fn problem<'a>(runs: &[JointRun<'a>], opts: &JointOptions) -> Result<JointProble
         }
         starts.push(n);
         n += at.len();
-        frfs.push(RunBins { frf: *run, at });
+        frfs.push(RunBins {
+            frf: *run,
+            at,
+            own: None,
+        });
     }
     starts.push(n);
     if !coulomb.is_empty() {
@@ -1364,7 +1421,7 @@ fn problem<'a>(runs: &[JointRun<'a>], opts: &JointOptions) -> Result<JointProble
     let has_force = runs.iter().any(|r| r.output == Output::Force);
     let force_delay =
         (has_force && opts.structure != Structure::Plain).then(|| opts.structure.n_params());
-    let friction = (opts.friction && runs.iter().any(|r| r.amplitude_m.is_some()))
+    let friction = (opts.friction && runs.iter().any(|r| r.bins.has_amplitudes()))
         .then(|| opts.structure.n_params() + usize::from(force_delay.is_some()));
     let seal_damping = friction.filter(|_| opts.seal_damping).map(|k| k + 1);
     let command_gain = opts.command_gain.then(|| {
@@ -1373,7 +1430,7 @@ fn problem<'a>(runs: &[JointRun<'a>], opts: &JointOptions) -> Result<JointProble
             + usize::from(friction.is_some())
             + usize::from(seal_damping.is_some())
     });
-    let flow_law = (opts.flow_law && runs.iter().any(|r| r.amplitude_m.is_some())).then(|| {
+    let flow_law = (opts.flow_law && runs.iter().any(|r| r.bins.has_amplitudes())).then(|| {
         opts.structure.n_params()
             + usize::from(force_delay.is_some())
             + usize::from(friction.is_some())
@@ -1406,7 +1463,9 @@ fn problem<'a>(runs: &[JointRun<'a>], opts: &JointOptions) -> Result<JointProble
     // Sized once: grown by doubling it could take twice its size.
     let mut known = Vec::with_capacity(n);
     for r in 0..runs.len() {
-        known.extend((0..problem.starts[r + 1] - problem.starts[r]).map(|k| problem.held(r, k)));
+        let view = problem.run_span(r);
+        let bins = 0..problem.starts[r + 1] - problem.starts[r];
+        known.extend(bins.map(|k| problem.held(&view, r, k)));
     }
     problem.known = known;
     Ok(problem)

@@ -8,6 +8,7 @@
 //! shared no-specimen run correlates the springs (J is taken over everything).
 
 pub mod amplitude;
+pub mod bins;
 pub mod consistency;
 pub mod joint;
 mod run_fit;

@@ -18,6 +18,7 @@ use std::time::Instant;
 
 use rayon::prelude::*;
 
+use super::scratch::Scratch;
 use super::sink::{Done, Probed, Sink};
 use super::step::{self, Output, RigOutcome};
 use crate::analysis::RigError;
@@ -108,6 +109,9 @@ pub(super) fn analyse_with(
     observer.event(&Event::Started {
         runs: campaign.runs.len(),
     });
+    // The identification runs' bins wait for the rig in a scratch file,
+    // where the job has a folder (in memory where it has none).
+    let scratch = sink.out_dir.and_then(Scratch::new);
     // One run per task: rayon otherwise hands each thread a block of runs
     // it works through alone once started, so a block of slow runs (spring
     // runs with their delay test) holds one core while the other has
@@ -116,7 +120,15 @@ pub(super) fn analyse_with(
         .runs
         .par_iter()
         .with_max_len(1)
-        .map(|plan| first_pass(campaign, plan, sink, observer).map_err(|e| e.in_run(&plan.id)))
+        .map(|plan| {
+            let mut first = first_pass(campaign, plan, sink, observer);
+            if let (Ok(FirstPass::Done(d)), Some(scratch)) = (&mut first, &scratch)
+                && let Some(e) = d.kept.estimate.as_mut()
+            {
+                e.move_bins(|data| scratch.keep(data).ok());
+            }
+            first.map_err(|e| e.in_run(&plan.id))
+        })
         .collect::<Result<_, _>>()?;
     // The workers' logs are freed beneath what the runs keep.
     super::allocator::give_back();
@@ -130,6 +142,7 @@ pub(super) fn analyse_with(
     // glob, say), then what the analysis finds.
     let mut warnings = campaign.warnings.clone();
     let rig = establish_rig(campaign, &mut first, &mut warnings);
+    drop(scratch);
     let rig_for_runs = for_runs(campaign, &rig);
 
     let second: Vec<Done> = campaign

@@ -11,6 +11,7 @@ mod cache;
 pub mod design;
 pub mod history;
 pub mod init;
+mod scratch;
 mod sensitivity;
 mod shard;
 pub mod simulate;

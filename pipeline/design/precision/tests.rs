@@ -6,6 +6,7 @@
 use rand_distr::{Distribution, StandardNormal};
 
 use super::*;
+use crate::identify::bins::Bins;
 use crate::identify::joint::{JointOptions, JointRun, Output, Structure, joint_fit};
 use crate::model::SpecimenModel;
 use crate::simulate::plant::{PlantSpec, Unmodelled, linear_state_space};
@@ -136,12 +137,9 @@ fn the_joint_fits_spread_is_the_predicted_one() {
                 specimen: p.specimen,
                 p_gain: p.p_gain,
                 output: Output::Displacement,
-                freq_hz: &f,
-                h,
-                variance: v,
+                bins: Bins::held(&f, h, v, None),
                 bin_hz: 0.05,
                 lag: 1,
-                amplitude_m: None,
                 spring_cubic_n_per_m3: None,
             })
             .collect();

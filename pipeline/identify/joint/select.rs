@@ -403,10 +403,11 @@ fn flow_law_taken(
 /// where no run with a specimen has amplitudes.
 fn peak_force_n(runs: &[JointRun<'_>]) -> Option<f64> {
     let mut peak = 0.0_f64;
-    for run in runs {
-        let Some(x) = run.amplitude_m else { continue };
+    for run in runs.iter().filter(|r| r.bins.has_amplitudes()) {
+        let bins = run.bins.all();
+        let Some(x) = &bins.amplitude_m else { continue };
         let (m, c, k) = run.specimen.mck();
-        for (&f, &x) in run.freq_hz.iter().zip(x) {
+        for (&f, &x) in bins.freq_hz.iter().zip(x.iter()) {
             let w = 2.0 * std::f64::consts::PI * f;
             peak = peak.max(Complex::new(k - m * w * w, c * w).norm() * x);
         }
@@ -563,7 +564,7 @@ const SIDE_BY_SIDE_MAX_BINS: usize = 500_000;
 
 /// Whether independent fits over `runs` go side by side.
 fn side_by_side(runs: &[JointRun<'_>]) -> bool {
-    runs.iter().map(|r| r.h.len()).sum::<usize>() <= SIDE_BY_SIDE_MAX_BINS
+    runs.iter().map(|r| r.bins.len()).sum::<usize>() <= SIDE_BY_SIDE_MAX_BINS
 }
 
 /// Every candidate's fit, in the order the choice reads them: the paper's

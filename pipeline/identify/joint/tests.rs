@@ -130,12 +130,9 @@ impl Campaign {
                 specimen: *s,
                 p_gain: 1.0,
                 output: Output::Displacement,
-                freq_hz: &self.f,
-                h,
-                variance: &self.var,
+                bins: Bins::held(&self.f, h, &self.var, None),
                 bin_hz: 0.05,
                 lag: 1,
-                amplitude_m: None,
                 spring_cubic_n_per_m3: None,
             })
             .collect()
@@ -230,9 +227,20 @@ fn the_friction_column_is_the_residuals_derivative() {
     let runs: Vec<JointRun<'_>> = c
         .runs()
         .into_iter()
-        .map(|r| JointRun {
-            amplitude_m: Some(&amplitude),
-            ..r
+        .map(|r| {
+            let Bins::Held {
+                freq_hz,
+                h,
+                variance,
+                ..
+            } = r.bins
+            else {
+                unreachable!("the campaign's bins are held")
+            };
+            JointRun {
+                bins: Bins::held(freq_hz, h, variance, Some(&amplitude)),
+                ..r
+            }
         })
         .collect();
     let opts = JointOptions {
@@ -442,12 +450,9 @@ fn a_validation_runs_displacement_and_force_join_the_fit() {
             specimen: exp1.linear().unwrap(),
             p_gain: 2.0,
             output,
-            freq_hz: &c.f,
-            h,
-            variance: var,
+            bins: Bins::held(&c.f, h, var, None),
             bin_hz: 0.05,
             lag: 1,
-            amplitude_m: None,
             spring_cubic_n_per_m3: None,
         });
     }
@@ -535,12 +540,9 @@ fn a_run_at_another_p_gain_scales_a1b0() {
             specimen: LinearSpecimen::None,
             p_gain: 1.0,
             output: Output::Displacement,
-            freq_hz: &f,
-            h: &h0,
-            variance: &var,
+            bins: Bins::held(&f, &h0, &var, None),
             bin_hz: 0.05,
             lag: 1,
-            amplitude_m: None,
             spring_cubic_n_per_m3: None,
         },
         JointRun {
@@ -549,12 +551,9 @@ fn a_run_at_another_p_gain_scales_a1b0() {
             },
             p_gain: 2.0,
             output: Output::Displacement,
-            freq_hz: &f,
-            h: &h1,
-            variance: &var,
+            bins: Bins::held(&f, &h1, &var, None),
             bin_hz: 0.05,
             lag: 1,
-            amplitude_m: None,
             spring_cubic_n_per_m3: None,
         },
     ];
@@ -794,12 +793,9 @@ impl WithForce {
                 specimen: EXP1.linear().unwrap(),
                 p_gain: 2.0,
                 output,
-                freq_hz: &self.c.f,
-                h,
-                variance: var,
+                bins: Bins::held(&self.c.f, h, var, None),
                 bin_hz: 0.05,
                 lag: 1,
-                amplitude_m: None,
                 spring_cubic_n_per_m3: None,
             });
         }
@@ -916,12 +912,9 @@ fn recovers_at_200_hz(cases: &[(Structure, Unmodelled)]) {
                 specimen: s.linear().unwrap(),
                 p_gain: 1.0,
                 output: Output::Displacement,
-                freq_hz: &f,
-                h,
-                variance: &var,
+                bins: Bins::held(&f, h, &var, None),
                 bin_hz: 0.05,
                 lag: 1,
-                amplitude_m: None,
                 spring_cubic_n_per_m3: None,
             })
             .collect();
@@ -1174,12 +1167,9 @@ fn the_grouped_jackknife_gives_the_spread_between_campaigns() {
                 specimen: *s,
                 p_gain: 1.0,
                 output: Output::Displacement,
-                freq_hz: f,
-                h,
-                variance: var,
+                bins: Bins::held(f, h, var, None),
                 bin_hz: 0.05,
                 lag: 1,
-                amplitude_m: None,
                 spring_cubic_n_per_m3: None,
             })
             .collect()
@@ -1229,18 +1219,19 @@ fn the_grouped_jackknife_gives_the_spread_between_campaigns() {
 fn the_coarse_problem_takes_every_strideth_bin_of_each_run() {
     let c = Campaign::new(None, 0.002);
     let mut runs = c.runs();
-    let mut variance = runs[1].variance.to_vec();
+    let mut variance = c.var.clone();
     for v in variance.iter_mut().step_by(5) {
         *v = f64::NAN;
     }
-    runs[1].variance = &variance;
+    runs[1].bins = Bins::held(&c.f, &c.h[1], &variance, None);
     let p = problem(&runs, &options(Structure::Delay)).unwrap();
     let all: Vec<Bin> = p.bins_in(0..p.len()).collect();
     let mut want_all = Vec::new();
     for (r, run) in runs.iter().enumerate() {
-        for i in 0..run.h.len() {
-            if run.variance[i].is_finite() && run.variance[i] > 0.0 {
-                want_all.push((r, run.h[i], (2.0 / run.variance[i]).sqrt()));
+        let bins = run.bins.all();
+        for i in bins.indices() {
+            if bins.variance(i).is_finite() && bins.variance(i) > 0.0 {
+                want_all.push((r, bins.h(i), (2.0 / bins.variance(i)).sqrt()));
             }
         }
     }
@@ -1256,4 +1247,73 @@ fn the_coarse_problem_takes_every_strideth_bin_of_each_run() {
             .collect();
         assert_eq!(got, want, "stride {stride}");
     }
+}
+
+/// A store's bins give the joint identification the bits held bins give:
+/// the structure chosen, every candidate's fit and the runs' spread, with
+/// the friction fitted on the bins' amplitudes, some bins without a
+/// variance, and the known factors followed through the aliases.
+#[test]
+fn stored_bins_identify_the_rig_to_the_bit_as_held_ones() {
+    use crate::identify::FitData;
+    use crate::identify::bins::MemoryStore;
+    let c = Campaign::with(Unmodelled::default(), 0.002);
+    let amplitude: Vec<f64> = c.f.iter().map(|f| 0.004 / (1.0 + f / 10.0)).collect();
+    let data: Vec<FitData> =
+        c.h.iter()
+            .enumerate()
+            .map(|(r, h)| FitData {
+                freq_hz: c.f.clone(),
+                h: h.clone(),
+                // A bin in seven of the second run's without a variance.
+                variance: (0..c.f.len())
+                    .map(|i| match r == 1 && i % 7 == 3 {
+                        true => f64::NAN,
+                        false => c.var[i],
+                    })
+                    .collect(),
+                suu: Vec::new(),
+                bin_hz: 0.05,
+                lag: 1,
+                amplitude_m: (r > 0).then(|| amplitude.clone()),
+            })
+            .collect();
+    let mut store = MemoryStore::default();
+    let keys: Vec<usize> = data.iter().map(|d| store.keep(d)).collect();
+    fn run<'a>(c: &Campaign, r: usize, bins: Bins<'a>) -> JointRun<'a> {
+        JointRun {
+            specimen: c.specimens[r],
+            p_gain: 1.0,
+            output: Output::Displacement,
+            bins,
+            bin_hz: 0.05,
+            lag: 1,
+            spring_cubic_n_per_m3: None,
+        }
+    }
+    let held: Vec<JointRun<'_>> = (data.iter().enumerate())
+        .map(|(r, d)| run(&c, r, d.bins()))
+        .collect();
+    let stored: Vec<JointRun<'_>> = (0..data.len())
+        .map(|r| {
+            let bins = Bins::Stored {
+                store: &store,
+                key: keys[r],
+                len: data[r].h.len(),
+                amplitudes: data[r].amplitude_m.is_some(),
+            };
+            run(&c, r, bins)
+        })
+        .collect();
+    let opts = JointOptions {
+        friction: true,
+        friction_start_n: 5.0,
+        ..options(Structure::Delay)
+    };
+    let a = identify(held, &rig(), &opts, Choice::Auto, 40.0);
+    let b = identify(stored, &rig(), &opts, Choice::Auto, 40.0);
+    let fit = a.selection.fit().expect("a structure is chosen");
+    assert!(fit.friction_n.is_some(), "the friction is fitted");
+    assert_eq!(format!("{:?}", a.selection), format!("{:?}", b.selection));
+    assert_eq!(format!("{:?}", a.misfit), format!("{:?}", b.misfit));
 }
