@@ -497,7 +497,23 @@ pub fn write_pages(
     }
     let path = out_dir.join("report.html");
     settle(out_dir)?;
-    write_atomic(&path, pages.campaign(campaign_figures)?.as_bytes())?;
+    // A failed write is the file's error; any other, the template's.
+    let mut template = None;
+    let written = write_streamed(&path, |w| {
+        pages
+            .campaign(campaign_figures, w)
+            .map_err(|e| match e.write_failure() {
+                Some(io) => io,
+                None => {
+                    template = Some(e);
+                    std::io::Error::other("the page's template failed")
+                }
+            })
+    });
+    if let Some(e) = template {
+        return Err(e.into());
+    }
+    written?;
     Ok(path)
 }
 
