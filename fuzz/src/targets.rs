@@ -364,11 +364,24 @@ pub fn with_numbers(text: &str, mut edits: Vec<(std::ops::Range<usize>, String)>
 /// A small simulated campaign with logs (8 s at 400 Hz: a no-specimen
 /// run, a spring and an SDOF validation run with force), simulated once
 /// per process into the temporary folder: its analysis manifest's text and
-/// path.
+/// path. A process cannot remove its folder as it exits (a static is never
+/// dropped), so each removes those of processes that have ended.
 pub fn numbers_campaign() -> &'static (String, std::path::PathBuf) {
     static CAMPAIGN: std::sync::OnceLock<(String, std::path::PathBuf)> = std::sync::OnceLock::new();
     CAMPAIGN.get_or_init(|| {
-        let dir = std::env::temp_dir().join(format!("servoid-numbers-{}", std::process::id()));
+        const PREFIX: &str = "servoid-numbers-";
+        let tmp = std::env::temp_dir();
+        for entry in std::fs::read_dir(&tmp).into_iter().flatten().flatten() {
+            let name = entry.file_name();
+            let pid = name.to_str().and_then(|n| n.strip_prefix(PREFIX));
+            let ended = pid.is_some_and(|p| {
+                p.parse::<u32>().is_ok() && !std::path::Path::new("/proc").join(p).exists()
+            });
+            if ended && std::path::Path::new("/proc/self").exists() {
+                let _ = std::fs::remove_dir_all(entry.path());
+            }
+        }
+        let dir = tmp.join(format!("{PREFIX}{}", std::process::id()));
         let _ = std::fs::remove_dir_all(&dir);
         std::fs::create_dir_all(&dir).expect("a temporary folder");
         let sim = dir.join("simulation.toml");
