@@ -371,13 +371,18 @@ pub fn numbers_campaign() -> &'static (String, std::path::PathBuf) {
     CAMPAIGN.get_or_init(|| {
         const PREFIX: &str = "servoid-numbers-";
         let tmp = std::env::temp_dir();
-        for entry in std::fs::read_dir(&tmp).into_iter().flatten().flatten() {
+        // Only where /proc tells which processes live.
+        let entries = match std::path::Path::new("/proc/self").exists() {
+            true => std::fs::read_dir(&tmp).ok(),
+            false => None,
+        };
+        for entry in entries.into_iter().flatten().flatten() {
             let name = entry.file_name();
             let pid = name.to_str().and_then(|n| n.strip_prefix(PREFIX));
             let ended = pid.is_some_and(|p| {
                 p.parse::<u32>().is_ok() && !std::path::Path::new("/proc").join(p).exists()
             });
-            if ended && std::path::Path::new("/proc/self").exists() {
+            if ended {
                 let _ = std::fs::remove_dir_all(entry.path());
             }
         }

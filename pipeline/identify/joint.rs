@@ -1371,42 +1371,11 @@ impl JointProblem<'_> {
 }
 
 fn problem<'a>(runs: &[JointRun<'a>], opts: &JointOptions) -> Result<JointProblem<'a>, FitError> {
-    let mut frfs = Vec::with_capacity(runs.len());
-    let mut starts = Vec::with_capacity(runs.len() + 1);
-    let mut coulomb = Vec::new();
-    let mut n = 0;
     for run in runs {
         let (freq, h, variance) = run.bins.lengths();
         if freq != h || h != variance {
             return Err(FitError::LengthMismatch { freq, h, variance });
         }
-        let all = run.bins.all();
-        let at: Vec<u32> = (0..h)
-            .filter(|&i| all.variance(i).is_finite() && all.variance(i) > 0.0)
-            .map(|i| u32::try_from(i).expect("an FRF of fewer than 2^32 bins"))
-            .collect();
-        if let (true, Some(a)) = (opts.friction, &all.amplitude_m) {
-            coulomb.resize(n, 0.0);
-            coulomb.extend(at.iter().map(|&i| {
-                let (f, a) = (all.freq(i as usize), a[i as usize]);
-                if a > 0.0 {
-                    model::coulomb_load_per_newton(f, a, opts.friction_smoothing_m_per_s)
-                } else {
-                    0.0
-                }
-            }));
-        }
-        starts.push(n);
-        n += at.len();
-        frfs.push(RunBins {
-            frf: *run,
-            at,
-            own: None,
-        });
-    }
-    starts.push(n);
-    if !coulomb.is_empty() {
-        coulomb.resize(n, 0.0);
     }
     let models = runs
         .iter()
@@ -1438,10 +1407,12 @@ fn problem<'a>(runs: &[JointRun<'a>], opts: &JointOptions) -> Result<JointProble
             + usize::from(command_gain.is_some())
     });
     let mut problem = JointProblem {
-        frfs,
-        starts,
-        known: Vec::new(),
-        coulomb,
+        frfs: Vec::with_capacity(runs.len()),
+        starts: Vec::with_capacity(runs.len() + 1),
+        // Sized once, for every bin (those without a variance are few):
+        // grown by doubling it could take twice its size.
+        known: Vec::with_capacity(runs.iter().map(|r| r.bins.len()).sum()),
+        coulomb: Vec::new(),
         amplitudes: opts.flow_law || opts.flow_law_held,
         sample_rate_hz: opts.sample_rate_hz,
         runs: models,
@@ -1460,15 +1431,51 @@ fn problem<'a>(runs: &[JointRun<'a>], opts: &JointOptions) -> Result<JointProble
         period_s: 1.0 / opts.sample_rate_hz,
         intersample: opts.intersample,
     };
-    // Sized once: grown by doubling it could take twice its size.
-    let mut known = Vec::with_capacity(n);
-    for r in 0..runs.len() {
-        let view = problem.run_span(r);
-        let bins = 0..problem.starts[r + 1] - problem.starts[r];
-        known.extend(bins.map(|k| problem.held(&view, r, k)));
+    for run in runs {
+        problem.weigh(run, opts);
     }
-    problem.known = known;
+    let n = problem.known.len();
+    problem.starts.push(n);
+    if !problem.coulomb.is_empty() {
+        problem.coulomb.resize(n, 0.0);
+    }
     Ok(problem)
+}
+
+impl<'a> JointProblem<'a> {
+    /// `run`'s bins added, its FRF read once for them: those with a finite,
+    /// positive variance, with their Coulomb describing function where
+    /// friction is fitted and their known factors.
+    fn weigh(&mut self, run: &JointRun<'a>, opts: &JointOptions) {
+        let (r, n) = (self.frfs.len(), self.known.len());
+        let all = run.bins.all();
+        let at: Vec<u32> = all
+            .indices()
+            .filter(|&i| all.variance(i).is_finite() && all.variance(i) > 0.0)
+            .map(|i| u32::try_from(i).expect("an FRF of fewer than 2^32 bins"))
+            .collect();
+        if let (true, Some(a)) = (opts.friction, &all.amplitude_m) {
+            self.coulomb.resize(n, 0.0);
+            self.coulomb.extend(at.iter().map(|&i| {
+                let (f, a) = (all.freq(i as usize), a[i as usize]);
+                if a > 0.0 {
+                    model::coulomb_load_per_newton(f, a, opts.friction_smoothing_m_per_s)
+                } else {
+                    0.0
+                }
+            }));
+        }
+        self.starts.push(n);
+        self.frfs.push(RunBins {
+            frf: *run,
+            at,
+            own: None,
+        });
+        for k in 0..self.frfs[r].at.len() {
+            let known = self.held(&all, r, k);
+            self.known.push(known);
+        }
+    }
 }
 
 /// Fit the rig jointly to `runs`, starting from `start` (the sequential

@@ -335,14 +335,13 @@ pub fn write_json(path: &Path, value: &impl serde::Serialize) -> Result<String, 
         }
     }
     let mut sha = String::new();
-    replace_with(path, true, |f| {
+    write_streamed(path, |w| {
         let mut w = Hashing {
-            inner: std::io::BufWriter::with_capacity(1 << 16, f),
+            inner: w,
             hash: sha2::Sha256::new(),
         };
         serde_json::to_writer_pretty(&mut w, value).map_err(std::io::Error::from)?;
         w.write_all(b"\n")?;
-        w.flush()?;
         sha = format!("{:x}", w.hash.finalize());
         Ok(())
     })?;
