@@ -11,6 +11,9 @@
 
 use std::collections::BTreeMap;
 
+mod parked;
+pub use parked::{Parked, PartStore};
+
 use schemars::JsonSchema;
 
 pub use crate::warning::Warning;
@@ -518,8 +521,11 @@ pub struct RunResult {
     pub validation: Option<ValidationMetrics>,
     /// How the actuator followed its command, when the run has a log:
     /// measured, and for a validation run as the identified model predicts
-    /// it for the same command.
-    pub tracking: Option<RunTracking>,
+    /// it for the same command. Parked once the run's files are written:
+    /// it is most of a validation run's result (the compensator's sweep
+    /// over the specimen's stiffness), and only the set's files read it.
+    #[schemars(with = "Option<RunTracking>")]
+    pub tracking: Option<Parked<RunTracking>>,
     /// The log this run read, when it has one.
     pub log: Option<LogInfo>,
     /// The FRF settings the run got and why, when it has a log.

@@ -1255,11 +1255,8 @@ fn seal_friction_is_fitted_with_the_rig() {
             // tracking as the amplitude falls.
             for run in &validation {
                 let v = run.validation.as_ref().expect("validated");
-                let c = run
-                    .tracking
-                    .as_ref()
-                    .and_then(|t| t.compensator.as_ref())
-                    .expect("a compensator");
+                let t = run.tracking.as_ref().expect("tracking").get();
+                let c = t.compensator.as_ref().expect("a compensator");
                 let left: Vec<(f64, f64)> = c
                     .seals
                     .iter()

@@ -56,17 +56,22 @@ pub fn needs_rig(campaign: &Campaign) -> bool {
 /// the key.
 fn stated_cutoff_unused(campaign: &Campaign, results: &Results) -> Option<Warning> {
     let fc = campaign.compensator.cutoff_hz?;
-    let outcomes: Vec<(&str, &CompensatorOutcome)> = results
+    // Each run's compensator: whether it was designed, and why not.
+    let outcomes: Vec<(&str, bool, Option<String>)> = results
         .runs
         .iter()
-        .filter_map(|r| Some((r.id.as_str(), r.tracking.as_ref()?.compensator.as_ref()?)))
+        .filter_map(|r| {
+            let tracking = r.tracking.as_ref()?.get();
+            let c: &CompensatorOutcome = tracking.compensator.as_ref()?;
+            Some((r.id.as_str(), c.design.is_some(), c.note.clone()))
+        })
         .collect();
-    if outcomes.iter().any(|(_, c)| c.design.is_some()) {
+    if outcomes.iter().any(|(_, designed, _)| *designed) {
         return None;
     }
     let notes: Vec<(&str, &str)> = outcomes
         .iter()
-        .filter_map(|(id, c)| Some((*id, c.note.as_deref()?)))
+        .filter_map(|(id, _, note)| Some((*id, note.as_deref()?)))
         .collect();
     let (_, why) = notes.first()?;
     let headline = format!("compensator.cutoff_hz = {fc} Hz: no compensator could be designed");

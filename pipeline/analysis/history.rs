@@ -153,7 +153,7 @@ fn night_delay(results: &Results) -> Option<f64> {
             .runs
             .iter()
             .filter(|r| !bare || r.role == crate::manifest::Role::NoSpecimen)
-            .filter_map(|r| r.tracking.as_ref()?.measured.delay_xcorr_s)
+            .filter_map(|r| r.tracking.as_ref()?.get().measured.delay_xcorr_s)
             .collect()
     };
     let mut d = delays(true);

@@ -18,8 +18,8 @@ use crate::model::SpecimenModel;
 use crate::model::flow::RigAtLoad;
 use crate::model::{self, LinearSpecimen, RigExtras, RigParams};
 use crate::results::{
-    DelayTestResult, FitSummary, FrfUsed, HarmonicsFound, LinearityResult, LogInfo, PeriodicResult,
-    RunResult, RunTracking, Status, TfResult, TfSource,
+    DelayTestResult, FitSummary, FrfUsed, HarmonicsFound, LinearityResult, LogInfo, Parked,
+    PeriodicResult, RunResult, RunTracking, Status, TfResult, TfSource,
 };
 use crate::tracking::compensator::{self, Compensator, CompensatorOutcome};
 use crate::tracking::{self, FrfBins, Reference, Tracking};
@@ -542,12 +542,12 @@ pub fn fitted(
         let windows = time
             .as_ref()
             .map(|t: &validate::TimeStage| t.windows.as_slice());
-        out.tracking = Some(RunTracking {
+        out.tracking = Some(Parked::new(RunTracking {
             measured: measured_tracking(&st.reference(), st, windows),
             predicted: None,
             model_gap_s: None,
             compensator: None,
-        });
+        }));
     }
     (out, stage, time)
 }

@@ -23,7 +23,7 @@ use crate::lti::TransferFunction;
 use crate::manifest::{Campaign, Role, RunPlan};
 use crate::model::flow::{LoadLaw, RigAtLoad};
 use crate::model::{self, LinearSpecimen, RigExtras, RigParams, SpecimenModel};
-use crate::results::{RunResult, RunTracking, SpringForceResult};
+use crate::results::{Parked, RunResult, RunTracking, SpringForceResult};
 use crate::sensitivity::{self, NoiseProfile};
 use crate::validate::csi::Csi;
 use crate::validate::{self, TimeStage};
@@ -287,14 +287,14 @@ fn validated(
             .as_ref()
             .and_then(|tf| TransferFunction::with_delay(&tf.num, &tf.den, tf.delay_s).ok()),
     };
-    out.tracking = Some(run_tracking(
+    out.tracking = Some(Parked::new(run_tracking(
         plan,
         &st,
         time.as_ref(),
         plant.as_ref(),
         (&at_load, extras),
         design,
-    ));
+    )));
     // The measured force FRF at positive frequencies up to the kept top,
     // the bins Figs. 16-17 show it at.
     let force = st

@@ -19,6 +19,10 @@ pub trait BinStore: Send + Sync + std::fmt::Debug {
     /// `key` with `len` bins, with their amplitudes or without, bit for
     /// bit as they were kept.
     fn read(&self, key: usize, len: usize, amplitudes: bool, span: Range<usize>) -> Span<'static>;
+
+    /// `data`'s bins kept beside the others (a coarse problem's own
+    /// subset); their key, None where they cannot be kept.
+    fn keep(&self, data: &FitData) -> Option<usize>;
 }
 
 /// Consecutive bins of a run: borrowed where the run holds them, read
@@ -203,22 +207,13 @@ impl FitData {
 #[cfg(test)]
 #[derive(Debug, Default)]
 pub struct MemoryStore {
-    runs: Vec<FitData>,
-}
-
-#[cfg(test)]
-impl MemoryStore {
-    /// Keeps `data`'s bins; their key.
-    pub fn keep(&mut self, data: &FitData) -> usize {
-        self.runs.push(data.clone());
-        self.runs.len() - 1
-    }
+    runs: std::sync::Mutex<Vec<FitData>>,
 }
 
 #[cfg(test)]
 impl BinStore for MemoryStore {
     fn read(&self, key: usize, _: usize, amplitudes: bool, span: Range<usize>) -> Span<'static> {
-        let d = &self.runs[key];
+        let d = &self.runs.lock().unwrap()[key];
         Span {
             start: span.start,
             freq_hz: Cow::Owned(d.freq_hz[span.clone()].to_vec()),
@@ -228,5 +223,11 @@ impl BinStore for MemoryStore {
                 .filter(|_| amplitudes)
                 .map(|a| Cow::Owned(a[span].to_vec())),
         }
+    }
+
+    fn keep(&self, data: &FitData) -> Option<usize> {
+        let mut runs = self.runs.lock().unwrap();
+        runs.push(data.clone());
+        Some(runs.len() - 1)
     }
 }

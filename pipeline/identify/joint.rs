@@ -467,11 +467,75 @@ struct RunBins<'a> {
     frf: JointRun<'a>,
     /// The indices into the FRF of the bins weighed: those with a finite,
     /// positive variance (every stride-th of them in a coarse problem).
-    at: Vec<u32>,
-    /// A coarse problem's own copy of a stored run's bins weighed (`at`
-    /// then indexes it): its passes would otherwise read every bin of the
-    /// run to weigh one in `stride`.
+    at: Weighed,
+    /// A coarse problem's own copy of a stored run's bins weighed, where
+    /// the store could not keep it (else `frf` reads the store's copy; `at`
+    /// indexes the copy either way): its passes would otherwise read every
+    /// bin of the run to weigh one in `stride`.
     own: Option<FitData>,
+}
+
+/// The bins of a run a problem weighs, as indices into its FRF: a stride
+/// where they are evenly spaced (every bin has a variance, nearly always:
+/// a night's 2 M indices would be 8 MB), else listed.
+#[derive(Debug, Clone)]
+enum Weighed {
+    /// `len` bins, every `step`-th from the first.
+    Every {
+        step: usize,
+        len: usize,
+    },
+    Listed(Vec<u32>),
+}
+
+impl Weighed {
+    /// The bins of `len` that `keep` keeps.
+    fn of(len: usize, keep: impl Fn(usize) -> bool) -> Self {
+        match (0..len).all(&keep) {
+            true => Weighed::Every { step: 1, len },
+            false => Weighed::Listed(
+                (0..len)
+                    .filter(|&i| keep(i))
+                    .map(|i| u32::try_from(i).expect("an FRF of fewer than 2^32 bins"))
+                    .collect(),
+            ),
+        }
+    }
+
+    fn len(&self) -> usize {
+        match self {
+            Weighed::Every { len, .. } => *len,
+            Weighed::Listed(at) => at.len(),
+        }
+    }
+
+    fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// The FRF's index of the `k`-th bin weighed.
+    #[inline(always)]
+    fn get(&self, k: usize) -> usize {
+        match self {
+            Weighed::Every { step, .. } => k * step,
+            Weighed::Listed(at) => at[k] as usize,
+        }
+    }
+
+    fn iter(&self) -> impl Iterator<Item = usize> + '_ {
+        (0..self.len()).map(|k| self.get(k))
+    }
+
+    /// Every `stride`-th of these.
+    fn every(&self, stride: usize) -> Self {
+        match self {
+            Weighed::Every { step, len } => Weighed::Every {
+                step: step * stride,
+                len: len.div_ceil(stride),
+            },
+            Weighed::Listed(at) => Weighed::Listed(at.iter().step_by(stride).copied().collect()),
+        }
+    }
 }
 
 /// The least-squares problem over every bin of every run. A bin is its
@@ -653,7 +717,7 @@ impl<'a> JointProblem<'a> {
         let run = &self.frfs[r];
         let range = match ks.is_empty() {
             true => 0..0,
-            false => run.at[ks.start] as usize..run.at[ks.end - 1] as usize + 1,
+            false => run.at.get(ks.start)..run.at.get(ks.end - 1) + 1,
         };
         match &run.own {
             Some(own) => own.bins().span(range),
@@ -672,7 +736,7 @@ impl<'a> JointProblem<'a> {
     #[inline(always)]
     fn load(&self, view: &Span, r: usize, k: usize) -> (usize, Complex<f64>, Complex<f64>) {
         let frf = &self.frfs[r].frf;
-        let i = self.frfs[r].at[k] as usize;
+        let i = self.frfs[r].at.get(k);
         let s = Complex::new(0.0, 2.0 * std::f64::consts::PI * view.freq(i));
         let (m, c, stiffness) = self.runs[r].mck;
         let stiffening = match (frf.spring_cubic_n_per_m3, view.amplitude(i)) {
@@ -777,23 +841,26 @@ impl<'a> JointProblem<'a> {
         }
     }
 
-    /// Run `r`'s every `stride`-th bin weighed, a stored run's copied.
+    /// Run `r`'s every `stride`-th bin weighed, a stored run's copied
+    /// (into its store where it takes them).
     fn coarse_bins(&self, r: usize, stride: usize) -> RunBins<'a> {
         let run = &self.frfs[r];
-        let at: Vec<u32> = run.at.iter().step_by(stride).copied().collect();
-        let stored = matches!(run.frf.bins, Bins::Stored { .. }) && run.own.is_none();
-        if !stored || at.is_empty() {
-            return RunBins {
-                frf: run.frf,
-                at,
-                own: run.own.clone(),
-            };
-        }
+        let at = run.at.every(stride);
+        let store = match run.frf.bins {
+            Bins::Stored { store, .. } if run.own.is_none() && !at.is_empty() => store,
+            _ => {
+                return RunBins {
+                    frf: run.frf,
+                    at,
+                    own: run.own.clone(),
+                };
+            }
+        };
         let view = self.run_span(r);
-        let picked = |v: &dyn Fn(usize) -> f64| at.iter().map(|&i| v(i as usize)).collect();
+        let picked = |v: &dyn Fn(usize) -> f64| at.iter().map(v).collect();
         let own = FitData {
             freq_hz: picked(&|i| view.freq(i)),
-            h: at.iter().map(|&i| view.h(i as usize)).collect(),
+            h: at.iter().map(|i| view.h(i)).collect(),
             variance: picked(&|i| view.variance(i)),
             suu: Vec::new(),
             bin_hz: run.frf.bin_hz,
@@ -803,10 +870,29 @@ impl<'a> JointProblem<'a> {
                 .is_some()
                 .then(|| picked(&|i| view.amplitude(i).unwrap_or(0.0))),
         };
-        RunBins {
-            frf: run.frf,
-            at: (0..at.len() as u32).collect(),
-            own: Some(own),
+        let every = Weighed::Every {
+            step: 1,
+            len: at.len(),
+        };
+        match store.keep(&own) {
+            Some(key) => RunBins {
+                frf: JointRun {
+                    bins: Bins::Stored {
+                        store,
+                        key,
+                        len: own.h.len(),
+                        amplitudes: own.amplitude_m.is_some(),
+                    },
+                    ..run.frf
+                },
+                at: every,
+                own: None,
+            },
+            None => RunBins {
+                frf: run.frf,
+                at: every,
+                own: Some(own),
+            },
         }
     }
 
@@ -1449,15 +1535,13 @@ impl<'a> JointProblem<'a> {
     fn weigh(&mut self, run: &JointRun<'a>, opts: &JointOptions) {
         let (r, n) = (self.frfs.len(), self.known.len());
         let all = run.bins.all();
-        let at: Vec<u32> = all
-            .indices()
-            .filter(|&i| all.variance(i).is_finite() && all.variance(i) > 0.0)
-            .map(|i| u32::try_from(i).expect("an FRF of fewer than 2^32 bins"))
-            .collect();
+        let at = Weighed::of(run.bins.len(), |i| {
+            all.variance(i).is_finite() && all.variance(i) > 0.0
+        });
         if let (true, Some(a)) = (opts.friction, &all.amplitude_m) {
             self.coulomb.resize(n, 0.0);
-            self.coulomb.extend(at.iter().map(|&i| {
-                let (f, a) = (all.freq(i as usize), a[i as usize]);
+            self.coulomb.extend(at.iter().map(|i| {
+                let (f, a) = (all.freq(i), a[i]);
                 if a > 0.0 {
                     model::coulomb_load_per_newton(f, a, opts.friction_smoothing_m_per_s)
                 } else {

@@ -131,13 +131,13 @@ struct RunRow<'a> {
     tf: &'a Option<crate::results::TfResult>,
     fit: &'a Option<crate::results::FitSummary>,
     validation: &'a Option<crate::validate::timedomain::ValidationMetrics>,
-    tracking: Option<RowTracking<'a>>,
+    tracking: Option<RowTracking>,
     log: &'a Option<crate::results::LogInfo>,
 }
 
 #[derive(serde::Serialize)]
-struct RowTracking<'a> {
-    measured: &'a crate::tracking::Tracking,
+struct RowTracking {
+    measured: crate::tracking::Tracking,
 }
 
 impl<'a> PageResults<'a> {
@@ -156,7 +156,7 @@ impl<'a> PageResults<'a> {
             fit: &run.fit,
             validation: &run.validation,
             tracking: run.tracking.as_ref().map(|t| RowTracking {
-                measured: &t.measured,
+                measured: t.get().measured.clone(),
             }),
             log: &run.log,
         };
@@ -529,7 +529,11 @@ mod tests {
         let out = crate::run::simulate::simulate_campaign(&sim, dir.path()).expect("simulates");
         let results = crate::run::analyse(&crate::manifest::load(&out.manifest).unwrap());
         let v = results.runs.iter().find(|r| r.id == "v1").unwrap();
-        assert!(v.tracking.as_ref().is_some_and(|t| t.compensator.is_some()));
+        assert!(
+            v.tracking
+                .as_ref()
+                .is_some_and(|t| t.get().compensator.is_some())
+        );
         let mut pages = Pages::new(&results, super::super::FigureFormats::Summary).unwrap();
         let page = |pages: &Pages| {
             let mut out = Vec::new();

@@ -170,6 +170,8 @@ fn run_value(run: &RunResult, rig: Option<&RigResult>) -> Vec<MatValue> {
         simplified,
         run.tracking
             .as_ref()
+            .map(|t| t.get())
+            .as_deref()
             .and_then(|t| t.compensator.as_ref())
             .map_or_else(MatValue::empty, compensator),
         text(run.error.as_deref().unwrap_or("")),

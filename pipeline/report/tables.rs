@@ -208,7 +208,6 @@ pub const TRACKING_TABLE: &str = "tables/tracking.parquet";
 pub fn write_tracking(path: &Path, runs: &[RunResult]) -> Result<(), ColumnWriteError> {
     use crate::tracking::Tracking;
     type Measure = fn(&Tracking) -> Option<f64>;
-    type Source = fn(&RunResult) -> Option<&Tracking>;
     const MEASURES: [(&str, Measure); 8] = [
         ("delay_xcorr_s", |t| t.delay_xcorr_s),
         ("delay_phase_slope_s", |t| t.delay_phase_slope_s),
@@ -219,62 +218,60 @@ pub fn write_tracking(path: &Path, runs: &[RunResult]) -> Result<(), ColumnWrite
         ("j2_pct", |t| t.errors.as_ref().map(|e| e.nrms_pct)),
         ("j3_pct", |t| t.errors.as_ref().map(|e| e.peak_pct)),
     ];
-    fn compensator(r: &RunResult) -> Option<&crate::tracking::compensator::CompensatorOutcome> {
-        r.tracking.as_ref().and_then(|t| t.compensator.as_ref())
+    const SOURCES: [&str; 3] = ["measured", "predicted", "compensated"];
+    const AFTER: [&str; 3] = ["model_gap_s", "compensator_cutoff_hz", "compensator_lead_s"];
+    // Each run's tracking is read once (it may be parked), its numbers
+    // gathered by column.
+    let n = runs.len();
+    let mut numbers = vec![Vec::with_capacity(n); SOURCES.len() * MEASURES.len() + AFTER.len()];
+    let mut meets: Vec<Option<bool>> = Vec::with_capacity(n);
+    let mut targets = [Vec::with_capacity(n), Vec::with_capacity(n)];
+    for r in runs {
+        let tracking = r.tracking.as_ref().map(|t| t.get());
+        let t = tracking.as_deref();
+        let c = t.and_then(|t| t.compensator.as_ref());
+        let design = c.and_then(|c| c.design.as_ref());
+        let sources = [
+            t.map(|t| &t.measured),
+            t.and_then(|t| t.predicted.as_ref()),
+            c.and_then(|c| c.predicted.as_ref()),
+        ];
+        let measured = sources
+            .iter()
+            .flat_map(|s| MEASURES.iter().map(move |(_, m)| s.and_then(m)));
+        let after = [
+            t.and_then(|t| t.model_gap_s),
+            design.map(|d| d.cutoff_hz),
+            design.map(|d| d.lead_s),
+        ];
+        for (column, v) in numbers.iter_mut().zip(measured.chain(after)) {
+            column.push(v);
+        }
+        meets.push(c.and_then(|c| c.meets_target));
+        let k = c.and_then(|c| c.target_stiffness_n_per_m);
+        for (i, column) in targets.iter_mut().enumerate() {
+            column.push(k.map(|k| k[i]));
+        }
     }
-    let sources: [(&str, Source); 3] = [
-        ("measured", |r| r.tracking.as_ref().map(|t| &t.measured)),
-        ("predicted", |r| {
-            r.tracking.as_ref().and_then(|t| t.predicted.as_ref())
-        }),
-        ("compensated", |r| {
-            r.tracking
-                .as_ref()
-                .and_then(|t| t.compensator.as_ref())
-                .and_then(|c| c.predicted.as_ref())
-        }),
-    ];
+    let names = SOURCES
+        .iter()
+        .flat_map(|s| MEASURES.iter().map(move |(m, _)| format!("{s}_{m}")))
+        .chain(AFTER.map(String::from));
     let text = |f: &dyn Fn(&RunResult) -> String| runs.iter().map(f).collect::<Vec<String>>();
     let mut cols = vec![
         Column::new("run".into(), text(&|r| r.id.clone())),
         Column::new("role".into(), text(&|r| r.role.as_str().to_string())),
     ];
-    for (source, of) in sources {
-        for (name, measure) in MEASURES {
-            let v: Vec<Option<f64>> = runs.iter().map(|r| of(r).and_then(measure)).collect();
-            cols.push(Column::new(format!("{source}_{name}").into(), v));
-        }
-    }
-    let opt = |f: &dyn Fn(&RunResult) -> Option<f64>| runs.iter().map(f).collect::<Vec<_>>();
-    cols.push(Column::new(
-        "model_gap_s".into(),
-        opt(&|r| r.tracking.as_ref().and_then(|t| t.model_gap_s)),
-    ));
-    fn design(r: &RunResult) -> Option<&crate::tracking::compensator::Compensator> {
-        compensator(r).and_then(|c| c.design.as_ref())
-    }
-    cols.push(Column::new(
-        "compensator_cutoff_hz".into(),
-        opt(&|r| design(r).map(|d| d.cutoff_hz)),
-    ));
-    cols.push(Column::new(
-        "compensator_lead_s".into(),
-        opt(&|r| design(r).map(|d| d.lead_s)),
-    ));
-    cols.push(Column::new(
-        "compensator_meets_target".into(),
-        runs.iter()
-            .map(|r| compensator(r).and_then(|c| c.meets_target))
-            .collect::<Vec<Option<bool>>>(),
-    ));
-    for (i, name) in ["low", "high"].iter().enumerate() {
+    cols.extend(
+        names
+            .zip(numbers)
+            .map(|(name, v)| Column::new(name.into(), v)),
+    );
+    cols.push(Column::new("compensator_meets_target".into(), meets));
+    for (name, v) in ["low", "high"].iter().zip(targets) {
         cols.push(Column::new(
             format!("compensator_target_k_{name}_n_per_m").into(),
-            opt(&|r| {
-                compensator(r)
-                    .and_then(|c| c.target_stiffness_n_per_m)
-                    .map(|k| k[i])
-            }),
+            v,
         ));
     }
     write(path, runs.len(), cols)

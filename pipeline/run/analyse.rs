@@ -144,17 +144,28 @@ pub(super) fn analyse_with(
     let rig = establish_rig(campaign, &mut first, &mut warnings);
     drop(scratch);
     let rig_for_runs = for_runs(campaign, &rig);
+    // Each run's tracking waits for the set's files in another, once the
+    // run's own are written: what the campaign holds then grows by a run's
+    // summary, not by its tracking.
+    let parked = sink.out_dir.and_then(Scratch::new);
 
     let second: Vec<Done> = campaign
         .runs
         .par_iter()
         .zip(first)
         .with_max_len(1)
-        .map(|(plan, first)| {
-            second_pass(campaign, plan, first, &rig_for_runs, sink, observer)
-                .map_err(|e| e.in_run(&plan.id))
+        .map(|(plan, first)| -> Result<Done, WriteError> {
+            let mut done = second_pass(campaign, plan, first, &rig_for_runs, sink, observer)
+                .map_err(|e| e.in_run(&plan.id))?;
+            if let (Some(parked), Some(tracking)) = (&parked, &mut done.kept.result.tracking) {
+                tracking.park(|bytes| parked.keep_part(bytes).ok());
+            }
+            Ok(done)
         })
         .collect::<Result<_, _>>()?;
+    // The workers' logs are freed beneath the runs' results again, before
+    // the campaign's conclusions and its files are built.
+    super::allocator::give_back();
     let runs = PerRun::of(second, &mut warnings);
     let (rig_result, rig_error) = match rig {
         Ok((_, r)) => (Some(r), None),
@@ -440,4 +451,52 @@ fn run_once(
         },
     });
     Ok(done)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::results::Parked;
+
+    /// A campaign whose runs' tracking waits in the scratch file gives the
+    /// results.json the same campaign gives with it held, byte for byte.
+    #[test]
+    fn parked_tracking_gives_the_results_held_tracking_gives() {
+        use crate::manifest::simulation::load_simulation_str;
+        let dir = tempfile::tempdir().unwrap();
+        let text = include_str!("../../tests/fixtures/small-simulation.toml");
+        let sim = load_simulation_str(text, &dir.path().join("sim.toml")).expect("a simulation");
+        let out = crate::run::simulate::simulate_campaign(&sim, dir.path()).expect("simulates");
+        let campaign = crate::manifest::load(&out.manifest).unwrap();
+        let held = analyse(&campaign);
+        let work = tempfile::tempdir().unwrap();
+        let sink = Sink {
+            out_dir: Some(work.path()),
+            files: None,
+            choice: FigureFormats::None,
+            intersample: campaign.identification.intersample,
+            cache: None,
+        };
+        let parked = analyse_with(&campaign, &sink, &Unobserved).unwrap().results;
+        let stored = |r: &Results| {
+            (r.runs.iter())
+                .filter(|r| r.tracking.as_ref().is_some_and(Parked::is_stored))
+                .count()
+        };
+        assert!(
+            stored(&parked) >= 2,
+            "the validation runs' tracking is parked"
+        );
+        assert_eq!(stored(&held), 0);
+        assert!(
+            held.runs
+                .iter()
+                .any(|r| (r.tracking.as_ref()).is_some_and(|t| t.get().compensator.is_some()))
+        );
+        assert_eq!(
+            serde_json::to_string(&parked).unwrap(),
+            serde_json::to_string(&held).unwrap()
+        );
+        assert_eq!(parked, held);
+    }
 }

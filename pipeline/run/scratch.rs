@@ -1,11 +1,12 @@
-//! The identification runs' bins off the heap while a job lasts: an
-//! unnamed file in the output folder (gone when the job ends, however it
-//! ends, and never among the folder's outputs), each run's bins written as
-//! its first pass ends and read back a span at a time by the rig's fits
-//! (`identify::bins`). A run's bins are its columns one after another
-//! (frequency, H as Re and Im, E|dH|^2, and its amplitudes where it has
-//! them), their bits as computed, in the machine's byte order: the file
-//! lasts no longer than the job.
+//! What a job need not hold, off the heap while it lasts: an unnamed file
+//! in the output folder (gone when the job ends, however it ends, and
+//! never among the folder's outputs). The identification runs' bins are
+//! written as each run's first pass ends and read back a span at a time by
+//! the rig's fits (`identify::bins`): a run's bins are its columns one
+//! after another (frequency, H as Re and Im, E|dH|^2, and its amplitudes
+//! where it has them), their bits as computed, in the machine's byte
+//! order, since the file lasts no longer than the job. A run's parked
+//! parts (`results::Parked`) are their bytes as given.
 
 use std::borrow::Cow;
 use std::fs::File;
@@ -19,6 +20,7 @@ use nalgebra::Complex;
 
 use crate::identify::FitData;
 use crate::identify::bins::{BinStore, Span, StoredFit};
+use crate::results::PartStore;
 
 /// The scratch file of one job.
 #[derive(Debug)]
@@ -26,13 +28,14 @@ pub(super) struct Scratch {
     file: File,
     /// The folder it is in, to name in an error.
     dir: PathBuf,
-    /// The f64s written so far: the next run's key.
-    end: Mutex<usize>,
+    /// The bytes written so far (a multiple of 8, so bins' keys count
+    /// f64s): where the next record starts.
+    end: Mutex<u64>,
 }
 
 impl Scratch {
-    /// A scratch file in `dir`, None where it cannot be made (the bins
-    /// then stay in memory).
+    /// A scratch file in `dir`, None where it cannot be made (what would
+    /// have gone there stays in memory).
     pub(super) fn new(dir: &Path) -> Option<Arc<Self>> {
         let file = tempfile::tempfile_in(dir).ok()?;
         Some(Arc::new(Self {
@@ -42,9 +45,21 @@ impl Scratch {
         }))
     }
 
+    /// `data`'s bins written to the file, to be read back from `self`.
+    pub(super) fn keep(self: &Arc<Self>, data: &FitData) -> io::Result<StoredFit> {
+        Ok(StoredFit {
+            store: Arc::clone(self) as Arc<dyn BinStore>,
+            key: self.write_bins(data)?,
+            len: data.h.len(),
+            amplitudes: data.amplitude_m.is_some(),
+            bin_hz: data.bin_hz,
+            lag: data.lag,
+        })
+    }
+
     /// `data`'s bins written to the file; their key is where they start
     /// (in f64s).
-    pub(super) fn keep(self: &Arc<Self>, data: &FitData) -> io::Result<StoredFit> {
+    fn write_bins(&self, data: &FitData) -> io::Result<usize> {
         let n = data.h.len();
         let amplitude = data.amplitude_m.as_deref();
         let mut values = Vec::with_capacity(n * 5);
@@ -52,44 +67,62 @@ impl Scratch {
         values.extend(data.h.iter().flat_map(|h| [h.re, h.im]));
         values.extend_from_slice(&data.variance);
         values.extend_from_slice(amplitude.unwrap_or_default());
-        let key = {
-            let mut end = self.end.lock().unwrap_or_else(|e| e.into_inner());
-            let key = *end;
-            *end += values.len();
-            key
-        };
-        self.file
-            .write_all_at(bytemuck::cast_slice(&values), (key * 8) as u64)?;
-        Ok(StoredFit {
-            store: Arc::clone(self) as Arc<dyn BinStore>,
-            key,
-            len: n,
-            amplitudes: amplitude.is_some(),
-            bin_hz: data.bin_hz,
-            lag: data.lag,
-        })
+        let at = self.write(bytemuck::cast_slice(&values))?;
+        Ok((at / 8) as usize)
     }
-}
 
-impl Scratch {
+    /// A part's bytes written to the file, with the store to read them back
+    /// from and where they start.
+    pub(super) fn keep_part(
+        self: &Arc<Self>,
+        bytes: &[u8],
+    ) -> io::Result<(Arc<dyn PartStore>, u64)> {
+        let at = self.write(bytes)?;
+        Ok((Arc::clone(self) as Arc<dyn PartStore>, at))
+    }
+
+    /// `bytes` written at the file's end, padded to a multiple of 8; where
+    /// they start.
+    fn write(&self, bytes: &[u8]) -> io::Result<u64> {
+        let at = {
+            let mut end = self.end.lock().unwrap_or_else(|e| e.into_inner());
+            let at = *end;
+            *end += (bytes.len() as u64).next_multiple_of(8);
+            at
+        };
+        self.file.write_all_at(bytes, at)?;
+        Ok(at)
+    }
+
     /// The `n` f64s from the file's `at`-th.
     fn column(&self, at: usize, n: usize) -> Vec<f64> {
         let mut values = vec![0.0_f64; n];
-        let bytes: &mut [u8] = bytemuck::cast_slice_mut(&mut values);
-        if let Err(e) = self.file.read_exact_at(bytes, (at * 8) as u64) {
+        self.read_into(bytemuck::cast_slice_mut(&mut values), (at * 8) as u64);
+        values
+    }
+
+    /// Fill `bytes` from the file at `at`. Panics where it cannot be read
+    /// back: it was written in the output folder moments before, and what
+    /// reads it has no way to go on without it.
+    fn read_into(&self, bytes: &mut [u8], at: u64) {
+        if let Err(e) = self.file.read_exact_at(bytes, at) {
             panic!(
-                "{}: the identification runs' bins, kept in a scratch file there, cannot be read back: {e}",
+                "{}: what the job kept in a scratch file there cannot be read back: {e}",
                 self.dir.display()
             );
         }
-        values
+    }
+}
+
+impl PartStore for Scratch {
+    fn read(&self, at: u64, len: usize) -> Vec<u8> {
+        let mut bytes = vec![0; len];
+        self.read_into(&mut bytes, at);
+        bytes
     }
 }
 
 impl BinStore for Scratch {
-    /// Panics where the file cannot be read back: it was written in the
-    /// output folder moments before, and a fit has no way to go on
-    /// without its bins.
     fn read(&self, key: usize, len: usize, amplitudes: bool, span: Range<usize>) -> Span<'static> {
         // The columns' starts: frequency, H (two f64 a bin), E|dH|^2, amplitude.
         let (s, n) = (span.start, span.len());
@@ -105,6 +138,10 @@ impl BinStore for Scratch {
             variance: Cow::Owned(self.column(key + 3 * len + s, n)),
             amplitude_m: amplitudes.then(|| Cow::Owned(self.column(key + 4 * len + s, n))),
         }
+    }
+
+    fn keep(&self, data: &FitData) -> Option<usize> {
+        self.write_bins(data).ok()
     }
 }
 

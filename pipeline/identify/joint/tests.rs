@@ -1256,7 +1256,7 @@ fn the_coarse_problem_takes_every_strideth_bin_of_each_run() {
 #[test]
 fn stored_bins_identify_the_rig_to_the_bit_as_held_ones() {
     use crate::identify::FitData;
-    use crate::identify::bins::MemoryStore;
+    use crate::identify::bins::{BinStore, MemoryStore};
     let c = Campaign::with(Unmodelled::default(), 0.002);
     let amplitude: Vec<f64> = c.f.iter().map(|f| 0.004 / (1.0 + f / 10.0)).collect();
     let data: Vec<FitData> =
@@ -1278,8 +1278,8 @@ fn stored_bins_identify_the_rig_to_the_bit_as_held_ones() {
                 amplitude_m: (r > 0).then(|| amplitude.clone()),
             })
             .collect();
-    let mut store = MemoryStore::default();
-    let keys: Vec<usize> = data.iter().map(|d| store.keep(d)).collect();
+    let store = MemoryStore::default();
+    let keys: Vec<usize> = data.iter().map(|d| store.keep(d).unwrap()).collect();
     fn run<'a>(c: &Campaign, r: usize, bins: Bins<'a>) -> JointRun<'a> {
         JointRun {
             specimen: c.specimens[r],

@@ -739,7 +739,8 @@ const COMPENSATOR_POINTS: usize = 300;
 /// compensated tracking degrades when the specimen's stiffness differs
 /// from the one it was designed for. None without a design.
 pub fn compensator_figures(run: &RunResult, plant: &TransferFunction) -> Vec<FigureSpec> {
-    let Some(outcome) = run.tracking.as_ref().and_then(|t| t.compensator.as_ref()) else {
+    let tracking = run.tracking.as_ref().map(|t| t.get());
+    let Some(outcome) = tracking.as_ref().and_then(|t| t.compensator.as_ref()) else {
         return Vec::new();
     };
     let Some(c) = &outcome.design else {
