@@ -516,14 +516,17 @@ pub struct RunResult {
     /// f/u predicted by the model (Eq. 45), for runs with a specimen.
     pub force_tf: Option<TfResult>,
     /// How the transfer function was fitted to the log, when it was.
-    pub fit: Option<FitSummary>,
+    // Boxed: most of a night's runs (its validation runs) have none, and a
+    // night holds every run's result until its files are written.
+    pub fit: Option<Box<FitSummary>>,
     /// Measured vs simulated displacement (Eqs. 47-48), when the run has a log.
     pub validation: Option<ValidationMetrics>,
     /// How the actuator followed its command, when the run has a log:
     /// measured, and for a validation run as the identified model predicts
-    /// it for the same command. Parked once the run's files are written:
-    /// it is most of a validation run's result (the compensator's sweep
-    /// over the specimen's stiffness), and only the set's files read it.
+    /// it for the same command.
+    // Parked once the run's files are written: it is most of a validation
+    // run's result (the compensator's sweep over the specimen's
+    // stiffness), and only the set's files read it.
     #[schemars(with = "Option<RunTracking>")]
     pub tracking: Option<Parked<RunTracking>>,
     /// The log this run read, when it has one.

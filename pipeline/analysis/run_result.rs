@@ -526,7 +526,7 @@ pub fn fitted(
     {
         let summary = fit_summary(ident, plan, st, fit);
         out.warnings.extend(own_fit_warnings(&summary, st, fit));
-        out.fit = Some(summary);
+        out.fit = Some(Box::new(summary));
         match validate::fitted_run(&fit.tf, &record(&st.log)) {
             Ok(t) => {
                 out.validation = Some(t.metrics.clone());

@@ -129,7 +129,7 @@ struct RunRow<'a> {
     specimen: &'a crate::model::SpecimenModel,
     natural_frequency_hz: Option<f64>,
     tf: &'a Option<crate::results::TfResult>,
-    fit: &'a Option<crate::results::FitSummary>,
+    fit: Option<&'a crate::results::FitSummary>,
     validation: &'a Option<crate::validate::timedomain::ValidationMetrics>,
     tracking: Option<RowTracking>,
     log: &'a Option<crate::results::LogInfo>,
@@ -153,7 +153,7 @@ impl<'a> PageResults<'a> {
             specimen: &run.specimen,
             natural_frequency_hz: run.natural_frequency_hz,
             tf: &run.tf,
-            fit: &run.fit,
+            fit: run.fit.as_deref(),
             validation: &run.validation,
             tracking: run.tracking.as_ref().map(|t| RowTracking {
                 measured: t.get().measured.clone(),

@@ -164,7 +164,7 @@ fn run_value(run: &RunResult, rig: Option<&RigResult>) -> Vec<MatValue> {
         specimen(&run.specimen),
         run.tf
             .as_ref()
-            .map_or_else(MatValue::empty, |tf| tf_value(tf, run.fit.as_ref())),
+            .map_or_else(MatValue::empty, |tf| tf_value(tf, run.fit.as_deref())),
         physical,
         ccf,
         simplified,

@@ -18,13 +18,14 @@ pub trait PartStore: Send + Sync + fmt::Debug {
     fn read(&self, at: u64, len: usize) -> Vec<u8>;
 }
 
-/// A value in memory, or parked in a [`PartStore`].
+/// A value in memory, or parked in a [`PartStore`]. A held value is boxed,
+/// so that a parked one leaves no more than its place in the store behind.
 #[derive(Clone)]
 pub struct Parked<T>(Place<T>);
 
 #[derive(Clone)]
 enum Place<T> {
-    Held(T),
+    Held(Box<T>),
     Stored {
         store: Arc<dyn PartStore>,
         at: u64,
@@ -35,7 +36,7 @@ enum Place<T> {
 impl<T> Parked<T> {
     /// `value`, held.
     pub fn new(value: T) -> Self {
-        Self(Place::Held(value))
+        Self(Place::Held(Box::new(value)))
     }
 
     /// Whether the value is in a store rather than in memory.
@@ -58,7 +59,7 @@ impl<T: Clone + DeserializeOwned> Parked<T> {
     /// where it cannot read.
     pub fn get(&self) -> Cow<'_, T> {
         match &self.0 {
-            Place::Held(value) => Cow::Borrowed(value),
+            Place::Held(value) => Cow::Borrowed(&**value),
             Place::Stored { store, at, len } => {
                 let bytes = store.read(*at, *len);
                 Cow::Owned(

@@ -326,7 +326,7 @@ impl FirstPass {
             FirstPass::Waiting(read) => read.clone(),
             FirstPass::Done(d) => match (&d.log_error, d.kept.estimate.take()) {
                 (Some(e), _) => RigInput::Failed(e.clone()),
-                (None, Some(e)) => RigInput::Estimate(Box::new(e)),
+                (None, Some(e)) => RigInput::Estimate(e),
                 (None, None) => RigInput::Nothing,
             },
         }

@@ -41,7 +41,9 @@ pub(super) struct Wants {
 pub(super) struct Kept {
     pub result: RunResult,
     /// What the rig is identified from (an identification or fit run).
-    pub estimate: Option<Evidence>,
+    /// Boxed: a validation run has none, and a night holds every run's
+    /// until its files are written.
+    pub estimate: Option<Box<Evidence>>,
     /// The force FRF's bins, for the force figure once the rig is known.
     pub force: Option<ForceBins>,
     /// An identification run's FRF for Fig. 15.
@@ -152,7 +154,7 @@ pub(super) fn without_rig(
     let tables = tables(&done.result, measured.as_ref(), wants);
     Output {
         kept: Kept {
-            estimate: done.evidence,
+            estimate: done.evidence.map(Box::new),
             noise: done.noise,
             force,
             overlay,
