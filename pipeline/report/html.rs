@@ -522,12 +522,9 @@ mod tests {
     /// validation run (its tracking, compensator and windows).
     #[test]
     fn the_campaign_page_from_the_rows_is_the_page_from_the_whole_results() {
-        use crate::manifest::simulation::load_simulation_str;
         let dir = tempfile::tempdir().unwrap();
         let text = include_str!("../../tests/fixtures/small-simulation.toml");
-        let sim = load_simulation_str(text, &dir.path().join("sim.toml")).expect("a simulation");
-        let out = crate::run::simulate::simulate_campaign(&sim, dir.path()).expect("simulates");
-        let results = crate::run::analyse(&crate::manifest::load(&out.manifest).unwrap());
+        let results = crate::run::analyse(&crate::run::simulate::simulated(text, dir.path()));
         let v = results.runs.iter().find(|r| r.id == "v1").unwrap();
         assert!(
             v.tracking

@@ -112,24 +112,7 @@ pub(super) fn analyse_with(
     // The identification runs' bins wait for the rig in a scratch file,
     // where the job has a folder (in memory where it has none).
     let scratch = sink.out_dir.and_then(Scratch::new);
-    // One run per task: rayon otherwise hands each thread a block of runs
-    // it works through alone once started, so a block of slow runs (spring
-    // runs with their delay test) holds one core while the other has
-    // nothing left to take.
-    let mut first: Vec<FirstPass> = campaign
-        .runs
-        .par_iter()
-        .with_max_len(1)
-        .map(|plan| {
-            let mut first = first_pass(campaign, plan, sink, observer);
-            if let (Ok(FirstPass::Done(d)), Some(scratch)) = (&mut first, &scratch)
-                && let Some(e) = d.kept.estimate.as_mut()
-            {
-                e.move_bins(|data| scratch.keep(data).ok());
-            }
-            first.map_err(|e| e.in_run(&plan.id))
-        })
-        .collect::<Result<_, _>>()?;
+    let mut first = first_passes(campaign, sink, observer, scratch.as_ref())?;
     // The workers' logs are freed beneath what the runs keep.
     super::allocator::give_back();
 
@@ -148,21 +131,14 @@ pub(super) fn analyse_with(
     // run's own are written: what the campaign holds then grows by a run's
     // summary, not by its tracking.
     let parked = sink.out_dir.and_then(Scratch::new);
-
-    let second: Vec<Done> = campaign
-        .runs
-        .par_iter()
-        .zip(first)
-        .with_max_len(1)
-        .map(|(plan, first)| -> Result<Done, WriteError> {
-            let mut done = second_pass(campaign, plan, first, &rig_for_runs, sink, observer)
-                .map_err(|e| e.in_run(&plan.id))?;
-            if let (Some(parked), Some(tracking)) = (&parked, &mut done.kept.result.tracking) {
-                tracking.park(|bytes| parked.keep_part(bytes).ok());
-            }
-            Ok(done)
-        })
-        .collect::<Result<_, _>>()?;
+    let second = second_passes(
+        campaign,
+        first,
+        &rig_for_runs,
+        sink,
+        observer,
+        parked.as_ref(),
+    )?;
     // The workers' logs are freed beneath the runs' results again, before
     // the campaign's conclusions and its files are built.
     super::allocator::give_back();
@@ -211,6 +187,61 @@ pub(super) fn analyse_with(
         seconds: runs.seconds,
         cached: runs.cached,
     })
+}
+
+/// Every run's first pass, in parallel, in manifest order; an
+/// identification run's bins go to `scratch` as its pass ends.
+fn first_passes(
+    campaign: &Campaign,
+    sink: &Sink<'_>,
+    observer: &dyn Observer,
+    scratch: Option<&Arc<Scratch>>,
+) -> Result<Vec<FirstPass>, WriteError> {
+    // One run per task: rayon otherwise hands each thread a block of runs
+    // it works through alone once started, so a block of slow runs (spring
+    // runs with their delay test) holds one core while the other has
+    // nothing left to take.
+    campaign
+        .runs
+        .par_iter()
+        .with_max_len(1)
+        .map(|plan| {
+            let mut first = first_pass(campaign, plan, sink, observer);
+            if let (Ok(FirstPass::Done(d)), Some(scratch)) = (&mut first, scratch)
+                && let Some(e) = d.kept.estimate.as_mut()
+            {
+                e.move_bins(|data| scratch.keep(data).ok());
+            }
+            first.map_err(|e| e.in_run(&plan.id))
+        })
+        .collect()
+}
+
+/// Every run's second pass, in parallel (one run per task, as the first),
+/// in manifest order; each run's tracking goes to `parked` once the run's
+/// own files are written.
+fn second_passes(
+    campaign: &Campaign,
+    first: Vec<FirstPass>,
+    rig: &RigOutcome,
+    sink: &Sink<'_>,
+    observer: &dyn Observer,
+    parked: Option<&Arc<Scratch>>,
+) -> Result<Vec<Done>, WriteError> {
+    campaign
+        .runs
+        .par_iter()
+        .zip(first)
+        .with_max_len(1)
+        .map(|(plan, first)| {
+            let mut done = second_pass(campaign, plan, first, rig, sink, observer)
+                .map_err(|e| e.in_run(&plan.id))?;
+            if let (Some(parked), Some(tracking)) = (parked, &mut done.kept.result.tracking) {
+                tracking.park(|bytes| parked.keep_part(bytes).ok());
+            }
+            Ok(done)
+        })
+        .collect()
 }
 
 /// The rig from what the first pass's runs give it (their estimates move
@@ -462,12 +493,9 @@ mod tests {
     /// results.json the same campaign gives with it held, byte for byte.
     #[test]
     fn parked_tracking_gives_the_results_held_tracking_gives() {
-        use crate::manifest::simulation::load_simulation_str;
         let dir = tempfile::tempdir().unwrap();
         let text = include_str!("../../tests/fixtures/small-simulation.toml");
-        let sim = load_simulation_str(text, &dir.path().join("sim.toml")).expect("a simulation");
-        let out = crate::run::simulate::simulate_campaign(&sim, dir.path()).expect("simulates");
-        let campaign = crate::manifest::load(&out.manifest).unwrap();
+        let campaign = crate::run::simulate::simulated(text, dir.path());
         let held = analyse(&campaign);
         let work = tempfile::tempdir().unwrap();
         let sink = Sink {

@@ -51,6 +51,16 @@ pub struct Simulated {
     pub logs: Vec<PathBuf>,
 }
 
+/// The campaign a simulation manifest's `text` describes, simulated into
+/// `dir` and loaded: the unit tests' campaigns from their fixtures.
+#[cfg(test)]
+pub(crate) fn simulated(text: &str, dir: &Path) -> crate::manifest::Campaign {
+    let sim = crate::manifest::simulation::load_simulation_str(text, &dir.join("sim.toml"))
+        .expect("a simulation");
+    let out = simulate_campaign(&sim, dir).expect("simulates");
+    crate::manifest::load(&out.manifest).expect("the manifest loads")
+}
+
 /// Simulate every run and write the campaign into `out_dir`.
 pub fn simulate_campaign(
     plan: &SimulationPlan,

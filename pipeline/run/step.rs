@@ -243,9 +243,8 @@ mod tests {
     use super::*;
     use crate::analysis::evidence::RigInput;
     use crate::analysis::run_result::validation_evidence;
-    use crate::manifest::simulation::load_simulation_str;
-    use crate::manifest::{RunSource, load};
-    use crate::run::simulate::simulate_campaign;
+    use crate::manifest::RunSource;
+    use crate::run::simulate::simulated;
 
     /// The tests' short campaign (a no-specimen run, a spring and a
     /// validation run), the joint fit including the validation run.
@@ -262,10 +261,7 @@ mod tests {
     #[test]
     fn a_validation_log_changed_since_the_joint_fit_read_it_fails_its_run() {
         let dir = tempfile::tempdir().unwrap();
-        let sim =
-            load_simulation_str(CAMPAIGN, &dir.path().join("sim.toml")).expect("a simulation");
-        let out = simulate_campaign(&sim, dir.path()).expect("simulates");
-        let campaign = load(&out.manifest).expect("the manifest loads");
+        let campaign = simulated(CAMPAIGN, dir.path());
         let plan = campaign.runs.iter().find(|r| r.id == "v1").unwrap();
         let RigInput::Validation(read) = validation_evidence(&campaign, plan) else {
             panic!("the joint fit reads the validation run");
